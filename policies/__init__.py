@@ -1,0 +1,1 @@
+"""Policies that drive the team: scripted ones and learned ones."""

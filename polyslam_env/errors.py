@@ -1,0 +1,15 @@
+"""Exceptions raised on bad input. Each names the file, field and value at fault."""
+
+from __future__ import annotations
+
+
+class PolyslamError(Exception):
+    """Base class of every error this package raises on bad input."""
+
+
+class ConfigError(PolyslamError, ValueError):
+    """A configuration key is unknown or its value is invalid."""
+
+
+class MapFileError(PolyslamError, ValueError):
+    """A map file (or map data) does not follow the documented schema."""

@@ -1,0 +1,1 @@
+"""Polynomial-landmark EKF SLAM, one instance per robot (numpy/scipy only)."""

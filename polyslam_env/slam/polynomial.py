@@ -1,0 +1,120 @@
+"""Polynomial wall segments, the landmarks of the polynomial SLAM (SPEC §3).
+
+A segment is ``x² = c0 + Σ_{i=1..m} b_i (x¹)^i`` on ``x¹ ∈ [lo, hi]`` (variate 1) or
+``x¹ = c0 + Σ b_i (x²)^i`` on ``x² ∈ [lo, hi]`` (variate 2). The independent variable is
+called ξ, the dependent one η; ``coeffs = [c0, b_1, …, b_m]`` in increasing powers.
+
+This module is geometry only: in the SLAM the value of ``c0`` lives in the EKF state and the
+shape ``b`` and extent here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class Polynomial:
+    """An immutable polynomial segment; see the module docstring for the convention."""
+
+    variate: int  # 1: η = x², ξ = x¹;  2: η = x¹, ξ = x²
+    coeffs: np.ndarray  # (m+1,): c0, b_1, …, b_m
+    lo: float  # extent on ξ
+    hi: float
+
+    def __post_init__(self) -> None:
+        if self.variate not in (1, 2):
+            raise ValueError(f"variate must be 1 or 2, got {self.variate!r}")
+        c = np.asarray(self.coeffs, dtype=float)
+        if c.ndim != 1 or len(c) < 2:
+            raise ValueError(f"coeffs must be [c0, b1, ...], got shape {c.shape}")
+        if not (np.all(np.isfinite(c)) and np.isfinite(self.lo) and np.isfinite(self.hi)):
+            raise ValueError("polynomial coefficients and extent must be finite")
+        if self.hi < self.lo:
+            raise ValueError(f"extent must satisfy lo <= hi, got [{self.lo}, {self.hi}]")
+        object.__setattr__(self, "coeffs", c)
+
+    # -- basic evaluation -----------------------------------------------------------------
+    @property
+    def order(self) -> int:
+        return len(self.coeffs) - 1
+
+    @property
+    def c0(self) -> float:
+        return float(self.coeffs[0])
+
+    @property
+    def shape(self) -> np.ndarray:  # (m,): b_1, …, b_m
+        return self.coeffs[1:]
+
+    def value(self, xi: np.ndarray | float) -> np.ndarray:
+        """η(ξ) = c0 + B(ξ)."""
+        return np.asarray(np.polynomial.polynomial.polyval(xi, self.coeffs))
+
+    def slope(self, xi: np.ndarray | float) -> np.ndarray:
+        """B'(ξ) = dη/dξ."""
+        return np.asarray(
+            np.polynomial.polynomial.polyval(xi, np.polynomial.polynomial.polyder(self.coeffs))
+        )
+
+    def to_xy(self, xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
+        """(ξ, η) pairs to (x¹, x²) points, shape (…, 2)."""
+        if self.variate == 1:
+            return np.stack([xi, eta], axis=-1)
+        return np.stack([eta, xi], axis=-1)
+
+    def from_xy(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x¹, x²) points to (ξ, η)."""
+        p = np.asarray(points, dtype=float)
+        if self.variate == 1:
+            return p[..., 0], p[..., 1]
+        return p[..., 1], p[..., 0]
+
+    def points_at(self, xi: np.ndarray) -> np.ndarray:
+        """Points on the curve at the given ξ, shape (n, 2)."""
+        xi = np.asarray(xi, dtype=float)
+        return self.to_xy(xi, self.value(xi))
+
+    def endpoints(self) -> np.ndarray:
+        """(2, 2): Q_m (at lo) and Q_M (at hi)."""
+        return self.points_at(np.array([self.lo, self.hi]))
+
+    def with_c0(self, c0: float) -> Polynomial:
+        coeffs = self.coeffs.copy()
+        coeffs[0] = c0
+        return Polynomial(self.variate, coeffs, self.lo, self.hi)
+
+    # -- sampling ---------------------------------------------------------------------------
+    def sample_arclength(self, step: float = 0.01, dense: int = 512) -> np.ndarray:
+        """Points equally spaced by ``step`` of arc length (both ends included), (n, 2)."""
+        if self.hi == self.lo:
+            return self.points_at(np.array([self.lo]))
+        xi = np.linspace(self.lo, self.hi, dense)
+        pts = self.points_at(xi)
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+        n = max(int(np.floor(s[-1] / step)) + 1, 2)
+        targets = np.linspace(0.0, s[-1], n)
+        return self.points_at(np.interp(targets, s, xi))
+
+    def length(self, dense: int = 512) -> float:
+        """Arc length over the extent."""
+        xi = np.linspace(self.lo, self.hi, dense)
+        return float(np.linalg.norm(np.diff(self.points_at(xi), axis=0), axis=1).sum())
+
+    def equally_spaced(self, n: int, lo: float | None = None, hi: float | None = None) -> np.ndarray:
+        """``n`` points equally spaced in ξ over [lo, hi] (default: the extent), (n, 2)."""
+        a = self.lo if lo is None else lo
+        b = self.hi if hi is None else hi
+        return self.points_at(np.linspace(a, b, n))
+
+
+def transform_points(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Map points (…, 2) from a frame whose origin sits at ``pose`` = (x, y, θ) in the parent."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    p = np.asarray(points, dtype=float)
+    return np.stack(
+        [pose[0] + c * p[..., 0] - s * p[..., 1], pose[1] + s * p[..., 0] + c * p[..., 1]],
+        axis=-1,
+    )

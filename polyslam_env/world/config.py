@@ -1,0 +1,117 @@
+"""World configuration: robots, physics, odometry, range beams, camera (SPEC §2)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from polyslam_env.config import (
+    Config,
+    check_non_negative,
+    check_positive,
+    check_range,
+)
+from polyslam_env.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class RobotConfig(Config):
+    """A differential-drive robot (Khepera III-like defaults)."""
+
+    radius: float = 0.065  # m
+    mass: float = 0.69  # kg
+    v_max: float = 0.3  # m/s, forward speed limit (|v| <= v_max)
+    omega_max: float = 1.5  # rad/s, turn-rate limit (|omega| <= omega_max)
+    allow_reverse: bool = True  # False clips v to [0, v_max]
+
+    def validate(self) -> None:
+        check_positive("robot.radius", self.radius)
+        check_positive("robot.mass", self.mass)
+        check_positive("robot.v_max", self.v_max)
+        check_positive("robot.omega_max", self.omega_max)
+
+
+@dataclass(frozen=True)
+class OdometryConfig(Config):
+    """Odometry = displacement actually made (robot frame) + N(0, diag(s_xy², s_xy², s_θ²))."""
+
+    sigma_xy: float = 0.001  # m per step
+    sigma_theta_deg: float = 0.01  # degrees per step
+
+    @property
+    def sigma_theta(self) -> float:
+        return math.radians(self.sigma_theta_deg)
+
+    def validate(self) -> None:
+        check_non_negative("odometry.sigma_xy", self.sigma_xy)
+        check_non_negative("odometry.sigma_theta_deg", self.sigma_theta_deg)
+
+
+@dataclass(frozen=True)
+class RangeSensorConfig(Config):
+    """Range beams at fixed angles from the robot axis; no return is reported as ``inf``."""
+
+    angles_deg: tuple[float, ...] = (90.0, 45.0, 0.0, -45.0, -90.0)
+    max_range: float = 2.0  # m
+    sigma: float = 0.02  # m, Gaussian range noise
+    hit_robots: bool = False  # whether beams also stop at other robots
+
+    @property
+    def angles(self) -> tuple[float, ...]:
+        return tuple(math.radians(a) for a in self.angles_deg)
+
+    def validate(self) -> None:
+        if not self.angles_deg:
+            raise ConfigError("range_sensor.angles_deg: at least one beam is needed")
+        for i, a in enumerate(self.angles_deg):
+            check_range(f"range_sensor.angles_deg[{i}]", a, -360.0, 360.0)
+        check_positive("range_sensor.max_range", self.max_range)
+        check_non_negative("range_sensor.sigma", self.sigma)
+
+
+@dataclass(frozen=True)
+class CameraConfig(Config):
+    """Detects other robots in range and field of view with line of sight."""
+
+    range: float = 1.5  # m
+    fov_deg: float = 360.0  # full angle, centred on the robot axis
+    sigma_d: float = 0.01  # m, distance noise
+    sigma_bearing_deg: float = 1.0  # degrees, bearing noise
+
+    @property
+    def sigma_bearing(self) -> float:
+        return math.radians(self.sigma_bearing_deg)
+
+    def validate(self) -> None:
+        check_positive("camera.range", self.range)
+        check_range("camera.fov_deg", self.fov_deg, 1e-6, 360.0)
+        check_non_negative("camera.sigma_d", self.sigma_d)
+        check_non_negative("camera.sigma_bearing_deg", self.sigma_bearing_deg)
+
+
+@dataclass(frozen=True)
+class WorldConfig(Config):
+    """The simulated world: control period, physics sub-steps, robots and sensors."""
+
+    dt: float = 1.0  # s, control period T (paper: 1 s)
+    substeps: int = 20  # physics sub-steps per control period
+    wall_radius: float = 0.005  # m, half thickness of the wall segments
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    range_sensor: RangeSensorConfig = field(default_factory=RangeSensorConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+
+    def validate(self) -> None:
+        check_positive("dt", self.dt)
+        if self.substeps < 1:
+            raise ConfigError(f"substeps: must be >= 1, got {self.substeps!r}")
+        check_non_negative("wall_radius", self.wall_radius)
+        # A sub-step must not move a robot more than a third of its radius, or a fast robot
+        # could tunnel through a thin wall between two collision checks.
+        step = self.robot.v_max * self.dt / self.substeps
+        if step > self.robot.radius / 3:
+            need = math.ceil(3 * self.robot.v_max * self.dt / self.robot.radius)
+            raise ConfigError(
+                f"substeps: {self.substeps} sub-steps move a robot {step:.3f} m each at v_max,"
+                f" more than radius/3; use at least {need}"
+            )
