@@ -103,7 +103,9 @@ class Polynomial:
         xi = np.linspace(self.lo, self.hi, dense)
         return float(np.linalg.norm(np.diff(self.points_at(xi), axis=0), axis=1).sum())
 
-    def equally_spaced(self, n: int, lo: float | None = None, hi: float | None = None) -> np.ndarray:
+    def equally_spaced(
+        self, n: int, lo: float | None = None, hi: float | None = None
+    ) -> np.ndarray:
         """``n`` points equally spaced in ξ over [lo, hi] (default: the extent), (n, 2)."""
         a = self.lo if lo is None else lo
         b = self.hi if hi is None else hi

@@ -57,9 +57,7 @@ def resolve_map_path(name_or_path: str | Path) -> Path:
     )
 
 
-def load_map(
-    name_or_path: str | Path, *, robot_radius: float = DEFAULT_START_CLEARANCE
-) -> Layout:
+def load_map(name_or_path: str | Path, *, robot_radius: float = DEFAULT_START_CLEARANCE) -> Layout:
     """Load and validate a map file, or a built-in map by name."""
     path = resolve_map_path(name_or_path)
     try:
@@ -70,8 +68,9 @@ def load_map(
         data = yaml.safe_load(text)  # JSON is a subset of YAML
     except yaml.YAMLError as err:
         raise MapFileError(f"{path}: not valid YAML/JSON: {err}") from None
-    return layout_from_dict(data, source=str(path), default_name=path.stem,
-                            robot_radius=robot_radius)
+    return layout_from_dict(
+        data, source=str(path), default_name=path.stem, robot_radius=robot_radius
+    )
 
 
 def layout_from_dict(
@@ -87,8 +86,10 @@ def layout_from_dict(
         return MapFileError(f"{source}: {field}: {msg}")
 
     if not isinstance(data, dict):
-        raise MapFileError(f"{source}: the map must be a mapping with keys 'walls' and "
-                           f"'start_poses', got {type(data).__name__}")
+        raise MapFileError(
+            f"{source}: the map must be a mapping with keys 'walls' and "
+            f"'start_poses', got {type(data).__name__}"
+        )
     unknown = sorted(set(map(str, data)) - set(REQUIRED_KEYS) - set(OPTIONAL_KEYS))
     if unknown:
         raise fail(unknown[0], "unknown key (valid keys: name, walls, pillars, start_poses)")

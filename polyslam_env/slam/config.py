@@ -1,0 +1,91 @@
+"""SLAM parameters. The defaults are the paper's §4 values (preset ``paper``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from polyslam_env.config import Config, check_non_negative, check_positive, check_range
+from polyslam_env.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class SlamConfig(Config):
+    """Parameters of the per-robot polynomial EKF SLAM (SPEC §3, "Paper parameters")."""
+
+    order: int = 3  # m, polynomial order
+    rho_min: float = 0.08  # m, good-approximation threshold ρ at zero uncertainty
+    rho_max: float = 0.24  # m, ... at K·P0
+    sigma_min: float = 0.1  # m, "unmapped" threshold σ at zero uncertainty
+    sigma_max: float = 0.3  # m, ... at K·P0
+    eps_m: int = 5  # ε_M: Q_bad size that triggers a refit; points per polynomial in merges
+    eps_z: int = 10  # ε_Z: cluster size that triggers a new polynomial
+    k_divergence: float = 150.0  # K: P_{k|k-1} beyond K·P0 means divergence
+    cluster_radius: float = 0.35  # m, R: neighbourhood radius for clustering
+    gamma_max: float = 0.35  # m, γ_M: merge threshold on the RMS error
+    merge_min_overlap: float = 0.1  # m, overlap length that counts as "overlapping"
+    range_sigma: float = 0.02  # m, range noise the filter assumes
+    odom_sigma_xy: float = 0.001  # m, process noise the filter assumes (per step)
+    odom_sigma_theta_deg: float = 0.01  # degrees, ditto
+    p0_sigma: tuple[float, float, float] = (0.05, 0.05, 0.0175)  # initial pose std (m, m, rad)
+    gate_prob: float = 0.99  # χ² gate probability for each beam's innovation
+    tangent_min_deg: float = 10.0  # beams hitting closer to tangent than this are skipped
+    squared_error: bool = False  # the paper's squared end-point distance in association
+
+    def validate(self) -> None:
+        if not 1 <= self.order <= 5:
+            raise ConfigError(f"slam.order: must be in 1..5, got {self.order!r}")
+        for name in (
+            "rho_min",
+            "rho_max",
+            "sigma_min",
+            "sigma_max",
+            "k_divergence",
+            "cluster_radius",
+            "gamma_max",
+            "range_sigma",
+        ):
+            check_positive(f"slam.{name}", getattr(self, name))
+        if self.rho_max < self.rho_min:
+            raise ConfigError(
+                f"slam.rho_max: must be >= rho_min ({self.rho_min}), got {self.rho_max}"
+            )
+        if self.sigma_max < self.sigma_min:
+            raise ConfigError(
+                f"slam.sigma_max: must be >= sigma_min ({self.sigma_min}), got {self.sigma_max}"
+            )
+        for name in ("eps_m", "eps_z"):
+            if getattr(self, name) < self.order + 1:
+                raise ConfigError(
+                    f"slam.{name}: must be >= order + 1 = {self.order + 1} to fit a"
+                    f" polynomial, got {getattr(self, name)}"
+                )
+        check_non_negative("slam.merge_min_overlap", self.merge_min_overlap)
+        check_non_negative("slam.odom_sigma_xy", self.odom_sigma_xy)
+        check_non_negative("slam.odom_sigma_theta_deg", self.odom_sigma_theta_deg)
+        for i, s in enumerate(self.p0_sigma):
+            check_positive(f"slam.p0_sigma[{i}]", s)
+        check_range("slam.gate_prob", self.gate_prob, 0.5, 1.0)
+        check_range("slam.tangent_min_deg", self.tangent_min_deg, 0.0, 89.0)
+
+    @property
+    def p0(self) -> np.ndarray:  # (3, 3)
+        return np.diag(np.square(self.p0_sigma))
+
+    @property
+    def odom_cov(self) -> np.ndarray:  # (3, 3)
+        s_th = math.radians(self.odom_sigma_theta_deg)
+        return np.diag([self.odom_sigma_xy**2, self.odom_sigma_xy**2, s_th**2])
+
+
+PRESETS: dict[str, SlamConfig] = {"paper": SlamConfig()}
+
+
+def slam_preset(name: str) -> SlamConfig:
+    """A named SLAM preset; an unknown name is an error listing the known ones."""
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise ConfigError(f"slam preset: unknown {name!r} (known: {', '.join(PRESETS)})") from None
