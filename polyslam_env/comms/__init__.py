@@ -1,0 +1,64 @@
+"""Rendezvous map exchange (SPEC §4): relative pose, message format, channel, polylines.
+
+numpy only; the per-robot SLAM and the env wire these parts together.
+"""
+
+from polyslam_env.comms.channel import Channel, ChannelConfig, Counters, Delivered, Expired
+from polyslam_env.comms.messages import (
+    GridMessage,
+    Header,
+    Message,
+    PointsMessage,
+    PolynomialMessage,
+    PolynomialRecord,
+    decode,
+    encode,
+    encode_grid,
+    encode_points,
+    encode_polynomials,
+    payload_size,
+)
+from polyslam_env.comms.polyline import piecewise_linear, polyline_points, transform_polyline
+from polyslam_env.comms.relative_pose import (
+    apply,
+    as_matrix,
+    compose,
+    frame_transform,
+    frame_transform_with_jacobian,
+    inverse,
+    relative_pose,
+    relative_pose_covariance,
+    relative_pose_with_jacobian,
+)
+
+__all__ = [
+    "Channel",
+    "ChannelConfig",
+    "Counters",
+    "Delivered",
+    "Expired",
+    "GridMessage",
+    "Header",
+    "Message",
+    "PointsMessage",
+    "PolynomialMessage",
+    "PolynomialRecord",
+    "apply",
+    "as_matrix",
+    "compose",
+    "decode",
+    "encode",
+    "encode_grid",
+    "encode_points",
+    "encode_polynomials",
+    "frame_transform",
+    "frame_transform_with_jacobian",
+    "inverse",
+    "payload_size",
+    "piecewise_linear",
+    "polyline_points",
+    "relative_pose",
+    "relative_pose_covariance",
+    "relative_pose_with_jacobian",
+    "transform_polyline",
+]

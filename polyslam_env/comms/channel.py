@@ -1,0 +1,249 @@
+"""The radio between robots: range, bandwidth cap, packet loss, and honest byte counting.
+
+Semantics (SPEC §4):
+
+* ``send`` queues a message (bytes) from one robot to another; nothing moves until ``deliver``.
+* ``deliver(step, in_view)`` runs once per control step. For every queued message, in the
+  order they were sent, whose two robots are in view (``in_view(sender, receiver)`` is the
+  caller's mutual camera detection; when ``distance`` is given the robots must also be within
+  ``config.range``), the channel makes one **transmission attempt**:
+
+  - with a bandwidth cap ``B > 0``, a sender transmits at most ``B`` bytes per step over all
+    its messages. A message larger than what is left is sent in chunks over several steps;
+    chunks have no framing overhead of their own, the progress is kept while the robots are
+    out of view, and the message is delivered when its last chunk arrives;
+  - each attempt (a whole message, or one chunk) is lost with probability ``loss_prob``. A lost
+    attempt is counted, its bytes still count as sent (the radio spent them) and it is retried
+    at the next step the robots see each other — not within the same step;
+  - a delivered message is returned exactly once and leaves the queue.
+
+* A message whose age ``step − sent_step`` exceeds ``max_age`` (``None``: never) is dropped
+  before the step's attempts and counted as expired; the drops of the last call are listed in
+  ``last_expired``. Nothing is ever lost silently.
+
+Counters per robot: as sender ``messages_sent`` (queued), ``attempts``, ``messages_lost``
+(lost attempts), ``bytes_sent`` (every attempt's bytes), ``bytes_lost``, ``messages_delivered``,
+``messages_expired``; as receiver ``messages_received`` and ``bytes_received`` (full size of
+delivered messages). Without a cap, ``attempts == messages_delivered + messages_lost`` and
+``bytes_sent == bytes_received + bytes_lost`` summed over robots; always
+``messages_sent == messages_delivered + messages_expired + pending``.
+
+The only randomness is one ``rng.random()`` draw per attempt, in queue order, so a channel is
+deterministic given its generator.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from polyslam_env.config import Config, check_positive, check_range
+from polyslam_env.errors import ConfigError
+
+_UNLIMITED = 2**62  # bytes per step when there is no cap
+
+
+@dataclass(frozen=True)
+class ChannelConfig(Config):
+    """The radio link used at rendezvous."""
+
+    range: float = 1.5  # m, maximum distance for a link
+    bandwidth_bytes_per_step: int = 0  # bytes per sender per step; 0 = unlimited
+    loss_prob: float = 0.0  # probability that one transmission attempt is lost
+    precision: Literal["float32", "float64"] = "float64"  # float width in messages
+    payload: Literal["polynomials", "points", "grid"] = "polynomials"  # what is exchanged
+    max_age: int | None = None  # steps a message may wait; None = until delivered
+
+    def validate(self) -> None:
+        check_positive("range", self.range)
+        if self.bandwidth_bytes_per_step < 0:
+            raise ConfigError(
+                f"bandwidth_bytes_per_step: must be >= 0 (0 = unlimited),"
+                f" got {self.bandwidth_bytes_per_step!r}"
+            )
+        check_range("loss_prob", self.loss_prob, 0.0, 1.0)
+        if self.max_age is not None and self.max_age < 0:
+            raise ConfigError(f"max_age: must be >= 0 or null, got {self.max_age!r}")
+
+
+@dataclass
+class Counters:
+    """Traffic of one robot (see the module docstring for what each counts)."""
+
+    messages_sent: int = 0
+    attempts: int = 0
+    messages_lost: int = 0
+    messages_delivered: int = 0
+    messages_expired: int = 0
+    messages_received: int = 0
+    bytes_sent: int = 0
+    bytes_lost: int = 0
+    bytes_received: int = 0
+
+
+@dataclass(frozen=True)
+class Delivered:
+    """A message that reached its receiver."""
+
+    msg_id: int
+    sender: int
+    receiver: int
+    payload: bytes
+    sent_step: int
+    delivered_step: int
+    attempts: int  # transmission attempts it took (chunks and lost ones included)
+
+
+@dataclass(frozen=True)
+class Expired:
+    """A message dropped after waiting longer than ``max_age`` steps."""
+
+    msg_id: int
+    sender: int
+    receiver: int
+    size: int
+    sent_step: int
+    expired_step: int
+    bytes_done: int  # bytes that had got through before it was dropped
+
+
+@dataclass
+class _Queued:
+    msg_id: int
+    sender: int
+    receiver: int
+    payload: bytes
+    sent_step: int
+    done: int = 0  # bytes already received (chunked transfers)
+    attempts: int = 0
+
+
+class Channel:
+    """Message queue between robots with loss, bandwidth cap and expiry; see module docstring."""
+
+    def __init__(self, config: ChannelConfig, rng: np.random.Generator) -> None:
+        self.config = config
+        self._rng = rng
+        self._queue: list[_Queued] = []
+        self._counters: dict[int, Counters] = {}
+        self._next_id = 0
+        self._last_step: int | None = None
+        self.last_expired: tuple[Expired, ...] = ()
+
+    # -- public API ----------------------------------------------------------------------------
+    def send(self, sender: int, receiver: int, payload: bytes, step: int) -> int:
+        """Queue ``payload`` from ``sender`` to ``receiver``; returns the message id."""
+        if sender == receiver:
+            raise ValueError(f"a robot cannot send to itself (robot {sender})")
+        if not payload:
+            raise ValueError("payload must be non-empty bytes")
+        if self._last_step is not None and step < self._last_step:
+            raise ValueError(f"send at step {step} after deliver at step {self._last_step}")
+        msg = _Queued(self._next_id, sender, receiver, bytes(payload), step)
+        self._next_id += 1
+        self._queue.append(msg)
+        self._counter(sender).messages_sent += 1
+        return msg.msg_id
+
+    def deliver(
+        self,
+        step: int,
+        in_view: Callable[[int, int], bool],
+        distance: Callable[[int, int], float] | None = None,
+    ) -> list[Delivered]:
+        """Expire old messages, then attempt every queued message whose robots are linked."""
+        if self._last_step is not None and step <= self._last_step:
+            raise ValueError(f"deliver steps must increase: {step} after {self._last_step}")
+        self._last_step = step
+        self.last_expired = self._expire(step)
+        budget: dict[int, int] = {}
+        delivered: list[Delivered] = []
+        for msg in list(self._queue):
+            if not self._linked(msg, in_view, distance):
+                continue
+            left = budget.setdefault(msg.sender, self._cap())
+            if left <= 0:
+                continue
+            chunk = min(len(msg.payload) - msg.done, left)
+            budget[msg.sender] = left - chunk
+            if self._attempt(msg, chunk):
+                self._queue.remove(msg)
+                delivered.append(self._complete(msg, step))
+        return delivered
+
+    def pending(self, sender: int | None = None, receiver: int | None = None) -> int:
+        """Number of queued messages, optionally only those of one sender and/or receiver."""
+        return sum(
+            1
+            for m in self._queue
+            if (sender is None or m.sender == sender)
+            and (receiver is None or m.receiver == receiver)
+        )
+
+    def counters(self, robot: int) -> Counters:
+        """A copy of one robot's counters (zeros if it never used the channel)."""
+        return Counters(**vars(self._counter(robot)))
+
+    def totals(self) -> Counters:
+        """Counters summed over all robots."""
+        total = Counters()
+        for c in self._counters.values():
+            for name, value in vars(c).items():
+                setattr(total, name, getattr(total, name) + value)
+        return total
+
+    # -- internals --------------------------------------------------------------------------------
+    def _counter(self, robot: int) -> Counters:
+        return self._counters.setdefault(robot, Counters())
+
+    def _cap(self) -> int:
+        cap = self.config.bandwidth_bytes_per_step
+        return cap if cap > 0 else _UNLIMITED
+
+    def _linked(
+        self,
+        msg: _Queued,
+        in_view: Callable[[int, int], bool],
+        distance: Callable[[int, int], float] | None,
+    ) -> bool:
+        if not in_view(msg.sender, msg.receiver):
+            return False
+        return distance is None or distance(msg.sender, msg.receiver) <= self.config.range
+
+    def _attempt(self, msg: _Queued, chunk: int) -> bool:
+        """One transmission of ``chunk`` bytes; True when the message is now complete."""
+        counter = self._counter(msg.sender)
+        counter.attempts += 1
+        counter.bytes_sent += chunk
+        msg.attempts += 1
+        if self._rng.random() < self.config.loss_prob:
+            counter.messages_lost += 1
+            counter.bytes_lost += chunk
+            return False
+        msg.done += chunk
+        return msg.done == len(msg.payload)
+
+    def _complete(self, msg: _Queued, step: int) -> Delivered:
+        self._counter(msg.sender).messages_delivered += 1
+        receiver = self._counter(msg.receiver)
+        receiver.messages_received += 1
+        receiver.bytes_received += len(msg.payload)
+        return Delivered(
+            msg.msg_id, msg.sender, msg.receiver, msg.payload, msg.sent_step, step, msg.attempts
+        )
+
+    def _expire(self, step: int) -> tuple[Expired, ...]:
+        max_age = self.config.max_age
+        if max_age is None:
+            return ()
+        old = [m for m in self._queue if step - m.sent_step > max_age]
+        for m in old:
+            self._queue.remove(m)
+            self._counter(m.sender).messages_expired += 1
+        return tuple(
+            Expired(m.msg_id, m.sender, m.receiver, len(m.payload), m.sent_step, step, m.done)
+            for m in old
+        )
