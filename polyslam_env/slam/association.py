@@ -1,0 +1,365 @@
+"""Landmark extraction and data association (paper §3.1, SPEC §3).
+
+Each beam point π is compared with every map polynomial by the approximation error ε
+(:func:`approximation_error`); with p* the best polynomial:
+
+* ε ≤ ρ_k — good: the beam updates c0 of p* in the EKF;
+* ρ_k < ε ≤ σ_k — the point joins Q_bad(p*); when |Q_bad| > ε_M, p* is refit on Q_bad ∪ R;
+* ε > σ_k — the point joins the cluster with most points within radius R (or a new one);
+  when a cluster holds more than ε_Z points it becomes a new polynomial (:func:`fit_cluster`).
+
+:class:`MapBook` keeps the clusters, the Q_bad sets and stable landmark ids; it never touches
+the EKF. :meth:`MapBook.associate` returns what to do (:class:`AssociationResult`), and the
+caller builds the point sets (:func:`qbad_refit_points`, :func:`fit_cluster`), fits them and
+augments / removes state entries, telling the book with :meth:`MapBook.add_landmark`,
+:meth:`MapBook.move_to_end` and :meth:`MapBook.remove_landmark`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from polyslam_env.slam.fitting import (
+    Fit,
+    PointSet,
+    StoredPoint,
+    concat,
+    fit_polynomial,
+    polynomial_points,
+    stored_points,
+)
+from polyslam_env.slam.polynomial import Polynomial
+
+
+# -- approximation error ---------------------------------------------------------------------
+def approximation_error(
+    points: np.ndarray,
+    polys: Sequence[Polynomial],
+    c0s: Sequence[float] | np.ndarray,
+    squared: bool = False,
+) -> np.ndarray:
+    """(P, n) approximation error of each point by each polynomial (c0 taken from ``c0s``).
+
+    Inside a polynomial's extent: the vertical (variate 1) / horizontal (variate 2) distance
+    |η − p(ξ)|; outside: the distance to the nearer end point. Metres, or the paper's squared
+    form with ``squared=True``.
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(polys) == 0:
+        return np.zeros((len(pts), 0))
+    order = max(p.order for p in polys)
+    coeffs = np.zeros((len(polys), order + 1))  # (n, m+1), zero-padded
+    for j, p in enumerate(polys):
+        coeffs[j, : p.order + 1] = p.coeffs
+    coeffs[:, 0] = np.asarray(c0s, dtype=float)
+    var1 = np.array([p.variate == 1 for p in polys])  # (n,)
+    lo = np.array([p.lo for p in polys])
+    hi = np.array([p.hi for p in polys])
+    xi = np.where(var1, pts[:, :1], pts[:, 1:])  # (P, n)
+    eta = np.where(var1, pts[:, 1:], pts[:, :1])
+    powers = xi[:, :, None] ** np.arange(order + 1)  # (P, n, m+1)
+    vertical = np.abs(eta - np.einsum("pnj,nj->pn", powers, coeffs))
+    ends_xi = np.stack([lo, hi], axis=-1)  # (n, 2)
+    ends_eta = np.einsum("nej,nj->ne", ends_xi[:, :, None] ** np.arange(order + 1), coeffs)
+    d_end = np.hypot(xi[:, :, None] - ends_xi, eta[:, :, None] - ends_eta).min(axis=-1)
+    err = np.where((xi >= lo) & (xi <= hi), vertical, d_end)
+    return err**2 if squared else err
+
+
+# -- bookkeeping ------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class RefitRequest:
+    """Refit landmark ``landmark_id`` on its Q_bad points (``points``) ∪ R."""
+
+    landmark_id: int
+    points: list[StoredPoint]
+
+
+@dataclass(frozen=True, eq=False)
+class NewLandmarkRequest:
+    """Fit a new landmark to a cluster's points (the cluster is already removed)."""
+
+    points: list[StoredPoint]
+
+
+@dataclass(eq=False)
+class AssociationResult:
+    """What one step's association asks the SLAM to do; nothing has touched the EKF."""
+
+    good: dict[int, int] = field(default_factory=dict)  # beam → index into the polys given
+    good_ids: dict[int, int] = field(default_factory=dict)  # beam → landmark id
+    errors: dict[int, float] = field(default_factory=dict)  # beam → best ε (inf if no map)
+    refits: list[RefitRequest] = field(default_factory=list)
+    new_landmarks: list[NewLandmarkRequest] = field(default_factory=list)
+
+
+class MapBook:
+    """Clusters, Q_bad sets and stable landmark ids of one robot's map.
+
+    Landmark ids are stable integers; ``ids[i]`` is the landmark whose c0 sits at state index
+    3 + i. Keep it in step with the EKF: :meth:`add_landmark` after ``ekf.augment`` of a new
+    c0, :meth:`move_to_end` after a refit (augment the new c0, remove the old one),
+    :meth:`remove_landmark` after ``ekf.remove``.
+    """
+
+    def __init__(self, eps_m: int = 5, eps_z: int = 10, cluster_radius: float = 0.35) -> None:
+        if eps_m < 1 or eps_z < 1 or not cluster_radius > 0:
+            raise ValueError(
+                f"need eps_m >= 1, eps_z >= 1, cluster_radius > 0; "
+                f"got {eps_m}, {eps_z}, {cluster_radius}"
+            )
+        self.eps_m = eps_m
+        self.eps_z = eps_z
+        self.cluster_radius = cluster_radius
+        self.ids: list[int] = []
+        self.clusters: list[list[StoredPoint]] = []
+        self.qbad: dict[int, list[StoredPoint]] = {}
+        self._next_id = 0
+
+    # -- landmark ids ---------------------------------------------------------------------
+    def add_landmark(self) -> int:
+        """Register a landmark appended at the end of the state; returns its new id."""
+        lid = self._next_id
+        self._next_id += 1
+        self.ids.append(lid)
+        self.qbad[lid] = []
+        return lid
+
+    def remove_landmark(self, landmark_id: int) -> list[StoredPoint]:
+        """Forget a landmark whose state entry was removed; returns its Q_bad points (after a
+        merge the caller may hand them to the merged landmark's ``qbad``)."""
+        self.ids.remove(landmark_id)
+        return self.qbad.pop(landmark_id)
+
+    def move_to_end(self, landmark_id: int) -> None:
+        """A refit keeps the id but its new c0 was appended at the end of the state."""
+        self.ids.remove(landmark_id)
+        self.ids.append(landmark_id)
+        self.qbad[landmark_id] = []
+
+    def index_of(self, landmark_id: int) -> int:
+        """Position of the landmark among the map polynomials (state index − 3)."""
+        return self.ids.index(landmark_id)
+
+    def state_index(self, landmark_id: int) -> int:
+        """Index of the landmark's c0 in the EKF state."""
+        return 3 + self.index_of(landmark_id)
+
+    # -- clusters ---------------------------------------------------------------------------
+    def add_to_cluster(self, point: StoredPoint) -> list[StoredPoint] | None:
+        """Put the point in the cluster with most neighbours within R (or a new cluster).
+
+        Returns the cluster's points, and removes the cluster, once it holds more than ε_Z.
+        """
+        counts = [
+            int(np.count_nonzero(_distances(c, point.xy) <= self.cluster_radius))
+            for c in self.clusters
+        ]
+        if counts and max(counts) > 0:
+            best = int(np.argmax(counts))  # ties: the oldest cluster
+            self.clusters[best].append(point)
+        else:
+            best = len(self.clusters)
+            self.clusters.append([point])
+        if len(self.clusters[best]) > self.eps_z:
+            return self.clusters.pop(best)
+        return None
+
+    def restore_cluster(self, points: Sequence[StoredPoint]) -> None:
+        """Give back points a cluster fit did not use, as one cluster of the newest ≤ ε_Z.
+
+        Trimming to ε_Z keeps the cluster bounded: the next point re-triggers a fit on the
+        newest evidence instead of refitting an ever-growing set every step.
+        """
+        if points:
+            self.clusters.append(list(points)[-self.eps_z :])
+
+    # -- one step -----------------------------------------------------------------------------
+    def associate(
+        self,
+        points: Sequence[StoredPoint],
+        polys: Sequence[Polynomial],
+        c0s: Sequence[float] | np.ndarray,
+        rho: float,
+        sigma: float,
+        squared: bool = False,
+    ) -> AssociationResult:
+        """Classify this step's beam points against the map as it stood at the step's start.
+
+        ``polys[i]`` / ``c0s[i]`` must be the landmark ``ids[i]``. Polynomials requested
+        during the step join the map only once the caller fits them, so the step's later
+        points are compared with the old map (one step of delay, nothing lost: they go to
+        clusters or Q_bad and are used later).
+        """
+        if len(polys) != len(self.ids) or len(c0s) != len(self.ids):
+            raise ValueError(f"{len(polys)} polys / {len(c0s)} c0s for {len(self.ids)} landmarks")
+        if not 0 < rho <= sigma:
+            raise ValueError(f"need 0 < rho <= sigma, got rho={rho}, sigma={sigma}")
+        result = AssociationResult()
+        if not points:
+            return result
+        if len({p.beam for p in points}) != len(points):
+            raise ValueError("points must carry distinct beam indices (use store_beams)")
+        err = approximation_error(np.array([p.xy for p in points]), polys, c0s, squared)
+        for i, point in enumerate(points):
+            best = int(np.argmin(err[i])) if len(polys) else -1
+            eps = float(err[i, best]) if best >= 0 else np.inf
+            result.errors[point.beam] = eps
+            if eps <= rho:
+                result.good[point.beam] = best
+                result.good_ids[point.beam] = self.ids[best]
+            elif eps <= sigma:
+                self._add_bad(self.ids[best], point, result)
+            else:
+                cluster = self.add_to_cluster(point)
+                if cluster is not None:
+                    result.new_landmarks.append(NewLandmarkRequest(cluster))
+        return result
+
+    def _add_bad(self, landmark_id: int, point: StoredPoint, result: AssociationResult) -> None:
+        """Add to Q_bad; past ε_M points, request (or extend this step's) refit and empty it."""
+        bad = self.qbad[landmark_id]
+        bad.append(point)
+        if len(bad) <= self.eps_m:
+            return
+        self.qbad[landmark_id] = []
+        for request in result.refits:
+            if request.landmark_id == landmark_id:
+                request.points.extend(bad)
+                return
+        result.refits.append(RefitRequest(landmark_id, bad))
+
+
+def _distances(points: Sequence[StoredPoint], xy: np.ndarray) -> np.ndarray:
+    return np.linalg.norm(np.array([p.xy for p in points]) - xy, axis=1)  # (N,)
+
+
+# -- building the fits ----------------------------------------------------------------------
+def qbad_refit_points(
+    qbad: Sequence[StoredPoint],
+    poly: Polynomial,
+    c0_index: int,
+    c0_var: float,
+    eps_m: int,
+    anchor_pose: np.ndarray,
+    n_state: int,
+) -> PointSet:
+    """Q_bad ∪ R: the stored bad points plus ε_M equally spaced points on p* (full extent).
+
+    ``poly`` must carry the current c0; the fit's G_x then has entries on the pose (through
+    the stored points) and on the old c0 (through R).
+    """
+    on_poly = polynomial_points(poly, c0_index, c0_var, eps_m, poly.lo, poly.hi, n_state)
+    return concat(stored_points(qbad, anchor_pose, n_state), on_poly)
+
+
+@dataclass(frozen=True, eq=False)
+class ClusterFit:
+    """A cluster's new landmark (or None) and how the cluster's points were split."""
+
+    fit: Fit | None
+    used: list[StoredPoint]
+    leftover: list[StoredPoint]  # give back with MapBook.restore_cluster
+
+
+def fit_cluster(
+    points: Sequence[StoredPoint],
+    anchor_pose: np.ndarray,
+    n_state: int,
+    max_rms: float,
+    order: int = 3,
+    line_tol: float | None = None,
+    min_second: int = 3,
+    corner_angle_deg: float = 30.0,
+    shape_fixed: bool = False,
+) -> ClusterFit:
+    """A new polynomial from a cluster, without cutting across corners.
+
+    The paper fits one cubic to the whole cluster, but a cluster of radius R = 0.35 m can
+    straddle a corner, and a cubic through both walls rounds the corner off (by ~5 cm for a
+    45°-rotated right angle, where its rms still passes ρ_k). So:
+
+    1. find the dominant line: the MSAC-best line through a pair of points, with inlier
+       tolerance ``line_tol`` (default 3 × the largest range σ, ≥ 1 cm: the points' mutual
+       consistency depends on the range noise, not on the absolute pose uncertainty);
+    2. fewer than ``min_second`` points off it: fit the line's points (one or two strays
+       cannot make a wall; they are left over);
+    3. otherwise find the dominant line of the off-line points; if it has ≥ ``min_second``
+       points and makes ≥ ``corner_angle_deg`` with the first, it is a corner: fit the points
+       within ``line_tol`` of the first line and nearer to it than to the second. Otherwise
+       the points are one curved wall and all are fitted;
+    4. the fit is accepted with ≥ order + 2 points and rms ≤ ``max_rms`` (the caller's ρ_k);
+       otherwise no landmark and every point is left over. ``shape_fixed`` is passed to
+       :func:`~polyslam_env.slam.fitting.fit_polynomial`.
+
+    Bounds (tested): for a noiseless right-angle corner the polynomial lies on one wall
+    (1e-6 m); with σ = 2 cm range noise and arms of 0.3–0.4 m it stays within 0.15 m of one
+    wall, where the paper's single cubic spans both (≈ 0.3 m off either wall). A wall bending
+    by more than ``corner_angle_deg`` within a cluster becomes two landmarks.
+    """
+    pts = list(points)
+    xy = np.array([p.xy for p in pts], dtype=float)  # (N, 2)
+    tol = line_tol if line_tol is not None else max(3.0 * max(p.sigma for p in pts), 0.01)
+    mask = _select_wall(xy, tol, min_second, np.radians(corner_angle_deg))
+    if np.count_nonzero(mask) >= min(order + 2, len(pts)) and np.count_nonzero(mask) >= 2:
+        used = [p for p, m in zip(pts, mask, strict=True) if m]
+        fit = fit_polynomial(stored_points(used, anchor_pose, n_state), order, None, shape_fixed)
+        if fit.rms <= max_rms:
+            return ClusterFit(fit, used, [p for p, m in zip(pts, mask, strict=True) if not m])
+    return ClusterFit(None, [], pts)
+
+
+def _select_wall(xy: np.ndarray, tol: float, min_second: int, corner_angle: float) -> np.ndarray:
+    """(N,) mask of the points of one wall (steps 1–3 of :func:`fit_cluster`)."""
+    dir_on, dist_on = _dominant_line(xy, tol)
+    off = dist_on > tol
+    if np.count_nonzero(off) < min_second:
+        return ~off
+    dir_off, dist_off_sub = _dominant_line(xy[off], tol)
+    if np.count_nonzero(dist_off_sub <= tol) < min_second:
+        return np.ones(len(xy), dtype=bool)  # no second straight wall: one curved wall
+    dist_off = _line_distances(xy[off][dist_off_sub <= tol], dir_off, xy)
+    angle = np.arccos(min(abs(float(dir_on @ dir_off)), 1.0))
+    if angle < corner_angle:
+        return np.ones(len(xy), dtype=bool)  # a gentle bend, not a corner
+    return np.asarray((dist_on <= dist_off) & (dist_on <= tol))
+
+
+def _line_distances(fit_xy: np.ndarray, direction: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Perpendicular distances (N,) of ``xy`` to the line along ``direction`` through the
+    centroid of ``fit_xy``."""
+    normal = np.array([-direction[1], direction[0]])
+    return np.abs((xy - fit_xy.mean(axis=0)) @ normal)
+
+
+def _tls_direction(xy: np.ndarray) -> np.ndarray:
+    """(2,) unit direction of the total-least-squares line through the points."""
+    return np.asarray(np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)[2][0])
+
+
+def _dominant_line(xy: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """The line best supported by the points: its direction (2,) and all distances (N,) to it.
+
+    Candidates are the lines through every pair of points (clusters hold ~ε_Z points); the
+    score is the truncated quadratic Σ min(d², tol²) (MSAC), which prefers a tight wall over
+    a diagonal band through both arms of a corner that merely counts more points within
+    ``tol``. The winner is refined by total least squares on its inliers.
+    """
+    n_pts = len(xy)
+    i, j = np.triu_indices(n_pts, k=1)
+    chord = xy[j] - xy[i]  # (L, 2)
+    length = np.linalg.norm(chord, axis=1)
+    keep = length > 1e-9
+    if n_pts < 3 or not keep.any():
+        direction = _tls_direction(xy) if n_pts >= 2 else np.array([1.0, 0.0])
+        return direction, _line_distances(xy, direction, xy)
+    i, chord, length = i[keep], chord[keep], length[keep]
+    normal = np.stack([-chord[:, 1], chord[:, 0]], axis=1) / length[:, None]  # (L, 2)
+    dist = np.abs(np.einsum("lc,lnc->ln", normal, xy[None, :, :] - xy[i][:, None, :]))
+    best = int(np.argmin((np.minimum(dist, tol) ** 2).sum(axis=1)))  # first on ties
+    inliers = xy[dist[best] <= tol]
+    direction = _tls_direction(inliers)
+    return direction, _line_distances(inliers, direction, xy)

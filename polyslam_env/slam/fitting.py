@@ -1,0 +1,389 @@
+"""The landmark generation function g: weighted LMS polynomial fits and their Jacobians.
+
+Every landmark the SLAM creates (from a cluster), refits (from Q_bad ∪ R) or merges (from
+points on two polynomials) is a weighted least-squares fit of a polynomial to points, and its
+position coefficient c0 enters the EKF state through eq. 4–5 of the paper:
+``P ← G_x P G_xᵀ + G_y V G_yᵀ``. To build G_x and G_y each point carries its derivatives with
+respect to the state X = [x¹, x², θ, c0_1 … c0_n] and to its own measurement noise
+(:class:`PointSet`); :func:`fit_polynomial` chains them through the derivative of the LMS
+solution (SPEC §3 "Weighted LMS", "State augmentation / replacement").
+
+Points come from three constructors:
+
+* :func:`beam_points` — this step's range returns (paper eq. 3), exact derivatives;
+* :func:`stored_points` — points kept from earlier steps (clusters, Q_bad), attached to the
+  current pose (see its docstring for the approximation);
+* :func:`polynomial_points` — points sampled on a polynomial whose c0 is in the state.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from polyslam_env.slam.polynomial import Polynomial
+
+# d/dθ of R(θ) v is J R(θ) v
+J_ROT = np.array([[0.0, -1.0], [1.0, 0.0]])
+
+
+@dataclass(frozen=True, eq=False)
+class PointSet:
+    """Points in frame 0 with their derivatives w.r.t. the state and their noise."""
+
+    xy: np.ndarray  # (N, 2) coordinates in the robot's frame 0
+    d_state: np.ndarray  # (N, 2, 3+n) ∂point/∂X
+    d_noise: np.ndarray  # (N, 2, k) ∂point/∂noise
+    noise_cov: np.ndarray  # (k, k) covariance V of the noise
+    weights: np.ndarray  # (N,) LMS weights, > 0
+
+    def __post_init__(self) -> None:
+        n_pts = self.xy.shape[0]
+        if self.xy.shape != (n_pts, 2):
+            raise ValueError(f"xy must have shape (N, 2), got {self.xy.shape}")
+        if self.d_state.ndim != 3 or self.d_state.shape[:2] != (n_pts, 2):
+            raise ValueError(f"d_state must have shape (N, 2, 3+n), got {self.d_state.shape}")
+        k = self.noise_cov.shape[0]
+        if self.d_noise.shape != (n_pts, 2, k) or self.noise_cov.shape != (k, k):
+            raise ValueError(
+                f"d_noise {self.d_noise.shape} and noise_cov {self.noise_cov.shape} disagree"
+            )
+        if self.weights.shape != (n_pts,) or not np.all(self.weights > 0):
+            raise ValueError("weights must be a positive (N,) array")
+
+    @property
+    def n_points(self) -> int:
+        return int(self.xy.shape[0])
+
+    @property
+    def n_state(self) -> int:
+        return int(self.d_state.shape[2])
+
+    @property
+    def n_noise(self) -> int:
+        return int(self.noise_cov.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class StoredPoint:
+    """A range return kept for later (cluster or Q_bad member).
+
+    It remembers where it was seen in frame 0, along which beam direction (its range noise acts
+    along it), the range σ, its LMS weight 1/‖P_{k|k−1}‖ and the pose estimate at its time.
+    """
+
+    xy: np.ndarray  # (2,) frame-0 coordinates
+    direction: np.ndarray  # (2,) unit beam direction in frame 0
+    sigma: float  # range noise standard deviation (m)
+    weight: float  # 1/‖P_{k|k−1}‖ of the pose prediction that produced it
+    pose: np.ndarray  # (3,) pose estimate when it was measured
+    beam: int = -1  # beam index at its step (bookkeeping only)
+    step: int = -1  # step at which it was measured (bookkeeping only)
+
+
+@dataclass(frozen=True, eq=False)
+class Fit:
+    """Result of a weighted LMS fit: the polynomial and the rows of g's Jacobians."""
+
+    poly: Polynomial
+    c0: float
+    Gx: np.ndarray  # (1, 3+n) ∂c0/∂X
+    Gy: np.ndarray  # (1, k) ∂c0/∂noise
+    V: np.ndarray  # (k, k) noise covariance
+    rms: float  # unweighted RMS of the η residuals (m)
+    order: int  # order actually fitted (≤ requested; higher coefficients are zero)
+
+
+# -- point constructors ------------------------------------------------------------------
+def prediction_weight(pose_cov: np.ndarray) -> float:
+    """LMS weight 1/‖P_{k|k−1}‖ (spectral norm of the pose block)."""
+    norm = float(np.linalg.norm(np.asarray(pose_cov, dtype=float)[:3, :3], 2))
+    if not norm > 0:
+        raise ValueError("pose covariance has zero norm; cannot weight its points")
+    return 1.0 / norm
+
+
+def _beam_directions(theta: float, beam_angles: np.ndarray) -> np.ndarray:
+    phi = theta + np.asarray(beam_angles, dtype=float)
+    return np.stack([np.cos(phi), np.sin(phi)], axis=-1)  # (B, 2)
+
+
+def store_beams(
+    pose_pred: np.ndarray,
+    pose_cov: np.ndarray,
+    ranges: np.ndarray,
+    beam_angles: np.ndarray,
+    range_sigma: float,
+    step: int = -1,
+) -> list[StoredPoint]:
+    """Beam returns of one step as :class:`StoredPoint` s; beams without return are skipped."""
+    pose = np.asarray(pose_pred, dtype=float)
+    r = np.asarray(ranges, dtype=float)
+    u = _beam_directions(pose[2], beam_angles)
+    weight = prediction_weight(pose_cov)
+    return [
+        StoredPoint(pose[:2] + r[i] * u[i], u[i], float(range_sigma), weight, pose.copy(), i, step)
+        for i in range(len(r))
+        if np.isfinite(r[i])
+    ]
+
+
+def beam_points(
+    pose_pred: np.ndarray,
+    pose_cov: np.ndarray,
+    ranges: np.ndarray,
+    beam_angles: np.ndarray,
+    range_sigma: float,
+    n_state: int,
+    anchor_pose: np.ndarray | None = None,
+) -> PointSet:
+    """This step's beam points π_i = p + y_i (cos(θ+β_i), sin(θ+β_i)) (paper eq. 3).
+
+    The noise is the B ranges (V = σ² I); all points weigh 1/‖P_{k|k−1}‖. With ``anchor_pose``
+    the points are computed at ``pose_pred`` but attached to ``anchor_pose`` as in
+    :func:`stored_points` (identical to the exact model when both poses are equal).
+    All ranges must be finite: select the beams with a return first.
+    """
+    r = np.asarray(ranges, dtype=float)
+    if not np.all(np.isfinite(r)):
+        raise ValueError("beam_points needs finite ranges; drop beams without a return")
+    if anchor_pose is not None:
+        stored = store_beams(pose_pred, pose_cov, r, beam_angles, range_sigma)
+        return stored_points(stored, anchor_pose, n_state)
+    pose = np.asarray(pose_pred, dtype=float)
+    u = _beam_directions(pose[2], beam_angles)  # (B, 2)
+    n_beams = len(r)
+    d_state = np.zeros((n_beams, 2, n_state))
+    d_state[:, :, :2] = np.eye(2)
+    d_state[:, :, 2] = r[:, None] * (u @ J_ROT.T)  # ∂/∂θ = y (−sin φ, cos φ)
+    return PointSet(
+        xy=pose[:2] + r[:, None] * u,
+        d_state=d_state,
+        d_noise=_diag_noise(u),
+        noise_cov=np.eye(n_beams) * float(range_sigma) ** 2,
+        weights=np.full(n_beams, prediction_weight(pose_cov)),
+    )
+
+
+def _diag_noise(u: np.ndarray) -> np.ndarray:
+    """(N, 2, N) with point i moving along u_i under noise i only."""
+    n_pts = len(u)
+    d_noise = np.zeros((n_pts, 2, n_pts))
+    d_noise[np.arange(n_pts), :, np.arange(n_pts)] = u
+    return d_noise
+
+
+def stored_points(
+    points: Sequence[StoredPoint],
+    anchor_pose: np.ndarray,
+    n_state: int,
+    pose: np.ndarray | None = None,
+    noise: np.ndarray | None = None,
+) -> PointSet:
+    """Stored points as a function of the current pose: π_i = p + R(θ − θ̂)(π̂_i − p̂) + e_i u_i.
+
+    ``anchor_pose`` = (p̂, θ̂) is the current pose estimate (the linearisation point), π̂_i the
+    stored frame-0 coordinates, u_i the beam direction and e_i ~ N(0, σ_i²) the range noise.
+    The point is modelled as rigidly attached to the current pose: ∂/∂(x, y) = I and
+    ∂/∂θ = J(π̂_i − p̂). This is an approximation: the pose at the point's own step is no longer
+    in the state, so its correlation with the map is carried through the current pose, and the
+    odometry drift between the point's step and now is neglected (it is small over the few
+    steps a point spends in a cluster or Q_bad). ``pose`` and ``noise`` (default: the anchor
+    and zero) evaluate the model elsewhere, for finite-difference checks.
+    """
+    if len(points) == 0:
+        raise ValueError("stored_points needs at least one point")
+    anchor = np.asarray(anchor_pose, dtype=float)
+    at = anchor if pose is None else np.asarray(pose, dtype=float)
+    e = np.zeros(len(points)) if noise is None else np.asarray(noise, dtype=float)
+    xy0 = np.array([p.xy for p in points], dtype=float)  # (N, 2)
+    u = np.array([p.direction for p in points], dtype=float)  # (N, 2)
+    c, s = np.cos(at[2] - anchor[2]), np.sin(at[2] - anchor[2])
+    rel = (xy0 - anchor[:2]) @ np.array([[c, -s], [s, c]]).T  # (N, 2) R(θ − θ̂)(π̂ − p̂)
+    d_state = np.zeros((len(points), 2, n_state))
+    d_state[:, :, :2] = np.eye(2)
+    d_state[:, :, 2] = rel @ J_ROT.T
+    return PointSet(
+        xy=at[:2] + rel + e[:, None] * u,
+        d_state=d_state,
+        d_noise=_diag_noise(u),
+        noise_cov=np.diag([float(p.sigma) ** 2 for p in points]),
+        weights=np.array([p.weight for p in points], dtype=float),
+    )
+
+
+def polynomial_points(
+    poly: Polynomial,
+    c0_index: int,
+    c0_var: float,
+    n: int,
+    lo: float,
+    hi: float,
+    n_state: int,
+) -> PointSet:
+    """``n`` points equally spaced in ξ ∈ [lo, hi] on ``poly``; its c0 is state ``c0_index``.
+
+    ``poly`` must carry the current state value of c0. ∂η/∂c0 = 1 (η = x² for variate 1, x¹
+    for variate 2); there is no measurement noise; every point weighs 1/var(c0).
+    """
+    if not 3 <= c0_index < n_state:
+        raise ValueError(
+            f"c0_index must be a landmark state index in [3, {n_state}), got {c0_index}"
+        )
+    if not c0_var > 0:
+        raise ValueError(f"c0_var must be > 0, got {c0_var}")
+    xy = poly.equally_spaced(n, lo, hi)  # (n, 2)
+    d_state = np.zeros((n, 2, n_state))
+    d_state[:, 1 if poly.variate == 1 else 0, c0_index] = 1.0
+    return PointSet(
+        xy=xy,
+        d_state=d_state,
+        d_noise=np.zeros((n, 2, 0)),
+        noise_cov=np.zeros((0, 0)),
+        weights=np.full(n, 1.0 / float(c0_var)),
+    )
+
+
+def concat(*pointsets: PointSet) -> PointSet:
+    """Stack point sets; their noises are independent, so V is block diagonal."""
+    if not pointsets:
+        raise ValueError("concat needs at least one PointSet")
+    n_state = pointsets[0].n_state
+    if any(ps.n_state != n_state for ps in pointsets):
+        raise ValueError("all point sets must share the state size")
+    k_total = sum(ps.n_noise for ps in pointsets)
+    d_noise = np.zeros((sum(ps.n_points for ps in pointsets), 2, k_total))
+    row = col = 0
+    for ps in pointsets:
+        d_noise[row : row + ps.n_points, :, col : col + ps.n_noise] = ps.d_noise
+        row, col = row + ps.n_points, col + ps.n_noise
+    return PointSet(
+        xy=np.concatenate([ps.xy for ps in pointsets]),
+        d_state=np.concatenate([ps.d_state for ps in pointsets]),
+        d_noise=d_noise,
+        noise_cov=scipy.linalg.block_diag(*[ps.noise_cov for ps in pointsets]).reshape(
+            k_total, k_total
+        ),
+        weights=np.concatenate([ps.weights for ps in pointsets]),
+    )
+
+
+# -- fitting --------------------------------------------------------------------------------
+def choose_variate(xy: np.ndarray, weights: np.ndarray | None = None) -> int:
+    """1 if the weighted principal direction is closer to x¹ (|dx| ≥ |dy|), else 2."""
+    pts = np.asarray(xy, dtype=float)
+    w = np.ones(len(pts)) if weights is None else np.asarray(weights, dtype=float)
+    centred = pts - (w @ pts) / w.sum()
+    cov = (centred * w[:, None]).T @ centred  # (2, 2)
+    direction = np.linalg.eigh(cov)[1][:, -1]
+    return 1 if abs(direction[0]) >= abs(direction[1]) else 2
+
+
+def _split(xy: np.ndarray, variate: int) -> tuple[np.ndarray, np.ndarray]:
+    """(ξ, η) of points for the given variate."""
+    return (xy[:, 0], xy[:, 1]) if variate == 1 else (xy[:, 1], xy[:, 0])
+
+
+def _distinct_count(xi: np.ndarray, scale: float) -> int:
+    """Number of distinct abscissae, up to a relative tolerance of 1e-9."""
+    sorted_xi = np.sort(xi)
+    return 1 + int(np.count_nonzero(np.diff(sorted_xi) > 1e-9 * scale))
+
+
+def _weighted_qr(
+    xi_s: np.ndarray, sqrt_w: np.ndarray, order: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """QR of √W A on scaled abscissae, lowering the order until it has full rank."""
+    while True:
+        a_mat = np.vander(xi_s, order + 1, increasing=True)  # (N, m+1)
+        q, r = np.linalg.qr(sqrt_w[:, None] * a_mat)
+        diag = np.abs(np.diag(r))
+        if order == 0 or diag.min() > 1e-10 * diag.max():
+            return a_mat, q, r, order
+        order -= 1
+
+
+def fit_polynomial(
+    points: PointSet, order: int = 3, variate: int | None = None, shape_fixed: bool = False
+) -> Fit:
+    """Weighted LMS polynomial a = (AᵀWA)⁻¹AᵀWη, with ∂c0/∂X and ∂c0/∂noise.
+
+    The variate is chosen by direction unless given; the extent is [min ξ, max ξ]. With fewer
+    distinct ξ than order+1 (or a rank-deficient design) the order is lowered and the missing
+    coefficients are zero, so the result always has ``order + 1`` coefficients. Columns are
+    scaled by max|ξ| and solved by QR, never by forming (AᵀWA)⁻¹. Derivatives of c0 = a_0
+    (M = AᵀWA, r_i the residual, A_i' = d/dξ of row A_i):
+    ∂a/∂η_i = M⁻¹A_iᵀ w_i and ∂a/∂ξ_i = M⁻¹[w_i A_i'ᵀ r_i − w_i A_iᵀ (A_i' a)];
+    G_x = Σ_i ∂c0/∂π_i ∂π_i/∂X and G_y likewise. The weights are treated as constants.
+
+    ``shape_fixed=True`` differentiates c0 with the shape b held at its fitted value instead
+    (same c0: the normal equation of the constant column gives c0 = Σw(η − B(ξ))/Σw), i.e.
+    ∂c0/∂η_i = w_i/Σw and ∂c0/∂ξ_i = −w_i B'(ξ_i)/Σw. That matches the SLAM's model, where
+    c0 is a rigid offset of a fixed shape; the full derivative also carries the change of
+    shape extrapolated to ξ = 0, which is huge for a segment far from the origin.
+    """
+    if points.n_points == 0:
+        raise ValueError("cannot fit a polynomial to zero points")
+    if order < 1:
+        raise ValueError(f"order must be >= 1, got {order}")
+    var = choose_variate(points.xy, points.weights) if variate is None else variate
+    xi, eta = _split(points.xy, var)
+    scale = max(float(np.abs(xi).max()), 1e-9)
+    w = points.weights / points.weights.max()  # c0 is invariant to a common weight factor
+    m = min(order, _distinct_count(xi, max(scale, 1.0)) - 1)
+    a_mat, q, r, m = _weighted_qr(xi / scale, np.sqrt(w), m)
+    a_s = scipy.linalg.solve_triangular(r, q.T @ (np.sqrt(w) * eta))  # scaled coefficients
+    resid = eta - a_mat @ a_s  # (N,)
+    if shape_fixed:
+        slope = (
+            np.polynomial.polynomial.polyval(
+                xi, np.polynomial.polynomial.polyder(a_s / scale ** np.arange(m + 1))
+            )
+            if m > 0
+            else np.zeros_like(xi)
+        )
+        dc0 = np.stack([-w * slope, w], axis=-1) / w.sum()  # (N, 2) in (ξ, η)
+    else:
+        dc0 = _c0_gradient(xi / scale, scale, w, a_mat, r, a_s, resid, m)
+    dc0_xy = dc0 if var == 1 else dc0[:, ::-1]
+    coeffs = np.zeros(order + 1)
+    coeffs[: m + 1] = a_s / scale ** np.arange(m + 1)
+    return Fit(
+        poly=Polynomial(var, coeffs, float(xi.min()), float(xi.max())),
+        c0=float(coeffs[0]),
+        Gx=np.einsum("nj,njs->s", dc0_xy, points.d_state)[None, :],
+        Gy=np.einsum("nj,njk->k", dc0_xy, points.d_noise)[None, :],
+        V=points.noise_cov,
+        rms=float(np.sqrt(np.mean(resid**2))),
+        order=m,
+    )
+
+
+def _c0_gradient(
+    xi_s: np.ndarray,
+    scale: float,
+    w: np.ndarray,
+    a_mat: np.ndarray,
+    r: np.ndarray,
+    a_s: np.ndarray,
+    resid: np.ndarray,
+    m: int,
+) -> np.ndarray:
+    """(N, 2): ∂c0/∂ξ_i and ∂c0/∂η_i from the normal equations (see :func:`fit_polynomial`)."""
+    e0 = np.zeros(m + 1)
+    e0[0] = 1.0
+    # row 0 of M⁻¹ = R⁻¹R⁻ᵀ, from two triangular solves
+    row0 = scipy.linalg.solve_triangular(r, scipy.linalg.solve_triangular(r, e0, trans="T"))
+    powers = np.arange(m + 1)
+    # d/dξ of (ξ/s)^j = j (ξ/s)^(j−1) / s
+    d_a = np.zeros_like(a_mat)
+    d_a[:, 1:] = powers[1:] * a_mat[:, :-1] / scale  # (N, m+1)
+    slope = d_a @ a_s  # (N,) dη/dξ at each point
+    q_a = a_mat @ row0  # (N,) e0ᵀ M⁻¹ A_iᵀ
+    q_da = d_a @ row0  # (N,) e0ᵀ M⁻¹ A_i'ᵀ
+    d_eta = w * q_a
+    d_xi = w * (q_da * resid - q_a * slope)
+    return np.stack([d_xi, d_eta], axis=-1)

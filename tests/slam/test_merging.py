@@ -1,0 +1,137 @@
+"""Tests of map merging: overlap, γ test, and the merged fit's Jacobians."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from polyslam_env.slam.fitting import PointSet, fit_polynomial
+from polyslam_env.slam.merging import find_merge, merge_points, overlap_interval
+from polyslam_env.slam.polynomial import Polynomial
+
+GAMMA_M = 0.35  # paper value
+# Central differences with step 1e-6: truncation ~1e-12, round-off ~1e-10 relative;
+# 1e-5 catches any wrong term, which would be O(1) relative.
+FD_STEP = 1e-6
+FD_RTOL = 1e-5
+FD_ATOL = 1e-6
+
+
+def wall_value(x: np.ndarray) -> np.ndarray:
+    """The true wall x² = w(x¹), gently curved."""
+    return 0.8 + 0.2 * x - 0.05 * x**2
+
+
+def fitted_piece(lo: float, hi: float, rng: np.random.Generator, variate: int = 1) -> Polynomial:
+    """A cubic fitted to noisy points of the wall over x¹ ∈ [lo, hi]."""
+    x = np.linspace(lo, hi, 30)
+    xy = np.column_stack([x, wall_value(x) + rng.normal(0, 0.005, 30)])
+    ps = PointSet(xy, np.zeros((30, 2, 3)), np.zeros((30, 2, 0)), np.zeros((0, 0)), np.ones(30))
+    return fit_polynomial(ps, 3, variate).poly
+
+
+def line(variate: int, c0: float, slope: float, lo: float, hi: float) -> Polynomial:
+    return Polynomial(variate, np.array([c0, slope, 0.0, 0.0]), lo, hi)
+
+
+def test_merge__overlapping_pieces_of_one_wall_merge_close_to_it() -> None:
+    rng = np.random.default_rng(0)
+    old = fitted_piece(0.0, 1.2, rng)
+    new = fitted_piece(0.8, 2.0, rng)
+    far = line(1, 3.0, 0.0, 0.0, 2.0)  # a wall 2 m away: overlapping in x¹, not mergeable
+    idx = find_merge(new, new.c0, [far, old], [far.c0, old.c0], GAMMA_M)
+    assert idx == 1
+    pts = merge_points(new, 4, 1e-4, old, 5, 2e-4, 5, n_state=6)
+    merged = fit_polynomial(pts, 3)
+    assert (merged.poly.lo, merged.poly.hi) == pytest.approx((0.0, 2.0), abs=0.02)  # fit noise
+    x = np.linspace(0.0, 2.0, 50)
+    # each piece is within ~5 mm (its noise); their blend stays within 1 cm of the wall
+    assert np.max(np.abs(merged.poly.value(x) - wall_value(x))) < 0.01
+
+
+@pytest.mark.parametrize("variates", [(1, 1), (2, 2), (1, 2)])
+def test_merge_points__jacobians_on_both_c0s_match_finite_differences(
+    variates: tuple[int, int],
+) -> None:
+    # a diagonal wall described as x¹- or x²-variate polynomials
+    a = Polynomial(variates[0], np.array([0.3, 0.9, 0.05, -0.01]), 0.0, 1.5)
+    b_coeffs = (
+        np.array([0.35, 0.95, 0.02, 0.0])
+        if variates[1] == variates[0]
+        else np.array([-0.3, 1.1, 0.0, 0.0])
+    )
+    b = Polynomial(variates[1], b_coeffs, 1.0, 2.5)
+    state = np.array([0.1, 0.2, 0.3, 9.0, a.c0, b.c0])
+    i_a, i_b = 4, 5
+
+    def merged_c0(x: np.ndarray, variate: int) -> float:
+        pts = merge_points(a.with_c0(x[i_a]), i_a, 1e-4, b.with_c0(x[i_b]), i_b, 3e-4, 5, 6)
+        return fit_polynomial(pts, 3, variate).c0
+
+    fit = fit_polynomial(merge_points(a, i_a, 1e-4, b, i_b, 3e-4, 5, 6), 3)
+    fd = np.zeros(6)
+    for j in range(6):
+        step = np.zeros(6)
+        step[j] = FD_STEP
+        fd[j] = (
+            merged_c0(state + step, fit.poly.variate) - merged_c0(state - step, fit.poly.variate)
+        ) / (2 * FD_STEP)
+    np.testing.assert_allclose(fit.Gx[0], fd, rtol=FD_RTOL, atol=FD_ATOL)
+    # both c0s enter (b's share of the intercept at ξ = 0 is small: its points are far from 0
+    # and weigh 1/3 of a's; measured ≥ 0.004)
+    assert abs(fit.Gx[0, i_a]) > 1e-3 and abs(fit.Gx[0, i_b]) > 1e-3
+    np.testing.assert_array_equal(fit.Gx[0, :4], 0.0)
+    assert fit.Gy.shape == (1, 0)
+
+
+def test_find_merge__gamma_threshold_is_respected() -> None:
+    p = line(1, 1.0, 0.0, 0.0, 1.0)
+    p2 = line(1, 1.3, 0.0, 0.2, 1.2)  # parallel, 0.3 m apart: γ = 0.3
+    assert find_merge(p, p.c0, [p2], [p2.c0], gamma_max=0.35) == 0
+    assert find_merge(p, p.c0, [p2], [p2.c0], gamma_max=0.25) is None
+    # the c0 from the state counts, not the polynomial's own
+    assert find_merge(p, p.c0, [p2], [1.05], gamma_max=0.1) == 0
+
+
+def test_find_merge__far_or_disjoint_or_barely_touching_are_not_merged() -> None:
+    p = line(1, 1.0, 0.0, 0.0, 1.0)
+    far = line(1, 2.0, 0.0, 0.0, 1.0)  # 1 m away
+    disjoint = line(1, 1.0, 0.0, 1.5, 2.5)  # same line, no overlap
+    touching = line(1, 1.0, 0.0, 0.95, 2.0)  # overlap 5 cm < 10 cm, neither includes the other
+    for other in (far, disjoint, touching):
+        assert find_merge(p, p.c0, [other], [other.c0], GAMMA_M) is None
+    assert find_merge(p, p.c0, [touching], [touching.c0], GAMMA_M, min_overlap=0.04) == 0
+
+
+def test_find_merge__short_included_piece_is_merged() -> None:
+    p = line(1, 1.0, 0.0, 0.0, 1.0)
+    short = line(1, 1.02, 0.0, 0.4, 0.45)  # 5 cm, inside p's extent
+    assert find_merge(p, p.c0, [short], [short.c0], GAMMA_M) == 0
+
+
+def test_find_merge__perpendicular_walls_at_a_corner_are_not_merged() -> None:
+    p = line(1, 1.0, 0.0, 0.0, 1.0)  # x² = 1
+    wall = line(2, 0.9, 0.0, 1.0, 1.3)  # x¹ = 0.9 for x² ∈ [1, 1.3]: meets p at a corner
+    assert overlap_interval(p, wall) is not None  # it projects inside p's extent…
+    assert find_merge(p, p.c0, [wall], [wall.c0], GAMMA_M) is None  # …but is not the same wall
+
+
+def test_find_merge__different_variates_compare_geometrically() -> None:
+    # the diagonal x² = x¹ as x¹-variate on [0, 1] and as x²-variate on [0.5, 1.5]
+    p = line(1, 0.0, 1.0, 0.0, 1.0)
+    p2 = line(2, 0.05, 1.0, 0.5, 1.5)  # x¹ = x² + 0.05: 5 cm from p along x¹
+    a, b, included = overlap_interval(p, p2) or (0.0, 0.0, True)
+    assert (a, b) == pytest.approx((0.55, 1.0)) and not included  # projected on p's x¹ axis
+    assert find_merge(p, p.c0, [p2], [p2.c0], 0.1) == 0
+    assert find_merge(p, p.c0, [p2], [p2.c0], 0.051) == 0
+    assert find_merge(p, p.c0, [p2], [p2.c0], 0.049) is None  # γ = 0.05 (horizontal distance)
+
+
+def test_find_merge__picks_the_best_and_skips_excluded() -> None:
+    p = line(1, 1.0, 0.0, 0.0, 1.0)
+    near, nearer = line(1, 1.2, 0.0, 0.0, 1.0), line(1, 1.05, 0.0, 0.0, 1.0)
+    polys = [near, p, nearer]
+    c0s = [q.c0 for q in polys]
+    assert find_merge(p, p.c0, polys, c0s, GAMMA_M, exclude=1) == 2
+    assert find_merge(p, p.c0, polys, c0s, GAMMA_M) == 1  # itself, γ = 0
+    assert find_merge(p, p.c0, [near], [near.c0], GAMMA_M) == 0
