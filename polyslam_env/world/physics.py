@@ -1,0 +1,340 @@
+"""The pymunk world: differential-drive robots among static walls and pillars (SPEC §2).
+
+One :class:`World` is one episode: it owns a fresh ``pymunk.Space`` (the env builds a new World
+at every reset), the robot bodies and the sensors. Design choices (the spec is silent on them):
+
+* Robots are dynamic circles with **infinite moment** and **zero friction / elasticity**: the
+  wheels alone set the heading (contacts never spin a robot), a robot pushing a wall at an angle
+  slides along it, and nothing bounces.
+* The command is a velocity, applied in pymunk's velocity phase of every sub-step, *after*
+  collision detection and *before* the contact solver, so the solver removes the part of the
+  motion that goes into an obstacle before any position moves. (Setting ``body.velocity`` before
+  ``space.step`` does not work: pymunk moves positions first, and a robot pushing a wall sinks
+  in by several centimetres.) It is done without a Python callback: ``space.damping = 0`` drops
+  all velocity at each velocity phase, and a drive force ``m v / h`` along the heading then
+  gives exactly the commanded velocity (no momentum is carried between sub-steps). Each sub-step
+  moves along the chord of the sub-step's arc (mid-step heading, speed × sinc(ω h / 2)), so a
+  free robot lands exactly on the unicycle arc. The heading is kept by this class (θ += ω h
+  per sub-step; a circle's contacts do not depend on it) and written to ``body.angle`` once per
+  control step.
+* Pymunk has no speculative contacts, so a robot could overlap an obstacle by up to one sub-step
+  of travel on first impact. The collision shapes therefore carry a **skin** of
+  ``v_max · dt / substeps`` (one sub-step at full speed) and ``collision_slop`` equals it: a
+  contact starts up to a skin before the true circles touch and blocks further approach, but is
+  never pushed apart unless the true shapes overlap. Robots thus never overlap walls, pillars or
+  each other, and stop between 0 and one skin (1.5 cm by default) short of them.
+* ``collided`` means a contact pushed on the robot during the step (non-zero impulse): a robot
+  driving into a wall or another robot, or being pushed; gliding past within the skin is not.
+* A guard checks every control step that no robot centre crossed a wall and that no robot
+  overlaps one by more than ``GUARD_TOLERANCE``; a violation puts the robot back where the step
+  started, marks it collided and counts it in ``guard_reverts``. The only case seen: a robot
+  pushed by another into a gap narrower than itself (between a wall and a wall end), where
+  pymunk's solver settles at ~2 mm overlap.
+* A failed robot (``disable``) becomes a static body: it stays as an obstacle, cannot be pushed,
+  ignores commands, and cameras no longer see it (nor does it see). Its odometry is noise only;
+  noise is drawn for every robot every step so the streams do not depend on failures.
+* Walls are thick (``wall_radius``) only for the physics; sensors see thin lines.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pymunk
+
+from polyslam_env.errors import MapFileError
+from polyslam_env.world.config import WorldConfig
+from polyslam_env.world.layout import Layout, point_segment_distance
+from polyslam_env.world.sensors import Camera, Detection, RangeSensor, wrap_angle
+
+#: Solver iterations per physics step, fixed so results do not depend on pymunk defaults; 40
+#: (not pymunk's 10) keeps a robot pushed into a wall corner within 0.1 mm of it.
+SOLVER_ITERATIONS = 40
+#: Share of a true-shape overlap that the solver removes in one sub-step.
+OVERLAP_CORRECTION = 0.5
+#: ``Body.force`` setter called directly: half the cost of ``body.force = f`` in the sub-step loop.
+_SET_FORCE: Callable[[pymunk.Body, Sequence[float]], None] = vars(pymunk.Body)["force"].fset
+#: Overlap of the true shapes (beyond the skin) that the guard tolerates, m.
+GUARD_TOLERANCE = 1e-3
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What one control step produced, per robot."""
+
+    odometry: np.ndarray  # (N, 3): noisy (dx, dy, dθ) in the robot frame at the step start
+    true_odometry: np.ndarray  # (N, 3): the displacement actually made, noiseless
+    collided: np.ndarray  # (N,) bool: a contact pushed on the robot during the step
+    commands: np.ndarray  # (N, 2): the clipped (v, ω) actually applied
+
+
+class World:
+    """Robots, walls and pillars in one pymunk space, plus range beams and a camera."""
+
+    def __init__(
+        self,
+        layout: Layout,
+        config: WorldConfig,
+        num_robots: int,
+        rngs: dict[str, np.random.Generator],
+        start_poses: np.ndarray | None = None,
+    ) -> None:
+        self.layout = layout
+        self.config = config
+        self.num_robots = num_robots
+        self.rngs = rngs
+        self.range_sensor = RangeSensor(config.range_sensor)
+        self.camera_sensor = Camera(config.camera)
+        self.segments = layout.segments  # (S, 4), thin lines for sensing
+        self.pillars = np.asarray(layout.pillars, dtype=float).reshape(-1, 3)  # (P, 3)
+        self.skin = config.robot.v_max * config.dt / config.substeps  # m, see module doc
+        self.active = np.ones(num_robots, dtype=bool)  # (N,)
+        self.guard_reverts = 0
+        self._h = config.dt / config.substeps  # s, one physics sub-step
+        self._v = [0.0] * num_robots  # commanded speed of each robot this control step
+        self._w = [0.0] * num_robots  # commanded turn rate
+        self._touched = np.zeros(num_robots, dtype=bool)  # (N,), set by the contact callback
+        self._pose = self._start_poses(start_poses)  # (N, 3), θ unwrapped like pymunk's
+        self.space = self._make_space()
+        self.bodies = [self._add_robot(p) for p in self._pose]
+        self._shape_index = {s: i for i, b in enumerate(self.bodies) for s in b.shapes}
+
+    # -- construction -----------------------------------------------------------------------
+    def _start_poses(self, start_poses: np.ndarray | None) -> np.ndarray:
+        """The (N, 3) start poses, validated: inside the map, clear of walls and each other."""
+        n = self.num_robots
+        if n < 1:
+            raise ValueError(f"num_robots: must be >= 1, got {n}")
+        if start_poses is None:
+            have = self.layout.num_start_poses
+            if have < n:
+                raise MapFileError(
+                    f"map {self.layout.name!r}: start_poses has {have} poses,"
+                    f" {n} robots need one each"
+                )
+            start_poses = self.layout.start_poses[:n]
+        poses = np.asarray(start_poses, dtype=float)
+        if poses.shape != (n, 3) or not np.all(np.isfinite(poses)):
+            raise ValueError(f"start_poses: expected ({n}, 3) finite values, got {poses!r}")
+        r = self.config.robot.radius
+        inside = self.layout.contains(poses[:, :2])
+        clear = self.layout.clearance(poses[:, :2])
+        for i in range(n):
+            if not inside[i] or clear[i] < r + self.config.wall_radius:
+                raise ValueError(
+                    f"start_poses[{i}]: {tuple(poses[i])} is outside the map or within"
+                    f" {r + self.config.wall_radius:g} m of a wall or pillar"
+                )
+        rel = poses[:, None, :2] - poses[None, :, :2]  # (N, N, 2)
+        gap = np.hypot(rel[..., 0], rel[..., 1])  # (N, N)
+        gap[np.diag_indices(n)] = np.inf
+        if n > 1 and gap.min() < 2 * r:
+            a, b = np.unravel_index(int(np.argmin(gap)), gap.shape)
+            raise ValueError(f"start_poses[{a}] and start_poses[{b}] overlap")
+        return poses.copy()
+
+    def _make_space(self) -> pymunk.Space:
+        """A fresh space with fixed solver settings and the static walls and pillars."""
+        space = pymunk.Space()
+        space.gravity = (0.0, 0.0)
+        space.damping = 0.0  # velocity = drive force · h / m at every sub-step (module doc)
+        space.iterations = SOLVER_ITERATIONS
+        space.collision_slop = self.skin
+        space.collision_bias = (1.0 - OVERLAP_CORRECTION) ** (1.0 / self._h)  # left after 1 s
+        space.sleep_time_threshold = float("inf")  # never sleep: commands change every step
+        static = space.static_body
+        for x0, y0, x1, y1 in self.segments:
+            seg = pymunk.Segment(static, (x0, y0), (x1, y1), self.config.wall_radius)
+            seg.friction, seg.elasticity = 0.0, 0.0
+            space.add(seg)
+        for x, y, rad in self.pillars:
+            circ = pymunk.Circle(static, rad, (x, y))
+            circ.friction, circ.elasticity = 0.0, 0.0
+            space.add(circ)
+        space.on_collision(post_solve=self._on_contact)
+        return space
+
+    def _add_robot(self, pose: np.ndarray) -> pymunk.Body:
+        """A dynamic circle (radius + skin) with infinite moment, frictionless, driven."""
+        body = pymunk.Body(self.config.robot.mass, float("inf"))
+        body.position = (float(pose[0]), float(pose[1]))
+        body.angle = float(pose[2])
+        shape = pymunk.Circle(body, self.config.robot.radius + self.skin)
+        shape.friction, shape.elasticity = 0.0, 0.0
+        self.space.add(body, shape)
+        return body
+
+    def _on_contact(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+        """Mark the robots of a contact that pushed (pymunk calls this after solving)."""
+        if arbiter.total_impulse.length <= 0.0:
+            return
+        for shape in arbiter.shapes:
+            i = self._shape_index.get(shape)
+            if i is not None:
+                self._touched[i] = True
+
+    # -- state ------------------------------------------------------------------------------
+    @property
+    def poses(self) -> np.ndarray:  # (N, 3)
+        """True poses (x, y, θ), θ wrapped to (−π, π]."""
+        out = self._pose.copy()
+        out[:, 2] = wrap_angle(out[:, 2])
+        return out
+
+    def _read_positions(self) -> np.ndarray:  # (N, 2)
+        return np.array([tuple(b.position) for b in self.bodies])
+
+    def disable(self, i: int) -> None:
+        """Fail robot ``i``: it stops, becomes an immovable obstacle and leaves camera views."""
+        if not self.active[i]:
+            return
+        self.active[i] = False
+        body = self.bodies[i]
+        body.velocity = (0.0, 0.0)
+        body.body_type = pymunk.Body.STATIC
+        self.space.reindex_shapes_for_body(body)
+
+    # -- stepping ---------------------------------------------------------------------------
+    def clip_commands(self, commands: np.ndarray) -> np.ndarray:
+        """Validate (N, 2) commands and clip (v, ω) to the robot limits; failed robots get 0."""
+        cmd = np.asarray(commands, dtype=float)
+        if cmd.shape != (self.num_robots, 2):
+            raise ValueError(f"commands: expected shape ({self.num_robots}, 2), got {cmd.shape}")
+        bad = ~np.all(np.isfinite(cmd), axis=1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ValueError(f"commands[{i}] (robot_{i}): not finite, got {tuple(cmd[i])}")
+        rc = self.config.robot
+        v_lo = -rc.v_max if rc.allow_reverse else 0.0
+        out = np.column_stack(
+            [np.clip(cmd[:, 0], v_lo, rc.v_max), np.clip(cmd[:, 1], -rc.omega_max, rc.omega_max)]
+        )
+        out[~self.active] = 0.0
+        return out
+
+    def step(self, commands: np.ndarray) -> StepResult:
+        """Drive every robot with its (v, ω) for one control period ``dt``."""
+        cmd = self.clip_commands(commands)
+        start = self._pose
+        self._touched[:] = False
+        heading = self._integrate(cmd)
+        self._pose = self._guard(start, np.column_stack([self._read_positions(), heading]))
+        true_odo = relative_motion(start, self._pose)
+        odo = self.config.odometry
+        sigma = np.array([odo.sigma_xy, odo.sigma_xy, odo.sigma_theta])  # (3,)
+        noise = self.rngs["motion"].standard_normal((self.num_robots, 3)) * sigma
+        return StepResult(
+            odometry=true_odo + noise,
+            true_odometry=true_odo,
+            collided=self._touched.copy(),
+            commands=cmd,
+        )
+
+    def _integrate(self, cmd: np.ndarray) -> np.ndarray:
+        """Run the sub-steps; return the end headings (N,), θ unwrapped.
+
+        Robots start the period at rest. Pymunk moves positions with the velocity solved in the
+        previous sub-step, so the first sub-step does not move them and the translation solved
+        in the last one is applied here by hand: each period moves by exactly ``substeps``
+        solved sub-steps and turns by exactly ``ω dt``.
+        """
+        n, h = self.config.substeps, self._h
+        th0 = self._pose[:, 2]  # (N,)
+        mid = th0[:, None] + cmd[:, 1:2] * h * (np.arange(n)[None, :] + 0.5)  # (N, n)
+        # Speed scaled by sinc(ω h / 2): each sub-step then moves along the chord of its arc, so
+        # a free robot lands exactly on the unicycle arc. Force m·v/h gives velocity v (damping 0).
+        half = cmd[:, 1:2] * (h / 2)  # (N, 1): half the turn of one sub-step
+        safe = np.where(half == 0.0, 1.0, half)
+        chord = np.where(half == 0.0, 1.0, np.sin(safe) / safe)  # (N, 1): sinc(ω h / 2)
+        gain = cmd[:, 0:1] * chord * self.config.robot.mass / h  # (N, 1)
+        force = np.stack([gain * np.cos(mid), gain * np.sin(mid)], axis=-1)  # (N, n, 2)
+        # Robots with v = 0 need no force (damping 0 stops them) but may still be pushed.
+        driven = [(b, force[i].tolist()) for i, b in enumerate(self.bodies) if cmd[i, 0] != 0.0]
+        set_force = _SET_FORCE  # the property setter, minus pymunk's __setattr__ hook (hot loop)
+        for k in range(n):
+            for body, f in driven:
+                set_force(body, f[k])
+            self.space.step(h)
+        heading = th0 + cmd[:, 1] * self.config.dt  # (N,)
+        for body in (b for b, a in zip(self.bodies, self.active, strict=True) if a):
+            p, vel = body.position, body.velocity
+            body.position = (p.x + vel.x * h, p.y + vel.y * h)
+            body.velocity = (0.0, 0.0)
+        return np.asarray(heading)
+
+    def _guard(self, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+        """Put back any robot whose centre crossed a wall or ended inside one (module doc).
+
+        start, end (N, 3); returns the poses after the guard, and syncs ``body.angle``.
+        """
+        crossed = segments_cross(start[:, :2], end[:, :2], self.segments)  # (N,)
+        bad = (crossed | self._too_deep(end[:, :2])) & self.active
+        end = np.where(bad[:, None], start, end)
+        for i in np.nonzero(bad)[0]:
+            self.bodies[int(i)].position = (float(start[i, 0]), float(start[i, 1]))
+            self._touched[i] = True
+            self.guard_reverts += 1
+        for body, th, a in zip(self.bodies, end[:, 2], self.active, strict=True):
+            if a:
+                body.angle = float(th)
+        return end
+
+    def _too_deep(self, centres: np.ndarray) -> np.ndarray:
+        """Whether each centre (N, 2) overlaps a wall or pillar by more than the tolerance."""
+        r = self.config.robot.radius
+        deep = np.zeros(len(centres), dtype=bool)
+        if len(self.segments):
+            wall = point_segment_distance(centres, self.segments).min(axis=1)
+            deep |= wall < r + self.config.wall_radius - GUARD_TOLERANCE
+        if len(self.pillars):
+            rel = centres[:, None, :] - self.pillars[None, :, :2]  # (N, P, 2)
+            gap = np.hypot(rel[..., 0], rel[..., 1]) - self.pillars[None, :, 2]
+            deep |= gap.min(axis=1) < r - GUARD_TOLERANCE
+        return deep
+
+    # -- sensing ----------------------------------------------------------------------------
+    def true_scan(self) -> np.ndarray:  # (N, B)
+        """Noiseless ranges of every robot's beams (``inf`` = no return)."""
+        return self.range_sensor.true_ranges(
+            self._pose, self.segments, self.pillars, self.config.robot.radius
+        )
+
+    def scan(self) -> np.ndarray:  # (N, B)
+        """Noisy ranges (noise from ``rngs["sensor"]``), clipped to ≥ 0; no return is ``inf``."""
+        return self.range_sensor.measure(
+            self._pose, self.segments, self.pillars, self.rngs["sensor"], self.config.robot.radius
+        )
+
+    def camera(self) -> list[list[Detection]]:
+        """Per robot, the other robots it sees (noise from ``rngs["camera"]``)."""
+        return self.camera_sensor.detect(
+            self._pose, self.active, self.segments, self.pillars, self.rngs["camera"]
+        )
+
+
+def relative_motion(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """(dx, dy, dθ) (N, 3) of end poses in the frames of start poses (N, 3); θ unwrapped ok."""
+    d = end[:, :2] - start[:, :2]  # (N, 2) world frame
+    c, s = np.cos(start[:, 2]), np.sin(start[:, 2])
+    dx = c * d[:, 0] + s * d[:, 1]
+    dy = -s * d[:, 0] + c * d[:, 1]
+    return np.column_stack([dx, dy, wrap_angle(end[:, 2] - start[:, 2])])
+
+
+def segments_cross(p0: np.ndarray, p1: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Whether each path p0→p1 (N, 2) properly intersects any segment (S, 4): (N,) bool."""
+    if len(segments) == 0:
+        return np.zeros(len(p0), dtype=bool)
+    a, e = segments[:, 0:2], segments[:, 2:4] - segments[:, 0:2]  # (S, 2)
+    d = p1 - p0  # (N, 2)
+    w = a[None, :, :] - p0[:, None, :]  # (N, S, 2)
+    denom = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]  # (N, S)
+    t = w[..., 0] * e[None, :, 1] - w[..., 1] * e[None, :, 0]  # path parameter · denom
+    u = w[..., 0] * d[:, None, 1] - w[..., 1] * d[:, None, 0]  # segment parameter · denom
+    sign = np.sign(denom)
+    t, u, denom = t * sign, u * sign, denom * sign
+    hit = (denom > 0) & (t > 0) & (t < denom) & (u > 0) & (u < denom)
+    return np.asarray(hit.any(axis=1))
