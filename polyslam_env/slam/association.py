@@ -275,6 +275,7 @@ def fit_cluster(
     min_second: int = 3,
     corner_angle_deg: float = 30.0,
     shape_fixed: bool = False,
+    auto_order: bool = False,
 ) -> ClusterFit:
     """A new polynomial from a cluster, without cutting across corners.
 
@@ -293,7 +294,7 @@ def fit_cluster(
        the points are one curved wall and all are fitted;
     4. the fit is accepted with ≥ order + 2 points and rms ≤ ``max_rms`` (the caller's ρ_k);
        otherwise no landmark and every point is left over. ``shape_fixed`` is passed to
-       :func:`~polyslam_env.slam.fitting.fit_polynomial`.
+       :func:`~polyslam_env.slam.fitting.fit_polynomial`, and so is ``auto_order``.
 
     Bounds (tested): for a noiseless right-angle corner the polynomial lies on one wall
     (1e-6 m); with σ = 2 cm range noise and arms of 0.3–0.4 m it stays within 0.15 m of one
@@ -306,7 +307,9 @@ def fit_cluster(
     mask = _select_wall(xy, tol, min_second, np.radians(corner_angle_deg))
     if np.count_nonzero(mask) >= min(order + 2, len(pts)) and np.count_nonzero(mask) >= 2:
         used = [p for p, m in zip(pts, mask, strict=True) if m]
-        fit = fit_polynomial(stored_points(used, anchor_pose, n_state), order, None, shape_fixed)
+        fit = fit_polynomial(
+            stored_points(used, anchor_pose, n_state), order, None, shape_fixed, auto_order
+        )
         if fit.rms <= max_rms:
             return ClusterFit(fit, used, [p for p, m in zip(pts, mask, strict=True) if not m])
     return ClusterFit(None, [], pts)

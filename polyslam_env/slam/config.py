@@ -15,7 +15,8 @@ from polyslam_env.errors import ConfigError
 class SlamConfig(Config):
     """Parameters of the per-robot polynomial EKF SLAM (SPEC §3, "Paper parameters")."""
 
-    order: int = 3  # m, polynomial order
+    order: int = 3  # m, the largest polynomial order
+    auto_order: bool = True  # pick each fit's order ≤ m by BIC (False: always m, as printed)
     rho_min: float = 0.08  # m, good-approximation threshold ρ at zero uncertainty
     rho_max: float = 0.24  # m, ... at K·P0
     sigma_min: float = 0.1  # m, "unmapped" threshold σ at zero uncertainty
@@ -33,6 +34,7 @@ class SlamConfig(Config):
     gate_prob: float = 0.99  # χ² gate probability for each beam's innovation
     tangent_min_deg: float = 10.0  # beams hitting closer to tangent than this are skipped
     squared_error: bool = False  # the paper's squared end-point distance in association
+    shape_follows_heading: bool = True  # couple shapes' rotation to θ in ∂h/∂θ (see robot.py)
 
     def validate(self) -> None:
         if not 1 <= self.order <= 5:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
+import scipy.special
 
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -306,8 +307,44 @@ def _weighted_qr(
         order -= 1
 
 
+def select_order(
+    xi: np.ndarray, eta: np.ndarray, w: np.ndarray, max_order: int, noise_var: float = 0.0
+) -> int:
+    """The lowest order in 1..max_order whose residuals the point noise explains.
+
+    The paper's m is the *largest* order a segment may take: a cubic through a dozen points
+    with 2 cm noise over half a metre of straight wall has slopes that are pure noise, and
+    those slopes enter ∂h/∂x and ∂h/∂θ, making the pose look observable where it is not (an
+    overconfident filter). With a known per-point noise variance, order m is accepted when
+    its residual sum of squares is below the 99 % χ² quantile with N − m − 1 dof times the
+    variance. Without noise (points sampled on polynomials) the lowest order that fits to
+    0.1 mm RMS is taken.
+    """
+    n_pts = len(xi)
+    scale = max(float(np.abs(xi).max()), 1e-9)
+    sqrt_w = np.sqrt(w / w.max())
+    for m in range(1, max_order + 1):
+        a_mat, q, r, m_eff = _weighted_qr(xi / scale, sqrt_w, m)
+        if m_eff < m or n_pts <= m + 1:
+            return max(m_eff, 1)
+        coef = scipy.linalg.solve_triangular(r, q.T @ (sqrt_w * eta))
+        resid = eta - a_mat @ coef
+        rss = float(resid @ resid)
+        if noise_var > 0:
+            limit = float(scipy.special.chdtri(n_pts - m - 1, 0.01)) * noise_var
+        else:
+            limit = n_pts * 1e-8
+        if rss <= limit:
+            return m
+    return max_order
+
+
 def fit_polynomial(
-    points: PointSet, order: int = 3, variate: int | None = None, shape_fixed: bool = False
+    points: PointSet,
+    order: int = 3,
+    variate: int | None = None,
+    shape_fixed: bool = False,
+    auto_order: bool = False,
 ) -> Fit:
     """Weighted LMS polynomial a = (AᵀWA)⁻¹AᵀWη, with ∂c0/∂X and ∂c0/∂noise.
 
@@ -324,6 +361,9 @@ def fit_polynomial(
     ∂c0/∂η_i = w_i/Σw and ∂c0/∂ξ_i = −w_i B'(ξ_i)/Σw. That matches the SLAM's model, where
     c0 is a rigid offset of a fixed shape; the full derivative also carries the change of
     shape extrapolated to ξ = 0, which is huge for a segment far from the origin.
+
+    ``auto_order=True`` fits the order :func:`select_order` picks (at most ``order``), with
+    the points' mean noise variance.
     """
     if points.n_points == 0:
         raise ValueError("cannot fit a polynomial to zero points")
@@ -334,6 +374,9 @@ def fit_polynomial(
     scale = max(float(np.abs(xi).max()), 1e-9)
     w = points.weights / points.weights.max()  # c0 is invariant to a common weight factor
     m = min(order, _distinct_count(xi, max(scale, 1.0)) - 1)
+    if auto_order and m > 1:
+        noise_var = float(np.trace(points.noise_cov)) / points.n_points
+        m = select_order(xi, eta, w, m, noise_var)
     a_mat, q, r, m = _weighted_qr(xi / scale, np.sqrt(w), m)
     a_s = scipy.linalg.solve_triangular(r, q.T @ (np.sqrt(w) * eta))  # scaled coefficients
     resid = eta - a_mat @ a_s  # (N,)

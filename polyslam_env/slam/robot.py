@@ -1,0 +1,341 @@
+"""One robot's polynomial EKF SLAM: the stateful shell around the pure functions.
+
+Each step follows SPEC §3's order: predict from odometry → extraction and data association
+(creating and refitting landmarks) → merge check → batched, gated EKF update with the beams
+associated to a landmark → end points follow from the updated c0s.
+
+The robot works in its own start frame R_{j,0} and never sees ground truth.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from polyslam_env.slam import ekf
+from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
+from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.fitting import Fit, PointSet, StoredPoint, fit_polynomial, store_beams
+from polyslam_env.slam.measurement import PackedPolynomials, expected_ranges_and_jacobian
+from polyslam_env.slam.merging import find_merge, merge_points
+from polyslam_env.slam.polynomial import Polynomial
+
+#: Number of recent normalised innovations the divergence test looks at.
+NIS_WINDOW = 50
+
+
+@dataclass(frozen=True)
+class SlamStepInfo:
+    """What one SLAM step did (for logs, metrics and tests)."""
+
+    step: int
+    time_s: float  # wall time of the step
+    n_landmarks: int
+    beams_used: int  # beams that went into the EKF update
+    created: int  # landmarks created from clusters
+    refit: int  # landmarks refit from Q_bad
+    merged: int  # merges performed
+    rho: float  # this step's thresholds
+    sigma: float
+    divergence_f: float
+    diverging: bool
+
+
+class PolySlam:
+    """Polynomial-landmark EKF SLAM of one robot (paper §3.1, §3.3).
+
+    The state is ``mean = [x¹, x², θ, c0_1 … c0_n]`` with covariance ``cov``; landmark ``i``
+    (stable id ``landmark_ids[i]``) keeps its shape and extent in :attr:`shapes`.
+    """
+
+    def __init__(
+        self,
+        config: SlamConfig,
+        beam_angles: Sequence[float] | np.ndarray,
+        max_range: float,
+    ) -> None:
+        self.config = config
+        self.beam_angles = np.asarray(beam_angles, dtype=float)  # (B,)
+        self.max_range = float(max_range)
+        self.mean = np.zeros(3)  # (3+n,)
+        self.cov = config.p0.copy()  # (3+n, 3+n)
+        self.book = MapBook(config.eps_m, config.eps_z, config.cluster_radius)
+        self.shapes: dict[int, Polynomial] = {}  # id → shape and extent (c0 is in the state)
+        self.changed_at: dict[int, int] = {}  # id → step it was created, refit or merged
+        self.pivots: dict[int, float] = {}  # id → ξ of the weighted centroid of its fit points
+        self.step_count = 0
+        self.diverging = False
+        self.divergence_f = 0.0
+        self._packed: PackedPolynomials | None = None
+        self._nis: deque[float] = deque(maxlen=NIS_WINDOW)
+
+    # -- read-only views ------------------------------------------------------------------
+    @property
+    def pose(self) -> np.ndarray:  # (3,)
+        return self.mean[:3].copy()
+
+    @property
+    def pose_cov(self) -> np.ndarray:  # (3, 3)
+        return self.cov[:3, :3].copy()
+
+    @property
+    def landmark_ids(self) -> list[int]:
+        return list(self.book.ids)
+
+    @property
+    def n_landmarks(self) -> int:
+        return len(self.book.ids)
+
+    def polynomials(self) -> list[Polynomial]:
+        """The map: every landmark with its current c0, in state order."""
+        return [
+            self.shapes[i].with_c0(c) for i, c in zip(self.book.ids, self.mean[3:], strict=True)
+        ]
+
+    def c0_variance(self, landmark_id: int) -> float:
+        k = self.book.state_index(landmark_id)
+        return float(self.cov[k, k])
+
+    # -- one step -----------------------------------------------------------------------------
+    def step(self, odometry: np.ndarray, ranges: np.ndarray) -> SlamStepInfo:
+        """Advance by one control period given odometry (3,) and range readings (B,)."""
+        start = time.perf_counter()
+        cfg = self.config
+        self.step_count += 1
+        self.mean, self.cov = ekf.predict(self.mean, self.cov, odometry, cfg.odom_cov)
+        pose_cov = self.cov[:3, :3]
+        f = ekf.divergence_ratio(pose_cov, cfg.p0, cfg.k_divergence)
+        rho = ekf.thresholds(f, cfg.rho_min, cfg.rho_max)
+        sigma = ekf.thresholds(f, cfg.sigma_min, cfg.sigma_max)
+
+        points = store_beams(
+            self.mean[:3], pose_cov, ranges, self.beam_angles, cfg.range_sigma, self.step_count
+        )
+        assoc = self.book.associate(
+            points, self.polynomials(), self.mean[3:], rho, sigma, cfg.squared_error
+        )
+        self._extend_extents(points, assoc.good_ids)
+        refit = sum(self._refit(r.landmark_id, r.points, rho) for r in assoc.refits)
+        created = merged = 0
+        for request in assoc.new_landmarks:
+            new_id = self._create(request.points, rho)
+            if new_id is not None:
+                created += 1
+                merged += self._merge_into_map(new_id)
+
+        good_beams = np.array(sorted(b for b, lid in assoc.good_ids.items() if lid in self.shapes))
+        used = self._update(good_beams, np.asarray(ranges, dtype=float))
+        self.divergence_f = f
+        self.diverging = ekf.is_diverging(
+            self.cov[:3, :3], cfg.p0, cfg.k_divergence, np.fromiter(self._nis, float)
+        )
+        return SlamStepInfo(
+            step=self.step_count,
+            time_s=time.perf_counter() - start,
+            n_landmarks=self.n_landmarks,
+            beams_used=used,
+            created=created,
+            refit=refit,
+            merged=merged,
+            rho=rho,
+            sigma=sigma,
+            divergence_f=f,
+            diverging=self.diverging,
+        )
+
+    def _extend_extents(self, points: Sequence[StoredPoint], good_ids: dict[int, int]) -> None:
+        """Stretch a landmark's extent to cover the good points just beyond its end.
+
+        A point within ρ_k of an end point belongs to the same wall (paper §3.1, case 1), but
+        a beam past the extent has no admissible intersection and could not update c0; so the
+        extent grows to the point's ξ (the end points are "refreshed"). If the extrapolated
+        curve bends away from the wall, the next points land in Q_bad and trigger a refit.
+        """
+        for point in points:
+            lid = good_ids.get(point.beam)
+            if lid is None:
+                continue
+            poly = self.shapes[lid]
+            xi = float(point.xy[0] if poly.variate == 1 else point.xy[1])
+            if xi < poly.lo or xi > poly.hi:
+                self.shapes[lid] = Polynomial(
+                    poly.variate, poly.coeffs, min(poly.lo, xi), max(poly.hi, xi)
+                )
+                self._packed = None
+
+    # -- landmark generation (paper eq. 4–5) ------------------------------------------------------
+    def _augment(self, fit: Fit) -> int:
+        """Append a fitted landmark to the state; returns its new id."""
+        self.mean, self.cov = ekf.augment(self.mean, self.cov, fit.c0, fit.Gx, fit.Gy, fit.V)
+        lid = self.book.add_landmark()
+        self.shapes[lid] = fit.poly
+        self.pivots[lid] = 0.5 * (fit.poly.lo + fit.poly.hi)
+        self.changed_at[lid] = self.step_count
+        self._packed = None
+        return lid
+
+    def _remove(self, landmark_id: int) -> None:
+        self.mean, self.cov = ekf.remove(self.mean, self.cov, self.book.state_index(landmark_id))
+        self.book.remove_landmark(landmark_id)
+        del self.shapes[landmark_id]
+        del self.pivots[landmark_id]
+        self.changed_at.pop(landmark_id, None)
+        self._packed = None
+
+    def _replace(self, old_ids: Sequence[int], fit: Fit) -> int:
+        """Add the fit (its G_x may touch the old c0s) and then drop the old landmarks."""
+        new_id = self._augment(fit)
+        for lid in old_ids:
+            self._remove(lid)
+        return new_id
+
+    def _refit(self, landmark_id: int, bad: Sequence, rho: float) -> int:
+        """Refit a landmark on Q_bad ∪ R; returns 1 if it was replaced."""
+        if landmark_id not in self.shapes:
+            return 0
+        poly = self.shapes[landmark_id].with_c0(self.mean[self.book.state_index(landmark_id)])
+        pts = qbad_refit_points(
+            bad,
+            poly,
+            self.book.state_index(landmark_id),
+            self.c0_variance(landmark_id),
+            self.config.eps_m,
+            self.mean[:3],
+            self.mean.size,
+        )
+        fit = self._fit(pts)
+        if fit is None or fit.rms > self.config.sigma_max:
+            return 0  # the bad points do not make one wall with p*: keep p* as it is
+        new_id = self._replace([landmark_id], fit)
+        self._merge_into_map(new_id)
+        return 1
+
+    def _create(self, cluster: Sequence, rho: float) -> int | None:
+        """A new landmark from a full cluster; unused points go back to a cluster."""
+        result = fit_cluster(
+            cluster,
+            self.mean[:3],
+            self.mean.size,
+            max_rms=rho,
+            order=self.config.order,
+            shape_fixed=True,
+            auto_order=self.config.auto_order,
+        )
+        self.book.restore_cluster(result.leftover)
+        if result.fit is None:
+            return None
+        return self._augment(result.fit)
+
+    def _merge_into_map(self, landmark_id: int) -> int:
+        """Merge a new or changed landmark with an overlapping one (paper §3.3); 1 if merged."""
+        if landmark_id not in self.shapes:
+            return 0
+        idx = self.book.index_of(landmark_id)
+        polys = self.polynomials()
+        j = find_merge(
+            polys[idx],
+            float(self.mean[3 + idx]),
+            polys,
+            self.mean[3:],
+            self.config.gamma_max,
+            self.config.merge_min_overlap,
+            exclude=idx,
+        )
+        if j is None:
+            return 0
+        other_id = self.book.ids[j]
+        pts = merge_points(
+            polys[idx],
+            3 + idx,
+            float(self.cov[3 + idx, 3 + idx]),
+            polys[j],
+            3 + j,
+            float(self.cov[3 + j, 3 + j]),
+            self.config.eps_m,
+            self.mean.size,
+        )
+        fit = self._fit(pts)
+        if fit is None:
+            return 0
+        self._replace([landmark_id, other_id], fit)
+        return 1
+
+    def _fit(self, points: PointSet) -> Fit | None:
+        fit = fit_polynomial(
+            points, self.config.order, None, shape_fixed=True, auto_order=self.config.auto_order
+        )
+        if not (
+            np.isfinite(fit.c0) and np.all(np.isfinite(fit.Gx)) and np.all(np.isfinite(fit.Gy))
+        ):
+            return None
+        return fit
+
+    # -- EKF update -------------------------------------------------------------------------------
+    def _packed_map(self) -> PackedPolynomials:
+        if self._packed is None:
+            self._packed = PackedPolynomials.from_polynomials(
+                [self.shapes[i] for i in self.book.ids]
+            )
+        return self._packed
+
+    def _shape_rotation_term(
+        self, angles: np.ndarray, t: np.ndarray, index: np.ndarray, H: np.ndarray
+    ) -> np.ndarray:
+        """∂h/∂θ from the landmark's shape turning with the heading error (k,).
+
+        A shape was fitted to points placed with the heading estimate of its time, so a
+        heading error rotates the shape as well as shifting it. ``c0``'s Jacobian G_x already
+        carries the shift of the fit points' centroid; the rotation of the shape about that
+        centroid (ξ_c, η_c) is not in the state (the paper keeps shapes out of it). Taking the
+        shape's heading error equal to the robot's current one (odometry turns it by little),
+        rotating the curve by δα changes η at ξ* by ±[(ξ* − ξ_c) + B'(ξ*)(η* − η_c)]·δα
+        (+ for x¹-variate, − for x²-variate), and ∂h/∂η = ∂h/∂c0 = 1/D. Without this term a
+        wall's frozen slope makes the absolute heading look observable: P_θθ collapses while
+        the heading error stays (an overconfident filter).
+        """
+        pose = self.mean[:3]
+        phi = pose[2] + angles
+        hit = pose[:2] + t[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)  # (k, 2)
+        out = np.zeros(len(t))
+        ids = self.book.ids
+        for row, (i, point) in enumerate(zip(index, hit, strict=True)):
+            lid = ids[int(i)]
+            poly, xi_c = self.shapes[lid], self.pivots[lid]
+            xi = point[0] if poly.variate == 1 else point[1]
+            shape = poly.with_c0(0.0)
+            lever = (xi - xi_c) + float(poly.slope(xi)) * float(shape.value(xi) - shape.value(xi_c))
+            sign = 1.0 if poly.variate == 1 else -1.0
+            out[row] = sign * lever * H[row, 3 + int(i)]  # H[., c0] = 1/D
+        return out
+
+    def _update(self, beams: np.ndarray, ranges: np.ndarray) -> int:
+        """Batched, gated update with the associated beams; returns how many were used."""
+        if beams.size == 0 or self.n_landmarks == 0:
+            return 0
+        expected = expected_ranges_and_jacobian(
+            self.mean,
+            self._packed_map(),
+            self.beam_angles[beams],
+            self.max_range,
+            self.config.tangent_min_deg,
+        )
+        rows = np.flatnonzero(expected.valid)
+        if rows.size == 0:
+            return 0
+        z = ranges[beams[rows]]
+        H = expected.H[rows]
+        if self.config.shape_follows_heading:
+            H[:, 2] += self._shape_rotation_term(
+                self.beam_angles[beams[rows]], expected.z_hat[rows], expected.poly_index[rows], H
+            )
+        R = np.eye(rows.size) * self.config.range_sigma**2
+        result = ekf.update(
+            self.mean, self.cov, z, expected.z_hat[rows], H, R, self.config.gate_prob
+        )
+        self._nis.extend(float(v) for v in result.nis if np.isfinite(v))
+        self.mean, self.cov = result.mean, result.cov
+        return int(result.accepted.sum())
