@@ -130,9 +130,7 @@ class PolySlam:
         good_beams = np.array(sorted(b for b, lid in assoc.good_ids.items() if lid in self.shapes))
         used = self._update(good_beams, np.asarray(ranges, dtype=float))
         self.divergence_f = f
-        self.diverging = ekf.is_diverging(
-            self.cov[:3, :3], cfg.p0, cfg.k_divergence, np.fromiter(self._nis, float)
-        )
+        self.diverging = self._is_diverging()
         return SlamStepInfo(
             step=self.step_count,
             time_s=time.perf_counter() - start,
@@ -166,6 +164,21 @@ class PolySlam:
                     poly.variate, poly.coeffs, min(poly.lo, xi), max(poly.hi, xi)
                 )
                 self._packed = None
+
+    def _is_diverging(self) -> bool:
+        """The paper's test (P beyond K·P0) or most recent innovations inconsistent.
+
+        The innovation test uses the *median* NIS of the last :data:`NIS_WINDOW` beams
+        (rejected ones included): a consistent filter has a median near 0.45 (χ², 1 dof),
+        occasional association outliers do not move it, and a median above the 95 %
+        quantile means most beams disagree with the map — the filter has lost itself.
+        """
+        cfg = self.config
+        if ekf.is_diverging(self.cov[:3, :3], cfg.p0, cfg.k_divergence):
+            return True
+        if len(self._nis) < NIS_WINDOW // 5:
+            return False
+        return float(np.median(np.fromiter(self._nis, float))) > ekf.chi2_1dof_quantile(0.95)
 
     # -- landmark generation (paper eq. 4–5) ------------------------------------------------------
     def _augment(self, fit: Fit) -> int:

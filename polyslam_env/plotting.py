@@ -1,0 +1,89 @@
+"""Pictures of SLAM results, in the style of the paper's Figs 5–8 (matplotlib, no window).
+
+Per robot: true walls red, the robot's polynomials (moved to the absolute frame through its
+known start pose) green, true path blue, estimated path dashed red.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from polyslam_env import metrics
+from polyslam_env.slam.polynomial import transform_points
+from polyslam_env.world.layout import Layout
+
+
+def _pyplot():  # type: ignore[no-untyped-def]
+    import matplotlib
+
+    if matplotlib.get_backend().lower() not in ("agg", "pdf", "svg", "cairo"):
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def draw_layout(ax, layout: Layout) -> None:  # type: ignore[no-untyped-def]
+    """True walls (red) and pillars."""
+    for wall in layout.walls:
+        ax.plot(wall[:, 0], wall[:, 1], color="tab:red", lw=1.2, zorder=1)
+    for x, y, r in layout.pillars:
+        t = np.linspace(0, 2 * np.pi, 48)
+        ax.plot(x + r * np.cos(t), y + r * np.sin(t), color="tab:red", lw=1.2, zorder=1)
+    x0, y0, x1, y1 = layout.bounds
+    pad = 0.3
+    ax.set_xlim(x0 - pad, x1 + pad)
+    ax.set_ylim(y0 - pad, y1 + pad)
+    ax.set_aspect("equal")
+
+
+def draw_robot_map(ax, run, color: str = "tab:green") -> None:  # type: ignore[no-untyped-def]
+    """One robot's polynomials, true path and estimated path, in the absolute frame."""
+    sp = run.start_pose
+    for poly in run.polynomials:
+        pts = transform_points(poly.sample_arclength(0.01), sp)
+        ax.plot(pts[:, 0], pts[:, 1], color=color, lw=2.2, zorder=3)
+    ax.plot(run.true_poses[:, 0], run.true_poses[:, 1], color="tab:blue", lw=1.0, zorder=2)
+    est = metrics.pose_to_absolute(run.est_poses, sp)
+    ax.plot(est[:, 0], est[:, 1], "--", color="tab:red", lw=1.0, zorder=2)
+    ax.plot(*run.true_poses[0, :2], "o", color="tab:blue", ms=4)
+
+
+def plot_runs(
+    layout: Layout,
+    runs: Sequence,  # Sequence[RobotRun]
+    path: str | Path,
+    titles: Sequence[str] | None = None,
+) -> Path:
+    """One panel per robot (paper Figs 5–7); saves a PNG and returns its path."""
+    plt = _pyplot()
+    n = max(len(runs), 1)
+    cols = min(n, 3)
+    rows = int(np.ceil(n / cols))
+    x0, y0, x1, y1 = layout.bounds
+    aspect = (y1 - y0 + 0.6) / (x1 - x0 + 0.6)
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(5.2 * cols, 5.2 * cols * aspect * rows / cols + 0.6)
+    )
+    axes = np.atleast_1d(axes).ravel()
+    for i, ax in enumerate(axes):
+        if i >= len(runs):
+            ax.axis("off")
+            continue
+        draw_layout(ax, layout)
+        draw_robot_map(ax, runs[i])
+        ax.set_title(titles[i] if titles else f"robot r{i + 1}", fontsize=10)
+        ax.tick_params(labelsize=7)
+    fig.suptitle(
+        "green: mapped polynomials · red: true walls · blue: true path · dashed red: estimate",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

@@ -1,0 +1,232 @@
+"""Run robots with SLAM on a map without the RL environment.
+
+:func:`simulate` drives a team along scripted commands (the paper's precomputed paths, any
+``(N, K, 2)`` array, or a simple reactive controller), runs each robot's :class:`PolySlam`
+on its own odometry and ranges, and records what the metrics need. Tests and the paper
+reproduction use it; :func:`robot_metrics` turns a run into the paper's numbers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from polyslam_env import metrics
+from polyslam_env.seeding import make_rngs
+from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.robot import PolySlam
+from polyslam_env.world.config import WorldConfig
+from polyslam_env.world.layout import Layout
+from polyslam_env.world.maps import load_map
+from polyslam_env.world.physics import World
+
+#: controller(step, scans (N, B)) -> commands (N, 2); it sees only the robots' own ranges.
+Controller = Callable[[int, np.ndarray], np.ndarray]
+
+
+@dataclass
+class RobotRun:
+    """Everything one robot did in a simulation (estimates in its own start frame)."""
+
+    start_pose: np.ndarray  # (3,) true start pose (absolute frame), known to metrics only
+    true_poses: np.ndarray  # (K+1, 3) absolute
+    est_poses: np.ndarray  # (K+1, 3) in the robot's start frame
+    est_covs: np.ndarray  # (K+1, 3, 3)
+    polynomials: list[Polynomial]  # final map, robot frame
+    hit_points: np.ndarray  # (H, 2) true points its beams hit (absolute), for hit_fraction
+    slam_times: np.ndarray  # (K,) seconds per SLAM step
+    diverged: bool  # flagged at any step
+    collisions: int
+
+
+@dataclass
+class SimulationResult:
+    """A finished simulation: the layout, one :class:`RobotRun` per robot, and settings."""
+
+    layout: Layout
+    runs: list[RobotRun]
+    seed: int | None
+    steps: int
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def metrics(self) -> list[dict[str, float]]:
+        return [robot_metrics(run, self.layout) for run in self.runs]
+
+
+def robot_metrics(run: RobotRun, layout: Layout) -> dict[str, float]:
+    """The paper's metrics (SPEC §5) for one robot, plus completeness and timing."""
+    sp = run.start_pose
+    polys = run.polynomials
+    hit = metrics.hit_fraction(run.hit_points, layout) if len(run.hit_points) else 0.0
+    return {
+        "nees": metrics.nees(run.true_poses, run.est_poses, run.est_covs, sp),
+        "nees_paper": metrics.nees_paper(run.true_poses, run.est_poses, run.est_covs, sp),
+        "nu": metrics.nu(polys, sp, layout),
+        "nu_mean": metrics.nu_mean(polys, sp, layout),
+        "completeness": metrics.completeness(polys, sp, layout),
+        "hit_fraction": hit,
+        "landmarks": float(len(polys)),
+        "slam_time_ms": 1e3 * float(np.mean(run.slam_times)) if len(run.slam_times) else 0.0,
+        "slam_time_ms_median": 1e3 * float(np.median(run.slam_times))
+        if len(run.slam_times)
+        else 0.0,
+        "diverged": float(run.diverged),
+        "collisions": float(run.collisions),
+    }
+
+
+def wall_follow_controller(
+    world_config: WorldConfig, speed: float = 0.08, distance: float = 0.4
+) -> Controller:
+    """A reactive right-hand wall follower on each robot's own (noisy) ranges.
+
+    It needs the beams at −90°, −45° and 0° (the default sensor has them); it turns left in
+    place when the way ahead is blocked and steers to keep the right wall at ``distance``.
+    """
+    angles = np.asarray(world_config.range_sensor.angles_deg)
+    try:
+        front, right_diag, right = (
+            int(np.flatnonzero(np.isclose(angles, a))[0]) for a in (0.0, -45.0, -90.0)
+        )
+    except IndexError:
+        raise ValueError("wall_follow_controller needs beams at 0, -45 and -90 degrees") from None
+    omega_max = world_config.robot.omega_max
+
+    def control(step: int, scans: np.ndarray) -> np.ndarray:
+        out = np.zeros((len(scans), 2))
+        for i, scan in enumerate(scans):
+            ahead = min(scan[front], scan[right_diag] * np.cos(np.pi / 4) * 1.6)
+            if ahead < distance + 0.05:
+                out[i] = (0.0, 0.6)
+                continue
+            side = scan[right] if np.isfinite(scan[right]) else 2 * distance
+            turn = float(np.clip(-1.5 * (side - distance), -0.8, 0.8))
+            out[i] = (speed, np.clip(turn, -omega_max, omega_max))
+        return out
+
+    return control
+
+
+def simulate(
+    map: str | Layout = "paper",
+    *,
+    commands: np.ndarray | None = None,
+    controller: Controller | None = None,
+    num_robots: int | None = None,
+    steps: int | None = None,
+    seed: int | None = 0,
+    world_config: WorldConfig | None = None,
+    slam_config: SlamConfig | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> SimulationResult:
+    """Run ``num_robots`` robots with SLAM for ``steps`` control periods.
+
+    Motion comes from ``commands`` (N, K, 2) of (v, ω) if given, else from ``controller``,
+    else from the map's built-in paths when there are some (the ``paper`` map), else from
+    :func:`wall_follow_controller`. ``progress`` is called with each finished step.
+    """
+    wcfg = world_config or WorldConfig()
+    scfg = slam_config or SlamConfig()
+    layout = map if isinstance(map, Layout) else load_map(map)
+    if commands is None and controller is None:
+        commands = _builtin_commands(layout.name)
+    if commands is not None:
+        commands = np.asarray(commands, dtype=float)
+        if commands.ndim != 3 or commands.shape[2] != 2:
+            raise ValueError(f"commands: expected shape (N, K, 2), got {commands.shape}")
+        num_robots = num_robots or commands.shape[0]
+        steps = steps or commands.shape[1]
+        if commands.shape[0] < num_robots or commands.shape[1] < steps:
+            raise ValueError(
+                f"commands: shape {commands.shape} is too small for {num_robots} robots"
+                f" × {steps} steps"
+            )
+    num_robots = num_robots or min(3, layout.num_start_poses)
+    steps = 200 if steps is None else steps
+    if commands is not None:
+        table = commands
+        controller = lambda k, _scans: table[:num_robots, k]  # noqa: E731
+    elif controller is None:
+        controller = wall_follow_controller(wcfg)
+
+    world = World(layout, wcfg, num_robots, make_rngs(seed))
+    slams = [
+        PolySlam(scfg, wcfg.range_sensor.angles, wcfg.range_sensor.max_range)
+        for _ in range(num_robots)
+    ]
+    rec = _Recorder(world, slams)
+    scans = world.scan()
+    for k in range(steps):
+        result = world.step(np.asarray(controller(k, scans), dtype=float))
+        scans = world.scan()
+        infos = [slam.step(result.odometry[i], scans[i]) for i, slam in enumerate(slams)]
+        rec.record(scans, infos, result.collided)
+        if progress is not None:
+            progress(k + 1)
+    return SimulationResult(layout, rec.runs(), seed, steps)
+
+
+def _builtin_commands(map_name: str) -> np.ndarray | None:
+    """The precomputed paths shipped for a built-in map, if any."""
+    try:
+        from polyslam_env.paths import builtin_paths, load_paths
+    except ImportError:  # pragma: no cover - paths module is part of the package
+        return None
+    for name in builtin_paths():
+        paths = load_paths(name)
+        if paths.map == map_name:
+            return paths.commands
+    return None
+
+
+class _Recorder:
+    """Collects the per-step data of every robot during :func:`simulate`."""
+
+    def __init__(self, world: World, slams: list[PolySlam]) -> None:
+        self.world, self.slams = world, slams
+        n = len(slams)
+        self.start = world.poses.copy()
+        self.true = [[world.poses[i].copy()] for i in range(n)]
+        self.est = [[s.pose] for s in slams]
+        self.cov = [[s.pose_cov] for s in slams]
+        self.hits: list[list[np.ndarray]] = [[] for _ in range(n)]
+        self.times: list[list[float]] = [[] for _ in range(n)]
+        self.diverged = [False] * n
+        self.collisions = [0] * n
+        self.angles = np.asarray(world.config.range_sensor.angles)
+
+    def record(self, scans: np.ndarray, infos: list, collided: np.ndarray) -> None:
+        poses = self.world.poses
+        true_ranges = self.world.true_scan()
+        for i, slam in enumerate(self.slams):
+            self.true[i].append(poses[i].copy())
+            self.est[i].append(slam.pose)
+            self.cov[i].append(slam.pose_cov)
+            self.times[i].append(infos[i].time_s)
+            self.diverged[i] |= infos[i].diverging
+            self.collisions[i] += int(collided[i])
+            r = true_ranges[i]
+            ok = np.isfinite(r)
+            phi = poses[i, 2] + self.angles[ok]
+            rays = np.stack([np.cos(phi), np.sin(phi)], axis=1)
+            self.hits[i].append(poses[i, :2] + r[ok, None] * rays)
+
+    def runs(self) -> list[RobotRun]:
+        return [
+            RobotRun(
+                start_pose=self.start[i],
+                true_poses=np.array(self.true[i]),
+                est_poses=np.array(self.est[i]),
+                est_covs=np.array(self.cov[i]),
+                polynomials=slam.polynomials(),
+                hit_points=np.vstack(self.hits[i]) if self.hits[i] else np.zeros((0, 2)),
+                slam_times=np.array(self.times[i]),
+                diverged=self.diverged[i],
+                collisions=self.collisions[i],
+            )
+            for i, slam in enumerate(self.slams)
+        ]
