@@ -34,7 +34,7 @@ class SlamConfig(Config):
     gate_prob: float = 0.99  # χ² gate probability for each beam's innovation
     tangent_min_deg: float = 10.0  # beams hitting closer to tangent than this are skipped
     squared_error: bool = False  # the paper's squared end-point distance in association
-    shape_follows_heading: bool = True  # couple shapes' rotation to θ in ∂h/∂θ (see robot.py)
+    shape_follows_pose: bool = True  # shapes move with the pose error in ∂h/∂pose (robot.py)
 
     def validate(self) -> None:
         if not 1 <= self.order <= 5:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -67,6 +67,8 @@ class PolySlam:
         self.shapes: dict[int, Polynomial] = {}  # id → shape and extent (c0 is in the state)
         self.changed_at: dict[int, int] = {}  # id → step it was created, refit or merged
         self.pivots: dict[int, float] = {}  # id → ξ of the weighted centroid of its fit points
+        self.model_var: dict[int, float] = {}  # id → fit residual variance beyond the noise
+        self.xi_var: dict[int, float] = {}  # id → pose variance along ξ when it was made
         self.step_count = 0
         self.diverging = False
         self.divergence_f = 0.0
@@ -146,24 +148,31 @@ class PolySlam:
         )
 
     def _extend_extents(self, points: Sequence[StoredPoint], good_ids: dict[int, int]) -> None:
-        """Stretch a landmark's extent to cover the good points just beyond its end.
+        """Stretch a landmark's extent over good points just beyond its end.
 
         A point within ρ_k of an end point belongs to the same wall (paper §3.1, case 1), but
-        a beam past the extent has no admissible intersection and could not update c0; so the
-        extent grows to the point's ξ (the end points are "refreshed"). If the extrapolated
-        curve bends away from the wall, the next points land in Q_bad and trigger a refit.
+        a beam past the extent has no admissible intersection and cannot update c0. The
+        extent grows to the point's ξ only when the extrapolated curve itself explains the
+        point (|η − p(ξ)| ≤ 2σ of the range noise); otherwise the extrapolation would be
+        trusted where it bends away from a curved wall, and the point is left to Q_bad and a
+        refit, as in the paper.
         """
+        limit = 2.0 * self.config.range_sigma
         for point in points:
             lid = good_ids.get(point.beam)
             if lid is None:
                 continue
             poly = self.shapes[lid]
-            xi = float(point.xy[0] if poly.variate == 1 else point.xy[1])
-            if xi < poly.lo or xi > poly.hi:
-                self.shapes[lid] = Polynomial(
-                    poly.variate, poly.coeffs, min(poly.lo, xi), max(poly.hi, xi)
-                )
-                self._packed = None
+            xi, eta = (point.xy[0], point.xy[1]) if poly.variate == 1 else point.xy[::-1]
+            if poly.lo <= xi <= poly.hi:
+                continue
+            c0 = self.mean[self.book.state_index(lid)]
+            if abs(eta - c0 - float(poly.with_c0(0.0).value(xi))) > limit:
+                continue
+            self.shapes[lid] = Polynomial(
+                poly.variate, poly.coeffs, min(poly.lo, xi), max(poly.hi, xi)
+            )
+            self._packed = None
 
     def _is_diverging(self) -> bool:
         """The paper's test (P beyond K·P0) or most recent innovations inconsistent.
@@ -187,6 +196,8 @@ class PolySlam:
         lid = self.book.add_landmark()
         self.shapes[lid] = fit.poly
         self.pivots[lid] = 0.5 * (fit.poly.lo + fit.poly.hi)
+        self.model_var[lid] = max(fit.rms**2 - self.config.range_sigma**2, 0.0)
+        self.xi_var[lid] = float(self.cov[0, 0] if fit.poly.variate == 1 else self.cov[1, 1])
         self.changed_at[lid] = self.step_count
         self._packed = None
         return lid
@@ -196,6 +207,8 @@ class PolySlam:
         self.book.remove_landmark(landmark_id)
         del self.shapes[landmark_id]
         del self.pivots[landmark_id]
+        del self.model_var[landmark_id]
+        del self.xi_var[landmark_id]
         self.changed_at.pop(landmark_id, None)
         self._packed = None
 
@@ -295,35 +308,48 @@ class PolySlam:
             )
         return self._packed
 
-    def _shape_rotation_term(
+    def _shape_coupling(
         self, angles: np.ndarray, t: np.ndarray, index: np.ndarray, H: np.ndarray
-    ) -> np.ndarray:
-        """∂h/∂θ from the landmark's shape turning with the heading error (k,).
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Extra ∂h/∂pose (k, 3) from a landmark's shape moving with the pose error.
 
-        A shape was fitted to points placed with the heading estimate of its time, so a
-        heading error rotates the shape as well as shifting it. ``c0``'s Jacobian G_x already
-        carries the shift of the fit points' centroid; the rotation of the shape about that
-        centroid (ξ_c, η_c) is not in the state (the paper keeps shapes out of it). Taking the
-        shape's heading error equal to the robot's current one (odometry turns it by little),
-        rotating the curve by δα changes η at ξ* by ±[(ξ* − ξ_c) + B'(ξ*)(η* − η_c)]·δα
-        (+ for x¹-variate, − for x²-variate), and ∂h/∂η = ∂h/∂c0 = 1/D. Without this term a
-        wall's frozen slope makes the absolute heading look observable: P_θθ collapses while
-        the heading error stays (an overconfident filter).
+        A shape was fitted to points placed with the pose estimate of its time, so that pose's
+        error moves the whole shape rigidly. ``c0``'s Jacobian G_x carries the part of that
+        motion a constant offset can: the shift of the curve at its centroid ξ_c. What it
+        cannot carry (the shape is outside the state, as in the paper) is
+
+        * the rotation by δα about the centroid (ξ_c, η_c), which changes η at ξ* by
+          ±[(ξ* − ξ_c) + B'(ξ*)(η* − η_c)]·δα (+ for x¹-variate, − for x²-variate), and
+        * the translation along ξ by δξ, which changes η at ξ* by −(B'(ξ*) − B'(ξ_c))·δξ.
+
+        The heading error changes little after a landmark is made (odometry turns it by
+        little and a wall hardly corrects absolute heading), so the shape's rotation is taken
+        equal to the robot's current heading error: it enters ∂h/∂θ through
+        ∂h/∂η = ∂h/∂c0 = 1/D (returned, (k, 3), in column θ). Without it a frozen slope makes
+        the absolute heading look observable: P_θθ shrinks while the error stays. The
+        position error, in contrast, is corrected by the update, so the translation term is
+        treated as noise: its variance ((B'(ξ*) − B'(ξ_c))/D)²·σ²_ξ, with σ²_ξ the pose
+        variance along ξ when the landmark was made, is returned separately (k,) for R.
         """
         pose = self.mean[:3]
         phi = pose[2] + angles
         hit = pose[:2] + t[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)  # (k, 2)
-        out = np.zeros(len(t))
+        out = np.zeros((len(t), 3))
+        extra_var = np.zeros(len(t))
         ids = self.book.ids
         for row, (i, point) in enumerate(zip(index, hit, strict=True)):
             lid = ids[int(i)]
             poly, xi_c = self.shapes[lid], self.pivots[lid]
-            xi = point[0] if poly.variate == 1 else point[1]
             shape = poly.with_c0(0.0)
-            lever = (xi - xi_c) + float(poly.slope(xi)) * float(shape.value(xi) - shape.value(xi_c))
-            sign = 1.0 if poly.variate == 1 else -1.0
-            out[row] = sign * lever * H[row, 3 + int(i)]  # H[., c0] = 1/D
-        return out
+            v1 = poly.variate == 1
+            xi = point[0] if v1 else point[1]
+            slope = float(poly.slope(xi))
+            inv_d = H[row, 3 + int(i)]  # ∂h/∂c0 = 1/D
+            shift = (slope - float(poly.slope(xi_c))) * inv_d
+            extra_var[row] = shift**2 * self.xi_var[lid]
+            lever = (xi - xi_c) + slope * float(shape.value(xi) - shape.value(xi_c))
+            out[row, 2] = (1.0 if v1 else -1.0) * lever * inv_d
+        return out, extra_var
 
     def _update(self, beams: np.ndarray, ranges: np.ndarray) -> int:
         """Batched, gated update with the associated beams; returns how many were used."""
@@ -341,14 +367,48 @@ class PolySlam:
             return 0
         z = ranges[beams[rows]]
         H = expected.H[rows]
-        if self.config.shape_follows_heading:
-            H[:, 2] += self._shape_rotation_term(
-                self.beam_angles[beams[rows]], expected.z_hat[rows], expected.poly_index[rows], H
+        index = expected.poly_index[rows]
+        ids = self.book.ids
+        inv_d = H[np.arange(rows.size), 3 + index]
+        variance = (
+            self.config.range_sigma**2
+            + np.array([self.model_var[ids[int(i)]] for i in index]) * inv_d**2
+        )
+        if self.config.shape_follows_pose:
+            coupling, extra = self._shape_coupling(
+                self.beam_angles[beams[rows]], expected.z_hat[rows], index, H
             )
-        R = np.eye(rows.size) * self.config.range_sigma**2
+            H[:, :3] += coupling
+            variance += extra
+        R = np.diag(variance)
         result = ekf.update(
             self.mean, self.cov, z, expected.z_hat[rows], H, R, self.config.gate_prob
         )
         self._nis.extend(float(v) for v in result.nis if np.isfinite(v))
+        before = self.mean[:3].copy()
         self.mean, self.cov = result.mean, result.cov
+        self._carry_stored_points(before, self.mean[:3])
         return int(result.accepted.sum())
+
+    def _carry_stored_points(self, before: np.ndarray, after: np.ndarray) -> None:
+        """Move cluster and Q_bad points rigidly with a pose correction.
+
+        Stored points were placed from the pose estimates of their steps, which odometry ties
+        rigidly to the current pose; the fits model them so (∂π/∂X through the current pose).
+        When the update corrects the current pose, the recent trajectory moves with it, and so
+        must the points: else a new landmark mixes stale coordinates with the corrected pose.
+        """
+        dtheta = float(after[2] - before[2])
+        c, s = np.cos(dtheta), np.sin(dtheta)
+        rot = np.array([[c, -s], [s, c]])
+
+        def carry(p: StoredPoint) -> StoredPoint:
+            xy = after[:2] + rot @ (p.xy - before[:2])
+            pose = np.concatenate(
+                [after[:2] + rot @ (p.pose[:2] - before[:2]), [p.pose[2] + dtheta]]
+            )
+            return replace(p, xy=xy, direction=rot @ p.direction, pose=pose)
+
+        book = self.book
+        book.clusters = [[carry(p) for p in cluster] for cluster in book.clusters]
+        book.qbad = {lid: [carry(p) for p in pts] for lid, pts in book.qbad.items()}
