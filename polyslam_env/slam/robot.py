@@ -189,6 +189,22 @@ class PolySlam:
             return False
         return float(np.median(np.fromiter(self._nis, float))) > ekf.chi2_1dof_quantile(0.95)
 
+    # -- public landmark insertion (map exchange) -----------------------------------------------
+    def insert_landmark(self, fit: Fit, merge: bool = True) -> int:
+        """Add a landmark from an external fit (e.g. a received polynomial refitted in this
+        robot's frame); ``fit.Gx``/``fit.Gy``/``fit.V`` must describe its c0's dependence on
+        this robot's state and on the inputs' noise. Runs the merge check unless ``merge`` is
+        False. Returns the id of the landmark that holds it afterwards (after a merge, the
+        merged landmark's id)."""
+        lid = self._augment(fit)
+        if merge and self._merge_into_map(lid):
+            return self.book.ids[-1]
+        return lid
+
+    def changed_since(self, step: int) -> list[int]:
+        """Ids of the landmarks created, refit or merged after ``step`` (exchange payloads)."""
+        return [lid for lid in self.book.ids if self.changed_at.get(lid, -1) > step]
+
     # -- landmark generation (paper eq. 4–5) ------------------------------------------------------
     def _augment(self, fit: Fit) -> int:
         """Append a fitted landmark to the state; returns its new id."""
