@@ -250,7 +250,7 @@ class PolySlam:
             self.mean.size,
         )
         fit = self._fit(pts)
-        if fit is None or fit.rms > self.config.sigma_max:
+        if fit is None or fit.rms > self._max_fit_rms(rho):
             return 0  # the bad points do not make one wall with p*: keep p* as it is
         new_id = self._replace([landmark_id], fit)
         self._merge_into_map(new_id)
@@ -262,15 +262,26 @@ class PolySlam:
             cluster,
             self.mean[:3],
             self.mean.size,
-            max_rms=rho,
+            max_rms=self._max_fit_rms(rho),
             order=self.config.order,
             shape_fixed=True,
             auto_order=self.config.auto_order,
+            min_noise_var=self.config.range_sigma**2,
         )
         self.book.restore_cluster(result.leftover)
         if result.fit is None:
             return None
         return self._augment(result.fit)
+
+    def _max_fit_rms(self, rho: float) -> float:
+        """Largest RMS residual a new or refit polynomial may have: min(ρ_k, 2.5 σ_range).
+
+        The paper accepts a fit within ρ_k (8 cm at first), four times the 2 cm range noise:
+        a cubic across a straight wall and the start of a bulge passes that, and the robot
+        then localises against a wall that is not there. A right shape leaves residuals at
+        the noise level; 2.5σ leaves room for the drift between the points' steps.
+        """
+        return min(rho, 2.5 * self.config.range_sigma)
 
     def _merge_into_map(self, landmark_id: int) -> int:
         """Merge a new or changed landmark with an overlapping one (paper §3.3); 1 if merged."""
@@ -308,7 +319,12 @@ class PolySlam:
 
     def _fit(self, points: PointSet) -> Fit | None:
         fit = fit_polynomial(
-            points, self.config.order, None, shape_fixed=True, auto_order=self.config.auto_order
+            points,
+            self.config.order,
+            None,
+            shape_fixed=True,
+            auto_order=self.config.auto_order,
+            min_noise_var=self.config.range_sigma**2,
         )
         if not (
             np.isfinite(fit.c0) and np.all(np.isfinite(fit.Gx)) and np.all(np.isfinite(fit.Gy))
