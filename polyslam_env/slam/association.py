@@ -276,6 +276,7 @@ def fit_cluster(
     corner_angle_deg: float = 30.0,
     shape_fixed: bool = False,
     auto_order: bool = False,
+    min_noise_var: float = 0.0,
 ) -> ClusterFit:
     """A new polynomial from a cluster, without cutting across corners.
 
@@ -294,7 +295,8 @@ def fit_cluster(
        the points are one curved wall and all are fitted;
     4. the fit is accepted with ≥ order + 2 points and rms ≤ ``max_rms`` (the caller's ρ_k);
        otherwise no landmark and every point is left over. ``shape_fixed`` is passed to
-       :func:`~polyslam_env.slam.fitting.fit_polynomial`, and so is ``auto_order``.
+       :func:`~polyslam_env.slam.fitting.fit_polynomial`, and so are ``auto_order`` and
+       ``min_noise_var``.
 
     Bounds (tested): for a noiseless right-angle corner the polynomial lies on one wall
     (1e-6 m); with σ = 2 cm range noise and arms of 0.3–0.4 m it stays within 0.15 m of one
@@ -308,7 +310,12 @@ def fit_cluster(
     if np.count_nonzero(mask) >= min(order + 2, len(pts)) and np.count_nonzero(mask) >= 2:
         used = [p for p, m in zip(pts, mask, strict=True) if m]
         fit = fit_polynomial(
-            stored_points(used, anchor_pose, n_state), order, None, shape_fixed, auto_order
+            stored_points(used, anchor_pose, n_state),
+            order,
+            None,
+            shape_fixed,
+            auto_order,
+            min_noise_var,
         )
         if fit.rms <= max_rms:
             return ClusterFit(fit, used, [p for p, m in zip(pts, mask, strict=True) if not m])

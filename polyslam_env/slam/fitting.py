@@ -345,6 +345,7 @@ def fit_polynomial(
     variate: int | None = None,
     shape_fixed: bool = False,
     auto_order: bool = False,
+    min_noise_var: float = 0.0,
 ) -> Fit:
     """Weighted LMS polynomial a = (AᵀWA)⁻¹AᵀWη, with ∂c0/∂X and ∂c0/∂noise.
 
@@ -363,7 +364,10 @@ def fit_polynomial(
     shape extrapolated to ξ = 0, which is huge for a segment far from the origin.
 
     ``auto_order=True`` fits the order :func:`select_order` picks (at most ``order``), with
-    the points' mean noise variance.
+    the points' mean noise variance, floored at ``min_noise_var``: points sampled on
+    polynomials (merges, refits) carry no noise of their own, but their polynomials came from
+    noisy ranges, and a 1 cm disagreement between two segments of one straight wall must
+    not buy a cubic whose spurious curvature then makes the pose look observable.
     """
     if points.n_points == 0:
         raise ValueError("cannot fit a polynomial to zero points")
@@ -375,7 +379,7 @@ def fit_polynomial(
     w = points.weights / points.weights.max()  # c0 is invariant to a common weight factor
     m = min(order, _distinct_count(xi, max(scale, 1.0)) - 1)
     if auto_order and m > 1:
-        noise_var = float(np.trace(points.noise_cov)) / points.n_points
+        noise_var = max(float(np.trace(points.noise_cov)) / points.n_points, min_noise_var)
         m = select_order(xi, eta, w, m, noise_var)
     a_mat, q, r, m = _weighted_qr(xi / scale, np.sqrt(w), m)
     a_s = scipy.linalg.solve_triangular(r, q.T @ (np.sqrt(w) * eta))  # scaled coefficients

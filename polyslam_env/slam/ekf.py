@@ -1,0 +1,237 @@
+"""EKF core of the polynomial SLAM as pure functions on (mean, cov) (SPEC §3, STYLE habit 8).
+
+State X = [x¹, x², θ, c0_1 … c0_n] (3+n,), covariance P (3+n, 3+n). Every function returns
+new arrays and leaves its inputs untouched; a thin per-robot class strings them together.
+Landmark i's c0 sits at state index 3+i.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import scipy.linalg
+import scipy.special
+
+
+def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
+    """Angles wrapped to [−π, π)."""
+    return np.asarray((np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi)
+
+
+def _symmetrise(a: np.ndarray) -> np.ndarray:
+    return 0.5 * (a + a.T)
+
+
+# -- prediction ----------------------------------------------------------------------------------
+def motion_jacobians(pose: np.ndarray, odometry: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """F = ∂f/∂pose and L = ∂f/∂odometry of the unicycle composition, both (3, 3).
+
+    f(pose, u) = [x + cos θ·dx − sin θ·dy, y + sin θ·dx + cos θ·dy, θ + dθ], with the
+    odometry u = (dx, dy, dθ) measured in the robot frame at the start of the step.
+    """
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    dx, dy = odometry[0], odometry[1]
+    F = np.array([[1.0, 0.0, -s * dx - c * dy], [0.0, 1.0, c * dx - s * dy], [0.0, 0.0, 1.0]])
+    L = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return F, L
+
+
+def compose(pose: np.ndarray, odometry: np.ndarray) -> np.ndarray:
+    """The unicycle motion f(pose, u) (3,), heading wrapped."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    return np.array(
+        [
+            pose[0] + c * odometry[0] - s * odometry[1],
+            pose[1] + s * odometry[0] + c * odometry[1],
+            float(wrap_angle(pose[2] + odometry[2])),
+        ]
+    )
+
+
+def predict(
+    mean: np.ndarray, cov: np.ndarray, odometry: np.ndarray, W: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """EKF prediction from odometry (3,) with noise covariance W (3, 3) in the robot frame.
+
+    Landmarks are static, so only the pose block (F P_pp Fᵀ + L W Lᵀ) and the pose–landmark
+    cross-covariances (F P_pl) change: O(n) arithmetic (plus the copy that keeps it pure).
+    """
+    odometry = np.asarray(odometry, dtype=float)
+    F, L = motion_jacobians(mean, odometry)
+    new_mean = mean.astype(float, copy=True)
+    new_mean[:3] = compose(mean[:3], odometry)
+    new_cov = cov.astype(float, copy=True)
+    new_cov[:3, :3] = _symmetrise(F @ cov[:3, :3] @ F.T + L @ W @ L.T)
+    cross = F @ cov[:3, 3:]  # (3, n)
+    new_cov[:3, 3:] = cross
+    new_cov[3:, :3] = cross.T
+    return new_mean, new_cov
+
+
+# -- update -------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class UpdateResult:
+    """Outcome of :func:`update`: the new estimate and which measurements were used."""
+
+    mean: np.ndarray  # (3+n,)
+    cov: np.ndarray  # (3+n, 3+n)
+    accepted: np.ndarray  # (k,) bool: passed the χ² gate and went into the update
+    nis: np.ndarray  # (k,) normalised innovation squared ν²/S_ii per measurement (nan if unusable)
+
+    @property
+    def mean_cov(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.mean, self.cov
+
+
+@lru_cache(maxsize=32)
+def chi2_1dof_quantile(prob: float) -> float:
+    """Quantile of χ² with 1 dof: (√2·erfinv(p))², without importing scipy.stats."""
+    if not 0.0 < prob <= 1.0:
+        raise ValueError(f"gate probability must lie in (0, 1], got {prob}")
+    return float(2.0 * scipy.special.erfinv(prob) ** 2)
+
+
+def update(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    z: np.ndarray,
+    z_hat: np.ndarray,
+    H: np.ndarray,
+    R: np.ndarray,
+    gate_prob: float = 0.99,
+) -> UpdateResult:
+    """Gated, batched EKF update with measurements z (k,), predictions z_hat (k,), H (k, 3+n).
+
+    Each measurement is gated on its own normalised innovation ν_i²/S_ii against the χ²
+    (1 dof) quantile ``gate_prob`` (1.0 disables the gate); non-finite z or z_hat are never
+    accepted. The accepted ones update together with the Joseph form
+    P⁺ = (I−KH) P (I−KH)ᵀ + K R Kᵀ, evaluated as M = P − K(PHᵀ)ᵀ, P⁺ = M − (M Hᵀ) Kᵀ + K R Kᵀ
+    (the same product, without (3+n)² identities), with K from a Cholesky solve. H is
+    sparse in practice (pose + one c0 per row), so P Hᵀ uses only its non-zero columns.
+    """
+    z, z_hat = np.asarray(z, dtype=float), np.asarray(z_hat, dtype=float)
+    H, R = np.atleast_2d(H), np.atleast_2d(R)
+    innovation = z - z_hat  # (k,)
+    usable = np.isfinite(innovation)
+    cols = np.flatnonzero(np.any(H[usable] != 0.0, axis=0))  # state indices H touches
+    PHt = cov[:, cols] @ H[:, cols].T  # (3+n, k)
+    s_diag = np.einsum("ij,ji->i", H[:, cols], PHt[cols]) + np.diag(R)  # (k,)
+    nis = np.full(z.shape, np.nan)
+    nis[usable] = innovation[usable] ** 2 / s_diag[usable]
+    accepted = usable & (nis <= chi2_1dof_quantile(gate_prob))
+    if not accepted.any():
+        return UpdateResult(mean.copy(), cov.copy(), accepted, nis)
+    a = np.flatnonzero(accepted)
+    PHt_a, H_a, R_a = PHt[:, a], H[np.ix_(a, cols)], R[np.ix_(a, a)]
+    S = H_a @ PHt_a[cols] + R_a  # (k_a, k_a)
+    K = scipy.linalg.cho_solve(scipy.linalg.cho_factor(S), PHt_a.T).T  # (3+n, k_a)
+    new_mean = mean + K @ innovation[a]
+    new_mean[2] = wrap_angle(new_mean[2])
+    M = cov - K @ PHt_a.T  # (I − KH) P
+    new_cov = M - (M[:, cols] @ H_a.T) @ K.T + K @ R_a @ K.T
+    return UpdateResult(new_mean, _symmetrise(new_cov), accepted, nis)
+
+
+# -- augmentation and removal --------------------------------------------------------------------
+def augment(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    value: float,
+    Gx: np.ndarray,
+    Gy: np.ndarray,
+    V: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Append a landmark c0 = g(X, y) (paper eq. 4–5).
+
+    ``Gx`` (3+n,) or (1, 3+n) is ∂g/∂X over the whole current state (pose and any c0 the new
+    one was built from, e.g. when refitting or merging); ``Gy`` (k,) or (1, k) is ∂g/∂y for
+    the k raw inputs y with covariance ``V`` (k, k). The new row/column is
+    [Gx P, Gx P Gxᵀ + Gy V Gyᵀ]: the cross-covariance with the pose is kept.
+    """
+    n_state = mean.size
+    gx = np.asarray(Gx, dtype=float).reshape(-1)
+    gy = np.asarray(Gy, dtype=float).reshape(-1)
+    V = np.atleast_2d(np.asarray(V, dtype=float))
+    if gx.size != n_state:
+        raise ValueError(f"Gx must have {n_state} entries, got {gx.size}")
+    if V.shape != (gy.size, gy.size):
+        raise ValueError(f"V must have shape ({gy.size}, {gy.size}), got {V.shape}")
+    cross = cov @ gx  # (3+n,) = P Gxᵀ
+    new_cov = np.empty((n_state + 1, n_state + 1))
+    new_cov[:n_state, :n_state] = cov
+    new_cov[:n_state, n_state] = cross
+    new_cov[n_state, :n_state] = cross
+    new_cov[n_state, n_state] = gx @ cross + gy @ V @ gy
+    return np.append(mean, value), new_cov
+
+
+def remove(
+    mean: np.ndarray, cov: np.ndarray, indices: np.ndarray | list[int] | int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Drop the landmark state entries at ``indices`` (state indices ≥ 3) and their rows/cols."""
+    drop = np.atleast_1d(np.asarray(indices, dtype=int))
+    if drop.size and (drop.min() < 3 or drop.max() >= mean.size):
+        raise ValueError(f"landmark state indices must lie in [3, {mean.size}), got {drop}")
+    keep = np.setdiff1d(np.arange(mean.size), drop)
+    return mean[keep], cov[np.ix_(keep, keep)]
+
+
+# -- divergence and consistency ------------------------------------------------------------------
+def divergence_ratio(cov_pose: np.ndarray, P0: np.ndarray, K: float) -> float:
+    """f = (‖K P0‖ − ‖K P0 − P‖)/‖K P0‖ with spectral norms (paper §3.1, SPEC §3).
+
+    f = 0 at P = 0 and f = 1 at P = K P0. By the triangle inequality f ≤ 1 always, and it
+    falls again (even below 0) as P grows past K P0, so "f > 1" can never flag divergence:
+    use :func:`is_diverging`. :func:`thresholds` clips f to [0, 1].
+    """
+    kp0 = K * np.asarray(P0, dtype=float)
+    ref = np.linalg.norm(kp0, 2)
+    return float((ref - np.linalg.norm(kp0 - cov_pose, 2)) / ref)
+
+
+def thresholds(f: float, lo: float, hi: float) -> float:
+    """Adaptive threshold lo + (hi − lo)·clip(f, 0, 1) (ρ_k and σ_k of the paper)."""
+    return float(lo + (hi - lo) * np.clip(f, 0.0, 1.0))
+
+
+def is_diverging(
+    cov_pose: np.ndarray,
+    P0: np.ndarray,
+    K: float,
+    nis: np.ndarray | None = None,
+    nis_prob: float = 0.999,
+) -> bool:
+    """Whether the filter should be reported as diverging.
+
+    Two tests, either flags:
+    - the paper's: P_{k|k−1} > K P0, read as "P − K P0 is not negative semidefinite" (the
+      pose uncertainty exceeds K P0 in some direction);
+    - innovation consistency, when ``nis`` (a window of per-measurement ν²/S values, 1 dof
+      each, including the ones the gate rejected) is given: their mean exceeds the upper
+      ``nis_prob`` χ² bound. This catches the overconfident filter (process noise far too
+      small, biased sensors) whose P stays small while its estimate drifts away.
+    """
+    excess = np.asarray(cov_pose, dtype=float) - K * np.asarray(P0, dtype=float)
+    if np.linalg.eigvalsh(_symmetrise(excess))[-1] > 0.0:
+        return True
+    if nis is None:
+        return False
+    values = np.asarray(nis, dtype=float)
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        return False
+    return bool(values.mean() > _chi2_upper(values.size, nis_prob) / values.size)
+
+
+def _chi2_upper(dof: int, prob: float) -> float:
+    """χ² quantile with ``dof`` degrees of freedom (scipy.special, no scipy.stats import)."""
+    return float(scipy.special.chdtri(dof, 1.0 - prob))
+
+
+def nees(error: np.ndarray, cov: np.ndarray) -> float:
+    """Normalised estimation error squared eᵀP⁻¹e of a pose error (3,), heading wrapped."""
+    e = np.asarray(error, dtype=float).copy()
+    e[2] = wrap_angle(e[2])
+    return float(e @ np.linalg.solve(cov, e))
