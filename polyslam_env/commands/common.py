@@ -1,0 +1,32 @@
+"""Helpers shared by the subcommands: tables and progress."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+
+
+def fmt(value: float) -> str:
+    """A number for a table: 3 decimals in the everyday range, scientific outside, n/a for NaN."""
+    if value != value:  # NaN
+        return "n/a"
+    if value == 0 or 1e-2 <= abs(value) < 1e4:
+        return f"{value:.3f}"
+    return f"{value:.2e}"
+
+
+def format_table(
+    rows: Sequence[dict[str, float]], keys: Sequence[str], names: Sequence[str]
+) -> str:
+    """A plain-text table: one column per row of ``rows`` (robots), one line per key."""
+    width = max(len(k) for k in keys) + 2
+    head = " " * width + "".join(f"{n:>12}" for n in names)
+    lines = [head, "-" * len(head)]
+    for k in keys:
+        lines.append(f"{k:<{width}}" + "".join(f"{fmt(float(r[k])):>12}" for r in rows))
+    return "\n".join(lines)
+
+
+def show_progress(quiet: bool = False) -> bool:
+    """Whether to draw progress bars: on a terminal, unless asked to be quiet."""
+    return not quiet and sys.stderr.isatty()
