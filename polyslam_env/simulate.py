@@ -15,6 +15,8 @@ from typing import Any
 import numpy as np
 
 from polyslam_env import metrics
+from polyslam_env.comms.channel import ChannelConfig
+from polyslam_env.comms.exchange import RendezvousExchange
 from polyslam_env.seeding import make_rngs
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.polynomial import Polynomial
@@ -41,6 +43,7 @@ class RobotRun:
     slam_times: np.ndarray  # (K,) seconds per SLAM step
     diverged: bool  # flagged at any step
     collisions: int
+    comms: dict[str, int] = field(default_factory=dict)  # exchange counters (empty: no exchange)
 
 
 @dataclass
@@ -55,6 +58,10 @@ class SimulationResult:
 
     def metrics(self) -> list[dict[str, float]]:
         return [robot_metrics(run, self.layout) for run in self.runs]
+
+
+#: Exchange counters that :func:`robot_metrics` reports (zeros when there was no exchange).
+COMMS_METRICS = ("bytes_sent", "bytes_received", "rendezvous", "messages_lost")
 
 
 def robot_metrics(run: RobotRun, layout: Layout) -> dict[str, float]:
@@ -76,6 +83,7 @@ def robot_metrics(run: RobotRun, layout: Layout) -> dict[str, float]:
         else 0.0,
         "diverged": float(run.diverged),
         "collisions": float(run.collisions),
+        **{key: float(run.comms.get(key, 0)) for key in COMMS_METRICS},
     }
 
 
@@ -123,6 +131,7 @@ def simulate(
     slam_config: SlamConfig | None = None,
     initial_error: bool = False,
     progress: Callable[[int], None] | None = None,
+    exchange: bool | ChannelConfig | RendezvousExchange = False,
 ) -> SimulationResult:
     """Run ``num_robots`` robots with SLAM for ``steps`` control periods.
 
@@ -135,6 +144,11 @@ def simulate(
     pose, so the initial error is zero while P0 is not and the standard NEES is below 3 by
     construction. ``initial_error=True`` draws the robot's true offset from its frame origin
     from N(0, P0) (stream ``"anchor"``), the setting in which a consistent filter's NEES is 3.
+
+    ``exchange`` turns on rendezvous map exchange (SPEC §4) after every SLAM step: ``True``
+    for the default :class:`ChannelConfig`, a config, or a ready :class:`RendezvousExchange`
+    (e.g. one that logs payload sizes). Its counters land in ``RobotRun.comms`` and its
+    messages in ``meta["exchange"]``. Off, the run is exactly as without it.
     """
     wcfg = world_config or WorldConfig()
     scfg = slam_config or SlamConfig()
@@ -172,15 +186,76 @@ def simulate(
             e0 = anchor.multivariate_normal(np.zeros(3), scfg.p0)
             frames[i] = _frame_of(world.poses[i], e0)
     rec = _Recorder(world, slams, frames)
+    ex = _make_exchange(exchange, num_robots, seed, wcfg, scfg)
+    log: list[dict[str, Any]] = []
     scans = world.scan()
     for k in range(steps):
         result = world.step(np.asarray(controller(k, scans), dtype=float))
         scans = world.scan()
         infos = [slam.step(result.odometry[i], scans[i]) for i, slam in enumerate(slams)]
         rec.record(scans, infos, result.collided)
+        if ex is not None:
+            log += _exchange_step(ex, k, world, slams, scans)
         if progress is not None:
             progress(k + 1)
-    return SimulationResult(layout, rec.runs(), seed, steps)
+    runs = rec.runs()
+    if ex is None:
+        return SimulationResult(layout, runs, seed, steps)
+    for i, run in enumerate(runs):
+        run.comms = ex.counters(i)
+    return SimulationResult(layout, runs, seed, steps, meta={"exchange": log})
+
+
+def _make_exchange(
+    exchange: bool | ChannelConfig | RendezvousExchange,
+    num_robots: int,
+    seed: int | None,
+    wcfg: WorldConfig,
+    scfg: SlamConfig,
+) -> RendezvousExchange | None:
+    """The exchange :func:`simulate` asked for (None when off); channel stream ``"channel"``."""
+    if isinstance(exchange, RendezvousExchange):
+        if exchange.num_robots != num_robots:
+            raise ValueError(
+                f"exchange: built for {exchange.num_robots} robots, the run has {num_robots}"
+            )
+        return exchange
+    if exchange is False:
+        return None
+    config = ChannelConfig() if exchange is True else exchange
+    return RendezvousExchange(
+        config,
+        num_robots,
+        make_rngs(seed, ["channel"])["channel"],
+        wcfg.camera.sigma_d,
+        wcfg.camera.sigma_bearing,
+        scfg.order,
+        scfg.auto_order,
+        max_range=wcfg.range_sensor.max_range,
+    )
+
+
+def _exchange_step(
+    ex: RendezvousExchange, k: int, world: World, slams: list[PolySlam], scans: np.ndarray
+) -> list[dict[str, Any]]:
+    """Log the scans, run one exchange step; returns its delivered messages as plain dicts."""
+    angles = np.asarray(world.config.range_sensor.angles)
+    for i, slam in enumerate(slams):
+        ex.record_scan(i, slam.pose, scans[i], angles)
+    out = ex.step(k, slams, world.camera(), world.active)
+    return [
+        {
+            "sender": d.sender,
+            "receiver": d.receiver,
+            "kind": d.kind,
+            "bytes": d.bytes,
+            "n_polynomials": d.n_polynomials,
+            "sent_step": d.sent_step,
+            "delivered_step": d.delivered_step,
+            "attempts": d.attempts,
+        }
+        for d in out.delivered
+    ]
 
 
 def _builtin_commands(map_name: str) -> np.ndarray | None:

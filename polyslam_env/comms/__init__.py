@@ -4,6 +4,12 @@ numpy only; the per-robot SLAM and the env wire these parts together.
 """
 
 from polyslam_env.comms.channel import Channel, ChannelConfig, Counters, Delivered, Expired
+from polyslam_env.comms.exchange import (
+    DeliveredMessage,
+    ExchangeStep,
+    PayloadSizes,
+    RendezvousExchange,
+)
 from polyslam_env.comms.messages import (
     GridMessage,
     Header,
@@ -36,13 +42,17 @@ __all__ = [
     "ChannelConfig",
     "Counters",
     "Delivered",
+    "DeliveredMessage",
+    "ExchangeStep",
     "Expired",
     "GridMessage",
     "Header",
     "Message",
+    "PayloadSizes",
     "PointsMessage",
     "PolynomialMessage",
     "PolynomialRecord",
+    "RendezvousExchange",
     "apply",
     "as_matrix",
     "compose",

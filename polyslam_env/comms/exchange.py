@@ -1,0 +1,605 @@
+"""Rendezvous map exchange wired into the robots' SLAM (SPEC §4, paper §3.2).
+
+Once per control step, after every robot's SLAM step, :meth:`RendezvousExchange.step`
+
+1. finds the **mutual sightings**: i's camera sees j and j's sees i, both robots active, and
+   both measured distances within the channel range;
+2. for every pair whose mutual sighting **starts** this step (a new rendezvous, counted once
+   per meeting) builds one message each way and queues it on the :class:`Channel`: the sender's
+   landmarks changed (created, refit, merged) since its last rendezvous with that receiver,
+   its pose estimate and its bearing measurement of the receiver;
+3. lets the channel deliver (loss, retry at the next step in view, bandwidth cap, expiry);
+4. applies every delivered message exactly once at its receiver: relative pose from the
+   receiver's range and bearing of the sender (taken at the step the message was sent) and
+   the sender's bearing from the header; ``T_{l0,j0} = T_{j,j0} T_{l,j} T_{l,l0}⁻¹``; each
+   polynomial → piecewise-linear chain (chord error ≤ ``chord_tol``, 5 mm) → points every
+   ``spacing`` (5 cm) along it → into the receiver's frame → weighted LMS refit within
+   ``refit_tol`` (2.5 mm) of those points, halving the chain where one polynomial cannot
+   follow it (:func:`refit_received`) → :meth:`PolySlam.insert_landmark` (which runs the
+   merge check). Each received landmark thus lies within 7.5 mm of the sender's curve
+   mapped through the estimated transform.
+
+**Wire frame.** A message on the channel is ``encode(message)`` (``messages.py``) followed by
+an exchange trailer: the sender's pose variances σ²_x, σ²_y, σ²_θ (3 floats of the message's
+width F) and a CRC-32 of everything before it (4 bytes), i.e. 3F + 4 bytes more. The
+sender's pose covariance is not in the message header but the receiver needs it: the
+transform depends on the sender's pose estimate. The trailer is counted in every byte figure.
+
+**Noise model of a received polynomial.** The refit's points depend on the receiver's state
+only through its pose (d_state: the first three columns of the transform's (3, 9) Jacobian),
+and on a 7-vector of noise: the sender's c0 (its variance from the message), the relative
+pose (3, covariance :func:`relative_pose_covariance` of the camera noise) and the sender's
+pose estimate (3, diagonal covariance from the trailer). The sender's c0 and pose are
+correlated in its own filter; that correlation is not sent and is neglected.
+
+**Late delivery.** A lost message is retried while the robots stay in view; by then the
+receiver has moved. Its relative-pose measurement and pose estimate from the send step are
+kept, and the old pose is expressed as ``x_now ⊕ Δ⁻¹`` with Δ the estimated motion since, so
+the transform's Jacobian is taken w.r.t. the *current* pose (identity chain when Δ = 0).
+
+**Bookkeeping.** Per ordered pair (sender, receiver): the sender's SLAM step at their last
+rendezvous; only landmarks with ``changed_at`` after it are sent. Landmarks inserted from a
+message get ``changed_at`` = the receiver's step, so they are not sent back at the same
+meeting; an inserted landmark that was *not* merged is also remembered as known to its
+sender and never echoed back to it later (a merged one carries the receiver's own data and
+is sent). Landmarks of a message that expires (``max_age``) are sent again at the next
+meeting of that pair. Nothing is applied twice: every delivery is checked against the set of
+applied message ids.
+
+**Other payloads.** With ``payload="points"`` (beam hits since the last meeting) or
+``"grid"`` (occupancy raster of the sender's whole map), the receiver decodes the message
+and counts its bytes but does not change its SLAM: these payloads exist to measure the cost
+of the alternatives (the SLAM integrates polynomials only). ``compare_payloads=True`` records,
+for every message built, the size every payload kind and precision would have had
+(:attr:`RendezvousExchange.payload_log`), so one episode compares all of them.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+import scipy.linalg
+
+from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
+from polyslam_env.comms.messages import (
+    GridMessage,
+    Header,
+    Message,
+    PointsMessage,
+    PolynomialMessage,
+    PolynomialRecord,
+    decode,
+    encode,
+)
+from polyslam_env.comms.payloads import ScanLog, occupancy_grid
+from polyslam_env.comms.polyline import piecewise_linear, polyline_points
+from polyslam_env.comms.relative_pose import (
+    compose,
+    compose_with_jacobians,
+    frame_transform_with_jacobian,
+    inverse,
+    relative_pose,
+    relative_pose_covariance,
+)
+from polyslam_env.slam.fitting import J_ROT, Fit, PointSet, fit_polynomial
+from polyslam_env.slam.polynomial import Polynomial
+
+if TYPE_CHECKING:
+    from polyslam_env.slam.robot import PolySlam
+
+_TRAILER_CRC = struct.Struct("<I")
+_FLOAT: dict[int, np.dtype[np.floating]] = {4: np.dtype("<f4"), 8: np.dtype("<f8")}
+PAYLOAD_KINDS = ("polynomials", "points", "grid")
+PRECISIONS = ("float32", "float64")
+_MAX_SPLIT_DEPTH = 3  # a received polynomial is cut into at most 2**3 pieces to refit
+
+
+class DetectionLike(Protocol):
+    """What the exchange reads of a camera detection (``world.sensors.Detection``)."""
+
+    @property
+    def target(self) -> int: ...
+    @property
+    def distance(self) -> float: ...
+    @property
+    def bearing(self) -> float: ...
+
+
+# -- results --------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class DeliveredMessage:
+    """A message applied at its receiver."""
+
+    msg_id: int
+    sender: int
+    receiver: int
+    kind: str  # "polynomials", "points" or "grid"
+    bytes: int  # size on the wire, trailer included
+    n_polynomials: int  # records in the message (0 for the other kinds)
+    sent_step: int
+    delivered_step: int
+    attempts: int
+    received: tuple[Polynomial, ...]  # refits in the receiver's frame, before any merge
+    landmark_ids: tuple[int, ...]  # receiver's landmarks holding them after the merge check
+
+
+@dataclass(frozen=True)
+class PayloadSizes:
+    """Bytes one message would take with every payload kind and precision."""
+
+    sender: int
+    receiver: int
+    step: int
+    n_polynomials: int
+    n_points: int
+    grid_shape: tuple[int, int]
+    sizes: dict[str, int]  # "kind/precision" → bytes on the wire, trailer included
+
+
+@dataclass(frozen=True, eq=False)
+class ExchangeStep:
+    """What one exchange step did."""
+
+    step: int
+    in_view: tuple[tuple[int, int], ...]  # mutual sightings (i < j)
+    new_rendezvous: tuple[tuple[int, int], ...]  # pairs (i < j) whose sighting began now
+    sent: tuple[tuple[int, int, int], ...]  # (sender, receiver, bytes) queued this step
+    delivered: tuple[DeliveredMessage, ...]
+    expired: tuple[Expired, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class _Sighting:
+    """What a robot measured of another at a rendezvous, and its own pose estimate then."""
+
+    pose: np.ndarray  # (3,) own pose estimate at that step
+    distance: float  # m
+    bearing: float  # rad
+
+
+# -- wire frame ----------------------------------------------------------------------------------
+def frame_message(message: bytes, pose_var: np.ndarray) -> bytes:
+    """Message bytes followed by the exchange trailer (pose variances, CRC-32)."""
+    width = message[3]  # the message header's float width
+    var = np.asarray(pose_var, dtype=float).reshape(3)
+    if not np.all(np.isfinite(var) & (var >= 0)):
+        raise ValueError(f"pose variances must be finite and >= 0, got {var}")
+    body = message + var.astype(_FLOAT[width]).tobytes()
+    return body + _TRAILER_CRC.pack(zlib.crc32(body))
+
+
+def unframe_message(data: bytes) -> tuple[Message, np.ndarray]:
+    """Inverse of :func:`frame_message`: the decoded message and the pose variances (3,)."""
+    if len(data) < 4 or data[3] not in _FLOAT:
+        raise ValueError("truncated or corrupt exchange frame")
+    width = data[3]
+    size = 3 * width + _TRAILER_CRC.size
+    body = data[: -_TRAILER_CRC.size]
+    (crc,) = _TRAILER_CRC.unpack(data[-_TRAILER_CRC.size :])
+    if len(data) <= size or zlib.crc32(body) != crc:
+        raise ValueError("corrupt exchange frame: trailer CRC-32 mismatch")
+    var = np.frombuffer(body[-3 * width :], dtype=_FLOAT[width]).astype(float)
+    return decode(body[: -3 * width]), var
+
+
+# -- received polynomial → points in the receiver's frame ----------------------------------------
+def received_point_set(
+    record: PolynomialRecord,
+    transform: np.ndarray,
+    d_transform_state: np.ndarray,
+    d_transform_noise: np.ndarray,
+    noise_cov: np.ndarray,
+    n_state: int,
+    chord_tol: float = 0.005,
+    spacing: float = 0.05,
+) -> PointSet:
+    """Points on a received polynomial mapped into the receiver's frame, with derivatives.
+
+    ``transform`` (3,) is T_{l0,j0}; ``d_transform_state`` (3, 3) its Jacobian w.r.t. the
+    receiver's pose, ``d_transform_noise`` (3, 6) w.r.t. [relative pose | sender's pose] whose
+    covariance is ``noise_cov`` (6, 6). The point set's noise is [sender's c0 ; those 6].
+    """
+    poly = record.polynomial
+    q = polyline_points(piecewise_linear(poly, chord_tol), spacing)  # (N, 2) sender frame
+    c, s = np.cos(transform[2]), np.sin(transform[2])
+    rot = np.array([[c, -s], [s, c]])
+    rq = q @ rot.T  # (N, 2)
+    n_pts = len(q)
+    dp_dt = np.zeros((n_pts, 2, 3))  # ∂p/∂T
+    dp_dt[:, :, :2] = np.eye(2)
+    dp_dt[:, :, 2] = rq @ J_ROT.T
+    d_state = np.zeros((n_pts, 2, n_state))
+    d_state[:, :, :3] = dp_dt @ d_transform_state
+    eta_axis = np.array([0.0, 1.0]) if poly.variate == 1 else np.array([1.0, 0.0])
+    d_noise = np.concatenate(
+        [
+            np.broadcast_to((rot @ eta_axis)[None, :, None], (n_pts, 2, 1)),
+            dp_dt @ d_transform_noise,
+        ],
+        axis=2,
+    )  # (N, 2, 7)
+    return PointSet(
+        xy=transform[:2] + rq,
+        d_state=d_state,
+        d_noise=d_noise,
+        noise_cov=scipy.linalg.block_diag([[record.c0_var]], noise_cov),
+        weights=np.ones(n_pts),
+    )
+
+
+def _subset(points: PointSet, rows: slice) -> PointSet:
+    return PointSet(
+        points.xy[rows], points.d_state[rows], points.d_noise[rows], points.noise_cov,
+        points.weights[rows],
+    )  # fmt: skip
+
+
+def refit_received(
+    points: PointSet, order: int, auto_order: bool, tol: float, depth: int = 0
+) -> list[Fit]:
+    """Weighted LMS fits of a received chain, each within ``tol`` of its points.
+
+    The chain's points carry no noise of their own (their noise is common to all of them), so
+    the SLAM's χ² order test does not apply: with ``auto_order`` the lowest order whose largest
+    residual is within ``tol`` is taken, else ``order``. A curve turned into another frame may
+    bend past what one polynomial of either variate describes; while the fit misses by more
+    than ``tol`` the chain is halved (at most :data:`_MAX_SPLIT_DEPTH` times). Coefficients are
+    padded to ``order + 1``; fits with non-finite values are dropped.
+    """
+    fit, worst = _fit_chain(points, order, auto_order, tol)
+    n_pts = points.n_points
+    if worst > tol and depth < _MAX_SPLIT_DEPTH and n_pts >= 4:
+        mid = n_pts // 2
+        halves = (slice(0, mid + 1), slice(mid, n_pts))  # they share the middle point
+        return [
+            fit
+            for rows in halves
+            for fit in refit_received(_subset(points, rows), order, auto_order, tol, depth + 1)
+        ]
+    finite = np.isfinite(fit.c0) and np.all(np.isfinite(fit.Gx)) and np.all(np.isfinite(fit.Gy))
+    return [fit] if finite else []
+
+
+def _fit_chain(points: PointSet, order: int, auto_order: bool, tol: float) -> tuple[Fit, float]:
+    """The fit (coefficients padded to ``order + 1``) and its largest |η residual| (m)."""
+    for m in range(1, order + 1) if auto_order else (order,):
+        fit = fit_polynomial(points, m, None, shape_fixed=True, auto_order=False)
+        xi, eta = fit.poly.from_xy(points.xy)
+        worst = float(np.max(np.abs(eta - fit.poly.value(xi))))
+        if worst <= tol:
+            break
+    coeffs = np.zeros(order + 1)
+    coeffs[: fit.poly.order + 1] = fit.poly.coeffs
+    poly = Polynomial(fit.poly.variate, coeffs, fit.poly.lo, fit.poly.hi)
+    return Fit(poly, fit.c0, fit.Gx, fit.Gy, fit.V, fit.rms, fit.order), worst
+
+
+def map_transform(
+    receiver_pose: np.ndarray,
+    motion_since: np.ndarray,
+    distance: float,
+    bearing_receiver: float,
+    bearing_sender: float,
+    sender_pose: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """T_{l0,j0} (3,) mapping the sender's frame into the receiver's, and its Jacobians.
+
+    The receiver (j) measured ``distance`` and ``bearing_receiver`` to the sender (l) when its
+    pose was ``receiver_pose ⊕ motion_since⁻¹`` (``motion_since`` = zero pose when the message
+    arrives at the step it was sent); ``bearing_sender`` and ``sender_pose`` come from the
+    header. Returns T, ∂T/∂(receiver's current pose) (3, 3) with the motion held fixed, and
+    ∂T/∂[relative pose | sender pose] (3, 6).
+    """
+    pose_then, j_then, _ = compose_with_jacobians(receiver_pose, inverse(motion_since))
+    rel = relative_pose(distance, bearing_receiver, bearing_sender)
+    transform, jac = frame_transform_with_jacobian(pose_then, rel, sender_pose)
+    return transform, jac[:, :3] @ j_then, jac[:, 3:]
+
+
+def _mutual_sightings(
+    detections: Sequence[Sequence[DetectionLike]], active: np.ndarray, max_range: float
+) -> dict[tuple[int, int], tuple[DetectionLike, DetectionLike]]:
+    """(i, j) with i < j → (i's detection of j, j's detection of i), for mutual sightings."""
+    seen = {(i, d.target): d for i, dets in enumerate(detections) for d in dets}
+    out: dict[tuple[int, int], tuple[DetectionLike, DetectionLike]] = {}
+    for (i, j), d_ij in sorted(seen.items()):
+        d_ji = seen.get((j, i))
+        if i >= j or d_ji is None or not (active[i] and active[j]):
+            continue
+        if max(d_ij.distance, d_ji.distance) <= max_range:
+            out[(i, j)] = (d_ij, d_ji)
+    return out
+
+
+# -- the exchange ------------------------------------------------------------------------------
+class RendezvousExchange:
+    """Rendezvous detection, message building, channel and integration for a team.
+
+    See the module docstring for the protocol. ``camera_sigma_d`` (m) and
+    ``camera_sigma_bearing`` (rad) are the camera noise the relative-pose covariance uses;
+    ``slam_order``/``auto_order`` are the SLAM's fit settings (used for the refits).
+    """
+
+    def __init__(
+        self,
+        config: ChannelConfig,
+        num_robots: int,
+        rng: np.random.Generator,
+        camera_sigma_d: float,
+        camera_sigma_bearing: float,
+        slam_order: int = 3,
+        auto_order: bool = True,
+        *,
+        chord_tol: float = 0.005,
+        spacing: float = 0.05,
+        refit_tol: float = 0.0025,
+        grid_resolution: float = 0.05,
+        max_range: float = 2.0,
+        compare_payloads: bool = False,
+    ) -> None:
+        if num_robots < 1:
+            raise ValueError(f"num_robots must be >= 1, got {num_robots}")
+        self.config = config
+        self.num_robots = num_robots
+        self.channel = Channel(config, rng)
+        self.sigma_d, self.sigma_bearing = float(camera_sigma_d), float(camera_sigma_bearing)
+        self.order, self.auto_order = slam_order, auto_order
+        self.chord_tol, self.spacing, self.refit_tol = chord_tol, spacing, refit_tol
+        self.grid_resolution = grid_resolution
+        self.compare_payloads = compare_payloads
+        self.payload_log: list[PayloadSizes] = []
+        self.history: list[DeliveredMessage] = []  # every applied message, in order
+        self.scan_logs = [ScanLog(max_range) for _ in range(num_robots)]
+        self._last_meeting: dict[tuple[int, int], int] = {}  # (s, r) → s's SLAM step
+        self._last_log: dict[tuple[int, int], int] = {}  # (s, r) → s's scan-log length
+        self._known: list[dict[int, set[int]]] = [{} for _ in range(num_robots)]
+        self._resend: dict[tuple[int, int], set[int]] = {}  # expired landmark ids per pair
+        self._sent_ids: dict[int, tuple[int, int, tuple[int, ...]]] = {}  # msg → s, r, ids
+        self._sightings: dict[tuple[int, int, int], _Sighting] = {}  # (r, s, step) → r's view
+        self._seq: dict[tuple[int, int], int] = {}
+        self._applied: set[int] = set()
+        self._in_view: set[tuple[int, int]] = set()
+        self._rendezvous = [0] * num_robots
+        self._polys_sent = [0] * num_robots
+        self._polys_received = [0] * num_robots
+
+    # -- public API --------------------------------------------------------------------------------
+    def record_scan(
+        self, i: int, pose_est: np.ndarray, ranges: np.ndarray, beam_angles: np.ndarray
+    ) -> None:
+        """Log robot i's scan (placed with its pose estimate) for the points/grid payloads."""
+        if self.config.payload != "polynomials" or self.compare_payloads:
+            self.scan_logs[i].record(pose_est, ranges, beam_angles)
+
+    def step(
+        self,
+        k: int,
+        slams: Sequence[PolySlam],
+        detections: Sequence[Sequence[DetectionLike]],
+        active: np.ndarray,
+    ) -> ExchangeStep:
+        """Detect rendezvous, send, deliver and apply; see the module docstring."""
+        if len(slams) != self.num_robots or len(detections) != self.num_robots:
+            raise ValueError(
+                f"expected {self.num_robots} robots, got {len(slams)} SLAMs and"
+                f" {len(detections)} detection lists"
+            )
+        sightings = _mutual_sightings(detections, np.asarray(active, bool), self.config.range)
+        new = tuple(pair for pair in sightings if pair not in self._in_view)
+        sent = [out for pair in new for out in self._meet(k, pair, sightings[pair], slams)]
+        linked: Callable[[int, int], bool] = lambda s, r: (min(s, r), max(s, r)) in sightings  # noqa: E731
+        delivered = [self._apply(d, slams) for d in self.channel.deliver(k, linked)]
+        self.history += delivered
+        expired = self.channel.last_expired
+        for e in expired:
+            s, r, ids = self._sent_ids.pop(e.msg_id)
+            self._resend.setdefault((s, r), set()).update(ids)
+            self._sightings.pop((r, s, e.sent_step), None)
+        self._in_view = set(sightings)
+        return ExchangeStep(k, tuple(sightings), new, tuple(sent), tuple(delivered), expired)
+
+    def counters(self, i: int) -> dict[str, int]:
+        """Robot i's traffic: bytes, rendezvous, messages and polynomials."""
+        c = self.channel.counters(i)
+        return {
+            "bytes_sent": c.bytes_sent,
+            "bytes_received": c.bytes_received,
+            "rendezvous": self._rendezvous[i],
+            "messages_sent": c.messages_sent,
+            "messages_delivered": c.messages_delivered,
+            "messages_received": c.messages_received,
+            "messages_lost": c.messages_lost,
+            "messages_expired": c.messages_expired,
+            "messages_pending": self.channel.pending(sender=i),
+            "polynomials_sent": self._polys_sent[i],
+            "polynomials_received": self._polys_received[i],
+        }
+
+    # -- sending -----------------------------------------------------------------------------------
+    def _meet(
+        self,
+        k: int,
+        pair: tuple[int, int],
+        views: tuple[DetectionLike, DetectionLike],
+        slams: Sequence[PolySlam],
+    ) -> list[tuple[int, int, int]]:
+        """A new rendezvous: store both sightings, queue one message each way."""
+        i, j = pair
+        view_of = {(i, j): views[0], (j, i): views[1]}  # (observer, target) → detection
+        for robot in pair:
+            self._rendezvous[robot] += 1
+        for s, r in ((i, j), (j, i)):
+            d = view_of[(r, s)]
+            self._sightings[(r, s, k)] = _Sighting(slams[r].pose, d.distance, d.bearing)
+        out = []
+        for s, r in ((i, j), (j, i)):
+            payload, ids = self._build(k, s, r, view_of[(s, r)].bearing, slams[s])
+            msg_id = self.channel.send(s, r, payload, k)
+            self._sent_ids[msg_id] = (s, r, ids)
+            self._polys_sent[s] += len(ids)
+            out.append((s, r, len(payload)))
+        return out
+
+    def _landmarks_to_send(self, s: int, r: int, slam: PolySlam) -> tuple[int, ...]:
+        since = self._last_meeting.get((s, r), -1)
+        wanted = set(slam.changed_since(since)) | self._resend.pop((s, r), set())
+        known = self._known[s]
+        return tuple(
+            lid for lid in slam.landmark_ids if lid in wanted and r not in known.get(lid, ())
+        )
+
+    def _build(
+        self, k: int, s: int, r: int, bearing: float, slam: PolySlam
+    ) -> tuple[bytes, tuple[int, ...]]:
+        """Wire bytes of s's message to r, and the landmark ids it carries."""
+        ids = self._landmarks_to_send(s, r, slam)
+        seq = self._seq.get((s, r), 0)
+        self._seq[(s, r)] = seq + 1
+        header = Header(s, r, seq, slam.pose, bearing)
+        polys = slam.polynomials()
+        index = {lid: n for n, lid in enumerate(slam.landmark_ids)}
+        records = tuple(
+            PolynomialRecord(lid, polys[index[lid]], max(slam.c0_variance(lid), 0.0)) for lid in ids
+        )
+        since_log = self._last_log.get((s, r), 0)
+        self._last_meeting[(s, r)] = slam.step_count
+        self._last_log[(s, r)] = len(self.scan_logs[s])
+        pose_var = np.diag(slam.pose_cov).clip(min=0.0)
+        kind, precision = self.config.payload, self.config.precision
+        variants = self._variants(header, records, s, since_log, polys, kind)
+        if self.compare_payloads:
+            self._log_sizes(k, s, r, variants, pose_var, len(records))
+        message = variants[kind]
+        return frame_message(encode(message, precision), pose_var), ids
+
+    def _variants(
+        self,
+        header: Header,
+        records: tuple[PolynomialRecord, ...],
+        s: int,
+        since_log: int,
+        polys: list[Polynomial],
+        kind: str,
+    ) -> dict[str, Message]:
+        """The message in each payload kind needed now (all when comparing)."""
+        out: dict[str, Message] = {"polynomials": PolynomialMessage(header, records)}
+        log = self.scan_logs[s]
+        if kind == "points" or self.compare_payloads:
+            out["points"] = PointsMessage(header, log.hits_since(since_log))
+        if kind == "grid" or self.compare_payloads:
+            origin, cells = occupancy_grid(polys, *log.rays(), resolution=self.grid_resolution)
+            out["grid"] = GridMessage(header, origin, self.grid_resolution, cells)
+        return out
+
+    def _log_sizes(
+        self,
+        k: int,
+        s: int,
+        r: int,
+        variants: dict[str, Message],
+        pose_var: np.ndarray,
+        n_polys: int,
+    ) -> None:
+        sizes = {
+            f"{kind}/{precision}": len(frame_message(encode(msg, precision), pose_var))  # type: ignore[arg-type]
+            for kind, msg in variants.items()
+            for precision in PRECISIONS
+        }
+        points = variants["points"]
+        grid = variants["grid"]
+        assert isinstance(points, PointsMessage) and isinstance(grid, GridMessage)
+        shape = (int(grid.cells.shape[0]), int(grid.cells.shape[1]))
+        self.payload_log.append(PayloadSizes(s, r, k, n_polys, len(points.points), shape, sizes))
+
+    # -- receiving ---------------------------------------------------------------------------------
+    def _apply(self, delivered: Delivered, slams: Sequence[PolySlam]) -> DeliveredMessage:
+        """Integrate one delivered message at its receiver (exactly once)."""
+        if delivered.msg_id in self._applied:
+            raise RuntimeError(f"message {delivered.msg_id} delivered twice")
+        self._applied.add(delivered.msg_id)
+        s, r = delivered.sender, delivered.receiver
+        self._sent_ids.pop(delivered.msg_id, None)
+        sighting = self._sightings.pop((r, s, delivered.sent_step))
+        message, pose_var = unframe_message(delivered.payload)
+        received: list[Polynomial] = []
+        ids: list[int] = []
+        n_records = 0
+        if isinstance(message, PolynomialMessage):
+            n_records = len(message.records)
+            received, ids = self._integrate(slams[r], message, pose_var, sighting, s)
+            self._polys_received[r] += n_records
+        return DeliveredMessage(
+            delivered.msg_id,
+            s,
+            r,
+            _kind_name(message),
+            len(delivered.payload),
+            n_records,
+            delivered.sent_step,
+            delivered.delivered_step,
+            delivered.attempts,
+            tuple(received),
+            tuple(ids),
+        )
+
+    def _transform(
+        self, receiver_pose: np.ndarray, sighting: _Sighting, header: Header, pose_var: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:func:`map_transform` for a delivery, plus the covariance (6, 6) of its noise."""
+        motion = compose(inverse(sighting.pose), receiver_pose)  # estimated motion since
+        out = map_transform(
+            receiver_pose, motion, sighting.distance, sighting.bearing, header.bearing, header.pose
+        )
+        rel_cov = relative_pose_covariance(
+            sighting.distance, sighting.bearing, header.bearing, self.sigma_d, self.sigma_bearing
+        )
+        return (*out, scipy.linalg.block_diag(rel_cov, np.diag(pose_var)))
+
+    def _integrate(
+        self,
+        slam: PolySlam,
+        message: PolynomialMessage,
+        pose_var: np.ndarray,
+        sighting: _Sighting,
+        sender: int,
+    ) -> tuple[list[Polynomial], list[int]]:
+        """Refit every record in the receiver's frame and insert it; returns fits and ids."""
+        t, d_state, d_noise, noise_cov = self._transform(
+            slam.pose, sighting, message.header, pose_var
+        )
+        received: list[Polynomial] = []
+        ids: list[int] = []
+        for record in message.records:
+            pts = received_point_set(
+                record, t, d_state, d_noise, noise_cov, slam.mean.size, self.chord_tol,
+                self.spacing,
+            )  # fmt: skip
+            for fit in refit_received(pts, self.order, self.auto_order, self.refit_tol):
+                fit = _on_state(fit, slam.mean.size)
+                before = slam.n_landmarks
+                lid = slam.insert_landmark(fit)
+                received.append(fit.poly)
+                ids.append(lid)
+                if slam.n_landmarks > before:  # not merged: a pure copy of the sender's one
+                    self._known[message.header.receiver].setdefault(lid, set()).add(sender)
+        return received, ids
+
+
+def _on_state(fit: Fit, n_state: int) -> Fit:
+    """The fit with G_x padded to the receiver's current state size (it grows per insert)."""
+    if fit.Gx.shape[1] == n_state:
+        return fit
+    gx = np.zeros((1, n_state))
+    gx[:, : fit.Gx.shape[1]] = fit.Gx
+    return Fit(fit.poly, fit.c0, gx, fit.Gy, fit.V, fit.rms, fit.order)
+
+
+def _kind_name(message: Message) -> str:
+    if isinstance(message, PolynomialMessage):
+        return "polynomials"
+    return "points" if isinstance(message, PointsMessage) else "grid"
