@@ -619,4 +619,5 @@ def _write_with_imageio(frames: list[np.ndarray], path: Path, fps: float) -> Non
             f"writing {path.suffix} video needs imageio with ffmpeg "
             "(pip install 'imageio[ffmpeg]'); or save a .gif, which needs only Pillow"
         ) from e
-    imageio.mimwrite(path, frames, fps=fps)
+    stack: Any = np.stack(frames)  # imageio's stubs want a list of its own array type
+    imageio.mimwrite(path, stack, fps=fps)

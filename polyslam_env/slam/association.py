@@ -31,13 +31,14 @@ from polyslam_env.slam.fitting import (
     polynomial_points,
     stored_points,
 )
+from polyslam_env.slam.measurement import PolynomialsLike, pack
 from polyslam_env.slam.polynomial import Polynomial
 
 
 # -- approximation error ---------------------------------------------------------------------
 def approximation_error(
     points: np.ndarray,
-    polys: Sequence[Polynomial],
+    polys: PolynomialsLike,
     c0s: Sequence[float] | np.ndarray,
     squared: bool = False,
 ) -> np.ndarray:
@@ -45,28 +46,34 @@ def approximation_error(
 
     Inside a polynomial's extent: the vertical (variate 1) / horizontal (variate 2) distance
     |η − p(ξ)|; outside: the distance to the nearer end point. Metres, or the paper's squared
-    form with ``squared=True``.
+    form with ``squared=True``. ``polys`` may be packed (the SLAM's hot path).
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
-    if len(polys) == 0:
+    packed = pack(polys)
+    if len(packed) == 0:
         return np.zeros((len(pts), 0))
-    order = max(p.order for p in polys)
-    coeffs = np.zeros((len(polys), order + 1))  # (n, m+1), zero-padded
-    for j, p in enumerate(polys):
-        coeffs[j, : p.order + 1] = p.coeffs
+    coeffs = packed.shape.copy()  # (n, m+1), zero-padded
     coeffs[:, 0] = np.asarray(c0s, dtype=float)
-    var1 = np.array([p.variate == 1 for p in polys])  # (n,)
-    lo = np.array([p.lo for p in polys])
-    hi = np.array([p.hi for p in polys])
+    var1 = packed.variate == 1  # (n,)
+    lo, hi = packed.lo, packed.hi
     xi = np.where(var1, pts[:, :1], pts[:, 1:])  # (P, n)
     eta = np.where(var1, pts[:, 1:], pts[:, :1])
-    powers = xi[:, :, None] ** np.arange(order + 1)  # (P, n, m+1)
-    vertical = np.abs(eta - np.einsum("pnj,nj->pn", powers, coeffs))
-    ends_xi = np.stack([lo, hi], axis=-1)  # (n, 2)
-    ends_eta = np.einsum("nej,nj->ne", ends_xi[:, :, None] ** np.arange(order + 1), coeffs)
-    d_end = np.hypot(xi[:, :, None] - ends_xi, eta[:, :, None] - ends_eta).min(axis=-1)
+    vertical = np.abs(eta - _horner(coeffs, xi))
+    ends_xi = np.stack([lo, hi], axis=0)  # (2, n)
+    ends_eta = _horner(coeffs, ends_xi)  # (2, n)
+    d_end = np.minimum(
+        np.hypot(xi - ends_xi[0], eta - ends_eta[0]), np.hypot(xi - ends_xi[1], eta - ends_eta[1])
+    )
     err = np.where((xi >= lo) & (xi <= hi), vertical, d_end)
     return err**2 if squared else err
+
+
+def _horner(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Σ_j coeffs[n, j] x[..., n]^j for x (…, n), by Horner's scheme."""
+    value = np.broadcast_to(coeffs[:, -1], x.shape)
+    for j in range(coeffs.shape[1] - 2, -1, -1):
+        value = value * x + coeffs[:, j]
+    return np.asarray(value)
 
 
 # -- bookkeeping ------------------------------------------------------------------------------
@@ -181,7 +188,7 @@ class MapBook:
     def associate(
         self,
         points: Sequence[StoredPoint],
-        polys: Sequence[Polynomial],
+        polys: PolynomialsLike,
         c0s: Sequence[float] | np.ndarray,
         rho: float,
         sigma: float,

@@ -1,7 +1,8 @@
 """EKF core of the polynomial SLAM as pure functions on (mean, cov) (SPEC §3, STYLE habit 8).
 
 State X = [x¹, x², θ, c0_1 … c0_n] (3+n,), covariance P (3+n, 3+n). Every function returns
-new arrays and leaves its inputs untouched; a thin per-robot class strings them together.
+new arrays and leaves its inputs untouched (except :func:`predict_inplace`, the
+stateful caller's copy-free variant); a thin per-robot class strings them together.
 Landmark i's c0 sits at state index 3+i.
 """
 
@@ -11,7 +12,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-import scipy.linalg
 import scipy.special
 
 
@@ -70,6 +70,21 @@ def predict(
     return new_mean, new_cov
 
 
+def predict_inplace(mean: np.ndarray, cov: np.ndarray, odometry: np.ndarray, W: np.ndarray) -> None:
+    """:func:`predict` writing into ``mean`` (3+n,) and ``cov`` (3+n, 3+n) (float arrays).
+
+    Same arithmetic as the pure version, without its (3+n)² copy: for the stateful caller
+    whose per-step cost should stay O(n) in the prediction.
+    """
+    odometry = np.asarray(odometry, dtype=float)
+    F, L = motion_jacobians(mean, odometry)
+    mean[:3] = compose(mean[:3], odometry)
+    cross = F @ cov[:3, 3:]  # (3, n), from the old cross-covariances
+    cov[:3, :3] = _symmetrise(F @ cov[:3, :3] @ F.T + L @ W @ L.T)
+    cov[:3, 3:] = cross
+    cov[3:, :3] = cross.T
+
+
 # -- update -------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class UpdateResult:
@@ -108,8 +123,9 @@ def update(
     (1 dof) quantile ``gate_prob`` (1.0 disables the gate); non-finite z or z_hat are never
     accepted. The accepted ones update together with the Joseph form
     P⁺ = (I−KH) P (I−KH)ᵀ + K R Kᵀ, evaluated as M = P − K(PHᵀ)ᵀ, P⁺ = M − (M Hᵀ) Kᵀ + K R Kᵀ
-    (the same product, without (3+n)² identities), with K from a Cholesky solve. H is
-    sparse in practice (pose + one c0 per row), so P Hᵀ uses only its non-zero columns.
+    (the same product, without (3+n)² identities; see :func:`_joseph`), with K from a solve
+    with S. H is sparse in practice (pose + one c0 per row), so P Hᵀ uses only its non-zero
+    columns.
     """
     z, z_hat = np.asarray(z, dtype=float), np.asarray(z_hat, dtype=float)
     H, R = np.atleast_2d(H), np.atleast_2d(R)
@@ -124,14 +140,32 @@ def update(
     if not accepted.any():
         return UpdateResult(mean.copy(), cov.copy(), accepted, nis)
     a = np.flatnonzero(accepted)
-    PHt_a, H_a, R_a = PHt[:, a], H[np.ix_(a, cols)], R[np.ix_(a, a)]
-    S = H_a @ PHt_a[cols] + R_a  # (k_a, k_a)
-    K = scipy.linalg.cho_solve(scipy.linalg.cho_factor(S), PHt_a.T).T  # (3+n, k_a)
+    PHt_a, H_a, R_a = PHt[:, a], H[a][:, cols], R[a][:, a]
+    S = H_a @ PHt_a[cols] + R_a  # (k_a, k_a), symmetric positive definite
+    K = np.linalg.solve(S, PHt_a.T).T  # (3+n, k_a); S is tiny: LAPACK's overhead dominates
     new_mean = mean + K @ innovation[a]
     new_mean[2] = wrap_angle(new_mean[2])
-    M = cov - K @ PHt_a.T  # (I − KH) P
-    new_cov = M - (M[:, cols] @ H_a.T) @ K.T + K @ R_a @ K.T
-    return UpdateResult(new_mean, _symmetrise(new_cov), accepted, nis)
+    return UpdateResult(new_mean, _joseph(cov, K, PHt_a, H_a, R_a, cols), accepted, nis)
+
+
+def _joseph(
+    cov: np.ndarray,
+    K: np.ndarray,
+    PHt: np.ndarray,
+    H: np.ndarray,
+    R: np.ndarray,
+    cols: np.ndarray,
+) -> np.ndarray:
+    """Joseph form P⁺ = M − (M Hᵀ) Kᵀ + K R Kᵀ with M = P − K (P Hᵀ)ᵀ, symmetrised.
+
+    ``H`` (k, c) holds only the state columns ``cols`` it touches, ``PHt`` = P Hᵀ (3+n, k).
+    M Hᵀ needs only M's columns ``cols``, so M is never formed: with B = M Hᵀ − K R,
+    P⁺ = P − [K  B] [PHtᵀ; Kᵀ], one rank-2k product and a handful of (3+n)² passes.
+    """
+    m_cols = cov[:, cols] - K @ PHt[cols].T  # (3+n, c) = M[:, cols]
+    B = m_cols @ H.T - K @ R  # (3+n, k)
+    new_cov = cov - np.hstack([K, B]) @ np.vstack([PHt.T, K.T])
+    return _symmetrise(new_cov)
 
 
 # -- augmentation and removal --------------------------------------------------------------------
@@ -179,21 +213,33 @@ def remove(
 
 
 # -- divergence and consistency ------------------------------------------------------------------
-def divergence_ratio(cov_pose: np.ndarray, P0: np.ndarray, K: float) -> float:
+def spectral_norm_sym(a: np.ndarray) -> float:
+    """Spectral norm of a symmetric matrix: its largest |eigenvalue| (eigvalsh, not an SVD).
+
+    Only the lower triangle is read, so pass a symmetric matrix (covariances, K P0 − P).
+    """
+    eig = np.linalg.eigvalsh(a)  # ascending
+    return float(max(-eig[0], eig[-1]))
+
+
+def divergence_ratio(
+    cov_pose: np.ndarray, P0: np.ndarray, K: float, ref_norm: float | None = None
+) -> float:
     """f = (‖K P0‖ − ‖K P0 − P‖)/‖K P0‖ with spectral norms (paper §3.1, SPEC §3).
 
     f = 0 at P = 0 and f = 1 at P = K P0. By the triangle inequality f ≤ 1 always, and it
     falls again (even below 0) as P grows past K P0, so "f > 1" can never flag divergence:
-    use :func:`is_diverging`. :func:`thresholds` clips f to [0, 1].
+    use :func:`is_diverging`. :func:`thresholds` clips f to [0, 1]. P and P0 are symmetric
+    (covariances); a caller that asks every step may pass ``ref_norm`` = ‖K P0‖.
     """
     kp0 = K * np.asarray(P0, dtype=float)
-    ref = np.linalg.norm(kp0, 2)
-    return float((ref - np.linalg.norm(kp0 - cov_pose, 2)) / ref)
+    ref = spectral_norm_sym(kp0) if ref_norm is None else ref_norm
+    return float((ref - spectral_norm_sym(kp0 - cov_pose)) / ref)
 
 
 def thresholds(f: float, lo: float, hi: float) -> float:
     """Adaptive threshold lo + (hi − lo)·clip(f, 0, 1) (ρ_k and σ_k of the paper)."""
-    return float(lo + (hi - lo) * np.clip(f, 0.0, 1.0))
+    return float(lo + (hi - lo) * min(max(f, 0.0), 1.0))  # builtins: np.clip costs µs
 
 
 def is_diverging(

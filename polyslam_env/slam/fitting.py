@@ -100,8 +100,12 @@ class Fit:
 
 # -- point constructors ------------------------------------------------------------------
 def prediction_weight(pose_cov: np.ndarray) -> float:
-    """LMS weight 1/‖P_{k|k−1}‖ (spectral norm of the pose block)."""
-    norm = float(np.linalg.norm(np.asarray(pose_cov, dtype=float)[:3, :3], 2))
+    """LMS weight 1/‖P_{k|k−1}‖ (spectral norm of the pose block).
+
+    The block is a covariance (symmetric), so its norm is its largest |eigenvalue|.
+    """
+    eig = np.linalg.eigvalsh(np.asarray(pose_cov, dtype=float)[:3, :3])  # ascending
+    norm = float(max(-eig[0], eig[-1]))
     if not norm > 0:
         raise ValueError("pose covariance has zero norm; cannot weight its points")
     return 1.0 / norm

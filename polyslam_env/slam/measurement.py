@@ -278,7 +278,7 @@ def ray_intersections(
     overrides the polynomials' own c0. A root counts when it is real, 0 < t ≤ max_range and
     its ξ lies in [lo, hi]; the smallest over all polynomials wins.
     """
-    packed = pack(polys)
+    packed = _trim_order(pack(polys))
     c0s = np.asarray(c0s, dtype=float)
     phi = pose[2] + np.asarray(beam_angles, dtype=float)  # (B,)
     n_polys = len(packed)
@@ -298,6 +298,20 @@ def ray_intersections(
     t, index = _nearest_admissible(coeffs, xi0, dxi, packed.lo, packed.hi, max_range)
     hit = np.isfinite(t)
     return _describe_hits(t, index, hit, taylor, xi0, dxi, deta, phi, packed.variate)
+
+
+def _trim_order(packed: PackedPolynomials) -> PackedPolynomials:
+    """Drop leading shape columns that are zero for every polynomial (keep ≥ linear).
+
+    A zero leading coefficient sends every row through :func:`_real_roots`' lower-degree
+    path and back (e.g. straight walls padded to cubics); without the column the roots,
+    the winner and its Newton polish are exactly the same, and one recursion is saved.
+    """
+    used = np.flatnonzero(np.any(packed.shape != 0.0, axis=0))  # columns in use
+    width = max(int(used[-1]) + 1 if used.size else 0, 2)
+    if width == packed.shape.shape[1]:
+        return packed
+    return PackedPolynomials(packed.variate, packed.shape[:, :width], packed.lo, packed.hi)
 
 
 def _no_hits(phi: np.ndarray) -> Hits:
@@ -393,6 +407,7 @@ def expected_ranges_and_jacobian(
     beam_angles: np.ndarray,
     max_range: float,
     tangent_min_deg: float = 10.0,
+    candidates: np.ndarray | None = None,
 ) -> ExpectedMeasurement:
     """h(X) for every beam and H = ∂h/∂X (SPEC §3), from the state ``mean`` (3+n,).
 
@@ -402,10 +417,17 @@ def expected_ranges_and_jacobian(
     ∂h/∂ξ0 = B'/D, ∂h/∂η0 = −1/D, ∂h/∂c0 = 1/D and ∂h/∂θ = −t*(dη' − B'·dξ')/D where ' is
     d/dφ. For the x¹-variate case this is the SPEC's (B'/D, −1/D, −t*(cos φ + B' sin φ)/D,
     1/D), and for the x²-variate case (−1/D, B'/D, t*(sin φ + B' cos φ)/D, 1/D).
+
+    ``candidates`` (ascending indices) restricts the ray casting to the polynomials a beam
+    can reach (e.g. those whose bounding box lies within ``max_range``); the others must
+    have no admissible root. Each beam's result is then the same as with all of them.
     """
     mean = np.asarray(mean, dtype=float)
     n_state = mean.size
-    hits = ray_intersections(mean[:3], beam_angles, polys, mean[3:], max_range)
+    if candidates is None:
+        hits = ray_intersections(mean[:3], beam_angles, polys, mean[3:], max_range)
+    else:
+        hits = _candidate_hits(mean, beam_angles, pack(polys), candidates, max_range)
     min_sine = np.sin(np.deg2rad(tangent_min_deg))
     valid = (hits.index >= 0) & (hits.incidence_sine >= min_sine)  # (B,)
     rows = np.flatnonzero(valid)
@@ -422,3 +444,24 @@ def expected_ranges_and_jacobian(
         H[rows, 2] = -hits.ranges[rows] * (d_eta - hits.slope[rows] * d_xi) * inv_d
         H[rows, 3 + hits.index[rows]] = inv_d
     return ExpectedMeasurement(hits.ranges, H, valid, hits.index)
+
+
+def _candidate_hits(
+    mean: np.ndarray,
+    beam_angles: np.ndarray,
+    packed: PackedPolynomials,
+    candidates: np.ndarray,
+    max_range: float,
+) -> Hits:
+    """:func:`ray_intersections` on the ``candidates`` subset, indices mapped back."""
+    if candidates.size == 0:
+        return _no_hits(mean[2] + np.asarray(beam_angles, dtype=float))
+    sub = PackedPolynomials(
+        packed.variate[candidates],
+        packed.shape[candidates],
+        packed.lo[candidates],
+        packed.hi[candidates],
+    )
+    hits = ray_intersections(mean[:3], beam_angles, sub, mean[3 + candidates], max_range)
+    index = np.where(hits.index >= 0, candidates[np.maximum(hits.index, 0)], -1)
+    return Hits(hits.ranges, index, hits.xi, hits.slope, hits.denom, hits.phi, hits.variate)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -20,12 +20,16 @@ from polyslam_env.slam import ekf
 from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit, PointSet, StoredPoint, fit_polynomial, store_beams
-from polyslam_env.slam.measurement import PackedPolynomials, expected_ranges_and_jacobian
+from polyslam_env.slam.landmarks import LandmarkArrays
+from polyslam_env.slam.measurement import expected_ranges_and_jacobian
 from polyslam_env.slam.merging import find_merge, merge_points
 from polyslam_env.slam.polynomial import Polynomial
 
 #: Number of recent normalised innovations the divergence test looks at.
 NIS_WINDOW = 50
+#: Slack (m) added to box distances when selecting the landmarks a beam can reach: covers
+#: the root polishing and rounding of the hit point, which the exact test then decides.
+REACH_MARGIN = 1e-3
 
 
 @dataclass(frozen=True)
@@ -49,7 +53,12 @@ class PolySlam:
     """Polynomial-landmark EKF SLAM of one robot (paper §3.1, §3.3).
 
     The state is ``mean = [x¹, x², θ, c0_1 … c0_n]`` with covariance ``cov``; landmark ``i``
-    (stable id ``landmark_ids[i]``) keeps its shape and extent in :attr:`shapes`.
+    (stable id ``landmark_ids[i]``) keeps its shape and extent in :attr:`shapes`. ``mean``
+    and ``cov`` are working arrays (the prediction writes into ``cov``): copy to keep them.
+
+    Set :attr:`profile` to a dict to collect per-stage wall times (s) of every step under
+    the keys ``predict``, ``association``, ``map`` (extents, refits, new landmarks,
+    merges) and ``update``; None (the default) skips the timing.
     """
 
     def __init__(
@@ -72,7 +81,11 @@ class PolySlam:
         self.step_count = 0
         self.diverging = False
         self.divergence_f = 0.0
-        self._packed: PackedPolynomials | None = None
+        self.profile: dict[str, list[float]] | None = None
+        self._arrays = LandmarkArrays()  # the same map as arrays, for the hot path
+        kp0_eig = np.linalg.eigvalsh(config.k_divergence * config.p0)  # (3,) ascending
+        self._kp0_norm = float(max(-kp0_eig[0], kp0_eig[-1]))  # ‖K P0‖
+        self._kp0_min = float(kp0_eig[0])  # λ_min(K P0)
         self._nis: deque[float] = deque(maxlen=NIS_WINDOW)
 
     # -- read-only views ------------------------------------------------------------------
@@ -105,22 +118,27 @@ class PolySlam:
     # -- one step -----------------------------------------------------------------------------
     def step(self, odometry: np.ndarray, ranges: np.ndarray) -> SlamStepInfo:
         """Advance by one control period given odometry (3,) and range readings (B,)."""
-        start = time.perf_counter()
+        start = lap = time.perf_counter()
         cfg = self.config
         self.step_count += 1
-        self.mean, self.cov = ekf.predict(self.mean, self.cov, odometry, cfg.odom_cov)
+        self._predict(odometry)
         pose_cov = self.cov[:3, :3]
-        f = ekf.divergence_ratio(pose_cov, cfg.p0, cfg.k_divergence)
+        f = ekf.divergence_ratio(pose_cov, cfg.p0, cfg.k_divergence, self._kp0_norm)
         rho = ekf.thresholds(f, cfg.rho_min, cfg.rho_max)
         sigma = ekf.thresholds(f, cfg.sigma_min, cfg.sigma_max)
+        if self.profile is not None:
+            lap = self._lap("predict", lap)
 
         points = store_beams(
             self.mean[:3], pose_cov, ranges, self.beam_angles, cfg.range_sigma, self.step_count
         )
         assoc = self.book.associate(
-            points, self.polynomials(), self.mean[3:], rho, sigma, cfg.squared_error
+            points, self._arrays.packed(), self.mean[3:], rho, sigma, cfg.squared_error
         )
-        self._extend_extents(points, assoc.good_ids)
+        if self.profile is not None:
+            lap = self._lap("association", lap)
+
+        self._extend_extents(points, assoc.good)
         refit = sum(self._refit(r.landmark_id, r.points, rho) for r in assoc.refits)
         created = merged = 0
         for request in assoc.new_landmarks:
@@ -128,11 +146,15 @@ class PolySlam:
             if new_id is not None:
                 created += 1
                 merged += self._merge_into_map(new_id)
+        if self.profile is not None:
+            lap = self._lap("map", lap)
 
         good_beams = np.array(sorted(b for b, lid in assoc.good_ids.items() if lid in self.shapes))
         used = self._update(good_beams, np.asarray(ranges, dtype=float))
         self.divergence_f = f
         self.diverging = self._is_diverging()
+        if self.profile is not None:
+            self._lap("update", lap)
         return SlamStepInfo(
             step=self.step_count,
             time_s=time.perf_counter() - start,
@@ -147,7 +169,19 @@ class PolySlam:
             diverging=self.diverging,
         )
 
-    def _extend_extents(self, points: Sequence[StoredPoint], good_ids: dict[int, int]) -> None:
+    def _predict(self, odometry: np.ndarray) -> None:
+        """EKF prediction into the working arrays (the mean is small: a fresh copy)."""
+        self.mean = self.mean.copy()
+        ekf.predict_inplace(self.mean, self.cov, odometry, self.config.odom_cov)
+
+    def _lap(self, stage: str, since: float) -> float:
+        """Record the time since ``since`` under ``stage`` (profiling on); returns now."""
+        now = time.perf_counter()
+        assert self.profile is not None
+        self.profile.setdefault(stage, []).append(now - since)
+        return now
+
+    def _extend_extents(self, points: Sequence[StoredPoint], good: dict[int, int]) -> None:
         """Stretch a landmark's extent over good points just beyond its end.
 
         A point within ρ_k of an end point belongs to the same wall (paper §3.1, case 1), but
@@ -155,24 +189,26 @@ class PolySlam:
         extent grows to the point's ξ only when the extrapolated curve itself explains the
         point (|η − p(ξ)| ≤ 2σ of the range noise); otherwise the extrapolation would be
         trusted where it bends away from a curved wall, and the point is left to Q_bad and a
-        refit, as in the paper.
+        refit, as in the paper. ``good`` maps beams to landmark indices (state index − 3).
         """
         limit = 2.0 * self.config.range_sigma
+        arrays = self._arrays
         for point in points:
-            lid = good_ids.get(point.beam)
-            if lid is None:
+            idx = good.get(point.beam)
+            if idx is None:
                 continue
+            v1 = arrays.variate[idx] == 1
+            xi, eta = (point.xy[0], point.xy[1]) if v1 else (point.xy[1], point.xy[0])
+            if arrays.lo[idx] <= xi <= arrays.hi[idx]:
+                continue
+            lid = self.book.ids[idx]
             poly = self.shapes[lid]
-            xi, eta = (point.xy[0], point.xy[1]) if poly.variate == 1 else point.xy[::-1]
-            if poly.lo <= xi <= poly.hi:
-                continue
-            c0 = self.mean[self.book.state_index(lid)]
+            c0 = self.mean[3 + idx]
             if abs(eta - c0 - float(poly.with_c0(0.0).value(xi))) > limit:
                 continue
-            self.shapes[lid] = Polynomial(
-                poly.variate, poly.coeffs, min(poly.lo, xi), max(poly.hi, xi)
-            )
-            self._packed = None
+            lo, hi = min(poly.lo, xi), max(poly.hi, xi)
+            self.shapes[lid] = Polynomial(poly.variate, poly.coeffs, lo, hi)
+            arrays.set_extent(idx, lo, hi)
 
     def _is_diverging(self) -> bool:
         """The paper's test (P beyond K·P0) or most recent innovations inconsistent.
@@ -183,11 +219,14 @@ class PolySlam:
         quantile means most beams disagree with the map — the filter has lost itself.
         """
         cfg = self.config
-        if ekf.is_diverging(self.cov[:3, :3], cfg.p0, cfg.k_divergence):
+        pose_cov = self.cov[:3, :3]
+        # λ_max(P − K P0) ≤ ‖P‖_F − λ_min(K P0): far below K P0, skip the eigenvalues
+        small = float((pose_cov * pose_cov).sum()) < (0.5 * self._kp0_min) ** 2
+        if not small and ekf.is_diverging(pose_cov, cfg.p0, cfg.k_divergence):
             return True
         if len(self._nis) < NIS_WINDOW // 5:
             return False
-        return float(np.median(np.fromiter(self._nis, float))) > ekf.chi2_1dof_quantile(0.95)
+        return _median(self._nis) > ekf.chi2_1dof_quantile(0.95)
 
     # -- public landmark insertion (map exchange) -----------------------------------------------
     def insert_landmark(self, fit: Fit, merge: bool = True) -> int:
@@ -215,18 +254,19 @@ class PolySlam:
         self.model_var[lid] = max(fit.rms**2 - self.config.range_sigma**2, 0.0)
         self.xi_var[lid] = float(self.cov[0, 0] if fit.poly.variate == 1 else self.cov[1, 1])
         self.changed_at[lid] = self.step_count
-        self._packed = None
+        self._arrays.append(fit.poly, self.pivots[lid], self.xi_var[lid], self.model_var[lid])
         return lid
 
     def _remove(self, landmark_id: int) -> None:
-        self.mean, self.cov = ekf.remove(self.mean, self.cov, self.book.state_index(landmark_id))
+        idx = self.book.index_of(landmark_id)
+        self.mean, self.cov = ekf.remove(self.mean, self.cov, 3 + idx)
+        self._arrays.remove(idx)
         self.book.remove_landmark(landmark_id)
         del self.shapes[landmark_id]
         del self.pivots[landmark_id]
         del self.model_var[landmark_id]
         del self.xi_var[landmark_id]
         self.changed_at.pop(landmark_id, None)
-        self._packed = None
 
     def _replace(self, old_ids: Sequence[int], fit: Fit) -> int:
         """Add the fit (its G_x may touch the old c0s) and then drop the old landmarks."""
@@ -284,31 +324,41 @@ class PolySlam:
         return min(rho, 2.5 * self.config.range_sigma)
 
     def _merge_into_map(self, landmark_id: int) -> int:
-        """Merge a new or changed landmark with an overlapping one (paper §3.3); 1 if merged."""
+        """Merge a new or changed landmark with an overlapping one (paper §3.3); 1 if merged.
+
+        Only landmarks whose bounding box lies within γ_M of this one's are handed to
+        :func:`find_merge`: every approximation error of a farther one is at least the box
+        distance, so its γ could not be below γ_M (same choice, in the same order).
+        """
         if landmark_id not in self.shapes:
             return 0
         idx = self.book.index_of(landmark_id)
-        polys = self.polynomials()
-        j = find_merge(
-            polys[idx],
-            float(self.mean[3 + idx]),
-            polys,
-            self.mean[3:],
-            self.config.gamma_max,
-            self.config.merge_min_overlap,
-            exclude=idx,
+        c0s = self.mean[3:]
+        cfg = self.config
+        reach = cfg.gamma_max * (1.0 + 1e-9) + 1e-12  # ≥ γ_M despite rounding
+        near = self._arrays.near(self._box(idx), c0s, reach)
+        near = near[near != idx]
+        poly = self._polynomial(idx)
+        j_near = find_merge(
+            poly,
+            float(c0s[idx]),
+            [self._polynomial(int(j)) for j in near],
+            c0s[near],
+            cfg.gamma_max,
+            cfg.merge_min_overlap,
         )
-        if j is None:
+        if j_near is None:
             return 0
+        j = int(near[j_near])
         other_id = self.book.ids[j]
         pts = merge_points(
-            polys[idx],
+            poly,
             3 + idx,
             float(self.cov[3 + idx, 3 + idx]),
-            polys[j],
+            self._polynomial(j),
             3 + j,
             float(self.cov[3 + j, 3 + j]),
-            self.config.eps_m,
+            cfg.eps_m,
             self.mean.size,
         )
         fit = self._fit(pts)
@@ -316,6 +366,14 @@ class PolySlam:
             return 0
         self._replace([landmark_id, other_id], fit)
         return 1
+
+    def _polynomial(self, index: int) -> Polynomial:
+        """Landmark ``index`` (state 3 + index) with its current c0."""
+        return self.shapes[self.book.ids[index]].with_c0(float(self.mean[3 + index]))
+
+    def _box(self, index: int) -> np.ndarray:
+        """(4,) bounding box (x_min, x_max, y_min, y_max) of landmark ``index``."""
+        return self._arrays.boxes(self.mean[3:])[index]
 
     def _fit(self, points: PointSet) -> Fit | None:
         fit = fit_polynomial(
@@ -333,12 +391,11 @@ class PolySlam:
         return fit
 
     # -- EKF update -------------------------------------------------------------------------------
-    def _packed_map(self) -> PackedPolynomials:
-        if self._packed is None:
-            self._packed = PackedPolynomials.from_polynomials(
-                [self.shapes[i] for i in self.book.ids]
-            )
-        return self._packed
+    def _reachable(self) -> np.ndarray:
+        """Indices of the landmarks whose bounding box lies within the range of the beams."""
+        x, y = self.mean[0], self.mean[1]
+        robot = np.array([x, x, y, y])
+        return self._arrays.near(robot, self.mean[3:], self.max_range + REACH_MARGIN)
 
     def _shape_coupling(
         self, angles: np.ndarray, t: np.ndarray, index: np.ndarray, H: np.ndarray
@@ -365,22 +422,19 @@ class PolySlam:
         """
         pose = self.mean[:3]
         phi = pose[2] + angles
-        hit = pose[:2] + t[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)  # (k, 2)
+        arrays = self._arrays
+        v1 = arrays.variate[index] == 1  # (k,)
+        start = np.where(v1, pose[0], pose[1])
+        xi = start + t * np.where(v1, np.cos(phi), np.sin(phi))  # (k,) ξ of the hit
+        shape, xi_c = arrays.shape[index], arrays.pivot[index]  # (k, M+1), (k,)
+        slope, value = _slope_and_value(shape, xi)
+        slope_c, value_c = _slope_and_value(shape, xi_c)
+        inv_d = H[np.arange(len(t)), 3 + index]  # ∂h/∂c0 = 1/D
+        shift = (slope - slope_c) * inv_d
+        extra_var = shift**2 * arrays.xi_var[index]
+        lever = (xi - xi_c) + slope * (value - value_c)
         out = np.zeros((len(t), 3))
-        extra_var = np.zeros(len(t))
-        ids = self.book.ids
-        for row, (i, point) in enumerate(zip(index, hit, strict=True)):
-            lid = ids[int(i)]
-            poly, xi_c = self.shapes[lid], self.pivots[lid]
-            shape = poly.with_c0(0.0)
-            v1 = poly.variate == 1
-            xi = point[0] if v1 else point[1]
-            slope = float(poly.slope(xi))
-            inv_d = H[row, 3 + int(i)]  # ∂h/∂c0 = 1/D
-            shift = (slope - float(poly.slope(xi_c))) * inv_d
-            extra_var[row] = shift**2 * self.xi_var[lid]
-            lever = (xi - xi_c) + slope * float(shape.value(xi) - shape.value(xi_c))
-            out[row, 2] = (1.0 if v1 else -1.0) * lever * inv_d
+        out[:, 2] = np.where(v1, 1.0, -1.0) * lever * inv_d
         return out, extra_var
 
     def _update(self, beams: np.ndarray, ranges: np.ndarray) -> int:
@@ -389,10 +443,11 @@ class PolySlam:
             return 0
         expected = expected_ranges_and_jacobian(
             self.mean,
-            self._packed_map(),
+            self._arrays.packed(),
             self.beam_angles[beams],
             self.max_range,
             self.config.tangent_min_deg,
+            candidates=self._reachable(),
         )
         rows = np.flatnonzero(expected.valid)
         if rows.size == 0:
@@ -400,12 +455,8 @@ class PolySlam:
         z = ranges[beams[rows]]
         H = expected.H[rows]
         index = expected.poly_index[rows]
-        ids = self.book.ids
         inv_d = H[np.arange(rows.size), 3 + index]
-        variance = (
-            self.config.range_sigma**2
-            + np.array([self.model_var[ids[int(i)]] for i in index]) * inv_d**2
-        )
+        variance = self.config.range_sigma**2 + self._arrays.model_var[index] * inv_d**2
         if self.config.shape_follows_pose:
             coupling, extra = self._shape_coupling(
                 self.beam_angles[beams[rows]], expected.z_hat[rows], index, H
@@ -430,17 +481,47 @@ class PolySlam:
         When the update corrects the current pose, the recent trajectory moves with it, and so
         must the points: else a new landmark mixes stale coordinates with the corrected pose.
         """
-        dtheta = float(after[2] - before[2])
-        c, s = np.cos(dtheta), np.sin(dtheta)
-        rot = np.array([[c, -s], [s, c]])
-
-        def carry(p: StoredPoint) -> StoredPoint:
-            xy = after[:2] + rot @ (p.xy - before[:2])
-            pose = np.concatenate(
-                [after[:2] + rot @ (p.pose[:2] - before[:2]), [p.pose[2] + dtheta]]
-            )
-            return replace(p, xy=xy, direction=rot @ p.direction, pose=pose)
-
         book = self.book
-        book.clusters = [[carry(p) for p in cluster] for cluster in book.clusters]
-        book.qbad = {lid: [carry(p) for p in pts] for lid, pts in book.qbad.items()}
+        groups = [*book.clusters, *book.qbad.values()]
+        flat = [p for group in groups for p in group]
+        if not flat:
+            return
+        moved = iter(_carry(flat, before, after))
+        book.clusters = [[next(moved) for _ in c] for c in book.clusters]
+        book.qbad = {lid: [next(moved) for _ in pts] for lid, pts in book.qbad.items()}
+
+
+def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> list[StoredPoint]:
+    """The points moved by the rigid motion taking pose ``before`` (3,) to ``after`` (3,)."""
+    dtheta = float(after[2] - before[2])
+    c, s = np.cos(dtheta), np.sin(dtheta)
+    rot_t = np.array([[c, s], [-s, c]])  # Rᵀ: row vectors times Rᵀ rotate by dθ
+    xy = after[:2] + (np.array([p.xy for p in points]) - before[:2]) @ rot_t  # (N, 2)
+    direction = np.array([p.direction for p in points]) @ rot_t  # (N, 2)
+    poses = np.array([p.pose for p in points])  # (N, 3)
+    poses[:, :2] = after[:2] + (poses[:, :2] - before[:2]) @ rot_t
+    poses[:, 2] += dtheta
+    return [
+        StoredPoint(xy[i], direction[i], p.sigma, p.weight, poses[i], p.beam, p.step)
+        for i, p in enumerate(points)
+    ]
+
+
+def _slope_and_value(shape: np.ndarray, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """B'(ξ) and B(ξ) (k,) of shapes (k, M+1) at ξ (k,), by Horner's scheme."""
+    order = shape.shape[1] - 1
+    value = shape[:, order].copy()
+    slope = np.zeros_like(xi)
+    for j in range(order - 1, -1, -1):
+        slope = slope * xi + value
+        value = value * xi + shape[:, j]
+    return slope, value
+
+
+def _median(values: deque[float]) -> float:
+    """Median of a short window (sorting in Python beats numpy's overhead here)."""
+    ordered = sorted(values)
+    mid = len(ordered) // 2
+    if len(ordered) % 2:
+        return ordered[mid]
+    return 0.5 * (ordered[mid - 1] + ordered[mid])

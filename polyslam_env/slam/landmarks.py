@@ -1,0 +1,120 @@
+"""Per-landmark arrays of one robot's map, kept in state order and updated incrementally.
+
+:class:`~polyslam_env.slam.robot.PolySlam` keeps each landmark's shape as a
+:class:`~polyslam_env.slam.polynomial.Polynomial`, but its hot path (association, ray
+casting, the shape coupling of the update, the merge check) wants arrays over all landmarks.
+Rebuilding them from the polynomials every step costs O(n) Python work; :class:`LandmarkArrays`
+instead changes one row when the map changes (append, remove, new extent).
+
+It also keeps a conservative η range of each shape over its extent, so that a landmark's
+axis-aligned bounding box follows from its current c0 in O(1). A beam can only hit, and a
+merge partner can only lie near, landmarks whose box is near: :meth:`LandmarkArrays.near`
+selects them without changing what the exact tests downstream decide.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polyslam_env.slam.measurement import PackedPolynomials, taylor_at
+from polyslam_env.slam.polynomial import Polynomial
+
+
+def shape_range(shape: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Bounds (n, 2) on B(ξ) over ξ ∈ [lo, hi] for shapes (n, M+1) = [0, b_1, …, b_M].
+
+    Interval arithmetic on the Taylor expansion about the middle m of the extent, with half
+    width h: B(m + u) = Σ_k T_k u^k, so |B − T_0| ≤ Σ_{k≥1} |T_k| h^k. Never too narrow (the
+    box tests rely on that); loose only by the curvature terms of short segments.
+    """
+    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)  # (n,)
+    taylor = taylor_at(shape, mid)  # (n, M+1)
+    powers = half[:, None] ** np.arange(shape.shape[1])  # (n, M+1)
+    spread = (np.abs(taylor[:, 1:]) * powers[:, 1:]).sum(axis=1)
+    # a relative pad absorbs the rounding of T_0 and of the exact values this bounds
+    pad = spread * 1e-9 + 1e-9 * (1.0 + np.abs(taylor[:, 0]))
+    return np.stack([taylor[:, 0] - spread - pad, taylor[:, 0] + spread + pad], axis=-1)
+
+
+class LandmarkArrays:
+    """Shapes, extents and per-landmark scalars of a map as arrays (row i = state 3 + i).
+
+    ``shape`` rows are [0, b_1, …, b_M], zero-padded to the largest order so far;
+    ``pivot`` is ξ of the centroid a landmark was fitted around, ``xi_var`` the pose
+    variance along ξ when it was made and ``model_var`` its fit variance beyond the range
+    noise (see PolySlam). Arrays are replaced, never written in place, so a
+    :class:`PackedPolynomials` handed out earlier stays valid.
+    """
+
+    def __init__(self) -> None:
+        self.variate = np.zeros(0, dtype=int)  # (n,)
+        self.shape = np.zeros((0, 2))  # (n, M+1)
+        self.lo = np.zeros(0)  # (n,)
+        self.hi = np.zeros(0)  # (n,)
+        self.eta_range = np.zeros((0, 2))  # (n, 2) bounds on B over the extent (no c0)
+        self.pivot = np.zeros(0)  # (n,)
+        self.xi_var = np.zeros(0)  # (n,)
+        self.model_var = np.zeros(0)  # (n,)
+        self._packed: PackedPolynomials | None = None
+
+    def __len__(self) -> int:
+        return len(self.variate)
+
+    # -- changes ----------------------------------------------------------------------------
+    def append(self, poly: Polynomial, pivot: float, xi_var: float, model_var: float) -> None:
+        """Add a landmark at the end (its c0 was appended to the state)."""
+        width = max(self.shape.shape[1], poly.order + 1)
+        row = np.zeros((1, width))  # (1, M+1)
+        row[0, 1 : poly.order + 1] = poly.shape
+        shape = np.zeros((len(self) + 1, width))
+        shape[:-1, : self.shape.shape[1]] = self.shape
+        shape[-1] = row[0]
+        self.shape = shape
+        self.variate = np.append(self.variate, poly.variate)
+        self.lo = np.append(self.lo, poly.lo)
+        self.hi = np.append(self.hi, poly.hi)
+        rng = shape_range(row, np.array([poly.lo]), np.array([poly.hi]))  # (1, 2)
+        self.eta_range = np.concatenate([self.eta_range, rng])
+        self.pivot = np.append(self.pivot, pivot)
+        self.xi_var = np.append(self.xi_var, xi_var)
+        self.model_var = np.append(self.model_var, model_var)
+        self._packed = None
+
+    def remove(self, index: int) -> None:
+        """Drop row ``index`` (its c0 left the state)."""
+        for name in ("variate", "shape", "lo", "hi", "eta_range", "pivot", "xi_var", "model_var"):
+            setattr(self, name, np.delete(getattr(self, name), index, axis=0))
+        self._packed = None
+
+    def set_extent(self, index: int, lo: float, hi: float) -> None:
+        """New extent [lo, hi] of landmark ``index`` (same shape)."""
+        self.lo, self.hi = self.lo.copy(), self.hi.copy()
+        self.lo[index], self.hi[index] = lo, hi
+        rng = shape_range(
+            self.shape[index : index + 1], self.lo[index : index + 1], self.hi[index : index + 1]
+        )
+        self.eta_range = self.eta_range.copy()
+        self.eta_range[index] = rng[0]
+        self._packed = None
+
+    # -- views --------------------------------------------------------------------------------
+    def packed(self) -> PackedPolynomials:
+        """The shapes for ray casting (cached until the next change)."""
+        if self._packed is None:
+            self._packed = PackedPolynomials(self.variate, self.shape, self.lo, self.hi)
+        return self._packed
+
+    def boxes(self, c0s: np.ndarray) -> np.ndarray:
+        """Axis-aligned boxes (n, 4) = (x_min, x_max, y_min, y_max) holding each curve."""
+        eta = c0s[:, None] + self.eta_range  # (n, 2)
+        v1 = (self.variate == 1)[:, None]
+        xi = np.stack([self.lo, self.hi], axis=-1)  # (n, 2)
+        return np.concatenate([np.where(v1, xi, eta), np.where(v1, eta, xi)], axis=1)
+
+    def near(self, box: np.ndarray, c0s: np.ndarray, distance: float) -> np.ndarray:
+        """Indices (ascending) of the landmarks whose box lies within ``distance`` of ``box``
+        (4,) = (x_min, x_max, y_min, y_max); a point is a box with min = max."""
+        mine = self.boxes(c0s)  # (n, 4)
+        gap_x = np.maximum(np.maximum(mine[:, 0] - box[1], box[0] - mine[:, 1]), 0.0)
+        gap_y = np.maximum(np.maximum(mine[:, 2] - box[3], box[2] - mine[:, 3]), 0.0)
+        return np.flatnonzero(gap_x * gap_x + gap_y * gap_y <= distance * distance)

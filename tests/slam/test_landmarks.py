@@ -1,0 +1,231 @@
+"""Fast-path helpers of the SLAM step: incremental landmark arrays, bounding boxes, and the
+faster variants (in-place prediction, candidate ray casting, packed association) against the
+pure or brute-force versions they replace."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from polyslam_env.slam.association import approximation_error
+from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.ekf import predict, predict_inplace, spectral_norm_sym
+from polyslam_env.slam.fitting import Fit, StoredPoint
+from polyslam_env.slam.landmarks import LandmarkArrays, shape_range
+from polyslam_env.slam.measurement import (
+    PackedPolynomials,
+    expected_ranges_and_jacobian,
+    ray_intersections,
+)
+from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.robot import PolySlam, _carry, _median
+
+BEAMS = np.deg2rad([90.0, 45.0, 0.0, -45.0, -90.0])
+
+
+def random_polys(rng: np.random.Generator, n: int, spread: float = 3.0) -> list[Polynomial]:
+    """n short cubics (some straight lines) of both variates scattered over ±spread m."""
+    polys = []
+    for i in range(n):
+        coeffs = np.array([rng.uniform(-spread, spread), *rng.normal(0.0, [0.5, 0.3, 0.2])])
+        if i % 3 == 0:
+            coeffs[2:] = 0.0  # a straight wall
+        lo = rng.uniform(-spread, spread)
+        polys.append(Polynomial(int(rng.integers(1, 3)), coeffs, lo, lo + rng.uniform(0.1, 1.5)))
+    return polys
+
+
+def arrays_of(polys: list[Polynomial]) -> LandmarkArrays:
+    arrays = LandmarkArrays()
+    for i, p in enumerate(polys):
+        arrays.append(p, pivot=0.5 * (p.lo + p.hi), xi_var=0.01 * i, model_var=0.001 * i)
+    return arrays
+
+
+def assert_packed_equal(a: PackedPolynomials, b: PackedPolynomials) -> None:
+    np.testing.assert_array_equal(a.variate, b.variate)
+    np.testing.assert_array_equal(a.shape, b.shape)
+    np.testing.assert_array_equal(a.lo, b.lo)
+    np.testing.assert_array_equal(a.hi, b.hi)
+
+
+# -- LandmarkArrays -------------------------------------------------------------------------------
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_shape_range__bounds_the_curve_on_its_extent(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    polys = random_polys(rng, 4)
+    arrays = arrays_of(polys)
+    for p, (low, high) in zip(polys, arrays.eta_range, strict=True):
+        values = p.with_c0(0.0).value(np.linspace(p.lo, p.hi, 2001))
+        assert values.min() >= low and values.max() <= high  # exact: the bound is conservative
+
+
+def test_shape_range__is_tight_for_a_straight_line() -> None:
+    shape = np.array([[0.0, 2.0, 0.0, 0.0]])  # B(ξ) = 2ξ
+    low, high = shape_range(shape, np.array([1.0]), np.array([3.0]))[0]
+    # only the 1e-9 relative pad separates the bound from the true range [2, 6]
+    assert abs(low - 2.0) < 1e-7 and abs(high - 6.0) < 1e-7
+
+
+def test_landmark_arrays__track_appends_removals_and_extents() -> None:
+    rng = np.random.default_rng(3)
+    polys = random_polys(rng, 6)
+    polys[1] = Polynomial(1, np.array([0.5, 0.1]), -1.0, 1.0)  # lower order: zero-padded
+    arrays = arrays_of(polys)
+    assert_packed_equal(arrays.packed(), PackedPolynomials.from_polynomials(polys))
+    arrays.remove(2)
+    arrays.set_extent(0, polys[0].lo - 0.5, polys[0].hi)
+    expected = [Polynomial(polys[0].variate, polys[0].coeffs, polys[0].lo - 0.5, polys[0].hi)]
+    expected += polys[1:2] + polys[3:]
+    assert_packed_equal(arrays.packed(), PackedPolynomials.from_polynomials(expected))
+    np.testing.assert_array_equal(arrays.xi_var, [0.0, 0.01, 0.03, 0.04, 0.05])
+    np.testing.assert_array_equal(arrays.eta_range, arrays_of(expected).eta_range)
+
+
+def test_landmark_arrays__packed_views_stay_valid_after_changes() -> None:
+    polys = random_polys(np.random.default_rng(4), 3)
+    arrays = arrays_of(polys)
+    before = arrays.packed()
+    arrays.set_extent(1, -10.0, 10.0)
+    assert before.lo[1] == polys[1].lo  # not written in place
+    assert arrays.packed().lo[1] == -10.0
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), distance=st.floats(0.05, 3.0))
+def test_near__keeps_every_landmark_with_a_curve_point_within_the_distance(
+    seed: int, distance: float
+) -> None:
+    rng = np.random.default_rng(seed)
+    polys = random_polys(rng, 12)
+    arrays = arrays_of(polys)
+    c0s = rng.uniform(-2.0, 2.0, len(polys))
+    point = rng.uniform(-3.0, 3.0, 2)
+    near = set(arrays.near(np.repeat(point, 2), c0s, distance).tolist())
+    for i, p in enumerate(polys):
+        curve = p.with_c0(c0s[i]).equally_spaced(500)
+        if np.min(np.linalg.norm(curve - point, axis=1)) <= distance:
+            assert i in near
+
+
+# -- fast variants against the pure ones -----------------------------------------------------------
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_expected_ranges__candidates_give_the_same_result_as_all(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    polys = random_polys(rng, 15)
+    arrays = arrays_of(polys)
+    mean = np.concatenate([rng.uniform(-2, 2, 2), rng.uniform(-np.pi, np.pi, 1)])
+    mean = np.concatenate([mean, rng.uniform(-2.0, 2.0, len(polys))])
+    reach = arrays.near(np.repeat(mean[:2], 2), mean[3:], 2.0 + 1e-3)
+    full = expected_ranges_and_jacobian(mean, polys, BEAMS, 2.0)
+    fast = expected_ranges_and_jacobian(mean, arrays.packed(), BEAMS, 2.0, candidates=reach)
+    for a, b in zip(full, fast, strict=True):
+        np.testing.assert_array_equal(a, b)  # same rows solved the same way: bit-identical
+
+
+def test_ray_intersections__padding_lines_to_cubics_changes_nothing() -> None:
+    rng = np.random.default_rng(5)
+    lines = [Polynomial(1 + i % 2, np.array([rng.uniform(-1, 1), 0.3]), -2, 2) for i in range(4)]
+    padded = PackedPolynomials(
+        np.array([p.variate for p in lines]),
+        np.array([[0.0, 0.3, 0.0, 0.0]] * 4),
+        np.full(4, -2.0),
+        np.full(4, 2.0),
+    )
+    pose = np.array([0.1, -0.2, 0.4])
+    c0s = np.array([p.c0 for p in lines])
+    a = ray_intersections(pose, BEAMS, lines, c0s, 2.0)
+    b = ray_intersections(pose, BEAMS, padded, c0s, 2.0)
+    np.testing.assert_array_equal(a.ranges, b.ranges)
+    np.testing.assert_array_equal(a.index, b.index)
+
+
+def test_approximation_error__packed_matches_list() -> None:
+    rng = np.random.default_rng(6)
+    polys = random_polys(rng, 8)
+    points = rng.uniform(-3, 3, (7, 2))
+    c0s = rng.uniform(-1, 1, 8)
+    a = approximation_error(points, polys, c0s)
+    b = approximation_error(points, PackedPolynomials.from_polynomials(polys), c0s)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_predict_inplace__matches_pure_predict() -> None:
+    rng = np.random.default_rng(7)
+    a = rng.normal(size=(8, 8))
+    cov = a @ a.T
+    mean = rng.normal(size=8)
+    odometry, W = np.array([0.1, 0.02, 0.05]), np.diag([1e-4, 1e-4, 1e-6])
+    want_mean, want_cov = predict(mean, cov, odometry, W)
+    predict_inplace(mean, cov, odometry, W)
+    np.testing.assert_array_equal(mean, want_mean)
+    np.testing.assert_array_equal(cov, want_cov)
+
+
+def test_spectral_norm_sym__matches_svd_norm() -> None:
+    rng = np.random.default_rng(8)
+    for _ in range(20):
+        a = rng.normal(size=(3, 3))
+        a = a + a.T  # indefinite: the norm may come from the most negative eigenvalue
+        # eigvalsh and the SVD round differently: a few ulps of the norm
+        assert abs(spectral_norm_sym(a) - np.linalg.norm(a, 2)) <= 1e-13 * np.linalg.norm(a, 2)
+
+
+# -- PolySlam helpers ----------------------------------------------------------------------------
+def test_median__matches_numpy() -> None:
+    rng = np.random.default_rng(9)
+    for size in (1, 2, 9, 10, 50):
+        values = deque(rng.normal(size=size).tolist())
+        assert _median(values) == np.median(np.array(values))
+
+
+def test_carry__moves_points_rigidly_with_the_pose_correction() -> None:
+    before, after = np.array([1.0, 2.0, 0.3]), np.array([1.05, 1.9, 0.35])
+    point = StoredPoint(np.array([2.0, 2.5]), np.array([0.0, 1.0]), 0.02, 3.0, before.copy(), 1, 4)
+    (moved,) = _carry([point], before, after)
+    d = after[2] - before[2]
+    rot = np.array([[np.cos(d), -np.sin(d)], [np.sin(d), np.cos(d)]])
+    # rounding of a 2×2 rotation of metre-sized vectors
+    np.testing.assert_allclose(moved.xy, after[:2] + rot @ (point.xy - before[:2]), atol=1e-15)
+    np.testing.assert_allclose(moved.direction, rot @ point.direction, atol=1e-15)
+    np.testing.assert_allclose(moved.pose, after, atol=1e-15)
+    assert (moved.beam, moved.step, moved.sigma, moved.weight) == (1, 4, 0.02, 3.0)
+
+
+def _slam_with_walls() -> PolySlam:
+    slam = PolySlam(SlamConfig(), BEAMS, 2.0)
+    for wall in (
+        Polynomial(1, np.array([0.5, 0.0]), -1.5, 0.9),
+        Polynomial(1, np.array([-0.5, 0.0]), -1.5, 0.9),
+        Polynomial(2, np.array([1.0, 0.0]), -0.45, 0.45),
+    ):
+        gx = np.zeros((1, slam.mean.size))
+        gx[0, 1 if wall.variate == 1 else 0] = 1.0
+        fit = Fit(wall, wall.c0, gx, np.ones((1, 1)), np.array([[4e-4]]), 0.02, 1)
+        slam.insert_landmark(fit, merge=False)
+    return slam
+
+
+def test_profile_hook__records_stages_without_changing_the_estimate() -> None:
+    plain, profiled = _slam_with_walls(), _slam_with_walls()
+    profiled.profile = {}
+    rng = np.random.default_rng(10)
+    walls = plain.polynomials()
+    c0s = np.array([w.c0 for w in walls])
+    pose = np.zeros(3)
+    for _ in range(5):
+        pose = pose + np.array([0.01, 0.0, 0.0])
+        ranges = ray_intersections(pose, BEAMS, walls, c0s, 2.0).ranges
+        ranges = ranges + rng.normal(0.0, 0.02, BEAMS.size)
+        odometry = np.array([0.01, 0.0, 0.0])
+        assert plain.step(odometry, ranges).beams_used > 0
+        profiled.step(odometry, ranges)
+    np.testing.assert_array_equal(plain.mean, profiled.mean)
+    np.testing.assert_array_equal(plain.cov, profiled.cov)
+    assert set(profiled.profile) == {"predict", "association", "map", "update"}
+    assert all(len(t) == 5 for t in profiled.profile.values())
