@@ -8,7 +8,7 @@ reproduction use it; :func:`robot_metrics` turns a run into the paper's numbers.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -55,6 +55,7 @@ class SimulationResult:
     seed: int | None
     steps: int
     meta: dict[str, Any] = field(default_factory=dict)
+    shadow_runs: dict[int, RobotRun] = field(default_factory=dict)  # robot → its lone SLAM
 
     def metrics(self) -> list[dict[str, float]]:
         return [robot_metrics(run, self.layout) for run in self.runs]
@@ -132,6 +133,7 @@ def simulate(
     initial_error: bool = False,
     progress: Callable[[int], None] | None = None,
     exchange: bool | ChannelConfig | RendezvousExchange = False,
+    shadow: Sequence[int] = (),
 ) -> SimulationResult:
     """Run ``num_robots`` robots with SLAM for ``steps`` control periods.
 
@@ -149,6 +151,10 @@ def simulate(
     for the default :class:`ChannelConfig`, a config, or a ready :class:`RendezvousExchange`
     (e.g. one that logs payload sizes). Its counters land in ``RobotRun.comms`` and its
     messages in ``meta["exchange"]``. Off, the run is exactly as without it.
+
+    ``shadow`` lists robots that get a second, lone SLAM fed the very same odometry and
+    ranges but never exchanging: their single-robot result on the identical episode
+    (``SimulationResult.shadow_runs``), as in the paper's Fig 8. Shadows change nothing else.
     """
     wcfg = world_config or WorldConfig()
     scfg = slam_config or SlamConfig()
@@ -185,7 +191,13 @@ def simulate(
         for i in range(num_robots):
             e0 = anchor.multivariate_normal(np.zeros(3), scfg.p0)
             frames[i] = _frame_of(world.poses[i], e0)
-    rec = _Recorder(world, slams, frames)
+    shadow = list(shadow)
+    if any(not 0 <= i < num_robots for i in shadow):
+        raise ValueError(f"shadow: robot indices must be in [0, {num_robots}), got {shadow}")
+    shadows = [
+        PolySlam(scfg, wcfg.range_sensor.angles, wcfg.range_sensor.max_range) for _ in shadow
+    ]
+    rec = _Recorder(world, slams + shadows, frames, list(range(num_robots)) + shadow)
     ex = _make_exchange(exchange, num_robots, seed, wcfg, scfg)
     log: list[dict[str, Any]] = []
     scans = world.scan()
@@ -193,17 +205,23 @@ def simulate(
         result = world.step(np.asarray(controller(k, scans), dtype=float))
         scans = world.scan()
         infos = [slam.step(result.odometry[i], scans[i]) for i, slam in enumerate(slams)]
+        infos += [
+            lone.step(result.odometry[i], scans[i]) for i, lone in zip(shadow, shadows, strict=True)
+        ]
         rec.record(scans, infos, result.collided)
         if ex is not None:
             log += _exchange_step(ex, k, world, slams, scans)
         if progress is not None:
             progress(k + 1)
-    runs = rec.runs()
+    all_runs = rec.runs()
+    runs, lone_runs = all_runs[:num_robots], dict(zip(shadow, all_runs[num_robots:], strict=True))
     if ex is None:
-        return SimulationResult(layout, runs, seed, steps)
+        return SimulationResult(layout, runs, seed, steps, shadow_runs=lone_runs)
     for i, run in enumerate(runs):
         run.comms = ex.counters(i)
-    return SimulationResult(layout, runs, seed, steps, meta={"exchange": log})
+    return SimulationResult(
+        layout, runs, seed, steps, meta={"exchange": log}, shadow_runs=lone_runs
+    )
 
 
 def _make_exchange(
@@ -283,11 +301,14 @@ def _frame_of(true_start: np.ndarray, offset: np.ndarray) -> np.ndarray:
 class _Recorder:
     """Collects the per-step data of every robot during :func:`simulate`."""
 
-    def __init__(self, world: World, slams: list[PolySlam], frames: np.ndarray) -> None:
+    def __init__(
+        self, world: World, slams: list[PolySlam], frames: np.ndarray, robots: list[int]
+    ) -> None:
         self.world, self.slams = world, slams
+        self.robots = robots  # slams[j] estimates world robot robots[j] (shadows repeat one)
         n = len(slams)
-        self.start = frames  # (N, 3): each robot's frame R_{j,0} in the absolute frame
-        self.true = [[world.poses[i].copy()] for i in range(n)]
+        self.start = frames[robots]  # (n, 3): each SLAM's frame R_{j,0} in the absolute frame
+        self.true = [[world.poses[r].copy()] for r in robots]
         self.est = [[s.pose] for s in slams]
         self.cov = [[s.pose_cov] for s in slams]
         self.hits: list[list[np.ndarray]] = [[] for _ in range(n)]
@@ -299,18 +320,18 @@ class _Recorder:
     def record(self, scans: np.ndarray, infos: list, collided: np.ndarray) -> None:
         poses = self.world.poses
         true_ranges = self.world.true_scan()
-        for i, slam in enumerate(self.slams):
-            self.true[i].append(poses[i].copy())
+        for i, (slam, robot) in enumerate(zip(self.slams, self.robots, strict=True)):
+            self.true[i].append(poses[robot].copy())
             self.est[i].append(slam.pose)
             self.cov[i].append(slam.pose_cov)
             self.times[i].append(infos[i].time_s)
             self.diverged[i] |= infos[i].diverging
-            self.collisions[i] += int(collided[i])
-            r = true_ranges[i]
+            self.collisions[i] += int(collided[robot])
+            r = true_ranges[robot]
             ok = np.isfinite(r)
-            phi = poses[i, 2] + self.angles[ok]
+            phi = poses[robot, 2] + self.angles[ok]
             rays = np.stack([np.cos(phi), np.sin(phi)], axis=1)
-            self.hits[i].append(poses[i, :2] + r[ok, None] * rays)
+            self.hits[i].append(poses[robot, :2] + r[ok, None] * rays)
 
     def runs(self) -> list[RobotRun]:
         return [

@@ -10,4 +10,5 @@ works without the optional extras.
 COMMANDS = (
     "simulate",
     "maps",
+    "reproduce",
 )
