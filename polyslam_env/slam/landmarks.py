@@ -41,9 +41,10 @@ class LandmarkArrays:
 
     ``shape`` rows are [0, b_1, …, b_M], zero-padded to the largest order so far;
     ``pivot`` is ξ of the centroid a landmark was fitted around, ``xi_var`` the pose
-    variance along ξ when it was made and ``model_var`` its fit variance beyond the range
-    noise (see PolySlam). Arrays are replaced, never written in place, so a
-    :class:`PackedPolynomials` handed out earlier stays valid.
+    variance along ξ when it was made, ``model_var`` its fit variance beyond the range
+    noise and ``fit_half`` half the extent it was fitted over (see PolySlam). Arrays are
+    replaced, never written in place, so a :class:`PackedPolynomials` handed out earlier
+    stays valid.
     """
 
     def __init__(self) -> None:
@@ -55,13 +56,16 @@ class LandmarkArrays:
         self.pivot = np.zeros(0)  # (n,)
         self.xi_var = np.zeros(0)  # (n,)
         self.model_var = np.zeros(0)  # (n,)
+        self.fit_half = np.zeros(0)  # (n,) half the extent it was fitted over
         self._packed: PackedPolynomials | None = None
 
     def __len__(self) -> int:
         return len(self.variate)
 
     # -- changes ----------------------------------------------------------------------------
-    def append(self, poly: Polynomial, pivot: float, xi_var: float, model_var: float) -> None:
+    def append(
+        self, poly: Polynomial, pivot: float, xi_var: float, model_var: float, fit_half: float
+    ) -> None:
         """Add a landmark at the end (its c0 was appended to the state)."""
         width = max(self.shape.shape[1], poly.order + 1)
         row = np.zeros((1, width))  # (1, M+1)
@@ -78,11 +82,13 @@ class LandmarkArrays:
         self.pivot = np.append(self.pivot, pivot)
         self.xi_var = np.append(self.xi_var, xi_var)
         self.model_var = np.append(self.model_var, model_var)
+        self.fit_half = np.append(self.fit_half, fit_half)
         self._packed = None
 
     def remove(self, index: int) -> None:
         """Drop row ``index`` (its c0 left the state)."""
-        for name in ("variate", "shape", "lo", "hi", "eta_range", "pivot", "xi_var", "model_var"):
+        names = ("variate", "shape", "lo", "hi", "eta_range", "pivot", "xi_var", "model_var")
+        for name in (*names, "fit_half"):
             setattr(self, name, np.delete(getattr(self, name), index, axis=0))
         self._packed = None
 

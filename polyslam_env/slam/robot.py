@@ -9,6 +9,7 @@ The robot works in its own start frame R_{j,0} and never sees ground truth.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections import deque
 from collections.abc import Sequence
@@ -254,7 +255,8 @@ class PolySlam:
         self.model_var[lid] = max(fit.rms**2 - self.config.range_sigma**2, 0.0)
         self.xi_var[lid] = float(self.cov[0, 0] if fit.poly.variate == 1 else self.cov[1, 1])
         self.changed_at[lid] = self.step_count
-        self._arrays.append(fit.poly, self.pivots[lid], self.xi_var[lid], self.model_var[lid])
+        half = max(0.5 * (fit.poly.hi - fit.poly.lo), 0.05)
+        self._arrays.append(fit.poly, self.pivots[lid], self.xi_var[lid], self.model_var[lid], half)
         return lid
 
     def _remove(self, landmark_id: int) -> None:
@@ -432,10 +434,33 @@ class PolySlam:
         inv_d = H[np.arange(len(t)), 3 + index]  # ∂h/∂c0 = 1/D
         shift = (slope - slope_c) * inv_d
         extra_var = shift**2 * arrays.xi_var[index]
+        extra_var += inv_d**2 * self._shape_fit_var(shape, (xi - xi_c) / arrays.fit_half[index])
         lever = (xi - xi_c) + slope * (value - value_c)
         out = np.zeros((len(t), 3))
         out[:, 2] = np.where(v1, 1.0, -1.0) * lever * inv_d
         return out, extra_var
+
+    def _shape_fit_var(self, shape: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Variance (k,) of a frozen shape's η at scaled positions t = (ξ* − ξ_c)/half-extent.
+
+        The shape was fitted to noisy points and is not in the state, so its own estimation
+        error is a bias every later beam on it shares. For N points equally spaced over the
+        fitted extent, the fit's η at t has variance σ² a(t)ᵀM⁻¹a(t) (a = [1, t, …, t^m]);
+        the constant part σ²/N is c0's and already in the state, the rest goes into R. It is
+        small inside the fitted extent (~σ²·m/N) and grows fast where the curve is
+        extrapolated. N = ε_Z + 1, the size of the cluster a landmark is born from.
+        """
+        n_fit = self.config.eps_z + 1
+        orders = np.array([int(np.flatnonzero(row)[-1]) if row.any() else 0 for row in shape])
+        out = np.zeros(len(t))
+        for m in set(orders.tolist()):
+            if m == 0:
+                continue
+            sel = orders == m
+            a = t[sel, None] ** np.arange(m + 1)  # (k_m, m+1)
+            quad = np.einsum("ki,ij,kj->k", a, _uniform_fit_inverse(n_fit, m), a)
+            out[sel] = self.config.range_sigma**2 * np.maximum(quad - 1.0 / n_fit, 0.0)
+        return out
 
     def _update(self, beams: np.ndarray, ranges: np.ndarray) -> int:
         """Batched, gated update with the associated beams; returns how many were used."""
@@ -489,6 +514,13 @@ class PolySlam:
         moved = iter(_carry(flat, before, after))
         book.clusters = [[next(moved) for _ in c] for c in book.clusters]
         book.qbad = {lid: [next(moved) for _ in pts] for lid, pts in book.qbad.items()}
+
+
+@functools.lru_cache(maxsize=16)
+def _uniform_fit_inverse(n_points: int, order: int) -> np.ndarray:
+    """(AᵀA)⁻¹ (m+1, m+1) for monomials of t at n points equally spaced over [−1, 1]."""
+    a = np.linspace(-1.0, 1.0, n_points)[:, None] ** np.arange(order + 1)
+    return np.asarray(np.linalg.inv(a.T @ a))
 
 
 def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> list[StoredPoint]:

@@ -41,7 +41,9 @@ def random_polys(rng: np.random.Generator, n: int, spread: float = 3.0) -> list[
 def arrays_of(polys: list[Polynomial]) -> LandmarkArrays:
     arrays = LandmarkArrays()
     for i, p in enumerate(polys):
-        arrays.append(p, pivot=0.5 * (p.lo + p.hi), xi_var=0.01 * i, model_var=0.001 * i)
+        arrays.append(
+            p, pivot=0.5 * (p.lo + p.hi), xi_var=0.01 * i, model_var=0.001 * i, fit_half=0.2
+        )
     return arrays
 
 
