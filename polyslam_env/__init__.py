@@ -57,3 +57,7 @@ class _Package(types.ModuleType):
 
 sys.modules[__name__].__class__ = _Package
 
+# Gymnasium ids (``polyslam/Team-v0``): a registry entry with an entry-point string, no env import.
+from polyslam_env.gym_env import register_envs as _register_envs  # noqa: E402
+
+_register_envs()

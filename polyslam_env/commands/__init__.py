@@ -10,5 +10,8 @@ works without the optional extras.
 COMMANDS = (
     "simulate",
     "maps",
+    "run",
+    "evaluate",
     "reproduce",
+    "train",
 )

@@ -1,0 +1,242 @@
+"""The policy interface, the static facts a policy may know, and the policy registry (SPEC §7).
+
+A :class:`Policy` sees only its agent's observation and a :class:`PolicyContext`: the spaces
+and the env config's public numbers (beam angles, ranges, speed limits, dt, observation layout),
+taken once at construction. It never holds the env, so it cannot read ground truth.
+
+``make_policy(name, env, agent, **kwargs)`` builds one by registry name; :class:`TeamPolicy`
+holds one per agent. New policies register a factory ``factory(context, **kwargs) -> Policy``
+in :data:`POLICIES`, either the callable itself or a ``"module:attribute"`` string that is
+imported only when the policy is made (so torch loads only for learned policies).
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from polyslam_env.env_config import EnvConfig
+from polyslam_env.errors import PolyslamError
+from polyslam_env.observations import ObservationEncoder
+
+__all__ = [
+    "POLICIES",
+    "CheckpointError",
+    "Policy",
+    "PolicyContext",
+    "PolicyError",
+    "PolicyFactory",
+    "TeamPolicy",
+    "make_policy",
+    "make_team",
+    "policy_factory",
+    "policy_names",
+]
+
+
+class PolicyError(PolyslamError, ValueError):
+    """A policy cannot be made or cannot run with this env (name, map, action mode...)."""
+
+
+class CheckpointError(PolicyError):
+    """A policy checkpoint is missing, unreadable, or does not fit the env."""
+
+
+@dataclass(frozen=True, eq=False)
+class PolicyContext:
+    """What a policy may know besides its observation: static, public facts of the env."""
+
+    agent: str
+    index: int  # the agent's number i in robot_i
+    num_robots: int
+    map: str  # the env config's map value (a name, a path or "generator:<name>")
+    observation_space: spaces.Space[Any]
+    action_space: spaces.Space[Any]
+    action_mode: str  # "continuous" or "discrete"
+    discrete: np.ndarray  # (K, 2) physical (v, ω) of each discrete action
+    obs_mode: str  # "vector" or "grid"
+    vector_layout: Mapping[str, slice]  # parts of the flat vector (see ObservationEncoder)
+    grid_size: int  # G of the local G × G map
+    grid_resolution: float  # m per local map cell
+    pose_scale: float  # m; the observed position is pose / pose_scale
+    beam_angles: np.ndarray  # (B,) rad, in the robot frame
+    max_range: float  # m
+    camera_range: float  # m
+    robot_radius: float  # m
+    v_max: float  # m/s
+    omega_max: float  # rad/s
+    allow_reverse: bool
+    dt: float  # s, control period
+    max_steps: int
+
+    @classmethod
+    def from_env(cls, env: Any, agent: str) -> PolicyContext:
+        """The context of ``agent`` in a ``polyslam_v0`` env (read once, never kept)."""
+        cfg: EnvConfig = env.unwrapped.config if hasattr(env, "unwrapped") else env.config
+        if agent not in env.possible_agents:
+            raise PolicyError(
+                f"unknown agent {agent!r}; agents are {', '.join(env.possible_agents)}"
+            )
+        enc = ObservationEncoder(cfg)
+        rc, wc = cfg.world.robot, cfg.world
+        return cls(
+            agent=agent,
+            index=list(env.possible_agents).index(agent),
+            num_robots=cfg.num_robots,
+            map=cfg.map,
+            observation_space=env.observation_space(agent),
+            action_space=env.action_space(agent),
+            action_mode=cfg.action.mode,
+            discrete=np.array(cfg.action.discrete, dtype=float) * (rc.v_max, rc.omega_max),
+            obs_mode=cfg.observation.mode,
+            vector_layout=dict(enc.vector_layout),
+            grid_size=cfg.observation.grid_size,
+            grid_resolution=cfg.observation.grid_resolution,
+            pose_scale=cfg.observation.pose_scale,
+            beam_angles=np.deg2rad(np.asarray(wc.range_sensor.angles_deg, dtype=float)),
+            max_range=wc.range_sensor.max_range,
+            camera_range=wc.camera.range,
+            robot_radius=rc.radius,
+            v_max=rc.v_max,
+            omega_max=rc.omega_max,
+            allow_reverse=rc.allow_reverse,
+            dt=wc.dt,
+            max_steps=cfg.max_steps,
+        )
+
+    # -- decoding the observation -----------------------------------------------------------
+    def vector(self, observation: Any) -> np.ndarray:  # (D,)
+        """The flat vector part of an observation (either mode)."""
+        if isinstance(observation, Mapping):
+            return np.asarray(observation["vector"], dtype=float)
+        return np.asarray(observation, dtype=float)
+
+    def ranges(self, observation: Any) -> np.ndarray:  # (B,) m, inf = no return
+        """The beam ranges in metres (no return → inf)."""
+        vec = self.vector(observation)
+        r = vec[self.vector_layout["ranges"]] * self.max_range
+        return np.where(vec[self.vector_layout["no_return"]] > 0.5, np.inf, r)
+
+    def pose(self, observation: Any) -> np.ndarray:  # (3,)
+        """The robot's pose estimate (x, y, θ) in its own start frame."""
+        x, y, c, s = self.vector(observation)[self.vector_layout["pose"]]
+        return np.array([x * self.pose_scale, y * self.pose_scale, math.atan2(s, c)])
+
+    def detections(self, observation: Any) -> np.ndarray:  # (k, 2) distance m, bearing rad
+        """The other robots the camera sees, nearest first, as (distance, bearing)."""
+        slots = self.vector(observation)[self.vector_layout["detections"]].reshape(-1, 4)
+        seen = slots[slots[:, 0] > 0.5]
+        return np.column_stack([seen[:, 1] * self.camera_range, np.arctan2(seen[:, 3], seen[:, 2])])
+
+    def local_grid(self, observation: Any) -> np.ndarray:  # (3, G, G) bool: occ, free, unknown
+        """The egocentric local map as occupied / free / unknown channels (either mode)."""
+        if isinstance(observation, Mapping):
+            return np.asarray(observation["grid"]) > 0.5
+        g = self.grid_size
+        flat = self.vector(observation)[self.vector_layout["local_map"]].reshape(g, g)
+        occ, unknown = flat > 0.75, np.abs(flat - 0.5) < 0.25  # values are 0, 0.5 or 1
+        return np.stack([occ, ~(occ | unknown), unknown])
+
+    # -- encoding the action ----------------------------------------------------------------
+    def action(self, v: float, omega: float) -> Any:
+        """(v, ω) in physical units as an action of this env: clipped to the limits
+        (continuous, float32) or the nearest discrete action (relative to the limits)."""
+        v_lo = -self.v_max if self.allow_reverse else 0.0
+        v = float(np.clip(v, v_lo, self.v_max))
+        omega = float(np.clip(omega, -self.omega_max, self.omega_max))
+        if self.action_mode == "discrete":
+            scale = np.array([self.v_max, self.omega_max])
+            d = np.sum(((self.discrete - (v, omega)) / scale) ** 2, axis=1)  # (K,)
+            return np.int64(np.argmin(d))
+        return np.array([v, omega], dtype=np.float32)
+
+
+class Policy(ABC):
+    """Maps one agent's observation to an action; state lives between ``reset`` calls."""
+
+    def __init__(self, context: PolicyContext) -> None:
+        self.context = context
+
+    def reset(self, seed: int | None = None) -> None:  # noqa: B027 - stateless by default
+        """Forget the last episode (called before every episode)."""
+
+    @abstractmethod
+    def act(self, observation: Any, rng: np.random.Generator) -> Any:
+        """The action for ``observation``; all randomness comes from ``rng``."""
+
+
+PolicyFactory = Callable[..., Policy]
+#: Policy name → ``factory(context, **kwargs)`` or a lazy ``"module:attribute"`` string.
+POLICIES: dict[str, PolicyFactory | str] = {
+    "paper": "policies.scripted:PaperPolicy",
+    "frontier": "policies.frontier:FrontierPolicy",
+    "wall_follow": "policies.scripted:WallFollowPolicy",
+    "random": "policies.scripted:RandomPolicy",
+    "ppo": "policies.ppo:PPOPolicy",
+}
+
+
+def policy_names() -> list[str]:
+    """The registered policy names, sorted."""
+    return sorted(POLICIES)
+
+
+def policy_factory(name: str) -> PolicyFactory:
+    """The factory registered as ``name`` (imported now if lazy); unknown names raise."""
+    entry = POLICIES.get(name)
+    if entry is None:
+        raise PolicyError(f"unknown policy {name!r}; policies are {', '.join(policy_names())}")
+    if isinstance(entry, str):
+        module, _, attr = entry.partition(":")
+        try:
+            factory: PolicyFactory = getattr(importlib.import_module(module), attr)
+        except (ImportError, AttributeError) as err:
+            raise PolicyError(f"policy {name!r} is not available: {err}") from None
+        return factory
+    return entry
+
+
+def make_policy(name: str, env: Any, agent: str, **kwargs: Any) -> Policy:
+    """The policy ``name`` for ``agent`` of ``env``; ``kwargs`` go to its factory.
+
+    ``checkpoint=None`` is dropped; a checkpoint given to a policy that takes none is an error.
+    """
+    if kwargs.get("checkpoint", 0) is None:
+        kwargs.pop("checkpoint")
+    factory = policy_factory(name)
+    context = PolicyContext.from_env(env, agent)
+    if "checkpoint" in kwargs and not getattr(factory, "takes_checkpoint", False):
+        raise PolicyError(f"policy {name!r} takes no checkpoint, got {kwargs['checkpoint']!r}")
+    return factory(context, **kwargs)
+
+
+class TeamPolicy:
+    """One policy per agent: ``{agent: observation}`` → ``{agent: action}``."""
+
+    def __init__(self, policies: Mapping[str, Policy]) -> None:
+        self.policies = dict(policies)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reset every member; member i gets ``seed + i`` (None stays None)."""
+        for i, policy in enumerate(self.policies.values()):
+            policy.reset(None if seed is None else seed + i)
+
+    def act(self, observations: Mapping[str, Any], rng: np.random.Generator) -> dict[str, Any]:
+        """Actions of the agents present in ``observations``, in the team's agent order."""
+        return {
+            agent: policy.act(observations[agent], rng)
+            for agent, policy in self.policies.items()
+            if agent in observations
+        }
+
+
+def make_team(name: str, env: Any, **kwargs: Any) -> TeamPolicy:
+    """The same policy ``name`` for every agent of ``env``."""
+    return TeamPolicy({a: make_policy(name, env, a, **kwargs) for a in env.possible_agents})

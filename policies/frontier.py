@@ -1,0 +1,371 @@
+"""Frontier exploration on the robot's own estimated map (SPEC §7).
+
+Each step the policy folds the observation's egocentric local grid (occupied = the robot's
+own polynomials, free = cells its beams swept) and its current beams into an :class:`OwnMap`
+in the robot's own start frame, placed with the pose estimate from the observation — no
+ground truth. It then
+
+1. finds frontiers: known free cells next to unknown space, after closing the gaps between the
+   five beams' swept stripes (else every beam line would be a frontier);
+2. plans the cheapest path (Dijkstra, 8-connected) on the grid with obstacles inflated by the
+   robot radius plus a margin and a soft cost near obstacles, to the nearest frontier at least
+   ``min_goal`` away (the nearest one at all if none is that far);
+3. follows it by pure pursuit within the (v, ω) limits, slowing down or turning away when a
+   front beam is short;
+4. replans when the goal is reached, stops being a frontier, the path gets blocked, the robot
+   stalls, or every ``replan_every`` steps; a goal it could not reach is blacklisted for a while.
+
+When no frontier is left it falls back to right-hand wall following. Each robot explores alone
+(no team coordination): maps received at a rendezvous show up in its local grid's occupied
+channel, but robots do not split frontiers between them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from policies.base import Policy, PolicyContext, PolicyError
+from policies.scripted import avoid_robots, beam_index, wall_follow_command
+
+__all__ = ["FrontierPolicy", "OwnMap", "grid_path"]
+
+#: 8-neighbour offsets (row, col) used for the graph edges (the other four are their reverses).
+_EDGE_OFFSETS = ((0, 1), (1, 0), (1, 1), (1, -1))
+
+
+class OwnMap:
+    """A robot's occupancy belief in its own start frame: a square grid, rows = y."""
+
+    def __init__(self, size: float, resolution: float) -> None:
+        self.res = float(resolution)
+        self.n = math.ceil(size / resolution)
+        self.origin = -0.5 * self.n * self.res  # x and y of the lower-left corner
+        self.free = np.zeros((self.n, self.n), dtype=bool)  # (n, n) swept by a beam / visited
+        self.occ = np.zeros((self.n, self.n), dtype=bool)  # (n, n) last seen occupied (map)
+        self.hit = np.zeros((self.n, self.n), dtype=bool)  # (n, n) a beam ended here
+
+    def cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(row, col) (M,) of points (M, 2), only for points inside the grid."""
+        ij = np.floor((points - self.origin) / self.res).astype(np.intp)  # (M, 2) (col, row)
+        ok = np.all((ij >= 0) & (ij < self.n), axis=1)
+        return ij[ok, 1], ij[ok, 0]
+
+    def centre(self, row: int, col: int) -> np.ndarray:  # (2,)
+        return np.array([col + 0.5, row + 0.5]) * self.res + self.origin
+
+    def integrate_local(self, pose: np.ndarray, local: np.ndarray, cell: float) -> None:
+        """Fold an egocentric (3, G, G) bool grid of ``cell`` m cells seen from ``pose``.
+
+        Each local cell is sampled on a k × k lattice finer than our cells' side / √2, so any
+        rotation of it covers all our cells it overlaps.
+        """
+        g = local.shape[1]
+        k = max(1, math.ceil(cell * math.sqrt(2) / self.res))
+        sub = (np.arange(k) + 0.5) / k - 0.5  # (k,) offsets in cells
+        q = (np.arange(g) - g // 2)[:, None] + sub[None, :]  # (G, k)
+        qs = q.reshape(-1) * cell  # (G·k,)
+        xs, ys = np.meshgrid(qs, qs)  # columns x, rows y: (G·k, G·k)
+        ego = np.stack([xs.reshape(-1), ys.reshape(-1)], axis=1)  # (G²k², 2)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        own = ego @ np.array([[c, s], [-s, c]]) + pose[:2]  # (G²k², 2)
+
+        def up(mask: np.ndarray) -> np.ndarray:  # (G, G) → (G²k²,) per lattice point
+            return np.repeat(np.repeat(mask, k, axis=0), k, axis=1).reshape(-1)
+
+        rows, cols = self.cells(own[up(local[1])])
+        self.free[rows, cols] = True
+        self.occ[rows, cols] = False
+        rows, cols = self.cells(own[up(local[0])])
+        self.occ[rows, cols] = True
+
+    def integrate_beams(
+        self, pose: np.ndarray, angles: np.ndarray, ranges: np.ndarray, max_range: float
+    ) -> None:
+        """Free along each beam up to half a cell short of its hit, and the hit cells."""
+        finite = np.isfinite(ranges)
+        r = np.where(finite, np.minimum(ranges, max_range), max_range)  # (B,)
+        length = np.where(finite, np.maximum(r - 0.5 * self.res, 0.0), r)
+        phi = pose[2] + angles  # (B,)
+        direction = np.column_stack([np.cos(phi), np.sin(phi)])  # (B, 2)
+        t = np.linspace(0.0, 1.0, math.ceil(max_range / (0.5 * self.res)) + 1)  # (S,)
+        pts = pose[:2] + (length[:, None] * t)[..., None] * direction[:, None, :]  # (B, S, 2)
+        self.free[self.cells(pts.reshape(-1, 2))] = True
+        self.hit[self.cells(pose[:2] + r[finite, None] * direction[finite])] = True
+
+    def mark_visited(self, pose: np.ndarray, radius: float) -> None:
+        """The robot's own footprint is free (it has been there)."""
+        rr = radius + 0.5 * self.res
+        offs = np.mgrid[-rr : rr + 1e-9 : self.res / 2, -rr : rr + 1e-9 : self.res / 2]
+        pts = offs.reshape(2, -1).T  # (M, 2)
+        pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= radius]
+        self.free[self.cells(pose[:2] + pts)] = True
+
+    @property
+    def obstacles(self) -> np.ndarray:  # (n, n) bool
+        return self.occ | self.hit
+
+    def bbox(self, pose: np.ndarray, margin: int) -> tuple[slice, slice]:
+        """The window of known cells plus the robot, grown by ``margin`` cells."""
+        known = self.free | self.obstacles
+        rows = np.flatnonzero(known.any(axis=1))
+        cols = np.flatnonzero(known.any(axis=0))
+        r, c = self.cells(pose[None, :2])
+        rr = np.concatenate([rows, r])
+        cc = np.concatenate([cols, c])
+        if len(rr) == 0:
+            return slice(0, self.n), slice(0, self.n)
+        r0, r1 = max(int(rr.min()) - margin, 0), min(int(rr.max()) + margin + 1, self.n)
+        c0, c1 = max(int(cc.min()) - margin, 0), min(int(cc.max()) + margin + 1, self.n)
+        return slice(r0, r1), slice(c0, c1)
+
+
+def grid_path(
+    passable: np.ndarray, cost: np.ndarray, start: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Dijkstra from ``start`` over passable cells (8-connected), edge = length × mean cost.
+
+    Returns the distance (H, W) (inf where unreachable) and the predecessor (H·W,) flat index
+    of every cell (−9999 where none).
+    """
+    h, w = passable.shape
+    idx = np.arange(h * w).reshape(h, w)
+    src, dst, wt = [], [], []
+    for dr, dc in _EDGE_OFFSETS:
+        r0, r1 = 0, h - dr
+        c0, c1 = max(0, -dc), w - max(0, dc)
+        a = (slice(r0, r1), slice(c0, c1))
+        b = (slice(r0 + dr, r1 + dr), slice(c0 + dc, c1 + dc))
+        ok = passable[a] & passable[b]
+        src.append(idx[a][ok])
+        dst.append(idx[b][ok])
+        wt.append(math.hypot(dr, dc) * 0.5 * (cost[a][ok] + cost[b][ok]))
+    graph = coo_matrix(
+        (np.concatenate(wt), (np.concatenate(src), np.concatenate(dst))), shape=(h * w, h * w)
+    ).tocsr()
+    dist, pred = dijkstra(
+        graph, directed=False, indices=start[0] * w + start[1], return_predecessors=True
+    )
+    return np.asarray(dist).reshape(h, w), np.asarray(pred)
+
+
+class FrontierPolicy(Policy):
+    """Nearest-frontier exploration with pure pursuit on the robot's own map (module doc)."""
+
+    def __init__(
+        self,
+        context: PolicyContext,
+        resolution: float = 0.1,
+        map_size: float = 32.0,
+        margin: float = 0.09,
+        lookahead: float = 0.4,
+        min_goal: float = 0.8,
+        replan_every: int = 8,
+        close_gaps: float = 0.3,
+    ) -> None:
+        super().__init__(context)
+        for name, value in (
+            ("resolution", resolution),
+            ("map_size", map_size),
+            ("lookahead", lookahead),
+            ("replan_every", replan_every),
+        ):
+            if not value > 0:
+                raise PolicyError(f"frontier: {name} must be > 0, got {value!r}")
+        if "local_map" not in context.vector_layout and context.obs_mode != "grid":
+            raise PolicyError("frontier: the observation has no local map")
+        self.resolution, self.map_size = float(resolution), float(map_size)
+        self.inflate = context.robot_radius + margin  # m
+        self.lookahead, self.min_goal = float(lookahead), float(min_goal)
+        self.replan_every = int(replan_every)
+        self.close_cells = max(1, round(close_gaps / resolution))
+        self.reset()
+
+    def reset(self, seed: int | None = None) -> None:
+        self.map = OwnMap(self.map_size, self.resolution)
+        self.path: np.ndarray | None = None  # (P, 2) own-frame waypoints
+        self.goal: tuple[int, int] | None = None  # (row, col) in the own map
+        self._since_plan = 0
+        self._blacklist: dict[tuple[int, int], int] = {}  # goal cell → step it expires
+        self._step = 0
+        self._trail: list[np.ndarray] = []  # recent positions, for stall detection
+        self._wall_error = 0.0
+
+    # -- act -------------------------------------------------------------------------------
+    def act(self, observation: Any, rng: np.random.Generator) -> Any:
+        ctx = self.context
+        pose = ctx.pose(observation)
+        ranges = ctx.ranges(observation)
+        self._update_map(pose, ranges, ctx.local_grid(observation))
+        self._step += 1
+        self._trail = [*self._trail[-7:], pose[:2].copy()]
+        if self._needs_plan(pose):
+            self._plan(pose)
+        if self.path is None:
+            v, omega, self._wall_error = wall_follow_command(
+                ranges, ctx, prev_error=self._wall_error
+            )
+        else:
+            v, omega = self._pursue(pose, ranges)
+            v = self._safe_speed(pose, v, omega)
+        v, omega = avoid_robots(v, omega, ctx.detections(observation), ctx)
+        return ctx.action(v, omega)
+
+    def _update_map(self, pose: np.ndarray, ranges: np.ndarray, local: np.ndarray) -> None:
+        ctx = self.context
+        self.map.integrate_local(pose, local, ctx.grid_resolution)
+        self.map.integrate_beams(pose, ctx.beam_angles, ranges, ctx.max_range)
+        self.map.mark_visited(pose, ctx.robot_radius)
+
+    # -- planning --------------------------------------------------------------------------
+    def _frontier_and_cost(
+        self, window: tuple[slice, slice]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Frontier cells, passable cells and cell costs (H, W) inside ``window``."""
+        m = self.map
+        obst = m.obstacles[window]
+        free = m.free[window] & ~obst
+        clearance = ndimage.distance_transform_edt(~obst) * m.res  # (H, W) m
+        passable = free & (clearance > self.inflate)
+        ball = ndimage.generate_binary_structure(2, 1)
+        known = ndimage.binary_closing(
+            free | obst, structure=ball, iterations=self.close_cells, border_value=1
+        )
+        unknown = ndimage.binary_opening(~known, structure=ball)
+        frontier = passable & ndimage.binary_dilation(unknown, structure=np.ones((3, 3)))
+        soft = 3.0 * self.inflate
+        cost = 1.0 + 4.0 * np.clip((soft - clearance) / soft, 0.0, 1.0)
+        return frontier, passable, cost
+
+    def _needs_plan(self, pose: np.ndarray) -> bool:
+        self._since_plan += 1
+        if self.path is None or self.goal is None or self._since_plan >= self.replan_every:
+            return True
+        if np.hypot(*(self.path[-1] - pose[:2])) < 0.25:
+            return True
+        if len(self._trail) >= 8 and np.hypot(*(self._trail[-1] - self._trail[0])) < 0.1:
+            self._blacklist[self.goal] = self._step + 60  # stalled: give this goal a rest
+            return True
+        window = self.map.bbox(pose, 4)
+        frontier, _, _ = self._frontier_and_cost(window)
+        r, c = self.goal[0] - window[0].start, self.goal[1] - window[1].start
+        if not (0 <= r < frontier.shape[0] and 0 <= c < frontier.shape[1]) or not frontier[r, c]:
+            return True
+        rows, cols = self.map.cells(self.path)
+        return bool(np.any(self.map.obstacles[rows, cols]))
+
+    def _plan(self, pose: np.ndarray) -> None:
+        """Path to the nearest frontier (at least ``min_goal`` away when possible), or None."""
+        self._since_plan = 0
+        self.path, self.goal = None, None
+        m = self.map
+        window = m.bbox(pose, 4)
+        frontier, passable, cost = self._frontier_and_cost(window)
+        rows, cols = m.cells(pose[None, :2])
+        if len(rows) == 0:
+            return
+        start = (int(rows[0]) - window[0].start, int(cols[0]) - window[1].start)
+        self._free_start(passable, m.obstacles[window], start)
+        dist, pred = grid_path(passable, cost, start)
+        frontier &= np.isfinite(dist)
+        self._drop_blacklisted(frontier, window)
+        if not frontier.any():
+            return
+        d = np.where(frontier, dist, np.inf) * m.res  # (H, W) m
+        far = d >= self.min_goal
+        pick = np.where(far, d, np.inf) if far[frontier].any() else d
+        goal = np.unravel_index(int(np.argmin(pick)), d.shape)
+        cells = self._walk_back(pred, goal[0] * d.shape[1] + goal[1], start, d.shape[1])
+        self.path = np.array([m.centre(r + window[0].start, c + window[1].start) for r, c in cells])
+        self.goal = (int(goal[0]) + window[0].start, int(goal[1]) + window[1].start)
+
+    @staticmethod
+    def _free_start(passable: np.ndarray, obst: np.ndarray, start: tuple[int, int]) -> None:
+        """Let the robot leave its cell even when it is inside the inflated zone."""
+        r, c = start
+        near = (slice(max(r - 1, 0), r + 2), slice(max(c - 1, 0), c + 2))
+        passable[near] |= ~obst[near]
+        passable[r, c] = True
+
+    def _drop_blacklisted(self, frontier: np.ndarray, window: tuple[slice, slice]) -> None:
+        near = max(1, round(0.3 / self.map.res))
+        for (r, c), until in list(self._blacklist.items()):
+            if until <= self._step:
+                del self._blacklist[(r, c)]
+                continue
+            r0, c0 = r - window[0].start, c - window[1].start
+            frontier[max(r0 - near, 0) : r0 + near + 1, max(c0 - near, 0) : c0 + near + 1] = False
+
+    @staticmethod
+    def _walk_back(
+        pred: np.ndarray, goal: int, start: tuple[int, int], width: int
+    ) -> list[tuple[int, int]]:
+        out, node, first = [], goal, start[0] * width + start[1]
+        while node >= 0 and node != first:
+            out.append(divmod(int(node), width))
+            node = int(pred[node])
+        out.reverse()
+        return out or [start]
+
+    # -- following -------------------------------------------------------------------------
+    def _pursue(self, pose: np.ndarray, ranges: np.ndarray) -> tuple[float, float]:
+        """Pure pursuit to the look-ahead point, then limited by the front beams."""
+        ctx = self.context
+        assert self.path is not None
+        d = np.hypot(*(self.path - pose[:2]).T)  # (P,)
+        nearest = int(np.argmin(d))
+        ahead = np.flatnonzero(d[nearest:] >= self.lookahead)
+        target = self.path[nearest + ahead[0]] if len(ahead) else self.path[-1]
+        dx, dy = target - pose[:2]
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        fx, fy = c * dx + s * dy, -s * dx + c * dy  # target in the robot frame
+        dist, alpha = math.hypot(fx, fy), math.atan2(fy, fx)
+        if abs(alpha) > 0.7:  # turn on the spot first
+            return 0.0, float(np.clip(alpha / ctx.dt, -ctx.omega_max, ctx.omega_max))
+        v = min(ctx.v_max, 0.8 * dist / ctx.dt)
+        v = min(v, self._speed_cap(ranges))
+        omega = 2.0 * math.sin(alpha) / max(dist, 1e-6) * v + 0.3 * alpha / ctx.dt
+        if v < 0.02:  # blocked ahead: turn toward the roomier side
+            left = ranges[beam_index(ctx.beam_angles, math.pi / 4)]
+            right = ranges[beam_index(ctx.beam_angles, -math.pi / 4)]
+            omega = 0.8 * ctx.omega_max * (1.0 if left >= right else -1.0)
+            self.path = None  # replan next step with the new hits in the map
+        return v, float(np.clip(omega, -ctx.omega_max, ctx.omega_max))
+
+    def _safe_speed(self, pose: np.ndarray, v: float, omega: float) -> float:
+        """``v``, halved until the arc driven in one step keeps the robot off mapped obstacles."""
+        ctx = self.context
+        keep = ctx.robot_radius + 0.04
+        r = np.arange(-keep, keep + 1e-9, 0.5 * self.map.res)
+        disk = np.stack(np.meshgrid(r, r), axis=-1).reshape(-1, 2)  # (D, 2)
+        disk = disk[np.hypot(disk[:, 0], disk[:, 1]) <= keep]
+        t = np.linspace(0.25, 1.0, 4) * ctx.dt  # (T,) s
+        for _ in range(4):
+            th = pose[2] + omega * t  # (T,)
+            if abs(omega) > 1e-6:
+                x = pose[0] + v / omega * (np.sin(th) - math.sin(pose[2]))
+                y = pose[1] - v / omega * (np.cos(th) - math.cos(pose[2]))
+            else:
+                x, y = pose[0] + v * t * math.cos(pose[2]), pose[1] + v * t * math.sin(pose[2])
+            pts = (np.stack([x, y], axis=1)[:, None, :] + disk[None]).reshape(-1, 2)
+            if not self.map.obstacles[self.map.cells(pts)].any():
+                return v
+            v *= 0.5
+        return 0.0
+
+    def _speed_cap(self, ranges: np.ndarray) -> float:
+        """Fastest safe forward speed given the beams within 60° of straight ahead."""
+        ctx = self.context
+        cap = ctx.v_max
+        for angle, r in zip(ctx.beam_angles, ranges, strict=True):
+            if abs(angle) < math.radians(60) and math.isfinite(r):
+                ahead = r * math.cos(angle) - ctx.robot_radius - 0.1
+                side = abs(r * math.sin(angle))
+                if side < ctx.robot_radius + 0.2:
+                    cap = min(cap, max(ahead, 0.0) / ctx.dt)
+        return cap

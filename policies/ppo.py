@@ -1,0 +1,107 @@
+"""``ppo``: a policy trained with Stable-Baselines3 PPO and parameter sharing.
+
+The same network acts for every robot, each on its own observation. Checkpoints are SB3
+``.zip`` files written by ``polyslam train``; their action space is the unit box of
+:class:`polyslam_env.vec_env.FixedAgents`, mapped here to the env's physical (v, ω). torch
+and SB3 are imported when a checkpoint is loaded, not before.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from policies.base import CheckpointError, Policy, PolicyContext
+
+__all__ = ["CheckpointError", "PPOPolicy", "load_checkpoint"]
+
+#: Loaded models by (resolved path, modification time): robots of a team share one network.
+_CACHE: dict[tuple[str, int], Any] = {}
+
+
+def load_checkpoint(path: str | Path) -> Any:
+    """The SB3 PPO model in ``path`` (cached); :class:`CheckpointError` if missing or corrupt."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"checkpoint {str(path)!r}: no such file")
+    key = (str(path.resolve()), path.stat().st_mtime_ns)
+    if key not in _CACHE:
+        if not zipfile.is_zipfile(path):
+            raise CheckpointError(f"checkpoint {str(path)!r}: not an SB3 .zip file")
+        from stable_baselines3 import PPO
+
+        try:
+            _CACHE[key] = PPO.load(path, device="cpu")
+        except Exception as err:  # SB3 raises many kinds on a damaged archive
+            raise CheckpointError(
+                f"checkpoint {str(path)!r}: cannot load ({type(err).__name__}: {err})"
+            ) from None
+    return _CACHE[key]
+
+
+class PPOPolicy(Policy):
+    """Drives one robot with a saved PPO network (deterministic mean action by default).
+
+    Registered as ``ppo``: ``make_policy("ppo", env, agent, checkpoint=path)``. ``act``
+    returns the action in the env's action space; ``rng`` is used only when
+    ``deterministic`` is False (a draw from the policy's Gaussian).
+    """
+
+    takes_checkpoint = True
+
+    def __init__(
+        self, context: PolicyContext, checkpoint: str | Path, deterministic: bool = True
+    ) -> None:
+        super().__init__(context)
+        self.deterministic = deterministic
+        self.model = load_checkpoint(checkpoint)
+        obs_space, act_space = context.observation_space, context.action_space
+        self._check_spaces(str(checkpoint), obs_space, act_space)
+        assert isinstance(act_space, spaces.Box)
+        m_space = self.model.action_space
+        self._m_low, self._m_high = m_space.low.astype(float), m_space.high.astype(float)  # (2,)
+        self._low, self._high = act_space.low.astype(float), act_space.high.astype(float)  # (2,)
+
+    def _check_spaces(
+        self, checkpoint: str, obs_space: spaces.Space[Any], act_space: spaces.Space[Any]
+    ) -> None:
+        model_obs, model_act = self.model.observation_space, self.model.action_space
+        if not isinstance(obs_space, spaces.Box) or obs_space.shape != model_obs.shape:
+            raise CheckpointError(
+                f"checkpoint {checkpoint!r}: observation space mismatch: the network expects"
+                f" shape {model_obs.shape}, the env gives {getattr(obs_space, 'shape', obs_space)}"
+                " (same observation settings, num_robots and max_detections as in training?)"
+            )
+        if not isinstance(act_space, spaces.Box) or act_space.shape != model_act.shape:
+            raise CheckpointError(
+                f"checkpoint {checkpoint!r}: action space mismatch: the network gives shape"
+                f" {model_act.shape}, the env expects {getattr(act_space, 'shape', act_space)}"
+                " (continuous actions needed)"
+            )
+
+    def act(self, observation: Any, rng: np.random.Generator) -> np.ndarray:  # (2,)
+        """The robot's (v, ω) for its observation (D,)."""
+        obs = np.asarray(observation, dtype=np.float32)[None]  # (1, D)
+        if self.deterministic:
+            a, _ = self.model.predict(obs, deterministic=True)
+            a = np.asarray(a, dtype=float).reshape(-1)  # (2,)
+        else:
+            a = self._sample(obs, rng)
+        a = np.clip(a, self._m_low, self._m_high)
+        frac = (a - self._m_low) / (self._m_high - self._m_low)
+        return (self._low + frac * (self._high - self._low)).astype(np.float32)
+
+    def _sample(self, obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:  # (2,)
+        """A draw from the policy's Gaussian with ``rng`` (not torch's global generator)."""
+        import torch
+
+        policy = self.model.policy
+        with torch.no_grad():
+            dist = policy.get_distribution(policy.obs_to_tensor(obs)[0]).distribution
+            mean = dist.mean.numpy().reshape(-1)
+            std = dist.stddev.numpy().reshape(-1)
+        return np.asarray(mean + std * rng.standard_normal(mean.shape), dtype=float)
