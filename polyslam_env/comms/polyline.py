@@ -73,7 +73,10 @@ def _max_perpendicular(poly: Polynomial, a: float, b: float) -> float:
     s = (yb - ya) / (b - a)
     deriv = npoly.polyder(poly.coeffs).copy()
     deriv[0] -= s  # e'(ξ) = p'(ξ) − s
-    roots = npoly.polyroots(deriv) if np.any(deriv[1:] != 0) else np.array([])
+    # Leading coefficients negligible next to the largest (even subnormal ones) would blow
+    # the companion matrix up to inf: drop them; they cannot move a root inside [a, b].
+    deriv = npoly.polytrim(deriv, 1e-12 * float(np.max(np.abs(deriv), initial=0.0)))
+    roots = npoly.polyroots(deriv) if len(deriv) > 1 and np.any(deriv[1:] != 0) else np.array([])
     crit = roots.real[(np.abs(roots.imag) < 1e-12) & (roots.real > a) & (roots.real < b)]
     if crit.size == 0:
         return 0.0

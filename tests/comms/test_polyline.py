@@ -114,3 +114,12 @@ def test_polyline_points__single_point_and_errors() -> None:
     np.testing.assert_array_equal(polyline_points(np.array([[1.0, 2.0]] * 3), 0.1), [[1.0, 2.0]])
     with pytest.raises(ValueError, match="spacing"):
         polyline_points(np.zeros((2, 2)), -1.0)
+
+
+def test_piecewise_linear__negligible_leading_coefficient_is_not_a_crash() -> None:
+    """Hypothesis found b3 = 2.2e-313 (subnormal): the companion matrix overflowed to inf."""
+    poly = Polynomial(1, np.array([0.0, 0.0, 1.0, 2.22507386e-313]), 0.0, 1.0)
+    vertices = piecewise_linear(poly, chord_tol=0.002)
+    dense = poly.points_at(np.linspace(0.0, 1.0, 2001))
+    assert np.all(np.isfinite(vertices)) and len(vertices) > 2
+    np.testing.assert_allclose(vertices[[0, -1]], dense[[0, -1]])
