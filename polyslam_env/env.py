@@ -426,17 +426,17 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         """Sweep every active robot's beams (true poses) into the team coverage grid; return
         the area of free cells first swept by the team now, per robot."""
         grid = self.coverage
-        before = grid.swept.copy()  # (H, W)
+        fresh = grid.free & ~grid.swept  # (H, W): free cells nobody swept before this step
         gains = np.zeros(self.config.num_robots)
         poses = self.world.poses
         max_range = self.config.world.range_sensor.max_range
         origins = np.empty((len(self._angles), 2))
         for i in np.flatnonzero(self.world.active):
-            mine = grid.robot_swept.get(int(i))
-            mine_before = before & False if mine is None else mine.copy()
             origins[:] = poses[i, :2]
             grid.sweep(origins, poses[i, 2] + self._angles, scans[i], max_range, robot=int(i))
-            new = grid.robot_swept[int(i)] & ~mine_before & ~before & grid.free
+            # A robot's own mask only ever grows together with ``swept``, so its cells that
+            # were not swept before this step are exactly the ones it first swept now.
+            new = grid.robot_swept[int(i)] & fresh
             gains[i] = np.count_nonzero(new) * grid.resolution**2
         return gains
 

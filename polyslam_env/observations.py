@@ -51,7 +51,8 @@ class BeliefGrid:
     def _flat_cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Flat cell index (M,) of points (M, 2) (0 where outside) and whether each is inside."""
         ij = np.floor((points - self.origin) / self.resolution).astype(np.intp)  # (M, 2)
-        inside = np.all(ij.view(np.uintp) < self.n, axis=1)  # negatives wrap to huge values
+        u = ij.view(np.uintp)  # negatives wrap to huge values
+        inside = (u[:, 0] < self.n) & (u[:, 1] < self.n)
         return np.where(inside, ij[:, 1] * self.n + ij[:, 0], 0), inside
 
     def sweep(self, pose: np.ndarray, angles: np.ndarray, ranges: np.ndarray) -> None:
@@ -62,12 +63,13 @@ class BeliefGrid:
         length = np.where(finite, np.maximum(r - 0.5 * self.resolution, 0.0), r)
         phi = pose[2] + angles  # (B,)
         direction = np.column_stack([np.cos(phi), np.sin(phi)])  # (B, 2)
-        t = length[:, None] * self._t  # (B, S)
-        pts = pose[:2] + t[..., None] * direction[:, None, :]  # (B, S, 2)
-        flat, inside = self._flat_cells(pts.reshape(-1, 2))
-        self.free.reshape(-1)[flat[inside]] = True
-        flat, inside = self._flat_cells(pose[:2] + r[finite, None] * direction[finite])
-        self.hit.reshape(-1)[flat[inside]] = True
+        # The beam samples (B·S) and the hit points (H) go through one cell lookup.
+        t = np.concatenate([(length[:, None] * self._t).reshape(-1), r[finite]])  # (B·S + H,)
+        steps = np.concatenate([np.repeat(direction, self._t.size, axis=0), direction[finite]])
+        flat, inside = self._flat_cells(pose[:2] + t[:, None] * steps)
+        n_free = length.size * self._t.size
+        self.free.reshape(-1)[flat[:n_free][inside[:n_free]]] = True
+        self.hit.reshape(-1)[flat[n_free:][inside[n_free:]]] = True
 
     def lookup(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(free, hit) (M,) at points (M, 2); False outside the grid."""
@@ -210,7 +212,8 @@ class ObservationEncoder:
         if len(view.map_points):
             ego = (view.map_points - view.pose[:2]) @ rot  # (M, 2)
             idx = np.floor(ego / self.res + (g // 2 + 0.5)).astype(np.intp)  # (M, 2)
-            ok = (idx.view(np.uintp) < g).all(axis=1)
+            u = idx.view(np.uintp)  # negatives wrap to huge values
+            ok = (u[:, 0] < g) & (u[:, 1] < g)
             occ[idx[ok, 1] * g + idx[ok, 0]] = True
         free, hit = view.belief.lookup(self.cell_centres @ rot.T + view.pose[:2])
         if self.use_hits:

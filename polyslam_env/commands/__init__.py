@@ -14,4 +14,5 @@ COMMANDS = (
     "evaluate",
     "reproduce",
     "train",
+    "benchmark",
 )
