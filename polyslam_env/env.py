@@ -590,7 +590,7 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
             coverage_resolution=grid.resolution,
             active=self.world.active.copy(),
             step=self.step_count,
-            info_text=f"step {self.step_count}  coverage {100 * grid.coverage:.1f} %",
+            info_text=f"coverage {100 * grid.coverage:.1f} %",
         )
 
     def close(self) -> None:
