@@ -15,6 +15,17 @@ from typing import Any
 from polyslam_env.commands import COMMANDS
 from polyslam_env.errors import PolyslamError
 
+#: Optional dependencies and how to get them (the extras in pyproject.toml).
+EXTRAS = {
+    "torch": "pip install torch==2.13.0 && pip install 'polyslam[rl]'",
+    "stable_baselines3": "pip install torch==2.13.0 && pip install 'polyslam[rl]'",
+    "supersuit": "pip install torch==2.13.0 && pip install 'polyslam[rl]'",
+    "tensorboard": "pip install torch==2.13.0 && pip install 'polyslam[rl]'",
+    "imageio": "pip install 'polyslam[video]' (or save a .gif, which needs nothing more)",
+    "mpe2": "pip install 'polyslam[bench]'",
+    "ray": "pip install 'polyslam[ray]'",
+}
+
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
@@ -38,6 +49,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args))
     except (PolyslamError, FileNotFoundError) as err:
         print(f"polyslam: error: {err}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as err:
+        root = (err.name or "").split(".")[0]
+        if root not in EXTRAS:
+            raise
+        print(f"polyslam: error: {args.command} needs {root}: {EXTRAS[root]}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("polyslam: interrupted", file=sys.stderr)

@@ -62,3 +62,26 @@ def test_maps__lists_builtin_maps(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["maps"]) == 0
     out = capsys.readouterr().out
     assert "paper" in out and "two_rooms" in out
+
+
+def test_main__missing_optional_dependency_names_the_extra(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "torch", None)  # as if the rl extra were not installed
+    code = main(
+        [
+            "train",
+            "--config",
+            str(Path(__file__).resolve().parent.parent / "configs" / "train_ppo.yaml"),
+            "--timesteps",
+            "64",
+            "--out",
+            str(tmp_path),
+            "--quiet",
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "needs torch" in err and "polyslam[rl]" in err and "Traceback" not in err
