@@ -31,7 +31,7 @@ import numpy as np
 import yaml
 
 from polyslam_env.errors import ConfigError
-from polyslam_env.resources import configs_dir
+from polyslam_env.resources import builtin_names, configs_dir, resolve_file
 from polyslam_env.seeding import make_rngs
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
@@ -82,25 +82,12 @@ class Paths:
 
 def builtin_paths() -> list[str]:
     """Names of the paths shipped in ``configs/paths``."""
-    folder = paths_dir()
-    return sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else []
+    return builtin_names(paths_dir())
 
 
 def resolve_paths_file(name_or_path: str | Path) -> Path:
     """A built-in paths name (``"paper"``) or a path to a paths file."""
-    text = str(name_or_path)
-    path = Path(text)
-    if path.suffix.lower() in (".yaml", ".yml", ".json") or path.exists() or "/" in text:
-        if not path.is_file():
-            raise ConfigError(f"{path}: paths file not found")
-        return path
-    builtin = paths_dir() / f"{text}.yaml"
-    if builtin.is_file():
-        return builtin
-    raise ConfigError(
-        f"unknown paths {text!r}: not a file and not built-in"
-        f" (built-in: {', '.join(builtin_paths()) or 'none'})"
-    )
+    return resolve_file(name_or_path, paths_dir(), "paths", ConfigError)
 
 
 def load_paths(name_or_path: str | Path) -> Paths:

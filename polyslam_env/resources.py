@@ -23,3 +23,27 @@ def configs_dir() -> Path:
 
 def maps_dir() -> Path:
     return configs_dir() / "maps"
+
+
+def builtin_names(folder: Path) -> list[str]:
+    """Stems of the YAML files shipped in ``folder`` (empty if it does not exist)."""
+    return sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else []
+
+
+def resolve_file(name_or_path: str | Path, folder: Path, kind: str, error: type[Exception]) -> Path:
+    """A built-in name (a YAML file in ``folder``) or a path to a file; else ``error``.
+
+    Anything that looks like a path (a YAML/JSON suffix, a slash, an existing file) must be a
+    file; otherwise the name must be built in. ``kind`` names the thing in messages.
+    """
+    text = str(name_or_path)
+    path = Path(text)
+    if path.suffix.lower() in (".yaml", ".yml", ".json") or path.exists() or "/" in text:
+        if not path.is_file():
+            raise error(f"{path}: {kind} file not found")
+        return path
+    builtin = folder / f"{text}.yaml"
+    if builtin.is_file():
+        return builtin
+    names = ", ".join(builtin_names(folder)) or "none"
+    raise error(f"unknown {kind} {text!r}: not a file and not built-in (built-in: {names})")

@@ -26,7 +26,7 @@ import numpy as np
 import yaml
 
 from polyslam_env.errors import MapFileError
-from polyslam_env.resources import maps_dir
+from polyslam_env.resources import builtin_names, maps_dir, resolve_file
 from polyslam_env.world.layout import Layout
 
 REQUIRED_KEYS = ("walls", "start_poses")
@@ -37,24 +37,12 @@ DEFAULT_START_CLEARANCE = 0.065
 
 def builtin_maps() -> list[str]:
     """Names of the maps shipped in ``configs/maps``."""
-    return sorted(p.stem for p in maps_dir().glob("*.yaml"))
+    return builtin_names(maps_dir())
 
 
 def resolve_map_path(name_or_path: str | Path) -> Path:
     """A built-in map name (``"paper"``) or a path to a map file."""
-    text = str(name_or_path)
-    path = Path(text)
-    if path.suffix.lower() in (".yaml", ".yml", ".json") or path.exists() or "/" in text:
-        if not path.is_file():
-            raise MapFileError(f"{path}: map file not found")
-        return path
-    builtin = maps_dir() / f"{text}.yaml"
-    if builtin.is_file():
-        return builtin
-    raise MapFileError(
-        f"unknown map {text!r}: not a file and not a built-in map"
-        f" (built-in: {', '.join(builtin_maps())})"
-    )
+    return resolve_file(name_or_path, maps_dir(), "map", MapFileError)
 
 
 def load_map(name_or_path: str | Path, *, robot_radius: float = DEFAULT_START_CLEARANCE) -> Layout:
