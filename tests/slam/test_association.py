@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 import pytest
+from finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -23,21 +22,6 @@ from polyslam_env.slam.fitting import (
     stored_points,
 )
 from polyslam_env.slam.polynomial import Polynomial
-
-# Central differences with step 1e-6: truncation ~1e-12, round-off ~1e-10 relative;
-# 1e-5 catches any wrong term, which would be O(1) relative.
-FD_STEP = 1e-6
-FD_RTOL = 1e-5
-FD_ATOL = 1e-6
-
-
-def fd_jacobian(func: Callable[[np.ndarray], float], x0: np.ndarray) -> np.ndarray:
-    grad = np.zeros(len(x0))
-    for j in range(len(x0)):
-        step = np.zeros(len(x0))
-        step[j] = FD_STEP
-        grad[j] = (func(x0 + step) - func(x0 - step)) / (2 * FD_STEP)
-    return grad
 
 
 def point(xy: tuple[float, float] | np.ndarray, beam: int = 0, sigma: float = 0.02) -> StoredPoint:

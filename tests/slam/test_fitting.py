@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 import pytest
+from finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -24,22 +23,6 @@ from polyslam_env.slam.polynomial import Polynomial
 
 POSE_COV = np.diag([0.01**2, 0.01**2, 0.005**2])
 SIGMA_R = 0.02
-# Central differences with step 1e-6 on O(1) quantities: truncation ~1e-12, round-off
-# ~1e-16/1e-6 · |c0| / conditioning ~1e-8; 1e-5 relative leaves margin but catches any
-# wrong term (those are O(1) relative).
-FD_STEP = 1e-6
-FD_RTOL = 1e-5
-FD_ATOL = 1e-6
-
-
-def fd_jacobian(func: Callable[[np.ndarray], float], x0: np.ndarray) -> np.ndarray:
-    """Central finite-difference gradient of a scalar function."""
-    grad = np.zeros(len(x0))
-    for j in range(len(x0)):
-        step = np.zeros(len(x0))
-        step[j] = FD_STEP
-        grad[j] = (func(x0 + step) - func(x0 - step)) / (2 * FD_STEP)
-    return grad
 
 
 def wall_ranges(pose: np.ndarray, angles: np.ndarray, wall: Polynomial) -> np.ndarray:
