@@ -18,6 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.stats import chi2
 
+from polyslam_env.geometry import wrap_angle
 from polyslam_env.slam.polynomial import Polynomial, transform_points
 from polyslam_env.world.layout import Layout
 
@@ -51,9 +52,6 @@ _K_REFINE = 4
 
 
 # -- frames ---------------------------------------------------------------------------------
-def wrap_angle(a: np.ndarray | float) -> np.ndarray:
-    """Wrap angles to (−π, π]."""
-    return np.asarray(np.pi - np.mod(np.pi - np.asarray(a, dtype=float), 2.0 * np.pi))
 
 
 def _rotation(theta: float) -> np.ndarray:  # (2, 2)

@@ -17,10 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
-    """Angle(s) wrapped to [−π, π)."""
-    return np.asarray((np.asarray(angle, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi)
+from polyslam_env.geometry import wrap_angle
 
 
 def _pose(pose: np.ndarray) -> np.ndarray:

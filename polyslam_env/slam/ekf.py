@@ -14,10 +14,7 @@ from functools import lru_cache
 import numpy as np
 import scipy.special
 
-
-def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
-    """Angles wrapped to [−π, π)."""
-    return np.asarray((np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi)
+from polyslam_env.geometry import wrap_angle
 
 
 def _symmetrise(a: np.ndarray) -> np.ndarray:

@@ -46,9 +46,10 @@ import numpy as np
 import pymunk
 
 from polyslam_env.errors import MapFileError
+from polyslam_env.geometry import wrap_angle
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout, point_segment_distance
-from polyslam_env.world.sensors import Camera, Detection, RangeSensor, wrap_angle
+from polyslam_env.world.sensors import Camera, Detection, RangeSensor
 
 #: Solver iterations per physics step, fixed so results do not depend on pymunk defaults; 40
 #: (not pymunk's 10) keeps a robot pushed into a wall corner within 0.1 mm of it.

@@ -20,15 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from polyslam_env.geometry import wrap_angle
 from polyslam_env.world.config import CameraConfig, RangeSensorConfig
 
 #: Rays and segments more parallel than this (|sin| of the angle between them) never hit.
 _PARALLEL_EPS = 1e-12
-
-
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    """Wrap angles (any shape) to (−π, π]."""
-    return np.asarray(np.pi - np.mod(np.pi - np.asarray(a), 2 * np.pi))
 
 
 def _ray_segment_hits(
