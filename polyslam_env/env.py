@@ -426,18 +426,19 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         """Sweep every active robot's beams (true poses) into the team coverage grid; return
         the area of free cells first swept by the team now, per robot."""
         grid = self.coverage
-        fresh = grid.free & ~grid.swept  # (H, W): free cells nobody swept before this step
-        gains = np.zeros(self.config.num_robots)
         poses = self.world.poses
         max_range = self.config.world.range_sensor.max_range
-        origins = np.empty((len(self._angles), 2))
-        for i in np.flatnonzero(self.world.active):
-            origins[:] = poses[i, :2]
-            grid.sweep(origins, poses[i, 2] + self._angles, scans[i], max_range, robot=int(i))
-            # A robot's own mask only ever grows together with ``swept``, so its cells that
-            # were not swept before this step are exactly the ones it first swept now.
-            new = grid.robot_swept[int(i)] & fresh
-            gains[i] = np.count_nonzero(new) * grid.resolution**2
+        cells = {
+            i: grid.beam_cells(poses[i, :2], poses[i, 2] + self._angles, scans[i], max_range)
+            for i in map(int, np.flatnonzero(self.world.active))
+        }
+        # Gains against the grid as it was before this step (counted before anything is marked),
+        # so a cell first swept by two robots at once counts for both.
+        gains = np.zeros(self.config.num_robots)
+        for i, c in cells.items():
+            gains[i] = grid.new_free_cells(c) * grid.resolution**2
+        for i, c in cells.items():
+            grid.mark(c, robot=i)
         return gains
 
     def _reward_terms(

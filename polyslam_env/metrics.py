@@ -11,6 +11,7 @@ numpy/scipy only: no pymunk, no PettingZoo. The SLAM wall time τ is measured by
 
 from __future__ import annotations
 
+import math
 import weakref
 from collections.abc import Sequence
 
@@ -381,6 +382,9 @@ class CoverageGrid:
         self.robot_swept: dict[int, np.ndarray] = {}  # robot -> (H, W)
         self.gain = 0  # new free cells of the team in the last sweep
         self._n_swept_free = 0
+        self._free_flat = self.free.reshape(-1)  # (H·W,) views for flat cell ids
+        self._swept_flat = self.swept.reshape(-1)
+        self._linspaces: dict[int, np.ndarray] = {}
 
     def cells_of(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rows, columns (N,) of points (N, 2) and whether each lies inside the grid."""
@@ -391,21 +395,60 @@ class CoverageGrid:
         inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
         return row, col, inside
 
-    def _beam_samples(
+    def _fractions(self, n: int) -> np.ndarray:  # (n,)
+        """``linspace(0, 1, n)``, cached: only a few ``n`` occur and linspace is slow."""
+        out = self._linspaces.get(n)
+        if out is None:
+            out = self._linspaces[n] = _frozen(np.linspace(0.0, 1.0, n))
+        return out
+
+    def beam_cells(
         self, origins: np.ndarray, angles: np.ndarray, ranges: np.ndarray, max_range: float
-    ) -> np.ndarray:  # (R·n, 2)
+    ) -> np.ndarray:  # (M,) flat cell ids, repeats kept
+        """Flat ids (row · W + col) of the grid cells under the samples of each beam.
+
+        Arguments as in :meth:`sweep`; ``origins`` may also be one (2,) origin for all beams.
+        Beams are sampled every ≤ res/2, both ends included. Nothing is marked:
+        :meth:`new_free_cells` and :meth:`mark` take the result.
+        """
+        if not max_range > 0:
+            raise ValueError(f"max_range must be > 0, got {max_range}")
         o = np.asarray(origins, dtype=float).reshape(-1, 2)
         a = np.asarray(angles, dtype=float).reshape(-1)
         r = np.asarray(ranges, dtype=float).reshape(-1)
-        if not (len(o) == len(a) == len(r)):
+        if not (len(o) in (1, len(a)) and len(a) == len(r)):
             raise ValueError(f"origins {o.shape}, angles {a.shape}, ranges {r.shape} disagree")
-        if np.any(r < 0):
+        if (r < 0).any():
             raise ValueError("ranges must be >= 0 (use inf or nan for no return)")
-        length = np.where(np.isfinite(r), np.minimum(r, max_range), max_range)  # (R,)
-        n = int(np.ceil(max(float(length.max(initial=0.0)), 0.0) / (0.5 * self.resolution))) + 1
-        t = length[:, None] * np.linspace(0.0, 1.0, n)  # (R, n), spacing ≤ res/2
-        pts = np.stack([o[:, 0:1] + t * np.cos(a)[:, None], o[:, 1:2] + t * np.sin(a)[:, None]])
-        return np.asarray(pts.reshape(2, -1).T)
+        length = np.fmin(r, max_range)  # (R,): fmin maps nan (and inf) to max_range
+        n = math.ceil(max(float(length.max(initial=0.0)), 0.0) / (0.5 * self.resolution)) + 1
+        t = length[:, None] * self._fractions(n)  # (R, n), spacing ≤ res/2
+        res, (ox, oy) = self.resolution, self.origin
+        col = np.floor((o[:, 0:1] + t * np.cos(a)[:, None] - ox) / res).astype(np.intp)
+        row = np.floor((o[:, 1:2] + t * np.sin(a)[:, None] - oy) / res).astype(np.intp)
+        h, w = self.free.shape
+        # Negative indices wrap to huge unsigned values, so one comparison per axis suffices.
+        inside = (row.view(np.uintp) < h) & (col.view(np.uintp) < w)  # (R, n)
+        return np.asarray((row * w + col)[inside])
+
+    def new_free_cells(self, cells: np.ndarray) -> int:
+        """How many distinct free cells among ``cells`` (flat ids, repeats allowed) nobody has
+        swept yet."""
+        fresh = cells[self._free_flat[cells] & ~self._swept_flat[cells]]  # few, usually none
+        return _count_distinct(fresh)
+
+    def mark(self, cells: np.ndarray, robot: int | None = None) -> int:
+        """Mark ``cells`` (flat ids from :meth:`beam_cells`) swept, and ``robot``'s own mask.
+
+        Returns (and stores as ``gain``) the number of newly swept free cells of the team.
+        """
+        self.gain = self.new_free_cells(cells)
+        self._n_swept_free += self.gain
+        self._swept_flat[cells] = True
+        if robot is not None:
+            mine = self.robot_swept.setdefault(int(robot), np.zeros_like(self.swept))
+            mine.reshape(-1)[cells] = True
+        return self.gain
 
     def sweep(
         self,
@@ -421,18 +464,7 @@ class CoverageGrid:
         return; ranges beyond ``max_range`` are cut there. ``robot`` also marks that robot's own
         mask. Returns (and stores as ``gain``) the number of newly swept free cells of the team.
         """
-        if not max_range > 0:
-            raise ValueError(f"max_range must be > 0, got {max_range}")
-        row, col, inside = self.cells_of(self._beam_samples(origins, angles, ranges, max_range))
-        flat = np.unique(row[inside] * self.free.shape[1] + col[inside])  # (C,) cell ids
-        swept, free = self.swept.reshape(-1), self.free.reshape(-1)
-        self.gain = int(np.count_nonzero(free[flat] & ~swept[flat]))
-        self._n_swept_free += self.gain
-        swept[flat] = True
-        if robot is not None:
-            mine = self.robot_swept.setdefault(int(robot), np.zeros_like(self.swept))
-            mine.reshape(-1)[flat] = True
-        return self.gain
+        return self.mark(self.beam_cells(origins, angles, ranges, max_range), robot)
 
     @property
     def coverage(self) -> float:
@@ -458,6 +490,14 @@ class CoverageGrid:
             return 0.0
         counts = np.sum([m & self.free for m in self.robot_swept.values()], axis=0)
         return int(np.count_nonzero(counts >= 2)) / swept
+
+
+def _count_distinct(values: np.ndarray) -> int:
+    """Number of distinct values in a 1-D integer array (cheaper than ``len(np.unique(…))``)."""
+    if len(values) < 2:
+        return len(values)
+    v = np.sort(values)
+    return 1 + int(np.count_nonzero(v[1:] != v[:-1]))
 
 
 def time_to_fraction(series: np.ndarray, fraction: float) -> int | None:

@@ -351,6 +351,27 @@ def test_coverage_grid__overlap_matches_mask_arithmetic() -> None:
     assert grid.overlap() == pytest.approx(expected)
 
 
+def test_coverage_grid__beam_cells_then_mark_equals_sweep() -> None:
+    rng = np.random.default_rng(7)
+    free = rng.uniform(size=(30, 40)) > 0.2
+    by_sweep = M.CoverageGrid(free, (0.0, 0.0), 0.1)
+    by_parts = M.CoverageGrid(free, (0.0, 0.0), 0.1)
+    for k in range(25):
+        origin = rng.uniform(0, 3, 2)
+        a = rng.uniform(-3, 3, 5)
+        r = np.where(rng.uniform(size=5) < 0.3, np.inf, rng.uniform(0, 1.2, 5))
+        gain = by_sweep.sweep(np.tile(origin, (5, 1)), a, r, 1.0, k % 3)
+        cells = by_parts.beam_cells(origin, a, r, 1.0)  # one (2,) origin for all beams
+        distinct_free = np.unique(cells[free.reshape(-1)[cells]])
+        expected_new = np.count_nonzero(~by_parts.swept.reshape(-1)[distinct_free])
+        assert by_parts.new_free_cells(cells) == expected_new
+        assert by_parts.mark(cells, k % 3) == gain == expected_new
+    assert np.array_equal(by_sweep.swept, by_parts.swept)
+    assert by_sweep.coverage == by_parts.coverage
+    for robot in range(3):
+        assert np.array_equal(by_sweep.robot_swept[robot], by_parts.robot_swept[robot])
+
+
 def test_coverage_grid__rejects_bad_input() -> None:
     with pytest.raises(ValueError, match="boolean"):
         M.CoverageGrid(np.ones((3, 3)), (0.0, 0.0), 0.1)
