@@ -14,6 +14,8 @@ selects them without changing what the exact tests downstream decide.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from polyslam_env.slam.measurement import PackedPolynomials, taylor_at
@@ -34,6 +36,26 @@ def shape_range(shape: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray
     # a relative pad absorbs the rounding of T_0 and of the exact values this bounds
     pad = spread * 1e-9 + 1e-9 * (1.0 + np.abs(taylor[:, 0]))
     return np.stack([taylor[:, 0] - spread - pad, taylor[:, 0] + spread + pad], axis=-1)
+
+
+class LandmarkRow(NamedTuple):
+    """One landmark's shape and scalars as Python numbers (see :meth:`LandmarkArrays.rows`)."""
+
+    variate: int
+    shape: tuple[float, ...]  # (0, b_1, …, b_m), m its own order (≥ 1): no zero tail
+    lo: float
+    hi: float
+    pivot: float
+    xi_var: float
+    model_var: float
+    fit_half: float
+
+
+def _own_order(shape: np.ndarray) -> tuple[float, ...]:
+    """A zero-padded shape row without its zero tail, kept at least linear."""
+    used = np.flatnonzero(shape)
+    width = max(int(used[-1]) + 1 if used.size else 0, 2)
+    return tuple(float(b) for b in shape[:width])
 
 
 class LandmarkArrays:
@@ -58,6 +80,7 @@ class LandmarkArrays:
         self.model_var = np.zeros(0)  # (n,)
         self.fit_half = np.zeros(0)  # (n,) half the extent it was fitted over
         self._packed: PackedPolynomials | None = None
+        self._rows: list[LandmarkRow] | None = None
 
     def __len__(self) -> int:
         return len(self.variate)
@@ -83,14 +106,14 @@ class LandmarkArrays:
         self.xi_var = np.append(self.xi_var, xi_var)
         self.model_var = np.append(self.model_var, model_var)
         self.fit_half = np.append(self.fit_half, fit_half)
-        self._packed = None
+        self._changed()
 
     def remove(self, index: int) -> None:
         """Drop row ``index`` (its c0 left the state)."""
         names = ("variate", "shape", "lo", "hi", "eta_range", "pivot", "xi_var", "model_var")
         for name in (*names, "fit_half"):
             setattr(self, name, np.delete(getattr(self, name), index, axis=0))
-        self._packed = None
+        self._changed()
 
     def set_extent(self, index: int, lo: float, hi: float) -> None:
         """New extent [lo, hi] of landmark ``index`` (same shape)."""
@@ -101,7 +124,11 @@ class LandmarkArrays:
         )
         self.eta_range = self.eta_range.copy()
         self.eta_range[index] = rng[0]
+        self._changed()
+
+    def _changed(self) -> None:
         self._packed = None
+        self._rows = None
 
     # -- views --------------------------------------------------------------------------------
     def packed(self) -> PackedPolynomials:
@@ -109,6 +136,28 @@ class LandmarkArrays:
         if self._packed is None:
             self._packed = PackedPolynomials(self.variate, self.shape, self.lo, self.hi)
         return self._packed
+
+    def rows(self) -> list[LandmarkRow]:
+        """Row i as plain Python numbers (cached until the next change), for the per-beam
+        loops of :mod:`polyslam_env.slam.beamcast` and the update, where indexing numpy
+        arrays element by element would cost more than the arithmetic."""
+        if self._rows is None:
+            columns = zip(
+                self.variate.tolist(),
+                self.shape,
+                self.lo.tolist(),
+                self.hi.tolist(),
+                self.pivot.tolist(),
+                self.xi_var.tolist(),
+                self.model_var.tolist(),
+                self.fit_half.tolist(),
+                strict=True,
+            )
+            self._rows = [
+                LandmarkRow(v, _own_order(shape), lo, hi, pivot, xi_var, model_var, fit_half)
+                for v, shape, lo, hi, pivot, xi_var, model_var, fit_half in columns
+            ]
+        return self._rows
 
     def boxes(self, c0s: np.ndarray) -> np.ndarray:
         """Axis-aligned boxes (n, 4) = (x_min, x_max, y_min, y_max) holding each curve."""

@@ -10,6 +10,7 @@ The robot works in its own start frame R_{j,0} and never sees ground truth.
 from __future__ import annotations
 
 import functools
+import math
 import time
 from collections import deque
 from collections.abc import Sequence
@@ -17,12 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyslam_env.slam import ekf
+from polyslam_env.slam import beamcast, ekf
 from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit, PointSet, StoredPoint, fit_polynomial, store_beams
-from polyslam_env.slam.landmarks import LandmarkArrays
-from polyslam_env.slam.measurement import expected_ranges_and_jacobian
+from polyslam_env.slam.landmarks import LandmarkArrays, LandmarkRow
 from polyslam_env.slam.merging import find_merge, merge_points
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -70,6 +70,8 @@ class PolySlam:
     ) -> None:
         self.config = config
         self.beam_angles = np.asarray(beam_angles, dtype=float)  # (B,)
+        self._angles: list[float] = self.beam_angles.tolist()
+        self._min_sine = float(np.sin(np.deg2rad(config.tangent_min_deg)))
         self.max_range = float(max_range)
         self.mean = np.zeros(3)  # (3+n,)
         self.cov = config.p0.copy()  # (3+n, 3+n)
@@ -84,6 +86,7 @@ class PolySlam:
         self.divergence_f = 0.0
         self.profile: dict[str, list[float]] | None = None
         self._arrays = LandmarkArrays()  # the same map as arrays, for the hot path
+        self._work = np.empty(0)  # scratch for the update's covariance products
         kp0_eig = np.linalg.eigvalsh(config.k_divergence * config.p0)  # (3,) ascending
         self._kp0_norm = float(max(-kp0_eig[0], kp0_eig[-1]))  # ‖K P0‖
         self._kp0_min = float(kp0_eig[0])  # λ_min(K P0)
@@ -150,7 +153,7 @@ class PolySlam:
         if self.profile is not None:
             lap = self._lap("map", lap)
 
-        good_beams = np.array(sorted(b for b, lid in assoc.good_ids.items() if lid in self.shapes))
+        good_beams = sorted(b for b, lid in assoc.good_ids.items() if lid in self.shapes)
         used = self._update(good_beams, np.asarray(ranges, dtype=float))
         self.divergence_f = f
         self.diverging = self._is_diverging()
@@ -399,15 +402,87 @@ class PolySlam:
         robot = np.array([x, x, y, y])
         return self._arrays.near(robot, self.mean[3:], self.max_range + REACH_MARGIN)
 
-    def _shape_coupling(
-        self, angles: np.ndarray, t: np.ndarray, index: np.ndarray, H: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Extra ∂h/∂pose (k, 3) from a landmark's shape moving with the pose error.
+    def _update(self, beams: list[int], ranges: np.ndarray) -> int:
+        """Batched, gated update with the associated beams; returns how many were used.
 
-        A shape was fitted to points placed with the pose estimate of its time, so that pose's
-        error moves the whole shape rigidly. ``c0``'s Jacobian G_x carries the part of that
-        motion a constant offset can: the shift of the curve at its centroid ξ_c. What it
-        cannot carry (the shape is outside the state, as in the paper) is
+        Each beam's hit (:mod:`~polyslam_env.slam.beamcast`, on the landmarks within range)
+        gives one row of H: the pose part and 1/D on the c0 hit (SPEC §3, and
+        :func:`~polyslam_env.slam.measurement.expected_ranges_and_jacobian`, which computes
+        the same rows for any number of beams). Near-tangent hits are skipped. R adds to the
+        range noise the landmark's fit variance beyond the noise, and with
+        ``shape_follows_pose`` the shape's own errors (:meth:`_shape_terms`).
+        """
+        if not beams or self.n_landmarks == 0:
+            return 0
+        mean = self.mean
+        x, y, theta = float(mean[0]), float(mean[1]), float(mean[2])
+        rows = self._arrays.rows()
+        hits = beamcast.cast(
+            x,
+            y,
+            theta,
+            [self._angles[b] for b in beams],
+            self._reachable().tolist(),
+            rows,
+            mean[3:].tolist(),
+            self.max_range,
+        )
+        range_var = self.config.range_sigma**2
+        innovation, h_pose, c0_index, h_c0, variance = [], [], [], [], []
+        for b, hit in zip(beams, hits, strict=True):
+            if hit is None:
+                continue
+            if abs(hit.denom) / math.sqrt(1.0 + hit.slope * hit.slope) < self._min_sine:
+                continue  # near-tangent: too sensitive to linearise
+            inv_d = 1.0 / hit.denom
+            slope_d = hit.slope * inv_d
+            cos, sin = math.cos(hit.phi), math.sin(hit.phi)
+            v1 = hit.variate == 1
+            d_eta, d_xi = (cos, -sin) if v1 else (-sin, cos)  # d(dη)/dφ, d(dξ)/dφ
+            h_theta = -hit.t * (d_eta - hit.slope * d_xi) * inv_d
+            row = rows[hit.landmark]
+            var = range_var + row.model_var * (inv_d * inv_d)
+            if self.config.shape_follows_pose:
+                xi = (x if v1 else y) + hit.t * (cos if v1 else sin)
+                lever, extra = self._shape_terms(row, xi, inv_d)
+                h_theta += (1.0 if v1 else -1.0) * lever * inv_d
+                var += extra
+            innovation.append(float(ranges[b]) - hit.t)
+            h_pose.append((slope_d, -inv_d, h_theta) if v1 else (-inv_d, slope_d, h_theta))
+            c0_index.append(3 + hit.landmark)
+            h_c0.append(inv_d)
+            variance.append(var)
+        if not innovation:
+            return 0
+        before = mean[:3].copy()
+        accepted, nis = ekf.update_sparse_inplace(
+            mean,
+            self.cov,
+            np.array(innovation),
+            np.array(h_pose),
+            np.array(c0_index),
+            np.array(h_c0),
+            np.array(variance),
+            self.config.gate_prob,
+            self._workspace(),
+        )
+        self._nis.extend(v for v in nis.tolist() if math.isfinite(v))
+        self._carry_stored_points(before, mean[:3])
+        return int(accepted.sum())
+
+    def _workspace(self) -> np.ndarray:
+        """Scratch the size of ``cov``, kept between steps (see ekf.update_sparse_inplace)."""
+        if self._work.shape != self.cov.shape:
+            self._work = np.empty_like(self.cov)
+        return self._work
+
+    def _shape_terms(self, row: LandmarkRow, xi: float, inv_d: float) -> tuple[float, float]:
+        """A frozen shape's error in a beam's range: (rotation lever, extra variance).
+
+        A shape was fitted to points placed with the pose estimate of its time, so that
+        pose's error moves the whole shape rigidly. ``c0``'s Jacobian G_x carries the part of
+        that motion a constant offset can: the shift of the curve at its centroid ξ_c. What
+        it cannot carry (the shape is outside the state, as in the paper) is
 
         * the rotation by δα about the centroid (ξ_c, η_c), which changes η at ξ* by
           ±[(ξ* − ξ_c) + B'(ξ*)(η* − η_c)]·δα (+ for x¹-variate, − for x²-variate), and
@@ -415,33 +490,23 @@ class PolySlam:
 
         The heading error changes little after a landmark is made (odometry turns it by
         little and a wall hardly corrects absolute heading), so the shape's rotation is taken
-        equal to the robot's current heading error: it enters ∂h/∂θ through
-        ∂h/∂η = ∂h/∂c0 = 1/D (returned, (k, 3), in column θ). Without it a frozen slope makes
-        the absolute heading look observable: P_θθ shrinks while the error stays. The
-        position error, in contrast, is corrected by the update, so the translation term is
-        treated as noise: its variance ((B'(ξ*) − B'(ξ_c))/D)²·σ²_ξ, with σ²_ξ the pose
-        variance along ξ when the landmark was made, is returned separately (k,) for R.
+        equal to the robot's current heading error: the caller adds ±lever/D to ∂h/∂θ
+        (∂h/∂η = ∂h/∂c0 = 1/D). Without it a frozen slope makes the absolute heading look
+        observable: P_θθ shrinks while the error stays. The position error, in contrast, is
+        corrected by the update, so the translation term is treated as noise: its variance
+        ((B'(ξ*) − B'(ξ_c))/D)²·σ²_ξ, with σ²_ξ the pose variance along ξ when the landmark was
+        made, goes into R together with the shape's own fit error (:meth:`_shape_fit_var`).
         """
-        pose = self.mean[:3]
-        phi = pose[2] + angles
-        arrays = self._arrays
-        v1 = arrays.variate[index] == 1  # (k,)
-        start = np.where(v1, pose[0], pose[1])
-        xi = start + t * np.where(v1, np.cos(phi), np.sin(phi))  # (k,) ξ of the hit
-        shape, xi_c = arrays.shape[index], arrays.pivot[index]  # (k, M+1), (k,)
-        slope, value = _slope_and_value(shape, xi)
-        slope_c, value_c = _slope_and_value(shape, xi_c)
-        inv_d = H[np.arange(len(t)), 3 + index]  # ∂h/∂c0 = 1/D
+        slope, value = _slope_and_value(row.shape, xi)
+        slope_c, value_c = _slope_and_value(row.shape, row.pivot)
         shift = (slope - slope_c) * inv_d
-        extra_var = shift**2 * arrays.xi_var[index]
-        extra_var += inv_d**2 * self._shape_fit_var(shape, (xi - xi_c) / arrays.fit_half[index])
-        lever = (xi - xi_c) + slope * (value - value_c)
-        out = np.zeros((len(t), 3))
-        out[:, 2] = np.where(v1, 1.0, -1.0) * lever * inv_d
-        return out, extra_var
+        extra = shift * shift * row.xi_var
+        extra += inv_d * inv_d * self._shape_fit_var(row.shape, (xi - row.pivot) / row.fit_half)
+        lever = (xi - row.pivot) + slope * (value - value_c)
+        return lever, extra
 
-    def _shape_fit_var(self, shape: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """Variance (k,) of a frozen shape's η at scaled positions t = (ξ* − ξ_c)/half-extent.
+    def _shape_fit_var(self, shape: tuple[float, ...], t: float) -> float:
+        """Variance of a frozen shape's η at scaled position t = (ξ* − ξ_c)/half-extent.
 
         The shape was fitted to noisy points and is not in the state, so its own estimation
         error is a bias every later beam on it shares. For N points equally spaced over the
@@ -450,53 +515,15 @@ class PolySlam:
         small inside the fitted extent (~σ²·m/N) and grows fast where the curve is
         extrapolated. N = ε_Z + 1, the size of the cluster a landmark is born from.
         """
+        order = len(shape) - 1 if shape[-1] != 0.0 else 0  # shapes carry no zero tail
+        if order == 0:
+            return 0.0
         n_fit = self.config.eps_z + 1
-        orders = np.array([int(np.flatnonzero(row)[-1]) if row.any() else 0 for row in shape])
-        out = np.zeros(len(t))
-        for m in set(orders.tolist()):
-            if m == 0:
-                continue
-            sel = orders == m
-            a = t[sel, None] ** np.arange(m + 1)  # (k_m, m+1)
-            quad = np.einsum("ki,ij,kj->k", a, _uniform_fit_inverse(n_fit, m), a)
-            out[sel] = self.config.range_sigma**2 * np.maximum(quad - 1.0 / n_fit, 0.0)
-        return out
-
-    def _update(self, beams: np.ndarray, ranges: np.ndarray) -> int:
-        """Batched, gated update with the associated beams; returns how many were used."""
-        if beams.size == 0 or self.n_landmarks == 0:
-            return 0
-        expected = expected_ranges_and_jacobian(
-            self.mean,
-            self._arrays.packed(),
-            self.beam_angles[beams],
-            self.max_range,
-            self.config.tangent_min_deg,
-            candidates=self._reachable(),
-        )
-        rows = np.flatnonzero(expected.valid)
-        if rows.size == 0:
-            return 0
-        z = ranges[beams[rows]]
-        H = expected.H[rows]
-        index = expected.poly_index[rows]
-        inv_d = H[np.arange(rows.size), 3 + index]
-        variance = self.config.range_sigma**2 + self._arrays.model_var[index] * inv_d**2
-        if self.config.shape_follows_pose:
-            coupling, extra = self._shape_coupling(
-                self.beam_angles[beams[rows]], expected.z_hat[rows], index, H
-            )
-            H[:, :3] += coupling
-            variance += extra
-        R = np.diag(variance)
-        result = ekf.update(
-            self.mean, self.cov, z, expected.z_hat[rows], H, R, self.config.gate_prob
-        )
-        self._nis.extend(float(v) for v in result.nis if np.isfinite(v))
-        before = self.mean[:3].copy()
-        self.mean, self.cov = result.mean, result.cov
-        self._carry_stored_points(before, self.mean[:3])
-        return int(result.accepted.sum())
+        a = [t**i for i in range(order + 1)]
+        quad = 0.0
+        for a_i, row in zip(a, _uniform_fit_inverse(n_fit, order), strict=True):
+            quad += a_i * sum(m_ij * a_j for m_ij, a_j in zip(row, a, strict=True))
+        return float(self.config.range_sigma**2 * max(quad - 1.0 / n_fit, 0.0))
 
     def _carry_stored_points(self, before: np.ndarray, after: np.ndarray) -> None:
         """Move cluster and Q_bad points rigidly with a pose correction.
@@ -517,10 +544,11 @@ class PolySlam:
 
 
 @functools.lru_cache(maxsize=16)
-def _uniform_fit_inverse(n_points: int, order: int) -> np.ndarray:
+def _uniform_fit_inverse(n_points: int, order: int) -> list[list[float]]:
     """(AᵀA)⁻¹ (m+1, m+1) for monomials of t at n points equally spaced over [−1, 1]."""
     a = np.linspace(-1.0, 1.0, n_points)[:, None] ** np.arange(order + 1)
-    return np.asarray(np.linalg.inv(a.T @ a))
+    inverse: list[list[float]] = np.linalg.inv(a.T @ a).tolist()
+    return inverse
 
 
 def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> list[StoredPoint]:
@@ -539,14 +567,13 @@ def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> 
     ]
 
 
-def _slope_and_value(shape: np.ndarray, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """B'(ξ) and B(ξ) (k,) of shapes (k, M+1) at ξ (k,), by Horner's scheme."""
-    order = shape.shape[1] - 1
-    value = shape[:, order].copy()
-    slope = np.zeros_like(xi)
-    for j in range(order - 1, -1, -1):
+def _slope_and_value(shape: Sequence[float], xi: float) -> tuple[float, float]:
+    """B'(ξ) and B(ξ) of a shape [b_0, …, b_M] at ξ, by Horner's scheme."""
+    value = shape[-1]
+    slope = 0.0
+    for b in shape[-2::-1]:
         slope = slope * xi + value
-        value = value * xi + shape[:, j]
+        value = value * xi + b
     return slope, value
 
 

@@ -19,6 +19,7 @@ from polyslam_env.slam.ekf import (
     remove,
     thresholds,
     update,
+    update_sparse_inplace,
     wrap_angle,
 )
 from polyslam_env.slam.measurement import PackedPolynomials, expected_ranges_and_jacobian
@@ -113,6 +114,67 @@ def test_update__equals_textbook_joseph_form() -> None:
     # 1e-12: the same algebra in another association order on O(1) numbers
     np.testing.assert_allclose(result.cov, expected_cov, atol=1e-12)
     np.testing.assert_allclose(result.mean, expected_mean, atol=1e-12)
+
+
+@pytest.mark.parametrize("n_state", [4, 12, 60])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_update_sparse_inplace__equals_dense_update(n_state: int, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    k = 5
+    mean, cov = rng.normal(size=n_state), random_spd(rng, n_state, 0.01)
+    h_pose, h_c0 = rng.normal(size=(k, 3)), rng.normal(size=k)
+    c0_index = rng.integers(3, n_state, size=k)  # two rows may share a landmark
+    r = rng.uniform(1e-4, 1e-3, size=k)
+    H = np.zeros((k, n_state))
+    H[:, :3] = h_pose
+    H[np.arange(k), c0_index] = h_c0
+    innovation = 0.05 * rng.normal(size=k)
+    innovation[0] = 50.0  # an outlier the gate must drop in both
+    dense = update(mean, cov, innovation, np.zeros(k), H, np.diag(r))
+    new_mean, new_cov = mean.copy(), cov.copy()
+    accepted, nis = update_sparse_inplace(new_mean, new_cov, innovation, h_pose, c0_index, h_c0, r)
+    np.testing.assert_array_equal(accepted, dense.accepted)
+    assert not accepted[0] and accepted[1:].any()
+    # 1e-12 relative: the same quantities in another association order (S, K and the
+    # polarised Joseph products), on a well-conditioned S
+    np.testing.assert_allclose(nis, dense.nis, rtol=1e-12)
+    np.testing.assert_allclose(new_mean, dense.mean, rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(new_cov, dense.cov, rtol=1e-10, atol=1e-14)
+    assert_symmetric_psd(new_cov)
+
+
+def test_update_sparse_inplace__stays_exactly_symmetric_over_many_updates() -> None:
+    rng = np.random.default_rng(7)
+    n_state = 40
+    mean, cov = np.zeros(n_state), random_spd(rng, n_state, 0.01)
+    work = np.empty_like(cov)
+    for _ in range(200):
+        k = int(rng.integers(1, 6))
+        update_sparse_inplace(
+            mean,
+            cov,
+            0.01 * rng.normal(size=k),
+            rng.normal(size=(k, 3)),
+            rng.integers(3, n_state, size=k),
+            rng.normal(size=k),
+            np.full(k, 4e-4),
+            1.0,
+            work,
+        )
+        cov[:3, :3] += 1e-4 * np.eye(3)  # some process noise so P does not collapse
+    assert_symmetric_psd(cov)
+
+
+def test_update_sparse_inplace__nothing_accepted_leaves_state() -> None:
+    rng = np.random.default_rng(3)
+    mean, cov = rng.normal(size=6), random_spd(rng, 6, 1e-4)
+    before_mean, before_cov = mean.copy(), cov.copy()
+    accepted, nis = update_sparse_inplace(
+        mean, cov, np.array([5.0]), np.ones((1, 3)), np.array([4]), np.ones(1), np.full(1, 1e-4)
+    )
+    assert not accepted.any() and nis[0] > 100
+    np.testing.assert_array_equal(mean, before_mean)
+    np.testing.assert_array_equal(cov, before_cov)
 
 
 def test_update__gate_rejects_outliers_and_unusable_beams() -> None:
