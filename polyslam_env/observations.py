@@ -30,6 +30,7 @@ __all__ = ["BeliefGrid", "MapSampler", "ObservationEncoder", "RobotView"]
 FREE, UNKNOWN, OCCUPIED = 0.0, 0.5, 1.0
 #: Caps of the reported pose standard deviations (x m, y m, θ rad); std/cap is clipped to 1.
 STD_CAPS = np.array([1.0, 1.0, math.pi])
+_CAPS = STD_CAPS.tolist()
 
 
 class BeliefGrid:
@@ -58,18 +59,22 @@ class BeliefGrid:
     def sweep(self, pose: np.ndarray, angles: np.ndarray, ranges: np.ndarray) -> None:
         """Mark the beams of one scan from ``pose`` (3,): free up to half a cell short of each
         hit (or to ``max_range`` without return), and the hit cells."""
-        finite = np.isfinite(ranges)
-        r = np.where(finite, np.minimum(ranges, self.max_range), self.max_range)  # (B,)
+        finite = np.isfinite(ranges)  # (B,)
+        r = np.fmin(ranges, self.max_range)  # (B,); no return (inf) → max_range
         length = np.where(finite, np.maximum(r - 0.5 * self.resolution, 0.0), r)
         phi = pose[2] + angles  # (B,)
-        direction = np.column_stack([np.cos(phi), np.sin(phi)])  # (B, 2)
-        # The beam samples (B·S) and the hit points (H) go through one cell lookup.
-        t = np.concatenate([(length[:, None] * self._t).reshape(-1), r[finite]])  # (B·S + H,)
-        steps = np.concatenate([np.repeat(direction, self._t.size, axis=0), direction[finite]])
-        flat, inside = self._flat_cells(pose[:2] + t[:, None] * steps)
-        n_free = length.size * self._t.size
-        self.free.reshape(-1)[flat[:n_free][inside[:n_free]]] = True
-        self.hit.reshape(-1)[flat[n_free:][inside[n_free:]]] = True
+        # Each beam's S free samples and its end point (used only for hits) in one array.
+        t = np.empty((len(r), self._t.size + 1))  # (B, S + 1)
+        np.multiply(length[:, None], self._t, out=t[:, :-1])
+        t[:, -1] = r
+        x = pose[0] + t * np.cos(phi)[:, None]  # (B, S + 1)
+        y = pose[1] + t * np.sin(phi)[:, None]
+        col = np.floor((x - self.origin) / self.resolution).astype(np.intp)
+        row = np.floor((y - self.origin) / self.resolution).astype(np.intp)
+        inside = (row.view(np.uintp) < self.n) & (col.view(np.uintp) < self.n)  # see _flat_cells
+        flat = row * self.n + col  # (B, S + 1)
+        self.free.reshape(-1)[flat[:, :-1][inside[:, :-1]]] = True
+        self.hit.reshape(-1)[flat[:, -1][inside[:, -1] & finite]] = True
 
     def lookup(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(free, hit) (M,) at points (M, 2); False outside the grid."""
@@ -203,8 +208,9 @@ class ObservationEncoder:
         return out
 
     # -- encoding -------------------------------------------------------------------------
-    def local_map(self, view: RobotView) -> np.ndarray:  # (3, G, G) float32
-        """Occupied / free / unknown channels of the egocentric grid (x forward = columns)."""
+    def local_cells(self, view: RobotView) -> tuple[np.ndarray, np.ndarray]:
+        """Occupied and free cells (G²,) bool of the egocentric grid (x forward = columns,
+        row-major); a cell is never both, and neither means unknown."""
         g = self.g
         c, s = math.cos(view.pose[2]), math.sin(view.pose[2])
         rot = np.array([[c, -s], [s, c]])  # ego → own frame; (own − xy) @ rot = ego
@@ -219,45 +225,66 @@ class ObservationEncoder:
         if self.use_hits:
             occ |= hit
         free &= ~occ
-        out = np.empty((3, g * g), dtype=np.float32)
+        return occ, free
+
+    def local_map(self, view: RobotView) -> np.ndarray:  # (3, G, G) float32
+        """Occupied / free / unknown channels of the egocentric grid (x forward = columns)."""
+        occ, free = self.local_cells(view)
+        out = np.empty((3, self.g * self.g), dtype=np.float32)
         out[0], out[1], out[2] = occ, free, ~(occ | free)
-        return out.reshape(3, g, g)
+        return out.reshape(3, self.g, self.g)
 
-    def _detections(self, detections: list[Detection]) -> np.ndarray:  # (4K,)
-        out = np.zeros((self.k, 4), dtype=np.float32)
+    def _detections(self, detections: list[Detection]) -> list[float]:  # (4K,)
+        """Slots nearest first, ``(seen, d/range, cos α, sin α)``, zeros for empty slots."""
         cam_range = self.config.world.camera.range
-        for slot, det in enumerate(sorted(detections, key=lambda d: (d.distance, d.target))):
-            if slot >= self.k:
-                break
+        out: list[float] = []
+        for det in sorted(detections, key=lambda d: (d.distance, d.target))[: self.k]:
             d = min(det.distance / cam_range, 1.0)
-            out[slot] = (1.0, d, math.cos(det.bearing), math.sin(det.bearing))
-        return out.reshape(-1)
+            out += (1.0, d, math.cos(det.bearing), math.sin(det.bearing))
+        return out + [0.0] * (4 * self.k - len(out))
 
-    def vector(self, view: RobotView, local: np.ndarray | None) -> np.ndarray:  # (D,) float32
-        """The flat vector; ``local`` (3, G, G) is folded in as one coded channel if given."""
+    def vector(
+        self, view: RobotView, cells: tuple[np.ndarray, np.ndarray] | None
+    ) -> np.ndarray:  # (D,) float32
+        """The flat vector; the local map's (occupied, free) ``cells`` (G²,) are folded in as
+        one coded channel if given.
+
+        The few scalar parts are written as Python floats: numpy calls on 2–4 element arrays
+        cost more than the arithmetic (the float32 values are the same either way).
+        """
         oc = self.config.observation
         lay = self._layout
         out = np.empty(self.vector_space.shape, dtype=np.float32)
-        finite = np.isfinite(view.ranges)
-        out[lay["ranges"]] = np.where(finite, np.minimum(view.ranges / self.max_range, 1.0), 1.0)
-        out[lay["no_return"]] = ~finite
-        x, y = np.clip(view.pose[:2] / oc.pose_scale, -1.0, 1.0)
-        out[lay["pose"]] = (x, y, math.cos(view.pose[2]), math.sin(view.pose[2]))
-        out[lay["pose_std"]] = np.clip(view.pose_std / STD_CAPS, 0.0, 1.0)
-        if local is not None:
-            out[lay["local_map"]] = (local[0] * OCCUPIED + local[2] * UNKNOWN).reshape(-1)
-        out[lay["detections"]] = self._detections(view.detections)
+        out[lay["ranges"]] = np.fmin(view.ranges / self.max_range, 1.0)  # no return (inf) → 1
+        out[lay["no_return"]] = ~np.isfinite(view.ranges)
+        x, y, theta = view.pose.tolist()
+        scale = oc.pose_scale
+        out[lay["pose"]] = (
+            min(max(x / scale, -1.0), 1.0),
+            min(max(y / scale, -1.0), 1.0),
+            math.cos(theta),
+            math.sin(theta),
+        )
+        std = zip(view.pose_std.tolist(), _CAPS, strict=True)
+        out[lay["pose_std"]] = [min(max(sd / cap, 0.0), 1.0) for sd, cap in std]
+        if cells is not None:
+            occ, free = cells
+            local = out[lay["local_map"]]
+            local.fill(UNKNOWN)
+            local[occ] = OCCUPIED
+            local[free] = FREE
         since, t = view.steps_since_rendezvous, self.config.max_steps
-        out[lay["channel"]] = (
+        # detections, channel and progress are adjacent: one assignment
+        out[lay["detections"].start : lay["progress"].stop] = [
+            *self._detections(view.detections),
             1.0 if since is None else min(since / t, 1.0),
             min(view.rendezvous, oc.rendezvous_cap) / oc.rendezvous_cap,
-        )
-        out[lay["progress"]] = min(view.step / t, 1.0)
+            min(view.step / t, 1.0),
+        ]
         return out
 
     def encode(self, view: RobotView) -> np.ndarray | dict[str, np.ndarray]:
         """The observation of one robot in :attr:`space`."""
-        local = self.local_map(view)
         if self.mode == "grid":
-            return {"grid": local, "vector": self.vector(view, None)}
-        return self.vector(view, local)
+            return {"grid": self.local_map(view), "vector": self.vector(view, None)}
+        return self.vector(view, self.local_cells(view))
