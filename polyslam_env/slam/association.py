@@ -17,6 +17,7 @@ augments / removes state entries, telling the book with :meth:`MapBook.add_landm
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -161,10 +162,8 @@ class MapBook:
 
         Returns the cluster's points, and removes the cluster, once it holds more than ε_Z.
         """
-        counts = [
-            int(np.count_nonzero(_distances(c, point.xy) <= self.cluster_radius))
-            for c in self.clusters
-        ]
+        x, y = float(point.xy[0]), float(point.xy[1])
+        counts = [_count_within(c, x, y, self.cluster_radius) for c in self.clusters]
         if counts and max(counts) > 0:
             best = int(np.argmax(counts))  # ties: the oldest cluster
             self.clusters[best].append(point)
@@ -240,8 +239,14 @@ class MapBook:
         result.refits.append(RefitRequest(landmark_id, bad))
 
 
-def _distances(points: Sequence[StoredPoint], xy: np.ndarray) -> np.ndarray:
-    return np.linalg.norm(np.array([p.xy for p in points]) - xy, axis=1)  # (N,)
+def _count_within(points: Sequence[StoredPoint], x: float, y: float, radius: float) -> int:
+    """How many of ``points`` lie within ``radius`` of (x, y) (a handful: plain floats)."""
+    count = 0
+    for p in points:
+        px, py = p.xy.tolist()
+        if math.hypot(px - x, py - y) <= radius:
+            count += 1
+    return count
 
 
 # -- building the fits ----------------------------------------------------------------------

@@ -31,6 +31,9 @@ from polyslam_env.slam.measurement import (
 )
 
 NAN = math.nan
+#: Slack (m) around a landmark's box when deciding whether a beam can reach it: far above the
+#: error of any accepted root (the closed forms plus Newton are accurate to ~1e-9 m).
+BOX_MARGIN = 1e-3
 _TINY = 2.2250738585072014e-308  # smallest normal float: np.finfo(float).tiny
 
 
@@ -67,13 +70,17 @@ def cast(
     shapes: Sequence[ShapeRow],
     c0s: Sequence[float],
     max_range: float,
+    boxes: Sequence[Sequence[float]] | None = None,
 ) -> list[BeamHit | None]:
     """Per beam, the nearest admissible hit on the ``candidates`` (ascending landmark indices,
-    into ``shapes`` and ``c0s``), or None. Same contract as ``ray_intersections``."""
-    taylors = []
-    for j in candidates:
-        row = shapes[j]
-        taylors.append(_taylor(row.shape, x if row.variate == 1 else y))
+    into ``shapes`` and ``c0s``), or None. Same contract as ``ray_intersections``.
+
+    ``boxes`` (one (x_min, x_max, y_min, y_max) per candidate), when given, must hold each
+    candidate's curve over its extent (e.g. :meth:`LandmarkArrays.boxes`): a beam whose
+    segment passes farther than :data:`BOX_MARGIN` from a box cannot hit that landmark, and
+    is not solved against it. The answer is the same; most pairs are skipped.
+    """
+    taylors: dict[int, list[float]] = {}
     out: list[BeamHit | None] = []
     for beta in beam_angles:
         phi = theta + beta
@@ -82,13 +89,20 @@ def cast(
         best_k = -1
         best_coeffs: list[float] = []
         for k, j in enumerate(candidates):
+            if boxes is not None and not _meets_box(
+                x, y, cos * max_range, sin * max_range, boxes[k]
+            ):
+                continue
             row = shapes[j]
             lo, hi = row.lo, row.hi
             if row.variate == 1:
                 xi0, eta0, dxi, deta = x, y, cos, sin
             else:
                 xi0, eta0, dxi, deta = y, x, sin, cos
-            coeffs = _ray_coeffs(taylors[k], eta0 - c0s[j], dxi, deta, max_range)
+            taylor = taylors.get(k)
+            if taylor is None:
+                taylor = taylors[k] = _taylor(row.shape, xi0)
+            coeffs = _ray_coeffs(taylor, eta0 - c0s[j], dxi, deta, max_range)
             step = max_range * dxi
             for s in _real_roots(coeffs):
                 if s > 0.0 and s <= 1.0 and s < best:
@@ -111,6 +125,25 @@ def cast(
             power *= u
         out.append(BeamHit(t, j, slope, deta - slope * dxi, phi, variate))
     return out
+
+
+def _meets_box(x: float, y: float, dx: float, dy: float, box: Sequence[float]) -> bool:
+    """Whether the segment (x, y) → (x + dx, y + dy) passes within BOX_MARGIN of ``box``
+    (slab clipping: the segment's parameter interval inside each widened slab)."""
+    t0, t1 = 0.0, 1.0
+    for start, delta, low, high in ((x, dx, box[0], box[1]), (y, dy, box[2], box[3])):
+        low, high = low - BOX_MARGIN, high + BOX_MARGIN
+        if delta == 0.0:
+            if start < low or start > high:
+                return False
+            continue
+        a, b = (low - start) / delta, (high - start) / delta
+        if a > b:
+            a, b = b, a
+        t0, t1 = max(t0, a), min(t1, b)
+        if t0 > t1:
+            return False
+    return True
 
 
 def _taylor(b: tuple[float, ...], xi0: float) -> list[float]:

@@ -14,7 +14,7 @@ from functools import lru_cache
 import numpy as np
 import scipy.special
 
-from polyslam_env.geometry import wrap_angle
+from polyslam_env.geometry import symmetric_eigvals3, wrap_angle
 
 
 def _symmetrise(a: np.ndarray) -> np.ndarray:
@@ -178,26 +178,26 @@ def update_sparse_inplace(
     S is at most a handful of rows, so K = P Hᵀ S⁻¹ uses its explicit inverse (LAPACK's
     solve with 3+n right-hand sides costs far more here, for no accuracy that matters).
     """
-    rows = np.arange(innovation.size)
     PHt = cov[:, :3] @ h_pose.T  # (3+n, k)
     PHt += cov[:, c0_index] * h_c0
-    s_diag = np.einsum("ij,ji->i", h_pose, PHt[:3]) + h_c0 * PHt[c0_index, rows] + r
-    nis = innovation**2 / s_diag  # (k,)
+    S = h_pose @ PHt[:3]  # (k, k) = H P Hᵀ
+    S += h_c0[:, None] * PHt[c0_index]
+    nis = innovation**2 / (S.diagonal() + r)  # (k,)
     accepted = nis <= chi2_1dof_quantile(gate_prob)
-    if not accepted.any():
-        return accepted, nis
-    a = np.flatnonzero(accepted)
-    PHt_a = PHt[:, a]
-    S = h_pose[a] @ PHt_a[:3] + h_c0[a, None] * PHt_a[c0_index[a]]  # (k_a, k_a) = H P Hᵀ
+    if not accepted.all():
+        if not accepted.any():
+            return accepted, nis
+        a = np.flatnonzero(accepted)
+        PHt, S, innovation, r = PHt[:, a], S[np.ix_(a, a)], innovation[a], r[a]
     S = _symmetrise(S)
-    S.flat[:: a.size + 1] += r[a]  # + R
-    K = PHt_a @ np.linalg.inv(S)  # (3+n, k_a)
-    mean += K @ innovation[a]
+    S.flat[:: r.size + 1] += r  # + R
+    K = PHt @ np.linalg.inv(S)  # (3+n, k_a)
+    mean += K @ innovation
     mean[2] = wrap_angle(mean[2])
-    W = PHt_a - 0.5 * (K @ S)
-    k_norm, w_norm = np.linalg.norm(K, axis=0), np.linalg.norm(W, axis=0)  # (k_a,)
-    scale = np.sqrt(np.divide(w_norm, k_norm, out=np.ones_like(w_norm), where=k_norm > 0))
-    scale[scale == 0.0] = 1.0
+    W = PHt - 0.5 * (K @ S)
+    k_sq, w_sq = (K * K).sum(axis=0), (W * W).sum(axis=0)  # (k_a,) squared column norms
+    usable = (k_sq > 0.0) & (w_sq > 0.0)
+    scale = np.sqrt(np.sqrt(np.divide(w_sq, k_sq, out=np.ones_like(w_sq), where=usable)))
     K *= scale / np.sqrt(2.0)
     W /= scale * np.sqrt(2.0)
     if work is None or work.shape != cov.shape:
@@ -278,8 +278,9 @@ def spectral_norm_sym(a: np.ndarray) -> float:
     """Spectral norm of a symmetric matrix: its largest |eigenvalue| (eigvalsh, not an SVD).
 
     Only the lower triangle is read, so pass a symmetric matrix (covariances, K P0 − P).
+    3×3 matrices (pose blocks, asked for every step) take the closed form.
     """
-    eig = np.linalg.eigvalsh(a)  # ascending
+    eig = symmetric_eigvals3(a) if a.shape == (3, 3) else np.linalg.eigvalsh(a)  # ascending
     return float(max(-eig[0], eig[-1]))
 
 

@@ -169,7 +169,11 @@ class LandmarkArrays:
     def near(self, box: np.ndarray, c0s: np.ndarray, distance: float) -> np.ndarray:
         """Indices (ascending) of the landmarks whose box lies within ``distance`` of ``box``
         (4,) = (x_min, x_max, y_min, y_max); a point is a box with min = max."""
-        mine = self.boxes(c0s)  # (n, 4)
-        gap_x = np.maximum(np.maximum(mine[:, 0] - box[1], box[0] - mine[:, 1]), 0.0)
-        gap_y = np.maximum(np.maximum(mine[:, 2] - box[3], box[2] - mine[:, 3]), 0.0)
-        return np.flatnonzero(gap_x * gap_x + gap_y * gap_y <= distance * distance)
+        return boxes_near(self.boxes(c0s), box, distance)
+
+
+def boxes_near(boxes: np.ndarray, box: np.ndarray, distance: float) -> np.ndarray:
+    """Indices (ascending) of ``boxes`` (n, 4) within ``distance`` of ``box`` (4,)."""
+    gap_x = np.maximum(np.maximum(boxes[:, 0] - box[1], box[0] - boxes[:, 1]), 0.0)
+    gap_y = np.maximum(np.maximum(boxes[:, 2] - box[3], box[2] - boxes[:, 3]), 0.0)
+    return np.flatnonzero(gap_x * gap_x + gap_y * gap_y <= distance * distance)

@@ -22,7 +22,7 @@ from polyslam_env.slam import beamcast, ekf
 from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit, PointSet, StoredPoint, fit_polynomial, store_beams
-from polyslam_env.slam.landmarks import LandmarkArrays, LandmarkRow
+from polyslam_env.slam.landmarks import LandmarkArrays, LandmarkRow, boxes_near
 from polyslam_env.slam.merging import find_merge, merge_points
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -396,12 +396,6 @@ class PolySlam:
         return fit
 
     # -- EKF update -------------------------------------------------------------------------------
-    def _reachable(self) -> np.ndarray:
-        """Indices of the landmarks whose bounding box lies within the range of the beams."""
-        x, y = self.mean[0], self.mean[1]
-        robot = np.array([x, x, y, y])
-        return self._arrays.near(robot, self.mean[3:], self.max_range + REACH_MARGIN)
-
     def _update(self, beams: list[int], ranges: np.ndarray) -> int:
         """Batched, gated update with the associated beams; returns how many were used.
 
@@ -417,15 +411,18 @@ class PolySlam:
         mean = self.mean
         x, y, theta = float(mean[0]), float(mean[1]), float(mean[2])
         rows = self._arrays.rows()
+        boxes = self._arrays.boxes(mean[3:])  # (n, 4)
+        reach = boxes_near(boxes, np.array([x, x, y, y]), self.max_range + REACH_MARGIN)
         hits = beamcast.cast(
             x,
             y,
             theta,
             [self._angles[b] for b in beams],
-            self._reachable().tolist(),
+            reach.tolist(),
             rows,
             mean[3:].tolist(),
             self.max_range,
+            boxes[reach].tolist(),
         )
         range_var = self.config.range_sigma**2
         innovation, h_pose, c0_index, h_c0, variance = [], [], [], [], []
@@ -467,8 +464,10 @@ class PolySlam:
             self._workspace(),
         )
         self._nis.extend(v for v in nis.tolist() if math.isfinite(v))
-        self._carry_stored_points(before, mean[:3])
-        return int(accepted.sum())
+        used = int(accepted.sum())
+        if used:  # else the pose did not move
+            self._carry_stored_points(before, mean[:3])
+        return used
 
     def _workspace(self) -> np.ndarray:
         """Scratch the size of ``cov``, kept between steps (see ekf.update_sparse_inplace)."""
@@ -562,8 +561,8 @@ def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> 
     poses[:, :2] = after[:2] + (poses[:, :2] - before[:2]) @ rot_t
     poses[:, 2] += dtheta
     return [
-        StoredPoint(xy[i], direction[i], p.sigma, p.weight, poses[i], p.beam, p.step)
-        for i, p in enumerate(points)
+        StoredPoint(moved, turned, p.sigma, p.weight, pose, p.beam, p.step)
+        for moved, turned, pose, p in zip(xy, direction, poses, points, strict=True)
     ]
 
 

@@ -49,6 +49,18 @@ def assert_same_hits(
         c0s.tolist(),
         max_range,
     )
+    boxed = cast(
+        float(pose[0]),
+        float(pose[1]),
+        float(pose[2]),
+        beams.tolist(),
+        list(range(len(polys))),
+        arrays.rows(),
+        c0s.tolist(),
+        max_range,
+        arrays.boxes(c0s).tolist(),
+    )
+    assert boxed == got  # the boxes only skip pairs that cannot hit: the very same answer
     for j, hit in enumerate(got):
         if hit is None:
             assert want.index[j] == -1 and np.isinf(want.ranges[j])
