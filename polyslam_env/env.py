@@ -251,7 +251,7 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         self._detections = self.world.camera()
         self._sweep_coverage(self._scans)
         self._coverage_series = [self.coverage.coverage]
-        observations = self._observe(self.agents)
+        observations = self._observe(self.agents, self._estimates())
         return observations, {a: {} for a in self.agents}
 
     def _draw_layout(self) -> Layout:
@@ -294,8 +294,9 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         scans, detections = self._sense()
         slam_infos = self._run_slam(result, scans)
         exchanged = self._exchange(detections)
-        self._record(result, scans, slam_infos)
-        observations = self._observe(acting)
+        estimates = self._estimates()
+        self._record(result, scans, slam_infos, estimates)
+        observations = self._observe(acting, estimates)
         terms = self._reward_terms(acting, result, scans, slam_infos, exchanged)
         rewards = self._combine(terms)
         terminations, truncations = self._done(acting)
@@ -369,25 +370,35 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         return out
 
     def _record(
-        self, result: StepResult, scans: np.ndarray, slam_infos: list[SlamStepInfo | None]
+        self,
+        result: StepResult,
+        scans: np.ndarray,
+        slam_infos: list[SlamStepInfo | None],
+        estimates: list[tuple[np.ndarray, np.ndarray]],
     ) -> None:
-        """Histories for the end-of-episode metrics, and each robot's own belief grid."""
+        """Histories for the end-of-episode metrics (the belief grids are swept in _observe)."""
         poses = self.world.poses
+        phi = poses[:, 2:3] + self._angles  # (N, B)
+        hits = np.stack(  # (N, B, 2) beam end points, true poses (inf without return)
+            [poses[:, 0:1] + scans * np.cos(phi), poses[:, 1:2] + scans * np.sin(phi)], axis=-1
+        )
+        ok = np.isfinite(scans)  # (N, B)
         for i in map(int, np.flatnonzero(self.world.active)):
-            est, cov = self._estimate(i)
+            est, cov = estimates[i]
             info = slam_infos[i]
-            ok = np.isfinite(scans[i])
-            phi = poses[i, 2] + self._angles[ok]
-            hits = poses[i, :2] + scans[i, ok, None] * np.column_stack([np.cos(phi), np.sin(phi)])
             self._histories[i].record(
                 poses[i],
                 est,
                 cov,
-                hits,
+                hits[i][ok[i]],
                 None if info is None else info.time_s,
                 bool(result.collided[i]),
                 bool(info is not None and info.diverging),
             )
+
+    def _estimates(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Every robot's :meth:`_estimate`, taken once per step after SLAM and exchange."""
+        return [self._estimate(i) for i in range(self.config.num_robots)]
 
     def _estimate(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """Robot i's pose (3,) and covariance (3, 3) in its start frame (truth without SLAM)."""
@@ -396,17 +407,20 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         return _to_frame(self.world.poses[i], self.start_poses[i]), np.zeros((3, 3))
 
     # -- observe ---------------------------------------------------------------------------
-    def _observe(self, agents: list[str]) -> dict[str, Obs]:
+    def _observe(
+        self, agents: list[str], estimates: list[tuple[np.ndarray, np.ndarray]]
+    ) -> dict[str, Obs]:
         out: dict[str, Obs] = {}
         for agent in agents:
             i = self._index[agent]
+            pose, cov = estimates[i]
             if self.world.active[i]:
-                self._beliefs[i].sweep(self._estimate(i)[0], self._angles, self._scans[i])
-            out[agent] = self._encoder.encode(self._view(i))
+                self._beliefs[i].sweep(pose, self._angles, self._scans[i])
+            out[agent] = self._encoder.encode(self._view(i, pose, cov))
         return out
 
-    def _view(self, i: int) -> RobotView:
-        pose, cov = self._estimate(i)
+    def _view(self, i: int, pose: np.ndarray, cov: np.ndarray) -> RobotView:
+        """What robot i knows, with its estimated pose (3,) and covariance (3, 3)."""
         last = self._last_rendezvous[i]
         count = self.exchange.counters(i)["rendezvous"] if self.exchange is not None else 0
         return RobotView(

@@ -66,10 +66,11 @@ class RobotHistory:
         diverging: bool,
     ) -> None:
         """Append one step: poses (3,), covariance (3, 3), beam hit points (h, 2)."""
-        self.path_length += float(np.hypot(*(true_pose[:2] - self.true[-1][:2])))
-        self.true.append(np.asarray(true_pose, dtype=float).copy())
-        self.est.append(np.asarray(est_pose, dtype=float).copy())
-        self.cov.append(np.asarray(est_cov, dtype=float).copy())
+        (x, y), (x0, y0) = true_pose[:2].tolist(), self.true[-1][:2].tolist()
+        self.path_length += float(np.hypot(x - x0, y - y0))
+        self.true.append(np.array(true_pose, dtype=float))  # np.array copies
+        self.est.append(np.array(est_pose, dtype=float))
+        self.cov.append(np.array(est_cov, dtype=float))
         self.hits.append(hits)
         if slam_time is not None:
             self.slam_times.append(slam_time)
