@@ -32,7 +32,7 @@ from polyslam_env.slam.fitting import (
     polynomial_points,
     stored_points,
 )
-from polyslam_env.slam.measurement import PolynomialsLike, pack
+from polyslam_env.slam.measurement import PackedPolynomials, PolynomialsLike, pack
 from polyslam_env.slam.polynomial import Polynomial
 
 
@@ -192,6 +192,7 @@ class MapBook:
         rho: float,
         sigma: float,
         squared: bool = False,
+        candidates: np.ndarray | None = None,
     ) -> AssociationResult:
         """Classify this step's beam points against the map as it stood at the step's start.
 
@@ -199,6 +200,12 @@ class MapBook:
         during the step join the map only once the caller fits them, so the step's later
         points are compared with the old map (one step of delay, nothing lost: they go to
         clusters or Q_bad and are used later).
+
+        ``candidates`` (ascending indices), when given, limits the comparison to those
+        polynomials. It must hold every polynomial that could lie within σ_k of a point (ε is
+        never below the distance to a curve's bounding box, so the boxes within σ_k of the
+        points' box will do): then every point is classified exactly as against the whole
+        map; only ``errors`` reads inf for a point no candidate is near.
         """
         if len(polys) != len(self.ids) or len(c0s) != len(self.ids):
             raise ValueError(f"{len(polys)} polys / {len(c0s)} c0s for {len(self.ids)} landmarks")
@@ -209,10 +216,24 @@ class MapBook:
             return result
         if len({p.beam for p in points}) != len(points):
             raise ValueError("points must carry distinct beam indices (use store_beams)")
-        err = approximation_error(np.array([p.xy for p in points]), polys, c0s, squared)
+        xy = np.array([p.xy for p in points])  # (P, 2)
+        if candidates is None:
+            err = approximation_error(xy, polys, c0s, squared)  # (P, n)
+            index = np.arange(len(polys))
+        else:
+            packed = pack(polys)
+            subset = PackedPolynomials(
+                packed.variate[candidates],
+                packed.shape[candidates],
+                packed.lo[candidates],
+                packed.hi[candidates],
+            )
+            err = approximation_error(xy, subset, np.asarray(c0s)[candidates], squared)
+            index = candidates
         for i, point in enumerate(points):
-            best = int(np.argmin(err[i])) if len(polys) else -1
-            eps = float(err[i, best]) if best >= 0 else np.inf
+            k = int(np.argmin(err[i])) if index.size else -1
+            best = int(index[k]) if k >= 0 else -1
+            eps = float(err[i, k]) if k >= 0 else np.inf
             result.errors[point.beam] = eps
             if eps <= rho:
                 result.good[point.beam] = best

@@ -137,7 +137,13 @@ class PolySlam:
             self.mean[:3], pose_cov, ranges, self.beam_angles, cfg.range_sigma, self.step_count
         )
         assoc = self.book.associate(
-            points, self._arrays.packed(), self.mean[3:], rho, sigma, cfg.squared_error
+            points,
+            self._arrays.packed(),
+            self.mean[3:],
+            rho,
+            sigma,
+            cfg.squared_error,
+            candidates=self._association_candidates(points, sigma),
         )
         if self.profile is not None:
             lap = self._lap("association", lap)
@@ -172,6 +178,17 @@ class PolySlam:
             divergence_f=f,
             diverging=self.diverging,
         )
+
+    def _association_candidates(self, points: Sequence[StoredPoint], sigma: float) -> np.ndarray:
+        """Landmarks whose box lies within σ_k (in metres) of this step's points' box: the
+        only ones a point can be good or bad for (see MapBook.associate)."""
+        if not points:
+            return np.zeros(0, dtype=int)
+        xy = np.array([p.xy for p in points])  # (P, 2)
+        box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
+        reach = math.sqrt(sigma) if self.config.squared_error else sigma  # ε² ≤ σ_k there
+        reach = reach * (1.0 + 1e-9) + 1e-12  # ≥ the threshold despite rounding
+        return self._arrays.near(box, self.mean[3:], reach)
 
     def _predict(self, odometry: np.ndarray) -> None:
         """EKF prediction into the working arrays (the mean is small: a fresh copy)."""

@@ -21,6 +21,7 @@ from polyslam_env.slam.fitting import (
     polynomial_points,
     stored_points,
 )
+from polyslam_env.slam.landmarks import LandmarkArrays
 from polyslam_env.slam.polynomial import Polynomial
 
 
@@ -73,6 +74,40 @@ def test_approximation_error__matches_brute_force(polys: list[Polynomial], seed:
     np.testing.assert_allclose(
         approximation_error(pts, polys, c0s, squared=True), ref**2, rtol=1e-9, atol=1e-12
     )
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    polys=st.lists(poly_strategy, min_size=1, max_size=8),
+    seed=st.integers(0, 2**32 - 1),
+    squared=st.booleans(),
+)
+def test_associate__box_candidates_classify_like_the_whole_map(
+    polys: list[Polynomial], seed: int, squared: bool
+) -> None:
+    # PolySlam hands associate only the landmarks whose box lies within σ_k of the points'
+    # box; every point must land in the same case (good / bad / cluster) with the same p*.
+    rng = np.random.default_rng(seed)
+    arrays = LandmarkArrays()
+    for p in polys:
+        arrays.append(p, pivot=0.0, xi_var=0.0, model_var=0.0, fit_half=1.0)
+    c0s = rng.normal(0.0, 1.0, len(polys))
+    rho, sigma = (0.04, 0.3) if not squared else (0.0016, 0.09)
+    pts = [point(rng.uniform(-3.0, 3.0, 2), beam=b) for b in range(5)]
+    xy = np.array([q.xy for q in pts])
+    box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
+    reach = np.sqrt(sigma) if squared else sigma
+    candidates = arrays.near(box, c0s, reach * (1 + 1e-9) + 1e-12)
+    results = []
+    for cand in (None, candidates):
+        book = MapBook(eps_m=50, eps_z=50)  # no refits or new landmarks: compare the cases
+        for _ in polys:
+            book.add_landmark()
+        res = book.associate(pts, arrays.packed(), c0s, rho, sigma, squared, candidates=cand)
+        bad = {lid: [q.beam for q in qs] for lid, qs in book.qbad.items() if qs}
+        clustered = sorted(q.beam for c in book.clusters for q in c)
+        results.append((res.good, res.good_ids, bad, clustered))
+    assert results[0] == results[1]
 
 
 def test_approximation_error__empty_map_has_no_columns() -> None:
