@@ -277,12 +277,85 @@ def distance_to_boundary(points: np.ndarray, layout: Layout) -> np.ndarray:  # (
 
 
 # -- mapping error and completeness -----------------------------------------------------------
+def _horner(coeffs: np.ndarray, xi: np.ndarray) -> np.ndarray:  # (P, k)
+    """Row-wise ``polyval``: coefficients (P, m+1) in increasing powers at ξ (P, k).
+
+    The operations of ``np.polynomial.polynomial.polyval`` in the same order, so every value
+    is bit-identical to it. Rows of lower order are padded with zero leading coefficients:
+    ``0 + (±0)·ξ`` stays zero until the first true coefficient, which is then added exactly.
+    """
+    value = coeffs[:, -1:] + xi * 0
+    for i in range(2, coeffs.shape[1] + 1):
+        value = coeffs[:, -i, None] + value * xi
+    return np.asarray(value)
+
+
+def sample_arclength_batch(
+    polys: Sequence[Polynomial], step: float, dense: int = 512
+) -> list[np.ndarray]:
+    """``[p.sample_arclength(step, dense) for p in polys]``, bit for bit, in one numpy pass.
+
+    The completeness resamples a whole map whenever it changes, and one polynomial at a time
+    the overhead of ~15 numpy calls each dominates. Every operation here is elementwise or runs
+    along one row (linspace, Horner, diff, cumsum) exactly as in
+    :meth:`~polyslam_env.slam.polynomial.Polynomial.sample_arclength`, so the points are the
+    same; only ``np.interp`` runs per polynomial. A zero extent (or a ξ step that underflows
+    to 0, which linspace treats apart) takes the polynomial's own method.
+    """
+    out = [np.zeros((0, 2))] * len(polys)
+    batch: list[Polynomial] = []  # (Q) the polynomials done here, and their places in out
+    places: list[int] = []
+    for k, poly in enumerate(polys):
+        if (poly.hi - poly.lo) / (dense - 1) != 0.0:
+            batch.append(poly)
+            places.append(k)
+        else:
+            out[k] = poly.sample_arclength(step, dense)
+    if not batch:
+        return out
+    coeffs = np.zeros((len(batch), max(len(p.coeffs) for p in batch)))  # (Q, m+1), zero-padded
+    for row, poly in enumerate(batch):
+        coeffs[row, : len(poly.coeffs)] = poly.coeffs
+    lo = np.array([p.lo for p in batch])  # (Q,)
+    hi = np.array([p.hi for p in batch])
+    # linspace(lo, hi, dense) per row, as numpy computes it: k · ((hi − lo) / (dense − 1)) + lo,
+    # the last one set to hi (a linspace call with array ends is slower than this).
+    xi = np.arange(dense, dtype=float) * ((hi - lo) / (dense - 1))[:, None] + lo[:, None]
+    xi[:, -1] = hi  # (Q, dense)
+    eta = _horner(coeffs, xi)
+    # Arc length: the norm of each (Δx, Δy) is sqrt(Δx² + Δy²) (add.reduce of two squares),
+    # and Δξ² + Δη² is the same sum whichever of ξ, η is x.
+    dxi, deta = np.diff(xi, axis=1), np.diff(eta, axis=1)  # (Q, dense − 1)
+    arc = np.zeros((len(batch), dense))  # (Q, dense)
+    np.cumsum(np.sqrt(dxi * dxi + deta * deta), axis=1, out=arc[:, 1:])
+    total = arc[:, -1]  # (Q,)
+    counts = np.maximum(np.floor(total / step).astype(np.intp) + 1, 2)  # (Q,)
+    # linspace(0, total, n) per row, the same way: k · (total / (n − 1)) + 0, the last = total.
+    owner = np.repeat(np.arange(len(batch)), counts)  # (M,)
+    ends = np.cumsum(counts)
+    index = np.arange(len(owner)) - np.repeat(ends - counts, counts)  # (M,) within its row
+    targets = index.astype(float) * (total / (counts - 1))[owner] + 0.0
+    targets[ends - 1] = total
+    xi_q = np.concatenate(
+        [
+            np.interp(targets[end - n : end], arc[row], xi[row])
+            for row, (n, end) in enumerate(zip(counts.tolist(), ends.tolist(), strict=True))
+        ]
+    )  # (M,)
+    eta_q = _horner(coeffs[owner], xi_q[:, None])[:, 0]
+    second = np.array([p.variate == 2 for p in batch])[owner]  # (M,): ξ is y
+    pts = np.column_stack([np.where(second, eta_q, xi_q), np.where(second, xi_q, eta_q)])
+    for k, n, end in zip(places, counts.tolist(), ends.tolist(), strict=True):
+        out[k] = pts[end - n : end]
+    return out
+
+
 def map_points(
     polys: Sequence[Polynomial], start_pose: np.ndarray, step: float = 0.01
 ) -> list[np.ndarray]:
     """Each polynomial's points every ``step`` of arc length, in the absolute frame: (n_q, 2)."""
     x0 = _check_pose(start_pose)
-    return [transform_points(p.sample_arclength(step), x0) for p in polys]
+    return [transform_points(p, x0) for p in sample_arclength_batch(polys, step)]
 
 
 def map_distances(

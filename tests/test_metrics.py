@@ -385,3 +385,30 @@ def test_time_to_fraction__first_crossing_or_none() -> None:
     assert M.time_to_fraction(series, 0.5) == 2
     assert M.time_to_fraction(series, 0.9) == 4
     assert M.time_to_fraction(series, 0.95) is None
+
+
+def _random_polynomials(rng: np.random.Generator, count: int) -> list[Polynomial]:
+    """Orders 1–4, both variates, a few zero extents."""
+    scale = np.array([1.0, 1.0, 0.3, 0.1, 0.05])
+    polys = []
+    for _ in range(count):
+        m = int(rng.integers(1, 5))
+        lo = rng.uniform(-3, 3)
+        hi = lo + (0.0 if rng.uniform() < 0.1 else rng.uniform(0, 3))
+        polys.append(
+            Polynomial(int(rng.integers(1, 3)), rng.normal(size=m + 1) * scale[: m + 1], lo, hi)
+        )
+    return polys
+
+
+@pytest.mark.parametrize("step", [0.01, 0.05])
+def test_sample_arclength_batch__bit_identical_to_each_polynomials_own_sampling(
+    step: float,
+) -> None:
+    rng = np.random.default_rng(8)
+    for count in (0, 1, 2, 7, 30):
+        polys = _random_polynomials(rng, count)
+        batch = M.sample_arclength_batch(polys, step)
+        assert len(batch) == len(polys)
+        for poly, pts in zip(polys, batch, strict=True):
+            assert np.array_equal(pts, poly.sample_arclength(step))
