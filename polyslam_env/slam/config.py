@@ -35,6 +35,7 @@ class SlamConfig(Config):
     tangent_min_deg: float = 10.0  # beams hitting closer to tangent than this are skipped
     squared_error: bool = False  # the paper's squared end-point distance in association
     shape_follows_pose: bool = True  # shapes move with the pose error in ∂h/∂pose (robot.py)
+    blas_threads: int = 1  # BLAS threads during a step (polyslam_env/blas.py); 0: leave as is
 
     def validate(self) -> None:
         if not 1 <= self.order <= 5:
@@ -71,6 +72,7 @@ class SlamConfig(Config):
             check_positive(f"slam.p0_sigma[{i}]", s)
         check_range("slam.gate_prob", self.gate_prob, 0.5, 1.0)
         check_range("slam.tangent_min_deg", self.tangent_min_deg, 0.0, 89.0)
+        check_non_negative("slam.blas_threads", self.blas_threads)
 
     @property
     def p0(self) -> np.ndarray:  # (3, 3)

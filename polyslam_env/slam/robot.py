@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from polyslam_env.blas import blas_threads
 from polyslam_env.slam import beamcast, ekf
 from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
 from polyslam_env.slam.config import SlamConfig
@@ -121,7 +122,14 @@ class PolySlam:
 
     # -- one step -----------------------------------------------------------------------------
     def step(self, odometry: np.ndarray, ranges: np.ndarray) -> SlamStepInfo:
-        """Advance by one control period given odometry (3,) and range readings (B,)."""
+        """Advance by one control period given odometry (3,) and range readings (B,).
+
+        BLAS runs on ``config.blas_threads`` threads meanwhile (see :mod:`polyslam_env.blas`).
+        """
+        with blas_threads(self.config.blas_threads):
+            return self._step(odometry, ranges)
+
+    def _step(self, odometry: np.ndarray, ranges: np.ndarray) -> SlamStepInfo:
         start = lap = time.perf_counter()
         cfg = self.config
         self.step_count += 1
