@@ -25,7 +25,13 @@ from polyslam_env.comms.exchange import ExchangeStep, RendezvousExchange
 from polyslam_env.env_config import EnvConfig, resolve_config
 from polyslam_env.env_metrics import RobotHistory, final_robot_metrics, team_metrics
 from polyslam_env.errors import MapFileError
-from polyslam_env.observations import BeliefGrid, MapSampler, ObservationEncoder, RobotView
+from polyslam_env.observations import (
+    BeliefGrid,
+    MapSampler,
+    ObservationEncoder,
+    RobotView,
+    sweep_beliefs,
+)
 from polyslam_env.render_state import RenderState
 from polyslam_env.seeding import make_rngs
 from polyslam_env.slam.robot import PolySlam, SlamStepInfo
@@ -410,14 +416,16 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     def _observe(
         self, agents: list[str], estimates: list[tuple[np.ndarray, np.ndarray]]
     ) -> dict[str, Obs]:
-        out: dict[str, Obs] = {}
-        for agent in agents:
-            i = self._index[agent]
-            pose, cov = estimates[i]
-            if self.world.active[i]:
-                self._beliefs[i].sweep(pose, self._angles, self._scans[i])
-            out[agent] = self._encoder.encode(self._view(i, pose, cov))
-        return out
+        robots = [self._index[agent] for agent in agents]
+        sweeping = [i for i in robots if self.world.active[i]]
+        if sweeping:  # each robot's beams into its own belief grid, with its estimated pose
+            poses = np.array([estimates[i][0] for i in sweeping])  # (K, 3)
+            grids = [self._beliefs[i] for i in sweeping]
+            sweep_beliefs(grids, poses, self._angles, self._scans[sweeping])
+        return {
+            agent: self._encoder.encode(self._view(i, *estimates[i]))
+            for agent, i in zip(agents, robots, strict=True)
+        }
 
     def _view(self, i: int, pose: np.ndarray, cov: np.ndarray) -> RobotView:
         """What robot i knows, with its estimated pose (3,) and covariance (3, 3)."""

@@ -14,6 +14,7 @@ channel state into the vector (or grid + vector) observation, and owns the space
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +25,7 @@ from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.sensors import Detection
 
-__all__ = ["BeliefGrid", "MapSampler", "ObservationEncoder", "RobotView"]
+__all__ = ["BeliefGrid", "MapSampler", "ObservationEncoder", "RobotView", "sweep_beliefs"]
 
 #: Values of the one-channel local map in vector mode.
 FREE, UNKNOWN, OCCUPIED = 0.0, 0.5, 1.0
@@ -59,27 +60,43 @@ class BeliefGrid:
     def sweep(self, pose: np.ndarray, angles: np.ndarray, ranges: np.ndarray) -> None:
         """Mark the beams of one scan from ``pose`` (3,): free up to half a cell short of each
         hit (or to ``max_range`` without return), and the hit cells."""
-        finite = np.isfinite(ranges)  # (B,)
-        r = np.fmin(ranges, self.max_range)  # (B,); no return (inf) → max_range
-        length = np.where(finite, np.maximum(r - 0.5 * self.resolution, 0.0), r)
-        phi = pose[2] + angles  # (B,)
-        # Each beam's S free samples and its end point (used only for hits) in one array.
-        t = np.empty((len(r), self._t.size + 1))  # (B, S + 1)
-        np.multiply(length[:, None], self._t, out=t[:, :-1])
-        t[:, -1] = r
-        x = pose[0] + t * np.cos(phi)[:, None]  # (B, S + 1)
-        y = pose[1] + t * np.sin(phi)[:, None]
-        col = np.floor((x - self.origin) / self.resolution).astype(np.intp)
-        row = np.floor((y - self.origin) / self.resolution).astype(np.intp)
-        inside = (row.view(np.uintp) < self.n) & (col.view(np.uintp) < self.n)  # see _flat_cells
-        flat = row * self.n + col  # (B, S + 1)
-        self.free.reshape(-1)[flat[:, :-1][inside[:, :-1]]] = True
-        self.hit.reshape(-1)[flat[:, -1][inside[:, -1] & finite]] = True
+        sweep_beliefs([self], pose[None], angles, ranges[None])
 
     def lookup(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(free, hit) (M,) at points (M, 2); False outside the grid."""
         flat, inside = self._flat_cells(points)
         return self.free.reshape(-1)[flat] & inside, self.hit.reshape(-1)[flat] & inside
+
+
+def sweep_beliefs(
+    grids: Sequence[BeliefGrid], poses: np.ndarray, angles: np.ndarray, ranges: np.ndarray
+) -> None:
+    """:meth:`BeliefGrid.sweep` of several robots' scans into their own grids, in one numpy
+    pass (the grids share size, resolution and range): poses (K, 3), ranges (K, B).
+
+    With a handful of beams per robot the cost is numpy call overhead, so doing all robots
+    together costs little more than one; the cells are those of separate sweeps.
+    """
+    g = grids[0]
+    if any((h.n, h.resolution, h.max_range) != (g.n, g.resolution, g.max_range) for h in grids):
+        raise ValueError("sweep_beliefs needs grids of the same size, resolution and range")
+    finite = np.isfinite(ranges)  # (K, B)
+    r = np.fmin(ranges, g.max_range)  # (K, B); no return (inf) → max_range
+    length = np.where(finite, np.maximum(r - 0.5 * g.resolution, 0.0), r)
+    phi = poses[:, 2:3] + angles  # (K, B)
+    # Each beam's S free samples and its end point (used only for hits) in one array.
+    t = np.empty((*r.shape, g._t.size + 1))  # (K, B, S + 1)
+    np.multiply(length[..., None], g._t, out=t[..., :-1])
+    t[..., -1] = r
+    x = poses[:, 0, None, None] + t * np.cos(phi)[..., None]  # (K, B, S + 1)
+    y = poses[:, 1, None, None] + t * np.sin(phi)[..., None]
+    col = np.floor((x - g.origin) / g.resolution).astype(np.intp)
+    row = np.floor((y - g.origin) / g.resolution).astype(np.intp)
+    inside = (row.view(np.uintp) < g.n) & (col.view(np.uintp) < g.n)  # see _flat_cells
+    flat = row * g.n + col  # (K, B, S + 1)
+    for k, grid in enumerate(grids):
+        grid.free.reshape(-1)[flat[k, :, :-1][inside[k, :, :-1]]] = True
+        grid.hit.reshape(-1)[flat[k, :, -1][inside[k, :, -1] & finite[k]]] = True
 
 
 class MapSampler:

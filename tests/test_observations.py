@@ -5,9 +5,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from polyslam_env.env import parallel_env
-from polyslam_env.observations import BeliefGrid
+from polyslam_env.observations import BeliefGrid, sweep_beliefs
 
 
 def _brute_force_sweep(
@@ -55,6 +56,23 @@ def test_belief_grid__sweep_matches_brute_force_samples() -> None:
     assert np.array_equal(grid.free, expected_free)
     assert np.array_equal(grid.hit, expected_hit)
     assert grid.free.any() and grid.hit.any()
+
+
+def test_sweep_beliefs__several_robots_at_once_equal_separate_sweeps() -> None:
+    rng = np.random.default_rng(5)
+    angles = np.deg2rad([90.0, 45.0, 0.0, -45.0, -90.0])
+    together = [BeliefGrid(4.0, 0.1, 1.5) for _ in range(3)]
+    apart = [BeliefGrid(4.0, 0.1, 1.5) for _ in range(3)]
+    for _ in range(10):
+        poses = np.column_stack([rng.uniform(-2.5, 2.5, (3, 2)), rng.uniform(-4, 4, 3)])
+        ranges = np.where(rng.uniform(size=(3, 5)) < 0.3, np.inf, rng.uniform(0, 2, (3, 5)))
+        sweep_beliefs(together, poses, angles, ranges)
+        for grid, pose, r in zip(apart, poses, ranges, strict=True):
+            grid.sweep(pose, angles, r)
+    for a, b in zip(together, apart, strict=True):
+        assert np.array_equal(a.free, b.free) and np.array_equal(a.hit, b.hit)
+    with pytest.raises(ValueError, match="same size"):
+        sweep_beliefs([together[0], BeliefGrid(4.0, 0.2, 1.5)], poses[:2], angles, ranges[:2])
 
 
 def test_observations__vector_mode_folds_the_grid_mode_channels() -> None:
