@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -67,6 +68,63 @@ def approximation_error(
     )
     err = np.where((xi >= lo) & (xi <= hi), vertical, d_end)
     return err**2 if squared else err
+
+
+class ShapeRow(Protocol):
+    """What :func:`nearest_by_error` reads of a landmark (e.g. a LandmarkRow)."""
+
+    @property
+    def variate(self) -> int: ...
+    @property
+    def shape(self) -> tuple[float, ...]: ...  # (0, b_1, …, b_m)
+    @property
+    def lo(self) -> float: ...
+    @property
+    def hi(self) -> float: ...
+
+
+def nearest_by_error(
+    xy: Sequence[Sequence[float]],
+    candidates: Sequence[int],
+    rows: Sequence[ShapeRow],
+    c0s: Sequence[float],
+    squared: bool = False,
+) -> list[tuple[int, float]]:
+    """Per point, (index of the landmark with the smallest approximation error, that error)
+    over ``candidates``, or (−1, inf) without candidates: the argmin of
+    :func:`approximation_error` in plain floats, for a handful of points and landmarks
+    (the SLAM's per-step association), where numpy's per-call cost would dominate."""
+    ends = []
+    for j in candidates:
+        row = rows[j]
+        ends.append((_value(row.shape, c0s[j], row.lo), _value(row.shape, c0s[j], row.hi)))
+    out = []
+    for x, y in xy:
+        best, best_err = -1, math.inf
+        for k, j in enumerate(candidates):
+            row = rows[j]
+            xi, eta = (x, y) if row.variate == 1 else (y, x)
+            if row.lo <= xi <= row.hi:
+                err = abs(eta - _value(row.shape, c0s[j], xi))
+            else:
+                eta_lo, eta_hi = ends[k]
+                err = min(
+                    math.hypot(xi - row.lo, eta - eta_lo), math.hypot(xi - row.hi, eta - eta_hi)
+                )
+            if squared:
+                err = err * err
+            if err < best_err:
+                best, best_err = j, err
+        out.append((best, best_err))
+    return out
+
+
+def _value(shape: tuple[float, ...], c0: float, x: float) -> float:
+    """c0 + B(x) for a shape (0, b_1, …, b_m), by Horner's scheme (as :func:`_horner`)."""
+    value = shape[-1]
+    for b in shape[-2:0:-1]:
+        value = value * x + b
+    return value * x + c0
 
 
 def _horner(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -193,6 +251,7 @@ class MapBook:
         sigma: float,
         squared: bool = False,
         candidates: np.ndarray | None = None,
+        rows: Sequence[ShapeRow] | None = None,
     ) -> AssociationResult:
         """Classify this step's beam points against the map as it stood at the step's start.
 
@@ -205,7 +264,9 @@ class MapBook:
         polynomials. It must hold every polynomial that could lie within σ_k of a point (ε is
         never below the distance to a curve's bounding box, so the boxes within σ_k of the
         points' box will do): then every point is classified exactly as against the whole
-        map; only ``errors`` reads inf for a point no candidate is near.
+        map; only ``errors`` reads inf for a point no candidate is near. With ``rows`` (the
+        same polynomials as plain floats, e.g. ``LandmarkArrays.rows()``) the candidates are
+        compared in floats (:func:`nearest_by_error`) instead of numpy arrays.
         """
         if len(polys) != len(self.ids) or len(c0s) != len(self.ids):
             raise ValueError(f"{len(polys)} polys / {len(c0s)} c0s for {len(self.ids)} landmarks")
@@ -216,24 +277,8 @@ class MapBook:
             return result
         if len({p.beam for p in points}) != len(points):
             raise ValueError("points must carry distinct beam indices (use store_beams)")
-        xy = np.array([p.xy for p in points])  # (P, 2)
-        if candidates is None:
-            err = approximation_error(xy, polys, c0s, squared)  # (P, n)
-            index = np.arange(len(polys))
-        else:
-            packed = pack(polys)
-            subset = PackedPolynomials(
-                packed.variate[candidates],
-                packed.shape[candidates],
-                packed.lo[candidates],
-                packed.hi[candidates],
-            )
-            err = approximation_error(xy, subset, np.asarray(c0s)[candidates], squared)
-            index = candidates
-        for i, point in enumerate(points):
-            k = int(np.argmin(err[i])) if index.size else -1
-            best = int(index[k]) if k >= 0 else -1
-            eps = float(err[i, k]) if k >= 0 else np.inf
+        nearest = self._nearest(points, polys, c0s, squared, candidates, rows)
+        for point, (best, eps) in zip(points, nearest, strict=True):
             result.errors[point.beam] = eps
             if eps <= rho:
                 result.good[point.beam] = best
@@ -245,6 +290,39 @@ class MapBook:
                 if cluster is not None:
                     result.new_landmarks.append(NewLandmarkRequest(cluster))
         return result
+
+    @staticmethod
+    def _nearest(
+        points: Sequence[StoredPoint],
+        polys: PolynomialsLike,
+        c0s: Sequence[float] | np.ndarray,
+        squared: bool,
+        candidates: np.ndarray | None,
+        rows: Sequence[ShapeRow] | None,
+    ) -> list[tuple[int, float]]:
+        """(p*, ε) per point over the candidates (all polynomials when None)."""
+        if candidates is not None and rows is not None:
+            xy = [p.xy.tolist() for p in points]
+            return nearest_by_error(xy, candidates.tolist(), rows, list(c0s), squared)
+        xy_all = np.array([p.xy for p in points])  # (P, 2)
+        if candidates is None:
+            err = approximation_error(xy_all, polys, c0s, squared)  # (P, n)
+            index = np.arange(len(polys))
+        else:
+            packed = pack(polys)
+            subset = PackedPolynomials(
+                packed.variate[candidates],
+                packed.shape[candidates],
+                packed.lo[candidates],
+                packed.hi[candidates],
+            )
+            err = approximation_error(xy_all, subset, np.asarray(c0s)[candidates], squared)
+            index = candidates
+        out = []
+        for i in range(len(points)):
+            k = int(np.argmin(err[i])) if index.size else -1
+            out.append((int(index[k]), float(err[i, k])) if k >= 0 else (-1, np.inf))
+        return out
 
     def _add_bad(self, landmark_id: int, point: StoredPoint, result: AssociationResult) -> None:
         """Add to Q_bad; past ε_M points, request (or extend this step's) refit and empty it."""

@@ -8,6 +8,7 @@ Landmark i's c0 sits at state index 3+i.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -55,31 +56,48 @@ def predict(
     Landmarks are static, so only the pose block (F P_pp Fᵀ + L W Lᵀ) and the pose–landmark
     cross-covariances (F P_pl) change: O(n) arithmetic (plus the copy that keeps it pure).
     """
-    odometry = np.asarray(odometry, dtype=float)
-    F, L = motion_jacobians(mean, odometry)
     new_mean = mean.astype(float, copy=True)
-    new_mean[:3] = compose(mean[:3], odometry)
     new_cov = cov.astype(float, copy=True)
-    new_cov[:3, :3] = _symmetrise(F @ cov[:3, :3] @ F.T + L @ W @ L.T)
-    cross = F @ cov[:3, 3:]  # (3, n)
-    new_cov[:3, 3:] = cross
-    new_cov[3:, :3] = cross.T
+    predict_inplace(new_mean, new_cov, odometry, W)
     return new_mean, new_cov
 
 
 def predict_inplace(mean: np.ndarray, cov: np.ndarray, odometry: np.ndarray, W: np.ndarray) -> None:
     """:func:`predict` writing into ``mean`` (3+n,) and ``cov`` (3+n, 3+n) (float arrays).
 
-    Same arithmetic as the pure version, without its (3+n)² copy: for the stateful caller
-    whose per-step cost should stay O(n) in the prediction.
+    Without the pure version's (3+n)² copy, for the stateful caller whose per-step cost
+    should stay O(n). F = I + a·e₀e₂ᵀ + b·e₁e₂ᵀ (see :func:`motion_jacobians`), so F P_pl
+    adds a and b times the heading row to the position rows, and the 3×3 pose block is
+    done in plain floats (symmetric by construction).
     """
-    odometry = np.asarray(odometry, dtype=float)
-    F, L = motion_jacobians(mean, odometry)
-    mean[:3] = compose(mean[:3], odometry)
-    cross = F @ cov[:3, 3:]  # (3, n), from the old cross-covariances
-    cov[:3, :3] = _symmetrise(F @ cov[:3, :3] @ F.T + L @ W @ L.T)
-    cov[:3, 3:] = cross
-    cov[3:, :3] = cross.T
+    x, y, theta = mean[:3].tolist()
+    dx, dy, dtheta = np.asarray(odometry, dtype=float).tolist()
+    c, s = math.cos(theta), math.sin(theta)
+    a, b = -s * dx - c * dy, c * dx - s * dy  # F[0, 2], F[1, 2]
+    mean[0] = x + c * dx - s * dy
+    mean[1] = y + s * dx + c * dy
+    mean[2] = wrap_angle(theta + dtheta)
+    if cov.shape[0] > 3:
+        heading = cov[2, 3:]
+        cov[0, 3:] += a * heading
+        cov[1, 3:] += b * heading
+        cov[3:, 0] = cov[0, 3:]
+        cov[3:, 1] = cov[1, 3:]
+    p = cov[:3, :3].tolist()
+    fp = [
+        [p[0][j] + a * p[2][j] for j in range(3)],
+        [p[1][j] + b * p[2][j] for j in range(3)],
+        p[2],
+    ]
+    fpf = [[row[0] + a * row[2], row[1] + b * row[2], row[2]] for row in fp]  # F P Fᵀ
+    rot = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]  # L
+    w = np.asarray(W, dtype=float).tolist()
+    lw = [[sum(rot[i][k] * w[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
+    for i in range(3):
+        for j in range(i, 3):
+            lwl = sum(lw[i][k] * rot[j][k] for k in range(3))  # (L W Lᵀ)_ij
+            value = 0.5 * ((fpf[i][j] + fpf[j][i]) + 2.0 * lwl) if i != j else fpf[i][i] + lwl
+            cov[i, j] = cov[j, i] = value
 
 
 # -- update -------------------------------------------------------------------------------------

@@ -152,6 +152,7 @@ class PolySlam:
             sigma,
             cfg.squared_error,
             candidates=self._association_candidates(points, sigma),
+            rows=self._arrays.rows(),
         )
         if self.profile is not None:
             lap = self._lap("association", lap)

@@ -12,6 +12,7 @@ from polyslam_env.slam.association import (
     MapBook,
     approximation_error,
     fit_cluster,
+    nearest_by_error,
     qbad_refit_points,
 )
 from polyslam_env.slam.fitting import (
@@ -99,15 +100,44 @@ def test_associate__box_candidates_classify_like_the_whole_map(
     reach = np.sqrt(sigma) if squared else sigma
     candidates = arrays.near(box, c0s, reach * (1 + 1e-9) + 1e-12)
     results = []
-    for cand in (None, candidates):
+    rows = arrays.rows()
+    for cand, as_floats in ((None, None), (candidates, None), (candidates, rows)):
         book = MapBook(eps_m=50, eps_z=50)  # no refits or new landmarks: compare the cases
         for _ in polys:
             book.add_landmark()
-        res = book.associate(pts, arrays.packed(), c0s, rho, sigma, squared, candidates=cand)
+        res = book.associate(
+            pts, arrays.packed(), c0s, rho, sigma, squared, candidates=cand, rows=as_floats
+        )
         bad = {lid: [q.beam for q in qs] for lid, qs in book.qbad.items() if qs}
         clustered = sorted(q.beam for c in book.clusters for q in c)
         results.append((res.good, res.good_ids, bad, clustered))
-    assert results[0] == results[1]
+    assert results[0] == results[1] == results[2]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    polys=st.lists(poly_strategy, min_size=1, max_size=5),
+    seed=st.integers(0, 2**32 - 1),
+    squared=st.booleans(),
+)
+def test_nearest_by_error__is_the_argmin_of_approximation_error(
+    polys: list[Polynomial], seed: int, squared: bool
+) -> None:
+    rng = np.random.default_rng(seed)
+    arrays = LandmarkArrays()
+    for p in polys:
+        arrays.append(p, pivot=0.0, xi_var=0.0, model_var=0.0, fit_half=1.0)
+    pts = rng.uniform(-4.0, 4.0, (6, 2))
+    c0s = rng.normal(0.0, 1.0, len(polys))
+    err = approximation_error(pts, arrays.packed(), c0s, squared)
+    got = nearest_by_error(
+        pts.tolist(), list(range(len(polys))), arrays.rows(), c0s.tolist(), squared
+    )
+    for i, (best, eps) in enumerate(got):
+        # 1e-12: the same formula in floats (libm's hypot may round the last bit differently)
+        assert eps == pytest.approx(err[i].min(), rel=1e-12, abs=1e-15)
+        assert err[i, best] == pytest.approx(err[i].min(), rel=1e-12, abs=1e-15)
+    assert nearest_by_error(pts.tolist(), [], arrays.rows(), c0s.tolist()) == [(-1, np.inf)] * 6
 
 
 def test_approximation_error__empty_map_has_no_columns() -> None:
