@@ -20,6 +20,7 @@ seeded generators. The :func:`run_benchmark` result is a JSON-ready dict.
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass
@@ -432,7 +433,7 @@ def run_benchmark(
     unknown = wanted - set(SECTIONS)
     if unknown:
         raise ValueError(f"sections: unknown {sorted(unknown)}; choose from {SECTIONS}")
-    out: dict[str, Any] = {"plan": asdict(plan), "seed": seed}
+    out: dict[str, Any] = {"plan": asdict(plan), "seed": seed, "machine": machine_info()}
     if "slam" in wanted:
         out["slam"] = [_emit(report, "slam", bench_slam(n, plan, seed)) for n in plan.slam_sizes]
     if "world" in wanted:
@@ -459,7 +460,35 @@ def run_benchmark(
         vec["ratio_to_env"] = _ratio(_rate(vec), _rate(out.get("env", {}).get("full_slam")))
         out["vec"] = _emit(report, "env", vec)
     out["targets"] = targets(out)
+    out["machine"]["load_after"] = _load_average()
     return out
+
+
+def machine_info() -> dict[str, Any]:
+    """What the figures depend on: cores, load (the 1-minute average before and after the
+    run; absolute figures from a loaded machine are slow, the ratios less so), versions and
+    numpy's BLAS threads (the SLAM caps them to ``slam.blas_threads`` while it steps)."""
+    import platform
+
+    from threadpoolctl import threadpool_info
+
+    blas = [f"{lib['internal_api']} ×{lib['num_threads']}" for lib in threadpool_info()
+            if lib["user_api"] == "blas"]  # fmt: skip
+    return {
+        "cpus": os.cpu_count(),
+        "load_before": _load_average(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "pymunk": pymunk.version,
+        "blas": ", ".join(blas) or "unknown",
+    }
+
+
+def _load_average() -> float | None:
+    try:
+        return float(os.getloadavg()[0])
+    except (AttributeError, OSError):  # not on every platform
+        return None
 
 
 def _emit(report: Report, section: str, row: dict[str, Any]) -> dict[str, Any]:

@@ -148,8 +148,11 @@ def test_benchmark_command__quick_json_has_every_section(
         else:
             assert row["ratio_to_mpe"] is None
     assert "ratio_to_env" in data["vec"]
+    machine = data["machine"]
+    assert machine["cpus"] >= 1 and machine["numpy"] and machine["blas"]
+    assert "load_before" in machine and "load_after" in machine
     printed = capsys.readouterr().out
-    for heading in ("SLAM step", "world step", "env steps per second", "target"):
+    for heading in ("SLAM step", "world step", "env steps per second", "target", "machine:"):
         assert heading in printed
 
 

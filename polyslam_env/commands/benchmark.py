@@ -54,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
     results = run_benchmark(plan, args.only or SECTIONS, seed=args.seed, report=printer)
     print()
     print(_format_targets(results["targets"]))
+    print(_format_machine(results["machine"]))
     if args.json:
         print(f"wrote {write_json(args.json, results)}")
     return 0
@@ -121,3 +122,14 @@ def _format_targets(rows: list[dict[str, Any]]) -> str:
         value = "n/a" if r["measured"] is None else f"{r['measured']:.2f}"
         lines.append(f"{r['target']:<32} {value:>10} {r['goal']:>8g}  {met}")
     return "\n".join(lines)
+
+
+def _format_machine(m: dict[str, Any]) -> str:
+    def load(value: float | None) -> str:
+        return "?" if value is None else f"{value:.2f}"
+
+    return (
+        f"machine: {m['cpus']} cpus, load {load(m['load_before'])} → {load(m['load_after'])}"
+        f" (1-min average; a loaded machine slows every figure, ratios less), BLAS {m['blas']},"
+        f" numpy {m['numpy']}, pymunk {m['pymunk']}, Python {m['python']}"
+    )
