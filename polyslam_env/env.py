@@ -450,10 +450,11 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         grid = self.coverage
         poses = self.world.poses
         max_range = self.config.world.range_sensor.max_range
-        cells = {
-            i: grid.beam_cells(poses[i, :2], poses[i, 2] + self._angles, scans[i], max_range)
-            for i in map(int, np.flatnonzero(self.world.active))
-        }
+        active = np.flatnonzero(self.world.active).tolist()
+        scan_cells = grid.scan_cells(
+            poses[active, :2], poses[active, 2:3] + self._angles, scans[active], max_range
+        )
+        cells = dict(zip(active, scan_cells, strict=True))
         # Gains against the grid as it was before this step (counted before anything is marked),
         # so a cell first swept by two robots at once counts for both.
         gains = np.zeros(self.config.num_robots)

@@ -457,7 +457,7 @@ class CoverageGrid:
         self._n_swept_free = 0
         self._free_flat = self.free.reshape(-1)  # (H·W,) views for flat cell ids
         self._swept_flat = self.swept.reshape(-1)
-        self._linspaces: dict[int, np.ndarray] = {}
+        self._linspaces: dict[tuple[int, int], np.ndarray] = {}
 
     def cells_of(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rows, columns (N,) of points (N, 2) and whether each lies inside the grid."""
@@ -468,11 +468,14 @@ class CoverageGrid:
         inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
         return row, col, inside
 
-    def _fractions(self, n: int) -> np.ndarray:  # (n,)
-        """``linspace(0, 1, n)``, cached: only a few ``n`` occur and linspace is slow."""
-        out = self._linspaces.get(n)
+    def _fractions(self, n: int, width: int) -> np.ndarray:  # (width,)
+        """``linspace(0, 1, n)`` padded with 1.0 to ``width`` (a beam's end sampled again, which
+        adds no cell), cached: only a few ``n`` occur and linspace is slow."""
+        out = self._linspaces.get((n, width))
         if out is None:
-            out = self._linspaces[n] = _frozen(np.linspace(0.0, 1.0, n))
+            out = np.ones(width)
+            out[:n] = np.linspace(0.0, 1.0, n)
+            self._linspaces[n, width] = _frozen(out)
         return out
 
     def beam_cells(
@@ -484,25 +487,45 @@ class CoverageGrid:
         Beams are sampled every ≤ res/2, both ends included. Nothing is marked:
         :meth:`new_free_cells` and :meth:`mark` take the result.
         """
+        a = np.asarray(angles, dtype=float).reshape(1, -1)
+        o = np.asarray(origins, dtype=float).reshape(1, -1, 2)
+        r = np.asarray(ranges, dtype=float).reshape(1, -1)
+        return self.scan_cells(o, a, r, max_range)[0]
+
+    def scan_cells(
+        self, origins: np.ndarray, angles: np.ndarray, ranges: np.ndarray, max_range: float
+    ) -> list[np.ndarray]:  # K × (M_k,) flat cell ids, repeats kept
+        """:meth:`beam_cells` of K scans in one numpy pass (a robot's beams are few, so numpy
+        call overhead is most of the cost): ``origins`` (K, 2) or (K, R, 2), ``angles`` and
+        ``ranges`` (K, R). Each scan is sampled as if alone (its own sample count)."""
         if not max_range > 0:
             raise ValueError(f"max_range must be > 0, got {max_range}")
-        o = np.asarray(origins, dtype=float).reshape(-1, 2)
-        a = np.asarray(angles, dtype=float).reshape(-1)
-        r = np.asarray(ranges, dtype=float).reshape(-1)
-        if not (len(o) in (1, len(a)) and len(a) == len(r)):
+        a = np.asarray(angles, dtype=float)
+        r = np.asarray(ranges, dtype=float)
+        o = np.asarray(origins, dtype=float)
+        o = o[:, None, :] if o.ndim == 2 else o  # (K, R or 1, 2)
+        if not (a.ndim == 2 and a.shape == r.shape and o.shape[0] == len(a)) or (
+            o.shape[1] not in (1, a.shape[1])
+        ):
             raise ValueError(f"origins {o.shape}, angles {a.shape}, ranges {r.shape} disagree")
         if (r < 0).any():
             raise ValueError("ranges must be >= 0 (use inf or nan for no return)")
-        length = np.fmin(r, max_range)  # (R,): fmin maps nan (and inf) to max_range
-        n = math.ceil(max(float(length.max(initial=0.0)), 0.0) / (0.5 * self.resolution)) + 1
-        t = length[:, None] * self._fractions(n)  # (R, n), spacing ≤ res/2
+        if len(a) == 0:
+            return []
+        length = np.fmin(r, max_range)  # (K, R): fmin maps nan (and inf) to max_range
+        spacing = 0.5 * self.resolution
+        counts = [math.ceil(max(m, 0.0) / spacing) + 1 for m in length.max(axis=1, initial=0.0)]
+        width = max(counts)
+        frac = np.array([self._fractions(n, width) for n in counts])  # (K, width)
+        t = length[:, :, None] * frac[:, None, :]  # (K, R, width), spacing ≤ res/2
         res, (ox, oy) = self.resolution, self.origin
-        col = np.floor((o[:, 0:1] + t * np.cos(a)[:, None] - ox) / res).astype(np.intp)
-        row = np.floor((o[:, 1:2] + t * np.sin(a)[:, None] - oy) / res).astype(np.intp)
+        col = np.floor((o[..., 0:1] + t * np.cos(a)[..., None] - ox) / res).astype(np.intp)
+        row = np.floor((o[..., 1:2] + t * np.sin(a)[..., None] - oy) / res).astype(np.intp)
         h, w = self.free.shape
         # Negative indices wrap to huge unsigned values, so one comparison per axis suffices.
-        inside = (row.view(np.uintp) < h) & (col.view(np.uintp) < w)  # (R, n)
-        return np.asarray((row * w + col)[inside])
+        inside = (row.view(np.uintp) < h) & (col.view(np.uintp) < w)  # (K, R, width)
+        flat = row * w + col
+        return [flat[k][inside[k]] for k in range(len(flat))]
 
     def new_free_cells(self, cells: np.ndarray) -> int:
         """How many distinct free cells among ``cells`` (flat ids, repeats allowed) nobody has

@@ -372,6 +372,21 @@ def test_coverage_grid__beam_cells_then_mark_equals_sweep() -> None:
         assert np.array_equal(by_sweep.robot_swept[robot], by_parts.robot_swept[robot])
 
 
+def test_coverage_grid__scan_cells_of_several_scans_equal_beam_cells_of_each() -> None:
+    rng = np.random.default_rng(10)
+    grid = M.CoverageGrid(np.ones((30, 40), dtype=bool), (0.0, 0.0), 0.1)
+    origins = rng.uniform(0, 3, (4, 2))
+    angles = rng.uniform(-3, 3, (4, 5))
+    ranges = rng.uniform(0, 1.5, (4, 5))
+    ranges[1] = np.inf  # scans of different lengths get different sample counts
+    ranges[2, :] = 0.05
+    together = grid.scan_cells(origins, angles, ranges, 1.0)
+    for k, cells in enumerate(together):
+        alone = grid.beam_cells(origins[k], angles[k], ranges[k], 1.0)
+        assert np.array_equal(np.unique(cells), np.unique(alone))
+    assert grid.scan_cells(np.zeros((0, 2)), np.zeros((0, 5)), np.zeros((0, 5)), 1.0) == []
+
+
 def test_coverage_grid__rejects_bad_input() -> None:
     with pytest.raises(ValueError, match="boolean"):
         M.CoverageGrid(np.ones((3, 3)), (0.0, 0.0), 0.1)
