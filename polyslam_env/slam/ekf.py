@@ -193,8 +193,7 @@ def update_sparse_inplace(
       result, so nothing is lost to cancellation). BLAS computes Z Zᵀ as an exactly
       symmetric syrk, so P⁺ stays exactly symmetric with no (3+n)² transpose pass: O(n²k).
 
-    S is at most a handful of rows, so K = P Hᵀ S⁻¹ uses its explicit inverse (LAPACK's
-    solve with 3+n right-hand sides costs far more here, for no accuracy that matters).
+    K comes from a solve with S (SPEC §3: ``solve``, not ``inv``).
     """
     PHt = cov[:, :3] @ h_pose.T  # (3+n, k)
     PHt += cov[:, c0_index] * h_c0
@@ -209,7 +208,7 @@ def update_sparse_inplace(
         PHt, S, innovation, r = PHt[:, a], S[np.ix_(a, a)], innovation[a], r[a]
     S = _symmetrise(S)
     S.flat[:: r.size + 1] += r  # + R
-    K = PHt @ np.linalg.inv(S)  # (3+n, k_a)
+    K = np.linalg.solve(S, PHt.T).T  # (3+n, k_a) = P Hᵀ S⁻¹
     mean += K @ innovation
     mean[2] = wrap_angle(mean[2])
     W = PHt - 0.5 * (K @ S)
