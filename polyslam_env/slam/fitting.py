@@ -18,6 +18,7 @@ Points come from three constructors:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -126,17 +127,28 @@ def store_beams(
     range_sigma: float,
     step: int = -1,
 ) -> list[StoredPoint]:
-    """Beam returns of one step as :class:`StoredPoint` s; beams without return are skipped."""
-    pose = np.asarray(pose_pred, dtype=float)
-    r = np.asarray(ranges, dtype=float)
-    u = _beam_directions(pose[2], beam_angles)  # (B, 2)
+    """Beam returns of one step as :class:`StoredPoint` s; beams without return are skipped.
+
+    A handful of beams: plain floats per beam beat numpy's per-call cost. The step's points
+    share one copy of the pose (nothing writes into a stored point's arrays).
+    """
+    pose = np.array(pose_pred, dtype=float)  # a copy
+    x, y, theta = pose[:3].tolist()
     weight = prediction_weight(pose_cov)
-    xy = pose[:2] + r[:, None] * u  # (B, 2)
     sigma = float(range_sigma)
-    return [
-        StoredPoint(xy[i], u[i], sigma, weight, pose.copy(), i, step)
-        for i in np.flatnonzero(np.isfinite(r)).tolist()
-    ]
+    angles = np.asarray(beam_angles, dtype=float).tolist()
+    out = []
+    for i, r in enumerate(np.asarray(ranges, dtype=float).tolist()):
+        if not math.isfinite(r):
+            continue
+        phi = theta + angles[i]
+        c, s = math.cos(phi), math.sin(phi)
+        out.append(
+            StoredPoint(
+                np.array([x + r * c, y + r * s]), np.array([c, s]), sigma, weight, pose, i, step
+            )
+        )
+    return out
 
 
 def beam_points(

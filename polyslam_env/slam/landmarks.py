@@ -81,6 +81,7 @@ class LandmarkArrays:
         self.fit_half = np.zeros(0)  # (n,) half the extent it was fitted over
         self._packed: PackedPolynomials | None = None
         self._rows: list[LandmarkRow] | None = None
+        self.version = 0  # bumped by every change, for caches built on these arrays
 
     def __len__(self) -> int:
         return len(self.variate)
@@ -129,6 +130,7 @@ class LandmarkArrays:
     def _changed(self) -> None:
         self._packed = None
         self._rows = None
+        self.version += 1
 
     # -- views --------------------------------------------------------------------------------
     def packed(self) -> PackedPolynomials:

@@ -88,6 +88,9 @@ class PolySlam:
         self.profile: dict[str, list[float]] | None = None
         self._arrays = LandmarkArrays()  # the same map as arrays, for the hot path
         self._work = np.empty(0)  # scratch for the update's covariance products
+        self._state_version = 0  # bumped whenever the c0s may have changed (updates, exchange)
+        self._boxes_key: tuple[int, int] | None = None
+        self._boxes_cache = np.zeros((0, 4))
         kp0_eig = np.linalg.eigvalsh(config.k_divergence * config.p0)  # (3,) ascending
         self._kp0_norm = float(max(-kp0_eig[0], kp0_eig[-1]))  # ‖K P0‖
         self._kp0_min = float(kp0_eig[0])  # λ_min(K P0)
@@ -193,11 +196,19 @@ class PolySlam:
         only ones a point can be good or bad for (see MapBook.associate)."""
         if not points:
             return np.zeros(0, dtype=int)
-        xy = np.array([p.xy for p in points])  # (P, 2)
-        box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
+        xs, ys = zip(*(p.xy.tolist() for p in points), strict=True)
+        box = np.array([min(xs), max(xs), min(ys), max(ys)])
         reach = math.sqrt(sigma) if self.config.squared_error else sigma  # ε² ≤ σ_k there
         reach = reach * (1.0 + 1e-9) + 1e-12  # ≥ the threshold despite rounding
-        return self._arrays.near(box, self.mean[3:], reach)
+        return boxes_near(self._boxes(), box, reach)
+
+    def _boxes(self) -> np.ndarray:
+        """Bounding boxes (n, 4) of the landmarks at the current c0s, cached until the map or
+        the state changes (the association and an update without map change share them)."""
+        key = (self._arrays.version, self._state_version)
+        if self._boxes_key != key:
+            self._boxes_cache, self._boxes_key = self._arrays.boxes(self.mean[3:]), key
+        return self._boxes_cache
 
     def _predict(self, odometry: np.ndarray) -> None:
         """EKF prediction into the working arrays (the mean is small: a fresh copy)."""
@@ -437,7 +448,7 @@ class PolySlam:
         mean = self.mean
         x, y, theta = float(mean[0]), float(mean[1]), float(mean[2])
         rows = self._arrays.rows()
-        boxes = self._arrays.boxes(mean[3:])  # (n, 4)
+        boxes = self._boxes()  # (n, 4)
         reach = boxes_near(boxes, np.array([x, x, y, y]), self.max_range + REACH_MARGIN)
         hits = beamcast.cast(
             x,
@@ -489,6 +500,7 @@ class PolySlam:
             self.config.gate_prob,
             self._workspace(),
         )
+        self._state_version += 1
         self._nis.extend(v for v in nis.tolist() if math.isfinite(v))
         used = int(accepted.sum())
         if used:  # else the pose did not move
