@@ -355,7 +355,11 @@ def map_points(
 ) -> list[np.ndarray]:
     """Each polynomial's points every ``step`` of arc length, in the absolute frame: (n_q, 2)."""
     x0 = _check_pose(start_pose)
-    return [transform_points(p, x0) for p in sample_arclength_batch(polys, step)]
+    own = sample_arclength_batch(polys, step)
+    if not own:
+        return []
+    # One transform for all points (it is pointwise, so the same numbers as one per polynomial).
+    return np.split(transform_points(np.vstack(own), x0), np.cumsum([len(q) for q in own])[:-1])
 
 
 def map_distances(
