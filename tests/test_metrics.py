@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from polyslam_env import metrics as M
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.polynomial import Polynomial, transform_points
 from polyslam_env.world.layout import Layout, point_segment_distance
 
 SIDE = 4.0
@@ -427,3 +427,11 @@ def test_sample_arclength_batch__bit_identical_to_each_polynomials_own_sampling(
         assert len(batch) == len(polys)
         for poly, pts in zip(polys, batch, strict=True):
             assert np.array_equal(pts, poly.sample_arclength(step))
+
+
+def test_map_points__equal_each_polynomials_samples_moved_to_the_absolute_frame() -> None:
+    polys = _random_polynomials(np.random.default_rng(11), 12)
+    start = np.array([1.5, -0.7, 2.3])
+    for poly, pts in zip(polys, M.map_points(polys, start, 0.05), strict=True):
+        assert np.array_equal(pts, transform_points(poly.sample_arclength(0.05), start))
+    assert M.map_points([], start) == []
