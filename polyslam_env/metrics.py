@@ -459,8 +459,6 @@ class CoverageGrid:
         self.robot_swept: dict[int, np.ndarray] = {}  # robot -> (H, W)
         self.gain = 0  # new free cells of the team in the last sweep
         self._n_swept_free = 0
-        self._free_flat = self.free.reshape(-1)  # (H·W,) views for flat cell ids
-        self._swept_flat = self.swept.reshape(-1)
         self._linspaces: dict[tuple[int, int], np.ndarray] = {}
 
     def cells_of(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -534,7 +532,8 @@ class CoverageGrid:
     def new_free_cells(self, cells: np.ndarray) -> int:
         """How many distinct free cells among ``cells`` (flat ids, repeats allowed) nobody has
         swept yet."""
-        fresh = cells[self._free_flat[cells] & ~self._swept_flat[cells]]  # few, usually none
+        free, swept = self.free.reshape(-1), self.swept.reshape(-1)  # (H·W,) views
+        fresh = cells[free[cells] & ~swept[cells]]  # few, usually none
         return _count_distinct(fresh)
 
     def mark(self, cells: np.ndarray, robot: int | None = None) -> int:
@@ -544,7 +543,7 @@ class CoverageGrid:
         """
         self.gain = self.new_free_cells(cells)
         self._n_swept_free += self.gain
-        self._swept_flat[cells] = True
+        self.swept.reshape(-1)[cells] = True
         if robot is not None:
             mine = self.robot_swept.setdefault(int(robot), np.zeros_like(self.swept))
             mine.reshape(-1)[cells] = True

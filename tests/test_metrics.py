@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -435,3 +436,11 @@ def test_map_points__equal_each_polynomials_samples_moved_to_the_absolute_frame(
     for poly, pts in zip(polys, M.map_points(polys, start, 0.05), strict=True):
         assert np.array_equal(pts, transform_points(poly.sample_arclength(0.05), start))
     assert M.map_points([], start) == []
+
+
+def test_coverage_grid__a_deep_copy_sweeps_its_own_masks() -> None:
+    grid = M.CoverageGrid(np.ones((10, 10), dtype=bool), (0.0, 0.0), 1.0)
+    twin = copy.deepcopy(grid)
+    twin.sweep(np.array([[0.5, 0.5]]), np.array([0.0]), np.array([5.0]), 9.0, robot=0)
+    assert twin.swept.sum() == 6 and twin.coverage == pytest.approx(0.06)
+    assert not grid.swept.any() and grid.coverage == 0.0
