@@ -212,16 +212,14 @@ class World:
         cmd = np.asarray(commands, dtype=float)
         if cmd.shape != (self.num_robots, 2):
             raise ValueError(f"commands: expected shape ({self.num_robots}, 2), got {cmd.shape}")
-        bad = ~np.all(np.isfinite(cmd), axis=1)
-        if bad.any():
-            i = int(np.argmax(bad))
+        if not np.isfinite(cmd).all():
+            i = int(np.argmax(~np.isfinite(cmd).all(axis=1)))
             raise ValueError(f"commands[{i}] (robot_{i}): not finite, got {tuple(cmd[i])}")
         rc = self.config.robot
         v_lo = -rc.v_max if rc.allow_reverse else 0.0
-        out = np.column_stack(
-            [np.clip(cmd[:, 0], v_lo, rc.v_max), np.clip(cmd[:, 1], -rc.omega_max, rc.omega_max)]
-        )
-        out[~self.active] = 0.0
+        out = np.clip(cmd, (v_lo, -rc.omega_max), (rc.v_max, rc.omega_max))  # per column
+        if not self.active.all():
+            out[~self.active] = 0.0
         return out
 
     def step(self, commands: np.ndarray) -> StepResult:
