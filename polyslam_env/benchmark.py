@@ -391,7 +391,33 @@ def bench_vec(plan: Plan, seed: int = 0, num_envs: int = 2) -> dict[str, Any]:
         "num_envs": num_envs,
         "processes": num_envs,
         "steps_per_s": rate.scaled(num_envs).to_dict(),
+        "machine_speedup": parallel_speedup(num_envs),
     }
+
+
+def _small_numpy_work(n: int) -> float:
+    """Seconds for ``n`` numpy operations on 5-element arrays: the env step's kind of work."""
+    start = time.perf_counter()
+    a = np.zeros(5)
+    for _ in range(n):
+        a = a + 1.0
+    return time.perf_counter() - start
+
+
+def parallel_speedup(processes: int = 2, n: int = 200_000) -> float:
+    """How much faster ``processes`` copies of small-array numpy work finish side by side than
+    one after another, in fresh processes (ideal: ``processes``). The vectorised env can gain
+    no more than this: on a VM whose vCPUs share a physical core, numpy-heavy processes slow
+    each other down even when pure Python ones do not."""
+    import multiprocessing
+
+    with multiprocessing.get_context("spawn").Pool(processes) as pool:
+        pool.map(_small_numpy_work, [1000] * processes)  # start-up, imports
+        alone = sum(pool.apply(_small_numpy_work, (n,)) for _ in range(processes))
+        start = time.perf_counter()
+        pool.map(_small_numpy_work, [n] * processes, chunksize=1)
+        together = time.perf_counter() - start
+    return alone / together
 
 
 def bench_mpe(plan: Plan, seed: int = 0) -> dict[str, Any]:

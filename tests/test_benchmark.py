@@ -148,6 +148,8 @@ def test_benchmark_command__quick_json_has_every_section(
         else:
             assert row["ratio_to_mpe"] is None
     assert "ratio_to_env" in data["vec"]
+    if data["vec"]["installed"]:
+        assert data["vec"]["machine_speedup"] > 0  # side by side / one after another
     machine = data["machine"]
     assert machine["cpus"] >= 1 and machine["numpy"] and machine["blas"]
     assert "load_before" in machine and "load_after" in machine
