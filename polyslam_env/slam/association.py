@@ -20,7 +20,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 
@@ -33,7 +32,7 @@ from polyslam_env.slam.fitting import (
     polynomial_points,
     stored_points,
 )
-from polyslam_env.slam.measurement import PackedPolynomials, PolynomialsLike, pack
+from polyslam_env.slam.measurement import PackedPolynomials, PolynomialsLike, ShapeRow, pack
 from polyslam_env.slam.polynomial import Polynomial
 
 
@@ -68,19 +67,6 @@ def approximation_error(
     )
     err = np.where((xi >= lo) & (xi <= hi), vertical, d_end)
     return err**2 if squared else err
-
-
-class ShapeRow(Protocol):
-    """What :func:`nearest_by_error` reads of a landmark (e.g. a LandmarkRow)."""
-
-    @property
-    def variate(self) -> int: ...
-    @property
-    def shape(self) -> tuple[float, ...]: ...  # (0, b_1, …, b_m)
-    @property
-    def lo(self) -> float: ...
-    @property
-    def hi(self) -> float: ...
 
 
 def nearest_by_error(

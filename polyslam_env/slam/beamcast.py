@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import NamedTuple, Protocol
+from typing import NamedTuple
 
 from polyslam_env.slam.measurement import (
     DEGREE_DROP_TOL,
@@ -28,6 +28,7 @@ from polyslam_env.slam.measurement import (
     POLISH_MAX,
     REAL_TOL,
     STIFF_TOL,
+    ShapeRow,
 )
 
 NAN = math.nan
@@ -35,19 +36,6 @@ NAN = math.nan
 #: error of any accepted root (the closed forms plus Newton are accurate to ~1e-9 m).
 BOX_MARGIN = 1e-3
 _TINY = 2.2250738585072014e-308  # smallest normal float: np.finfo(float).tiny
-
-
-class ShapeRow(Protocol):
-    """What :func:`cast` reads of a landmark."""
-
-    @property
-    def variate(self) -> int: ...
-    @property
-    def shape(self) -> tuple[float, ...]: ...  # (0, b_1, …, b_m)
-    @property
-    def lo(self) -> float: ...
-    @property
-    def hi(self) -> float: ...
 
 
 class BeamHit(NamedTuple):

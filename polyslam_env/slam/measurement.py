@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from math import comb
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -76,6 +76,20 @@ class PackedPolynomials:
 
 
 PolynomialsLike = Sequence[Polynomial] | PackedPolynomials
+
+
+class ShapeRow(Protocol):
+    """A landmark's shape as plain floats (e.g. a ``landmarks.LandmarkRow``), for the
+    per-beam loops of ``beamcast.cast`` and ``association.nearest_by_error``."""
+
+    @property
+    def variate(self) -> int: ...
+    @property
+    def shape(self) -> tuple[float, ...]: ...  # (0, b_1, …, b_m), no zero tail
+    @property
+    def lo(self) -> float: ...
+    @property
+    def hi(self) -> float: ...
 
 
 def pack(polys: PolynomialsLike) -> PackedPolynomials:

@@ -77,6 +77,13 @@ def test_approximation_error__matches_brute_force(polys: list[Polynomial], seed:
     )
 
 
+def landmark_arrays(polys: list[Polynomial]) -> LandmarkArrays:
+    arrays = LandmarkArrays()
+    for p in polys:
+        arrays.append(p, pivot=0.0, xi_var=0.0, model_var=0.0, fit_half=1.0)
+    return arrays
+
+
 @settings(max_examples=60, deadline=None)
 @given(
     polys=st.lists(poly_strategy, min_size=1, max_size=8),
@@ -89,9 +96,7 @@ def test_associate__box_candidates_classify_like_the_whole_map(
     # PolySlam hands associate only the landmarks whose box lies within σ_k of the points'
     # box; every point must land in the same case (good / bad / cluster) with the same p*.
     rng = np.random.default_rng(seed)
-    arrays = LandmarkArrays()
-    for p in polys:
-        arrays.append(p, pivot=0.0, xi_var=0.0, model_var=0.0, fit_half=1.0)
+    arrays = landmark_arrays(polys)
     c0s = rng.normal(0.0, 1.0, len(polys))
     rho, sigma = (0.04, 0.3) if not squared else (0.0016, 0.09)
     pts = [point(rng.uniform(-3.0, 3.0, 2), beam=b) for b in range(5)]
@@ -124,9 +129,7 @@ def test_nearest_by_error__is_the_argmin_of_approximation_error(
     polys: list[Polynomial], seed: int, squared: bool
 ) -> None:
     rng = np.random.default_rng(seed)
-    arrays = LandmarkArrays()
-    for p in polys:
-        arrays.append(p, pivot=0.0, xi_var=0.0, model_var=0.0, fit_half=1.0)
+    arrays = landmark_arrays(polys)
     pts = rng.uniform(-4.0, 4.0, (6, 2))
     c0s = rng.normal(0.0, 1.0, len(polys))
     err = approximation_error(pts, arrays.packed(), c0s, squared)

@@ -39,27 +39,10 @@ def assert_same_hits(
             assume(not brute_force_range(pose, pose[2] + beta, polys, c0s, max_range)[2])
     want = ray_intersections(pose, beams, polys, c0s, max_range)
     arrays = _rows(polys)
-    got = cast(
-        float(pose[0]),
-        float(pose[1]),
-        float(pose[2]),
-        beams.tolist(),
-        list(range(len(polys))),
-        arrays.rows(),
-        c0s.tolist(),
-        max_range,
-    )
-    boxed = cast(
-        float(pose[0]),
-        float(pose[1]),
-        float(pose[2]),
-        beams.tolist(),
-        list(range(len(polys))),
-        arrays.rows(),
-        c0s.tolist(),
-        max_range,
-        arrays.boxes(c0s).tolist(),
-    )
+    x, y, theta = pose.tolist()
+    args = (x, y, theta, beams.tolist(), list(range(len(polys))), arrays.rows(), c0s.tolist())
+    got = cast(*args, max_range)
+    boxed = cast(*args, max_range, arrays.boxes(c0s).tolist())
     assert boxed == got  # the boxes only skip pairs that cannot hit: the very same answer
     for j, hit in enumerate(got):
         if hit is None:
