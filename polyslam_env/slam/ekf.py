@@ -195,14 +195,22 @@ def update_sparse_inplace(
 
     K comes from a solve with S (SPEC §3: ``solve``, not ``inv``).
     """
-    PHt = cov[:, :3] @ h_pose.T  # (3+n, k)
-    PHt += cov[:, c0_index] * h_c0
-    S = h_pose @ PHt[:3]  # (k, k) = H P Hᵀ
-    S += h_c0[:, None] * PHt[c0_index]
-    nis = innovation**2 / (S.diagonal() + r)  # (k,)
-    accepted = nis <= chi2_1dof_quantile(gate_prob)
-    if not accepted.all():
-        if not accepted.any():
+    k = r.size
+    cols = np.array([0, 1, 2, *c0_index.tolist()])  # (3+k,) the state columns H touches
+    H = np.zeros((k, 3 + k))  # H on ``cols``: row i is h_pose[i], then h_c0[i] at 3+i
+    H[:, :3] = h_pose
+    H.flat[3 :: k + 4] = h_c0
+    PHt = cov[:, cols] @ H.T  # (3+n, k)
+    S = H @ PHt[cols]  # (k, k) = H P Hᵀ
+    gate = chi2_1dof_quantile(gate_prob)
+    nis_list = [  # k ≤ 5 or so: Python floats beat numpy's per-call cost
+        v * v / (s + q)
+        for v, s, q in zip(innovation.tolist(), S.diagonal().tolist(), r.tolist(), strict=True)
+    ]
+    passed = [v <= gate for v in nis_list]
+    accepted, nis = np.array(passed), np.array(nis_list)
+    if not all(passed):
+        if not any(passed):
             return accepted, nis
         a = np.flatnonzero(accepted)
         PHt, S, innovation, r = PHt[:, a], S[np.ix_(a, a)], innovation[a], r[a]
@@ -210,13 +218,16 @@ def update_sparse_inplace(
     S.flat[:: r.size + 1] += r  # + R
     K = np.linalg.solve(S, PHt.T).T  # (3+n, k_a) = P Hᵀ S⁻¹
     mean += K @ innovation
-    mean[2] = wrap_angle(mean[2])
+    mean[2] = math.pi - (math.pi - float(mean[2])) % (2.0 * math.pi)  # wrap_angle on a float
     W = PHt - 0.5 * (K @ S)
-    k_sq, w_sq = (K * K).sum(axis=0), (W * W).sum(axis=0)  # (k_a,) squared column norms
-    usable = (k_sq > 0.0) & (w_sq > 0.0)
-    scale = np.sqrt(np.sqrt(np.divide(w_sq, k_sq, out=np.ones_like(w_sq), where=usable)))
-    K *= scale / np.sqrt(2.0)
-    W /= scale * np.sqrt(2.0)
+    k_sq, w_sq = np.einsum("ij,ij->j", K, K).tolist(), np.einsum("ij,ij->j", W, W).tolist()
+    scale = [  # a_l, or 1 where a column is zero
+        math.sqrt(math.sqrt(ws / ks)) if ks > 0.0 and ws > 0.0 else 1.0
+        for ks, ws in zip(k_sq, w_sq, strict=True)
+    ]
+    sqrt2 = math.sqrt(2.0)
+    K *= np.array([a_l / sqrt2 for a_l in scale])
+    W /= np.array([a_l * sqrt2 for a_l in scale])
     if work is None or work.shape != cov.shape:
         work = np.empty_like(cov)
     z = K + W
