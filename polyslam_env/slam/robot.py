@@ -589,18 +589,28 @@ def _uniform_fit_inverse(n_points: int, order: int) -> list[list[float]]:
 
 
 def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> list[StoredPoint]:
-    """The points moved by the rigid motion taking pose ``before`` (3,) to ``after`` (3,)."""
-    dtheta = float(after[2] - before[2])
-    c, s = np.cos(dtheta), np.sin(dtheta)
-    rot_t = np.array([[c, s], [-s, c]])  # Rᵀ: row vectors times Rᵀ rotate by dθ
-    xy = after[:2] + (np.array([p.xy for p in points]) - before[:2]) @ rot_t  # (N, 2)
-    direction = np.array([p.direction for p in points]) @ rot_t  # (N, 2)
-    poses = np.array([p.pose for p in points])  # (N, 3)
-    poses[:, :2] = after[:2] + (poses[:, :2] - before[:2]) @ rot_t
-    poses[:, 2] += dtheta
+    """The points moved by the rigid motion taking pose ``before`` (3,) to ``after`` (3,).
+
+    All points go through one (N, 7) array [xy, direction, pose] and one 7×7 matmul; each
+    new point's arrays are row views of the result.
+    """
+    bx, by, dtheta = float(before[0]), float(before[1]), float(after[2] - before[2])
+    ax, ay = float(after[0]), float(after[1])
+    c, s = math.cos(dtheta), math.sin(dtheta)
+    rows = np.concatenate([a for p in points for a in (p.xy, p.direction, p.pose)])
+    rows = rows.reshape(len(points), 7) - np.array([bx, by, 0.0, 0.0, bx, by, 0.0])
+    motion = np.zeros((7, 7))  # Rᵀ on xy, direction and pose xy (row vectors times Rᵀ)
+    motion[0, :2] = motion[2, 2:4] = motion[4, 4:6] = c, s
+    motion[1, :2] = motion[3, 2:4] = motion[5, 4:6] = -s, c
+    motion[6, 6] = 1.0
+    rows = rows @ motion
+    rows += np.array([ax, ay, 0.0, 0.0, ax, ay, dtheta])
+    new = tuple.__new__
     return [
-        StoredPoint(moved, turned, p.sigma, p.weight, pose, p.beam, p.step)
-        for moved, turned, pose, p in zip(xy, direction, poses, points, strict=True)
+        new(StoredPoint, (moved, turned, p.sigma, p.weight, pose, p.beam, p.step))
+        for moved, turned, pose, p in zip(
+            rows[:, :2], rows[:, 2:4], rows[:, 4:], points, strict=True
+        )
     ]
 
 
