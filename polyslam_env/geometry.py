@@ -12,6 +12,11 @@ def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
     return np.asarray(np.pi - np.mod(np.pi - np.asarray(angle, dtype=float), 2.0 * np.pi))
 
 
+def wrap_scalar(angle: float) -> float:
+    """:func:`wrap_angle` of one float, without numpy's per-call cost (same formula)."""
+    return math.pi - (math.pi - angle) % (2.0 * math.pi)
+
+
 def symmetric_eigvals3(a: np.ndarray) -> tuple[float, float, float]:
     """Eigenvalues (ascending) of a symmetric 3×3 matrix in closed form (lower triangle read).
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from polyslam_env.geometry import symmetric_eigvals3
+from polyslam_env.geometry import symmetric_eigvals3, wrap_angle, wrap_scalar
 
 
 def _random_symmetric(rng: np.random.Generator, kind: str) -> np.ndarray:
@@ -44,3 +44,11 @@ def test_symmetric_eigvals3__repeated_pair_within_documented_accuracy() -> None:
         spread = np.abs(want).max()
         # the pair: ~√eps of the spread (the docstring's 1e-8·p, with room for p ≤ ‖A‖)
         np.testing.assert_allclose(got, want, rtol=0, atol=5e-8 * spread)
+
+
+def test_wrap_scalar__equals_wrap_angle() -> None:
+    angles = np.concatenate([np.linspace(-20.0, 20.0, 4001), [np.pi, -np.pi, 0.0, 3 * np.pi]])
+    want = wrap_angle(angles)
+    got = np.array([wrap_scalar(float(a)) for a in angles])
+    np.testing.assert_array_equal(got, want)  # the same formula on the same floats
+    assert wrap_scalar(-np.pi) == np.pi  # (−π, π]

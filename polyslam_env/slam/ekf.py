@@ -15,7 +15,7 @@ from functools import lru_cache
 import numpy as np
 import scipy.special
 
-from polyslam_env.geometry import symmetric_eigvals3, wrap_angle
+from polyslam_env.geometry import symmetric_eigvals3, wrap_angle, wrap_scalar
 
 
 def _symmetrise(a: np.ndarray) -> np.ndarray:
@@ -218,7 +218,7 @@ def update_sparse_inplace(
     S.flat[:: r.size + 1] += r  # + R
     K = np.linalg.solve(S, PHt.T).T  # (3+n, k_a) = P Hᵀ S⁻¹
     mean += K @ innovation
-    mean[2] = math.pi - (math.pi - float(mean[2])) % (2.0 * math.pi)  # wrap_angle on a float
+    mean[2] = wrap_scalar(float(mean[2]))
     W = PHt - 0.5 * (K @ S)
     k_sq, w_sq = np.einsum("ij,ij->j", K, K).tolist(), np.einsum("ij,ij->j", W, W).tolist()
     scale = [  # a_l, or 1 where a column is zero
