@@ -68,7 +68,7 @@ def predict_inplace(mean: np.ndarray, cov: np.ndarray, odometry: np.ndarray, W: 
     Without the pure version's (3+n)² copy, for the stateful caller whose per-step cost
     should stay O(n). F = I + a·e₀e₂ᵀ + b·e₁e₂ᵀ (see :func:`motion_jacobians`), so F P_pl
     adds a and b times the heading row to the position rows, and the 3×3 pose block is
-    done in plain floats (symmetric by construction).
+    written out in plain floats from its upper triangle (symmetric by construction).
     """
     x, y, theta = mean[:3].tolist()
     dx, dy, dtheta = np.asarray(odometry, dtype=float).tolist()
@@ -83,21 +83,25 @@ def predict_inplace(mean: np.ndarray, cov: np.ndarray, odometry: np.ndarray, W: 
         cov[1, 3:] += b * heading
         cov[3:, 0] = cov[0, 3:]
         cov[3:, 1] = cov[1, 3:]
-    p = cov[:3, :3].tolist()
-    fp = [
-        [p[0][j] + a * p[2][j] for j in range(3)],
-        [p[1][j] + b * p[2][j] for j in range(3)],
-        p[2],
-    ]
-    fpf = [[row[0] + a * row[2], row[1] + b * row[2], row[2]] for row in fp]  # F P Fᵀ
-    rot = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]  # L
-    w = np.asarray(W, dtype=float).tolist()
-    lw = [[sum(rot[i][k] * w[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
-    for i in range(3):
-        for j in range(i, 3):
-            lwl = sum(lw[i][k] * rot[j][k] for k in range(3))  # (L W Lᵀ)_ij
-            value = 0.5 * ((fpf[i][j] + fpf[j][i]) + 2.0 * lwl) if i != j else fpf[i][i] + lwl
-            cov[i, j] = cov[j, i] = value
+    (p00, p01, p02), (_, p11, p12), (_, _, p22) = cov[:3, :3].tolist()  # upper triangle
+    # F P Fᵀ, F = I + a·e₀e₂ᵀ + b·e₁e₂ᵀ
+    f02, f12 = p02 + a * p22, p12 + b * p22
+    f00 = p00 + a * p02 + a * f02
+    f01 = p01 + a * p12 + b * f02
+    f11 = p11 + b * p12 + b * f12
+    # L W Lᵀ, L = rotation by θ on (x, y), 1 on θ
+    (w00, w01, w02), (w10, w11, w12), (_, _, w22) = np.asarray(W, dtype=float).tolist()
+    r00, r01 = c * w00 - s * w10, c * w01 - s * w11  # rows of L W
+    r10, r11 = s * w00 + c * w10, s * w01 + c * w11
+    q00, q01 = r00 * c - r01 * s, r00 * s + r01 * c
+    q11 = r10 * s + r11 * c
+    q02, q12 = c * w02 - s * w12, s * w02 + c * w12
+    block = (
+        (f00 + q00, f01 + q01, f02 + q02),
+        (f01 + q01, f11 + q11, f12 + q12),
+        (f02 + q02, f12 + q12, p22 + w22),
+    )
+    cov[:3, :3] = block
 
 
 # -- update -------------------------------------------------------------------------------------
