@@ -47,6 +47,26 @@ class BeamHit(NamedTuple):
     denom: float  # D = dη − B'·dξ
     phi: float  # beam heading θ + β
     variate: int  # variate of the landmark hit
+    xi: float  # ξ* of the hit
+
+    @property
+    def incidence_sine(self) -> float:
+        """|sin| of the angle between beam and curve, |D| / √(1 + B'²) (as ``Hits``)."""
+        return abs(self.denom) / math.sqrt(1.0 + self.slope * self.slope)
+
+    def jacobian(self) -> tuple[tuple[float, float, float], float]:
+        """This range's row of H: (∂h/∂x¹, ∂h/∂x², ∂h/∂θ) and ∂h/∂c0 = 1/D.
+
+        The formulas of :func:`~polyslam_env.slam.measurement.expected_ranges_and_jacobian`
+        (see there; tested equal) for one hit.
+        """
+        inv_d = 1.0 / self.denom
+        slope_d = self.slope * inv_d
+        cos, sin = math.cos(self.phi), math.sin(self.phi)
+        v1 = self.variate == 1
+        d_eta, d_xi = (cos, -sin) if v1 else (-sin, cos)  # d(dη)/dφ, d(dξ)/dφ
+        h_theta = -self.t * (d_eta - self.slope * d_xi) * inv_d
+        return ((slope_d, -inv_d, h_theta) if v1 else (-inv_d, slope_d, h_theta)), inv_d
 
 
 def cast(
@@ -103,7 +123,7 @@ def cast(
         s = _polish(best_coeffs, best)
         j = candidates[best_k]
         variate = shapes[j].variate
-        dxi, deta = (cos, sin) if variate == 1 else (sin, cos)
+        xi0, dxi, deta = (x, cos, sin) if variate == 1 else (y, sin, cos)
         t = s * max_range
         u = t * dxi
         taylor = taylors[best_k]
@@ -111,7 +131,7 @@ def cast(
         for order in range(1, len(taylor)):
             slope += order * taylor[order] * power
             power *= u
-        out.append(BeamHit(t, j, slope, deta - slope * dxi, phi, variate))
+        out.append(BeamHit(t, j, slope, deta - slope * dxi, phi, variate, xi0 + u))
     return out
 
 

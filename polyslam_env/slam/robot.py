@@ -88,7 +88,7 @@ class PolySlam:
         self.profile: dict[str, list[float]] | None = None
         self._arrays = LandmarkArrays()  # the same map as arrays, for the hot path
         self._work = np.empty(0)  # scratch for the update's covariance products
-        self._state_version = 0  # bumped whenever the c0s may have changed (updates, exchange)
+        self._state_version = 0  # bumped by every update (map changes bump the arrays' version)
         self._boxes_key: tuple[int, int] | None = None
         self._boxes_cache = np.zeros((0, 4))
         kp0_eig = np.linalg.eigvalsh(config.k_divergence * config.p0)  # (3,) ascending
@@ -464,25 +464,17 @@ class PolySlam:
         range_var = self.config.range_sigma**2
         innovation, h_pose, c0_index, h_c0, variance = [], [], [], [], []
         for b, hit in zip(beams, hits, strict=True):
-            if hit is None:
-                continue
-            if abs(hit.denom) / math.sqrt(1.0 + hit.slope * hit.slope) < self._min_sine:
-                continue  # near-tangent: too sensitive to linearise
-            inv_d = 1.0 / hit.denom
-            slope_d = hit.slope * inv_d
-            cos, sin = math.cos(hit.phi), math.sin(hit.phi)
-            v1 = hit.variate == 1
-            d_eta, d_xi = (cos, -sin) if v1 else (-sin, cos)  # d(dη)/dφ, d(dξ)/dφ
-            h_theta = -hit.t * (d_eta - hit.slope * d_xi) * inv_d
+            if hit is None or hit.incidence_sine < self._min_sine:
+                continue  # no hit, or near-tangent: too sensitive to linearise
+            (h_x, h_y, h_theta), inv_d = hit.jacobian()
             row = rows[hit.landmark]
             var = range_var + row.model_var * (inv_d * inv_d)
             if self.config.shape_follows_pose:
-                xi = (x if v1 else y) + hit.t * (cos if v1 else sin)
-                lever, extra = self._shape_terms(row, xi, inv_d)
-                h_theta += (1.0 if v1 else -1.0) * lever * inv_d
+                lever, extra = self._shape_terms(row, hit.xi, inv_d)
+                h_theta += (1.0 if hit.variate == 1 else -1.0) * lever * inv_d
                 var += extra
             innovation.append(float(ranges[b]) - hit.t)
-            h_pose.append((slope_d, -inv_d, h_theta) if v1 else (-inv_d, slope_d, h_theta))
+            h_pose.append((h_x, h_y, h_theta))
             c0_index.append(3 + hit.landmark)
             h_c0.append(inv_d)
             variance.append(var)

@@ -12,7 +12,7 @@ from test_measurement import BEAMS, beam_sets, brute_force_range, polynomials, p
 
 from polyslam_env.slam.beamcast import cast
 from polyslam_env.slam.landmarks import LandmarkArrays
-from polyslam_env.slam.measurement import ray_intersections
+from polyslam_env.slam.measurement import expected_ranges_and_jacobian, ray_intersections
 from polyslam_env.slam.polynomial import Polynomial
 
 
@@ -56,6 +56,21 @@ def assert_same_hits(
         assert hit.slope == pytest.approx(want.slope[j], abs=1e-9)
         assert hit.denom == pytest.approx(want.denom[j], abs=1e-9)
         assert hit.phi == pytest.approx(want.phi[j], abs=1e-15)
+        assert hit.xi == pytest.approx(want.xi[j], abs=1e-12)  # as t
+        assert hit.incidence_sine == pytest.approx(want.incidence_sine[j], abs=1e-9)  # as D
+    # The update's rows of H equal the vectorised Jacobian (itself checked against finite
+    # differences in test_measurement.py); 1e-6 relative: 1/D amplifies the 1e-9 of D
+    # near the tangent limit (|D| ≥ sin 10° · √(1 + B'²) for valid rows).
+    state = np.concatenate([pose, c0s])
+    jac = expected_ranges_and_jacobian(state, polys, beams, max_range)
+    for j, hit in enumerate(got):
+        if hit is None or not jac.valid[j]:
+            continue
+        (h_x, h_y, h_theta), inv_d = hit.jacobian()
+        row = np.zeros(state.size)
+        row[:3] = h_x, h_y, h_theta
+        row[3 + hit.landmark] = inv_d
+        np.testing.assert_allclose(row, jac.H[j], rtol=1e-6, atol=1e-9)
 
 
 @settings(max_examples=200, deadline=None)
