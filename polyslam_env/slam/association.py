@@ -32,7 +32,7 @@ from polyslam_env.slam.fitting import (
     polynomial_points,
     stored_points,
 )
-from polyslam_env.slam.measurement import PackedPolynomials, PolynomialsLike, ShapeRow, pack
+from polyslam_env.slam.measurement import PolynomialsLike, ShapeRow, pack
 from polyslam_env.slam.polynomial import Polynomial
 
 
@@ -295,13 +295,7 @@ class MapBook:
             err = approximation_error(xy_all, polys, c0s, squared)  # (P, n)
             index = np.arange(len(polys))
         else:
-            packed = pack(polys)
-            subset = PackedPolynomials(
-                packed.variate[candidates],
-                packed.shape[candidates],
-                packed.lo[candidates],
-                packed.hi[candidates],
-            )
+            subset = pack(polys).subset(candidates)
             err = approximation_error(xy_all, subset, np.asarray(c0s)[candidates], squared)
             index = candidates
         out = []

@@ -76,7 +76,7 @@ def predict_inplace(mean: np.ndarray, cov: np.ndarray, odometry: np.ndarray, W: 
     a, b = -s * dx - c * dy, c * dx - s * dy  # F[0, 2], F[1, 2]
     mean[0] = x + c * dx - s * dy
     mean[1] = y + s * dx + c * dy
-    mean[2] = wrap_angle(theta + dtheta)
+    mean[2] = wrap_scalar(theta + dtheta)
     if cov.shape[0] > 3:
         heading = cov[2, 3:]
         cov[0, 3:] += a * heading

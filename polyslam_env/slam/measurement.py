@@ -74,6 +74,12 @@ class PackedPolynomials:
     def order(self) -> int:
         return self.shape.shape[1] - 1
 
+    def subset(self, indices: np.ndarray) -> PackedPolynomials:
+        """The polynomials at ``indices`` (an index array), in that order."""
+        return PackedPolynomials(
+            self.variate[indices], self.shape[indices], self.lo[indices], self.hi[indices]
+        )
+
 
 PolynomialsLike = Sequence[Polynomial] | PackedPolynomials
 
@@ -470,12 +476,7 @@ def _candidate_hits(
     """:func:`ray_intersections` on the ``candidates`` subset, indices mapped back."""
     if candidates.size == 0:
         return _no_hits(mean[2] + np.asarray(beam_angles, dtype=float))
-    sub = PackedPolynomials(
-        packed.variate[candidates],
-        packed.shape[candidates],
-        packed.lo[candidates],
-        packed.hi[candidates],
-    )
+    sub = packed.subset(candidates)
     hits = ray_intersections(mean[:3], beam_angles, sub, mean[3 + candidates], max_range)
     index = np.where(hits.index >= 0, candidates[np.maximum(hits.index, 0)], -1)
     return Hits(hits.ranges, index, hits.xi, hits.slope, hits.denom, hits.phi, hits.variate)
