@@ -22,9 +22,9 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from polyslam_env.env_config import EnvConfig
-from polyslam_env.errors import PolyslamError
-from polyslam_env.observations import ObservationEncoder
+from polyslam_env.core.errors import PolyslamError
+from polyslam_env.environment.config import EnvConfig
+from polyslam_env.environment.observations import ObservationEncoder
 
 __all__ = [
     "POLICIES",

@@ -1,9 +1,9 @@
 """``ppo``: a policy trained with Stable-Baselines3 PPO and parameter sharing.
 
-The same network acts for every robot, each on its own observation. Checkpoints are SB3
-``.zip`` files written by ``polyslam train``; their action space is the unit box of
-:class:`polyslam_env.vec_env.FixedAgents`, mapped here to the env's physical (v, ω). torch
-and SB3 are imported when a checkpoint is loaded, not before.
+The same network acts for every robot, each on its own observation. Checkpoints are SB3 ``.zip``
+files written by ``polyslam train``; their action space is the unit box of
+:class:`polyslam_env.environment.vector.FixedAgents`, mapped here to the env's physical (v, ω).
+torch and SB3 are imported when a checkpoint is loaded, not before.
 """
 
 from __future__ import annotations

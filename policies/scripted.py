@@ -13,8 +13,8 @@ import numpy as np
 from gymnasium import spaces
 
 from policies.base import Policy, PolicyContext, PolicyError
-from polyslam_env.errors import PolyslamError
-from polyslam_env.paths import Paths, load_paths
+from polyslam_env.core.errors import PolyslamError
+from polyslam_env.scenarios.paths import Paths, load_paths
 from polyslam_env.world.maps import load_map
 
 __all__ = [

@@ -6,7 +6,7 @@ world``.
 
 import sys
 
-from polyslam_env.cli import main
+from polyslam_env.cli.main import main
 
 if __name__ == "__main__":
     sys.exit(main(["benchmark", "--only", "world", *sys.argv[1:]]))

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from polyslam_env.simulate import simulate
+from polyslam_env.apps.simulate import simulate
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.config import WorldConfig

@@ -32,8 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
+from polyslam_env.core.seeding import make_rngs
 from polyslam_env.metrics import hit_fraction
-from polyslam_env.paths import (
+from polyslam_env.scenarios.paths import (
     Paths,
     Replay,
     contiguous_runs,
@@ -42,7 +43,6 @@ from polyslam_env.paths import (
     replay_paths,
     save_paths,
 )
-from polyslam_env.seeding import make_rngs
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.maps import load_map

@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import argparse
 
+from polyslam_env.apps.simulate import simulate
 from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.comms.exchange import RendezvousExchange
-from polyslam_env.seeding import make_rngs
-from polyslam_env.simulate import simulate
+from polyslam_env.core.seeding import make_rngs
 from polyslam_env.world.config import WorldConfig
 
 COLUMNS = (

@@ -13,7 +13,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from polyslam_env.simulate import simulate
+from polyslam_env.apps.simulate import simulate
 
 PAPER = {  # Table 1 of the core paper: μ (their NEES form), ν (their form), τ
     "nees_paper": (1.66e-6, 4.66e-7, 1.02e-6),

@@ -40,8 +40,8 @@ from typing import Literal
 
 import numpy as np
 
-from polyslam_env.config import Config, check_positive, check_range
-from polyslam_env.errors import ConfigError
+from polyslam_env.core.config import Config, check_positive, check_range
+from polyslam_env.core.errors import ConfigError
 
 _UNLIMITED = 2**62  # bytes per step when there is no cap
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from polyslam_env.geometry import wrap_angle
+from polyslam_env.core.geometry import wrap_angle
 
 
 def _pose(pose: np.ndarray) -> np.ndarray:

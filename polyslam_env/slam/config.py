@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyslam_env.config import Config, check_non_negative, check_positive, check_range
-from polyslam_env.errors import ConfigError
+from polyslam_env.core.config import Config, check_non_negative, check_positive, check_range
+from polyslam_env.core.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -35,7 +35,7 @@ class SlamConfig(Config):
     tangent_min_deg: float = 10.0  # beams hitting closer to tangent than this are skipped
     squared_error: bool = False  # the paper's squared end-point distance in association
     shape_follows_pose: bool = True  # shapes move with the pose error in ∂h/∂pose (robot.py)
-    blas_threads: int = 1  # BLAS threads during a step (polyslam_env/blas.py); 0: leave as is
+    blas_threads: int = 1  # BLAS threads during a step (polyslam_env/core/blas.py); 0: leave as is
 
     def validate(self) -> None:
         if not 1 <= self.order <= 5:

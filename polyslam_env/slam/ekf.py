@@ -15,7 +15,7 @@ from functools import lru_cache
 import numpy as np
 import scipy.special
 
-from polyslam_env.geometry import symmetric_eigvals3, wrap_angle, wrap_scalar
+from polyslam_env.core.geometry import symmetric_eigvals3, wrap_angle, wrap_scalar
 
 
 def _symmetrise(a: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyslam_env.blas import blas_threads
+from polyslam_env.core.blas import blas_threads
 from polyslam_env.slam import beamcast, ekf
 from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
 from polyslam_env.slam.config import SlamConfig
@@ -127,7 +127,7 @@ class PolySlam:
     def step(self, odometry: np.ndarray, ranges: np.ndarray) -> SlamStepInfo:
         """Advance by one control period given odometry (3,) and range readings (B,).
 
-        BLAS runs on ``config.blas_threads`` threads meanwhile (see :mod:`polyslam_env.blas`).
+        BLAS runs on ``config.blas_threads`` threads meanwhile (see :mod:`polyslam_env.core.blas`).
         """
         with blas_threads(self.config.blas_threads):
             return self._step(odometry, ranges)

@@ -5,13 +5,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from polyslam_env.config import (
+from polyslam_env.core.config import (
     Config,
     check_non_negative,
     check_positive,
     check_range,
 )
-from polyslam_env.errors import ConfigError
+from polyslam_env.core.errors import ConfigError
 
 
 @dataclass(frozen=True)

@@ -28,8 +28,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from polyslam_env.config import Config, check_positive, check_range
-from polyslam_env.errors import ConfigError
+from polyslam_env.core.config import Config, check_positive, check_range
+from polyslam_env.core.errors import ConfigError
 from polyslam_env.world.grid import FreeGrid, free_space_grid, is_connected
 from polyslam_env.world.layout import (
     Layout,

@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from polyslam_env.errors import MapFileError
-from polyslam_env.resources import builtin_names, maps_dir, resolve_file
+from polyslam_env.core.errors import MapFileError
+from polyslam_env.core.resources import builtin_names, maps_dir, resolve_file
 from polyslam_env.world.layout import Layout
 
 REQUIRED_KEYS = ("walls", "start_poses")

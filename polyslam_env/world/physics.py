@@ -45,8 +45,8 @@ from typing import Any
 import numpy as np
 import pymunk
 
-from polyslam_env.errors import MapFileError
-from polyslam_env.geometry import wrap_angle
+from polyslam_env.core.errors import MapFileError
+from polyslam_env.core.geometry import wrap_angle
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout, point_segment_distance
 from polyslam_env.world.nearby import segment_grid

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyslam_env.geometry import wrap_angle
+from polyslam_env.core.geometry import wrap_angle
 from polyslam_env.world.config import CameraConfig, RangeSensorConfig
 
 #: Rays and segments more parallel than this (|sin| of the angle between them) never hit.

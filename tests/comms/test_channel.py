@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered
-from polyslam_env.errors import ConfigError
+from polyslam_env.core.errors import ConfigError
 
 
 def always(a: int, b: int) -> bool:

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from polyslam_env import metrics
+from polyslam_env.apps.simulate import SimulationResult, simulate
 from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.comms.exchange import (
     RendezvousExchange,
@@ -28,8 +29,7 @@ from polyslam_env.comms.relative_pose import (
     relative_pose,
     wrap_angle,
 )
-from polyslam_env.seeding import make_rngs
-from polyslam_env.simulate import SimulationResult, simulate
+from polyslam_env.core.seeding import make_rngs
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import PointSet, fit_polynomial
 from polyslam_env.slam.polynomial import Polynomial

@@ -87,7 +87,7 @@ def env_episode(overrides: dict[str, Any], seed: int, steps: int) -> list[str]:
 def simulate_episode(seed: int) -> list[str]:
     """Digests of ``simulate`` on the paper paths with exchange and r3's lone shadow SLAM:
     every robot's estimated poses and covariances per step, then the final maps and metrics."""
-    from polyslam_env.simulate import simulate
+    from polyslam_env.apps.simulate import simulate
 
     result = simulate("paper", seed=seed, exchange=True, shadow=[2])
     runs = [*result.runs, *result.shadow_runs.values()]

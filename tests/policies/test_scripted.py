@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 import polyslam_env
 from policies import PolicyContext, PolicyError, TeamPolicy, make_policy, make_team
 from policies.frontier import OwnMap
-from polyslam_env.errors import PolyslamError
-from polyslam_env.paths import load_paths, replay_paths
-from polyslam_env.rollout import EpisodeResult, run_episode
+from polyslam_env.apps.rollout import EpisodeResult, run_episode
+from polyslam_env.core.errors import PolyslamError
+from polyslam_env.scenarios.paths import load_paths, replay_paths
 
 
 def _episode(policy: str, seed: int, **overrides: object) -> EpisodeResult:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -24,6 +23,7 @@ from polyslam_env.slam.fitting import (
 )
 from polyslam_env.slam.landmarks import LandmarkArrays
 from polyslam_env.slam.polynomial import Polynomial
+from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 
 
 def point(xy: tuple[float, float] | np.ndarray, beam: int = 0, sigma: float = 0.02) -> StoredPoint:

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
-from test_measurement import BEAMS, beam_sets, brute_force_range, polynomials, poses
 
 from polyslam_env.slam.beamcast import cast
 from polyslam_env.slam.landmarks import LandmarkArrays
 from polyslam_env.slam.measurement import expected_ranges_and_jacobian, ray_intersections
 from polyslam_env.slam.polynomial import Polynomial
+from tests.slam.test_measurement import BEAMS, beam_sets, brute_force_range, polynomials, poses
 
 
 def _rows(polys: list[Polynomial]) -> LandmarkArrays:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -20,6 +19,7 @@ from polyslam_env.slam.fitting import (
     stored_points,
 )
 from polyslam_env.slam.polynomial import Polynomial
+from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 
 POSE_COV = np.diag([0.01**2, 0.01**2, 0.005**2])
 SIGMA_R = 0.02

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from polyslam_env import metrics
-from polyslam_env.seeding import make_rngs
-from polyslam_env.simulate import simulate, wall_follow_controller
+from polyslam_env.apps.simulate import simulate, wall_follow_controller
+from polyslam_env.core.seeding import make_rngs
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.config import WorldConfig

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from polyslam_env.seeding import make_rngs
+from polyslam_env.core.seeding import make_rngs
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.maps import load_map
 from polyslam_env.world.physics import World

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from polyslam_env.errors import ConfigError
+from polyslam_env.core.errors import ConfigError
 from polyslam_env.world.generators import (
     CaveGenerator,
     GenerationError,

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
-from polyslam_env.errors import MapFileError
+from polyslam_env.core.errors import MapFileError
 from polyslam_env.world.generators import is_enclosed
 from polyslam_env.world.grid import component_at, free_space_grid, label_components
 from polyslam_env.world.layout import Layout

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from polyslam_env.seeding import make_rngs
+from polyslam_env.core.seeding import make_rngs
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import point_segment_distance
 from polyslam_env.world.maps import load_map

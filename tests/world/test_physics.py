@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from polyslam_env.errors import MapFileError
-from polyslam_env.seeding import make_rngs
+from polyslam_env.core.errors import MapFileError
+from polyslam_env.core.seeding import make_rngs
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.maps import load_map

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from polyslam_env.seeding import make_rngs
+from polyslam_env.core.seeding import make_rngs
 from polyslam_env.world.config import CameraConfig, RangeSensorConfig, WorldConfig
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.maps import load_map

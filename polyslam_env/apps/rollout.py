@@ -1,0 +1,117 @@
+"""Running episodes with a team policy, for ``polyslam run`` and ``polyslam evaluate``.
+
+The runner (not the policy) may read the env: it records the team coverage after every step
+for the coverage-over-time plots and collects ``infos[agent]["metrics"]`` and ``["team"]``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from policies.base import TeamPolicy, make_team
+from polyslam_env.environment.config import EnvConfig
+from polyslam_env.environment.parallel import PolySlamParallelEnv, parallel_env
+
+__all__ = ["EpisodeResult", "evaluate_episode", "run_episode", "summarise"]
+
+
+@dataclass
+class EpisodeResult:
+    """What one episode produced (plain data, picklable, JSON-ready via :meth:`to_dict`)."""
+
+    seed: int
+    steps: int
+    robots: dict[str, dict[str, float]]  # agent → infos[agent]["metrics"]
+    team: dict[str, Any]  # infos[...]["team"] at the episode end
+    coverage: list[float] = field(default_factory=list)  # team coverage after reset, each step
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "seed": self.seed,
+            "steps": self.steps,
+            "robots": self.robots,
+            "team": self.team,
+            "coverage": self.coverage,
+        }
+
+
+def run_episode(
+    env: PolySlamParallelEnv,
+    team: TeamPolicy,
+    seed: int,
+    on_step: Callable[[PolySlamParallelEnv], None] | None = None,
+) -> EpisodeResult:
+    """One seeded episode; the policies' rng is ``default_rng(seed)``, separate from the env's.
+
+    ``on_step(env)`` is called after reset and after every step (rendering, progress).
+    """
+    observations, _ = env.reset(seed=seed)
+    team.reset(seed)
+    rng = np.random.default_rng([seed, 1])
+    coverage = [float(env.coverage.coverage)]
+    robots: dict[str, dict[str, float]] = {}
+    team_info: dict[str, Any] = {}
+    if on_step is not None:
+        on_step(env)
+    while env.agents:
+        observations, _, _, _, infos = env.step(team.act(observations, rng))
+        coverage.append(float(env.coverage.coverage))
+        for agent, info in infos.items():
+            if "metrics" in info:
+                robots[agent] = dict(info["metrics"])
+                team_info = dict(info["team"])
+        if on_step is not None:
+            on_step(env)
+    ordered = {a: robots[a] for a in env.possible_agents if a in robots}
+    return EpisodeResult(seed, env.step_count, ordered, team_info, coverage)
+
+
+def evaluate_episode(
+    config: Mapping[str, Any], policy: str, policy_kwargs: Mapping[str, Any], seed: int
+) -> EpisodeResult:
+    """Build the env and team in this process and run one episode (a worker's job)."""
+    env = parallel_env(EnvConfig.from_dict(dict(config)))
+    try:
+        return run_episode(env, make_team(policy, env, **policy_kwargs), seed)
+    finally:
+        env.close()
+
+
+def _spread(values: list[float]) -> dict[str, float]:
+    a = np.asarray(values, dtype=float)
+    a = a[np.isfinite(a)]
+    if len(a) == 0:
+        return dict.fromkeys(("mean", "std", "min", "max"), float("nan"))
+    return {
+        "mean": float(a.mean()),
+        "std": float(a.std()),
+        "min": float(a.min()),
+        "max": float(a.max()),
+    }
+
+
+def summarise(results: list[EpisodeResult]) -> dict[str, Any]:
+    """Mean, std, min and max over episodes: per robot and metric, and per team metric.
+
+    ``steps_to_*`` are None in an episode that never reached that coverage; such episodes are
+    left out of the statistics and ``reached`` counts the others.
+    """
+    agents = sorted({a for r in results for a in r.robots}, key=lambda a: (len(a), a))
+    robots = {}
+    for agent in agents:
+        keys = sorted({k for r in results if agent in r.robots for k in r.robots[agent]})
+        robots[agent] = {
+            k: _spread([r.robots[agent][k] for r in results if agent in r.robots]) for k in keys
+        }
+    team: dict[str, dict[str, float]] = {}
+    for key in sorted({k for r in results for k in r.team}):
+        values = [r.team[key] for r in results if r.team.get(key) is not None]
+        team[key] = _spread([float(v) for v in values])
+        if key.startswith("steps_to_"):
+            team[key]["reached"] = float(len(values))
+    team["steps"] = _spread([float(r.steps) for r in results])
+    return {"episodes": len(results), "robots": robots, "team": team}

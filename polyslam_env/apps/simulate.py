@@ -1,0 +1,350 @@
+"""Run robots with SLAM on a map without the RL environment.
+
+:func:`simulate` drives a team along scripted commands (the paper's precomputed paths, any
+``(N, K, 2)`` array, or a simple reactive controller), runs each robot's :class:`PolySlam`
+on its own odometry and ranges, and records what the metrics need. Tests and the paper
+reproduction use it; :func:`robot_metrics` turns a run into the paper's numbers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from polyslam_env import metrics
+from polyslam_env.comms.channel import ChannelConfig
+from polyslam_env.comms.exchange import RendezvousExchange
+from polyslam_env.core.seeding import make_rngs
+from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.robot import PolySlam
+from polyslam_env.world.config import WorldConfig
+from polyslam_env.world.layout import Layout
+from polyslam_env.world.maps import load_map
+from polyslam_env.world.physics import World
+
+#: controller(step, scans (N, B)) -> commands (N, 2); it sees only the robots' own ranges.
+Controller = Callable[[int, np.ndarray], np.ndarray]
+
+
+@dataclass
+class RobotRun:
+    """Everything one robot did in a simulation (estimates in its own start frame)."""
+
+    start_pose: np.ndarray  # (3,) robot's frame R_{j,0} in the absolute frame (metrics only)
+    true_poses: np.ndarray  # (K+1, 3) absolute
+    est_poses: np.ndarray  # (K+1, 3) in the robot's start frame
+    est_covs: np.ndarray  # (K+1, 3, 3)
+    polynomials: list[Polynomial]  # final map, robot frame
+    hit_points: np.ndarray  # (H, 2) true points its beams hit (absolute), for hit_fraction
+    slam_times: np.ndarray  # (K,) seconds per SLAM step
+    diverged: bool  # flagged at any step
+    collisions: int
+    comms: dict[str, int] = field(default_factory=dict)  # exchange counters (empty: no exchange)
+
+
+@dataclass
+class SimulationResult:
+    """A finished simulation: the layout, one :class:`RobotRun` per robot, and settings."""
+
+    layout: Layout
+    runs: list[RobotRun]
+    seed: int | None
+    steps: int
+    meta: dict[str, Any] = field(default_factory=dict)
+    shadow_runs: dict[int, RobotRun] = field(default_factory=dict)  # robot → its lone SLAM
+
+    def metrics(self) -> list[dict[str, float]]:
+        return [robot_metrics(run, self.layout) for run in self.runs]
+
+
+#: Exchange counters that :func:`robot_metrics` reports (zeros when there was no exchange).
+COMMS_METRICS = ("bytes_sent", "bytes_received", "rendezvous", "messages_lost")
+
+
+def robot_metrics(run: RobotRun, layout: Layout) -> dict[str, float]:
+    """The paper's metrics (SPEC §5) for one robot, plus completeness and timing."""
+    sp = run.start_pose
+    polys = run.polynomials
+    hit = metrics.hit_fraction(run.hit_points, layout) if len(run.hit_points) else 0.0
+    return {
+        "nees": metrics.nees(run.true_poses, run.est_poses, run.est_covs, sp),
+        "nees_paper": metrics.nees_paper(run.true_poses, run.est_poses, run.est_covs, sp),
+        "nu": metrics.nu(polys, sp, layout),
+        "nu_mean": metrics.nu_mean(polys, sp, layout),
+        "completeness": metrics.completeness(polys, sp, layout),
+        "hit_fraction": hit,
+        "landmarks": float(len(polys)),
+        "slam_time_ms": 1e3 * float(np.mean(run.slam_times)) if len(run.slam_times) else 0.0,
+        "slam_time_ms_median": 1e3 * float(np.median(run.slam_times))
+        if len(run.slam_times)
+        else 0.0,
+        "diverged": float(run.diverged),
+        "collisions": float(run.collisions),
+        **{key: float(run.comms.get(key, 0)) for key in COMMS_METRICS},
+    }
+
+
+def wall_follow_controller(
+    world_config: WorldConfig, speed: float = 0.08, distance: float = 0.4
+) -> Controller:
+    """A reactive right-hand wall follower on each robot's own (noisy) ranges.
+
+    It needs the beams at −90°, −45° and 0° (the default sensor has them); it turns left in
+    place when the way ahead is blocked and steers to keep the right wall at ``distance``.
+    """
+    angles = np.asarray(world_config.range_sensor.angles_deg)
+    try:
+        front, right_diag, right = (
+            int(np.flatnonzero(np.isclose(angles, a))[0]) for a in (0.0, -45.0, -90.0)
+        )
+    except IndexError:
+        raise ValueError("wall_follow_controller needs beams at 0, -45 and -90 degrees") from None
+    omega_max = world_config.robot.omega_max
+
+    def control(step: int, scans: np.ndarray) -> np.ndarray:
+        out = np.zeros((len(scans), 2))
+        for i, scan in enumerate(scans):
+            ahead = min(scan[front], scan[right_diag] * np.cos(np.pi / 4) * 1.6)
+            if ahead < distance + 0.05:
+                out[i] = (0.0, 0.6)
+                continue
+            side = scan[right] if np.isfinite(scan[right]) else 2 * distance
+            turn = float(np.clip(-1.5 * (side - distance), -0.8, 0.8))
+            out[i] = (speed, np.clip(turn, -omega_max, omega_max))
+        return out
+
+    return control
+
+
+def simulate(
+    map: str | Layout = "paper",
+    *,
+    commands: np.ndarray | None = None,
+    controller: Controller | None = None,
+    num_robots: int | None = None,
+    steps: int | None = None,
+    seed: int | None = 0,
+    world_config: WorldConfig | None = None,
+    slam_config: SlamConfig | None = None,
+    initial_error: bool = False,
+    progress: Callable[[int], None] | None = None,
+    exchange: bool | ChannelConfig | RendezvousExchange = False,
+    shadow: Sequence[int] = (),
+) -> SimulationResult:
+    """Run ``num_robots`` robots with SLAM for ``steps`` control periods.
+
+    Motion comes from ``commands`` (N, K, 2) of (v, ω) if given, else from ``controller``,
+    else from the map's built-in paths when there are some (the ``paper`` map), else from
+    :func:`wall_follow_controller`. ``progress`` is called with each finished step.
+
+    Each robot estimates in its own frame and starts at x̂ = 0 with covariance P0. With
+    ``initial_error=False`` (the paper's setting) that frame sits exactly at the true start
+    pose, so the initial error is zero while P0 is not and the standard NEES is below 3 by
+    construction. ``initial_error=True`` draws the robot's true offset from its frame origin
+    from N(0, P0) (stream ``"anchor"``), the setting in which a consistent filter's NEES is 3.
+
+    ``exchange`` turns on rendezvous map exchange (SPEC §4) after every SLAM step: ``True``
+    for the default :class:`ChannelConfig`, a config, or a ready :class:`RendezvousExchange`
+    (e.g. one that logs payload sizes). Its counters land in ``RobotRun.comms`` and its
+    messages in ``meta["exchange"]``. Off, the run is exactly as without it.
+
+    ``shadow`` lists robots that get a second, lone SLAM fed the very same odometry and
+    ranges but never exchanging: their single-robot result on the identical episode
+    (``SimulationResult.shadow_runs``), as in the paper's Fig 8. Shadows change nothing else.
+    """
+    wcfg = world_config or WorldConfig()
+    scfg = slam_config or SlamConfig()
+    layout = map if isinstance(map, Layout) else load_map(map)
+    if commands is None and controller is None:
+        commands = _builtin_commands(layout.name)
+    if commands is not None:
+        commands = np.asarray(commands, dtype=float)
+        if commands.ndim != 3 or commands.shape[2] != 2:
+            raise ValueError(f"commands: expected shape (N, K, 2), got {commands.shape}")
+        num_robots = num_robots or commands.shape[0]
+        steps = steps or commands.shape[1]
+        if commands.shape[0] < num_robots or commands.shape[1] < steps:
+            raise ValueError(
+                f"commands: shape {commands.shape} is too small for {num_robots} robots"
+                f" × {steps} steps"
+            )
+    num_robots = num_robots or min(3, layout.num_start_poses)
+    steps = 200 if steps is None else steps
+    if commands is not None:
+        table = commands
+        controller = lambda k, _scans: table[:num_robots, k]  # noqa: E731
+    elif controller is None:
+        controller = wall_follow_controller(wcfg)
+
+    world = World(layout, wcfg, num_robots, make_rngs(seed))
+    slams = [
+        PolySlam(scfg, wcfg.range_sensor.angles, wcfg.range_sensor.max_range)
+        for _ in range(num_robots)
+    ]
+    frames = world.poses.copy()
+    if initial_error:
+        anchor = make_rngs(seed, ["anchor"])["anchor"]
+        for i in range(num_robots):
+            e0 = anchor.multivariate_normal(np.zeros(3), scfg.p0)
+            frames[i] = _frame_of(world.poses[i], e0)
+    shadow = list(shadow)
+    if any(not 0 <= i < num_robots for i in shadow):
+        raise ValueError(f"shadow: robot indices must be in [0, {num_robots}), got {shadow}")
+    shadows = [
+        PolySlam(scfg, wcfg.range_sensor.angles, wcfg.range_sensor.max_range) for _ in shadow
+    ]
+    rec = _Recorder(world, slams + shadows, frames, list(range(num_robots)) + shadow)
+    ex = _make_exchange(exchange, num_robots, seed, wcfg, scfg)
+    log: list[dict[str, Any]] = []
+    scans = world.scan()
+    for k in range(steps):
+        result = world.step(np.asarray(controller(k, scans), dtype=float))
+        scans = world.scan()
+        infos = [slam.step(result.odometry[i], scans[i]) for i, slam in enumerate(slams)]
+        infos += [
+            lone.step(result.odometry[i], scans[i]) for i, lone in zip(shadow, shadows, strict=True)
+        ]
+        rec.record(scans, infos, result.collided)
+        if ex is not None:
+            log += _exchange_step(ex, k, world, slams, scans)
+        if progress is not None:
+            progress(k + 1)
+    all_runs = rec.runs()
+    runs, lone_runs = all_runs[:num_robots], dict(zip(shadow, all_runs[num_robots:], strict=True))
+    if ex is None:
+        return SimulationResult(layout, runs, seed, steps, shadow_runs=lone_runs)
+    for i, run in enumerate(runs):
+        run.comms = ex.counters(i)
+    return SimulationResult(
+        layout, runs, seed, steps, meta={"exchange": log}, shadow_runs=lone_runs
+    )
+
+
+def _make_exchange(
+    exchange: bool | ChannelConfig | RendezvousExchange,
+    num_robots: int,
+    seed: int | None,
+    wcfg: WorldConfig,
+    scfg: SlamConfig,
+) -> RendezvousExchange | None:
+    """The exchange :func:`simulate` asked for (None when off); channel stream ``"channel"``."""
+    if isinstance(exchange, RendezvousExchange):
+        if exchange.num_robots != num_robots:
+            raise ValueError(
+                f"exchange: built for {exchange.num_robots} robots, the run has {num_robots}"
+            )
+        return exchange
+    if exchange is False:
+        return None
+    config = ChannelConfig() if exchange is True else exchange
+    return RendezvousExchange(
+        config,
+        num_robots,
+        make_rngs(seed, ["channel"])["channel"],
+        wcfg.camera.sigma_d,
+        wcfg.camera.sigma_bearing,
+        scfg.order,
+        scfg.auto_order,
+        max_range=wcfg.range_sensor.max_range,
+    )
+
+
+def _exchange_step(
+    ex: RendezvousExchange, k: int, world: World, slams: list[PolySlam], scans: np.ndarray
+) -> list[dict[str, Any]]:
+    """Log the scans, run one exchange step; returns its delivered messages as plain dicts."""
+    angles = np.asarray(world.config.range_sensor.angles)
+    for i, slam in enumerate(slams):
+        ex.record_scan(i, slam.pose, scans[i], angles)
+    out = ex.step(k, slams, world.camera(), world.active)
+    return [
+        {
+            "sender": d.sender,
+            "receiver": d.receiver,
+            "kind": d.kind,
+            "bytes": d.bytes,
+            "n_polynomials": d.n_polynomials,
+            "sent_step": d.sent_step,
+            "delivered_step": d.delivered_step,
+            "attempts": d.attempts,
+        }
+        for d in out.delivered
+    ]
+
+
+def _builtin_commands(map_name: str) -> np.ndarray | None:
+    """The precomputed paths shipped for a built-in map, if any."""
+    try:
+        from polyslam_env.scenarios.paths import builtin_paths, load_paths
+    except ImportError:  # pragma: no cover - paths module is part of the package
+        return None
+    for name in builtin_paths():
+        paths = load_paths(name)
+        if paths.map == map_name:
+            return paths.commands
+    return None
+
+
+def _frame_of(true_start: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """Pose F of a frame in which ``true_start`` reads ``offset``: true_start = F ⊕ offset."""
+    theta = true_start[2] - offset[2]
+    c, s = np.cos(theta), np.sin(theta)
+    x = true_start[0] - (c * offset[0] - s * offset[1])
+    y = true_start[1] - (s * offset[0] + c * offset[1])
+    return np.array([x, y, theta])
+
+
+class _Recorder:
+    """Collects the per-step data of every robot during :func:`simulate`."""
+
+    def __init__(
+        self, world: World, slams: list[PolySlam], frames: np.ndarray, robots: list[int]
+    ) -> None:
+        self.world, self.slams = world, slams
+        self.robots = robots  # slams[j] estimates world robot robots[j] (shadows repeat one)
+        n = len(slams)
+        self.start = frames[robots]  # (n, 3): each SLAM's frame R_{j,0} in the absolute frame
+        self.true = [[world.poses[r].copy()] for r in robots]
+        self.est = [[s.pose] for s in slams]
+        self.cov = [[s.pose_cov] for s in slams]
+        self.hits: list[list[np.ndarray]] = [[] for _ in range(n)]
+        self.times: list[list[float]] = [[] for _ in range(n)]
+        self.diverged = [False] * n
+        self.collisions = [0] * n
+        self.angles = np.asarray(world.config.range_sensor.angles)
+
+    def record(self, scans: np.ndarray, infos: list, collided: np.ndarray) -> None:
+        poses = self.world.poses
+        true_ranges = self.world.true_scan()
+        for i, (slam, robot) in enumerate(zip(self.slams, self.robots, strict=True)):
+            self.true[i].append(poses[robot].copy())
+            self.est[i].append(slam.pose)
+            self.cov[i].append(slam.pose_cov)
+            self.times[i].append(infos[i].time_s)
+            self.diverged[i] |= infos[i].diverging
+            self.collisions[i] += int(collided[robot])
+            r = true_ranges[robot]
+            ok = np.isfinite(r)
+            phi = poses[robot, 2] + self.angles[ok]
+            rays = np.stack([np.cos(phi), np.sin(phi)], axis=1)
+            self.hits[i].append(poses[robot, :2] + r[ok, None] * rays)
+
+    def runs(self) -> list[RobotRun]:
+        return [
+            RobotRun(
+                start_pose=self.start[i],
+                true_poses=np.array(self.true[i]),
+                est_poses=np.array(self.est[i]),
+                est_covs=np.array(self.cov[i]),
+                polynomials=slam.polynomials(),
+                hit_points=np.vstack(self.hits[i]) if self.hits[i] else np.zeros((0, 2)),
+                slam_times=np.array(self.times[i]),
+                diverged=self.diverged[i],
+                collisions=self.collisions[i],
+            )
+            for i, slam in enumerate(self.slams)
+        ]

@@ -1,0 +1,141 @@
+"""``polyslam benchmark``: SLAM, world and env speed next to references timed in the same run."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+#: Column headings of the tables, per section.
+HEADERS = {
+    "slam": f"{'landmarks':>9} {'step µs':>9} {'IQR':>7} {'min–max':>15} {'solve3 µs':>9}"
+    f" {'× solve3':>8} {'beams':>5}  stages (median µs)",
+    "world": f"{'robots':>9} {'step µs':>9} {'IQR':>7} {'min–max':>15} {'µs/robot':>9}"
+    f" {'pymunk µs':>9} {'× pymunk':>8}",
+    "env": f"{'env':<20} {'steps/s':>9} {'IQR':>7} {'min–max':>15} {'× MPE':>7}",
+}
+TITLES = {
+    "slam": "SLAM step per robot vs landmarks",
+    "world": "world step (physics + scan + camera) vs robots",
+    "env": "env steps per second (3 robots, paper map, vector obs, no rendering)",
+}
+
+
+def register(sub: Any) -> None:
+    parser = sub.add_parser(
+        "benchmark",
+        help="speed of the SLAM, the world and the env, with same-run references",
+        description="Time the SLAM step against the number of landmarks, the world step against"
+        " the number of robots, and env steps per second (full SLAM, no SLAM, the SB3"
+        " vectorised path with 2 processes, and PettingZoo MPE simple_spread as reference when"
+        " mpe2 is installed). Figures are medians over repeats with their spread; compare"
+        " machines by the ratios.",
+    )
+    parser.add_argument("--quick", action="store_true", help="about a minute instead of ~5")
+    parser.add_argument("--json", metavar="PATH", help="also write the results as JSON here")
+    parser.add_argument(
+        "--only",
+        nargs="+",
+        metavar="SECTION",
+        choices=("slam", "world", "env", "vec", "reference"),
+        help="run only these sections: slam world env vec reference (default: all)",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of maps and actions")
+    # Hidden: a few steps per figure, only to exercise the command (tests).
+    parser.add_argument("--tiny", action="store_true", help=argparse.SUPPRESS)
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from polyslam_env.apps.benchmark import PLANS, SECTIONS, run_benchmark
+    from polyslam_env.core.io import write_json
+
+    plan = PLANS["tiny" if args.tiny else "quick" if args.quick else "full"]
+    printer = _Printer()
+    results = run_benchmark(plan, args.only or SECTIONS, seed=args.seed, report=printer)
+    print()
+    print(_format_targets(results["targets"]))
+    print(_format_machine(results["machine"]))
+    if args.json:
+        print(f"wrote {write_json(args.json, results)}")
+    return 0
+
+
+class _Printer:
+    """Prints each row as it arrives, with a title and heading before a section's first row."""
+
+    def __init__(self) -> None:
+        self.section: str | None = None
+
+    def __call__(self, section: str, row: dict[str, Any]) -> None:
+        if section != self.section:
+            if self.section is not None:
+                print()
+            print(TITLES[section])
+            print(HEADERS[section])
+            self.section = section
+        print(FORMATTERS[section](row), flush=True)
+
+
+def _spread(s: dict[str, float], digits: int = 1) -> str:
+    span = f"{s['min']:.{digits}f}–{s['max']:.{digits}f}"
+    return f"{s['iqr']:>7.{digits}f} {span:>15}"
+
+
+def _slam_row(r: dict[str, Any]) -> str:
+    s = r["step_us"]
+    stages = "  ".join(f"{k} {v:.0f}" for k, v in r["stages_us"].items())
+    return (
+        f"{r['landmarks']:>9} {s['median']:>9.1f} {_spread(s)}"
+        f" {r['reference_solve3_us']['median']:>9.2f} {r['ratio_to_solve3']:>8.1f}"
+        f" {r['beams_used_per_step']:>5.2f}  {stages}"
+    )
+
+
+def _world_row(r: dict[str, Any]) -> str:
+    s = r["step_us"]
+    return (
+        f"{r['robots']:>9} {s['median']:>9.1f} {_spread(s)} {r['per_robot_us']:>9.1f}"
+        f" {r['reference_pymunk_us']['median']:>9.1f} {r['ratio_to_pymunk']:>8.1f}"
+    )
+
+
+def _env_row(r: dict[str, Any]) -> str:
+    if not r["installed"]:
+        return f"{r['label']:<20} {'not installed':>9}"
+    s = r["steps_per_s"]
+    ratio = r.get("ratio_to_mpe")
+    row = f"{r['label']:<20} {s['median']:>9.1f} {_spread(s)} {_opt(ratio):>7}"
+    if "machine_speedup" in r:  # the vectorised row: what the machine allows in parallel
+        row += (
+            f"   ({r['processes']} processes of small numpy work run"
+            f" {r['machine_speedup']:.2f}× faster than one after another here)"
+        )
+    return row
+
+
+def _opt(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.2f}"
+
+
+FORMATTERS = {"slam": _slam_row, "world": _world_row, "env": _env_row}
+
+
+def _format_targets(rows: list[dict[str, Any]]) -> str:
+    """Issue 8's targets: measured, goal, met (ratios to MPE are known only at the end)."""
+    lines = [f"{'target':<32} {'measured':>10} {'goal':>8}  met"]
+    for r in rows:
+        met = "n/a" if r["met"] is None else "yes" if r["met"] else "NO"
+        value = "n/a" if r["measured"] is None else f"{r['measured']:.2f}"
+        lines.append(f"{r['target']:<32} {value:>10} {r['goal']:>8g}  {met}")
+    return "\n".join(lines)
+
+
+def _format_machine(m: dict[str, Any]) -> str:
+    def load(value: float | None) -> str:
+        return "?" if value is None else f"{value:.2f}"
+
+    return (
+        f"machine: {m['cpus']} cpus, load {load(m['load_before'])} → {load(m['load_after'])}"
+        f" (1-min average; a loaded machine slows every figure, ratios less), BLAS {m['blas']},"
+        f" numpy {m['numpy']}, pymunk {m['pymunk']}, Python {m['python']}"
+    )

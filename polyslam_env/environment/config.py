@@ -1,0 +1,211 @@
+"""Configuration of the PettingZoo environment (SPEC §6): nested frozen dataclasses.
+
+:class:`EnvConfig` gathers the world, the SLAM, the channel, rewards, observations, actions and
+episode settings. :func:`resolve_config` turns what users pass to ``parallel_env`` (nothing, an
+``EnvConfig``, a dict, or a YAML path, plus ``a__b=value`` keyword overrides) into one validated
+``EnvConfig``; unknown keys and bad values raise :class:`ConfigError` naming them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from polyslam_env.comms.channel import ChannelConfig
+from polyslam_env.core.config import Config, check_choice, check_positive, check_range
+from polyslam_env.core.errors import ConfigError
+from polyslam_env.slam.config import PRESETS, SlamConfig, slam_preset
+from polyslam_env.world.config import WorldConfig
+from polyslam_env.world.generators import GENERATORS
+
+__all__ = [
+    "GENERATOR_PREFIX",
+    "ActionConfig",
+    "EnvConfig",
+    "ObservationConfig",
+    "RewardConfig",
+    "resolve_config",
+]
+
+#: A ``map`` value ``"generator:<name>"`` draws a new layout at every reset.
+GENERATOR_PREFIX = "generator:"
+
+#: Default discrete actions as fractions of (v_max, omega_max): stop, forward, forward-left,
+#: forward-right, turn left, turn right, back.
+DEFAULT_DISCRETE: tuple[tuple[float, float], ...] = (
+    (0.0, 0.0),
+    (1.0, 0.0),
+    (0.5, 0.5),
+    (0.5, -0.5),
+    (0.0, 1.0),
+    (0.0, -1.0),
+    (-0.5, 0.0),
+)
+
+
+@dataclass(frozen=True)
+class RewardConfig(Config):
+    """Weights of the named reward terms (see the env docstring for each term's definition)."""
+
+    coverage: float = 1.0  # per m² of newly swept free space
+    mapping: float = 1.0  # per unit change of the robot's map completeness
+    bytes: float = 0.1  # per kB sent (the term is −bytes/1000)
+    collision: float = 0.5  # the term is −1 on a step with a collision
+    time: float = 0.01  # the term is −1 every step
+    shared: bool = False  # True: every robot receives the team mean reward
+
+    def validate(self) -> None:
+        for name in ("coverage", "mapping", "bytes", "collision", "time"):
+            check_range(f"reward.{name}", getattr(self, name), -1e6, 1e6)
+
+
+@dataclass(frozen=True)
+class ObservationConfig(Config):
+    """What the observation contains and how big its local map is."""
+
+    mode: Literal["vector", "grid"] = "vector"
+    grid_size: int = 11  # G: local egocentric grid is G × G cells
+    grid_resolution: float = 0.2  # m per local grid cell
+    belief_size: float = 16.0  # m, side of each robot's own free-space grid around its start
+    belief_resolution: float = 0.1  # m per belief cell
+    max_detections: int | None = None  # camera slots; None = num_robots − 1
+    pose_scale: float = 20.0  # m; the position estimate is divided by it (then clipped to ±1)
+    rendezvous_cap: int = 10  # the rendezvous count is reported as min(count, cap) / cap
+
+    def validate(self) -> None:
+        if not 1 <= self.grid_size <= 101 or self.grid_size % 2 == 0:
+            raise ConfigError(
+                f"observation.grid_size: must be an odd integer in 1..101, got {self.grid_size!r}"
+            )
+        check_positive("observation.grid_resolution", self.grid_resolution)
+        check_positive("observation.belief_size", self.belief_size)
+        check_positive("observation.belief_resolution", self.belief_resolution)
+        if self.belief_size / self.belief_resolution > 4096:
+            raise ConfigError(
+                f"observation.belief_size: {self.belief_size} m at {self.belief_resolution} m"
+                " is more than 4096 cells a side"
+            )
+        if self.max_detections is not None and self.max_detections < 0:
+            raise ConfigError(
+                f"observation.max_detections: must be >= 0 or null, got {self.max_detections!r}"
+            )
+        check_positive("observation.pose_scale", self.pose_scale)
+        if self.rendezvous_cap < 1:
+            raise ConfigError(
+                f"observation.rendezvous_cap: must be >= 1, got {self.rendezvous_cap!r}"
+            )
+
+
+@dataclass(frozen=True)
+class ActionConfig(Config):
+    """Continuous (v, ω) in physical units, or an index into a table of (v, ω) fractions."""
+
+    mode: Literal["continuous", "discrete"] = "continuous"
+    discrete: tuple[tuple[float, float], ...] = DEFAULT_DISCRETE  # fractions of (v_max, ω_max)
+
+    def validate(self) -> None:
+        if not self.discrete:
+            raise ConfigError("action.discrete: at least one action is needed")
+        for i, (v, w) in enumerate(self.discrete):
+            check_range(f"action.discrete[{i}][0]", v, -1.0, 1.0)
+            check_range(f"action.discrete[{i}][1]", w, -1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class EnvConfig(Config):
+    """Everything that defines an episode of ``polyslam_v0``."""
+
+    map: str = "paper"  # built-in name, path to a YAML map, or "generator:rooms" / "generator:cave"
+    map_params: Any = None  # mapping of generator parameters (generator maps only)
+    num_robots: int = 3
+    max_steps: int = 500  # truncation
+    world: WorldConfig = field(default_factory=WorldConfig)
+    slam: SlamConfig = field(default_factory=SlamConfig)
+    slam_preset: str | None = None  # a named SlamConfig preset; replaces ``slam``
+    slam_enabled: bool = True  # False: ground-truth pose mode (no SLAM, no map exchange)
+    channel: ChannelConfig | None = field(default_factory=ChannelConfig)  # None: no exchange
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    observation: ObservationConfig = field(default_factory=ObservationConfig)
+    action: ActionConfig = field(default_factory=ActionConfig)
+    coverage_target: float = 0.95  # team coverage that terminates the episode
+    coverage_resolution: float = 0.1  # m, cell side of the coverage grid
+    faults: tuple[tuple[int, int], ...] = ()  # (robot, step): robot fails at that env step
+
+    def __post_init__(self) -> None:
+        if self.slam_preset is not None:
+            preset = slam_preset(self.slam_preset)
+            if self.slam not in (SlamConfig(), preset):
+                raise ConfigError(
+                    f"slam_preset: {self.slam_preset!r} given together with custom slam"
+                    " parameters; give one or the other"
+                )
+            object.__setattr__(self, "slam", preset)
+        super().__post_init__()
+
+    @property
+    def generator_name(self) -> str | None:
+        """The layout generator's name for ``map="generator:<name>"``, else None."""
+        if self.map.startswith(GENERATOR_PREFIX):
+            return self.map[len(GENERATOR_PREFIX) :]
+        return None
+
+    @property
+    def num_detections(self) -> int:
+        """Camera slots in the observation."""
+        m = self.observation.max_detections
+        return self.num_robots - 1 if m is None else m
+
+    def validate(self) -> None:
+        if not self.map:
+            raise ConfigError("map: must be a map name, a path or 'generator:<name>', got ''")
+        gen = self.generator_name
+        if gen is not None:
+            check_choice("map", gen, tuple(sorted(GENERATORS)))
+        if self.map_params is not None:
+            if gen is None:
+                raise ConfigError(f"map_params: only for generator maps, but map is {self.map!r}")
+            if not isinstance(self.map_params, Mapping):
+                raise ConfigError(f"map_params: expected a mapping, got {self.map_params!r}")
+        if self.slam_preset is not None:
+            check_choice("slam_preset", self.slam_preset, tuple(PRESETS))
+        if not 1 <= self.num_robots <= 64:
+            raise ConfigError(f"num_robots: must be in 1..64, got {self.num_robots!r}")
+        if self.max_steps < 1:
+            raise ConfigError(f"max_steps: must be >= 1, got {self.max_steps!r}")
+        check_range("coverage_target", self.coverage_target, 0.0, 1.0)
+        check_positive("coverage_resolution", self.coverage_resolution)
+        self._validate_faults()
+
+    def _validate_faults(self) -> None:
+        seen: set[int] = set()
+        for i, (robot, step) in enumerate(self.faults):
+            if not 0 <= robot < self.num_robots:
+                raise ConfigError(
+                    f"faults[{i}]: robot {robot!r} is not in 0..{self.num_robots - 1}"
+                )
+            if step < 1:
+                raise ConfigError(f"faults[{i}]: step must be >= 1, got {step!r}")
+            if robot in seen:
+                raise ConfigError(f"faults[{i}]: robot {robot} fails more than once")
+            seen.add(robot)
+
+
+def resolve_config(
+    config: EnvConfig | Mapping[str, Any] | str | Path | None = None, **overrides: Any
+) -> EnvConfig:
+    """One validated :class:`EnvConfig` from any accepted form plus ``a__b=value`` overrides."""
+    if config is None:
+        base = EnvConfig()
+    elif isinstance(config, EnvConfig):
+        base = config
+    elif isinstance(config, Mapping):
+        base = EnvConfig.from_dict(config)
+    elif isinstance(config, str | Path):
+        base = EnvConfig.from_yaml(config)
+    else:
+        raise ConfigError(
+            f"config: expected an EnvConfig, a mapping or a YAML path, got {type(config).__name__}"
+        )
+    return base.replace(**overrides)

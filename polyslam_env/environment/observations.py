@@ -1,0 +1,307 @@
+"""On-board observations (SPEC §6): what one robot could know, encoded for a policy.
+
+Nothing here reads ground truth. Each robot keeps
+
+* a :class:`BeliefGrid` in its own start frame: cells its beams swept (free) and, in
+  ground-truth-pose mode, cells its beams ended in (hit), both placed with its *estimated* pose;
+* a :class:`MapSampler`: its polynomials sampled as points, cached per landmark and shifted
+  when only c0 moved (a c0 change shifts every point of the curve along its dependent axis).
+
+:class:`ObservationEncoder` turns these, the ranges, the pose estimate, camera detections and
+channel state into the vector (or grid + vector) observation, and owns the spaces.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from gymnasium import spaces
+
+from polyslam_env.environment.config import EnvConfig
+from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.robot import PolySlam
+from polyslam_env.world.sensors import Detection
+
+__all__ = ["BeliefGrid", "MapSampler", "ObservationEncoder", "RobotView", "sweep_beliefs"]
+
+#: Values of the one-channel local map in vector mode.
+FREE, UNKNOWN, OCCUPIED = 0.0, 0.5, 1.0
+#: Caps of the reported pose standard deviations (x m, y m, θ rad); std/cap is clipped to 1.
+STD_CAPS = np.array([1.0, 1.0, math.pi])
+_CAPS = STD_CAPS.tolist()
+
+
+class BeliefGrid:
+    """A robot's own square grid centred on its start (its frame's origin), rows = y.
+
+    ``free`` marks cells its beams crossed, ``hit`` cells where a beam ended on something.
+    """
+
+    def __init__(self, size: float, resolution: float, max_range: float) -> None:
+        self.resolution = float(resolution)
+        self.n = math.ceil(size / resolution)
+        self.origin = -0.5 * self.n * self.resolution  # x and y of the lower-left corner
+        self.free = np.zeros((self.n, self.n), dtype=bool)  # (n, n)
+        self.hit = np.zeros((self.n, self.n), dtype=bool)  # (n, n)
+        self.max_range = float(max_range)
+        samples = math.ceil(max_range / (0.5 * self.resolution)) + 1
+        self._t = np.linspace(0.0, 1.0, samples)  # (S,) beam sample fractions, ≤ res/2 apart
+
+    def _flat_cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Flat cell index (M,) of points (M, 2) (0 where outside) and whether each is inside."""
+        ij = np.floor((points - self.origin) / self.resolution).astype(np.intp)  # (M, 2)
+        u = ij.view(np.uintp)  # negatives wrap to huge values
+        inside = (u[:, 0] < self.n) & (u[:, 1] < self.n)
+        return np.where(inside, ij[:, 1] * self.n + ij[:, 0], 0), inside
+
+    def sweep(self, pose: np.ndarray, angles: np.ndarray, ranges: np.ndarray) -> None:
+        """Mark the beams of one scan from ``pose`` (3,): free up to half a cell short of each
+        hit (or to ``max_range`` without return), and the hit cells."""
+        sweep_beliefs([self], pose[None], angles, ranges[None])
+
+    def lookup(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(free, hit) (M,) at points (M, 2); False outside the grid."""
+        flat, inside = self._flat_cells(points)
+        return self.free.reshape(-1)[flat] & inside, self.hit.reshape(-1)[flat] & inside
+
+
+def sweep_beliefs(
+    grids: Sequence[BeliefGrid], poses: np.ndarray, angles: np.ndarray, ranges: np.ndarray
+) -> None:
+    """:meth:`BeliefGrid.sweep` of several robots' scans into their own grids, in one numpy
+    pass (the grids share size, resolution and range): poses (K, 3), ranges (K, B).
+
+    With a handful of beams per robot the cost is numpy call overhead, so doing all robots
+    together costs little more than one; the cells are those of separate sweeps.
+    """
+    g = grids[0]
+    if any((h.n, h.resolution, h.max_range) != (g.n, g.resolution, g.max_range) for h in grids):
+        raise ValueError("sweep_beliefs needs grids of the same size, resolution and range")
+    finite = np.isfinite(ranges)  # (K, B)
+    r = np.fmin(ranges, g.max_range)  # (K, B); no return (inf) → max_range
+    length = np.where(finite, np.maximum(r - 0.5 * g.resolution, 0.0), r)
+    phi = poses[:, 2:3] + angles  # (K, B)
+    # Each beam's S free samples and its end point (used only for hits) in one array.
+    t = np.empty((*r.shape, g._t.size + 1))  # (K, B, S + 1)
+    np.multiply(length[..., None], g._t, out=t[..., :-1])
+    t[..., -1] = r
+    x = poses[:, 0, None, None] + t * np.cos(phi)[..., None]  # (K, B, S + 1)
+    y = poses[:, 1, None, None] + t * np.sin(phi)[..., None]
+    col = np.floor((x - g.origin) / g.resolution).astype(np.intp)
+    row = np.floor((y - g.origin) / g.resolution).astype(np.intp)
+    inside = (row.view(np.uintp) < g.n) & (col.view(np.uintp) < g.n)  # see _flat_cells
+    flat = row * g.n + col  # (K, B, S + 1)
+    for k, grid in enumerate(grids):
+        grid.free.reshape(-1)[flat[k, :, :-1][inside[k, :, :-1]]] = True
+        grid.hit.reshape(-1)[flat[k, :, -1][inside[k, :, -1] & finite[k]]] = True
+
+
+class MapSampler:
+    """A robot's polynomials as points every ``step`` of arc length, in its own frame.
+
+    A landmark is resampled only when its shape object changed (created, refit, merged or
+    extended: shapes are immutable, so a change is a new object); a c0 change alone shifts the
+    cached points along the polynomial's dependent axis, which is exact.
+    """
+
+    def __init__(self, step: float) -> None:
+        self.step = float(step)
+        self._shapes: list[Polynomial] = []  # cached shape objects, in state order
+        self._ids: list[int] = []
+        self._c0 = np.zeros(0)  # (n,) c0 of each landmark when its points were sampled
+        self._points = np.zeros((0, 2))  # (M, 2) all points at the cached c0s
+        self._owner = np.zeros(0, dtype=np.intp)  # (M,) landmark (state order) of each point
+        self._axis = np.zeros(0, dtype=np.intp)  # (M,) the dependent coordinate (0 or 1)
+        self._per_id: dict[int, tuple[Polynomial, float, np.ndarray]] = {}
+
+    def _stale(self, slam: PolySlam) -> bool:
+        ids = slam.book.ids
+        if list(ids) != self._ids:
+            return True
+        return any(slam.shapes[lid] is not shp for lid, shp in zip(ids, self._shapes, strict=True))
+
+    def _rebuild(self, slam: PolySlam) -> None:
+        """Resample the landmarks whose shape changed; keep the others' points."""
+        ids = list(slam.book.ids)
+        c0s = slam.mean[3:]
+        per_id: dict[int, tuple[Polynomial, float, np.ndarray]] = {}
+        for lid, c0 in zip(ids, c0s, strict=True):
+            shape = slam.shapes[lid]
+            old = self._per_id.get(lid)
+            if old is None or old[0] is not shape:
+                old = (shape, float(c0), shape.with_c0(float(c0)).sample_arclength(self.step))
+            per_id[lid] = old
+        self._per_id, self._ids = per_id, ids
+        self._shapes = [per_id[lid][0] for lid in ids]
+        self._c0 = np.array([per_id[lid][1] for lid in ids])
+        pts = [per_id[lid][2] for lid in ids]
+        counts = [len(p) for p in pts]
+        self._points = np.vstack(pts) if pts else np.zeros((0, 2))
+        self._owner = np.repeat(np.arange(len(ids)), counts)
+        axes = [1 if shp.variate == 1 else 0 for shp in self._shapes]
+        self._axis = np.repeat(np.array(axes, dtype=np.intp), counts)
+
+    def points(self, slam: PolySlam) -> np.ndarray:  # (M, 2)
+        """All map points of ``slam`` in its frame."""
+        if self._stale(slam):
+            self._rebuild(slam)
+        out = self._points.copy()
+        if len(out):
+            shift = (slam.mean[3:] - self._c0)[self._owner]  # (M,)
+            out[np.arange(len(out)), self._axis] += shift
+        return out
+
+
+@dataclass(frozen=True)
+class RobotView:
+    """Everything one robot knows at the end of a step (its own frame)."""
+
+    ranges: np.ndarray  # (B,) noisy ranges, inf = no return
+    pose: np.ndarray  # (3,) estimated pose in its start frame
+    pose_std: np.ndarray  # (3,) standard deviations of the pose estimate
+    map_points: np.ndarray  # (M, 2) its polynomials' points in its frame
+    belief: BeliefGrid
+    detections: list[Detection]
+    steps_since_rendezvous: int | None  # None: never met anyone
+    rendezvous: int
+    step: int
+
+
+class ObservationEncoder:
+    """Builds the observation space once and encodes :class:`RobotView` s into it."""
+
+    def __init__(self, config: EnvConfig) -> None:
+        oc = config.observation
+        self.config = config
+        self.mode = oc.mode
+        self.g = oc.grid_size
+        self.res = oc.grid_resolution
+        self.k = config.num_detections
+        self.beams = len(config.world.range_sensor.angles_deg)
+        self.max_range = config.world.range_sensor.max_range
+        self.use_hits = not config.slam_enabled
+        h = self.g // 2
+        q, r = np.meshgrid(np.arange(self.g) - h, np.arange(self.g) - h)  # columns x, rows y
+        self.cell_centres = np.stack([q, r], axis=-1).reshape(-1, 2) * self.res  # (G², 2) ego
+        self._layout = self.vector_layout
+        low, high = self._vector_bounds()
+        self.vector_space = spaces.Box(low, high, dtype=np.float32)
+        self.space: spaces.Space[object]
+        if self.mode == "grid":
+            grid = spaces.Box(0.0, 1.0, (3, self.g, self.g), dtype=np.float32)
+            self.space = spaces.Dict({"grid": grid, "vector": self.vector_space})
+        else:
+            self.space = self.vector_space
+
+    # -- layout of the vector -------------------------------------------------------------
+    def _vector_parts(self) -> list[tuple[str, int, float]]:
+        """(name, length, low) of each part, in order; every high is 1."""
+        parts = [
+            ("ranges", self.beams, 0.0),
+            ("no_return", self.beams, 0.0),
+            ("pose", 4, -1.0),
+            ("pose_std", 3, 0.0),
+        ]
+        if self.mode == "vector":
+            parts.append(("local_map", self.g * self.g, 0.0))
+        parts += [("detections", 4 * self.k, -1.0), ("channel", 2, 0.0), ("progress", 1, 0.0)]
+        return parts
+
+    def _vector_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        parts = self._vector_parts()
+        low = np.concatenate([np.full(n, lo, dtype=np.float32) for _, n, lo in parts])
+        return low, np.ones_like(low)
+
+    @property
+    def vector_layout(self) -> dict[str, slice]:
+        """Where each named part sits in the vector (for policies and tests)."""
+        out, start = {}, 0
+        for name, n, _ in self._vector_parts():
+            out[name] = slice(start, start + n)
+            start += n
+        return out
+
+    # -- encoding -------------------------------------------------------------------------
+    def local_cells(self, view: RobotView) -> tuple[np.ndarray, np.ndarray]:
+        """Occupied and free cells (G²,) bool of the egocentric grid (x forward = columns,
+        row-major); a cell is never both, and neither means unknown."""
+        g = self.g
+        c, s = math.cos(view.pose[2]), math.sin(view.pose[2])
+        rot = np.array([[c, -s], [s, c]])  # ego → own frame; (own − xy) @ rot = ego
+        occ = np.zeros(g * g, dtype=bool)  # (G²,)
+        if len(view.map_points):
+            ego = (view.map_points - view.pose[:2]) @ rot  # (M, 2)
+            idx = np.floor(ego / self.res + (g // 2 + 0.5)).astype(np.intp)  # (M, 2)
+            u = idx.view(np.uintp)  # negatives wrap to huge values
+            ok = (u[:, 0] < g) & (u[:, 1] < g)
+            occ[idx[ok, 1] * g + idx[ok, 0]] = True
+        free, hit = view.belief.lookup(self.cell_centres @ rot.T + view.pose[:2])
+        if self.use_hits:
+            occ |= hit
+        free &= ~occ
+        return occ, free
+
+    def local_map(self, view: RobotView) -> np.ndarray:  # (3, G, G) float32
+        """Occupied / free / unknown channels of the egocentric grid (x forward = columns)."""
+        occ, free = self.local_cells(view)
+        out = np.empty((3, self.g * self.g), dtype=np.float32)
+        out[0], out[1], out[2] = occ, free, ~(occ | free)
+        return out.reshape(3, self.g, self.g)
+
+    def _detections(self, detections: list[Detection]) -> list[float]:  # (4K,)
+        """Slots nearest first, ``(seen, d/range, cos α, sin α)``, zeros for empty slots."""
+        cam_range = self.config.world.camera.range
+        out: list[float] = []
+        for det in sorted(detections, key=lambda d: (d.distance, d.target))[: self.k]:
+            d = min(det.distance / cam_range, 1.0)
+            out += (1.0, d, math.cos(det.bearing), math.sin(det.bearing))
+        return out + [0.0] * (4 * self.k - len(out))
+
+    def vector(
+        self, view: RobotView, cells: tuple[np.ndarray, np.ndarray] | None
+    ) -> np.ndarray:  # (D,) float32
+        """The flat vector; the local map's (occupied, free) ``cells`` (G²,) are folded in as
+        one coded channel if given.
+
+        The few scalar parts are written as Python floats: numpy calls on 2–4 element arrays
+        cost more than the arithmetic (the float32 values are the same either way).
+        """
+        oc = self.config.observation
+        lay = self._layout
+        out = np.empty(self.vector_space.shape, dtype=np.float32)
+        out[lay["ranges"]] = np.fmin(view.ranges / self.max_range, 1.0)  # no return (inf) → 1
+        out[lay["no_return"]] = ~np.isfinite(view.ranges)
+        x, y, theta = view.pose.tolist()
+        scale = oc.pose_scale
+        out[lay["pose"]] = (
+            min(max(x / scale, -1.0), 1.0),
+            min(max(y / scale, -1.0), 1.0),
+            math.cos(theta),
+            math.sin(theta),
+        )
+        std = zip(view.pose_std.tolist(), _CAPS, strict=True)
+        out[lay["pose_std"]] = [min(max(sd / cap, 0.0), 1.0) for sd, cap in std]
+        if cells is not None:
+            occ, free = cells
+            local = out[lay["local_map"]]
+            local.fill(UNKNOWN)
+            local[occ] = OCCUPIED
+            local[free] = FREE
+        since, t = view.steps_since_rendezvous, self.config.max_steps
+        # detections, channel and progress are adjacent: one assignment
+        out[lay["detections"].start : lay["progress"].stop] = [
+            *self._detections(view.detections),
+            1.0 if since is None else min(since / t, 1.0),
+            min(view.rendezvous, oc.rendezvous_cap) / oc.rendezvous_cap,
+            min(view.step / t, 1.0),
+        ]
+        return out
+
+    def encode(self, view: RobotView) -> np.ndarray | dict[str, np.ndarray]:
+        """The observation of one robot in :attr:`space`."""
+        if self.mode == "grid":
+            return {"grid": self.local_map(view), "vector": self.vector(view, None)}
+        return self.vector(view, self.local_cells(view))

@@ -1,0 +1,134 @@
+"""Per-robot episode histories of the env and the metrics reported at an episode's end.
+
+The env records, for every active robot and step, what
+:func:`polyslam_env.apps.simulate.robot_metrics` needs (true and estimated poses, covariances, beam
+hit points, SLAM wall times, collisions) and turns it into a
+:class:`~polyslam_env.apps.simulate.RobotRun`, so the paper's metrics are computed by the same code
+as in :func:`~polyslam_env.apps.simulate.simulate`. Exploration and communication numbers are added
+on top.
+
+Differences from ``simulate``: hit points come from the *noisy* ranges placed with the true pose
+(no extra noiseless ray cast per step); a failed robot's history stops at its failure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from polyslam_env import metrics
+from polyslam_env.apps.simulate import RobotRun, robot_metrics
+from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.world.layout import Layout
+
+__all__ = ["ROBOT_METRIC_KEYS", "RobotHistory", "final_robot_metrics", "team_metrics"]
+
+#: Keys of ``infos[agent]["metrics"]`` (all floats; NaN where undefined).
+ROBOT_METRIC_KEYS: tuple[str, ...] = (
+    "nees",
+    "nees_paper",
+    "nu",
+    "nu_mean",
+    "completeness",
+    "coverage",
+    "bytes_sent",
+    "bytes_received",
+    "rendezvous",
+    "slam_time_ms",
+    "collisions",
+    "path_length",
+)
+_SLAM_KEYS = ("nees", "nees_paper", "nu", "nu_mean", "completeness", "slam_time_ms")
+
+
+class RobotHistory:
+    """What one robot did during an episode (estimates in its own start frame)."""
+
+    def __init__(self, start_pose: np.ndarray, est_pose: np.ndarray, est_cov: np.ndarray) -> None:
+        self.start_pose = np.asarray(start_pose, dtype=float).copy()  # (3,) absolute
+        self.true: list[np.ndarray] = [self.start_pose.copy()]  # (3,) each, absolute
+        self.est: list[np.ndarray] = [np.asarray(est_pose, dtype=float).copy()]  # (3,) own frame
+        self.cov: list[np.ndarray] = [np.asarray(est_cov, dtype=float).copy()]  # (3, 3) each
+        self.hits: list[np.ndarray] = []  # (h, 2) each, absolute
+        self.slam_times: list[float] = []  # s
+        self.collisions = 0
+        self.path_length = 0.0  # m, true distance travelled
+        self.diverged = False
+
+    def record(
+        self,
+        true_pose: np.ndarray,
+        est_pose: np.ndarray,
+        est_cov: np.ndarray,
+        hits: np.ndarray,
+        slam_time: float | None,
+        collided: bool,
+        diverging: bool,
+    ) -> None:
+        """Append one step: poses (3,), covariance (3, 3), beam hit points (h, 2)."""
+        (x, y), (x0, y0) = true_pose[:2].tolist(), self.true[-1][:2].tolist()
+        self.path_length += float(np.hypot(x - x0, y - y0))
+        self.true.append(np.array(true_pose, dtype=float))  # np.array copies
+        self.est.append(np.array(est_pose, dtype=float))
+        self.cov.append(np.array(est_cov, dtype=float))
+        self.hits.append(hits)
+        if slam_time is not None:
+            self.slam_times.append(slam_time)
+        self.collisions += int(collided)
+        self.diverged |= diverging
+
+    def true_path(self) -> np.ndarray:  # (k, 2)
+        return np.array([p[:2] for p in self.true])
+
+    def est_path_abs(self) -> np.ndarray:  # (k, 2)
+        return metrics.pose_to_absolute(np.array(self.est), self.start_pose)[:, :2]
+
+    def run(self, polys: list[Polynomial]) -> RobotRun:
+        return RobotRun(
+            start_pose=self.start_pose,
+            true_poses=np.array(self.true),
+            est_poses=np.array(self.est),
+            est_covs=np.array(self.cov),
+            polynomials=polys,
+            hit_points=np.vstack(self.hits) if self.hits else np.zeros((0, 2)),
+            slam_times=np.array(self.slam_times),
+            diverged=self.diverged,
+            collisions=self.collisions,
+        )
+
+
+def final_robot_metrics(
+    history: RobotHistory,
+    polys: list[Polynomial] | None,
+    layout: Layout,
+    coverage: float,
+    counters: Mapping[str, float],
+) -> dict[str, float]:
+    """``infos[agent]["metrics"]``; ``polys`` None (no SLAM) gives NaN for the SLAM metrics."""
+    out = dict.fromkeys(ROBOT_METRIC_KEYS, float("nan"))
+    if polys is not None:
+        paper = robot_metrics(history.run(polys), layout)
+        out.update({k: float(paper[k]) for k in _SLAM_KEYS})
+    out["coverage"] = float(coverage)
+    out["collisions"] = float(history.collisions)
+    out["path_length"] = history.path_length
+    for key in ("bytes_sent", "bytes_received", "rendezvous"):
+        out[key] = float(counters.get(key, 0.0))
+    return out
+
+
+def team_metrics(
+    coverage_series: Sequence[float], grid: metrics.CoverageGrid
+) -> dict[str, float | int | None]:
+    """``infos[agent]["team"]``: coverage, steps to 50 % / 90 % (None if not reached), overlap.
+
+    ``coverage_series[k]`` is the team coverage after env step k (k = 0: after reset).
+    """
+    series = np.asarray(coverage_series, dtype=float)
+    return {
+        "coverage": float(grid.coverage),
+        "steps_to_50": metrics.time_to_fraction(series, 0.5),
+        "steps_to_90": metrics.time_to_fraction(series, 0.9),
+        "overlap": float(grid.overlap()),
+    }

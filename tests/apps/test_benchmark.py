@@ -1,0 +1,168 @@
+"""The benchmark harness's statistics, and ``polyslam benchmark`` end to end (no timing checks:
+performance figures live in the benchmark itself, not in unit tests)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from polyslam_env.apps import benchmark
+from polyslam_env.apps.benchmark import Stats, rate_samples, scaling_exponent, targets, time_calls
+from polyslam_env.cli.main import main
+
+
+class FakeClock:
+    """A ``time`` stand-in whose ``perf_counter`` advances only when ``tick`` is called."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def perf_counter(self) -> float:
+        return self.now
+
+    def tick(self, seconds: float) -> None:
+        self.now += seconds
+
+
+@pytest.fixture
+def clock(monkeypatch: pytest.MonkeyPatch) -> Iterator[FakeClock]:
+    fake = FakeClock()
+    monkeypatch.setattr(benchmark, "time", fake)
+    yield fake
+
+
+def test_stats__known_samples() -> None:
+    s = Stats.of([5.0, 1.0, 4.0, 2.0, 3.0])
+    assert (s.median, s.q25, s.q75, s.min, s.max, s.n) == (3.0, 2.0, 4.0, 1.0, 5.0, 5)
+    assert s.iqr == 2.0
+    assert s.scaled(1e6).median == 3e6 and s.scaled(1e6).n == 5
+    assert s.to_dict()["iqr"] == 2.0
+
+
+def test_stats__no_samples_raises() -> None:
+    with pytest.raises(ValueError, match="no samples"):
+        Stats.of([])
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(0.0, 1e6, allow_nan=False), min_size=1, max_size=30))
+def test_stats__order_of_quantiles(samples: list[float]) -> None:
+    s = Stats.of(samples)
+    # 1e-9 relative: np.percentile interpolates, which may round past an end by an ulp or so.
+    tol = 1e-9 * max(1.0, s.max)
+    assert s.min - tol <= s.q25 <= s.median + tol
+    assert s.median - tol <= s.q75 <= s.max + tol
+    assert s.median == pytest.approx(float(np.median(samples)), rel=1e-12, abs=1e-12)
+
+
+def test_time_calls__per_call_time_with_warmup_and_number(clock: FakeClock) -> None:
+    durations = iter([100.0, 100.0] + [1.0, 3.0] * 3 + [2.0, 2.0] * 3 + [5.0, 7.0] * 3)
+    calls = []
+
+    def fn() -> None:
+        calls.append(1)
+        clock.tick(next(durations))
+
+    # Two warm-up calls (100 s each, not timed), then 3 samples of 6 calls each.
+    s = time_calls(fn, repeats=3, number=6, warmup=2)
+    assert len(calls) == 2 + 3 * 6
+    assert (s.min, s.median, s.max, s.n) == (2.0, 2.0, 6.0, 3)
+
+
+def test_rate_samples__calls_per_second(clock: FakeClock) -> None:
+    per_call = [0.5]  # seconds each call takes; changed between blocks
+
+    def step() -> None:
+        clock.tick(per_call[0])
+
+    rates = []
+    for seconds in (0.5, 0.25, 1.0, 0.5):
+        per_call[0] = seconds
+        rates.append(rate_samples(step, steps=4, repeats=1).median)
+    assert rates == [2.0, 4.0, 1.0, 2.0]
+    assert rate_samples(step, steps=10, repeats=3, warmup=1).n == 3
+
+
+def test_scaling_exponent__linear_and_constant() -> None:
+    counts = [1, 3, 8, 16, 32]
+    linear = [5.0 * n for n in counts]
+    # 1e-9: an exact power law; only floating-point rounding in the log-log fit remains.
+    assert scaling_exponent(counts, linear) == pytest.approx(1.0, abs=1e-9)
+    assert scaling_exponent(counts, [7.0] * 5) == pytest.approx(0.0, abs=1e-9)
+    assert np.isnan(scaling_exponent([3], [1.0]))
+
+
+def test_targets__met_flags_and_missing_figures() -> None:
+    results = {
+        "env": {"full_slam": {"installed": True, "steps_per_s": {"median": 1200.0}}},
+        "slam": [
+            {"landmarks": 30, "step_us": {"median": 400.0}},
+            {"landmarks": 300, "step_us": {"median": 900.0}},
+        ],
+        "world": {"scaling_exponent": 0.8},
+    }
+    met = {r["target"]: r["met"] for r in targets(results)}
+    assert met == {
+        "env steps/s, full SLAM": True,
+        "env / MPE simple_spread": None,  # no reference measured
+        "SLAM step µs, 30 landmarks": False,
+        "SLAM step µs, 300 landmarks": True,
+        "world cost exponent in robots": True,
+    }
+
+
+def test_run_benchmark__rejects_unknown_section() -> None:
+    with pytest.raises(ValueError, match="gpu"):
+        benchmark.run_benchmark(benchmark.PLANS["tiny"], ["slam", "gpu"])
+
+
+def test_benchmark_command__quick_json_has_every_section(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "bench.json"
+    assert main(["benchmark", "--quick", "--tiny", "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert {"slam", "world", "env", "vec", "reference", "targets"} <= set(data)
+    assert [r["landmarks"] for r in data["slam"]] == list(benchmark.PLANS["tiny"].slam_sizes)
+    for row in data["slam"]:
+        assert {"step_us", "reference_solve3_us", "ratio_to_solve3", "stages_us"} <= set(row)
+        assert row["ratio_to_solve3"] > 0
+    assert [r["robots"] for r in data["world"]["rows"]] == [1, 3]
+    assert all(r["ratio_to_pymunk"] > 0 for r in data["world"]["rows"])
+    assert "scaling_exponent" in data["world"]
+    env_rows = [data["env"]["full_slam"], data["env"]["no_slam"], data["vec"]]
+    mpe = data["reference"]
+    for row in env_rows:
+        assert "ratio_to_mpe" in row
+        if mpe["installed"] and row["installed"]:
+            expected = row["steps_per_s"]["median"] / mpe["steps_per_s"]["median"]
+            # 1e-9 relative: the ratio is computed from the same floats, JSON keeps 17 digits.
+            assert row["ratio_to_mpe"] == pytest.approx(expected, rel=1e-9)
+        else:
+            assert row["ratio_to_mpe"] is None
+    assert "ratio_to_env" in data["vec"]
+    if data["vec"]["installed"]:
+        assert data["vec"]["machine_speedup"] > 0  # side by side / one after another
+    machine = data["machine"]
+    assert machine["cpus"] >= 1 and machine["numpy"] and machine["blas"]
+    assert "load_before" in machine and "load_after" in machine
+    printed = capsys.readouterr().out
+    for heading in ("SLAM step", "world step", "env steps per second", "target", "machine:"):
+        assert heading in printed
+
+
+def test_benchmark_command__mpe_missing_says_not_installed(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    monkeypatch.setitem(sys.modules, "mpe2", None)  # makes ``import mpe2`` raise ImportError
+    out = tmp_path / "ref.json"
+    assert main(["benchmark", "--tiny", "--only", "reference", "--json", str(out)]) == 0
+    assert "MPE simple_spread    not installed" in capsys.readouterr().out
+    assert json.loads(out.read_text())["reference"]["installed"] is False
