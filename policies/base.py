@@ -1,8 +1,10 @@
 """The policy interface, the static facts a policy may know, and the policy registry (SPEC §7).
 
 A :class:`Policy` sees only its agent's observation and a :class:`PolicyContext`: the spaces
-and the env config's public numbers (beam angles, ranges, speed limits, dt, observation layout),
-taken once at construction. It never holds the env, so it cannot read ground truth.
+and the env's public facts (``env.unwrapped.public_facts()``: beam angles, ranges, speed limits,
+dt, observation layout, map), taken once at construction. It never holds the env, so it cannot
+read ground truth. Policies import nothing of ``polyslam_env`` but ``core`` and ``scenarios``
+(``tests/test_architecture.py`` checks it).
 
 ``make_policy(name, env, agent, **kwargs)`` builds one by registry name; :class:`TeamPolicy`
 holds one per agent. New policies register a factory ``factory(context, **kwargs) -> Policy``
@@ -17,14 +19,13 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
 from polyslam_env.core.errors import PolyslamError
-from polyslam_env.environment.config import EnvConfig
-from polyslam_env.environment.observations import ObservationEncoder
 
 __all__ = [
     "POLICIES",
@@ -57,6 +58,7 @@ class PolicyContext:
     index: int  # the agent's number i in robot_i
     num_robots: int
     map: str  # the env config's map value (a name, a path or "generator:<name>")
+    map_file: Path | None  # the map file it resolves to (None for generator maps)
     observation_space: spaces.Space[Any]
     action_space: spaces.Space[Any]
     action_mode: str  # "continuous" or "discrete"
@@ -78,37 +80,19 @@ class PolicyContext:
 
     @classmethod
     def from_env(cls, env: Any, agent: str) -> PolicyContext:
-        """The context of ``agent`` in a ``polyslam_v0`` env (read once, never kept)."""
-        cfg: EnvConfig = env.unwrapped.config if hasattr(env, "unwrapped") else env.config
+        """The context of ``agent`` in a ``polyslam_v0`` env, from its public facts and spaces
+        (read once, never kept)."""
         if agent not in env.possible_agents:
             raise PolicyError(
                 f"unknown agent {agent!r}; agents are {', '.join(env.possible_agents)}"
             )
-        enc = ObservationEncoder(cfg)
-        rc, wc = cfg.world.robot, cfg.world
+        base = env.unwrapped if hasattr(env, "unwrapped") else env
         return cls(
             agent=agent,
             index=list(env.possible_agents).index(agent),
-            num_robots=cfg.num_robots,
-            map=cfg.map,
             observation_space=env.observation_space(agent),
             action_space=env.action_space(agent),
-            action_mode=cfg.action.mode,
-            discrete=np.array(cfg.action.discrete, dtype=float) * (rc.v_max, rc.omega_max),
-            obs_mode=cfg.observation.mode,
-            vector_layout=dict(enc.vector_layout),
-            grid_size=cfg.observation.grid_size,
-            grid_resolution=cfg.observation.grid_resolution,
-            pose_scale=cfg.observation.pose_scale,
-            beam_angles=np.deg2rad(np.asarray(wc.range_sensor.angles_deg, dtype=float)),
-            max_range=wc.range_sensor.max_range,
-            camera_range=wc.camera.range,
-            robot_radius=rc.radius,
-            v_max=rc.v_max,
-            omega_max=rc.omega_max,
-            allow_reverse=rc.allow_reverse,
-            dt=wc.dt,
-            max_steps=cfg.max_steps,
+            **base.public_facts(),
         )
 
     # -- decoding the observation -----------------------------------------------------------

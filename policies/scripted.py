@@ -7,15 +7,15 @@ observation and the :class:`~policies.base.PolicyContext` only.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
 from policies.base import Policy, PolicyContext, PolicyError
-from polyslam_env.core.errors import PolyslamError
+from polyslam_env.core.resources import maps_dir, resolve_file
 from polyslam_env.scenarios.paths import Paths, load_paths
-from polyslam_env.world.maps import load_map
 
 __all__ = [
     "PaperPolicy",
@@ -27,14 +27,9 @@ __all__ = [
 ]
 
 
-def _map_name(map_value: str) -> str:
-    """The ``name`` of a built-in map or map file (the value itself for generator maps)."""
-    if map_value.startswith("generator:"):
-        return map_value
-    try:
-        return load_map(map_value).name
-    except PolyslamError:
-        return map_value
+def _map_file(paths: Paths) -> Path:
+    """The map file the paths were designed on (a built-in name or a path)."""
+    return resolve_file(paths.map, maps_dir(), "map", PolicyError).resolve()
 
 
 class PaperPolicy(Policy):
@@ -55,10 +50,10 @@ class PaperPolicy(Policy):
                 f"policy 'paper' replays (v, omega) commands and needs action.mode='continuous',"
                 f" got {ctx.action_mode!r}"
             )
-        want = _map_name(self.paths.map)
-        if _map_name(ctx.map) != want:
+        if ctx.map_file != _map_file(self.paths):
             raise PolicyError(
-                f"policy 'paper': paths {name!r} are for map {want!r}, the env's map is {ctx.map!r}"
+                f"policy 'paper': paths {name!r} are for map {self.paths.map!r},"
+                f" the env's map is {ctx.map!r}"
             )
         if ctx.index >= self.paths.num_robots:
             raise PolicyError(

@@ -34,19 +34,12 @@ import numpy as np
 
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.metrics import hit_fraction
-from polyslam_env.scenarios.paths import (
-    Paths,
-    Replay,
-    contiguous_runs,
-    load_paths,
-    paths_dir,
-    replay_paths,
-    save_paths,
-)
+from polyslam_env.scenarios.paths import Paths, load_paths, paths_dir, save_paths
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.maps import load_map
 from polyslam_env.world.physics import World
+from polyslam_env.world.replay import Replay, contiguous_runs, replay_paths
 from polyslam_env.world.sensors import wrap_angle
 
 STEPS = 200  # k_f

@@ -25,6 +25,7 @@ from polyslam_env.comms.exchange import ExchangeStep, RendezvousExchange
 from polyslam_env.core.errors import MapFileError
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.environment.config import EnvConfig, resolve_config
+from polyslam_env.environment.facts import public_facts
 from polyslam_env.environment.observations import (
     BeliefGrid,
     MapSampler,
@@ -194,6 +195,11 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         low = np.array([v_lo, -rc.omega_max], dtype=np.float32)
         high = np.array([rc.v_max, rc.omega_max], dtype=np.float32)
         return spaces.Box(low, high, dtype=np.float32)
+
+    def public_facts(self) -> dict[str, Any]:
+        """Static facts a policy may know (beam angles, limits, dt, observation layout, map);
+        see :func:`~polyslam_env.environment.facts.public_facts`."""
+        return public_facts(self.config)
 
     def observation_space(self, agent: str) -> spaces.Space[Any]:
         return self._observation_spaces[self._check_agent(agent)]

@@ -14,7 +14,8 @@ from policies import PolicyContext, PolicyError, TeamPolicy, make_policy, make_t
 from policies.frontier import OwnMap
 from polyslam_env.apps.rollout import EpisodeResult, run_episode
 from polyslam_env.core.errors import PolyslamError
-from polyslam_env.scenarios.paths import load_paths, replay_paths
+from polyslam_env.scenarios.paths import load_paths
+from polyslam_env.world.replay import replay_paths
 
 
 def _episode(policy: str, seed: int, **overrides: object) -> EpisodeResult:

@@ -17,16 +17,14 @@ from polyslam_env.core.errors import ConfigError
 from polyslam_env.metrics import hit_fraction
 from polyslam_env.scenarios.paths import (
     Paths,
-    Replay,
     builtin_paths,
-    contiguous_runs,
     load_paths,
     paths_from_dict,
     paths_to_yaml,
-    replay_paths,
     save_paths,
 )
 from polyslam_env.world.maps import load_map
+from polyslam_env.world.replay import Replay, contiguous_runs, replay_paths
 
 VALID: dict[str, Any] = {
     "name": "demo",

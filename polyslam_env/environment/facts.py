@@ -1,0 +1,52 @@
+"""The public, static facts of an env that a policy may know besides its observations.
+
+:func:`public_facts` is what :meth:`PolySlamParallelEnv.public_facts` returns: plain numbers,
+names and the observation layout, read from the config at construction. Policies build their
+context from it (``policies.base.PolicyContext.from_env``), so they never import the env's
+config classes or reach its episode state, and cannot read ground truth.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from polyslam_env.environment.config import EnvConfig
+from polyslam_env.environment.observations import ObservationEncoder
+from polyslam_env.world.maps import resolve_map_path
+
+
+def public_facts(config: EnvConfig) -> dict[str, Any]:
+    """Static facts of an env with ``config`` (the same for every agent).
+
+    ``map`` is the config's value (a name, a path or ``"generator:<name>"``); ``map_file`` the
+    map file it resolves to (None for generator maps), so a policy tied to one map (``paper``)
+    can check it without loading the map.
+    """
+    rc, wc, oc = config.world.robot, config.world, config.observation
+    map_file: Path | None = None
+    if config.generator_name is None:
+        map_file = resolve_map_path(config.map).resolve()
+    return {
+        "num_robots": config.num_robots,
+        "map": config.map,
+        "map_file": map_file,
+        "action_mode": config.action.mode,
+        "discrete": np.array(config.action.discrete, dtype=float) * (rc.v_max, rc.omega_max),
+        "obs_mode": oc.mode,
+        "vector_layout": dict(ObservationEncoder(config).vector_layout),
+        "grid_size": oc.grid_size,
+        "grid_resolution": oc.grid_resolution,
+        "pose_scale": oc.pose_scale,
+        "beam_angles": np.deg2rad(np.asarray(wc.range_sensor.angles_deg, dtype=float)),
+        "max_range": wc.range_sensor.max_range,
+        "camera_range": wc.camera.range,
+        "robot_radius": rc.radius,
+        "v_max": rc.v_max,
+        "omega_max": rc.omega_max,
+        "allow_reverse": rc.allow_reverse,
+        "dt": wc.dt,
+        "max_steps": config.max_steps,
+    }
