@@ -1,4 +1,11 @@
-"""The simulated world: layouts, maps, generators, pymunk physics and sensors."""
+"""The simulated world: layouts, maps, generators, pymunk physics and sensors.
+
+It owns ground truth: ``layout`` (walls, pillars, start poses), ``maps`` (the map file format
+and the built-in maps), ``generators`` (seeded layouts), ``physics`` (``World``: one pymunk
+space per episode, diff-drive robots, odometry), ``sensors`` (range beams and camera), ``grid``
+(free-space grids), ``nearby`` (the wall index) and ``replay`` (driving a world along shipped
+paths). Only this part imports pymunk; it knows nothing of SLAM.
+"""
 
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
