@@ -19,6 +19,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.stats import chi2
 
+from polyslam_env.core import raster
 from polyslam_env.core.geometry import compose, transform_covariance, transform_points, wrap_angle
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
@@ -512,13 +513,9 @@ class CoverageGrid:
         width = max(counts)
         frac = np.array([self._fractions(n, width) for n in counts])  # (K, width)
         t = length[:, :, None] * frac[:, None, :]  # (K, R, width), spacing ≤ res/2
-        res, (ox, oy) = self.resolution, self.origin
-        col = np.floor((o[..., 0:1] + t * np.cos(a)[..., None] - ox) / res).astype(np.intp)
-        row = np.floor((o[..., 1:2] + t * np.sin(a)[..., None] - oy) / res).astype(np.intp)
-        h, w = self.free.shape
-        # Negative indices wrap to huge unsigned values, so one comparison per axis suffices.
-        inside = (row.view(np.uintp) < h) & (col.view(np.uintp) < w)  # (K, R, width)
-        flat = row * w + col
+        flat, inside = raster.beam_cells(
+            o[..., 0:1], o[..., 1:2], a, t, self.origin, self.resolution, self.free.shape
+        )  # (K, R, width)
         return [flat[k][inside[k]] for k in range(len(flat))]
 
     def new_free_cells(self, cells: np.ndarray) -> int:
