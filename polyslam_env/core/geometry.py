@@ -2,11 +2,11 @@
 
 Angles: :func:`wrap_angle` (and its float twin :func:`wrap_scalar`) and the exact
 :func:`wrap_remainder`. SE(2): a pose ``(x, y, θ)`` of frame B in frame A is also the transform
-``p_A = R(θ) p_B + (x, y)`` (homogeneous matrix :func:`as_matrix`), so :func:`compose` is the
-matrix product, :func:`inverse` the matrix inverse, :func:`between` (``a⁻¹ ⊕ b``) the pose of
+``p_A = R(θ) p_B + (x, y)`` (a homogeneous matrix), so :func:`compose` is the matrix
+product, :func:`inverse` the matrix inverse, :func:`between` (``a⁻¹ ⊕ b``) the pose of
 ``b`` seen from ``a`` and :func:`compose_inverse` (``a ⊕ b⁻¹``) the frame in which ``a`` reads
-``b``. These are the only copies of the SE(2) formulas in the package; each keeps the exact
-floating-point operations of the code it replaced, so results are bit for bit the same.
+``b``. Callers use these instead of writing their own; each keeps the exact floating-point
+operations of the copy it replaced, so results stayed bit for bit the same.
 """
 
 from __future__ import annotations
@@ -84,19 +84,6 @@ def rotation(theta: float) -> np.ndarray:  # (2, 2)
     """Rotation matrix R(θ)."""
     c, s = np.cos(theta), np.sin(theta)
     return np.array([[c, -s], [s, c]])
-
-
-def as_matrix(pose: np.ndarray) -> np.ndarray:  # (3, 3)
-    """Homogeneous matrix of a pose (3,)."""
-    x, y, th = _pose(pose)
-    c, s = np.cos(th), np.sin(th)
-    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
-
-
-def from_matrix(matrix: np.ndarray) -> np.ndarray:  # (3,)
-    """Pose of a homogeneous matrix (3, 3)."""
-    m = np.asarray(matrix, dtype=float)
-    return np.array([m[0, 2], m[1, 2], float(np.arctan2(m[1, 0], m[0, 0]))])
 
 
 def transform_points(points: np.ndarray, pose: np.ndarray) -> np.ndarray:  # (…, 2)
