@@ -32,6 +32,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from policies.base import Policy, PolicyContext, PolicyError
 from policies.scripted import avoid_robots, beam_index, wall_follow_command
+from polyslam_env.core import raster
 
 __all__ = ["FrontierPolicy", "OwnMap", "grid_path"]
 
@@ -87,16 +88,20 @@ class OwnMap:
     def integrate_beams(
         self, pose: np.ndarray, angles: np.ndarray, ranges: np.ndarray, max_range: float
     ) -> None:
-        """Free along each beam up to half a cell short of its hit, and the hit cells."""
-        finite = np.isfinite(ranges)
-        r = np.where(finite, np.minimum(ranges, max_range), max_range)  # (B,)
-        length = np.where(finite, np.maximum(r - 0.5 * self.res, 0.0), r)
-        phi = pose[2] + angles  # (B,)
-        direction = np.column_stack([np.cos(phi), np.sin(phi)])  # (B, 2)
-        t = np.linspace(0.0, 1.0, math.ceil(max_range / (0.5 * self.res)) + 1)  # (S,)
-        pts = pose[:2] + (length[:, None] * t)[..., None] * direction[:, None, :]  # (B, S, 2)
-        self.free[self.cells(pts.reshape(-1, 2))] = True
-        self.hit[self.cells(pose[:2] + r[finite, None] * direction[finite])] = True
+        """Free along each beam up to half a cell short of its hit, and the hit cells
+        (:func:`polyslam_env.core.raster.scan_cells`, as the env's belief grids)."""
+        free, free_in, hit, hit_in = raster.scan_cells(
+            pose[None],
+            angles,
+            ranges[None],
+            max_range,
+            raster.beam_fractions(max_range, self.res),
+            (self.origin, self.origin),
+            self.res,
+            (self.n, self.n),
+        )
+        self.free.reshape(-1)[free[free_in]] = True
+        self.hit.reshape(-1)[hit[hit_in]] = True
 
     def mark_visited(self, pose: np.ndarray, radius: float) -> None:
         """The robot's own footprint is free (it has been there)."""

@@ -24,14 +24,10 @@ from polyslam_env.comms.messages import (
     encode_polynomials,
     payload_size,
 )
-from polyslam_env.comms.polyline import piecewise_linear, polyline_points, transform_polyline
+from polyslam_env.comms.polyline import piecewise_linear, polyline_points
 from polyslam_env.comms.relative_pose import (
-    apply,
-    as_matrix,
-    compose,
     frame_transform,
     frame_transform_with_jacobian,
-    inverse,
     relative_pose,
     relative_pose_covariance,
     relative_pose_with_jacobian,
@@ -53,9 +49,6 @@ __all__ = [
     "PolynomialMessage",
     "PolynomialRecord",
     "RendezvousExchange",
-    "apply",
-    "as_matrix",
-    "compose",
     "decode",
     "encode",
     "encode_grid",
@@ -63,12 +56,10 @@ __all__ = [
     "encode_polynomials",
     "frame_transform",
     "frame_transform_with_jacobian",
-    "inverse",
     "payload_size",
     "piecewise_linear",
     "polyline_points",
     "relative_pose",
     "relative_pose_covariance",
     "relative_pose_with_jacobian",
-    "transform_polyline",
 ]

@@ -79,13 +79,11 @@ from polyslam_env.comms.messages import (
 from polyslam_env.comms.payloads import ScanLog, occupancy_grid
 from polyslam_env.comms.polyline import piecewise_linear, polyline_points
 from polyslam_env.comms.relative_pose import (
-    compose,
-    compose_with_jacobians,
     frame_transform_with_jacobian,
-    inverse,
     relative_pose,
     relative_pose_covariance,
 )
+from polyslam_env.core.geometry import compose, compose_with_jacobians, inverse
 from polyslam_env.slam.fitting import J_ROT, Fit, PointSet, fit_polynomial
 from polyslam_env.slam.polynomial import Polynomial
 

@@ -18,7 +18,6 @@ import itertools
 import numpy as np
 from numpy.polynomial import polynomial as npoly
 
-from polyslam_env.comms.relative_pose import apply
 from polyslam_env.slam.polynomial import Polynomial
 
 _AIM = 0.8  # fraction of the tolerance the curvature-based placement aims at
@@ -99,11 +98,6 @@ def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray
     denom = np.maximum(np.sum(ab * ab, axis=-1), 1e-300)
     u = np.clip(np.sum((p - a) * ab, axis=-1) / denom, 0.0, 1.0)
     return np.asarray(np.linalg.norm(p - (a + u[..., None] * ab), axis=-1))
-
-
-def transform_polyline(vertices: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """Vertices (V, 2) given in the frame ``pose`` mapped into its parent frame."""
-    return apply(pose, vertices)
 
 
 def polyline_points(vertices: np.ndarray, spacing: float) -> np.ndarray:

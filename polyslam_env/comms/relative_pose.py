@@ -1,8 +1,8 @@
-"""Relative pose at a rendezvous and the SE(2) algebra that carries maps between frames.
+"""Relative pose at a rendezvous and the transform that carries maps between start frames.
 
-A pose ``(x, y, θ)`` of frame B in frame A is also the homogeneous transform ``T_{B,A}`` that
-maps B coordinates to A coordinates: ``p_A = R(θ) p_B + (x, y)``. Composition
-``compose(a, b)`` is the matrix product ``T_a T_b`` and ``inverse(a)`` the matrix inverse.
+The SE(2) algebra (compose, inverse and their Jacobians) is :mod:`polyslam_env.core.geometry`;
+a pose ``(x, y, θ)`` of frame B in frame A is the homogeneous transform ``T_{B,A}`` with
+``p_A = R(θ) p_B + (x, y)``. What lives here is specific to the camera measurement.
 
 Rendezvous geometry (SPEC §4, paper §3.2 with its typo fixed): robot j measures range ``d``
 and bearing ``α_j`` (from its own axis) to robot l; robot l measures bearing ``α_l`` to j.
@@ -17,14 +17,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from polyslam_env.core.geometry import wrap_angle
-
-
-def _pose(pose: np.ndarray) -> np.ndarray:
-    p = np.asarray(pose, dtype=float)
-    if p.shape != (3,):
-        raise ValueError(f"a pose must have shape (3,), got {p.shape}")
-    return p
+from polyslam_env.core.geometry import (
+    compose_with_jacobians,
+    inverse_with_jacobian,
+    wrap_angle,
+)
 
 
 # -- rendezvous measurement -> relative pose ----------------------------------------------------
@@ -56,60 +53,6 @@ def relative_pose_covariance(
     _, jac = relative_pose_with_jacobian(d, alpha_j, alpha_l)
     noise = np.diag([sigma_d**2, sigma_bearing**2, sigma_bearing**2])
     return jac @ noise @ jac.T
-
-
-# -- SE(2) ---------------------------------------------------------------------------------------
-def as_matrix(pose: np.ndarray) -> np.ndarray:
-    """Homogeneous matrix (3, 3) of a pose."""
-    x, y, th = _pose(pose)
-    c, s = np.cos(th), np.sin(th)
-    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
-
-
-def from_matrix(matrix: np.ndarray) -> np.ndarray:
-    """Pose (3,) of a homogeneous matrix (3, 3)."""
-    m = np.asarray(matrix, dtype=float)
-    return np.array([m[0, 2], m[1, 2], float(np.arctan2(m[1, 0], m[0, 0]))])
-
-
-def apply(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Points (…, 2) given in the frame ``pose`` mapped into its parent frame."""
-    x, y, th = _pose(pose)
-    c, s = np.cos(th), np.sin(th)
-    p = np.asarray(points, dtype=float)
-    return np.stack([x + c * p[..., 0] - s * p[..., 1], y + s * p[..., 0] + c * p[..., 1]], axis=-1)
-
-
-def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a ⊕ b`` (3,): the pose whose matrix is ``T_a T_b``; heading wrapped."""
-    return compose_with_jacobians(a, b)[0]
-
-
-def compose_with_jacobians(
-    a: np.ndarray, b: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``a ⊕ b`` (3,) and its Jacobians (3, 3) w.r.t. ``a`` and ``b``."""
-    ax, ay, ath = _pose(a)
-    bx, by, bth = _pose(b)
-    c, s = np.cos(ath), np.sin(ath)
-    out = np.array([ax + c * bx - s * by, ay + s * bx + c * by, float(wrap_angle(ath + bth))])
-    j_a = np.array([[1.0, 0.0, -s * bx - c * by], [0.0, 1.0, c * bx - s * by], [0.0, 0.0, 1.0]])
-    j_b = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return out, j_a, j_b
-
-
-def inverse(a: np.ndarray) -> np.ndarray:
-    """``a⁻¹`` (3,): the pose whose matrix is ``T_a⁻¹``; heading wrapped."""
-    return inverse_with_jacobian(a)[0]
-
-
-def inverse_with_jacobian(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``a⁻¹`` (3,) and its Jacobian (3, 3) w.r.t. ``a``."""
-    x, y, th = _pose(a)
-    c, s = np.cos(th), np.sin(th)
-    out = np.array([-c * x - s * y, s * x - c * y, float(wrap_angle(-th))])
-    jac = np.array([[-c, -s, s * x - c * y], [s, -c, c * x + s * y], [0.0, 0.0, -1.0]])
-    return out, jac
 
 
 # -- the rendezvous map transform -------------------------------------------------------------

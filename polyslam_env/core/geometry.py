@@ -1,8 +1,19 @@
-"""Small planar geometry shared by every layer (numpy only, so ``slam/`` may use it too)."""
+"""Small planar geometry shared by every layer (numpy only, so ``slam/`` may use it too).
+
+Angles: :func:`wrap_angle` (and its float twin :func:`wrap_scalar`) and the exact
+:func:`wrap_remainder`. SE(2): a pose ``(x, y, θ)`` of frame B in frame A is also the transform
+``p_A = R(θ) p_B + (x, y)`` (a homogeneous matrix), so :func:`compose` is the matrix
+product, :func:`inverse` the matrix inverse, :func:`between` (``a⁻¹ ⊕ b``) the pose of
+``b`` seen from ``a`` and :func:`compose_inverse` (``a ⊕ b⁻¹``) the frame in which ``a`` reads
+``b``. Callers use these instead of writing their own; each keeps the exact floating-point
+operations of the copy it replaced, so results stayed bit for bit the same.
+"""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -15,6 +26,12 @@ def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
 def wrap_scalar(angle: float) -> float:
     """:func:`wrap_angle` of one float, without numpy's per-call cost (same formula)."""
     return math.pi - (math.pi - angle) % (2.0 * math.pi)
+
+
+def wrap_remainder(angle: float) -> float:
+    """One angle wrapped to [−π, π] by the exact IEEE remainder (no rounding of small angles,
+    unlike :func:`wrap_angle`, which maps 1e-20 to 0)."""
+    return math.remainder(angle, 2.0 * math.pi)
 
 
 def symmetric_eigvals3(a: np.ndarray) -> tuple[float, float, float]:
@@ -46,3 +63,114 @@ def symmetric_eigvals3(a: np.ndarray) -> tuple[float, float, float]:
     largest = q + 2.0 * p * math.cos(phi)
     smallest = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
     return smallest, 3.0 * q - largest - smallest, largest
+
+
+# -- SE(2) ----------------------------------------------------------------------------------------
+def _poses(pose: np.ndarray) -> np.ndarray:  # (…, 3)
+    p = np.asarray(pose, dtype=float)
+    if p.ndim == 0 or p.shape[-1] != 3:
+        raise ValueError(f"a pose must have shape (3,) or (…, 3), got {p.shape}")
+    return p
+
+
+def _pose(pose: np.ndarray) -> np.ndarray:  # (3,)
+    p = np.asarray(pose, dtype=float)
+    if p.shape != (3,):
+        raise ValueError(f"a pose must have shape (3,), got {p.shape}")
+    return p
+
+
+def rotation(theta: float) -> np.ndarray:  # (2, 2)
+    """Rotation matrix R(θ)."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def transform_points(points: np.ndarray, pose: np.ndarray) -> np.ndarray:  # (…, 2)
+    """Points (…, 2) given in the frame whose pose in its parent is ``pose`` (3,), mapped into
+    the parent: ``(x + c·p₀ − s·p₁, y + s·p₀ + c·p₁)``."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    p = np.asarray(points, dtype=float)
+    return np.stack(
+        [pose[0] + c * p[..., 0] - s * p[..., 1], pose[1] + s * p[..., 0] + c * p[..., 1]],
+        axis=-1,
+    )
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:  # (…, 3)
+    """``a ⊕ b``: the pose whose matrix is ``T_a T_b``; poses (3,) or (…, 3), broadcast.
+
+    Also the unicycle motion model f(pose, u) with odometry ``u = b`` in the robot frame.
+    Heading wrapped with :func:`wrap_angle`.
+    """
+    a, b = _poses(a), _poses(b)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
+
+
+def compose_with_jacobians(
+    a: np.ndarray, b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`compose` of two poses (3,) and its Jacobians (3, 3) w.r.t. ``a`` and ``b``."""
+    a, b = _pose(a), _pose(b)
+    c, s = np.cos(a[2]), np.sin(a[2])
+    bx, by = b[0], b[1]
+    j_a = np.array([[1.0, 0.0, -s * bx - c * by], [0.0, 1.0, c * bx - s * by], [0.0, 0.0, 1.0]])
+    j_b = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return compose(a, b), j_a, j_b
+
+
+def inverse(a: np.ndarray) -> np.ndarray:  # (…, 3)
+    """``a⁻¹``: the pose whose matrix is ``T_a⁻¹``; poses (3,) or (…, 3); heading wrapped."""
+    a = _poses(a)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x, y = a[..., 0], a[..., 1]
+    return np.stack([-c * x - s * y, s * x - c * y, wrap_angle(-a[..., 2])], axis=-1)
+
+
+def inverse_with_jacobian(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`inverse` of a pose (3,) and its Jacobian (3, 3)."""
+    a = _pose(a)
+    c, s = np.cos(a[2]), np.sin(a[2])
+    x, y = a[0], a[1]
+    jac = np.array([[-c, -s, s * x - c * y], [s, -c, c * x + s * y], [0.0, 0.0, -1.0]])
+    return inverse(a), jac
+
+
+def between(
+    a: np.ndarray, b: np.ndarray, wrap: Callable[[Any], Any] = wrap_angle
+) -> np.ndarray:  # (…, 3)
+    """``a⁻¹ ⊕ b``: pose ``b`` expressed in the frame ``a`` (both in the same parent).
+
+    Computed as ``R(θ_a)ᵀ (b_xy − a_xy)`` and ``wrap(θ_b − θ_a)``: the odometry between two
+    poses, or an absolute pose in a robot's start frame. Poses (3,) or (…, 3), broadcast.
+    ``wrap`` is :func:`wrap_angle` (arrays) or :func:`wrap_remainder` (one pose).
+    """
+    a, b = _poses(a), _poses(b)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
+    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap(b[..., 2] - a[..., 2])], axis=-1)
+
+
+def compose_inverse(a: np.ndarray, b: np.ndarray) -> np.ndarray:  # (…, 3)
+    """``a ⊕ b⁻¹``: the frame F in which pose ``a`` reads ``b`` (``F ⊕ b = a``).
+
+    Computed as ``θ = θ_a − θ_b`` (not wrapped) and ``a_xy − R(θ) b_xy``: a robot's start
+    frame from its true pose and the offset its estimate starts at. Poses (3,) or (…, 3).
+    """
+    a, b = _poses(a), _poses(b)
+    theta = a[..., 2] - b[..., 2]
+    c, s = np.cos(theta), np.sin(theta)
+    x = a[..., 0] - (c * b[..., 0] - s * b[..., 1])
+    y = a[..., 1] - (s * b[..., 0] + c * b[..., 1])
+    return np.stack([x, y, theta], axis=-1)
+
+
+def transform_covariance(covs: np.ndarray, pose: np.ndarray) -> np.ndarray:  # (…, 3, 3)
+    """Pose covariances (…, 3, 3) given in the frame ``pose`` (3,), in its parent frame:
+    ``T P Tᵀ`` with ``T = blockdiag(R(θ), 1)`` (a fixed frame adds no uncertainty)."""
+    t = np.eye(3)
+    t[:2, :2] = rotation(float(pose[2]))
+    return np.asarray(t @ np.asarray(covs, dtype=float) @ t.T)

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
+from polyslam_env.core import raster
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
@@ -47,15 +48,14 @@ class BeliefGrid:
         self.free = np.zeros((self.n, self.n), dtype=bool)  # (n, n)
         self.hit = np.zeros((self.n, self.n), dtype=bool)  # (n, n)
         self.max_range = float(max_range)
-        samples = math.ceil(max_range / (0.5 * self.resolution)) + 1
-        self._t = np.linspace(0.0, 1.0, samples)  # (S,) beam sample fractions, ≤ res/2 apart
+        #: (origin, resolution, shape) in the arguments' order of polyslam_env.core.raster
+        self._grid = ((self.origin, self.origin), self.resolution, (self.n, self.n))
+        self._t = raster.beam_fractions(max_range, self.resolution)  # (S,) beam samples
 
     def _flat_cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Flat cell index (M,) of points (M, 2) (0 where outside) and whether each is inside."""
-        ij = np.floor((points - self.origin) / self.resolution).astype(np.intp)  # (M, 2)
-        u = ij.view(np.uintp)  # negatives wrap to huge values
-        inside = (u[:, 0] < self.n) & (u[:, 1] < self.n)
-        return np.where(inside, ij[:, 1] * self.n + ij[:, 0], 0), inside
+        flat, inside = raster.point_cells(points[:, 0], points[:, 1], *self._grid)
+        return np.where(inside, flat, 0), inside
 
     def sweep(self, pose: np.ndarray, angles: np.ndarray, ranges: np.ndarray) -> None:
         """Mark the beams of one scan from ``pose`` (3,): free up to half a cell short of each
@@ -80,23 +80,12 @@ def sweep_beliefs(
     g = grids[0]
     if any((h.n, h.resolution, h.max_range) != (g.n, g.resolution, g.max_range) for h in grids):
         raise ValueError("sweep_beliefs needs grids of the same size, resolution and range")
-    finite = np.isfinite(ranges)  # (K, B)
-    r = np.fmin(ranges, g.max_range)  # (K, B); no return (inf) → max_range
-    length = np.where(finite, np.maximum(r - 0.5 * g.resolution, 0.0), r)
-    phi = poses[:, 2:3] + angles  # (K, B)
-    # Each beam's S free samples and its end point (used only for hits) in one array.
-    t = np.empty((*r.shape, g._t.size + 1))  # (K, B, S + 1)
-    np.multiply(length[..., None], g._t, out=t[..., :-1])
-    t[..., -1] = r
-    x = poses[:, 0, None, None] + t * np.cos(phi)[..., None]  # (K, B, S + 1)
-    y = poses[:, 1, None, None] + t * np.sin(phi)[..., None]
-    col = np.floor((x - g.origin) / g.resolution).astype(np.intp)
-    row = np.floor((y - g.origin) / g.resolution).astype(np.intp)
-    inside = (row.view(np.uintp) < g.n) & (col.view(np.uintp) < g.n)  # see _flat_cells
-    flat = row * g.n + col  # (K, B, S + 1)
+    free, free_in, hit, hit_in = raster.scan_cells(
+        poses, angles, ranges, g.max_range, g._t, *g._grid
+    )
     for k, grid in enumerate(grids):
-        grid.free.reshape(-1)[flat[k, :, :-1][inside[k, :, :-1]]] = True
-        grid.hit.reshape(-1)[flat[k, :, -1][inside[k, :, -1] & finite[k]]] = True
+        grid.free.reshape(-1)[free[k][free_in[k]]] = True
+        grid.hit.reshape(-1)[hit[k][hit_in[k]]] = True
 
 
 class MapSampler:

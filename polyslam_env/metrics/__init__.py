@@ -19,8 +19,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.stats import chi2
 
-from polyslam_env.core.geometry import wrap_angle
-from polyslam_env.slam.polynomial import Polynomial, transform_points
+from polyslam_env.core import raster
+from polyslam_env.core.geometry import compose, transform_covariance, transform_points, wrap_angle
+from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
 
 __all__ = [
@@ -55,11 +56,6 @@ _K_REFINE = 4
 # -- frames ---------------------------------------------------------------------------------
 
 
-def _rotation(theta: float) -> np.ndarray:  # (2, 2)
-    c, s = np.cos(theta), np.sin(theta)
-    return np.array([[c, -s], [s, c]])
-
-
 def _check_pose(start_pose: np.ndarray) -> np.ndarray:  # (3,)
     p = np.asarray(start_pose, dtype=float)
     if p.shape != (3,):
@@ -73,8 +69,7 @@ def pose_to_absolute(poses: np.ndarray, start_pose: np.ndarray) -> np.ndarray:  
     p = np.asarray(poses, dtype=float)
     if p.ndim != 2 or p.shape[1] != 3:
         raise ValueError(f"poses must have shape (K, 3), got {p.shape}")
-    xy = transform_points(p[:, :2], x0)
-    return np.column_stack([xy, wrap_angle(p[:, 2] + x0[2])])
+    return compose(x0, p)
 
 
 def cov_to_absolute(covs: np.ndarray, start_pose: np.ndarray) -> np.ndarray:  # (K, 3, 3)
@@ -83,9 +78,7 @@ def cov_to_absolute(covs: np.ndarray, start_pose: np.ndarray) -> np.ndarray:  # 
     c = np.asarray(covs, dtype=float)
     if c.ndim != 3 or c.shape[1:] != (3, 3):
         raise ValueError(f"covs must have shape (K, 3, 3), got {c.shape}")
-    t = np.eye(3)
-    t[:2, :2] = _rotation(float(x0[2]))
-    return np.asarray(t @ c @ t.T)
+    return transform_covariance(c, x0)
 
 
 # -- NEES -----------------------------------------------------------------------------------
@@ -520,13 +513,9 @@ class CoverageGrid:
         width = max(counts)
         frac = np.array([self._fractions(n, width) for n in counts])  # (K, width)
         t = length[:, :, None] * frac[:, None, :]  # (K, R, width), spacing ≤ res/2
-        res, (ox, oy) = self.resolution, self.origin
-        col = np.floor((o[..., 0:1] + t * np.cos(a)[..., None] - ox) / res).astype(np.intp)
-        row = np.floor((o[..., 1:2] + t * np.sin(a)[..., None] - oy) / res).astype(np.intp)
-        h, w = self.free.shape
-        # Negative indices wrap to huge unsigned values, so one comparison per axis suffices.
-        inside = (row.view(np.uintp) < h) & (col.view(np.uintp) < w)  # (K, R, width)
-        flat = row * w + col
+        flat, inside = raster.beam_cells(
+            o[..., 0:1], o[..., 1:2], a, t, self.origin, self.resolution, self.free.shape
+        )  # (K, R, width)
         return [flat[k][inside[k]] for k in range(len(flat))]
 
     def new_free_cells(self, cells: np.ndarray) -> int:

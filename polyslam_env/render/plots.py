@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from polyslam_env import metrics
-from polyslam_env.slam.polynomial import transform_points
+from polyslam_env.core.geometry import transform_points
 from polyslam_env.world.layout import Layout
 
 

@@ -15,6 +15,7 @@ from functools import lru_cache
 import numpy as np
 import scipy.special
 
+from polyslam_env.core.geometry import compose as compose  # the motion f(pose, u), re-exported
 from polyslam_env.core.geometry import symmetric_eigvals3, wrap_angle, wrap_scalar
 
 
@@ -34,18 +35,6 @@ def motion_jacobians(pose: np.ndarray, odometry: np.ndarray) -> tuple[np.ndarray
     F = np.array([[1.0, 0.0, -s * dx - c * dy], [0.0, 1.0, c * dx - s * dy], [0.0, 0.0, 1.0]])
     L = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     return F, L
-
-
-def compose(pose: np.ndarray, odometry: np.ndarray) -> np.ndarray:
-    """The unicycle motion f(pose, u) (3,), heading wrapped."""
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    return np.array(
-        [
-            pose[0] + c * odometry[0] - s * odometry[1],
-            pose[1] + s * odometry[0] + c * odometry[1],
-            float(wrap_angle(pose[2] + odometry[2])),
-        ]
-    )
 
 
 def predict(

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from polyslam_env.core.geometry import transform_points as transform_points  # re-exported
+
 
 @dataclass(frozen=True, eq=False)
 class Polynomial:
@@ -110,13 +112,3 @@ class Polynomial:
         a = self.lo if lo is None else lo
         b = self.hi if hi is None else hi
         return self.points_at(np.linspace(a, b, n))
-
-
-def transform_points(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """Map points (…, 2) from a frame whose origin sits at ``pose`` = (x, y, θ) in the parent."""
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    p = np.asarray(points, dtype=float)
-    return np.stack(
-        [pose[0] + c * p[..., 0] - s * p[..., 1], pose[1] + s * p[..., 0] + c * p[..., 1]],
-        axis=-1,
-    )

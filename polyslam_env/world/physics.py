@@ -46,7 +46,7 @@ import numpy as np
 import pymunk
 
 from polyslam_env.core.errors import MapFileError
-from polyslam_env.core.geometry import wrap_angle
+from polyslam_env.core.geometry import between, wrap_angle
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout, point_segment_distance
 from polyslam_env.world.nearby import segment_grid
@@ -229,7 +229,7 @@ class World:
         self._touched[:] = False
         heading = self._integrate(cmd)
         self._pose = self._guard(start, np.column_stack([self._read_positions(), heading]))
-        true_odo = relative_motion(start, self._pose)
+        true_odo = between(start, self._pose)
         odo = self.config.odometry
         sigma = np.array([odo.sigma_xy, odo.sigma_xy, odo.sigma_theta])  # (3,)
         noise = self.rngs["motion"].standard_normal((self.num_robots, 3)) * sigma
@@ -336,15 +336,6 @@ class World:
         return self.camera_sensor.detect(
             self._pose, self.active, self.segments, self.pillars, self.rngs["camera"]
         )
-
-
-def relative_motion(start: np.ndarray, end: np.ndarray) -> np.ndarray:
-    """(dx, dy, dθ) (N, 3) of end poses in the frames of start poses (N, 3); θ unwrapped ok."""
-    d = end[:, :2] - start[:, :2]  # (N, 2) world frame
-    c, s = np.cos(start[:, 2]), np.sin(start[:, 2])
-    dx = c * d[:, 0] + s * d[:, 1]
-    dy = -s * d[:, 0] + c * d[:, 1]
-    return np.column_stack([dx, dy, wrap_angle(end[:, 2] - start[:, 2])])
 
 
 def segments_cross(p0: np.ndarray, p1: np.ndarray, segments: np.ndarray) -> np.ndarray:

@@ -21,14 +21,8 @@ from polyslam_env.comms.exchange import (
     unframe_message,
 )
 from polyslam_env.comms.messages import Header, PolynomialMessage, PolynomialRecord, encode
-from polyslam_env.comms.relative_pose import (
-    apply,
-    compose,
-    frame_transform,
-    inverse,
-    relative_pose,
-    wrap_angle,
-)
+from polyslam_env.comms.relative_pose import frame_transform, relative_pose, wrap_angle
+from polyslam_env.core.geometry import compose, inverse, transform_points
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import PointSet, fit_polynomial
@@ -58,7 +52,7 @@ def _slam(pose: np.ndarray) -> PolySlam:
 def _add_wall(slam: PolySlam, points_abs: np.ndarray, frame: np.ndarray) -> int:
     """Insert a landmark fitted to absolute wall points seen from a robot whose frame is
     ``frame``; the points hang on its pose with 1 mm noise, as a SLAM fit would."""
-    xy = apply(inverse(frame), points_abs)  # (N, 2) robot frame
+    xy = transform_points(points_abs, inverse(frame))  # (N, 2) robot frame
     n = len(xy)
     d_state = np.zeros((n, 2, slam.mean.size))
     d_state[:, :, :2] = np.eye(2)
@@ -194,10 +188,10 @@ def test_exchange__received_wall_lands_on_the_sender_wall_in_the_receiver_frame(
     step = ex.step(0, [sender, receiver], _mutual(p_s, p_r), np.ones(2, bool))
     got = next(d for d in step.delivered if d.receiver == 1)
     assert got.n_polynomials == 1 and len(got.received) >= 1
-    truth = apply(f_s, sender.polynomials()[0].sample_arclength(0.001))  # (M, 2) absolute
+    truth = transform_points(sender.polynomials()[0].sample_arclength(0.001), f_s)  # (M, 2) abs
     tree = cKDTree(truth)
     for poly in got.received:
-        dist, _ = tree.query(apply(f_r, poly.sample_arclength(0.01)))
+        dist, _ = tree.query(transform_points(poly.sample_arclength(0.01), f_r))
         # chord error ≤ 5 mm (chord_tol) plus the refit's residual on the chord points
         # ≤ 2.5 mm (refit_tol), plus 0.5 mm for sampling the truth every 1 mm
         assert dist.max() < 0.008

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from polyslam_env.comms.polyline import piecewise_linear, polyline_points, transform_polyline
-from polyslam_env.comms.relative_pose import apply
+from polyslam_env.comms.polyline import piecewise_linear, polyline_points
+from polyslam_env.core.geometry import transform_points
 from polyslam_env.slam.polynomial import Polynomial
 
 # Distances are computed in float64 on metre-scale values: 1e-9 m of slack covers rounding.
@@ -89,12 +89,12 @@ def test_piecewise_linear__degenerate_extent_and_bad_tolerance() -> None:
         piecewise_linear(poly, chord_tol=0.0)
 
 
-def test_transform_polyline__rigid_map_keeps_the_bound() -> None:
+def test_piecewise_linear__rigid_map_keeps_the_bound() -> None:
     rng = np.random.default_rng(0)
     poly = Polynomial(1, np.array([0.2, -0.4, 0.9, -0.5]), -0.8, 1.2)
     pose = np.array([1.5, -2.0, 2.3])
-    moved = transform_polyline(piecewise_linear(poly, 0.005), pose)
-    dense = apply(pose, poly.points_at(np.sort(rng.uniform(poly.lo, poly.hi, 3000))))
+    moved = transform_points(piecewise_linear(poly, 0.005), pose)
+    dense = transform_points(poly.points_at(np.sort(rng.uniform(poly.lo, poly.hi, 3000))), pose)
     assert np.max(_dist_to_polyline(dense, moved)) <= 0.005 + EPS
 
 

@@ -1,29 +1,25 @@
-"""Rendezvous relative pose and SE(2) helpers: ground truth, Jacobians, NEES consistency."""
+"""Rendezvous relative pose and map transform: ground truth, Jacobians, NEES consistency.
+
+The SE(2) algebra they build on is tested in tests/core/test_geometry.py.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
 import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from polyslam_env.comms.relative_pose import (
-    apply,
-    as_matrix,
-    compose,
-    compose_with_jacobians,
     frame_transform,
     frame_transform_with_jacobian,
-    from_matrix,
-    inverse,
-    inverse_with_jacobian,
     relative_pose,
     relative_pose_covariance,
     relative_pose_with_jacobian,
     wrap_angle,
 )
+from polyslam_env.core.geometry import compose, inverse, transform_points
 
 coord = st.floats(-5.0, 5.0, allow_nan=False)
 angle = st.floats(-np.pi, np.pi, allow_nan=False)
@@ -118,19 +114,11 @@ def test_frame_transform__recovers_true_start_frame_transform() -> None:
         np.testing.assert_allclose(_pose_diff(t, compose(inverse(x_j0), x_l0)), 0, atol=1e-9)
         # A point in l's start frame lands on the same world point through either route.
         p_l0 = rng.uniform(-3, 3, (5, 2))
-        np.testing.assert_allclose(apply(x_j0, apply(t, p_l0)), apply(x_l0, p_l0), atol=1e-9)
-
-
-@settings(max_examples=60, deadline=None)
-@given(a=poses, b=poses)
-def test_compose__matches_matrix_product(a: np.ndarray, b: np.ndarray) -> None:
-    # 1e-9: products of unit-scale trig values with coordinates up to 10.
-    np.testing.assert_allclose(as_matrix(compose(a, b)), as_matrix(a) @ as_matrix(b), atol=1e-9)
-    np.testing.assert_allclose(as_matrix(inverse(a)) @ as_matrix(a), np.eye(3), atol=1e-9)
-    np.testing.assert_allclose(_pose_diff(from_matrix(as_matrix(a)), a), 0, atol=1e-12)
-    pts = np.array([[0.3, -1.2], [2.0, 0.5]])
-    homog = (as_matrix(a) @ np.vstack([pts.T, np.ones(2)]))[:2].T
-    np.testing.assert_allclose(apply(a, pts), homog, atol=1e-9)
+        np.testing.assert_allclose(
+            transform_points(transform_points(p_l0, t), x_j0),
+            transform_points(p_l0, x_l0),
+            atol=1e-9,
+        )
 
 
 @settings(max_examples=60, deadline=None)
@@ -141,18 +129,6 @@ def test_relative_pose_jacobian__matches_finite_differences(
     _, jac = relative_pose_with_jacobian(d, a_j, a_l)
     num = _numeric_jacobian(lambda z: relative_pose(*z), np.array([d, a_j, a_l]))
     np.testing.assert_allclose(jac, num, atol=JAC_TOL)
-
-
-@settings(max_examples=60, deadline=None)
-@given(a=poses, b=poses)
-def test_compose_and_inverse_jacobians__match_finite_differences(
-    a: np.ndarray, b: np.ndarray
-) -> None:
-    _, j_a, j_b = compose_with_jacobians(a, b)
-    np.testing.assert_allclose(j_a, _numeric_jacobian(lambda z: compose(z, b), a), atol=JAC_TOL)
-    np.testing.assert_allclose(j_b, _numeric_jacobian(lambda z: compose(a, z), b), atol=JAC_TOL)
-    _, j_inv = inverse_with_jacobian(a)
-    np.testing.assert_allclose(j_inv, _numeric_jacobian(inverse, a), atol=JAC_TOL)
 
 
 @settings(max_examples=60, deadline=None)
@@ -168,8 +144,3 @@ def test_frame_transform_jacobian__matches_finite_differences(
 
     num = _numeric_jacobian(f, np.concatenate([pj, rel, pl]))
     np.testing.assert_allclose(jac, num, atol=JAC_TOL)
-
-
-def test_pose_helpers__reject_wrong_shape() -> None:
-    with pytest.raises(ValueError, match="shape"):
-        compose(np.zeros(2), np.zeros(3))

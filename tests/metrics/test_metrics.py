@@ -11,7 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from polyslam_env import metrics as M
-from polyslam_env.slam.polynomial import Polynomial, transform_points
+from polyslam_env.core.geometry import transform_points
+from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout, point_segment_distance
 
 SIDE = 4.0
