@@ -3,7 +3,9 @@
 :func:`simulate` drives a team along scripted commands (the paper's precomputed paths, any
 ``(N, K, 2)`` array, or a simple reactive controller), runs each robot's :class:`PolySlam`
 on its own odometry and ranges, and records what the metrics need. Tests and the paper
-reproduction use it; :func:`robot_metrics` turns a run into the paper's numbers.
+reproduction use it; :func:`~polyslam_env.metrics.episode.robot_metrics` turns a run into the
+paper's numbers (:class:`RobotRun` and :func:`robot_metrics` are re-exported from
+:mod:`polyslam_env.metrics.episode`).
 """
 
 from __future__ import annotations
@@ -14,36 +16,29 @@ from typing import Any
 
 import numpy as np
 
-from polyslam_env import metrics
 from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.comms.exchange import RendezvousExchange
 from polyslam_env.core.seeding import make_rngs
+from polyslam_env.metrics.episode import COMMS_METRICS, RobotRun, robot_metrics
 from polyslam_env.slam.config import SlamConfig
-from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.maps import load_map
 from polyslam_env.world.physics import World
 
+__all__ = [
+    "COMMS_METRICS",
+    "Controller",
+    "RobotRun",
+    "SimulationResult",
+    "robot_metrics",
+    "simulate",
+    "wall_follow_controller",
+]
+
 #: controller(step, scans (N, B)) -> commands (N, 2); it sees only the robots' own ranges.
 Controller = Callable[[int, np.ndarray], np.ndarray]
-
-
-@dataclass
-class RobotRun:
-    """Everything one robot did in a simulation (estimates in its own start frame)."""
-
-    start_pose: np.ndarray  # (3,) robot's frame R_{j,0} in the absolute frame (metrics only)
-    true_poses: np.ndarray  # (K+1, 3) absolute
-    est_poses: np.ndarray  # (K+1, 3) in the robot's start frame
-    est_covs: np.ndarray  # (K+1, 3, 3)
-    polynomials: list[Polynomial]  # final map, robot frame
-    hit_points: np.ndarray  # (H, 2) true points its beams hit (absolute), for hit_fraction
-    slam_times: np.ndarray  # (K,) seconds per SLAM step
-    diverged: bool  # flagged at any step
-    collisions: int
-    comms: dict[str, int] = field(default_factory=dict)  # exchange counters (empty: no exchange)
 
 
 @dataclass
@@ -59,33 +54,6 @@ class SimulationResult:
 
     def metrics(self) -> list[dict[str, float]]:
         return [robot_metrics(run, self.layout) for run in self.runs]
-
-
-#: Exchange counters that :func:`robot_metrics` reports (zeros when there was no exchange).
-COMMS_METRICS = ("bytes_sent", "bytes_received", "rendezvous", "messages_lost")
-
-
-def robot_metrics(run: RobotRun, layout: Layout) -> dict[str, float]:
-    """The paper's metrics (SPEC §5) for one robot, plus completeness and timing."""
-    sp = run.start_pose
-    polys = run.polynomials
-    hit = metrics.hit_fraction(run.hit_points, layout) if len(run.hit_points) else 0.0
-    return {
-        "nees": metrics.nees(run.true_poses, run.est_poses, run.est_covs, sp),
-        "nees_paper": metrics.nees_paper(run.true_poses, run.est_poses, run.est_covs, sp),
-        "nu": metrics.nu(polys, sp, layout),
-        "nu_mean": metrics.nu_mean(polys, sp, layout),
-        "completeness": metrics.completeness(polys, sp, layout),
-        "hit_fraction": hit,
-        "landmarks": float(len(polys)),
-        "slam_time_ms": 1e3 * float(np.mean(run.slam_times)) if len(run.slam_times) else 0.0,
-        "slam_time_ms_median": 1e3 * float(np.median(run.slam_times))
-        if len(run.slam_times)
-        else 0.0,
-        "diverged": float(run.diverged),
-        "collisions": float(run.collisions),
-        **{key: float(run.comms.get(key, 0)) for key in COMMS_METRICS},
-    }
 
 
 def wall_follow_controller(
