@@ -9,9 +9,9 @@ the env and :func:`polyslam_env.apps.simulate.simulate`:
 * :func:`final_robot_metrics` and :func:`team_metrics` are the env's end-of-episode
   ``infos[agent]["metrics"]`` and ``infos[agent]["team"]``.
 
-Differences from ``simulate``: the env's hit points come from the *noisy* ranges placed with
-the true pose (no extra noiseless ray cast per step); a failed robot's history stops at its
-failure.
+Hit points in the env are the true points the beams hit: the noiseless ranges of the step's
+ray cast placed with the true pose (:class:`~polyslam_env.environment.state.Sensing`), as in
+``simulate``. A failed robot's history stops at its failure.
 """
 
 from __future__ import annotations
