@@ -1,7 +1,8 @@
 """What a robot did during an episode, and the metrics reported at its end.
 
 This module owns the per-robot record of an episode and the numbers computed from it, for both
-the env and :func:`polyslam_env.apps.simulate.simulate`:
+the env and :func:`polyslam_env.apps.simulate.simulate` (which run the same record stage,
+:func:`polyslam_env.environment.stages.record`):
 
 * :class:`RobotHistory` grows by one entry per step (true and estimated poses, covariances,
   beam hit points, SLAM wall times, collisions, path length) and becomes a :class:`RobotRun`;
@@ -9,9 +10,9 @@ the env and :func:`polyslam_env.apps.simulate.simulate`:
 * :func:`final_robot_metrics` and :func:`team_metrics` are the env's end-of-episode
   ``infos[agent]["metrics"]`` and ``infos[agent]["team"]``.
 
-Hit points in the env are the true points the beams hit: the noiseless ranges of the step's
-ray cast placed with the true pose (:class:`~polyslam_env.environment.state.Sensing`), as in
-``simulate``. A failed robot's history stops at its failure.
+Hit points are the true points the beams hit: the noiseless ranges of the step's ray cast
+placed with the true pose (see :class:`~polyslam_env.environment.state.Sensing`). A failed
+robot's history stops at its failure.
 """
 
 from __future__ import annotations
