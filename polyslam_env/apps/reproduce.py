@@ -16,11 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from polyslam_env.apps.simulate import SimulationResult, robot_metrics, simulate
+from polyslam_env.apps.simulate import SimulationResult, simulate
 from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.core.config import Config
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.core.resources import configs_dir
+from polyslam_env.metrics.episode import robot_metrics
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.world.config import WorldConfig
 

@@ -52,14 +52,16 @@ def run_episode(
     observations, _ = env.reset(seed=seed)
     team.reset(seed)
     rng = np.random.default_rng([seed, 1])
-    coverage = [float(env.coverage.coverage)]
+    state = env.episode
+    assert state is not None  # made by reset
+    coverage = [float(state.coverage.coverage)]
     robots: dict[str, dict[str, float]] = {}
     team_info: dict[str, Any] = {}
     if on_step is not None:
         on_step(env)
     while env.agents:
         observations, _, _, _, infos = env.step(team.act(observations, rng))
-        coverage.append(float(env.coverage.coverage))
+        coverage.append(float(state.coverage.coverage))
         for agent, info in infos.items():
             if "metrics" in info:
                 robots[agent] = dict(info["metrics"])
@@ -67,7 +69,7 @@ def run_episode(
         if on_step is not None:
             on_step(env)
     ordered = {a: robots[a] for a in env.possible_agents if a in robots}
-    return EpisodeResult(seed, env.step_count, ordered, team_info, coverage)
+    return EpisodeResult(seed, state.step_count, ordered, team_info, coverage)
 
 
 def evaluate_episode(

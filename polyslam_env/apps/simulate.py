@@ -2,8 +2,12 @@
 
 :func:`simulate` drives a team along scripted commands (the paper's precomputed paths, any
 ``(N, K, 2)`` array, or a simple reactive controller), runs each robot's :class:`PolySlam`
-on its own odometry and ranges, and records what the metrics need. Tests and the paper
-reproduction use it; :func:`robot_metrics` turns a run into the paper's numbers.
+on its own odometry and ranges, and records what the metrics need. It runs the env's own
+stages (:mod:`polyslam_env.environment.stages`: simulate → sense → SLAM → exchange → record),
+so an episode here and in the env cannot drift apart. Tests and the paper reproduction use
+it; :func:`~polyslam_env.metrics.episode.robot_metrics` turns a run into the paper's numbers
+(:class:`RobotRun` and :func:`robot_metrics` are re-exported from
+:mod:`polyslam_env.metrics.episode`).
 """
 
 from __future__ import annotations
@@ -14,36 +18,30 @@ from typing import Any
 
 import numpy as np
 
-from polyslam_env import metrics
 from polyslam_env.comms.channel import ChannelConfig
-from polyslam_env.comms.exchange import RendezvousExchange
+from polyslam_env.comms.exchange import ExchangeStep, RendezvousExchange
 from polyslam_env.core.seeding import make_rngs
+from polyslam_env.environment import stages
+from polyslam_env.metrics.episode import COMMS_METRICS, RobotHistory, RobotRun, robot_metrics
 from polyslam_env.slam.config import SlamConfig
-from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.maps import load_map
 from polyslam_env.world.physics import World
 
+__all__ = [
+    "COMMS_METRICS",
+    "Controller",
+    "RobotRun",
+    "SimulationResult",
+    "robot_metrics",
+    "simulate",
+    "wall_follow_controller",
+]
+
 #: controller(step, scans (N, B)) -> commands (N, 2); it sees only the robots' own ranges.
 Controller = Callable[[int, np.ndarray], np.ndarray]
-
-
-@dataclass
-class RobotRun:
-    """Everything one robot did in a simulation (estimates in its own start frame)."""
-
-    start_pose: np.ndarray  # (3,) robot's frame R_{j,0} in the absolute frame (metrics only)
-    true_poses: np.ndarray  # (K+1, 3) absolute
-    est_poses: np.ndarray  # (K+1, 3) in the robot's start frame
-    est_covs: np.ndarray  # (K+1, 3, 3)
-    polynomials: list[Polynomial]  # final map, robot frame
-    hit_points: np.ndarray  # (H, 2) true points its beams hit (absolute), for hit_fraction
-    slam_times: np.ndarray  # (K,) seconds per SLAM step
-    diverged: bool  # flagged at any step
-    collisions: int
-    comms: dict[str, int] = field(default_factory=dict)  # exchange counters (empty: no exchange)
 
 
 @dataclass
@@ -59,33 +57,6 @@ class SimulationResult:
 
     def metrics(self) -> list[dict[str, float]]:
         return [robot_metrics(run, self.layout) for run in self.runs]
-
-
-#: Exchange counters that :func:`robot_metrics` reports (zeros when there was no exchange).
-COMMS_METRICS = ("bytes_sent", "bytes_received", "rendezvous", "messages_lost")
-
-
-def robot_metrics(run: RobotRun, layout: Layout) -> dict[str, float]:
-    """The paper's metrics (SPEC §5) for one robot, plus completeness and timing."""
-    sp = run.start_pose
-    polys = run.polynomials
-    hit = metrics.hit_fraction(run.hit_points, layout) if len(run.hit_points) else 0.0
-    return {
-        "nees": metrics.nees(run.true_poses, run.est_poses, run.est_covs, sp),
-        "nees_paper": metrics.nees_paper(run.true_poses, run.est_poses, run.est_covs, sp),
-        "nu": metrics.nu(polys, sp, layout),
-        "nu_mean": metrics.nu_mean(polys, sp, layout),
-        "completeness": metrics.completeness(polys, sp, layout),
-        "hit_fraction": hit,
-        "landmarks": float(len(polys)),
-        "slam_time_ms": 1e3 * float(np.mean(run.slam_times)) if len(run.slam_times) else 0.0,
-        "slam_time_ms_median": 1e3 * float(np.median(run.slam_times))
-        if len(run.slam_times)
-        else 0.0,
-        "diverged": float(run.diverged),
-        "collisions": float(run.collisions),
-        **{key: float(run.comms.get(key, 0)) for key in COMMS_METRICS},
-    }
 
 
 def wall_follow_controller(
@@ -150,7 +121,14 @@ def simulate(
     ``exchange`` turns on rendezvous map exchange (SPEC §4) after every SLAM step: ``True``
     for the default :class:`ChannelConfig`, a config, or a ready :class:`RendezvousExchange`
     (e.g. one that logs payload sizes). Its counters land in ``RobotRun.comms`` and its
-    messages in ``meta["exchange"]``. Off, the run is exactly as without it.
+    messages in ``meta["exchange"]``. Off, the run is exactly as without it (and no camera
+    frames are taken). Step numbers are the env's: the exchange runs as step ``k`` after the
+    ``k``-th control period (1-based; ``sent_step``/``delivered_step`` count so), while
+    ``controller(k, scans)`` and ``commands[:, k]`` index the command to apply, from 0.
+
+    The loop runs the env's stages (:mod:`polyslam_env.environment.stages`): simulate →
+    sense → SLAM → exchange → record. ``RobotRun.hit_points`` are the true points the beams
+    hit (noiseless ranges of each step's ray cast, placed with the true pose).
 
     ``shadow`` lists robots that get a second, lone SLAM fed the very same odometry and
     ranges but never exchanging: their single-robot result on the identical episode
@@ -159,6 +137,67 @@ def simulate(
     wcfg = world_config or WorldConfig()
     scfg = slam_config or SlamConfig()
     layout = map if isinstance(map, Layout) else load_map(map)
+    controller, num_robots, steps = _motion(layout, wcfg, commands, controller, num_robots, steps)
+
+    world = World(layout, wcfg, num_robots, make_rngs(seed))
+    slams = [
+        PolySlam(scfg, wcfg.range_sensor.angles, wcfg.range_sensor.max_range)
+        for _ in range(num_robots)
+    ]
+    frames = world.poses.copy()
+    if initial_error:
+        anchor = make_rngs(seed, ["anchor"])["anchor"]
+        for i in range(num_robots):
+            e0 = anchor.multivariate_normal(np.zeros(3), scfg.p0)
+            frames[i] = _frame_of(world.poses[i], e0)
+    shadow = list(shadow)
+    if any(not 0 <= i < num_robots for i in shadow):
+        raise ValueError(f"shadow: robot indices must be in [0, {num_robots}), got {shadow}")
+    shadows = [
+        PolySlam(scfg, wcfg.range_sensor.angles, wcfg.range_sensor.max_range) for _ in shadow
+    ]
+    every = slams + shadows  # the exchanging SLAMs, then the lone shadows
+    robots = list(range(num_robots)) + shadow  # every[j] runs on world robot robots[j]
+    histories = [
+        RobotHistory(frames[r], s.pose, s.pose_cov, true_pose=world.poses[r])
+        for s, r in zip(every, robots, strict=True)
+    ]
+    ex = _make_exchange(exchange, num_robots, seed, wcfg, scfg)
+    angles = np.asarray(wcfg.range_sensor.angles)
+    log: list[dict[str, Any]] = []
+    sensing = stages.sense(world, camera=False)  # what the controller sees first
+    for k in range(1, steps + 1):
+        commands = np.asarray(controller(k - 1, sensing.ranges), dtype=float)
+        result = stages.simulate(world, commands)
+        sensing = stages.sense(world, camera=ex is not None)
+        infos = stages.run_slam(every, robots, world.active, result.odometry, sensing.ranges)
+        if ex is not None:
+            delivered = stages.exchange_maps(ex, k, slams, world.active, sensing, angles)
+            log += _delivered_log(delivered)
+        estimates = [(s.pose, s.pose_cov) for s in every]
+        stages.record(histories, robots, world, sensing, estimates, infos, result.collided)
+        if progress is not None:
+            progress(k)
+    all_runs = [h.run(s.polynomials()) for h, s in zip(histories, every, strict=True)]
+    runs, lone_runs = all_runs[:num_robots], dict(zip(shadow, all_runs[num_robots:], strict=True))
+    if ex is None:
+        return SimulationResult(layout, runs, seed, steps, shadow_runs=lone_runs)
+    for i, run in enumerate(runs):
+        run.comms = ex.counters(i)
+    return SimulationResult(
+        layout, runs, seed, steps, meta={"exchange": log}, shadow_runs=lone_runs
+    )
+
+
+def _motion(
+    layout: Layout,
+    world_config: WorldConfig,
+    commands: np.ndarray | None,
+    controller: Controller | None,
+    num_robots: int | None,
+    steps: int | None,
+) -> tuple[Controller, int, int]:
+    """The controller, team size and number of steps :func:`simulate` runs (see there)."""
     if commands is None and controller is None:
         commands = _builtin_commands(layout.name)
     if commands is not None:
@@ -178,50 +217,8 @@ def simulate(
         table = commands
         controller = lambda k, _scans: table[:num_robots, k]  # noqa: E731
     elif controller is None:
-        controller = wall_follow_controller(wcfg)
-
-    world = World(layout, wcfg, num_robots, make_rngs(seed))
-    slams = [
-        PolySlam(scfg, wcfg.range_sensor.angles, wcfg.range_sensor.max_range)
-        for _ in range(num_robots)
-    ]
-    frames = world.poses.copy()
-    if initial_error:
-        anchor = make_rngs(seed, ["anchor"])["anchor"]
-        for i in range(num_robots):
-            e0 = anchor.multivariate_normal(np.zeros(3), scfg.p0)
-            frames[i] = _frame_of(world.poses[i], e0)
-    shadow = list(shadow)
-    if any(not 0 <= i < num_robots for i in shadow):
-        raise ValueError(f"shadow: robot indices must be in [0, {num_robots}), got {shadow}")
-    shadows = [
-        PolySlam(scfg, wcfg.range_sensor.angles, wcfg.range_sensor.max_range) for _ in shadow
-    ]
-    rec = _Recorder(world, slams + shadows, frames, list(range(num_robots)) + shadow)
-    ex = _make_exchange(exchange, num_robots, seed, wcfg, scfg)
-    log: list[dict[str, Any]] = []
-    scans = world.scan()
-    for k in range(steps):
-        result = world.step(np.asarray(controller(k, scans), dtype=float))
-        scans = world.scan()
-        infos = [slam.step(result.odometry[i], scans[i]) for i, slam in enumerate(slams)]
-        infos += [
-            lone.step(result.odometry[i], scans[i]) for i, lone in zip(shadow, shadows, strict=True)
-        ]
-        rec.record(scans, infos, result.collided)
-        if ex is not None:
-            log += _exchange_step(ex, k, world, slams, scans)
-        if progress is not None:
-            progress(k + 1)
-    all_runs = rec.runs()
-    runs, lone_runs = all_runs[:num_robots], dict(zip(shadow, all_runs[num_robots:], strict=True))
-    if ex is None:
-        return SimulationResult(layout, runs, seed, steps, shadow_runs=lone_runs)
-    for i, run in enumerate(runs):
-        run.comms = ex.counters(i)
-    return SimulationResult(
-        layout, runs, seed, steps, meta={"exchange": log}, shadow_runs=lone_runs
-    )
+        controller = wall_follow_controller(world_config)
+    return controller, num_robots, steps
 
 
 def _make_exchange(
@@ -253,14 +250,8 @@ def _make_exchange(
     )
 
 
-def _exchange_step(
-    ex: RendezvousExchange, k: int, world: World, slams: list[PolySlam], scans: np.ndarray
-) -> list[dict[str, Any]]:
-    """Log the scans, run one exchange step; returns its delivered messages as plain dicts."""
-    angles = np.asarray(world.config.range_sensor.angles)
-    for i, slam in enumerate(slams):
-        ex.record_scan(i, slam.pose, scans[i], angles)
-    out = ex.step(k, slams, world.camera(), world.active)
+def _delivered_log(step: ExchangeStep) -> list[dict[str, Any]]:
+    """The messages one exchange step delivered, as plain dicts (``meta["exchange"]``)."""
     return [
         {
             "sender": d.sender,
@@ -272,7 +263,7 @@ def _exchange_step(
             "delivered_step": d.delivered_step,
             "attempts": d.attempts,
         }
-        for d in out.delivered
+        for d in step.delivered
     ]
 
 
@@ -296,55 +287,3 @@ def _frame_of(true_start: np.ndarray, offset: np.ndarray) -> np.ndarray:
     x = true_start[0] - (c * offset[0] - s * offset[1])
     y = true_start[1] - (s * offset[0] + c * offset[1])
     return np.array([x, y, theta])
-
-
-class _Recorder:
-    """Collects the per-step data of every robot during :func:`simulate`."""
-
-    def __init__(
-        self, world: World, slams: list[PolySlam], frames: np.ndarray, robots: list[int]
-    ) -> None:
-        self.world, self.slams = world, slams
-        self.robots = robots  # slams[j] estimates world robot robots[j] (shadows repeat one)
-        n = len(slams)
-        self.start = frames[robots]  # (n, 3): each SLAM's frame R_{j,0} in the absolute frame
-        self.true = [[world.poses[r].copy()] for r in robots]
-        self.est = [[s.pose] for s in slams]
-        self.cov = [[s.pose_cov] for s in slams]
-        self.hits: list[list[np.ndarray]] = [[] for _ in range(n)]
-        self.times: list[list[float]] = [[] for _ in range(n)]
-        self.diverged = [False] * n
-        self.collisions = [0] * n
-        self.angles = np.asarray(world.config.range_sensor.angles)
-
-    def record(self, scans: np.ndarray, infos: list, collided: np.ndarray) -> None:
-        poses = self.world.poses
-        true_ranges = self.world.true_scan()
-        for i, (slam, robot) in enumerate(zip(self.slams, self.robots, strict=True)):
-            self.true[i].append(poses[robot].copy())
-            self.est[i].append(slam.pose)
-            self.cov[i].append(slam.pose_cov)
-            self.times[i].append(infos[i].time_s)
-            self.diverged[i] |= infos[i].diverging
-            self.collisions[i] += int(collided[robot])
-            r = true_ranges[robot]
-            ok = np.isfinite(r)
-            phi = poses[robot, 2] + self.angles[ok]
-            rays = np.stack([np.cos(phi), np.sin(phi)], axis=1)
-            self.hits[i].append(poses[robot, :2] + r[ok, None] * rays)
-
-    def runs(self) -> list[RobotRun]:
-        return [
-            RobotRun(
-                start_pose=self.start[i],
-                true_poses=np.array(self.true[i]),
-                est_poses=np.array(self.est[i]),
-                est_covs=np.array(self.cov[i]),
-                polynomials=slam.polynomials(),
-                hit_points=np.vstack(self.hits[i]) if self.hits[i] else np.zeros((0, 2)),
-                slam_times=np.array(self.times[i]),
-                diverged=self.diverged[i],
-                collisions=self.collisions[i],
-            )
-            for i, slam in enumerate(self.slams)
-        ]

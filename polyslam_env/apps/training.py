@@ -254,7 +254,8 @@ def evaluate_coverage(
         while env.agents:
             obs, rewards, _, _, _ = env.step(team.act(obs, rng))
             total += float(sum(rewards.values()))
-        coverage.append(float(env.coverage.coverage))
+        assert env.episode is not None  # made by reset
+        coverage.append(float(env.episode.coverage.coverage))
         returns.append(total)
     env.close()
     return {

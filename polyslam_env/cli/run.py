@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     pictures: list[Renderer] = []
 
     def on_step(e: Any) -> None:
-        bar.update(0 if e.step_count == 0 else 1)
+        bar.update(0 if e.episode.step_count == 0 else 1)
         if args.render:
             e.render()
         if args.video:
@@ -142,7 +142,7 @@ def _picture(env: Any, cache: list[Any]) -> Any:  # (H, W, 3) uint8
 
     if not cache:
         cache.append(
-            Renderer(env.world.layout, env.config.num_robots, "rgb_array", env.config.world)
+            Renderer(env.episode.world.layout, env.config.num_robots, "rgb_array", env.config.world)
         )
     return cache[0].render(env.render_state())
 

@@ -1,14 +1,18 @@
 """The PettingZoo parallel environment ``polyslam_v0`` (SPEC §6).
 
-``step`` is a pipeline of named stages: apply actions → simulate → sense → SLAM → exchange →
-observe → reward → done. Observations come from on-board knowledge only
-(:mod:`polyslam_env.environment.observations`); rewards may use ground truth; rendering reads a
-:class:`~polyslam_env.render.state.RenderState` and never feeds observations.
+This module owns the env's public face: construction (config, spaces, layout source,
+observation encoder, renderer), action validation, and ``reset``/``step``, which make the
+:class:`~polyslam_env.environment.state.EpisodeState` and run the stages of
+:mod:`polyslam_env.environment.stages` in order: apply actions → simulate → sense → SLAM →
+exchange → record → observe → coverage sweep → map bookkeeping → reward terms → combine →
+done → infos. Observations come from on-board knowledge only
+(:mod:`polyslam_env.environment.observations`); rewards (:mod:`~polyslam_env.environment.rewards`)
+may use ground truth; rendering reads a :class:`~polyslam_env.render.state.RenderState` and
+never feeds observations.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -21,27 +25,19 @@ from pettingzoo.utils import wrappers
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from polyslam_env import metrics
-from polyslam_env.comms.exchange import ExchangeStep, RendezvousExchange
 from polyslam_env.core.errors import MapFileError
 from polyslam_env.core.seeding import make_rngs
+from polyslam_env.environment import stages
 from polyslam_env.environment.config import EnvConfig, resolve_config
 from polyslam_env.environment.facts import public_facts
-from polyslam_env.environment.observations import (
-    BeliefGrid,
-    MapSampler,
-    ObservationEncoder,
-    RobotView,
-    sweep_beliefs,
-)
-from polyslam_env.metrics.episode import RobotHistory, final_robot_metrics, team_metrics
+from polyslam_env.environment.observations import ObservationEncoder
+from polyslam_env.environment.rewards import REWARD_TERMS, combine, reward_terms
+from polyslam_env.environment.state import EpisodeState, estimate, estimates
 from polyslam_env.render.state import RenderState
-from polyslam_env.slam.robot import PolySlam, SlamStepInfo
 from polyslam_env.world.generators import LayoutGenerator, make_generator
 from polyslam_env.world.grid import FreeGrid, free_space_grid
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.maps import load_map
-from polyslam_env.world.physics import StepResult, World
-from polyslam_env.world.sensors import Detection
 
 if TYPE_CHECKING:
     from polyslam_env.render.renderer import Renderer
@@ -50,10 +46,6 @@ __all__ = ["REWARD_TERMS", "PolySlamParallelEnv", "env", "parallel_env"]
 
 Obs = np.ndarray | dict[str, np.ndarray]
 Action = Any
-#: Names of the reward terms, in the order they appear in ``infos[agent]["reward_terms"]``.
-REWARD_TERMS: tuple[str, ...] = ("coverage", "mapping", "bytes", "collision", "time")
-#: Sampling step (m) and tolerance (m) of the completeness behind the ``mapping`` term.
-MAPPING_STEP, MAPPING_TOL = 0.05, 0.05
 
 
 class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
@@ -157,6 +149,9 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         )  # (K, 2) physical (v, ω)
         self._fault_at = {robot: step for robot, step in cfg.faults}
         self._seeder: np.random.Generator | None = None
+        # The current episode, made by reset(). Not named ``state``: that is PettingZoo's
+        # global-state method ``ParallelEnv.state()``, which this env leaves unimplemented.
+        self.episode: EpisodeState | None = None
         self._renderer: Renderer | None = None
         self._renderer_layout: Layout | None = None
 
@@ -226,65 +221,22 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Obs], dict[str, dict[str, Any]]]:
         """A new episode: new layout (generator maps), new pymunk world, fresh SLAMs."""
-        cfg = self.config
-        n = cfg.num_robots
-        self._rngs = make_rngs(self._episode_seed(seed))
-        layout = self._layout if self._layout is not None else self._draw_layout()
-        free = (
-            self._free
-            if self._free is not None
-            else free_space_grid(layout, cfg.coverage_resolution)
-        )
-        self.world = World(layout, cfg.world, n, self._rngs)
-        self.coverage = metrics.CoverageGrid(free.mask, free.origin, free.resolution)
-        self.start_poses = self.world.poses  # (N, 3), each robot's frame in the absolute frame
-        wc = cfg.world
-        self._angles = np.asarray(wc.range_sensor.angles)  # (B,)
-        self.slams = (
-            [PolySlam(cfg.slam, self._angles, wc.range_sensor.max_range) for _ in range(n)]
-            if cfg.slam_enabled
-            else []
-        )
-        self.exchange = self._make_exchange()
-        oc = cfg.observation
-        self._beliefs = [
-            BeliefGrid(oc.belief_size, oc.belief_resolution, wc.range_sensor.max_range)
-            for _ in range(n)
-        ]
-        self._samplers = [MapSampler(0.5 * oc.grid_resolution) for _ in range(n)]
-        self._histories = [RobotHistory(self.start_poses[i], *self._estimate(i)) for i in range(n)]
-        self._last_rendezvous: list[int | None] = [None] * n
-        self._completeness = [0.0] * n
-        self._bytes_sent = [0] * n
-        self._links: list[tuple[int, int]] = []
-        self.step_count = 0
+        rngs = make_rngs(self._episode_seed(seed))
+        layout = self._layout
+        if layout is None:
+            assert self._generator is not None
+            layout = self._generator(rngs["layout"])
+        free = self._free
+        if free is None:
+            free = free_space_grid(layout, self.config.coverage_resolution)
+        self.episode = state = stages.new_episode(self.config, rngs, layout, free)
         self.agents = self.possible_agents[:]
-        self._scans = self.world.scan()  # (N, B)
-        self._detections = self.world.camera()
-        self._sweep_coverage(self._scans)
-        self._coverage_series = [self.coverage.coverage]
-        observations = self._observe(self.agents, self._estimates())
+        observations = stages.observe(state, self._encoder, self._acting(), estimates(state))
         return observations, {a: {} for a in self.agents}
 
-    def _draw_layout(self) -> Layout:
-        assert self._generator is not None
-        return self._generator(self._rngs["layout"])
-
-    def _make_exchange(self) -> RendezvousExchange | None:
-        cfg = self.config
-        if cfg.channel is None or not cfg.slam_enabled:
-            return None
-        wc = cfg.world
-        return RendezvousExchange(
-            cfg.channel,
-            cfg.num_robots,
-            self._rngs["channel"],
-            wc.camera.sigma_d,
-            wc.camera.sigma_bearing,
-            cfg.slam.order,
-            cfg.slam.auto_order,
-            max_range=wc.range_sensor.max_range,
-        )
+    def _acting(self) -> dict[str, int]:
+        """The live agents and their robot indices."""
+        return {agent: self._index[agent] for agent in self.agents}
 
     # -- step: the pipeline -----------------------------------------------------------------
     def step(
@@ -297,22 +249,26 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         dict[str, dict[str, Any]],
     ]:
         """Advance every live robot by one control period (see the class docstring)."""
-        if not self.agents:
+        state = self.episode
+        if state is None or not self.agents:
             raise RuntimeError("step() called with no live agents; call reset() first")
-        acting = self.agents[:]
+        acting = self._acting()
         commands = self._apply_actions(actions)
-        self.step_count += 1
-        result = self._simulate(commands)
-        scans, detections = self._sense()
-        slam_infos = self._run_slam(result, scans)
-        exchanged = self._exchange(detections)
-        estimates = self._estimates()
-        self._record(result, scans, slam_infos, estimates)
-        observations = self._observe(acting, estimates)
-        terms = self._reward_terms(acting, result, scans, slam_infos, exchanged)
-        rewards = self._combine(terms)
-        terminations, truncations = self._done(acting)
-        infos = self._infos(acting, terms, terminations, truncations)
+        state.step_count += 1
+        result = stages.simulate(state.world, commands)
+        state.sensing = stages.sense(state.world)
+        slam_infos = stages.slam(state, result.odometry)
+        exchanged = stages.exchange(state)
+        robot_estimates = estimates(state)
+        stages.record_histories(state, result, slam_infos, robot_estimates)
+        observations = stages.observe(state, self._encoder, acting, robot_estimates)
+        gains = stages.sweep_coverage(state)
+        changes = stages.map_bookkeeping(state, acting, slam_infos, exchanged)
+        terms = reward_terms(acting, result.collided, gains, changes)
+        rewards = combine(terms, self.config.reward)
+        failed = stages.fail_robots(state, acting, self._fault_at)
+        terminations, truncations = stages.done(state, self.config, acting, failed)
+        infos = stages.infos(state, acting, terms, terminations, truncations)
         self.agents = [a for a in acting if not (terminations[a] or truncations[a])]
         return observations, rewards, terminations, truncations, infos
 
@@ -351,234 +307,16 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
             raise ValueError(f"action of {agent}: expected (v, omega), got shape {a.shape}")
         return a.astype(float).reshape(2)
 
-    def _simulate(self, commands: np.ndarray) -> StepResult:
-        return self.world.step(commands)
-
-    def _sense(self) -> tuple[np.ndarray, list[list[Detection]]]:
-        """Noisy ranges (N, B) and camera detections of every robot (failed ones see none)."""
-        self._scans = self.world.scan()
-        self._detections = self.world.camera()
-        return self._scans, self._detections
-
-    def _run_slam(self, result: StepResult, scans: np.ndarray) -> list[SlamStepInfo | None]:
-        """One SLAM step per active robot (None for failed robots or without SLAM)."""
-        out: list[SlamStepInfo | None] = [None] * self.config.num_robots
-        for i, slam in enumerate(self.slams):
-            if self.world.active[i]:
-                out[i] = slam.step(result.odometry[i], scans[i])
-        return out
-
-    def _exchange(self, detections: list[list[Detection]]) -> ExchangeStep | None:
-        """Rendezvous map exchange; also keeps the mutual-sighting links for rendering."""
-        self._links = _mutual_pairs(detections)
-        if self.exchange is None:
-            return None
-        for i, slam in enumerate(self.slams):
-            if self.world.active[i]:
-                self.exchange.record_scan(i, slam.pose, self._scans[i], self._angles)
-        out = self.exchange.step(self.step_count, self.slams, detections, self.world.active)
-        for i, j in out.new_rendezvous:
-            self._last_rendezvous[i] = self._last_rendezvous[j] = self.step_count
-        return out
-
-    def _record(
-        self,
-        result: StepResult,
-        scans: np.ndarray,
-        slam_infos: list[SlamStepInfo | None],
-        estimates: list[tuple[np.ndarray, np.ndarray]],
-    ) -> None:
-        """Histories for the end-of-episode metrics (the belief grids are swept in _observe)."""
-        poses = self.world.poses
-        phi = poses[:, 2:3] + self._angles  # (N, B)
-        hits = np.stack(  # (N, B, 2) beam end points, true poses (inf without return)
-            [poses[:, 0:1] + scans * np.cos(phi), poses[:, 1:2] + scans * np.sin(phi)], axis=-1
-        )
-        ok = np.isfinite(scans)  # (N, B)
-        for i in map(int, np.flatnonzero(self.world.active)):
-            est, cov = estimates[i]
-            info = slam_infos[i]
-            self._histories[i].record(
-                poses[i],
-                est,
-                cov,
-                hits[i][ok[i]],
-                None if info is None else info.time_s,
-                bool(result.collided[i]),
-                bool(info is not None and info.diverging),
-            )
-
-    def _estimates(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Every robot's :meth:`_estimate`, taken once per step after SLAM and exchange."""
-        return [self._estimate(i) for i in range(self.config.num_robots)]
-
-    def _estimate(self, i: int) -> tuple[np.ndarray, np.ndarray]:
-        """Robot i's pose (3,) and covariance (3, 3) in its start frame (truth without SLAM)."""
-        if self.slams:
-            return self.slams[i].pose, self.slams[i].pose_cov
-        return _to_frame(self.world.poses[i], self.start_poses[i]), np.zeros((3, 3))
-
-    # -- observe ---------------------------------------------------------------------------
-    def _observe(
-        self, agents: list[str], estimates: list[tuple[np.ndarray, np.ndarray]]
-    ) -> dict[str, Obs]:
-        robots = [self._index[agent] for agent in agents]
-        sweeping = [i for i in robots if self.world.active[i]]
-        if sweeping:  # each robot's beams into its own belief grid, with its estimated pose
-            poses = np.array([estimates[i][0] for i in sweeping])  # (K, 3)
-            grids = [self._beliefs[i] for i in sweeping]
-            sweep_beliefs(grids, poses, self._angles, self._scans[sweeping])
-        return {
-            agent: self._encoder.encode(self._view(i, *estimates[i]))
-            for agent, i in zip(agents, robots, strict=True)
-        }
-
-    def _view(self, i: int, pose: np.ndarray, cov: np.ndarray) -> RobotView:
-        """What robot i knows, with its estimated pose (3,) and covariance (3, 3)."""
-        last = self._last_rendezvous[i]
-        count = self.exchange.counters(i)["rendezvous"] if self.exchange is not None else 0
-        return RobotView(
-            ranges=self._scans[i],
-            pose=pose,
-            pose_std=np.sqrt(np.maximum(np.diag(cov), 0.0)),
-            map_points=self._samplers[i].points(self.slams[i]) if self.slams else np.zeros((0, 2)),
-            belief=self._beliefs[i],
-            detections=self._detections[i],
-            steps_since_rendezvous=None if last is None else self.step_count - last,
-            rendezvous=count,
-            step=self.step_count,
-        )
-
-    # -- reward ----------------------------------------------------------------------------
-    def _sweep_coverage(self, scans: np.ndarray) -> np.ndarray:  # (N,) m²
-        """Sweep every active robot's beams (true poses) into the team coverage grid; return
-        the area of free cells first swept by the team now, per robot."""
-        grid = self.coverage
-        poses = self.world.poses
-        max_range = self.config.world.range_sensor.max_range
-        active = np.flatnonzero(self.world.active).tolist()
-        scan_cells = grid.scan_cells(
-            poses[active, :2], poses[active, 2:3] + self._angles, scans[active], max_range
-        )
-        cells = dict(zip(active, scan_cells, strict=True))
-        # Gains against the grid as it was before this step (counted before anything is marked),
-        # so a cell first swept by two robots at once counts for both.
-        gains = np.zeros(self.config.num_robots)
-        for i, c in cells.items():
-            gains[i] = grid.new_free_cells(c) * grid.resolution**2
-        for i, c in cells.items():
-            grid.mark(c, robot=i)
-        return gains
-
-    def _reward_terms(
-        self,
-        acting: list[str],
-        result: StepResult,
-        scans: np.ndarray,
-        slam_infos: list[SlamStepInfo | None],
-        exchanged: ExchangeStep | None,
-    ) -> dict[str, dict[str, float]]:
-        gains = self._sweep_coverage(scans)
-        self._coverage_series.append(self.coverage.coverage)
-        received = {d.receiver for d in exchanged.delivered} if exchanged is not None else set()
-        out: dict[str, dict[str, float]] = {}
-        for agent in acting:
-            i = self._index[agent]
-            out[agent] = {
-                "coverage": float(gains[i]),
-                "mapping": self._mapping_term(i, slam_infos[i], i in received),
-                "bytes": -self._bytes_this_step(i) / 1000.0,
-                "collision": -1.0 if result.collided[i] else 0.0,
-                "time": -1.0,
-            }
-        return out
-
-    def _mapping_term(self, i: int, info: SlamStepInfo | None, received: bool) -> float:
-        """Change of robot i's map completeness, evaluated only when its map changed."""
-        if info is None or not (info.created or info.refit or info.merged or received):
-            return 0.0
-        comp = metrics.completeness(
-            self.slams[i].polynomials(),
-            self.start_poses[i],
-            self.world.layout,
-            tol=MAPPING_TOL,
-            step=MAPPING_STEP,
-        )
-        delta, self._completeness[i] = comp - self._completeness[i], comp
-        return delta
-
-    def _bytes_this_step(self, i: int) -> int:
-        if self.exchange is None:
-            return 0
-        total = self.exchange.counters(i)["bytes_sent"]
-        delta, self._bytes_sent[i] = total - self._bytes_sent[i], total
-        return delta
-
-    def _combine(self, terms: dict[str, dict[str, float]]) -> dict[str, float]:
-        """Σ weight · term per agent; the team mean for everyone in shared mode."""
-        rc = self.config.reward
-        rewards = {
-            agent: float(sum(getattr(rc, name) * value for name, value in t.items()))
-            for agent, t in terms.items()
-        }
-        if rc.shared and rewards:
-            mean = float(np.mean(list(rewards.values())))
-            rewards = dict.fromkeys(rewards, mean)
-        return rewards
-
-    # -- done ------------------------------------------------------------------------------
-    def _done(self, acting: list[str]) -> tuple[dict[str, bool], dict[str, bool]]:
-        """Coverage target → all terminated; faults → that robot; max_steps → all truncated."""
-        reached = self.coverage.coverage >= self.config.coverage_target
-        truncated = self.step_count >= self.config.max_steps
-        terminations, truncations = {}, {}
-        for agent in acting:
-            i = self._index[agent]
-            failed = self._fault_at.get(i) == self.step_count
-            if failed:
-                self.world.disable(i)
-            terminations[agent] = bool(reached or failed)
-            truncations[agent] = bool(truncated)
-        return terminations, truncations
-
-    def _infos(
-        self,
-        acting: list[str],
-        terms: dict[str, dict[str, float]],
-        terminations: dict[str, bool],
-        truncations: dict[str, bool],
-    ) -> dict[str, dict[str, Any]]:
-        infos: dict[str, dict[str, Any]] = {}
-        team: dict[str, Any] | None = None
-        for agent in acting:
-            info: dict[str, Any] = {"reward_terms": terms[agent], "step": self.step_count}
-            if terminations[agent] or truncations[agent]:
-                if team is None:
-                    team = team_metrics(self._coverage_series, self.coverage)
-                info["metrics"] = self._final_metrics(self._index[agent])
-                info["team"] = dict(team)
-            infos[agent] = info
-        return infos
-
-    def _final_metrics(self, i: int) -> dict[str, float]:
-        counters = self.exchange.counters(i) if self.exchange is not None else {}
-        return final_robot_metrics(
-            self._histories[i],
-            self.slams[i].polynomials() if self.slams else None,
-            self.world.layout,
-            self.coverage.robot_coverage(i),
-            counters,
-        )
-
     # -- rendering -------------------------------------------------------------------------
     def render(self) -> np.ndarray | None:
         """Draw the current state (``human``: a window, returns None; ``rgb_array``: an image)."""
         if self.render_mode is None:
             gymnasium.logger.warn("render() called without a render_mode; nothing to draw")
             return None
-        if not hasattr(self, "world"):
+        if self.episode is None:
             raise RuntimeError("render() called before reset()")
-        if self._renderer is None or self._renderer_layout is not self.world.layout:
+        layout = self.episode.world.layout
+        if self._renderer is None or self._renderer_layout is not layout:
             from polyslam_env.render.renderer import (
                 Renderer,
             )  # lazy: pygame loads only when rendering
@@ -586,42 +324,45 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
             if self._renderer is not None:
                 self._renderer.close()
             self._renderer = Renderer(
-                self.world.layout, self.config.num_robots, self.render_mode, self.config.world
+                layout, self.config.num_robots, self.render_mode, self.config.world
             )
-            self._renderer_layout = self.world.layout
+            self._renderer_layout = layout
         return self._renderer.render(self.render_state())
 
     def render_state(self) -> RenderState:
         """A snapshot of the episode for the renderer (ground truth and estimates, absolute)."""
+        state = self.episode
+        if state is None:
+            raise RuntimeError("render_state() called before reset()")
         n = self.config.num_robots
-        est = np.array([self._estimate(i)[0] for i in range(n)])
-        cov = np.array([self._estimate(i)[1] for i in range(n)])
+        est = np.array([estimate(state, i)[0] for i in range(n)])
+        cov = np.array([estimate(state, i)[1] for i in range(n)])
         est_abs = np.array(
-            [metrics.pose_to_absolute(est[i : i + 1], self.start_poses[i])[0] for i in range(n)]
+            [metrics.pose_to_absolute(est[i : i + 1], state.start_poses[i])[0] for i in range(n)]
         )
         cov_abs = np.array(
-            [metrics.cov_to_absolute(cov[i : i + 1], self.start_poses[i])[0] for i in range(n)]
+            [metrics.cov_to_absolute(cov[i : i + 1], state.start_poses[i])[0] for i in range(n)]
         )
         maps = [
-            metrics.map_points(self.slams[i].polynomials(), self.start_poses[i], 0.02)
-            if self.slams
+            metrics.map_points(state.slams[i].polynomials(), state.start_poses[i], 0.02)
+            if state.slams
             else []
             for i in range(n)
         ]
-        grid = self.coverage
+        grid = state.coverage
         return RenderState(
-            true_poses=self.world.poses,
+            true_poses=state.world.poses,
             est_poses_abs=est_abs,
             est_covs_abs=cov_abs,
             maps_abs=maps,
-            true_paths=[h.true_path() for h in self._histories],
-            est_paths=[h.est_path_abs() for h in self._histories],
-            links=list(self._links),
+            true_paths=[h.true_path() for h in state.histories],
+            est_paths=[h.est_path_abs() for h in state.histories],
+            links=list(state.links),
             coverage=grid.swept & grid.free,
             coverage_origin=grid.origin,
             coverage_resolution=grid.resolution,
-            active=self.world.active.copy(),
-            step=self.step_count,
+            active=state.world.active.copy(),
+            step=state.step_count,
             info_text=f"coverage {100 * grid.coverage:.1f} %",
         )
 
@@ -630,21 +371,6 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
             self._renderer.close()
             self._renderer = None
             self._renderer_layout = None
-
-
-# -- helpers --------------------------------------------------------------------------------
-def _mutual_pairs(detections: list[list[Detection]]) -> list[tuple[int, int]]:
-    """Pairs (i < j) that see each other."""
-    seen = {(i, d.target) for i, dets in enumerate(detections) for d in dets}
-    return sorted((i, j) for i, j in seen if i < j and (j, i) in seen)
-
-
-def _to_frame(pose: np.ndarray, frame: np.ndarray) -> np.ndarray:  # (3,)
-    """An absolute pose (3,) expressed in the frame whose absolute pose is ``frame`` (3,)."""
-    c, s = math.cos(frame[2]), math.sin(frame[2])
-    dx, dy = pose[0] - frame[0], pose[1] - frame[1]
-    dth = math.remainder(pose[2] - frame[2], 2 * math.pi)
-    return np.array([c * dx + s * dy, -s * dx + c * dy, dth])
 
 
 # -- constructors ---------------------------------------------------------------------------

@@ -1,28 +1,40 @@
-"""Per-robot episode histories of the env and the metrics reported at an episode's end.
+"""What a robot did during an episode, and the metrics reported at its end.
 
-The env records, for every active robot and step, what
-:func:`polyslam_env.apps.simulate.robot_metrics` needs (true and estimated poses, covariances, beam
-hit points, SLAM wall times, collisions) and turns it into a
-:class:`~polyslam_env.apps.simulate.RobotRun`, so the paper's metrics are computed by the same code
-as in :func:`~polyslam_env.apps.simulate.simulate`. Exploration and communication numbers are added
-on top.
+This module owns the per-robot record of an episode and the numbers computed from it, for both
+the env and :func:`polyslam_env.apps.simulate.simulate` (which run the same record stage,
+:func:`polyslam_env.environment.stages.record`):
 
-Differences from ``simulate``: hit points come from the *noisy* ranges placed with the true pose
-(no extra noiseless ray cast per step); a failed robot's history stops at its failure.
+* :class:`RobotHistory` grows by one entry per step (true and estimated poses, covariances,
+  beam hit points, SLAM wall times, collisions, path length) and becomes a :class:`RobotRun`;
+* :func:`robot_metrics` turns a :class:`RobotRun` into the paper's numbers (SPEC §5);
+* :func:`final_robot_metrics` and :func:`team_metrics` are the env's end-of-episode
+  ``infos[agent]["metrics"]`` and ``infos[agent]["team"]``.
+
+Hit points are the true points the beams hit: the noiseless ranges of the step's ray cast
+placed with the true pose (see :class:`~polyslam_env.environment.state.Sensing`). A failed
+robot's history stops at its failure.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from polyslam_env import metrics
-from polyslam_env.apps.simulate import RobotRun, robot_metrics
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
 
-__all__ = ["ROBOT_METRIC_KEYS", "RobotHistory", "final_robot_metrics", "team_metrics"]
+__all__ = [
+    "COMMS_METRICS",
+    "ROBOT_METRIC_KEYS",
+    "RobotHistory",
+    "RobotRun",
+    "final_robot_metrics",
+    "robot_metrics",
+    "team_metrics",
+]
 
 #: Keys of ``infos[agent]["metrics"]`` (all floats; NaN where undefined).
 ROBOT_METRIC_KEYS: tuple[str, ...] = (
@@ -42,12 +54,66 @@ ROBOT_METRIC_KEYS: tuple[str, ...] = (
 _SLAM_KEYS = ("nees", "nees_paper", "nu", "nu_mean", "completeness", "slam_time_ms")
 
 
-class RobotHistory:
-    """What one robot did during an episode (estimates in its own start frame)."""
+@dataclass
+class RobotRun:
+    """Everything one robot did in a simulation (estimates in its own start frame)."""
 
-    def __init__(self, start_pose: np.ndarray, est_pose: np.ndarray, est_cov: np.ndarray) -> None:
+    start_pose: np.ndarray  # (3,) robot's frame R_{j,0} in the absolute frame (metrics only)
+    true_poses: np.ndarray  # (K+1, 3) absolute
+    est_poses: np.ndarray  # (K+1, 3) in the robot's start frame
+    est_covs: np.ndarray  # (K+1, 3, 3)
+    polynomials: list[Polynomial]  # final map, robot frame
+    hit_points: np.ndarray  # (H, 2) true points its beams hit (absolute), for hit_fraction
+    slam_times: np.ndarray  # (K,) seconds per SLAM step
+    diverged: bool  # flagged at any step
+    collisions: int
+    comms: dict[str, int] = field(default_factory=dict)  # exchange counters (empty: no exchange)
+
+
+#: Exchange counters that :func:`robot_metrics` reports (zeros when there was no exchange).
+COMMS_METRICS = ("bytes_sent", "bytes_received", "rendezvous", "messages_lost")
+
+
+def robot_metrics(run: RobotRun, layout: Layout) -> dict[str, float]:
+    """The paper's metrics (SPEC §5) for one robot, plus completeness and timing."""
+    sp = run.start_pose
+    polys = run.polynomials
+    hit = metrics.hit_fraction(run.hit_points, layout) if len(run.hit_points) else 0.0
+    return {
+        "nees": metrics.nees(run.true_poses, run.est_poses, run.est_covs, sp),
+        "nees_paper": metrics.nees_paper(run.true_poses, run.est_poses, run.est_covs, sp),
+        "nu": metrics.nu(polys, sp, layout),
+        "nu_mean": metrics.nu_mean(polys, sp, layout),
+        "completeness": metrics.completeness(polys, sp, layout),
+        "hit_fraction": hit,
+        "landmarks": float(len(polys)),
+        "slam_time_ms": 1e3 * float(np.mean(run.slam_times)) if len(run.slam_times) else 0.0,
+        "slam_time_ms_median": 1e3 * float(np.median(run.slam_times))
+        if len(run.slam_times)
+        else 0.0,
+        "diverged": float(run.diverged),
+        "collisions": float(run.collisions),
+        **{key: float(run.comms.get(key, 0)) for key in COMMS_METRICS},
+    }
+
+
+class RobotHistory:
+    """What one robot did during an episode (estimates in its own start frame).
+
+    ``start_pose`` is the robot's frame in the absolute frame; ``true_pose`` its true pose at
+    the start, which is the frame's origin unless the start is drawn with an initial error.
+    """
+
+    def __init__(
+        self,
+        start_pose: np.ndarray,
+        est_pose: np.ndarray,
+        est_cov: np.ndarray,
+        true_pose: np.ndarray | None = None,
+    ) -> None:
         self.start_pose = np.asarray(start_pose, dtype=float).copy()  # (3,) absolute
-        self.true: list[np.ndarray] = [self.start_pose.copy()]  # (3,) each, absolute
+        first = self.start_pose if true_pose is None else np.asarray(true_pose, dtype=float)
+        self.true: list[np.ndarray] = [first.copy()]  # (3,) each, absolute
         self.est: list[np.ndarray] = [np.asarray(est_pose, dtype=float).copy()]  # (3,) own frame
         self.cov: list[np.ndarray] = [np.asarray(est_cov, dtype=float).copy()]  # (3, 3) each
         self.hits: list[np.ndarray] = []  # (h, 2) each, absolute

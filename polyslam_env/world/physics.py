@@ -331,6 +331,12 @@ class World:
             self._pose, self.segments, self.pillars, self.rngs["sensor"], self.config.robot.radius
         )
 
+    def scan_with_truth(self) -> tuple[np.ndarray, np.ndarray]:  # (N, B) each
+        """Noiseless and noisy ranges from one ray cast; the noisy ones are exactly what
+        :meth:`scan` would return (same draws from ``rngs["sensor"]``)."""
+        true = self.true_scan()
+        return true, self.range_sensor.add_noise(true, self.rngs["sensor"])
+
     def camera(self) -> list[list[Detection]]:
         """Per robot, the other robots it sees (noise from ``rngs["camera"]``)."""
         return self.camera_sensor.detect(

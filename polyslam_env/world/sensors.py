@@ -139,7 +139,10 @@ class RangeSensor:
 
         A noisy hit near ``max_range`` may read slightly above it (the noise is not truncated).
         """
-        true = self.true_ranges(poses, segments, circles, robot_radius)
+        return self.add_noise(self.true_ranges(poses, segments, circles, robot_radius), rng)
+
+    def add_noise(self, true: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Noisy ranges from noiseless ones (N, B), as :meth:`measure` (one draw per beam)."""
         noise = rng.standard_normal(true.shape) * self.config.sigma  # drawn for every beam
         return np.maximum(true + noise, 0.0)
 

@@ -125,7 +125,7 @@ def test_cli_train__interrupt_resume_and_evaluate_checkpoint(
             for a, act in actions.items():
                 assert env.action_space(a).contains(act)
             obs, *_ = env.step(actions)
-        coverages.append(env.coverage.coverage)
+        coverages.append(env.episode.coverage.coverage)
     assert coverages[0] == coverages[1]
 
 

@@ -133,7 +133,7 @@ def test_env__reset_without_seed_continues_a_seeded_sequence() -> None:
     o1, _ = e1.reset()
     o2, _ = e2.reset()
     assert np.array_equal(o1["robot_0"], o2["robot_0"])
-    assert e1.world.layout.segments.tolist() == e2.world.layout.segments.tolist()
+    assert e1.episode.world.layout.segments.tolist() == e2.episode.world.layout.segments.tolist()
 
 
 # -- actions ----------------------------------------------------------------------------------
@@ -172,9 +172,9 @@ def test_step__bad_shape_or_discrete_index_raises() -> None:
 def test_step__out_of_range_actions_are_clipped_to_the_robot_limits() -> None:
     env = parallel_env(map="two_rooms", num_robots=1)
     env.reset(seed=0)
-    start = env.world.poses[0].copy()
+    start = env.episode.world.poses[0].copy()
     env.step({"robot_0": np.array([50.0, 0.0])})
-    moved = float(np.hypot(*(env.world.poses[0, :2] - start[:2])))
+    moved = float(np.hypot(*(env.episode.world.poses[0, :2] - start[:2])))
     v_max, dt = env.config.world.robot.v_max, env.config.world.dt
     # The robot starts 0.5 m from the walls ahead, so one free step at v_max is exact up to
     # the physics' sub-step integration (1e-6 m is far below one sub-step's travel).
@@ -207,8 +207,8 @@ def test_observations__local_map_shows_own_polynomials_and_swept_space() -> None
     grid = obs["robot_0"]["grid"]
     assert np.all(grid.sum(axis=0) == 1.0)  # every cell is exactly one of the three classes
     assert grid[1].any()  # swept free space around the robot
-    if env.slams[0].n_landmarks:
-        assert grid[0].any() or env._samplers[0].points(env.slams[0]).size > 0
+    if env.episode.slams[0].n_landmarks:
+        assert grid[0].any() or env.episode.samplers[0].points(env.episode.slams[0]).size > 0
 
 
 # -- rewards ----------------------------------------------------------------------------------
@@ -246,7 +246,8 @@ def test_rewards__rendezvous_costs_bytes(tmp_path: Path) -> None:
     for agent in env.agents:
         assert info[agent]["reward_terms"]["bytes"] < 0.0
         assert (
-            env.exchange is not None and env.exchange.counters(env._index[agent])["rendezvous"] == 1
+            env.episode.exchange is not None
+            and env.episode.exchange.counters(env._index[agent])["rendezvous"] == 1
         )
     obs, *_ = env.step({a: np.zeros(2) for a in env.agents})
     channel = obs["robot_0"][env._encoder.vector_layout["channel"]]
@@ -287,7 +288,7 @@ def test_episode__terminates_when_team_coverage_reaches_target(tmp_path: Path) -
     assert env.agents == []
     team = info["robot_0"]["team"]
     assert team["coverage"] >= 0.3
-    assert team["steps_to_50"] is None or team["steps_to_50"] <= env.step_count
+    assert team["steps_to_50"] is None or team["steps_to_50"] <= env.episode.step_count
 
 
 def test_faults__failed_robot_leaves_and_the_others_continue() -> None:
@@ -302,11 +303,11 @@ def test_faults__failed_robot_leaves_and_the_others_continue() -> None:
         if k == 3:
             assert term["robot_1"] and not term["robot_0"] and not term["robot_2"]
             _check_final_info(info["robot_1"])
-            pose_at_failure = env.world.poses[1].copy()
+            pose_at_failure = env.episode.world.poses[1].copy()
         if k > 3:
             assert "robot_1" not in obs and "robot_1" not in info
-    assert np.array_equal(env.world.poses[1], pose_at_failure)
-    assert not env.world.active[1]
+    assert np.array_equal(env.episode.world.poses[1], pose_at_failure)
+    assert not env.episode.world.active[1]
     assert all(trunc[a] for a in ("robot_0", "robot_2"))
 
 
@@ -318,7 +319,7 @@ def test_ground_truth_mode__runs_without_slam() -> None:
         obs, _, _, _, info = env.step(_random_actions(env, rng))
         for agent, o in obs.items():
             assert env.observation_space(agent).contains(o)
-    assert env.slams == [] and env.exchange is None
+    assert env.episode.slams == [] and env.episode.exchange is None
     metrics = info["robot_0"]["metrics"]
     assert np.isnan(metrics["nees"]) and metrics["coverage"] > 0.0
 

@@ -59,7 +59,7 @@ def test_paper__true_poses_follow_replay_paths() -> None:
     env = polyslam_env.parallel_env(map="paper", num_robots=3, coverage_target=1.0, max_steps=120)
     team = make_team("paper", env)
     poses = []
-    run_episode(env, team, 5, on_step=lambda e: poses.append(e.world.poses.copy()))
+    run_episode(env, team, 5, on_step=lambda e: poses.append(e.episode.world.poses.copy()))
     poses_arr = np.array(poses)  # (K+1, N, 3)
     k = len(poses_arr)
     assert k == 121

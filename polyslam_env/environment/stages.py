@@ -1,0 +1,408 @@
+"""The stages of an episode: ``reset`` makes the state, ``step`` runs the stages in order.
+
+Each stage is a function of what it reads (the :class:`EpisodeState` and the outputs of earlier
+stages) that returns what it produces; a stage that changes the state says so in its first
+line. In the order ``PolySlamParallelEnv.step`` runs them:
+
+    simulate → sense → slam → exchange → record → observe → sweep_coverage → map_bookkeeping
+    → (reward terms, combine: :mod:`~polyslam_env.environment.rewards`) → fail_robots → done
+    → infos
+
+:func:`~polyslam_env.apps.simulate.simulate` runs the team without the RL env through the same
+cores — :func:`simulate`, :func:`sense`, :func:`run_slam`, :func:`exchange_maps` and
+:func:`record` — so the two cannot drift. Step numbers are 1-based everywhere: step ``k`` is
+the ``k``-th control period, after which the histories hold ``k + 1`` poses; the exchange is
+told that number (only differences of step numbers change what it does). One difference is
+left on purpose: the env's reset takes a camera frame for the first observations and
+``simulate`` does not, so with the exchange on their ``camera`` streams are one frame apart.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from polyslam_env import metrics
+from polyslam_env.comms.exchange import ExchangeStep, RendezvousExchange
+from polyslam_env.environment.config import EnvConfig
+from polyslam_env.environment.observations import (
+    BeliefGrid,
+    MapSampler,
+    ObservationEncoder,
+    RobotView,
+    sweep_beliefs,
+)
+from polyslam_env.environment.rewards import MAPPING_STEP, MAPPING_TOL, MapChanges
+from polyslam_env.environment.state import EpisodeState, Sensing, estimate
+from polyslam_env.metrics.episode import RobotHistory, final_robot_metrics, team_metrics
+from polyslam_env.slam.robot import PolySlam, SlamStepInfo
+from polyslam_env.world.grid import FreeGrid
+from polyslam_env.world.layout import Layout
+from polyslam_env.world.physics import StepResult, World
+from polyslam_env.world.sensors import Detection
+
+__all__ = [
+    "done",
+    "exchange",
+    "exchange_maps",
+    "fail_robots",
+    "infos",
+    "make_exchange",
+    "map_bookkeeping",
+    "new_episode",
+    "observe",
+    "record",
+    "record_histories",
+    "run_slam",
+    "sense",
+    "simulate",
+    "slam",
+    "sweep_coverage",
+]
+
+Obs = np.ndarray | dict[str, np.ndarray]
+
+
+# -- reset ----------------------------------------------------------------------------------------
+def new_episode(
+    config: EnvConfig, rngs: dict[str, np.random.Generator], layout: Layout, free: FreeGrid
+) -> EpisodeState:
+    """A fresh episode on ``layout`` (its free-space grid ``free``) with the named streams
+    ``rngs``: a new pymunk world, fresh SLAMs, grids and histories, the first sensor readings
+    and the first coverage sweep."""
+    n = config.num_robots
+    wc, oc = config.world, config.observation
+    world = World(layout, wc, n, rngs)
+    coverage = metrics.CoverageGrid(free.mask, free.origin, free.resolution)
+    start_poses = world.poses  # (N, 3), each robot's frame in the absolute frame
+    angles = np.asarray(wc.range_sensor.angles)  # (B,)
+    max_range = wc.range_sensor.max_range
+    slams = (
+        [PolySlam(config.slam, angles, max_range) for _ in range(n)] if config.slam_enabled else []
+    )
+    state = EpisodeState(
+        rngs=rngs,
+        world=world,
+        coverage=coverage,
+        start_poses=start_poses,
+        angles=angles,
+        slams=slams,
+        exchange=make_exchange(config, rngs["channel"]),
+        beliefs=[BeliefGrid(oc.belief_size, oc.belief_resolution, max_range) for _ in range(n)],
+        samplers=[MapSampler(0.5 * oc.grid_resolution) for _ in range(n)],
+        histories=[],  # filled below: a history starts from the robot's estimate
+        sensing=sense(world),
+        last_rendezvous=[None] * n,
+        completeness=[0.0] * n,
+        bytes_sent=[0] * n,
+        links=[],
+        coverage_series=[],
+    )
+    state.histories = [RobotHistory(start_poses[i], *estimate(state, i)) for i in range(n)]
+    sweep_coverage(state)
+    return state
+
+
+def make_exchange(config: EnvConfig, rng: np.random.Generator) -> RendezvousExchange | None:
+    """The env's exchange (None without a channel or without SLAM); ``rng`` the channel's."""
+    if config.channel is None or not config.slam_enabled:
+        return None
+    wc = config.world
+    return RendezvousExchange(
+        config.channel,
+        config.num_robots,
+        rng,
+        wc.camera.sigma_d,
+        wc.camera.sigma_bearing,
+        config.slam.order,
+        config.slam.auto_order,
+        max_range=wc.range_sensor.max_range,
+    )
+
+
+# -- shared with simulate -------------------------------------------------------------------------
+def simulate(world: World, commands: np.ndarray) -> StepResult:
+    """Drive the world (changes it) with (v, ω) commands (N, 2) for one control period."""
+    return world.step(commands)
+
+
+def sense(world: World, camera: bool = True) -> Sensing:
+    """Every robot's ranges, noisy and noiseless from one ray cast (stream ``sensor``), and its
+    camera detections (stream ``camera``; failed robots see none). ``camera=False`` skips the
+    camera (and its draws) and reports no detections."""
+    true_ranges, ranges = world.scan_with_truth()
+    detections = world.camera() if camera else [[] for _ in range(world.num_robots)]
+    return Sensing(ranges, true_ranges, detections)
+
+
+def run_slam(
+    slams: Sequence[PolySlam],
+    robots: Sequence[int],
+    active: np.ndarray,
+    odometry: np.ndarray,
+    ranges: np.ndarray,
+) -> list[SlamStepInfo | None]:
+    """One step (changes the SLAMs) of every SLAM whose robot is active: ``slams[j]`` runs on
+    world robot ``robots[j]``'s odometry (N, 3) and ranges (N, B); None for failed robots."""
+    return [
+        slam.step(odometry[i], ranges[i]) if active[i] else None
+        for slam, i in zip(slams, robots, strict=True)
+    ]
+
+
+def exchange_maps(
+    exchange: RendezvousExchange,
+    step: int,
+    slams: Sequence[PolySlam],
+    active: np.ndarray,
+    sensing: Sensing,
+    angles: np.ndarray,
+) -> ExchangeStep:
+    """One rendezvous exchange step (changes the exchange and the receivers' SLAMs) after the
+    SLAM step ``step``: log the active robots' scans, then detect, send, deliver and apply."""
+    for i, s in enumerate(slams):
+        if active[i]:
+            exchange.record_scan(i, s.pose, sensing.ranges[i], angles)
+    return exchange.step(step, slams, sensing.detections, active)
+
+
+def record(
+    histories: Sequence[RobotHistory],
+    robots: Sequence[int],
+    world: World,
+    sensing: Sensing,
+    estimates: Sequence[tuple[np.ndarray, np.ndarray]],
+    slam_infos: Sequence[SlamStepInfo | None],
+    collided: np.ndarray,
+) -> None:
+    """Append the step to the histories (changes them) of active robots: ``histories[j]``
+    follows world robot ``robots[j]`` with estimate ``estimates[j]`` (pose (3,), cov (3, 3)).
+
+    Hit points are the true points the beams hit: the noiseless ranges of the step's ray cast
+    placed with the true poses (beams without return give none).
+    """
+    poses = world.poses  # (N, 3)
+    true_ranges = sensing.true_ranges  # (N, B)
+    ok = np.isfinite(true_ranges)  # (N, B)
+    for history, i, (est, cov), info in zip(histories, robots, estimates, slam_infos, strict=True):
+        if not world.active[i]:
+            continue
+        r = true_ranges[i, ok[i]]
+        phi = poses[i, 2] + world.range_sensor.angles[ok[i]]
+        hits = poses[i, :2] + r[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+        history.record(
+            poses[i],
+            est,
+            cov,
+            hits,
+            None if info is None else info.time_s,
+            bool(collided[i]),
+            bool(info is not None and info.diverging),
+        )
+
+
+# -- the env's stages -----------------------------------------------------------------------------
+def slam(state: EpisodeState, odometry: np.ndarray) -> list[SlamStepInfo | None]:  # (N,)
+    """The SLAM stage (changes the SLAMs): :func:`run_slam` for robot i's own SLAM; None for
+    every robot without SLAM."""
+    world = state.world
+    if not state.slams:
+        return [None] * world.num_robots
+    robots = range(len(state.slams))
+    return run_slam(state.slams, robots, world.active, odometry, state.sensing.ranges)
+
+
+def exchange(state: EpisodeState) -> ExchangeStep | None:
+    """The exchange stage (changes links, last rendezvous, exchange, SLAMs): the mutual
+    sightings for rendering, then :func:`exchange_maps` if the exchange is on."""
+    state.links = _mutual_pairs(state.sensing.detections)
+    if state.exchange is None:
+        return None
+    out = exchange_maps(
+        state.exchange,
+        state.step_count,
+        state.slams,
+        state.world.active,
+        state.sensing,
+        state.angles,
+    )
+    for i, j in out.new_rendezvous:
+        state.last_rendezvous[i] = state.last_rendezvous[j] = state.step_count
+    return out
+
+
+def record_histories(
+    state: EpisodeState,
+    result: StepResult,
+    slam_infos: Sequence[SlamStepInfo | None],
+    estimates: Sequence[tuple[np.ndarray, np.ndarray]],
+) -> None:
+    """The record stage (changes the histories): :func:`record` of every robot."""
+    robots = range(state.world.num_robots)
+    record(
+        state.histories, robots, state.world, state.sensing, estimates, slam_infos, result.collided
+    )
+
+
+def observe(
+    state: EpisodeState,
+    encoder: ObservationEncoder,
+    acting: Mapping[str, int],
+    estimates: Sequence[tuple[np.ndarray, np.ndarray]],
+) -> dict[str, Obs]:
+    """Observations of the ``acting`` agents (name → robot); first sweeps each active robot's
+    beams into its own belief grid, placed with its estimated pose (changes the grids)."""
+    sweeping = [i for i in acting.values() if state.world.active[i]]
+    if sweeping:
+        poses = np.array([estimates[i][0] for i in sweeping])  # (K, 3)
+        grids = [state.beliefs[i] for i in sweeping]
+        sweep_beliefs(grids, poses, state.angles, state.sensing.ranges[sweeping])
+    return {agent: encoder.encode(_view(state, i, *estimates[i])) for agent, i in acting.items()}
+
+
+def _view(state: EpisodeState, i: int, pose: np.ndarray, cov: np.ndarray) -> RobotView:
+    """What robot i knows, with its estimated pose (3,) and covariance (3, 3)."""
+    last = state.last_rendezvous[i]
+    count = state.exchange.counters(i)["rendezvous"] if state.exchange is not None else 0
+    return RobotView(
+        ranges=state.sensing.ranges[i],
+        pose=pose,
+        pose_std=np.sqrt(np.maximum(np.diag(cov), 0.0)),
+        map_points=state.samplers[i].points(state.slams[i]) if state.slams else np.zeros((0, 2)),
+        belief=state.beliefs[i],
+        detections=state.sensing.detections[i],
+        steps_since_rendezvous=None if last is None else state.step_count - last,
+        rendezvous=count,
+        step=state.step_count,
+    )
+
+
+def sweep_coverage(state: EpisodeState) -> np.ndarray:  # (N,) m²
+    """Sweep every active robot's beams (true poses) into the team coverage grid and append
+    the team coverage to the series (changes both); return the area of free cells first swept
+    by the team now, per robot."""
+    grid = state.coverage
+    poses = state.world.poses
+    max_range = state.world.config.range_sensor.max_range
+    active = np.flatnonzero(state.world.active).tolist()
+    scans = state.sensing.ranges
+    scan_cells = grid.scan_cells(
+        poses[active, :2], poses[active, 2:3] + state.angles, scans[active], max_range
+    )
+    cells = dict(zip(active, scan_cells, strict=True))
+    # Gains against the grid as it was before this step (counted before anything is marked),
+    # so a cell first swept by two robots at once counts for both.
+    gains = np.zeros(state.world.num_robots)
+    for i, c in cells.items():
+        gains[i] = grid.new_free_cells(c) * grid.resolution**2
+    for i, c in cells.items():
+        grid.mark(c, robot=i)
+    state.coverage_series.append(grid.coverage)
+    return gains
+
+
+def map_bookkeeping(
+    state: EpisodeState,
+    acting: Mapping[str, int],
+    slam_infos: Sequence[SlamStepInfo | None],
+    exchanged: ExchangeStep | None,
+) -> MapChanges:
+    """Update each acting robot's map completeness and bytes-sent count (changes both) and
+    return the changes. Completeness is re-evaluated only when the robot's map changed
+    structurally (a landmark created, refit, merged or received), else its change is 0."""
+    received = {d.receiver for d in exchanged.delivered} if exchanged is not None else set()
+    completeness: dict[int, float] = {}
+    bytes_sent: dict[int, int] = {}
+    for i in acting.values():
+        completeness[i] = _completeness_change(state, i, slam_infos[i], i in received)
+        bytes_sent[i] = _bytes_change(state, i)
+    return MapChanges(completeness, bytes_sent)
+
+
+def _completeness_change(
+    state: EpisodeState, i: int, info: SlamStepInfo | None, received: bool
+) -> float:
+    if info is None or not (info.created or info.refit or info.merged or received):
+        return 0.0
+    comp = metrics.completeness(
+        state.slams[i].polynomials(),
+        state.start_poses[i],
+        state.world.layout,
+        tol=MAPPING_TOL,
+        step=MAPPING_STEP,
+    )
+    delta, state.completeness[i] = comp - state.completeness[i], comp
+    return delta
+
+
+def _bytes_change(state: EpisodeState, i: int) -> int:
+    if state.exchange is None:
+        return 0
+    total = state.exchange.counters(i)["bytes_sent"]
+    delta, state.bytes_sent[i] = total - state.bytes_sent[i], total
+    return delta
+
+
+# -- episode end ----------------------------------------------------------------------------------
+def fail_robots(
+    state: EpisodeState, acting: Mapping[str, int], fault_at: Mapping[int, int]
+) -> set[int]:
+    """Disable (changes the world) the acting robots whose fault is due at this step; returns
+    them."""
+    failed = [i for i in acting.values() if fault_at.get(i) == state.step_count]
+    for i in failed:
+        state.world.disable(i)
+    return set(failed)
+
+
+def done(
+    state: EpisodeState, config: EnvConfig, acting: Mapping[str, int], failed: set[int]
+) -> tuple[dict[str, bool], dict[str, bool]]:
+    """Coverage target → all terminated; failed robots → terminated; max_steps → all
+    truncated."""
+    reached = state.coverage.coverage >= config.coverage_target
+    truncated = state.step_count >= config.max_steps
+    terminations = {agent: bool(reached or i in failed) for agent, i in acting.items()}
+    truncations = dict.fromkeys(acting, bool(truncated))
+    return terminations, truncations
+
+
+def infos(
+    state: EpisodeState,
+    acting: Mapping[str, int],
+    terms: Mapping[str, dict[str, float]],
+    terminations: Mapping[str, bool],
+    truncations: Mapping[str, bool],
+) -> dict[str, dict[str, Any]]:
+    """Per agent: its reward terms and the step; at its last step also its final metrics and
+    the team's."""
+    out: dict[str, dict[str, Any]] = {}
+    team: dict[str, Any] | None = None
+    for agent, i in acting.items():
+        info: dict[str, Any] = {"reward_terms": terms[agent], "step": state.step_count}
+        if terminations[agent] or truncations[agent]:
+            if team is None:
+                team = team_metrics(state.coverage_series, state.coverage)
+            info["metrics"] = _final_metrics(state, i)
+            info["team"] = dict(team)
+        out[agent] = info
+    return out
+
+
+def _final_metrics(state: EpisodeState, i: int) -> dict[str, float]:
+    counters = state.exchange.counters(i) if state.exchange is not None else {}
+    return final_robot_metrics(
+        state.histories[i],
+        state.slams[i].polynomials() if state.slams else None,
+        state.world.layout,
+        state.coverage.robot_coverage(i),
+        counters,
+    )
+
+
+def _mutual_pairs(detections: list[list[Detection]]) -> list[tuple[int, int]]:
+    """Pairs (i < j) that see each other."""
+    seen = {(i, d.target) for i, dets in enumerate(detections) for d in dets}
+    return sorted((i, j) for i, j in seen if i < j and (j, i) in seen)
