@@ -20,6 +20,7 @@ import numpy as np
 
 from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.comms.exchange import ExchangeStep, RendezvousExchange
+from polyslam_env.core.geometry import compose_inverse
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.environment import stages
 from polyslam_env.metrics.episode import COMMS_METRICS, RobotHistory, RobotRun, robot_metrics
@@ -149,7 +150,7 @@ def simulate(
         anchor = make_rngs(seed, ["anchor"])["anchor"]
         for i in range(num_robots):
             e0 = anchor.multivariate_normal(np.zeros(3), scfg.p0)
-            frames[i] = _frame_of(world.poses[i], e0)
+            frames[i] = compose_inverse(world.poses[i], e0)
     shadow = list(shadow)
     if any(not 0 <= i < num_robots for i in shadow):
         raise ValueError(f"shadow: robot indices must be in [0, {num_robots}), got {shadow}")
@@ -278,12 +279,3 @@ def _builtin_commands(map_name: str) -> np.ndarray | None:
         if paths.map == map_name:
             return paths.commands
     return None
-
-
-def _frame_of(true_start: np.ndarray, offset: np.ndarray) -> np.ndarray:
-    """Pose F of a frame in which ``true_start`` reads ``offset``: true_start = F ⊕ offset."""
-    theta = true_start[2] - offset[2]
-    c, s = np.cos(theta), np.sin(theta)
-    x = true_start[0] - (c * offset[0] - s * offset[1])
-    y = true_start[1] - (s * offset[0] + c * offset[1])
-    return np.array([x, y, theta])

@@ -11,13 +11,13 @@ believes of its own pose (read-only).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from polyslam_env import metrics
 from polyslam_env.comms.exchange import RendezvousExchange
+from polyslam_env.core.geometry import between, wrap_remainder
 from polyslam_env.environment.observations import BeliefGrid, MapSampler
 from polyslam_env.metrics.episode import RobotHistory
 from polyslam_env.slam.robot import PolySlam
@@ -67,17 +67,9 @@ def estimate(state: EpisodeState, i: int) -> tuple[np.ndarray, np.ndarray]:
     """Robot i's pose (3,) and covariance (3, 3) in its start frame (truth without SLAM)."""
     if state.slams:
         return state.slams[i].pose, state.slams[i].pose_cov
-    return _to_frame(state.world.poses[i], state.start_poses[i]), np.zeros((3, 3))
+    return between(state.start_poses[i], state.world.poses[i], wrap_remainder), np.zeros((3, 3))
 
 
 def estimates(state: EpisodeState) -> list[tuple[np.ndarray, np.ndarray]]:
     """Every robot's :func:`estimate`."""
     return [estimate(state, i) for i in range(state.world.num_robots)]
-
-
-def _to_frame(pose: np.ndarray, frame: np.ndarray) -> np.ndarray:  # (3,)
-    """An absolute pose (3,) expressed in the frame whose absolute pose is ``frame`` (3,)."""
-    c, s = math.cos(frame[2]), math.sin(frame[2])
-    dx, dy = pose[0] - frame[0], pose[1] - frame[1]
-    dth = math.remainder(pose[2] - frame[2], 2 * math.pi)
-    return np.array([c * dx + s * dy, -s * dx + c * dy, dth])
