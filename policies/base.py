@@ -86,13 +86,12 @@ class PolicyContext:
             raise PolicyError(
                 f"unknown agent {agent!r}; agents are {', '.join(env.possible_agents)}"
             )
-        base = env.unwrapped if hasattr(env, "unwrapped") else env
         return cls(
             agent=agent,
             index=list(env.possible_agents).index(agent),
             observation_space=env.observation_space(agent),
             action_space=env.action_space(agent),
-            **base.public_facts(),
+            **env.unwrapped.public_facts(),
         )
 
     # -- decoding the observation -----------------------------------------------------------
