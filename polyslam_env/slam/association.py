@@ -32,8 +32,8 @@ from polyslam_env.slam.fitting import (
     polynomial_points,
     stored_points,
 )
-from polyslam_env.slam.measurement import PolynomialsLike, ShapeRow, pack
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.landmarks import PolynomialsLike, ShapeRow, pack
+from polyslam_env.slam.polynomial import Polynomial, polyval_rows, value_and_slope
 
 
 # -- approximation error ---------------------------------------------------------------------
@@ -59,9 +59,9 @@ def approximation_error(
     lo, hi = packed.lo, packed.hi
     xi = np.where(var1, pts[:, :1], pts[:, 1:])  # (P, n)
     eta = np.where(var1, pts[:, 1:], pts[:, :1])
-    vertical = np.abs(eta - _horner(coeffs, xi))
+    vertical = np.abs(eta - polyval_rows(coeffs, xi.T).T)
     ends_xi = np.stack([lo, hi], axis=0)  # (2, n)
-    ends_eta = _horner(coeffs, ends_xi)  # (2, n)
+    ends_eta = polyval_rows(coeffs, ends_xi.T).T  # (2, n)
     d_end = np.minimum(
         np.hypot(xi - ends_xi[0], eta - ends_eta[0]), np.hypot(xi - ends_xi[1], eta - ends_eta[1])
     )
@@ -106,19 +106,8 @@ def nearest_by_error(
 
 
 def _value(shape: tuple[float, ...], c0: float, x: float) -> float:
-    """c0 + B(x) for a shape (0, b_1, …, b_m), by Horner's scheme (as :func:`_horner`)."""
-    value = shape[-1]
-    for b in shape[-2:0:-1]:
-        value = value * x + b
-    return value * x + c0
-
-
-def _horner(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Σ_j coeffs[n, j] x[..., n]^j for x (…, n), by Horner's scheme."""
-    value = np.broadcast_to(coeffs[:, -1], x.shape)
-    for j in range(coeffs.shape[1] - 2, -1, -1):
-        value = value * x + coeffs[:, j]
-    return np.asarray(value)
+    """c0 + B(x) for a shape (0, b_1, …, b_m)."""
+    return value_and_slope(shape, x, c0)[0]
 
 
 # -- bookkeeping ------------------------------------------------------------------------------

@@ -14,12 +14,77 @@ selects them without changing what the exact tests downstream decide.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
-from polyslam_env.slam.measurement import PackedPolynomials, taylor_at
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.polynomial import Polynomial, taylor_at
+
+
+@dataclass(frozen=True, eq=False)
+class PackedPolynomials:
+    """Shapes, variates and extents of n polynomials as arrays, for vectorised evaluation.
+
+    Build it once per map change with :meth:`from_polynomials` and pass it instead of the
+    polynomial list on the hot path; ``c0`` is not stored (it lives in the EKF state).
+    """
+
+    variate: np.ndarray  # (n,) int, 1 or 2
+    shape: np.ndarray  # (n, M+1): [0, b_1, …, b_M], zero-padded to the largest order M
+    lo: np.ndarray  # (n,) extent on ξ
+    hi: np.ndarray  # (n,)
+
+    @classmethod
+    def from_polynomials(cls, polys: Sequence[Polynomial]) -> PackedPolynomials:
+        order = max((p.order for p in polys), default=1)
+        shape = np.zeros((len(polys), order + 1))  # (n, M+1)
+        for i, p in enumerate(polys):
+            shape[i, 1 : p.order + 1] = p.shape
+        return cls(
+            variate=np.array([p.variate for p in polys], dtype=int),
+            shape=shape,
+            lo=np.array([p.lo for p in polys], dtype=float),
+            hi=np.array([p.hi for p in polys], dtype=float),
+        )
+
+    def __len__(self) -> int:
+        return len(self.variate)
+
+    @property
+    def order(self) -> int:
+        return self.shape.shape[1] - 1
+
+    def subset(self, indices: np.ndarray) -> PackedPolynomials:
+        """The polynomials at ``indices`` (an index array), in that order."""
+        return PackedPolynomials(
+            self.variate[indices], self.shape[indices], self.lo[indices], self.hi[indices]
+        )
+
+
+PolynomialsLike = Sequence[Polynomial] | PackedPolynomials
+
+
+class ShapeRow(Protocol):
+    """A landmark's shape as plain floats (e.g. a :class:`LandmarkRow`), for the per-beam
+    loops of ``measurement.cast`` and ``association.nearest_by_error``."""
+
+    @property
+    def variate(self) -> int: ...
+    @property
+    def shape(self) -> tuple[float, ...]: ...  # (0, b_1, …, b_m), no zero tail
+    @property
+    def lo(self) -> float: ...
+    @property
+    def hi(self) -> float: ...
+
+
+def pack(polys: PolynomialsLike) -> PackedPolynomials:
+    """``polys`` as :class:`PackedPolynomials` (no copy when already packed)."""
+    if isinstance(polys, PackedPolynomials):
+        return polys
+    return PackedPolynomials.from_polynomials(polys)
 
 
 def shape_range(shape: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -141,7 +206,7 @@ class LandmarkArrays:
 
     def rows(self) -> list[LandmarkRow]:
         """Row i as plain Python numbers (cached until the next change), for the per-beam
-        loops of :mod:`polyslam_env.slam.beamcast` and the update, where indexing numpy
+        loops of :func:`polyslam_env.slam.measurement.cast` and the update, where indexing numpy
         arrays element by element would cost more than the arithmetic."""
         if self._rows is None:
             columns = zip(

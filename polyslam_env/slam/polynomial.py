@@ -10,7 +10,9 @@ shape ``b`` and extent here.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from math import comb
 
 import numpy as np
 
@@ -51,13 +53,11 @@ class Polynomial:
 
     def value(self, xi: np.ndarray | float) -> np.ndarray:
         """η(ξ) = c0 + B(ξ)."""
-        return np.asarray(np.polynomial.polynomial.polyval(xi, self.coeffs))
+        return polyval(xi, self.coeffs)
 
     def slope(self, xi: np.ndarray | float) -> np.ndarray:
         """B'(ξ) = dη/dξ."""
-        return np.asarray(
-            np.polynomial.polynomial.polyval(xi, np.polynomial.polynomial.polyder(self.coeffs))
-        )
+        return polyval(xi, self.coeffs, derivative=1)
 
     def to_xy(self, xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
         """(ξ, η) pairs to (x¹, x²) points, shape (…, 2)."""
@@ -110,6 +110,77 @@ class Polynomial:
         a = self.lo if lo is None else lo
         b = self.hi if hi is None else hi
         return self.points_at(np.linspace(a, b, n))
+
+
+# -- evaluation: the one Horner scheme, in three shapes -----------------------------------------
+def polyval(
+    x: np.ndarray | float, coeffs: np.ndarray | Sequence[float], derivative: int = 0
+) -> np.ndarray:
+    """Σ_j coeffs[j] x^j (increasing powers) at any array ``x``, or its ``derivative``-th
+    derivative: numpy's ``polyval`` (of ``polyder``), the reference for the other two."""
+    c = np.polynomial.polynomial.polyder(coeffs, derivative) if derivative else coeffs
+    return np.asarray(np.polynomial.polynomial.polyval(x, c))
+
+
+def polyval_rows(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Row-wise :func:`polyval`: row i of ``coeffs`` (n, m+1) at row i of ``x`` (n, k) → (n, k).
+
+    The operations of ``np.polynomial.polynomial.polyval`` in the same order, so every value
+    is bit-identical to it. Rows of lower order are padded with zero leading coefficients:
+    ``0 + (±0)·x`` stays zero until the first true coefficient, which is then added exactly.
+    """
+    value = coeffs[:, -1:] + x * 0
+    for i in range(2, coeffs.shape[1] + 1):
+        value = coeffs[:, -i, None] + value * x
+    return np.asarray(value)
+
+
+def value_and_slope(
+    coeffs: Sequence[float], x: float, c0: float | None = None
+) -> tuple[float, float]:
+    """(p(x), p'(x)) of one polynomial [c_0, …, c_m] (m ≥ 1) in plain floats, by Horner's
+    scheme: the per-beam and per-point loops of the SLAM, where numpy's per-call cost would
+    dominate. ``c0``, when given, replaces ``coeffs[0]`` (a landmark's c0 from the state)."""
+    value = coeffs[-1]
+    slope = 0.0
+    for b in coeffs[-2:0:-1]:
+        slope = slope * x + value
+        value = value * x + b
+    slope = slope * x + value
+    value = value * x + (coeffs[0] if c0 is None else c0)
+    return value, slope
+
+
+# -- Taylor shifts -----------------------------------------------------------------------------
+def powers(x: np.ndarray, order: int) -> np.ndarray:
+    """x**0 … x**order stacked on a new last axis, by products (float ** is slow)."""
+    out = np.empty((*x.shape, order + 1))
+    out[..., 0] = 1.0
+    for k in range(1, order + 1):
+        out[..., k] = out[..., k - 1] * x
+    return out
+
+
+def _taylor_weights(order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Exponents E[i, k] = max(i − k, 0) and weights C(i, k)·[i ≥ k], both (M+1, M+1)."""
+    i, k = np.indices((order + 1, order + 1))
+    binom = np.array([[comb(a, b) for b in range(order + 1)] for a in range(order + 1)], float)
+    return np.maximum(i - k, 0), np.where(i >= k, binom, 0.0)
+
+
+_TAYLOR_WEIGHTS = {m: _taylor_weights(m) for m in range(1, 9)}
+
+
+def taylor_at(shape: np.ndarray, xi0: np.ndarray) -> np.ndarray:
+    """Taylor coefficients T[p, k] = B_p^(k)(ξ0_p)/k!, so B_p(ξ0_p + u) = Σ_k T[p, k] u^k.
+
+    ``shape`` (n, M+1) holds [b_0, …, b_M]; ``xi0`` (n,). Returns (n, M+1):
+    T[p, k] = Σ_{i≥k} C(i, k) b_i ξ0^(i−k).
+    """
+    order = shape.shape[1] - 1
+    exps, weights = _TAYLOR_WEIGHTS.get(order) or _taylor_weights(order)
+    terms = powers(xi0, order)[:, exps] * weights  # (n, M+1, M+1) over (i, k)
+    return np.einsum("pi,pik->pk", shape, terms)
 
 
 def transform_points(points: np.ndarray, pose: np.ndarray) -> np.ndarray:

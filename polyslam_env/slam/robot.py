@@ -19,13 +19,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyslam_env.core.blas import blas_threads
-from polyslam_env.slam import beamcast, ekf
+from polyslam_env.slam import ekf, measurement
 from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit, PointSet, StoredPoint, fit_polynomial, store_beams
 from polyslam_env.slam.landmarks import LandmarkArrays, LandmarkRow, boxes_near
 from polyslam_env.slam.merging import find_merge, merge_points
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.polynomial import Polynomial, value_and_slope
 
 #: Number of recent normalised innovations the divergence test looks at.
 NIS_WINDOW = 50
@@ -436,10 +436,10 @@ class PolySlam:
     def _update(self, beams: list[int], ranges: np.ndarray) -> int:
         """Batched, gated update with the associated beams; returns how many were used.
 
-        Each beam's hit (:mod:`~polyslam_env.slam.beamcast`, on the landmarks within range)
-        gives one row of H: the pose part and 1/D on the c0 hit (SPEC §3, and
-        :func:`~polyslam_env.slam.measurement.expected_ranges_and_jacobian`, which computes
-        the same rows for any number of beams). Near-tangent hits are skipped. R adds to the
+        Each beam's hit (:func:`~polyslam_env.slam.measurement.cast`, on the landmarks within
+        range) gives one row of H: the pose part and 1/D on the c0 hit (SPEC §3,
+        :meth:`~polyslam_env.slam.measurement.BeamHit.jacobian`). Near-tangent hits are
+        skipped. R adds to the
         range noise the landmark's fit variance beyond the noise, and with
         ``shape_follows_pose`` the shape's own errors (:meth:`_shape_terms`).
         """
@@ -450,7 +450,7 @@ class PolySlam:
         rows = self._arrays.rows()
         boxes = self._boxes()  # (n, 4)
         reach = boxes_near(boxes, np.array([x, x, y, y]), self.max_range + REACH_MARGIN)
-        hits = beamcast.cast(
+        hits = measurement.cast(
             x,
             y,
             theta,
@@ -526,8 +526,8 @@ class PolySlam:
         ((B'(ξ*) − B'(ξ_c))/D)²·σ²_ξ, with σ²_ξ the pose variance along ξ when the landmark was
         made, goes into R together with the shape's own fit error (:meth:`_shape_fit_var`).
         """
-        slope, value = _slope_and_value(row.shape, xi)
-        slope_c, value_c = _slope_and_value(row.shape, row.pivot)
+        value, slope = value_and_slope(row.shape, xi)
+        value_c, slope_c = value_and_slope(row.shape, row.pivot)
         shift = (slope - slope_c) * inv_d
         extra = shift * shift * row.xi_var
         extra += inv_d * inv_d * self._shape_fit_var(row.shape, (xi - row.pivot) / row.fit_half)
@@ -604,16 +604,6 @@ def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> 
             rows[:, :2], rows[:, 2:4], rows[:, 4:], points, strict=True
         )
     ]
-
-
-def _slope_and_value(shape: Sequence[float], xi: float) -> tuple[float, float]:
-    """B'(ξ) and B(ξ) of a shape [b_0, …, b_M] at ξ, by Horner's scheme."""
-    value = shape[-1]
-    slope = 0.0
-    for b in shape[-2::-1]:
-        slope = slope * xi + value
-        value = value * xi + b
-    return slope, value
 
 
 def _median(values: deque[float]) -> float:

@@ -13,17 +13,21 @@ from polyslam_env.slam.ekf import (
     compose,
     divergence_ratio,
     is_diverging,
-    motion_jacobians,
     nees,
     predict,
     remove,
     thresholds,
-    update,
     update_sparse_inplace,
     wrap_angle,
 )
-from polyslam_env.slam.measurement import PackedPolynomials, expected_ranges_and_jacobian
+from polyslam_env.slam.landmarks import PackedPolynomials
 from polyslam_env.slam.polynomial import Polynomial
+from tests.slam.reference import (
+    expected_ranges_and_jacobian,
+    motion_jacobians,
+    predict_dense,
+    update,
+)
 
 P0 = np.diag([0.05**2, 0.05**2, 0.0175**2])
 BEAMS = np.deg2rad([90.0, 45.0, 0.0, -45.0, -90.0])
@@ -75,13 +79,10 @@ def test_predict__equals_dense_formula_and_leaves_landmarks() -> None:
     cov = random_spd(rng, 3 + n, 0.01)
     u, W = np.array([0.1, 0.02, 0.05]), np.diag([1e-4, 2e-4, 3e-5])
     new_mean, new_cov = predict(mean, cov, u, W)
-    F, L = motion_jacobians(mean, u)
-    Ff = np.eye(3 + n)
-    Ff[:3, :3] = F
-    Lf = np.zeros((3 + n, 3))
-    Lf[:3] = L
+    want_mean, want_cov = predict_dense(mean, cov, u, W)  # F P Fᵀ + L W Lᵀ
     # 1e-14: the same products in a different order
-    np.testing.assert_allclose(new_cov, Ff @ cov @ Ff.T + Lf @ W @ Lf.T, atol=1e-14)
+    np.testing.assert_allclose(new_cov, want_cov, atol=1e-14)
+    np.testing.assert_allclose(new_mean, want_mean, atol=1e-14)
     np.testing.assert_array_equal(new_cov[3:, 3:], cov[3:, 3:])
     np.testing.assert_array_equal(new_mean[3:], mean[3:])
     assert abs(new_mean[2]) <= np.pi
