@@ -34,7 +34,7 @@ from polyslam_env.core.seeding import make_rngs
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.ekf import compose
 from polyslam_env.slam.fitting import Fit
-from polyslam_env.slam.landmarks import LandmarkArrays
+from polyslam_env.slam.landmarks import LandmarkTable
 from polyslam_env.slam.measurement import cast
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
@@ -220,7 +220,7 @@ def make_inputs(
     walls: list[Polynomial], steps: int, rng: np.random.Generator
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """(odometry (3,), ranges (5,)) per step of a shuttle along x, ranges cast on the walls."""
-    arrays = LandmarkArrays()  # the walls as the SLAM's measurement model takes them
+    arrays = LandmarkTable()  # the walls as the SLAM's measurement model takes them
     for wall in walls:
         arrays.append(wall, pivot=0.0, xi_var=0.0, model_var=0.0, fit_half=1.0)
     every, c0s = list(range(len(walls))), [w.c0 for w in walls]

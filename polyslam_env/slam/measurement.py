@@ -105,7 +105,7 @@ def cast(
     0 < t ≤ max_range and its ξ lies in [lo, hi]; the smallest over all candidates wins.
 
     ``boxes`` (one (x_min, x_max, y_min, y_max) per candidate), when given, must hold each
-    candidate's curve over its extent (e.g. :meth:`LandmarkArrays.boxes`): a beam whose
+    candidate's curve over its extent (e.g. :meth:`LandmarkTable.boxes`): a beam whose
     segment passes farther than :data:`BOX_MARGIN` from a box cannot hit that landmark, and
     is not solved against it. The answer is the same; most pairs are skipped.
     """

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from polyslam_env.slam.landmarks import LandmarkArrays
+from polyslam_env.slam.landmarks import LandmarkTable
 from polyslam_env.slam.measurement import BeamHit, cast
 from polyslam_env.slam.polynomial import Polynomial
 from tests.slam.reference import expected_ranges_and_jacobian, ray_intersections
@@ -23,8 +23,8 @@ from tests.slam.test_reference import (
 )
 
 
-def _rows(polys: list[Polynomial]) -> LandmarkArrays:
-    arrays = LandmarkArrays()
+def _rows(polys: list[Polynomial]) -> LandmarkTable:
+    arrays = LandmarkTable()
     for p in polys:
         arrays.append(p, pivot=0.5 * (p.lo + p.hi), xi_var=0.0, model_var=0.0, fit_half=1.0)
     return arrays
