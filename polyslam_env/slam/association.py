@@ -82,7 +82,10 @@ def nearest_by_error(
     ends = []
     for j in candidates:
         row = rows[j]
-        ends.append((_value(row.shape, c0s[j], row.lo), _value(row.shape, c0s[j], row.hi)))
+        c0 = c0s[j]
+        ends.append(
+            (value_and_slope(row.shape, row.lo, c0)[0], value_and_slope(row.shape, row.hi, c0)[0])
+        )
     out = []
     for x, y in xy:
         best, best_err = -1, math.inf
@@ -90,7 +93,7 @@ def nearest_by_error(
             row = rows[j]
             xi, eta = (x, y) if row.variate == 1 else (y, x)
             if row.lo <= xi <= row.hi:
-                err = abs(eta - _value(row.shape, c0s[j], xi))
+                err = abs(eta - value_and_slope(row.shape, xi, c0s[j])[0])
             else:
                 eta_lo, eta_hi = ends[k]
                 err = min(
@@ -102,11 +105,6 @@ def nearest_by_error(
                 best, best_err = j, err
         out.append((best, best_err))
     return out
-
-
-def _value(shape: tuple[float, ...], c0: float, x: float) -> float:
-    """c0 + B(x) for a shape (0, b_1, …, b_m)."""
-    return value_and_slope(shape, x, c0)[0]
 
 
 # -- bookkeeping ------------------------------------------------------------------------------

@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 from polyslam_env.slam.landmarks import ShapeRow
+from polyslam_env.slam.polynomial import value_and_slope
 
 #: Leading coefficients below this fraction of the largest coefficient (with t scaled to
 #: [0, 1] by r_max) are treated as zero: the degree drops (e.g. a beam parallel to ξ).
@@ -281,10 +282,7 @@ def _companion(c: list[float]) -> list[float]:
 def _newton(c: list[float], s: float, steps: int, max_step: float) -> float:
     """Guarded Newton steps on a root ``s`` of Σ_k c[k] s^k (nan stays nan)."""
     for _ in range(steps):
-        value, deriv = c[-1] + 0.0 * s, 0.0 * s
-        for k in range(len(c) - 2, -1, -1):
-            deriv = deriv * s + value
-            value = value * s + c[k]
+        value, deriv = value_and_slope(c, s)
         step = value / deriv if deriv != 0.0 else 0.0
         if abs(step) <= max_step:
             s = s - step
