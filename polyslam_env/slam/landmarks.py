@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
 
-from polyslam_env.slam.polynomial import Polynomial, taylor_at
+from polyslam_env.slam.polynomial import Polynomial, taylor_shift
 
 if TYPE_CHECKING:
     from polyslam_env.slam.fitting import StoredPoint
@@ -99,7 +99,8 @@ def shape_range(shape: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray
     box tests rely on that); loose only by the curvature terms of short segments.
     """
     mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)  # (n,)
-    taylor = taylor_at(shape, mid)  # (n, M+1)
+    rows = zip(shape.tolist(), mid.tolist(), strict=True)
+    taylor = np.array([taylor_shift(row, m) for row, m in rows]).reshape(shape.shape)  # (n, M+1)
     powers = half[:, None] ** np.arange(shape.shape[1])  # (n, M+1)
     spread = (np.abs(taylor[:, 1:]) * powers[:, 1:]).sum(axis=1)
     # a relative pad absorbs the rounding of T_0 and of the exact values this bounds

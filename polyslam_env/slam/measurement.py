@@ -30,7 +30,7 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 from polyslam_env.slam.landmarks import ShapeRow
-from polyslam_env.slam.polynomial import value_and_slope
+from polyslam_env.slam.polynomial import taylor_shift, value_and_slope
 
 #: Leading coefficients below this fraction of the largest coefficient (with t scaled to
 #: [0, 1] by r_max) are treated as zero: the degree drops (e.g. a beam parallel to ξ).
@@ -131,7 +131,7 @@ def cast(
                 xi0, eta0, dxi, deta = y, x, sin, cos
             taylor = taylors.get(k)
             if taylor is None:
-                taylor = taylors[k] = _taylor(row.shape, xi0)
+                taylor = taylors[k] = taylor_shift(row.shape, xi0)
             coeffs = _ray_coeffs(taylor, eta0 - c0s[j], dxi, deta, max_range)
             step = max_range * dxi
             for s in _real_roots(coeffs):
@@ -174,17 +174,6 @@ def _meets_box(x: float, y: float, dx: float, dy: float, box: Sequence[float]) -
         if t0 > t1:
             return False
     return True
-
-
-def _taylor(b: tuple[float, ...], xi0: float) -> list[float]:
-    """T_k = Σ_{i≥k} C(i, k) b_i ξ0^(i−k): B(ξ0 + u) = Σ_k T_k u^k."""
-    m = len(b) - 1
-    powers = [1.0]
-    for _ in range(m):
-        powers.append(powers[-1] * xi0)
-    return [
-        sum(b[i] * (powers[i - k] * math.comb(i, k)) for i in range(k, m + 1)) for k in range(m + 1)
-    ]
 
 
 def _ray_coeffs(

@@ -151,36 +151,18 @@ def value_and_slope(
     return value, slope
 
 
-# -- Taylor shifts -----------------------------------------------------------------------------
-def powers(x: np.ndarray, order: int) -> np.ndarray:
-    """x**0 … x**order stacked on a new last axis, by products (float ** is slow)."""
-    out = np.empty((*x.shape, order + 1))
-    out[..., 0] = 1.0
-    for k in range(1, order + 1):
-        out[..., k] = out[..., k - 1] * x
-    return out
-
-
-def _taylor_weights(order: int) -> tuple[np.ndarray, np.ndarray]:
-    """Exponents E[i, k] = max(i − k, 0) and weights C(i, k)·[i ≥ k], both (M+1, M+1)."""
-    i, k = np.indices((order + 1, order + 1))
-    binom = np.array([[comb(a, b) for b in range(order + 1)] for a in range(order + 1)], float)
-    return np.maximum(i - k, 0), np.where(i >= k, binom, 0.0)
-
-
-_TAYLOR_WEIGHTS = {m: _taylor_weights(m) for m in range(1, 9)}
-
-
-def taylor_at(shape: np.ndarray, xi0: np.ndarray) -> np.ndarray:
-    """Taylor coefficients T[p, k] = B_p^(k)(ξ0_p)/k!, so B_p(ξ0_p + u) = Σ_k T[p, k] u^k.
-
-    ``shape`` (n, M+1) holds [b_0, …, b_M]; ``xi0`` (n,). Returns (n, M+1):
-    T[p, k] = Σ_{i≥k} C(i, k) b_i ξ0^(i−k).
-    """
-    order = shape.shape[1] - 1
-    exps, weights = _TAYLOR_WEIGHTS.get(order) or _taylor_weights(order)
-    terms = powers(xi0, order)[:, exps] * weights  # (n, M+1, M+1) over (i, k)
-    return np.einsum("pi,pik->pk", shape, terms)
+# -- Taylor shift ------------------------------------------------------------------------------
+def taylor_shift(coeffs: Sequence[float], x0: float) -> list[float]:
+    """Taylor coefficients T_k = Σ_{i≥k} C(i, k) c_i x0^(i−k) of [c_0, …, c_m] about x0, so
+    p(x0 + u) = Σ_k T_k u^k, in plain floats (the per-beam ray casting and the per-landmark
+    box bounds)."""
+    m = len(coeffs) - 1
+    powers = [1.0]
+    for _ in range(m):
+        powers.append(powers[-1] * x0)
+    return [
+        sum(coeffs[i] * (powers[i - k] * comb(i, k)) for i in range(k, m + 1)) for k in range(m + 1)
+    ]
 
 
 def transform_points(points: np.ndarray, pose: np.ndarray) -> np.ndarray:

@@ -17,6 +17,7 @@ exist only so tests can check the fast ones against them:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import comb
 from typing import NamedTuple
 
 import numpy as np
@@ -31,11 +32,40 @@ from polyslam_env.slam.measurement import (
     REAL_TOL,
     STIFF_TOL,
 )
-from polyslam_env.slam.polynomial import powers as _powers
-from polyslam_env.slam.polynomial import taylor_at
 
 
 # -- measurement model, vectorised over beams × polynomials ---------------------------------------
+def _powers(x: np.ndarray, order: int) -> np.ndarray:
+    """x**0 … x**order stacked on a new last axis, by products (float ** is slow)."""
+    out = np.empty((*x.shape, order + 1))
+    out[..., 0] = 1.0
+    for k in range(1, order + 1):
+        out[..., k] = out[..., k - 1] * x
+    return out
+
+
+def _taylor_weights(order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Exponents E[i, k] = max(i − k, 0) and weights C(i, k)·[i ≥ k], both (M+1, M+1)."""
+    i, k = np.indices((order + 1, order + 1))
+    binom = np.array([[comb(a, b) for b in range(order + 1)] for a in range(order + 1)], float)
+    return np.maximum(i - k, 0), np.where(i >= k, binom, 0.0)
+
+
+_TAYLOR_WEIGHTS = {m: _taylor_weights(m) for m in range(1, 9)}
+
+
+def taylor_at(shape: np.ndarray, xi0: np.ndarray) -> np.ndarray:
+    """Taylor coefficients T[p, k] = B_p^(k)(ξ0_p)/k!, so B_p(ξ0_p + u) = Σ_k T[p, k] u^k.
+
+    ``shape`` (n, M+1) holds [b_0, …, b_M]; ``xi0`` (n,). Returns (n, M+1):
+    T[p, k] = Σ_{i≥k} C(i, k) b_i ξ0^(i−k).
+    """
+    order = shape.shape[1] - 1
+    exps, weights = _TAYLOR_WEIGHTS.get(order) or _taylor_weights(order)
+    terms = _powers(xi0, order)[:, exps] * weights  # (n, M+1, M+1) over (i, k)
+    return np.einsum("pi,pik->pk", shape, terms)
+
+
 @dataclass(frozen=True, eq=False)
 class Hits:
     """Per beam: the nearest admissible intersection, or ``inf`` / −1 when there is none."""
