@@ -20,6 +20,7 @@ seeded generators. The :func:`run_benchmark` result is a JSON-ready dict.
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from collections.abc import Callable, Iterable
@@ -29,11 +30,12 @@ from typing import Any
 import numpy as np
 import pymunk
 
+from polyslam_env.core.geometry import compose
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.slam.config import SlamConfig
-from polyslam_env.slam.ekf import compose
 from polyslam_env.slam.fitting import Fit
-from polyslam_env.slam.measurement import ray_intersections
+from polyslam_env.slam.landmarks import LandmarkTable
+from polyslam_env.slam.measurement import cast
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.config import WorldConfig
@@ -218,15 +220,20 @@ def make_inputs(
     walls: list[Polynomial], steps: int, rng: np.random.Generator
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """(odometry (3,), ranges (5,)) per step of a shuttle along x, ranges cast on the walls."""
-    c0s = np.array([w.c0 for w in walls])
+    arrays = LandmarkTable()  # the walls as the SLAM's measurement model takes them
+    for wall in walls:
+        arrays.append(wall, pivot=0.0, xi_var=0.0, model_var=0.0, fit_half=1.0)
+    every, c0s = list(range(len(walls))), [w.c0 for w in walls]
     pose = np.zeros(3)
     out = []
     for k in range(steps):
         motion = np.array([STEP_DX if (k // SHUTTLE) % 2 == 0 else -STEP_DX, 0.0, 0.0])
         pose = compose(pose, motion)
         odometry = motion + rng.normal(0.0, ODOM_SIGMA, 3) * np.array([1.0, 1.0, 0.01])
-        hits = ray_intersections(pose, BEAM_ANGLES, walls, c0s, MAX_RANGE)
-        out.append((odometry, hits.ranges + rng.normal(0.0, RANGE_SIGMA, BEAM_ANGLES.size)))
+        x, y, theta = pose.tolist()
+        hits = cast(x, y, theta, BEAM_ANGLES.tolist(), every, arrays.rows(), c0s, MAX_RANGE)
+        ranges = np.array([math.inf if hit is None else hit.t for hit in hits])
+        out.append((odometry, ranges + rng.normal(0.0, RANGE_SIGMA, BEAM_ANGLES.size)))
     return out
 
 

@@ -18,7 +18,7 @@ import itertools
 import numpy as np
 from numpy.polynomial import polynomial as npoly
 
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.polynomial import Polynomial, polyval
 
 _AIM = 0.8  # fraction of the tolerance the curvature-based placement aims at
 _DENSE = 512  # grid for the curvature integral
@@ -47,7 +47,7 @@ def _initial_knots(poly: Polynomial, sagitta: float) -> np.ndarray:
     """ξ knots (n+1,) spaced so each chord's sagitta κL²/8 is about ``sagitta``."""
     xi = np.linspace(poly.lo, poly.hi, _DENSE)
     d1 = poly.slope(xi)
-    d2 = npoly.polyval(xi, npoly.polyder(poly.coeffs, 2))
+    d2 = polyval(xi, poly.coeffs, derivative=2)
     speed = np.sqrt(1.0 + d1**2)  # ds/dξ
     kappa = np.abs(d2) / speed**3
     density = np.sqrt(kappa / (8.0 * sagitta)) * speed  # chords per unit ξ

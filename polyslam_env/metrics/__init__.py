@@ -21,7 +21,7 @@ from scipy.stats import chi2
 
 from polyslam_env.core import raster
 from polyslam_env.core.geometry import compose, transform_covariance, transform_points, wrap_angle
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.polynomial import Polynomial, polyval_rows
 from polyslam_env.world.layout import Layout
 
 __all__ = [
@@ -270,19 +270,6 @@ def distance_to_boundary(points: np.ndarray, layout: Layout) -> np.ndarray:  # (
 
 
 # -- mapping error and completeness -----------------------------------------------------------
-def _horner(coeffs: np.ndarray, xi: np.ndarray) -> np.ndarray:  # (P, k)
-    """Row-wise ``polyval``: coefficients (P, m+1) in increasing powers at ξ (P, k).
-
-    The operations of ``np.polynomial.polynomial.polyval`` in the same order, so every value
-    is bit-identical to it. Rows of lower order are padded with zero leading coefficients:
-    ``0 + (±0)·ξ`` stays zero until the first true coefficient, which is then added exactly.
-    """
-    value = coeffs[:, -1:] + xi * 0
-    for i in range(2, coeffs.shape[1] + 1):
-        value = coeffs[:, -i, None] + value * xi
-    return np.asarray(value)
-
-
 def sample_arclength_batch(
     polys: Sequence[Polynomial], step: float, dense: int = 512
 ) -> list[np.ndarray]:
@@ -315,7 +302,7 @@ def sample_arclength_batch(
     # the last one set to hi (a linspace call with array ends is slower than this).
     xi = np.arange(dense, dtype=float) * ((hi - lo) / (dense - 1))[:, None] + lo[:, None]
     xi[:, -1] = hi  # (Q, dense)
-    eta = _horner(coeffs, xi)
+    eta = polyval_rows(coeffs, xi)
     # Arc length: the norm of each (Δx, Δy) is sqrt(Δx² + Δy²) (add.reduce of two squares),
     # and Δξ² + Δη² is the same sum whichever of ξ, η is x.
     dxi, deta = np.diff(xi, axis=1), np.diff(eta, axis=1)  # (Q, dense − 1)
@@ -335,7 +322,7 @@ def sample_arclength_batch(
             for row, (n, end) in enumerate(zip(counts.tolist(), ends.tolist(), strict=True))
         ]
     )  # (M,)
-    eta_q = _horner(coeffs[owner], xi_q[:, None])[:, 0]
+    eta_q = polyval_rows(coeffs[owner], xi_q[:, None])[:, 0]
     second = np.array([p.variate == 2 for p in batch])[owner]  # (M,): ξ is y
     pts = np.column_stack([np.where(second, eta_q, xi_q), np.where(second, xi_q, eta_q)])
     for k, n, end in zip(places, counts.tolist(), ends.tolist(), strict=True):

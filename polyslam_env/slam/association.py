@@ -8,11 +8,10 @@ Each beam point π is compared with every map polynomial by the approximation er
 * ε > σ_k — the point joins the cluster with most points within radius R (or a new one);
   when a cluster holds more than ε_Z points it becomes a new polynomial (:func:`fit_cluster`).
 
-:class:`MapBook` keeps the clusters, the Q_bad sets and stable landmark ids; it never touches
-the EKF. :meth:`MapBook.associate` returns what to do (:class:`AssociationResult`), and the
+:class:`MapBook` keeps the clusters and fills the Q_bad sets of the landmark table; it never
+touches the EKF. :meth:`MapBook.associate` returns what to do (:class:`AssociationResult`), and the
 caller builds the point sets (:func:`qbad_refit_points`, :func:`fit_cluster`), fits them and
-augments / removes state entries, telling the book with :meth:`MapBook.add_landmark`,
-:meth:`MapBook.move_to_end` and :meth:`MapBook.remove_landmark`.
+augments / removes state entries and the landmark table's rows.
 """
 
 from __future__ import annotations
@@ -32,8 +31,8 @@ from polyslam_env.slam.fitting import (
     polynomial_points,
     stored_points,
 )
-from polyslam_env.slam.measurement import PolynomialsLike, ShapeRow, pack
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.landmarks import LandmarkTable, PolynomialsLike, ShapeRow, pack
+from polyslam_env.slam.polynomial import Polynomial, polyval_rows, value_and_slope
 
 
 # -- approximation error ---------------------------------------------------------------------
@@ -59,9 +58,9 @@ def approximation_error(
     lo, hi = packed.lo, packed.hi
     xi = np.where(var1, pts[:, :1], pts[:, 1:])  # (P, n)
     eta = np.where(var1, pts[:, 1:], pts[:, :1])
-    vertical = np.abs(eta - _horner(coeffs, xi))
+    vertical = np.abs(eta - polyval_rows(coeffs, xi.T).T)
     ends_xi = np.stack([lo, hi], axis=0)  # (2, n)
-    ends_eta = _horner(coeffs, ends_xi)  # (2, n)
+    ends_eta = polyval_rows(coeffs, ends_xi.T).T  # (2, n)
     d_end = np.minimum(
         np.hypot(xi - ends_xi[0], eta - ends_eta[0]), np.hypot(xi - ends_xi[1], eta - ends_eta[1])
     )
@@ -83,7 +82,10 @@ def nearest_by_error(
     ends = []
     for j in candidates:
         row = rows[j]
-        ends.append((_value(row.shape, c0s[j], row.lo), _value(row.shape, c0s[j], row.hi)))
+        c0 = c0s[j]
+        ends.append(
+            (value_and_slope(row.shape, row.lo, c0)[0], value_and_slope(row.shape, row.hi, c0)[0])
+        )
     out = []
     for x, y in xy:
         best, best_err = -1, math.inf
@@ -91,7 +93,7 @@ def nearest_by_error(
             row = rows[j]
             xi, eta = (x, y) if row.variate == 1 else (y, x)
             if row.lo <= xi <= row.hi:
-                err = abs(eta - _value(row.shape, c0s[j], xi))
+                err = abs(eta - value_and_slope(row.shape, xi, c0s[j])[0])
             else:
                 eta_lo, eta_hi = ends[k]
                 err = min(
@@ -103,22 +105,6 @@ def nearest_by_error(
                 best, best_err = j, err
         out.append((best, best_err))
     return out
-
-
-def _value(shape: tuple[float, ...], c0: float, x: float) -> float:
-    """c0 + B(x) for a shape (0, b_1, …, b_m), by Horner's scheme (as :func:`_horner`)."""
-    value = shape[-1]
-    for b in shape[-2:0:-1]:
-        value = value * x + b
-    return value * x + c0
-
-
-def _horner(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Σ_j coeffs[n, j] x[..., n]^j for x (…, n), by Horner's scheme."""
-    value = np.broadcast_to(coeffs[:, -1], x.shape)
-    for j in range(coeffs.shape[1] - 2, -1, -1):
-        value = value * x + coeffs[:, j]
-    return np.asarray(value)
 
 
 # -- bookkeeping ------------------------------------------------------------------------------
@@ -149,15 +135,20 @@ class AssociationResult:
 
 
 class MapBook:
-    """Clusters, Q_bad sets and stable landmark ids of one robot's map.
+    """Clusters and the association thresholds of one robot's map.
 
-    Landmark ids are stable integers; ``ids[i]`` is the landmark whose c0 sits at state index
-    3 + i. Keep it in step with the EKF: :meth:`add_landmark` after ``ekf.augment`` of a new
-    c0, :meth:`move_to_end` after a refit (augment the new c0, remove the old one),
-    :meth:`remove_landmark` after ``ekf.remove``.
+    The landmarks themselves — ids (``ids[i]`` is the landmark whose c0 sits at state index
+    3 + i) and Q_bad sets — are the :class:`~polyslam_env.slam.landmarks.LandmarkTable`'s;
+    the book reads and fills them (a book made without a table starts an empty one).
     """
 
-    def __init__(self, eps_m: int = 5, eps_z: int = 10, cluster_radius: float = 0.35) -> None:
+    def __init__(
+        self,
+        eps_m: int = 5,
+        eps_z: int = 10,
+        cluster_radius: float = 0.35,
+        table: LandmarkTable | None = None,
+    ) -> None:
         if eps_m < 1 or eps_z < 1 or not cluster_radius > 0:
             raise ValueError(
                 f"need eps_m >= 1, eps_z >= 1, cluster_radius > 0; "
@@ -166,39 +157,18 @@ class MapBook:
         self.eps_m = eps_m
         self.eps_z = eps_z
         self.cluster_radius = cluster_radius
-        self.ids: list[int] = []
+        self.table = LandmarkTable() if table is None else table
         self.clusters: list[list[StoredPoint]] = []
-        self.qbad: dict[int, list[StoredPoint]] = {}
-        self._next_id = 0
 
-    # -- landmark ids ---------------------------------------------------------------------
-    def add_landmark(self) -> int:
-        """Register a landmark appended at the end of the state; returns its new id."""
-        lid = self._next_id
-        self._next_id += 1
-        self.ids.append(lid)
-        self.qbad[lid] = []
-        return lid
+    @property
+    def ids(self) -> list[int]:
+        """The table's landmark ids, in state order."""
+        return self.table.ids
 
-    def remove_landmark(self, landmark_id: int) -> list[StoredPoint]:
-        """Forget a landmark whose state entry was removed; returns its Q_bad points (after a
-        merge the caller may hand them to the merged landmark's ``qbad``)."""
-        self.ids.remove(landmark_id)
-        return self.qbad.pop(landmark_id)
-
-    def move_to_end(self, landmark_id: int) -> None:
-        """A refit keeps the id but its new c0 was appended at the end of the state."""
-        self.ids.remove(landmark_id)
-        self.ids.append(landmark_id)
-        self.qbad[landmark_id] = []
-
-    def index_of(self, landmark_id: int) -> int:
-        """Position of the landmark among the map polynomials (state index − 3)."""
-        return self.ids.index(landmark_id)
-
-    def state_index(self, landmark_id: int) -> int:
-        """Index of the landmark's c0 in the EKF state."""
-        return 3 + self.index_of(landmark_id)
+    @property
+    def qbad(self) -> dict[int, list[StoredPoint]]:
+        """The table's Q_bad sets, by landmark id."""
+        return self.table.qbad
 
     # -- clusters ---------------------------------------------------------------------------
     def add_to_cluster(self, point: StoredPoint) -> list[StoredPoint] | None:
@@ -251,7 +221,7 @@ class MapBook:
         never below the distance to a curve's bounding box, so the boxes within σ_k of the
         points' box will do): then every point is classified exactly as against the whole
         map; only ``errors`` reads inf for a point no candidate is near. With ``rows`` (the
-        same polynomials as plain floats, e.g. ``LandmarkArrays.rows()``) the candidates are
+        same polynomials as plain floats, e.g. ``LandmarkTable.rows()``) the candidates are
         compared in floats (:func:`nearest_by_error`) instead of numpy arrays.
         """
         if len(polys) != len(self.ids) or len(c0s) != len(self.ids):

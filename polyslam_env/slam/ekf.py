@@ -1,21 +1,23 @@
 """EKF core of the polynomial SLAM as pure functions on (mean, cov) (SPEC §3, STYLE habit 8).
 
 State X = [x¹, x², θ, c0_1 … c0_n] (3+n,), covariance P (3+n, 3+n). Every function returns
-new arrays and leaves its inputs untouched (except :func:`predict_inplace`, the
-stateful caller's copy-free variant); a thin per-robot class strings them together.
-Landmark i's c0 sits at state index 3+i.
+new arrays and leaves its inputs untouched, except the prediction and the update the SLAM
+step runs in place (:func:`predict_inplace`, :func:`update_sparse_inplace`: an O(n²) copy
+per step would cost more than their arithmetic); a thin per-robot class strings them
+together. Landmark i's c0 sits at state index 3+i.
+
+Their textbook forms (dense F P Fᵀ + L W Lᵀ; a gated Joseph update with any H and R) are the
+test oracles in ``tests/slam/reference.py``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 import scipy.special
 
-from polyslam_env.core.geometry import compose as compose  # the motion f(pose, u), re-exported
 from polyslam_env.core.geometry import symmetric_eigvals3, wrap_angle, wrap_scalar
 
 
@@ -24,17 +26,6 @@ def _symmetrise(a: np.ndarray) -> np.ndarray:
 
 
 # -- prediction ----------------------------------------------------------------------------------
-def motion_jacobians(pose: np.ndarray, odometry: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """F = ∂f/∂pose and L = ∂f/∂odometry of the unicycle composition, both (3, 3).
-
-    f(pose, u) = [x + cos θ·dx − sin θ·dy, y + sin θ·dx + cos θ·dy, θ + dθ], with the
-    odometry u = (dx, dy, dθ) measured in the robot frame at the start of the step.
-    """
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    dx, dy = odometry[0], odometry[1]
-    F = np.array([[1.0, 0.0, -s * dx - c * dy], [0.0, 1.0, c * dx - s * dy], [0.0, 0.0, 1.0]])
-    L = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return F, L
 
 
 def predict(
@@ -55,7 +46,9 @@ def predict_inplace(mean: np.ndarray, cov: np.ndarray, odometry: np.ndarray, W: 
     """:func:`predict` writing into ``mean`` (3+n,) and ``cov`` (3+n, 3+n) (float arrays).
 
     Without the pure version's (3+n)² copy, for the stateful caller whose per-step cost
-    should stay O(n). F = I + a·e₀e₂ᵀ + b·e₁e₂ᵀ (see :func:`motion_jacobians`), so F P_pl
+    should stay O(n). F = ∂f/∂pose = I + a·e₀e₂ᵀ + b·e₁e₂ᵀ of the unicycle composition
+    f(pose, u) = [x + cos θ·dx − sin θ·dy, y + sin θ·dx + cos θ·dy, θ + dθ], with the
+    odometry u = (dx, dy, dθ) in the robot frame and L = ∂f/∂u, so F P_pl
     adds a and b times the heading row to the position rows, and the 3×3 pose block is
     written out in plain floats from its upper triangle (symmetric by construction).
     """
@@ -94,66 +87,12 @@ def predict_inplace(mean: np.ndarray, cov: np.ndarray, odometry: np.ndarray, W: 
 
 
 # -- update -------------------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class UpdateResult:
-    """Outcome of :func:`update`: the new estimate and which measurements were used."""
-
-    mean: np.ndarray  # (3+n,)
-    cov: np.ndarray  # (3+n, 3+n)
-    accepted: np.ndarray  # (k,) bool: passed the χ² gate and went into the update
-    nis: np.ndarray  # (k,) normalised innovation squared ν²/S_ii per measurement (nan if unusable)
-
-    @property
-    def mean_cov(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.mean, self.cov
-
-
 @lru_cache(maxsize=32)
 def chi2_1dof_quantile(prob: float) -> float:
     """Quantile of χ² with 1 dof: (√2·erfinv(p))², without importing scipy.stats."""
     if not 0.0 < prob <= 1.0:
         raise ValueError(f"gate probability must lie in (0, 1], got {prob}")
     return float(2.0 * scipy.special.erfinv(prob) ** 2)
-
-
-def update(
-    mean: np.ndarray,
-    cov: np.ndarray,
-    z: np.ndarray,
-    z_hat: np.ndarray,
-    H: np.ndarray,
-    R: np.ndarray,
-    gate_prob: float = 0.99,
-) -> UpdateResult:
-    """Gated, batched EKF update with measurements z (k,), predictions z_hat (k,), H (k, 3+n).
-
-    Each measurement is gated on its own normalised innovation ν_i²/S_ii against the χ²
-    (1 dof) quantile ``gate_prob`` (1.0 disables the gate); non-finite z or z_hat are never
-    accepted. The accepted ones update together with the Joseph form
-    P⁺ = (I−KH) P (I−KH)ᵀ + K R Kᵀ, evaluated as M = P − K(PHᵀ)ᵀ, P⁺ = M − (M Hᵀ) Kᵀ + K R Kᵀ
-    (the same product, without (3+n)² identities; see :func:`_joseph`), with K from a solve
-    with S. H is sparse in practice (pose + one c0 per row), so P Hᵀ uses only its non-zero
-    columns.
-    """
-    z, z_hat = np.asarray(z, dtype=float), np.asarray(z_hat, dtype=float)
-    H, R = np.atleast_2d(H), np.atleast_2d(R)
-    innovation = z - z_hat  # (k,)
-    usable = np.isfinite(innovation)
-    cols = np.flatnonzero(np.any(H[usable] != 0.0, axis=0))  # state indices H touches
-    PHt = cov[:, cols] @ H[:, cols].T  # (3+n, k)
-    s_diag = np.einsum("ij,ji->i", H[:, cols], PHt[cols]) + np.diag(R)  # (k,)
-    nis = np.full(z.shape, np.nan)
-    nis[usable] = innovation[usable] ** 2 / s_diag[usable]
-    accepted = usable & (nis <= chi2_1dof_quantile(gate_prob))
-    if not accepted.any():
-        return UpdateResult(mean.copy(), cov.copy(), accepted, nis)
-    a = np.flatnonzero(accepted)
-    PHt_a, H_a, R_a = PHt[:, a], H[a][:, cols], R[a][:, a]
-    S = H_a @ PHt_a[cols] + R_a  # (k_a, k_a), symmetric positive definite
-    K = np.linalg.solve(S, PHt_a.T).T  # (3+n, k_a); S is tiny: LAPACK's overhead dominates
-    new_mean = mean + K @ innovation[a]
-    new_mean[2] = wrap_angle(new_mean[2])
-    return UpdateResult(new_mean, _joseph(cov, K, PHt_a, H_a, R_a, cols), accepted, nis)
 
 
 def update_sparse_inplace(
@@ -167,7 +106,7 @@ def update_sparse_inplace(
     gate_prob: float = 0.99,
     work: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`update` for range rows that touch the pose and one c0 each, in place.
+    """Gated, batched EKF update with range rows that touch the pose and one c0 each, in place.
 
     Row i of H is ``h_pose[i]`` (3,) on the pose and ``h_c0[i]`` on state index
     ``c0_index[i]``; R = diag(``r``) (k,); ``innovation`` (k,) must be finite. Writes the new
@@ -176,7 +115,10 @@ def update_sparse_inplace(
     every step keeps one, because a fresh array that large costs more in page faults than the
     arithmetic that fills it.
 
-    Same gate and the same Joseph form as :func:`update`, arranged for speed at large n:
+    Each measurement is gated on its own normalised innovation ν_i²/S_ii against the χ²
+    (1 dof) quantile ``gate_prob`` (1.0 disables the gate); the accepted ones update together
+    with the Joseph form P⁺ = (I−KH) P (I−KH)ᵀ + K R Kᵀ (the oracle in tests computes it
+    literally), arranged for speed at large n:
 
     * P Hᵀ = P[:, :3] h_poseᵀ + P[:, c0] h_c0, with no dense H;
     * expanded, the Joseph form is P⁺ = P − (K Wᵀ + W Kᵀ) with W = P Hᵀ − ½ K S (for any
@@ -228,26 +170,6 @@ def update_sparse_inplace(
     K -= W
     cov += np.matmul(K, K.T, out=work)
     return accepted, nis
-
-
-def _joseph(
-    cov: np.ndarray,
-    K: np.ndarray,
-    PHt: np.ndarray,
-    H: np.ndarray,
-    R: np.ndarray,
-    cols: np.ndarray,
-) -> np.ndarray:
-    """Joseph form P⁺ = M − (M Hᵀ) Kᵀ + K R Kᵀ with M = P − K (P Hᵀ)ᵀ, symmetrised.
-
-    ``H`` (k, c) holds only the state columns ``cols`` it touches, ``PHt`` = P Hᵀ (3+n, k).
-    M Hᵀ needs only M's columns ``cols``, so M is never formed: with B = M Hᵀ − K R,
-    P⁺ = P − [K  B] [PHtᵀ; Kᵀ], one rank-2k product and a handful of (3+n)² passes.
-    """
-    m_cols = cov[:, cols] - K @ PHt[cols].T  # (3+n, c) = M[:, cols]
-    B = m_cols @ H.T - K @ R  # (3+n, k)
-    new_cov = cov - np.hstack([K, B]) @ np.vstack([PHt.T, K.T])
-    return _symmetrise(new_cov)
 
 
 # -- augmentation and removal --------------------------------------------------------------------

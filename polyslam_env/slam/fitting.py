@@ -28,7 +28,7 @@ import scipy.linalg
 import scipy.special
 
 from polyslam_env.slam.ekf import spectral_norm_sym
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.polynomial import Polynomial, polyval
 
 # d/dθ of R(θ) v is J R(θ) v
 J_ROT = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -405,9 +405,7 @@ def fit_polynomial(
     resid = eta - a_mat @ a_s  # (N,)
     if shape_fixed:
         slope = (
-            np.polynomial.polynomial.polyval(
-                xi, np.polynomial.polynomial.polyder(a_s / scale ** np.arange(m + 1))
-            )
+            polyval(xi, a_s / scale ** np.arange(m + 1), derivative=1)
             if m > 0
             else np.zeros_like(xi)
         )

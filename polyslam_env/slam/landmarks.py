@@ -1,25 +1,94 @@
-"""Per-landmark arrays of one robot's map, kept in state order and updated incrementally.
+"""The landmark table of one robot's map (:class:`LandmarkTable`), kept in state order.
 
-:class:`~polyslam_env.slam.robot.PolySlam` keeps each landmark's shape as a
-:class:`~polyslam_env.slam.polynomial.Polynomial`, but its hot path (association, ray
-casting, the shape coupling of the update, the merge check) wants arrays over all landmarks.
-Rebuilding them from the polynomials every step costs O(n) Python work; :class:`LandmarkArrays`
-instead changes one row when the map changes (append, remove, new extent).
+:class:`~polyslam_env.slam.robot.PolySlam` keeps its whole map here (the EKF state holds only
+the c0s): stable ids, each landmark's shape and extent as a
+:class:`~polyslam_env.slam.polynomial.Polynomial`, and the same as arrays for the hot path
+(association, ray casting, the shape coupling of the update, the merge check). Rebuilding the
+arrays from the polynomials every step would cost O(n) Python work; the table changes one row
+when the map changes (append, remove, new extent).
 
 It also keeps a conservative η range of each shape over its extent, so that a landmark's
 axis-aligned bounding box follows from its current c0 in O(1). A beam can only hit, and a
-merge partner can only lie near, landmarks whose box is near: :meth:`LandmarkArrays.near`
+merge partner can only lie near, landmarks whose box is near: :meth:`LandmarkTable.near`
 selects them without changing what the exact tests downstream decide.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
 
-from polyslam_env.slam.measurement import PackedPolynomials, taylor_at
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.polynomial import Polynomial, taylor_shift
+
+if TYPE_CHECKING:
+    from polyslam_env.slam.fitting import StoredPoint
+
+
+@dataclass(frozen=True, eq=False)
+class PackedPolynomials:
+    """Shapes, variates and extents of n polynomials as arrays, for vectorised evaluation.
+
+    Build it once per map change with :meth:`from_polynomials` and pass it instead of the
+    polynomial list on the hot path; ``c0`` is not stored (it lives in the EKF state).
+    """
+
+    variate: np.ndarray  # (n,) int, 1 or 2
+    shape: np.ndarray  # (n, M+1): [0, b_1, …, b_M], zero-padded to the largest order M
+    lo: np.ndarray  # (n,) extent on ξ
+    hi: np.ndarray  # (n,)
+
+    @classmethod
+    def from_polynomials(cls, polys: Sequence[Polynomial]) -> PackedPolynomials:
+        order = max((p.order for p in polys), default=1)
+        shape = np.zeros((len(polys), order + 1))  # (n, M+1)
+        for i, p in enumerate(polys):
+            shape[i, 1 : p.order + 1] = p.shape
+        return cls(
+            variate=np.array([p.variate for p in polys], dtype=int),
+            shape=shape,
+            lo=np.array([p.lo for p in polys], dtype=float),
+            hi=np.array([p.hi for p in polys], dtype=float),
+        )
+
+    def __len__(self) -> int:
+        return len(self.variate)
+
+    @property
+    def order(self) -> int:
+        return self.shape.shape[1] - 1
+
+    def subset(self, indices: np.ndarray) -> PackedPolynomials:
+        """The polynomials at ``indices`` (an index array), in that order."""
+        return PackedPolynomials(
+            self.variate[indices], self.shape[indices], self.lo[indices], self.hi[indices]
+        )
+
+
+PolynomialsLike = Sequence[Polynomial] | PackedPolynomials
+
+
+class ShapeRow(Protocol):
+    """A landmark's shape as plain floats (e.g. a :class:`LandmarkRow`), for the per-beam
+    loops of ``measurement.cast`` and ``association.nearest_by_error``."""
+
+    @property
+    def variate(self) -> int: ...
+    @property
+    def shape(self) -> tuple[float, ...]: ...  # (0, b_1, …, b_m), no zero tail
+    @property
+    def lo(self) -> float: ...
+    @property
+    def hi(self) -> float: ...
+
+
+def pack(polys: PolynomialsLike) -> PackedPolynomials:
+    """``polys`` as :class:`PackedPolynomials` (no copy when already packed)."""
+    if isinstance(polys, PackedPolynomials):
+        return polys
+    return PackedPolynomials.from_polynomials(polys)
 
 
 def shape_range(shape: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -30,7 +99,8 @@ def shape_range(shape: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray
     box tests rely on that); loose only by the curvature terms of short segments.
     """
     mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)  # (n,)
-    taylor = taylor_at(shape, mid)  # (n, M+1)
+    rows = zip(shape.tolist(), mid.tolist(), strict=True)
+    taylor = np.array([taylor_shift(row, m) for row, m in rows]).reshape(shape.shape)  # (n, M+1)
     powers = half[:, None] ** np.arange(shape.shape[1])  # (n, M+1)
     spread = (np.abs(taylor[:, 1:]) * powers[:, 1:]).sum(axis=1)
     # a relative pad absorbs the rounding of T_0 and of the exact values this bounds
@@ -39,7 +109,7 @@ def shape_range(shape: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray
 
 
 class LandmarkRow(NamedTuple):
-    """One landmark's shape and scalars as Python numbers (see :meth:`LandmarkArrays.rows`)."""
+    """One landmark's shape and scalars as Python numbers (see :meth:`LandmarkTable.rows`)."""
 
     variate: int
     shape: tuple[float, ...]  # (0, b_1, …, b_m), m its own order (≥ 1): no zero tail
@@ -58,18 +128,30 @@ def _own_order(shape: np.ndarray) -> tuple[float, ...]:
     return tuple(float(b) for b in shape[:width])
 
 
-class LandmarkArrays:
-    """Shapes, extents and per-landmark scalars of a map as arrays (row i = state 3 + i).
+class LandmarkTable:
+    """One robot's map: every landmark's id, shape, extent and scalars, row i = state 3 + i.
 
-    ``shape`` rows are [0, b_1, …, b_M], zero-padded to the largest order so far;
-    ``pivot`` is ξ of the centroid a landmark was fitted around, ``xi_var`` the pose
-    variance along ξ when it was made, ``model_var`` its fit variance beyond the range
-    noise and ``fit_half`` half the extent it was fitted over (see PolySlam). Arrays are
-    replaced, never written in place, so a :class:`PackedPolynomials` handed out earlier
-    stays valid.
+    The single record of the map (the EKF state holds only the c0s): ``ids`` (stable
+    integers, row i's c0 at state index 3 + i), ``polys`` (shape and extent as an immutable
+    :class:`Polynomial`: a change is a new object, so readers can tell by identity; its own
+    c0 is the fit's, the current one is in the state), ``changed_at`` (the step the landmark
+    was created, refit or merged), ``qbad`` (the points it approximates badly, by id; the
+    association fills them), and the same shapes as arrays for the hot path, changed one
+    row at a time: ``shape`` rows [0, b_1, …, b_M] zero-padded to the largest order so far,
+    ``variate``, ``lo``/``hi``, ``eta_range`` (bounds on B over the extent, for the boxes),
+    ``pivot`` (ξ of the centroid the landmark was fitted around), ``xi_var`` (the pose
+    variance along ξ when it was made), ``model_var`` (its fit variance beyond the range
+    noise) and ``fit_half`` (half the extent it was fitted over; see PolySlam).
+
+    Arrays are replaced, never written in place, so a :class:`PackedPolynomials` handed out
+    earlier stays valid; ``ids`` is changed in place (readers may hold it).
     """
 
     def __init__(self) -> None:
+        self.ids: list[int] = []  # (n,) stable ids in state order
+        self.polys: list[Polynomial] = []  # (n,) shape and extent
+        self.changed_at: list[int] = []  # (n,) step created, refit or merged
+        self.qbad: dict[int, list[StoredPoint]] = {}  # id → its badly approximated points
         self.variate = np.zeros(0, dtype=int)  # (n,)
         self.shape = np.zeros((0, 2))  # (n, M+1)
         self.lo = np.zeros(0)  # (n,)
@@ -79,22 +161,56 @@ class LandmarkArrays:
         self.xi_var = np.zeros(0)  # (n,)
         self.model_var = np.zeros(0)  # (n,)
         self.fit_half = np.zeros(0)  # (n,) half the extent it was fitted over
+        self.shapes = ShapesView(self)
+        self.version = 0  # bumped by every change, for caches built on the table
+        self._next_id = 0
+        self._row_of: dict[int, int] | None = None  # id → row, rebuilt after append/remove
         self._packed: PackedPolynomials | None = None
         self._rows: list[LandmarkRow] | None = None
-        self.version = 0  # bumped by every change, for caches built on these arrays
+        self._boxes_key: tuple[int, int] | None = None
+        self._boxes = np.zeros((0, 4))
 
     def __len__(self) -> int:
-        return len(self.variate)
+        return len(self.ids)
+
+    def __contains__(self, landmark_id: object) -> bool:
+        return landmark_id in self._rows_by_id()
+
+    # -- ids --------------------------------------------------------------------------------
+    def index_of(self, landmark_id: int) -> int:
+        """Row of the landmark (state index − 3); KeyError if it is not in the map."""
+        return self._rows_by_id()[landmark_id]
+
+    def state_index(self, landmark_id: int) -> int:
+        """Index of the landmark's c0 in the EKF state."""
+        return 3 + self.index_of(landmark_id)
+
+    def _rows_by_id(self) -> dict[int, int]:
+        if self._row_of is None:
+            self._row_of = {lid: i for i, lid in enumerate(self.ids)}
+        return self._row_of
 
     # -- changes ----------------------------------------------------------------------------
     def append(
-        self, poly: Polynomial, pivot: float, xi_var: float, model_var: float, fit_half: float
-    ) -> None:
-        """Add a landmark at the end (its c0 was appended to the state)."""
+        self,
+        poly: Polynomial,
+        pivot: float,
+        xi_var: float,
+        model_var: float,
+        fit_half: float,
+        step: int = 0,
+    ) -> int:
+        """Add a landmark at the end (its c0 was appended to the state); returns its new id."""
+        landmark_id = self._next_id
+        self._next_id += 1
+        self.ids.append(landmark_id)
+        self.polys.append(poly)
+        self.changed_at.append(step)
+        self.qbad[landmark_id] = []
         width = max(self.shape.shape[1], poly.order + 1)
         row = np.zeros((1, width))  # (1, M+1)
         row[0, 1 : poly.order + 1] = poly.shape
-        shape = np.zeros((len(self) + 1, width))
+        shape = np.zeros((len(self), width))
         shape[:-1, : self.shape.shape[1]] = self.shape
         shape[-1] = row[0]
         self.shape = shape
@@ -107,17 +223,25 @@ class LandmarkArrays:
         self.xi_var = np.append(self.xi_var, xi_var)
         self.model_var = np.append(self.model_var, model_var)
         self.fit_half = np.append(self.fit_half, fit_half)
-        self._changed()
+        self._changed(ids=True)
+        return landmark_id
 
-    def remove(self, index: int) -> None:
-        """Drop row ``index`` (its c0 left the state)."""
+    def remove(self, index: int) -> int:
+        """Drop row ``index`` (its c0 left the state); returns its id."""
+        landmark_id = self.ids.pop(index)
+        del self.polys[index]
+        del self.changed_at[index]
+        del self.qbad[landmark_id]
         names = ("variate", "shape", "lo", "hi", "eta_range", "pivot", "xi_var", "model_var")
         for name in (*names, "fit_half"):
             setattr(self, name, np.delete(getattr(self, name), index, axis=0))
-        self._changed()
+        self._changed(ids=True)
+        return landmark_id
 
     def set_extent(self, index: int, lo: float, hi: float) -> None:
         """New extent [lo, hi] of landmark ``index`` (same shape)."""
+        poly = self.polys[index]
+        self.polys[index] = Polynomial(poly.variate, poly.coeffs, lo, hi)
         self.lo, self.hi = self.lo.copy(), self.hi.copy()
         self.lo[index], self.hi[index] = lo, hi
         rng = shape_range(
@@ -125,24 +249,30 @@ class LandmarkArrays:
         )
         self.eta_range = self.eta_range.copy()
         self.eta_range[index] = rng[0]
-        self._changed()
+        self._changed(ids=False)
 
-    def _changed(self) -> None:
+    def _changed(self, ids: bool) -> None:
         self._packed = None
         self._rows = None
+        if ids:
+            self._row_of = None
         self.version += 1
 
     # -- views --------------------------------------------------------------------------------
+    def polynomials(self, c0s: Sequence[float] | np.ndarray) -> list[Polynomial]:
+        """Every landmark with its c0 from ``c0s`` (n,), in state order."""
+        return [p.with_c0(c) for p, c in zip(self.polys, c0s, strict=True)]
+
     def packed(self) -> PackedPolynomials:
-        """The shapes for ray casting (cached until the next change)."""
+        """The shapes as arrays (cached until the next change)."""
         if self._packed is None:
             self._packed = PackedPolynomials(self.variate, self.shape, self.lo, self.hi)
         return self._packed
 
     def rows(self) -> list[LandmarkRow]:
         """Row i as plain Python numbers (cached until the next change), for the per-beam
-        loops of :mod:`polyslam_env.slam.beamcast` and the update, where indexing numpy
-        arrays element by element would cost more than the arithmetic."""
+        loops of :func:`polyslam_env.slam.measurement.cast` and the update, where indexing
+        numpy arrays element by element would cost more than the arithmetic."""
         if self._rows is None:
             columns = zip(
                 self.variate.tolist(),
@@ -161,17 +291,46 @@ class LandmarkArrays:
             ]
         return self._rows
 
-    def boxes(self, c0s: np.ndarray) -> np.ndarray:
-        """Axis-aligned boxes (n, 4) = (x_min, x_max, y_min, y_max) holding each curve."""
+    def boxes(self, c0s: np.ndarray, state_version: int | None = None) -> np.ndarray:
+        """Axis-aligned boxes (n, 4) = (x_min, x_max, y_min, y_max) holding each curve.
+
+        With ``state_version`` (the caller's count of changes to ``c0s``) the result is
+        cached until the table or that version changes (the association and an update
+        without map change share them)."""
+        key = None if state_version is None else (self.version, state_version)
+        if key is not None and key == self._boxes_key:
+            return self._boxes
         eta = c0s[:, None] + self.eta_range  # (n, 2)
         v1 = (self.variate == 1)[:, None]
         xi = np.stack([self.lo, self.hi], axis=-1)  # (n, 2)
-        return np.concatenate([np.where(v1, xi, eta), np.where(v1, eta, xi)], axis=1)
+        boxes = np.concatenate([np.where(v1, xi, eta), np.where(v1, eta, xi)], axis=1)
+        if key is not None:
+            self._boxes, self._boxes_key = boxes, key
+        return boxes
 
     def near(self, box: np.ndarray, c0s: np.ndarray, distance: float) -> np.ndarray:
         """Indices (ascending) of the landmarks whose box lies within ``distance`` of ``box``
         (4,) = (x_min, x_max, y_min, y_max); a point is a box with min = max."""
         return boxes_near(self.boxes(c0s), box, distance)
+
+
+class ShapesView(Mapping[int, Polynomial]):
+    """Read-only id → shape-and-extent mapping over a :class:`LandmarkTable` (state order)."""
+
+    def __init__(self, table: LandmarkTable) -> None:
+        self._table = table
+
+    def __getitem__(self, landmark_id: int) -> Polynomial:
+        return self._table.polys[self._table.index_of(landmark_id)]
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(list(self._table.ids))
+
+    def __len__(self) -> int:
+        return len(self._table)
+
+    def __contains__(self, landmark_id: object) -> bool:
+        return landmark_id in self._table
 
 
 def boxes_near(boxes: np.ndarray, box: np.ndarray, distance: float) -> np.ndarray:

@@ -10,11 +10,11 @@ shape ``b`` and extent here.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from math import comb
 
 import numpy as np
-
-from polyslam_env.core.geometry import transform_points as transform_points  # re-exported
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,13 +53,11 @@ class Polynomial:
 
     def value(self, xi: np.ndarray | float) -> np.ndarray:
         """η(ξ) = c0 + B(ξ)."""
-        return np.asarray(np.polynomial.polynomial.polyval(xi, self.coeffs))
+        return polyval(xi, self.coeffs)
 
     def slope(self, xi: np.ndarray | float) -> np.ndarray:
         """B'(ξ) = dη/dξ."""
-        return np.asarray(
-            np.polynomial.polynomial.polyval(xi, np.polynomial.polynomial.polyder(self.coeffs))
-        )
+        return polyval(xi, self.coeffs, derivative=1)
 
     def to_xy(self, xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
         """(ξ, η) pairs to (x¹, x²) points, shape (…, 2)."""
@@ -112,3 +110,56 @@ class Polynomial:
         a = self.lo if lo is None else lo
         b = self.hi if hi is None else hi
         return self.points_at(np.linspace(a, b, n))
+
+
+# -- evaluation: the one Horner scheme, in three shapes -----------------------------------------
+def polyval(
+    x: np.ndarray | float, coeffs: np.ndarray | Sequence[float], derivative: int = 0
+) -> np.ndarray:
+    """Σ_j coeffs[j] x^j (increasing powers) at any array ``x``, or its ``derivative``-th
+    derivative: numpy's ``polyval`` (of ``polyder``), the reference for the other two."""
+    c = np.polynomial.polynomial.polyder(coeffs, derivative) if derivative else coeffs
+    return np.asarray(np.polynomial.polynomial.polyval(x, c))
+
+
+def polyval_rows(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Row-wise :func:`polyval`: row i of ``coeffs`` (n, m+1) at row i of ``x`` (n, k) → (n, k).
+
+    The operations of ``np.polynomial.polynomial.polyval`` in the same order, so every value
+    is bit-identical to it. Rows of lower order are padded with zero leading coefficients:
+    ``0 + (±0)·x`` stays zero until the first true coefficient, which is then added exactly.
+    """
+    value = coeffs[:, -1:] + x * 0
+    for i in range(2, coeffs.shape[1] + 1):
+        value = coeffs[:, -i, None] + value * x
+    return np.asarray(value)
+
+
+def value_and_slope(
+    coeffs: Sequence[float], x: float, c0: float | None = None
+) -> tuple[float, float]:
+    """(p(x), p'(x)) of one polynomial [c_0, …, c_m] (m ≥ 1) in plain floats, by Horner's
+    scheme: the per-beam and per-point loops of the SLAM, where numpy's per-call cost would
+    dominate. ``c0``, when given, replaces ``coeffs[0]`` (a landmark's c0 from the state)."""
+    value = coeffs[-1]
+    slope = 0.0
+    for b in coeffs[-2:0:-1]:
+        slope = slope * x + value
+        value = value * x + b
+    slope = slope * x + value
+    value = value * x + (coeffs[0] if c0 is None else c0)
+    return value, slope
+
+
+# -- Taylor shift ------------------------------------------------------------------------------
+def taylor_shift(coeffs: Sequence[float], x0: float) -> list[float]:
+    """Taylor coefficients T_k = Σ_{i≥k} C(i, k) c_i x0^(i−k) of [c_0, …, c_m] about x0, so
+    p(x0 + u) = Σ_k T_k u^k, in plain floats (the per-beam ray casting and the per-landmark
+    box bounds)."""
+    m = len(coeffs) - 1
+    powers = [1.0]
+    for _ in range(m):
+        powers.append(powers[-1] * x0)
+    return [
+        sum(coeffs[i] * (powers[i - k] * comb(i, k)) for i in range(k, m + 1)) for k in range(m + 1)
+    ]

@@ -19,13 +19,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyslam_env.core.blas import blas_threads
-from polyslam_env.slam import beamcast, ekf
+from polyslam_env.slam import ekf, measurement
 from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit, PointSet, StoredPoint, fit_polynomial, store_beams
-from polyslam_env.slam.landmarks import LandmarkArrays, LandmarkRow, boxes_near
+from polyslam_env.slam.landmarks import LandmarkRow, LandmarkTable, ShapesView, boxes_near
 from polyslam_env.slam.merging import find_merge, merge_points
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.polynomial import Polynomial, value_and_slope
 
 #: Number of recent normalised innovations the divergence test looks at.
 NIS_WINDOW = 50
@@ -54,9 +54,10 @@ class SlamStepInfo:
 class PolySlam:
     """Polynomial-landmark EKF SLAM of one robot (paper §3.1, §3.3).
 
-    The state is ``mean = [x¹, x², θ, c0_1 … c0_n]`` with covariance ``cov``; landmark ``i``
-    (stable id ``landmark_ids[i]``) keeps its shape and extent in :attr:`shapes`. ``mean``
-    and ``cov`` are working arrays (the prediction writes into ``cov``): copy to keep them.
+    The state is ``mean = [x¹, x², θ, c0_1 … c0_n]`` with covariance ``cov``; everything
+    else about landmark ``i`` (stable id ``landmark_ids[i]``: shape, extent, Q_bad, …) is
+    row i of :attr:`table`, the map's one record. ``mean`` and ``cov`` are working arrays
+    (the prediction and the update write into them): copy to keep them.
 
     Set :attr:`profile` to a dict to collect per-stage wall times (s) of every step under
     the keys ``predict``, ``association``, ``map`` (extents, refits, new landmarks,
@@ -76,21 +77,14 @@ class PolySlam:
         self.max_range = float(max_range)
         self.mean = np.zeros(3)  # (3+n,)
         self.cov = config.p0.copy()  # (3+n, 3+n)
-        self.book = MapBook(config.eps_m, config.eps_z, config.cluster_radius)
-        self.shapes: dict[int, Polynomial] = {}  # id → shape and extent (c0 is in the state)
-        self.changed_at: dict[int, int] = {}  # id → step it was created, refit or merged
-        self.pivots: dict[int, float] = {}  # id → ξ of the weighted centroid of its fit points
-        self.model_var: dict[int, float] = {}  # id → fit residual variance beyond the noise
-        self.xi_var: dict[int, float] = {}  # id → pose variance along ξ when it was made
+        self.table = LandmarkTable()  # the map: ids, shapes, extents, Q_bad, … in state order
+        self.book = MapBook(config.eps_m, config.eps_z, config.cluster_radius, self.table)
         self.step_count = 0
         self.diverging = False
         self.divergence_f = 0.0
         self.profile: dict[str, list[float]] | None = None
-        self._arrays = LandmarkArrays()  # the same map as arrays, for the hot path
         self._work = np.empty(0)  # scratch for the update's covariance products
-        self._state_version = 0  # bumped by every update (map changes bump the arrays' version)
-        self._boxes_key: tuple[int, int] | None = None
-        self._boxes_cache = np.zeros((0, 4))
+        self._state_version = 0  # bumped by every update (map changes bump the table's version)
         kp0_eig = np.linalg.eigvalsh(config.k_divergence * config.p0)  # (3,) ascending
         self._kp0_norm = float(max(-kp0_eig[0], kp0_eig[-1]))  # ‖K P0‖
         self._kp0_min = float(kp0_eig[0])  # λ_min(K P0)
@@ -107,20 +101,24 @@ class PolySlam:
 
     @property
     def landmark_ids(self) -> list[int]:
-        return list(self.book.ids)
+        return list(self.table.ids)
 
     @property
     def n_landmarks(self) -> int:
-        return len(self.book.ids)
+        return len(self.table)
+
+    @property
+    def shapes(self) -> ShapesView:
+        """Id → shape and extent (a :class:`Polynomial` whose c0 is the fit's: the current
+        one is in the state); a new object whenever the landmark changes."""
+        return self.table.shapes
 
     def polynomials(self) -> list[Polynomial]:
         """The map: every landmark with its current c0, in state order."""
-        return [
-            self.shapes[i].with_c0(c) for i, c in zip(self.book.ids, self.mean[3:], strict=True)
-        ]
+        return self.table.polynomials(self.mean[3:])
 
     def c0_variance(self, landmark_id: int) -> float:
-        k = self.book.state_index(landmark_id)
+        k = self.table.state_index(landmark_id)
         return float(self.cov[k, k])
 
     # -- one step -----------------------------------------------------------------------------
@@ -149,13 +147,13 @@ class PolySlam:
         )
         assoc = self.book.associate(
             points,
-            self._arrays.packed(),
+            self.table.packed(),
             self.mean[3:],
             rho,
             sigma,
             cfg.squared_error,
             candidates=self._association_candidates(points, sigma),
-            rows=self._arrays.rows(),
+            rows=self.table.rows(),
         )
         if self.profile is not None:
             lap = self._lap("association", lap)
@@ -171,7 +169,7 @@ class PolySlam:
         if self.profile is not None:
             lap = self._lap("map", lap)
 
-        good_beams = sorted(b for b, lid in assoc.good_ids.items() if lid in self.shapes)
+        good_beams = sorted(b for b, lid in assoc.good_ids.items() if lid in self.table)
         used = self._update(good_beams, np.asarray(ranges, dtype=float))
         self.divergence_f = f
         self.diverging = self._is_diverging()
@@ -203,12 +201,10 @@ class PolySlam:
         return boxes_near(self._boxes(), box, reach)
 
     def _boxes(self) -> np.ndarray:
-        """Bounding boxes (n, 4) of the landmarks at the current c0s, cached until the map or
-        the state changes (the association and an update without map change share them)."""
-        key = (self._arrays.version, self._state_version)
-        if self._boxes_key != key:
-            self._boxes_cache, self._boxes_key = self._arrays.boxes(self.mean[3:]), key
-        return self._boxes_cache
+        """Bounding boxes (n, 4) of the landmarks at the current c0s, cached by the table until
+        the map or the state changes (the association and an update without map change share
+        them)."""
+        return self.table.boxes(self.mean[3:], self._state_version)
 
     def _predict(self, odometry: np.ndarray) -> None:
         """EKF prediction into the working arrays (the mean is small: a fresh copy)."""
@@ -233,23 +229,20 @@ class PolySlam:
         refit, as in the paper. ``good`` maps beams to landmark indices (state index − 3).
         """
         limit = 2.0 * self.config.range_sigma
-        arrays = self._arrays
+        table = self.table
         for point in points:
             idx = good.get(point.beam)
             if idx is None:
                 continue
-            v1 = arrays.variate[idx] == 1
+            v1 = table.variate[idx] == 1
             xi, eta = (point.xy[0], point.xy[1]) if v1 else (point.xy[1], point.xy[0])
-            if arrays.lo[idx] <= xi <= arrays.hi[idx]:
+            if table.lo[idx] <= xi <= table.hi[idx]:
                 continue
-            lid = self.book.ids[idx]
-            poly = self.shapes[lid]
+            poly = table.polys[idx]
             c0 = self.mean[3 + idx]
             if abs(eta - c0 - float(poly.with_c0(0.0).value(xi))) > limit:
                 continue
-            lo, hi = min(poly.lo, xi), max(poly.hi, xi)
-            self.shapes[lid] = Polynomial(poly.variate, poly.coeffs, lo, hi)
-            arrays.set_extent(idx, lo, hi)
+            table.set_extent(idx, min(poly.lo, xi), max(poly.hi, xi))
 
     def _is_diverging(self) -> bool:
         """The paper's test (P beyond K·P0) or most recent innovations inconsistent.
@@ -278,37 +271,32 @@ class PolySlam:
         merged landmark's id)."""
         lid = self._augment(fit)
         if merge and self._merge_into_map(lid):
-            return self.book.ids[-1]
+            return self.table.ids[-1]
         return lid
 
     def changed_since(self, step: int) -> list[int]:
         """Ids of the landmarks created, refit or merged after ``step`` (exchange payloads)."""
-        return [lid for lid in self.book.ids if self.changed_at.get(lid, -1) > step]
+        table = self.table
+        return [lid for lid, at in zip(table.ids, table.changed_at, strict=True) if at > step]
 
     # -- landmark generation (paper eq. 4–5) ------------------------------------------------------
     def _augment(self, fit: Fit) -> int:
         """Append a fitted landmark to the state; returns its new id."""
         self.mean, self.cov = ekf.augment(self.mean, self.cov, fit.c0, fit.Gx, fit.Gy, fit.V)
-        lid = self.book.add_landmark()
-        self.shapes[lid] = fit.poly
-        self.pivots[lid] = 0.5 * (fit.poly.lo + fit.poly.hi)
-        self.model_var[lid] = max(fit.rms**2 - self.config.range_sigma**2, 0.0)
-        self.xi_var[lid] = float(self.cov[0, 0] if fit.poly.variate == 1 else self.cov[1, 1])
-        self.changed_at[lid] = self.step_count
-        half = max(0.5 * (fit.poly.hi - fit.poly.lo), 0.05)
-        self._arrays.append(fit.poly, self.pivots[lid], self.xi_var[lid], self.model_var[lid], half)
-        return lid
+        poly = fit.poly
+        return self.table.append(
+            poly,
+            pivot=0.5 * (poly.lo + poly.hi),  # ξ of the centroid of its fit points
+            xi_var=float(self.cov[0, 0] if poly.variate == 1 else self.cov[1, 1]),
+            model_var=max(fit.rms**2 - self.config.range_sigma**2, 0.0),
+            fit_half=max(0.5 * (poly.hi - poly.lo), 0.05),
+            step=self.step_count,
+        )
 
     def _remove(self, landmark_id: int) -> None:
-        idx = self.book.index_of(landmark_id)
+        idx = self.table.index_of(landmark_id)
         self.mean, self.cov = ekf.remove(self.mean, self.cov, 3 + idx)
-        self._arrays.remove(idx)
-        self.book.remove_landmark(landmark_id)
-        del self.shapes[landmark_id]
-        del self.pivots[landmark_id]
-        del self.model_var[landmark_id]
-        del self.xi_var[landmark_id]
-        self.changed_at.pop(landmark_id, None)
+        self.table.remove(idx)
 
     def _replace(self, old_ids: Sequence[int], fit: Fit) -> int:
         """Add the fit (its G_x may touch the old c0s) and then drop the old landmarks."""
@@ -319,13 +307,14 @@ class PolySlam:
 
     def _refit(self, landmark_id: int, bad: Sequence, rho: float) -> int:
         """Refit a landmark on Q_bad ∪ R; returns 1 if it was replaced."""
-        if landmark_id not in self.shapes:
+        if landmark_id not in self.table:
             return 0
-        poly = self.shapes[landmark_id].with_c0(self.mean[self.book.state_index(landmark_id)])
+        state_index = self.table.state_index(landmark_id)
+        poly = self.table.polys[state_index - 3].with_c0(self.mean[state_index])
         pts = qbad_refit_points(
             bad,
             poly,
-            self.book.state_index(landmark_id),
+            state_index,
             self.c0_variance(landmark_id),
             self.config.eps_m,
             self.mean[:3],
@@ -372,13 +361,13 @@ class PolySlam:
         :func:`find_merge`: every approximation error of a farther one is at least the box
         distance, so its γ could not be below γ_M (same choice, in the same order).
         """
-        if landmark_id not in self.shapes:
+        if landmark_id not in self.table:
             return 0
-        idx = self.book.index_of(landmark_id)
+        idx = self.table.index_of(landmark_id)
         c0s = self.mean[3:]
         cfg = self.config
         reach = cfg.gamma_max * (1.0 + 1e-9) + 1e-12  # ≥ γ_M despite rounding
-        near = self._arrays.near(self._box(idx), c0s, reach)
+        near = self.table.near(self._box(idx), c0s, reach)
         near = near[near != idx]
         poly = self._polynomial(idx)
         j_near = find_merge(
@@ -392,7 +381,7 @@ class PolySlam:
         if j_near is None:
             return 0
         j = int(near[j_near])
-        other_id = self.book.ids[j]
+        other_id = self.table.ids[j]
         pts = merge_points(
             poly,
             3 + idx,
@@ -411,11 +400,11 @@ class PolySlam:
 
     def _polynomial(self, index: int) -> Polynomial:
         """Landmark ``index`` (state 3 + index) with its current c0."""
-        return self.shapes[self.book.ids[index]].with_c0(float(self.mean[3 + index]))
+        return self.table.polys[index].with_c0(float(self.mean[3 + index]))
 
     def _box(self, index: int) -> np.ndarray:
         """(4,) bounding box (x_min, x_max, y_min, y_max) of landmark ``index``."""
-        return self._arrays.boxes(self.mean[3:])[index]
+        return self.table.boxes(self.mean[3:])[index]
 
     def _fit(self, points: PointSet) -> Fit | None:
         fit = fit_polynomial(
@@ -436,10 +425,10 @@ class PolySlam:
     def _update(self, beams: list[int], ranges: np.ndarray) -> int:
         """Batched, gated update with the associated beams; returns how many were used.
 
-        Each beam's hit (:mod:`~polyslam_env.slam.beamcast`, on the landmarks within range)
-        gives one row of H: the pose part and 1/D on the c0 hit (SPEC §3, and
-        :func:`~polyslam_env.slam.measurement.expected_ranges_and_jacobian`, which computes
-        the same rows for any number of beams). Near-tangent hits are skipped. R adds to the
+        Each beam's hit (:func:`~polyslam_env.slam.measurement.cast`, on the landmarks within
+        range) gives one row of H: the pose part and 1/D on the c0 hit (SPEC §3,
+        :meth:`~polyslam_env.slam.measurement.BeamHit.jacobian`). Near-tangent hits are
+        skipped. R adds to the
         range noise the landmark's fit variance beyond the noise, and with
         ``shape_follows_pose`` the shape's own errors (:meth:`_shape_terms`).
         """
@@ -447,10 +436,10 @@ class PolySlam:
             return 0
         mean = self.mean
         x, y, theta = float(mean[0]), float(mean[1]), float(mean[2])
-        rows = self._arrays.rows()
+        rows = self.table.rows()
         boxes = self._boxes()  # (n, 4)
         reach = boxes_near(boxes, np.array([x, x, y, y]), self.max_range + REACH_MARGIN)
-        hits = beamcast.cast(
+        hits = measurement.cast(
             x,
             y,
             theta,
@@ -526,8 +515,8 @@ class PolySlam:
         ((B'(ξ*) − B'(ξ_c))/D)²·σ²_ξ, with σ²_ξ the pose variance along ξ when the landmark was
         made, goes into R together with the shape's own fit error (:meth:`_shape_fit_var`).
         """
-        slope, value = _slope_and_value(row.shape, xi)
-        slope_c, value_c = _slope_and_value(row.shape, row.pivot)
+        value, slope = value_and_slope(row.shape, xi)
+        value_c, slope_c = value_and_slope(row.shape, row.pivot)
         shift = (slope - slope_c) * inv_d
         extra = shift * shift * row.xi_var
         extra += inv_d * inv_d * self._shape_fit_var(row.shape, (xi - row.pivot) / row.fit_half)
@@ -562,14 +551,14 @@ class PolySlam:
         When the update corrects the current pose, the recent trajectory moves with it, and so
         must the points: else a new landmark mixes stale coordinates with the corrected pose.
         """
-        book = self.book
-        groups = [*book.clusters, *book.qbad.values()]
+        book, table = self.book, self.table
+        groups = [*book.clusters, *table.qbad.values()]
         flat = [p for group in groups for p in group]
         if not flat:
             return
         moved = iter(_carry(flat, before, after))
         book.clusters = [[next(moved) for _ in c] for c in book.clusters]
-        book.qbad = {lid: [next(moved) for _ in pts] for lid, pts in book.qbad.items()}
+        table.qbad = {lid: [next(moved) for _ in pts] for lid, pts in table.qbad.items()}
 
 
 @functools.lru_cache(maxsize=16)
@@ -604,16 +593,6 @@ def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> 
             rows[:, :2], rows[:, 2:4], rows[:, 4:], points, strict=True
         )
     ]
-
-
-def _slope_and_value(shape: Sequence[float], xi: float) -> tuple[float, float]:
-    """B'(ξ) and B(ξ) of a shape [b_0, …, b_M] at ξ, by Horner's scheme."""
-    value = shape[-1]
-    slope = 0.0
-    for b in shape[-2::-1]:
-        slope = slope * xi + value
-        value = value * xi + b
-    return slope, value
 
 
 def _median(values: deque[float]) -> float:

@@ -21,7 +21,7 @@ from polyslam_env.slam.fitting import (
     polynomial_points,
     stored_points,
 )
-from polyslam_env.slam.landmarks import LandmarkArrays
+from polyslam_env.slam.landmarks import LandmarkTable
 from polyslam_env.slam.polynomial import Polynomial
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 
@@ -77,8 +77,8 @@ def test_approximation_error__matches_brute_force(polys: list[Polynomial], seed:
     )
 
 
-def landmark_arrays(polys: list[Polynomial]) -> LandmarkArrays:
-    arrays = LandmarkArrays()
+def landmark_arrays(polys: list[Polynomial]) -> LandmarkTable:
+    arrays = LandmarkTable()
     for p in polys:
         arrays.append(p, pivot=0.0, xi_var=0.0, model_var=0.0, fit_half=1.0)
     return arrays
@@ -107,9 +107,8 @@ def test_associate__box_candidates_classify_like_the_whole_map(
     results = []
     rows = arrays.rows()
     for cand, as_floats in ((None, None), (candidates, None), (candidates, rows)):
-        book = MapBook(eps_m=50, eps_z=50)  # no refits or new landmarks: compare the cases
-        for _ in polys:
-            book.add_landmark()
+        # no refits or new landmarks: compare the cases
+        book = MapBook(eps_m=50, eps_z=50, table=landmark_arrays(polys))
         res = book.associate(
             pts, arrays.packed(), c0s, rho, sigma, squared, candidates=cand, rows=as_floats
         )
@@ -154,7 +153,7 @@ RHO, SIGMA = 0.125, 0.25  # exact binary fractions: 1 + ε is exact at the bound
 
 def one_landmark_book(eps_m: int = 5, eps_z: int = 10) -> MapBook:
     book = MapBook(eps_m=eps_m, eps_z=eps_z, cluster_radius=0.35)
-    book.add_landmark()
+    book.table.append(FLAT, pivot=1.0, xi_var=0.0, model_var=0.0, fit_half=1.0)
     return book
 
 
@@ -214,15 +213,10 @@ def test_add_to_cluster__joins_the_cluster_with_most_neighbours() -> None:
     assert [len(c) for c in book.clusters] == [1, 3]
 
 
-def test_mapbook__ids_stay_stable_through_refit_and_removal() -> None:
-    book = MapBook()
-    a, b, c = book.add_landmark(), book.add_landmark(), book.add_landmark()
-    assert [book.state_index(x) for x in (a, b, c)] == [3, 4, 5]
-    book.move_to_end(a)  # refit of a: new c0 appended, old one removed
-    assert [book.state_index(x) for x in (b, c, a)] == [3, 4, 5]
-    book.remove_landmark(c)
-    assert book.ids == [b, a] and book.state_index(a) == 4
-    assert book.add_landmark() not in (a, b, c)
+def test_mapbook__reads_ids_and_qbad_from_its_table() -> None:
+    book = one_landmark_book()
+    assert book.ids is book.table.ids and book.qbad is book.table.qbad
+    assert book.ids == [0] and book.qbad == {0: []}
 
 
 def test_associate__rejects_mismatched_map() -> None:

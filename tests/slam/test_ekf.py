@@ -8,22 +8,22 @@ import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from polyslam_env.core.geometry import compose
 from polyslam_env.slam.ekf import (
     augment,
-    compose,
     divergence_ratio,
     is_diverging,
-    motion_jacobians,
     nees,
     predict,
     remove,
     thresholds,
-    update,
     update_sparse_inplace,
     wrap_angle,
 )
-from polyslam_env.slam.measurement import PackedPolynomials, expected_ranges_and_jacobian
+from polyslam_env.slam.landmarks import LandmarkTable
+from polyslam_env.slam.measurement import BeamHit, cast
 from polyslam_env.slam.polynomial import Polynomial
+from tests.slam.reference import motion_jacobians, predict_dense, update
 
 P0 = np.diag([0.05**2, 0.05**2, 0.0175**2])
 BEAMS = np.deg2rad([90.0, 45.0, 0.0, -45.0, -90.0])
@@ -75,13 +75,10 @@ def test_predict__equals_dense_formula_and_leaves_landmarks() -> None:
     cov = random_spd(rng, 3 + n, 0.01)
     u, W = np.array([0.1, 0.02, 0.05]), np.diag([1e-4, 2e-4, 3e-5])
     new_mean, new_cov = predict(mean, cov, u, W)
-    F, L = motion_jacobians(mean, u)
-    Ff = np.eye(3 + n)
-    Ff[:3, :3] = F
-    Lf = np.zeros((3 + n, 3))
-    Lf[:3] = L
+    want_mean, want_cov = predict_dense(mean, cov, u, W)  # F P Fᵀ + L W Lᵀ
     # 1e-14: the same products in a different order
-    np.testing.assert_allclose(new_cov, Ff @ cov @ Ff.T + Lf @ W @ Lf.T, atol=1e-14)
+    np.testing.assert_allclose(new_cov, want_cov, atol=1e-14)
+    np.testing.assert_allclose(new_mean, want_mean, atol=1e-14)
     np.testing.assert_array_equal(new_cov[3:, 3:], cov[3:, 3:])
     np.testing.assert_array_equal(new_mean[3:], mean[3:])
     assert abs(new_mean[2]) <= np.pi
@@ -301,7 +298,10 @@ WALLS = [
     Polynomial(2, np.array([-2.5, 0.0, 0.05, 0.0]), -2.0, 2.5),  # left
     Polynomial(2, np.array([2.6, -0.04, 0.03, 0.0]), -2.0, 2.5),  # right
 ]
-PACKED = PackedPolynomials.from_polynomials(WALLS)
+WALL_ROWS = LandmarkTable()
+for _wall in WALLS:
+    WALL_ROWS.append(_wall, pivot=0.0, xi_var=0.0, model_var=0.0, fit_half=1.0)
+SIN_10 = np.sin(np.deg2rad(10.0))
 START = np.array([0.0, -0.4, 0.0])
 SIGMA_RANGE, SIGMA_C0 = 0.02, 0.03
 
@@ -329,19 +329,27 @@ def run_filter(
         u_meas = u_true + rng.multivariate_normal(np.zeros(3), W_true)
         true_pose = compose(true_pose, u_true)
         mean, cov = predict(mean, cov, u_meas, W_filter)
-        truth = expected_ranges_and_jacobian(
-            np.concatenate([true_pose, true_c0]), PACKED, BEAMS, 2.0
-        )
-        z = truth.z_hat + rng.normal(0.0, SIGMA_RANGE, BEAMS.size) + range_bias
-        z_hat, H, valid, _ = expected_ranges_and_jacobian(mean, PACKED, BEAMS, 2.0)
-        use = valid & np.isfinite(z)
-        result = update(
-            mean, cov, z[use], z_hat[use], H[use], SIGMA_RANGE**2 * np.eye(int(use.sum()))
-        )
-        mean, cov = result.mean, result.cov
-        all_nis.extend(result.nis.tolist())
+        truth = [h.t if h else np.inf for h in _cast(true_pose, true_c0)]
+        z = np.array(truth) + rng.normal(0.0, SIGMA_RANGE, BEAMS.size) + range_bias
+        rows = [  # the SLAM's rows: a hit, not near-tangent, with a return
+            (float(z[b]) - hit.t, *hit.jacobian(), 3 + hit.landmark)
+            for b, hit in enumerate(_cast(mean[:3], mean[3:]))
+            if hit is not None and hit.incidence_sine >= SIN_10 and np.isfinite(z[b])
+        ]
+        if rows:
+            innovation, h_pose, h_c0, c0_index = (np.array(c) for c in zip(*rows, strict=True))
+            r = np.full(len(rows), SIGMA_RANGE**2)
+            _, nis = update_sparse_inplace(mean, cov, innovation, h_pose, c0_index, h_c0, r)
+            all_nis.extend(nis.tolist())
         out[k] = nees(true_pose - mean[:3], cov[:3, :3])
     return out, cov[:3, :3], mean, all_nis
+
+
+def _cast(pose: np.ndarray, c0s: np.ndarray) -> list[BeamHit | None]:
+    """The SLAM's measurement model on the known walls with their c0s (n,)."""
+    x, y, theta = pose.tolist()
+    every = list(range(len(WALLS)))
+    return cast(x, y, theta, BEAMS.tolist(), every, WALL_ROWS.rows(), c0s.tolist(), 2.0)
 
 
 W_ODO = np.diag([0.01**2, 0.01**2, np.deg2rad(0.5) ** 2])

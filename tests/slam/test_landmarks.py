@@ -1,4 +1,4 @@
-"""Fast-path helpers of the SLAM step: incremental landmark arrays, bounding boxes, and the
+"""Fast-path helpers of the SLAM step: the landmark table, bounding boxes, and the
 faster variants (in-place prediction, candidate ray casting, packed association) against the
 pure or brute-force versions they replace."""
 
@@ -14,14 +14,10 @@ from polyslam_env.slam.association import approximation_error
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.ekf import predict, predict_inplace, spectral_norm_sym
 from polyslam_env.slam.fitting import Fit, StoredPoint
-from polyslam_env.slam.landmarks import LandmarkArrays, shape_range
-from polyslam_env.slam.measurement import (
-    PackedPolynomials,
-    expected_ranges_and_jacobian,
-    ray_intersections,
-)
+from polyslam_env.slam.landmarks import LandmarkTable, PackedPolynomials, shape_range
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam, _carry, _median
+from tests.slam.reference import expected_ranges_and_jacobian, ray_intersections
 
 BEAMS = np.deg2rad([90.0, 45.0, 0.0, -45.0, -90.0])
 
@@ -38,8 +34,8 @@ def random_polys(rng: np.random.Generator, n: int, spread: float = 3.0) -> list[
     return polys
 
 
-def arrays_of(polys: list[Polynomial]) -> LandmarkArrays:
-    arrays = LandmarkArrays()
+def arrays_of(polys: list[Polynomial]) -> LandmarkTable:
+    arrays = LandmarkTable()
     for i, p in enumerate(polys):
         arrays.append(
             p, pivot=0.5 * (p.lo + p.hi), xi_var=0.01 * i, model_var=0.001 * i, fit_half=0.2
@@ -54,7 +50,7 @@ def assert_packed_equal(a: PackedPolynomials, b: PackedPolynomials) -> None:
     np.testing.assert_array_equal(a.hi, b.hi)
 
 
-# -- LandmarkArrays -------------------------------------------------------------------------------
+# -- LandmarkTable -------------------------------------------------------------------------------
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_shape_range__bounds_the_curve_on_its_extent(seed: int) -> None:
@@ -73,7 +69,7 @@ def test_shape_range__is_tight_for_a_straight_line() -> None:
     assert abs(low - 2.0) < 1e-7 and abs(high - 6.0) < 1e-7
 
 
-def test_landmark_arrays__track_appends_removals_and_extents() -> None:
+def test_landmark_table__tracks_appends_removals_and_extents() -> None:
     rng = np.random.default_rng(3)
     polys = random_polys(rng, 6)
     polys[1] = Polynomial(1, np.array([0.5, 0.1]), -1.0, 1.0)  # lower order: zero-padded
@@ -86,9 +82,30 @@ def test_landmark_arrays__track_appends_removals_and_extents() -> None:
     assert_packed_equal(arrays.packed(), PackedPolynomials.from_polynomials(expected))
     np.testing.assert_array_equal(arrays.xi_var, [0.0, 0.01, 0.03, 0.04, 0.05])
     np.testing.assert_array_equal(arrays.eta_range, arrays_of(expected).eta_range)
+    assert arrays.ids == [0, 1, 3, 4, 5] and len(arrays) == 5
+    for got, want in zip(arrays.polys, expected, strict=True):  # the polynomials follow
+        assert (got.variate, got.lo, got.hi) == (want.variate, want.lo, want.hi)
+        np.testing.assert_array_equal(got.coeffs, want.coeffs)
 
 
-def test_landmark_arrays__packed_views_stay_valid_after_changes() -> None:
+def test_landmark_table__ids_stay_stable_through_removals() -> None:
+    polys = random_polys(np.random.default_rng(5), 3)
+    table = LandmarkTable()
+    a, b, c = (table.append(p, 0.0, 0.0, 0.0, 1.0, step=k) for k, p in enumerate(polys))
+    assert [table.state_index(x) for x in (a, b, c)] == [3, 4, 5]
+    table.qbad[a].append(StoredPoint(np.zeros(2), np.ones(2), 0.02, 1.0, np.zeros(3), 0, 0))
+    assert table.remove(table.index_of(a)) == a
+    assert table.ids == [b, c] and table.state_index(c) == 4 and a not in table
+    assert list(table.qbad) == [b, c] and table.changed_at == [1, 2]
+    d = table.append(polys[0], 0.0, 0.0, 0.0, 1.0, step=7)
+    assert d not in (a, b, c) and table.index_of(d) == 2
+    assert dict(table.shapes) == {b: polys[1], c: polys[2], d: polys[0]}
+    before = table.shapes[b]
+    table.set_extent(0, before.lo - 1.0, before.hi)
+    assert table.shapes[b] is not before and table.shapes[b].lo == before.lo - 1.0
+
+
+def test_landmark_table__packed_views_stay_valid_after_changes() -> None:
     polys = random_polys(np.random.default_rng(4), 3)
     arrays = arrays_of(polys)
     before = arrays.packed()

@@ -1,294 +1,159 @@
-"""Measurement model h: ray casting against brute force, Jacobians against finite differences."""
+"""The SLAM's per-beam measurement model equals the vectorised oracle (same algorithm, floats)."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
-from numpy.polynomial import Polynomial as NpPoly
 
-from polyslam_env.slam.measurement import (
-    PackedPolynomials,
-    expected_ranges_and_jacobian,
-    ray_intersections,
-)
+from polyslam_env.slam.landmarks import LandmarkTable
+from polyslam_env.slam.measurement import BeamHit, cast
 from polyslam_env.slam.polynomial import Polynomial
-
-BEAMS = np.deg2rad([90.0, 45.0, 0.0, -45.0, -90.0])
-SIN_10 = np.sin(np.deg2rad(10.0))
-
-
-# -- brute force ---------------------------------------------------------------------------------
-def brute_force_candidates(
-    pose: np.ndarray, phi: float, poly: Polynomial, c0: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """All complex roots t of F for one beam and polynomial (numpy composition + np.roots),
-    with the ξ of their real parts and the incidence sine |D|/√(1+B'²) there."""
-    c, s = np.cos(phi), np.sin(phi)
-    if poly.variate == 1:
-        xi0, eta0, dxi, deta = pose[0], pose[1], c, s
-    else:
-        xi0, eta0, dxi, deta = pose[1], pose[0], s, c
-    shape = NpPoly(np.concatenate([[0.0], poly.shape]))
-    f = NpPoly([eta0 - c0, deta]) - shape(NpPoly([xi0, dxi]))
-    coef = f.coef[::-1]  # highest power first for np.roots
-    # np.roots trims only exact zeros; a leading coefficient ~1e-300 would overflow its
-    # companion matrix. Trimming below 1e-14 of the largest drops roots at |t| > 1e4 m.
-    big = np.abs(coef) > 1e-14 * np.abs(coef).max() if np.any(coef != 0) else coef != 0
-    coef = coef[np.argmax(big) :] if big.any() else coef[:0]
-    roots = np.roots(coef) if coef.size > 1 else np.array([], dtype=complex)
-    xi = xi0 + roots.real * dxi
-    slope = shape.deriv()(xi)
-    return roots, xi, np.abs(deta - slope * dxi) / np.sqrt(1.0 + slope**2)
-
-
-def brute_force_range(
-    pose: np.ndarray, phi: float, polys: list[Polynomial], c0s: np.ndarray, max_range: float
-) -> tuple[float, int, bool]:
-    """(range, index, ambiguous): plain loops. Ambiguous when a root sits on a decision edge
-    or is (nearly) multiple, i.e. near-tangent: there, whether it is real is ill-posed."""
-    best, best_i, ambiguous = np.inf, -1, False
-    for i, (poly, c0) in enumerate(zip(polys, c0s, strict=True)):
-        roots, xi, sine = brute_force_candidates(pose, phi, poly, c0)
-        for r, x, sin_inc in zip(roots, xi, sine, strict=True):
-            t = r.real
-            near_edge = min(abs(t), abs(t - max_range), abs(x - poly.lo), abs(x - poly.hi)) < 1e-6
-            tangent = abs(r.imag) < 1e-2 and sin_inc < 1e-3
-            if near_edge or tangent or 1e-9 < abs(r.imag) < 1e-4:
-                ambiguous = True
-            if abs(r.imag) <= 1e-9 and 0 < t <= max_range and poly.lo <= x <= poly.hi and t < best:
-                best, best_i = t, i
-    return best, best_i, ambiguous
-
-
-# -- strategies ------------------------------------------------------------------------------
-@st.composite
-def polynomials(draw: st.DrawFn, order: int = 3) -> Polynomial:
-    variate = draw(st.sampled_from([1, 2]))
-    coeffs = [draw(st.floats(-2.0, 2.0))]
-    coeffs += [draw(st.floats(-1.0, 1.0)) / i for i in range(1, order + 1)]
-    lo = draw(st.floats(-3.0, 2.0))
-    width = draw(st.floats(0.1, 4.0))
-    return Polynomial(variate, np.array(coeffs), lo, lo + width)
-
-
-poses = st.tuples(st.floats(-2.0, 2.0), st.floats(-2.0, 2.0), st.floats(-np.pi, np.pi)).map(
-    np.array
-)
-beam_sets = st.one_of(
-    st.just(BEAMS), st.lists(st.floats(-np.pi, np.pi), min_size=1, max_size=6).map(np.array)
+from tests.slam.reference import expected_ranges_and_jacobian, ray_intersections
+from tests.slam.test_reference import (
+    BEAMS,
+    beam_sets,
+    brute_force_range,
+    polynomials,
+    poses,
+    valid_hits,
 )
 
 
-# -- ray casting --------------------------------------------------------------------------------
-@settings(max_examples=150, deadline=None)
+def _rows(polys: list[Polynomial]) -> LandmarkTable:
+    arrays = LandmarkTable()
+    for p in polys:
+        arrays.append(p, pivot=0.5 * (p.lo + p.hi), xi_var=0.0, model_var=0.0, fit_half=1.0)
+    return arrays
+
+
+def assert_same_hits(
+    pose: np.ndarray,
+    beams: np.ndarray,
+    polys: list[Polynomial],
+    max_range: float,
+    skip_ambiguous: bool = True,
+) -> None:
+    """Both casts agree on every beam that has no root on a decision edge (t ≈ 0, t ≈ r_max,
+    ξ ≈ an end) and no near-double root: there either answer is right, and which one comes
+    out depends on the last bit of cos/acos/cbrt (libm's here, numpy's there)."""
+    c0s = np.array([p.c0 for p in polys])
+    if skip_ambiguous:
+        for beta in beams:
+            assume(not brute_force_range(pose, pose[2] + beta, polys, c0s, max_range)[2])
+    want = ray_intersections(pose, beams, polys, c0s, max_range)
+    arrays = _rows(polys)
+    x, y, theta = pose.tolist()
+    args = (x, y, theta, beams.tolist(), list(range(len(polys))), arrays.rows(), c0s.tolist())
+    got = cast(*args, max_range)
+    boxed = cast(*args, max_range, arrays.boxes(c0s).tolist())
+    assert boxed == got  # the boxes only skip pairs that cannot hit: the very same answer
+    for j, hit in enumerate(got):
+        if hit is None:
+            assert want.index[j] == -1 and np.isinf(want.ranges[j])
+            continue
+        assert hit.landmark == want.index[j]
+        assert hit.variate == want.variate[j]
+        # 1e-12 (m, or dimensionless): the same operations on the same numbers; only libm's
+        # and numpy's cos/acos/cbrt may differ in the last bit, which Newton's polish damps.
+        assert hit.t == pytest.approx(want.ranges[j], abs=1e-12)
+        assert hit.slope == pytest.approx(want.slope[j], abs=1e-9)
+        assert hit.denom == pytest.approx(want.denom[j], abs=1e-9)
+        assert hit.phi == pytest.approx(want.phi[j], abs=1e-15)
+        assert hit.xi == pytest.approx(want.xi[j], abs=1e-12)  # as t
+        assert hit.incidence_sine == pytest.approx(want.incidence_sine[j], abs=1e-9)  # as D
+    # The update's rows of H equal the vectorised Jacobian (itself checked against finite
+    # differences in test_reference.py); 1e-6 relative: 1/D amplifies the 1e-9 of D
+    # near the tangent limit (|D| ≥ sin 10° · √(1 + B'²) for valid rows).
+    state = np.concatenate([pose, c0s])
+    jac = expected_ranges_and_jacobian(state, polys, beams, max_range)
+    for j, hit in enumerate(got):
+        if hit is None or not jac.valid[j]:
+            continue
+        (h_x, h_y, h_theta), inv_d = hit.jacobian()
+        row = np.zeros(state.size)
+        row[:3] = h_x, h_y, h_theta
+        row[3 + hit.landmark] = inv_d
+        np.testing.assert_allclose(row, jac.H[j], rtol=1e-6, atol=1e-9)
+
+
+@settings(max_examples=200, deadline=None)
 @given(
-    polys=st.lists(polynomials(), min_size=1, max_size=4),
+    polys=st.lists(polynomials(), min_size=1, max_size=5),
     pose=poses,
     beams=beam_sets,
     max_range=st.floats(0.5, 3.0),
 )
-def test_ray_intersections__match_brute_force_roots(
+def test_cast__equals_vectorised_ray_intersections(
     polys: list[Polynomial], pose: np.ndarray, beams: np.ndarray, max_range: float
 ) -> None:
-    c0s = np.array([p.c0 for p in polys])
-    hits = ray_intersections(pose, beams, polys, c0s, max_range)
-    for j, beta in enumerate(beams):
-        t, _, ambiguous = brute_force_range(pose, pose[2] + beta, polys, c0s, max_range)
-        assume(not ambiguous)
-        if np.isinf(t):
-            assert np.isinf(hits.ranges[j]) and hits.index[j] == -1
-            continue
-        # 1e-9 m: both sides are accurate to ~1e-12 away from multiple roots (excluded above).
-        assert hits.ranges[j] == pytest.approx(t, abs=1e-9)
-        hit_poly = polys[hits.index[j]]
-        xy = pose[:2] + hits.ranges[j] * np.array([np.cos(pose[2] + beta), np.sin(pose[2] + beta)])
-        xi, eta = hit_poly.from_xy(xy)
-        # 1e-8 m: the hit point lies on the polynomial it reports, up to root accuracy × slope.
-        assert float(hit_poly.value(xi)) == pytest.approx(float(eta), abs=1e-8)
-        # …and that polynomial alone attains the minimum (ties make the index ambiguous).
-        own, _, _ = brute_force_range(
-            pose, pose[2] + beta, [hit_poly], c0s[[hits.index[j]]], max_range
-        )
-        assert own == pytest.approx(t, abs=1e-9)  # same accuracy as above
-
-
-@pytest.mark.parametrize("b3", [1e-2, 1e-4, 1e-6, 1e-9, 1e-13])
-@pytest.mark.parametrize("theta", [np.pi / 2 - 1e-3, np.pi / 2 - 0.2, 0.3])
-def test_ray_intersections__small_leading_coefficient_matches_brute_force(
-    b3: float, theta: float
-) -> None:
-    # A tiny cubic term (nearly a parabola, or a beam nearly along the η axis) makes the
-    # closed-form cubic ill-conditioned; the solver must still find the small roots.
-    poly = Polynomial(1, np.array([0.8, -0.3, 0.5, b3]), -3.0, 3.0)
-    pose = np.array([0.2, -0.4, theta])
-    beams = np.deg2rad([0.0, 30.0, -30.0, 60.0, -60.0])
-    hits = ray_intersections(pose, beams, [poly], np.array([0.8]), 3.0)
-    compared = 0
-    for j, beta in enumerate(beams):
-        t, _, ambiguous = brute_force_range(pose, theta + beta, [poly], np.array([0.8]), 3.0)
-        if not ambiguous:
-            # 1e-9 m as in the property test above
-            assert hits.ranges[j] == pytest.approx(t, abs=1e-9)
-            compared += 1
-    assert compared >= 3
+    assert_same_hits(pose, beams, polys, max_range)
 
 
 @settings(max_examples=40, deadline=None)
 @given(polys=st.lists(polynomials(order=5), min_size=1, max_size=3), pose=poses)
-def test_ray_intersections__higher_order_matches_brute_force(
-    polys: list[Polynomial], pose: np.ndarray
-) -> None:
-    c0s = np.array([p.c0 for p in polys])
-    hits = ray_intersections(pose, BEAMS, polys, c0s, 2.0)
-    for j, beta in enumerate(BEAMS):
-        t, _, ambiguous = brute_force_range(pose, pose[2] + beta, polys, c0s, 2.0)
-        assume(not ambiguous)
-        # 1e-9 m: companion eigenvalues + one Newton step, well-separated roots
-        assert hits.ranges[j] == pytest.approx(t, abs=1e-9)
+def test_cast__higher_orders_equal_vectorised(polys: list[Polynomial], pose: np.ndarray) -> None:
+    assert_same_hits(pose, BEAMS, polys, 2.0)
 
 
-def _line(variate: int, c0: float, slope: float, lo: float, hi: float) -> Polynomial:
-    return Polynomial(variate, np.array([c0, slope, 0.0, 0.0]), lo, hi)
-
-
-def _cast(pose: list[float], beams: list[float], polys: list[Polynomial], r: float = 2.0):  # type: ignore[no-untyped-def]
-    return ray_intersections(
-        np.array(pose), np.array(beams), polys, np.array([p.c0 for p in polys]), r
-    )
-
-
-def test_ray_intersections__nearest_polynomial_wins() -> None:
-    walls = [_line(1, 1.5, 0.0, -5, 5), _line(1, 0.5, 0.0, -5, 5), _line(2, 1.0, 0.0, -5, 5)]
-    hits = _cast([0.0, 0.0, 0.0], [np.pi / 2, 0.0, np.pi], walls)
-    # exact lines: ranges are exact up to rounding (1e-12)
-    np.testing.assert_allclose(hits.ranges[:2], [0.5, 1.0], atol=1e-12)
-    assert list(hits.index) == [1, 2, -1]
-    assert np.isinf(hits.ranges[2])
-
-
-def test_ray_intersections__ignores_roots_outside_extent_and_beyond_range() -> None:
-    short = _line(1, 1.0, 0.0, 0.5, 2.0)  # y = 1 only for x in [0.5, 2]
-    hits = _cast([0.0, 0.0, 0.0], [np.pi / 2, np.pi / 4], [short], r=2.0)
-    assert hits.index[0] == -1  # straight up meets y = 1 at x = 0: outside the extent
-    assert hits.ranges[1] == pytest.approx(np.sqrt(2.0), abs=1e-12)  # at x = 1: inside
-    far = _cast([0.0, 0.0, 0.0], [np.pi / 2], [_line(1, 2.5, 0.0, -5, 5)], r=2.0)
-    assert far.index[0] == -1 and np.isinf(far.ranges[0])
-
-
-def test_ray_intersections__takes_farther_root_when_nearer_is_outside_extent() -> None:
-    # y = x² on x ∈ [0.5, 3]; the beam along y = 0.25 from x = −2 meets x = −0.5 (outside)
-    # before x = 0.5 (inside).
-    parabola = Polynomial(1, np.array([0.0, 0.0, 1.0, 0.0]), 0.5, 3.0)
-    hits = _cast([-2.0, 0.25, 0.0], [0.0], [parabola], r=3.0)
-    assert hits.ranges[0] == pytest.approx(2.5, abs=1e-12)  # double precision on exact roots
-
-
-def test_ray_intersections__axis_parallel_beam_drops_degree() -> None:
-    # A beam at exactly 90° on an x¹-variate cubic: F is linear in t (cos φ ≈ 6e-17).
-    cubic = Polynomial(1, np.array([1.0, 0.3, -0.2, 0.1]), -2.0, 2.0)
-    hits = _cast([0.4, -0.5, np.pi / 2], [0.0], [cubic], r=3.0)
-    expected = float(cubic.value(0.4)) + 0.5
-    assert hits.ranges[0] == pytest.approx(expected, abs=1e-12)  # linear root, exact
-
-
-def test_expected_ranges__tangent_ray_is_found_but_invalid() -> None:
-    # y = 0.5 + x²: the beam along y = 0.5 touches the vertex at t = 1 (double root), and a
-    # beam 1 mm above crosses it twice at a grazing angle; both are flagged, neither used.
-    parabola = Polynomial(1, np.array([0.5, 0.0, 1.0, 0.0]), -2.0, 2.0)
-    for y0 in (0.5, 0.501):
-        mean = np.array([-1.0, y0, 0.0, 0.5])
-        z_hat, H, valid, index = expected_ranges_and_jacobian(mean, [parabola], np.zeros(1), 2.0)
-        assert index[0] == 0 and not valid[0]
-        # the first root is 1 − √(y0 − 0.5) (0.968 m for 1 mm); tangent roots carry √eps error
-        assert z_hat[0] == pytest.approx(1.0 - np.sqrt(y0 - 0.5), abs=1e-6)
-        assert not H[0].any()
-    miss = np.array([-1.0, 0.499, 0.0, 0.5])  # 1 mm below the vertex: no return
-    _, _, valid, index = expected_ranges_and_jacobian(miss, [parabola], np.zeros(1), 2.0)
-    assert index[0] == -1 and not valid[0]
-
-
-def test_expected_ranges__empty_map_has_no_returns() -> None:
-    z_hat, H, valid, index = expected_ranges_and_jacobian(np.zeros(3), [], BEAMS, 2.0)
-    assert np.isinf(z_hat).all() and not valid.any() and (index == -1).all()
-    assert H.shape == (5, 3)
-
-
-def test_packed_polynomials__same_result_as_list() -> None:
-    rng = np.random.default_rng(3)
+@pytest.mark.parametrize("b3", [1e-2, 1e-4, 1e-6, 1e-9, 1e-13, 0.0])
+@pytest.mark.parametrize("theta", [math.pi / 2 - 1e-3, math.pi / 2 - 0.2, 0.3, math.pi / 2])
+def test_cast__stiff_and_degenerate_rows_equal_vectorised(b3: float, theta: float) -> None:
+    # tiny leading terms take the lower-degree path plus Newton; a beam exactly along the
+    # η axis makes every power of dξ vanish; a straight wall padded to a cubic (b3 = 0).
     polys = [
-        Polynomial(int(rng.integers(1, 3)), rng.normal(0, [1, 0.5, 0.3, 0.1][: o + 1]), -2, 2)
-        for o in (1, 2, 3, 3)
+        Polynomial(1, np.array([0.8, -0.3, 0.5, b3]), -3.0, 3.0),
+        Polynomial(2, np.array([1.1, 0.0, 0.0, 0.0]), -3.0, 3.0),
+        Polynomial(1, np.array([-0.7, 0.0]), -3.0, 3.0),
     ]
-    mean = np.concatenate([[0.1, -0.2, 0.4], [p.c0 for p in polys]])
-    a = expected_ranges_and_jacobian(mean, polys, BEAMS, 2.0)
-    b = expected_ranges_and_jacobian(mean, PackedPolynomials.from_polynomials(polys), BEAMS, 2.0)
-    np.testing.assert_array_equal(a.z_hat, b.z_hat)
-    np.testing.assert_array_equal(a.H, b.H)
+    pose = np.array([0.2, -0.4, theta])
+    beams = np.deg2rad([0.0, 30.0, -30.0, 60.0, -60.0, 90.0, 180.0])
+    assert_same_hits(pose, beams, polys, 3.0, skip_ambiguous=False)
 
 
-# -- Jacobians ---------------------------------------------------------------------------------
-@st.composite
-def valid_hits(draw: st.DrawFn) -> tuple[list[Polynomial], np.ndarray, float]:
-    """Two polynomials and a pose whose beam ``beta`` meets the first one non-tangentially."""
-    target = draw(polynomials())
-    other = draw(polynomials())
-    width = target.hi - target.lo
-    xi = target.lo + width * draw(st.floats(0.1, 0.9))
-    q = target.points_at(np.array([xi]))[0]
-    tangent = target.to_xy(np.array(1.0), target.slope(xi))  # d(x,y)/dξ
-    psi = np.arctan2(tangent[1], tangent[0])
-    incidence = draw(st.floats(np.deg2rad(20.0), np.deg2rad(160.0)))
-    phi = psi + draw(st.sampled_from([1.0, -1.0])) * incidence
-    t = draw(st.floats(0.2, 1.8))
-    beta = draw(st.sampled_from(list(BEAMS)))
-    pose = np.array([q[0] - t * np.cos(phi), q[1] - t * np.sin(phi), phi - beta])
-    return [target, other], pose, float(beta)
+def test_cast__only_candidates_are_cast() -> None:
+    near = Polynomial(1, np.array([0.5, 0.0]), -1.0, 1.0)
+    far = Polynomial(1, np.array([1.0, 0.0]), -1.0, 1.0)
+    rows = _rows([near, far]).rows()
+    (both,) = cast(0.0, 0.0, math.pi / 2, [0.0], [0, 1], rows, [0.5, 1.0], 2.0)
+    (only_far,) = cast(0.0, 0.0, math.pi / 2, [0.0], [1], rows, [0.5, 1.0], 2.0)
+    (none,) = cast(0.0, 0.0, math.pi / 2, [0.0], [], rows, [0.5, 1.0], 2.0)
+    assert both is not None and both.landmark == 0 and both.t == pytest.approx(0.5)
+    assert only_far is not None and only_far.landmark == 1 and only_far.t == pytest.approx(1.0)
+    assert none is None
 
 
 @settings(max_examples=150, deadline=None)
 @given(case=valid_hits())
-def test_expected_ranges_jacobian__matches_finite_differences(
+def test_beam_hit_jacobian__matches_finite_differences(
     case: tuple[list[Polynomial], np.ndarray, float],
 ) -> None:
     polys, pose, beta = case
+    rows = _rows(polys).rows()
     mean = np.concatenate([pose, [p.c0 for p in polys]])
-    beams, max_range = np.array([beta]), 2.0
-    hits = ray_intersections(pose, beams, polys, mean[3:], max_range)
-    assume(hits.index[0] >= 0 and hits.incidence_sine[0] > np.sin(np.deg2rad(15.0)))
-    poly = polys[hits.index[0]]
-    assume(min(hits.xi[0] - poly.lo, poly.hi - hits.xi[0], max_range - hits.ranges[0]) > 1e-3)
-    _, H, valid, index = expected_ranges_and_jacobian(mean, polys, beams, max_range)
-    assert valid[0]
+    max_range, every = 2.0, list(range(len(polys)))
+
+    def hit_at(state: np.ndarray) -> BeamHit | None:
+        x, y, theta = state[:3].tolist()
+        return cast(x, y, theta, [beta], every, rows, state[3:].tolist(), max_range)[0]
+
+    hit = hit_at(mean)
+    assume(hit is not None and hit.incidence_sine > np.sin(np.deg2rad(15.0)))
+    assert hit is not None
+    poly = polys[hit.landmark]
+    assume(min(hit.xi - poly.lo, poly.hi - hit.xi, max_range - hit.t) > 1e-3)
+    (h_x, h_y, h_theta), inv_d = hit.jacobian()
     step = 1e-6  # central differences: truncation ~ step² · h''' ≪ 1e-9, rounding ~ 1e-10
-    for col in (0, 1, 2, 3 + index[0]):
+    for col, want in ((0, h_x), (1, h_y), (2, h_theta), (3 + hit.landmark, inv_d)):
         delta = np.zeros_like(mean)
         delta[col] = step
-        plus = expected_ranges_and_jacobian(mean + delta, polys, beams, max_range)
-        minus = expected_ranges_and_jacobian(mean - delta, polys, beams, max_range)
-        assume(plus.poly_index[0] == minus.poly_index[0] == index[0])
-        numeric = (plus.z_hat[0] - minus.z_hat[0]) / (2 * step)
+        plus, minus = hit_at(mean + delta), hit_at(mean - delta)
+        assume(plus is not None and minus is not None)
+        assert plus is not None and minus is not None
+        assume(plus.landmark == minus.landmark == hit.landmark)
+        numeric = (plus.t - minus.t) / (2 * step)
         # 1e-6: |h''| ≲ 1e3 for ≥ 15° incidence leaves a central-difference error ≪ 1e-6
-        assert H[0, col] == pytest.approx(numeric, rel=1e-6, abs=1e-6), f"column {col}"
-    other_col = 3 + 1 - index[0]
-    assert H[0, other_col] == 0.0  # a beam depends only on the c0 it hits
-
-
-@settings(max_examples=60, deadline=None)
-@given(case=valid_hits())
-def test_expected_ranges__validity_follows_incidence_angle(
-    case: tuple[list[Polynomial], np.ndarray, float],
-) -> None:
-    polys, pose, beta = case
-    mean = np.concatenate([pose, [p.c0 for p in polys]])
-    z_hat, _, valid, index = expected_ranges_and_jacobian(mean, polys, np.array([beta]), 2.0)
-    assume(index[0] >= 0)
-    poly, phi = polys[index[0]], pose[2] + beta
-    direction = np.array([np.cos(phi), np.sin(phi)])
-    xi, _ = poly.from_xy(pose[:2] + z_hat[0] * direction)
-    tangent = poly.to_xy(np.array(1.0), poly.slope(xi))
-    cross = direction[0] * tangent[1] - direction[1] * tangent[0]
-    sine = abs(cross) / np.linalg.norm(tangent)
-    assume(abs(sine - SIN_10) > 1e-9)  # exactly on the threshold either answer is right
-    assert valid[0] == (sine >= SIN_10)
+        assert want == pytest.approx(numeric, rel=1e-6, abs=1e-6), f"column {col}"

@@ -1,0 +1,50 @@
+"""Polynomial evaluation: the float, row-wise and Taylor forms against numpy's polyval."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from numpy.polynomial import Polynomial as NpPoly
+
+from polyslam_env.slam.polynomial import polyval, polyval_rows, taylor_shift, value_and_slope
+from tests.slam.reference import taylor_at
+
+coefficients = st.lists(st.floats(-5.0, 5.0), min_size=2, max_size=6)
+
+
+@settings(max_examples=200, deadline=None)
+@given(coeffs=coefficients, x=st.floats(-4.0, 4.0), c0=st.floats(-3.0, 3.0))
+def test_value_and_slope__matches_polyval(coeffs: list[float], x: float, c0: float) -> None:
+    value, slope = value_and_slope(coeffs, x)
+    # Horner in the same order as numpy's polyval: the value is the very same float
+    assert value == float(polyval(x, np.array(coeffs)))
+    # the slope's Horner runs alongside (not on polyder's coefficients): rounding only
+    assert slope == pytest.approx(float(polyval(x, np.array(coeffs), derivative=1)), abs=1e-9)
+    shifted = [c0, *coeffs[1:]]
+    assert value_and_slope(coeffs, x, c0) == value_and_slope(shifted, x)
+
+
+def test_polyval_rows__bit_identical_to_polyval_per_row() -> None:
+    rng = np.random.default_rng(0)
+    coeffs = rng.normal(size=(7, 4))
+    coeffs[2, 2:] = 0.0  # a lower-order row, zero-padded
+    x = rng.normal(0.0, 3.0, size=(7, 11))
+    got = polyval_rows(coeffs, x)
+    for row in range(7):
+        np.testing.assert_array_equal(got[row], polyval(x[row], coeffs[row]))
+
+
+@settings(max_examples=200, deadline=None)
+@given(coeffs=coefficients, x0=st.floats(-4.0, 4.0), u=st.floats(-1.0, 1.0))
+def test_taylor_shift__expands_about_x0(coeffs: list[float], x0: float, u: float) -> None:
+    taylor = taylor_shift(coeffs, x0)
+    want = NpPoly(coeffs)(x0 + u)
+    scale = max(1.0, float(np.abs(coeffs).sum()) * max(1.0, abs(x0) + 1.0) ** len(coeffs))
+    assert float(NpPoly(taylor)(u)) == pytest.approx(want, abs=1e-12 * scale)
+    # and the same floats as the vectorised oracle (zero-padded rows, as the table keeps)
+    padded = np.zeros((1, 6))
+    padded[0, : len(coeffs)] = coeffs
+    oracle = taylor_at(padded, np.array([x0]))[0]
+    np.testing.assert_array_equal(taylor_shift(padded[0].tolist(), x0), oracle)
