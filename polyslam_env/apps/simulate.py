@@ -239,16 +239,8 @@ def _make_exchange(
     if exchange is False:
         return None
     config = ChannelConfig() if exchange is True else exchange
-    return RendezvousExchange(
-        config,
-        num_robots,
-        make_rngs(seed, ["channel"])["channel"],
-        wcfg.camera.sigma_d,
-        wcfg.camera.sigma_bearing,
-        scfg.order,
-        scfg.auto_order,
-        max_range=wcfg.range_sensor.max_range,
-    )
+    rng = make_rngs(seed, ["channel"])["channel"]
+    return stages.make_exchange(config, num_robots, rng, wcfg, scfg)
 
 
 def _delivered_log(step: ExchangeStep) -> list[dict[str, Any]]:

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from polyslam_env import metrics
+from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.comms.exchange import ExchangeStep, RendezvousExchange
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.observations import (
@@ -37,7 +38,9 @@ from polyslam_env.environment.observations import (
 from polyslam_env.environment.rewards import MAPPING_STEP, MAPPING_TOL, MapChanges
 from polyslam_env.environment.state import EpisodeState, Sensing, estimate
 from polyslam_env.metrics.episode import RobotHistory, final_robot_metrics, team_metrics
+from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.robot import PolySlam, SlamStepInfo
+from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.grid import FreeGrid
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.physics import StepResult, World
@@ -89,7 +92,9 @@ def new_episode(
         start_poses=start_poses,
         angles=angles,
         slams=slams,
-        exchange=make_exchange(config, rngs["channel"]),
+        exchange=None
+        if config.channel is None or not config.slam_enabled
+        else make_exchange(config.channel, n, rngs["channel"], wc, config.slam),
         beliefs=[BeliefGrid(oc.belief_size, oc.belief_resolution, max_range) for _ in range(n)],
         samplers=[MapSampler(0.5 * oc.grid_resolution) for _ in range(n)],
         histories=[],  # filled below: a history starts from the robot's estimate
@@ -105,20 +110,24 @@ def new_episode(
     return state
 
 
-def make_exchange(config: EnvConfig, rng: np.random.Generator) -> RendezvousExchange | None:
-    """The env's exchange (None without a channel or without SLAM); ``rng`` the channel's."""
-    if config.channel is None or not config.slam_enabled:
-        return None
-    wc = config.world
+def make_exchange(
+    channel: ChannelConfig,
+    num_robots: int,
+    rng: np.random.Generator,
+    world: WorldConfig,
+    slam: SlamConfig,
+) -> RendezvousExchange:
+    """The rendezvous exchange of a team (env and ``simulate``): ``rng`` is the channel's
+    stream; the camera's noise and the SLAM's order settings come from the configs."""
     return RendezvousExchange(
-        config.channel,
-        config.num_robots,
+        channel,
+        num_robots,
         rng,
-        wc.camera.sigma_d,
-        wc.camera.sigma_bearing,
-        config.slam.order,
-        config.slam.auto_order,
-        max_range=wc.range_sensor.max_range,
+        world.camera.sigma_d,
+        world.camera.sigma_bearing,
+        slam.order,
+        slam.auto_order,
+        max_range=world.range_sensor.max_range,
     )
 
 
