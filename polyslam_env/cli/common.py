@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 
 def fmt(value: float) -> str:
@@ -30,3 +31,11 @@ def format_table(
 def show_progress(quiet: bool = False) -> bool:
     """Whether to draw progress bars: on a terminal, unless asked to be quiet."""
     return not quiet and sys.stderr.isatty()
+
+
+def progress_bar(total: int, desc: str, unit: str, quiet: bool = False, leave: bool = True) -> Any:
+    """A tqdm bar for long work, drawn only when :func:`show_progress` says so (tqdm is
+    imported here, so that ``polyslam --help`` does not load it)."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit=unit, disable=not show_progress(quiet), leave=leave)

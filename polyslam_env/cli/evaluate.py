@@ -8,7 +8,7 @@ import io
 from pathlib import Path
 from typing import Any
 
-from polyslam_env.cli.common import fmt, show_progress
+from polyslam_env.cli.common import fmt, progress_bar
 from polyslam_env.cli.run import add_env_arguments, env_config, policy_kwargs
 
 
@@ -33,8 +33,6 @@ def register(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from concurrent.futures import ProcessPoolExecutor
 
-    from tqdm import tqdm
-
     from policies.base import make_team
     from polyslam_env.apps.rollout import EpisodeResult, evaluate_episode, summarise
     from polyslam_env.core.io import write_json
@@ -49,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     workers = args.workers or min(2, args.episodes)
     config = cfg.to_dict()
     results: list[EpisodeResult] = []
-    bar = tqdm(total=len(seeds), desc="evaluate", unit="ep", disable=not show_progress(args.quiet))
+    bar = progress_bar(len(seeds), "evaluate", "ep", args.quiet)
     with bar, ProcessPoolExecutor(max_workers=workers) as pool:
         jobs = [pool.submit(evaluate_episode, config, args.policy, kwargs, s) for s in seeds]
         for job in jobs:

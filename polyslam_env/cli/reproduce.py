@@ -27,7 +27,6 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
 
     from polyslam_env.apps.reproduce import (
         ReproduceConfig,
@@ -39,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
         table_rows,
         write_csv,
     )
-    from polyslam_env.cli.common import show_progress
+    from polyslam_env.cli.common import progress_bar
     from polyslam_env.core.io import write_json
 
     config = ReproduceConfig.from_yaml(args.config) if args.config else default_config()
@@ -47,13 +46,7 @@ def run(args: argparse.Namespace) -> int:
         config = config.replace(runs=args.runs)
     out = Path(args.out)
     start = time.perf_counter()
-    with tqdm(
-        total=config.runs,
-        desc="reproduce",
-        unit="run",
-        disable=not show_progress(args.quiet),
-        leave=False,
-    ) as bar:
+    with progress_bar(config.runs, "reproduce", "run", args.quiet, leave=False) as bar:
         runs = reproduce(config, workers=args.workers, progress=lambda n: bar.update(1))
     elapsed = time.perf_counter() - start
     summary = summarise(runs)

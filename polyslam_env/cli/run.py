@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from polyslam_env.cli.common import fmt, format_table, show_progress
+from polyslam_env.cli.common import fmt, format_table, progress_bar
 
 #: With no --map and no --config: the map of each policy's default run (``paper`` replays the
 #: paper paths on the paper map; the others explore the office, which frontier covers to 95 %
@@ -93,7 +93,6 @@ def _team_value(v: Any) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
 
     from policies.base import make_team
     from polyslam_env.apps.rollout import run_episode
@@ -115,9 +114,7 @@ def run(args: argparse.Namespace) -> int:
         if args.video:
             frames.append(_picture(e, pictures))
 
-    with tqdm(
-        total=cfg.max_steps, desc="run", unit="step", disable=not show_progress(args.quiet)
-    ) as bar:
+    with progress_bar(cfg.max_steps, "run", "step", args.quiet) as bar:
         try:
             result = run_episode(env, team, args.seed, on_step)
         finally:

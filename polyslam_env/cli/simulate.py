@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from polyslam_env.cli.common import format_table, show_progress
+from polyslam_env.cli.common import format_table, progress_bar
 
 KEYS = (
     "nees",
@@ -42,7 +42,6 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
 
     from polyslam_env.apps.simulate import simulate
     from polyslam_env.core.io import write_json
@@ -52,13 +51,7 @@ def run(args: argparse.Namespace) -> int:
 
     world_cfg = WorldConfig.from_yaml(args.world_config) if args.world_config else WorldConfig()
     slam_cfg = SlamConfig.from_yaml(args.slam_config) if args.slam_config else SlamConfig()
-    with tqdm(
-        total=args.steps,
-        desc="simulate",
-        unit="step",
-        disable=not show_progress(args.quiet),
-        leave=False,
-    ) as bar:
+    with progress_bar(args.steps, "simulate", "step", args.quiet, leave=False) as bar:
         result = simulate(
             args.map,
             num_robots=args.robots,
