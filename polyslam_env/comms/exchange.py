@@ -83,7 +83,7 @@ from polyslam_env.comms.relative_pose import (
     relative_pose,
     relative_pose_covariance,
 )
-from polyslam_env.core.geometry import compose, compose_with_jacobians, inverse
+from polyslam_env.core.geometry import compose, compose_with_jacobians, inverse, rotation
 from polyslam_env.slam.fitting import J_ROT, Fit, PointSet, fit_polynomial
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -204,8 +204,7 @@ def received_point_set(
     """
     poly = record.polynomial
     q = polyline_points(piecewise_linear(poly, chord_tol), spacing)  # (N, 2) sender frame
-    c, s = np.cos(transform[2]), np.sin(transform[2])
-    rot = np.array([[c, -s], [s, c]])
+    rot = rotation(transform[2])
     rq = q @ rot.T  # (N, 2)
     n_pts = len(q)
     dp_dt = np.zeros((n_pts, 2, 3))  # ∂p/∂T

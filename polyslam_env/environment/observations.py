@@ -21,6 +21,7 @@ import numpy as np
 from gymnasium import spaces
 
 from polyslam_env.core import raster
+from polyslam_env.core.geometry import rotation
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
@@ -218,8 +219,7 @@ class ObservationEncoder:
         """Occupied and free cells (G²,) bool of the egocentric grid (x forward = columns,
         row-major); a cell is never both, and neither means unknown."""
         g = self.g
-        c, s = math.cos(view.pose[2]), math.sin(view.pose[2])
-        rot = np.array([[c, -s], [s, c]])  # ego → own frame; (own − xy) @ rot = ego
+        rot = rotation(view.pose[2])  # ego → own frame; (own − xy) @ rot = ego
         occ = np.zeros(g * g, dtype=bool)  # (G²,)
         if len(view.map_points):
             ego = (view.map_points - view.pose[:2]) @ rot  # (M, 2)

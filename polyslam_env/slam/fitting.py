@@ -27,6 +27,7 @@ import numpy as np
 import scipy.linalg
 import scipy.special
 
+from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.ekf import spectral_norm_sym
 from polyslam_env.slam.polynomial import Polynomial, polyval
 
@@ -221,8 +222,7 @@ def stored_points(
     e = np.zeros(len(points)) if noise is None else np.asarray(noise, dtype=float)
     xy0 = np.array([p.xy for p in points], dtype=float)  # (N, 2)
     u = np.array([p.direction for p in points], dtype=float)  # (N, 2)
-    c, s = np.cos(at[2] - anchor[2]), np.sin(at[2] - anchor[2])
-    rel = (xy0 - anchor[:2]) @ np.array([[c, -s], [s, c]]).T  # (N, 2) R(θ − θ̂)(π̂ − p̂)
+    rel = (xy0 - anchor[:2]) @ rotation(at[2] - anchor[2]).T  # (N, 2) R(θ − θ̂)(π̂ − p̂)
     d_state = np.zeros((len(points), 2, n_state))
     d_state[:, :, :2] = np.eye(2)
     d_state[:, :, 2] = rel @ J_ROT.T
