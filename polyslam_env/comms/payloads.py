@@ -19,6 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from polyslam_env.comms.messages import CELL_FREE, CELL_OCCUPIED, CELL_UNKNOWN
+from polyslam_env.core.geometry import beam_endpoints
 from polyslam_env.slam.polynomial import Polynomial
 
 
@@ -46,7 +47,7 @@ class ScanLog:
         hit = np.isfinite(r)
         length = np.where(hit, r, self.max_range)  # (B,)
         phi = p[2] + angles
-        ends = p[:2] + length[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+        ends = beam_endpoints(p[:2], phi, length)
         self._starts.append(np.broadcast_to(p[:2], ends.shape).copy())
         self._ends.append(ends)
         self._hit.append(hit)

@@ -86,6 +86,14 @@ def rotation(theta: float) -> np.ndarray:  # (2, 2)
     return np.array([[c, -s], [s, c]])
 
 
+def beam_endpoints(origins: np.ndarray, angles: np.ndarray, ranges: np.ndarray) -> np.ndarray:
+    """End points (…, 2) of beams from ``origins`` (…, 2) along absolute ``angles`` (…) over
+    ``ranges`` (…): ``origin + r·(cos φ, sin φ)``, broadcast (an inf or NaN range gives a
+    non-finite end point)."""
+    direction = np.stack([np.cos(angles), np.sin(angles)], axis=-1)  # (…, 2)
+    return np.asarray(origins + np.asarray(ranges)[..., None] * direction)
+
+
 def transform_points(points: np.ndarray, pose: np.ndarray) -> np.ndarray:  # (…, 2)
     """Points (…, 2) given in the frame whose pose in its parent is ``pose`` (3,), mapped into
     the parent: ``(x + c·p₀ − s·p₁, y + s·p₀ + c·p₁)``."""

@@ -27,6 +27,7 @@ import numpy as np
 from polyslam_env import metrics
 from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.comms.exchange import ExchangeStep, RendezvousExchange
+from polyslam_env.core.geometry import beam_endpoints
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.observations import (
     BeliefGrid,
@@ -200,7 +201,7 @@ def record(
             continue
         r = true_ranges[i, ok[i]]
         phi = poses[i, 2] + world.range_sensor.angles[ok[i]]
-        hits = poses[i, :2] + r[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+        hits = beam_endpoints(poses[i, :2], phi, r)
         history.record(
             poses[i],
             est,

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from polyslam_env.core.errors import ConfigError
+from polyslam_env.core.geometry import beam_endpoints
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.scenarios.paths import Paths
 from polyslam_env.world.config import WorldConfig
@@ -118,4 +119,4 @@ def _hit_points(world: World, angles: np.ndarray) -> np.ndarray:  # (N, B, 2)
     r = world.true_scan()  # (N, B)
     r = np.where(np.isfinite(r), r, np.nan)
     phi = pose[:, 2:3] + angles[None, :]  # (N, B)
-    return np.stack([pose[:, 0:1] + r * np.cos(phi), pose[:, 1:2] + r * np.sin(phi)], axis=-1)
+    return beam_endpoints(pose[:, None, :2], phi, r)

@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from polyslam_env.core.geometry import (
+    beam_endpoints,
     between,
     compose,
     compose_inverse,
@@ -218,3 +219,23 @@ def test_se2__rejects_wrong_shapes() -> None:
         between(np.zeros(3), np.zeros((4, 2)))
     with pytest.raises(ValueError, match="shape"):
         compose_with_jacobians(np.zeros((2, 3)), np.zeros(3))
+
+
+def test_beam_endpoints__match_a_per_beam_loop_and_broadcast() -> None:
+    rng = np.random.default_rng(5)
+    poses = rng.uniform(-3, 3, size=(4, 3))  # (N, 3)
+    angles = poses[:, 2:3] + rng.uniform(-np.pi, np.pi, size=(4, 5))  # (N, B) absolute
+    ranges = rng.uniform(0, 2, size=(4, 5))
+    ranges[1, 2] = np.inf
+    ends = beam_endpoints(poses[:, None, :2], angles, ranges)  # (N, B, 2)
+    assert ends.shape == (4, 5, 2)
+    for i in range(4):
+        for b in range(5):
+            phi, r = angles[i, b], ranges[i, b]
+            if np.isfinite(r):
+                expect = [poses[i, 0] + r * math.cos(phi), poses[i, 1] + r * math.sin(phi)]
+                # numpy's and libm's cos may differ by an ulp: a few 1e-16 m on metres
+                np.testing.assert_allclose(ends[i, b], expect, rtol=0, atol=1e-12)
+    assert not np.all(np.isfinite(ends[1, 2]))  # no return: no finite end point
+    one = beam_endpoints(poses[0, :2], angles[0], ranges[0])  # (B, 2): one origin
+    np.testing.assert_array_equal(one, ends[0])
