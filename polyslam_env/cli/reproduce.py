@@ -147,6 +147,11 @@ def run_mblcc(args: argparse.Namespace) -> int:
     print(table_text(summary))
     for name, ok in summary["checks"].items():
         print(f"check {name}: {'yes' if ok else 'NO'}")
+    print("paired differences (mean ± standard error over runs), r1 / r2 / r3:")
+    for metric, pairs in summary["paired"].items():
+        for pair, cells in pairs.items():
+            text = " / ".join(f"{c['mean']:+.3f} ± {c['se']:.3f}" for c in cells)
+            print(f"  {metric:<15}{pair:<36}{text}")
     write_json(out / "summary.json", summary)
     figure = plot_armse(summary, out / "fig5_armse.png")
     print(f"wrote {out / 'summary.json'}, {figure}")

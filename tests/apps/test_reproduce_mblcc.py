@@ -48,6 +48,10 @@ def test_summarise__per_robot_mean_and_std_and_named_checks() -> None:
             assert len(cells) == 3 and all(c["mean"] > 0 and c["std"] >= 0 for c in cells)
     assert len(summary["checks"]) == 6
     assert all(isinstance(v, bool) for v in summary["checks"].values())
+    em_vs_fs2 = summary["paired"]["pose_error"]["em_fastslam-fastslam2"][0]
+    table = summary["table"]["pose_error"]
+    diff = table["em_fastslam"][0]["mean"] - table["fastslam2"][0]["mean"]
+    assert em_vs_fs2["mean"] == pytest.approx(diff, abs=1e-12) and em_vs_fs2["se"] >= 0
 
 
 def test_cli__reproduce_mblcc_writes_summary_and_figure(
