@@ -1,4 +1,9 @@
-"""``polyslam reproduce``: the paper's Table 1 and Figures 5–8."""
+"""``polyslam reproduce``: a seed paper's experiment.
+
+``--paper polynomial`` (default): the core paper's Table 1 and Figures 5–8.
+``--paper mblcc``: seed 003's Table 1 (four point-landmark FastSLAM variants, three robots)
+and Fig 5 (landmark ARMSE against the number of particles).
+"""
 
 from __future__ import annotations
 
@@ -13,20 +18,35 @@ FRACTION = "r3_multi_beats_single_fraction_of_runs"
 def register(sub: Any) -> None:
     parser = sub.add_parser(
         "reproduce",
-        help="the paper's Table 1 and Figs 5-8 over seeded runs",
-        description="Run the paper's experiment (configs/paper.yaml: three robots along the"
-        " paper's paths with map exchange) over seeded runs; print Table 1 (mean ± std per robot)"
-        " next to the paper's values; write table.csv, summary.json and the figures.",
+        help="a seed paper's Table 1 and figures over seeded runs",
+        description="Run a seed paper's experiment over seeded runs. polynomial (default):"
+        " configs/paper.yaml, three robots along the paper's paths with map exchange; print"
+        " Table 1 (mean ± std per robot) next to the paper's values; write table.csv,"
+        " summary.json and the figures. mblcc: seed 003's four FastSLAM variants on three"
+        " cars; print its Table 1 next to the seed's; write summary.json and fig5_armse.png.",
     )
-    parser.add_argument("--runs", type=int, default=None, help="number of runs (default: 100)")
+    parser.add_argument(
+        "--paper",
+        choices=("polynomial", "mblcc"),
+        default="polynomial",
+        help="which seed's experiment (default: polynomial)",
+    )
+    parser.add_argument(
+        "--runs", type=int, default=None, help="number of runs (default: 100; mblcc 50)"
+    )
     parser.add_argument("--out", default="out/reproduce", help="output folder")
     parser.add_argument("--workers", type=int, default=2, help="parallel processes (default: 2)")
-    parser.add_argument("--config", help="a YAML file like configs/paper.yaml")
+    parser.add_argument(
+        "--config",
+        help="a YAML file like configs/paper.yaml (mblcc: MblccReproduceConfig's fields)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.paper == "mblcc":
+        return run_mblcc(args)
 
     from polyslam_env.apps.reproduce import (
         ReproduceConfig,
@@ -77,4 +97,47 @@ def run(args: argparse.Namespace) -> int:
     write_csv(out / "table.csv", summary)
     figures = plot_figures(run_one(config, seed=0, keep=True), out)
     print(f"wrote {out / 'summary.json'}, {out / 'table.csv'}, " + ", ".join(map(str, figures)))
+    return 0
+
+
+def run_mblcc(args: argparse.Namespace) -> int:
+    """Seed 003: the table over ``runs`` seeds, Fig 5's particle sweep, summary and figure."""
+    from polyslam_env.apps.reproduce_mblcc import (
+        MblccReproduceConfig,
+        plot_armse,
+        reproduce,
+        summarise,
+        table_text,
+    )
+    from polyslam_env.cli.common import progress_bar
+    from polyslam_env.core.io import write_json
+
+    config = MblccReproduceConfig.from_yaml(args.config) if args.config else MblccReproduceConfig()
+    if args.runs is not None:
+        config = config.replace(runs=args.runs)
+    out = Path(args.out)
+    start = time.perf_counter()
+    sweep = [n for n in config.fig5_particles if n != config.slam.particles]
+    total = config.runs + len(sweep) * config.fig5_runs
+    with progress_bar(total, "reproduce mblcc", "run", args.quiet, leave=False) as bar:
+        runs, by_n = reproduce(config, workers=args.workers, progress=lambda n: bar.update(1))
+    elapsed = time.perf_counter() - start
+    summary = summarise(runs, by_n)
+    summary["elapsed_s"] = elapsed
+    summary["workers"] = args.workers
+    summary["config"] = config.to_dict()
+
+    print(f"{config.runs} runs (+ {total - config.runs} for Fig 5), {elapsed:.0f} s,")
+    print(f"{args.workers} workers; mean ± std over runs, seed's Table 1 mean alongside")
+    print(table_text(summary))
+    for name, ok in summary["checks"].items():
+        print(f"check {name}: {'yes' if ok else 'NO'}")
+    print("paired differences (mean ± standard error over runs), r1 / r2 / r3:")
+    for metric, pairs in summary["paired"].items():
+        for pair, cells in pairs.items():
+            text = " / ".join(f"{c['mean']:+.3f} ± {c['se']:.3f}" for c in cells)
+            print(f"  {metric:<15}{pair:<36}{text}")
+    write_json(out / "summary.json", summary)
+    figure = plot_armse(summary, out / "fig5_armse.png")
+    print(f"wrote {out / 'summary.json'}, {figure}")
     return 0

@@ -1,0 +1,175 @@
+"""FastSLAM 2.0, EM-FastSLAM and MBLCC-FastSLAM for one robot (seed 003, §§2–3).
+
+One sensor sweep (:func:`sweep`) follows the seed's steps in order:
+
+1. predict each particle's pose Gaussian through the controls since the last sweep;
+2. build FastSLAM 2.0's proposal by an EKF update of that Gaussian with every re-observed
+   landmark, and draw each particle's pose from it;
+3. weight by eq. 3 (likelihood × motion prior / proposal), normalise;
+4. EM-FastSLAM only: the attraction-repulsion move (``em``), then eq. 3 again at the moved
+   poses;
+5. resample (systematic) when N_eff < 0.75 N;
+6. update the landmark EKFs from the final poses (eqs. 9–13), MBLCC adding ε Σ_n (μ^n − μ)
+   towards the other robots' best-particle estimates, and start EKFs for new landmarks.
+
+:class:`PointFastSlam` is the thin stateful shell that holds one robot's particles between
+sweeps and implements :class:`~polyslam_env.slam.points.interface.PointSlamBackend`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from polyslam_env.slam.points import particles as pt
+from polyslam_env.slam.points.config import PointSlamConfig
+from polyslam_env.slam.points.em import em_move
+from polyslam_env.slam.points.interface import LandmarkMap, LandmarkMessage, PointMeasurements
+
+Neighbours = tuple[np.ndarray, np.ndarray]  # Σ_n μ^n (m, 2), count (m,) per re-observed landmark
+
+
+def sweep(
+    blocks: Sequence[pt.PoseBlock],
+    active: int,
+    landmarks: pt.LandmarkBlock,
+    log_w: np.ndarray,
+    controls: np.ndarray,
+    meas: PointMeasurements,
+    config: PointSlamConfig,
+    rng: np.random.Generator,
+    neighbours: Neighbours | None = None,
+) -> tuple[np.ndarray, int]:
+    """One FastSLAM step of robot ``active`` on particles whose other pose blocks (robots
+    sharing the map) are resampled along. Returns the new log weights and the index of the
+    particle that had the largest weight before resampling (after it)."""
+    block = blocks[active]
+    noise = np.diag(np.square(config.measurement_sigmas))
+    pt.predict(
+        block,
+        np.asarray(controls, float).reshape(-1, 2),
+        config.control_sigmas,
+        config.dt,
+        config.wheelbase,
+    )
+    known = np.array([int(i) in landmarks.slots for i in meas.ids], dtype=bool)
+    slots = landmarks.slots_of(meas.ids[known])
+    z_known = meas.z[known]
+    lm_means, lm_covs = landmarks.means[:, slots], landmarks.covs[:, slots]
+
+    prior = (block.poses, block.covs)
+    prop = pt.proposal(*prior, lm_means, lm_covs, z_known, noise) if known.any() else prior
+    x = pt.sample(rng, *prop)
+    weights = pt.normalise(log_w + pt.log_weight(x, prior, prop, lm_means, lm_covs, z_known, noise))
+    if config.em_move and known.any():
+        moved = em_move(rng, x, np.exp(weights), np.asarray(config.em_mobility))
+        if moved is not x:
+            x = moved
+            inc = pt.log_weight(x, prior, prop, lm_means, lm_covs, z_known, noise)
+            weights = pt.normalise(log_w + inc)
+    block.poses, block.covs = x, np.zeros_like(block.covs)
+
+    best = int(np.argmax(weights))
+    n = len(weights)
+    if pt.effective_size(weights) < config.resample_fraction * n:
+        index = pt.systematic_resample(rng, weights)
+        for b in blocks:
+            b.take(index)
+        landmarks.take(index)
+        weights = np.full(n, -np.log(n))
+        best = int(np.flatnonzero(index == best)[0])
+
+    if known.any():
+        means, covs = pt.update_landmarks(
+            landmarks.means[:, slots],
+            landmarks.covs[:, slots],
+            block.poses,
+            z_known,
+            noise,
+            config.consensus_step,
+            neighbours,
+        )
+        landmarks.means[:, slots], landmarks.covs[:, slots] = means, covs
+    if not known.all():
+        landmarks.add(meas.ids[~known], *pt.init_landmarks(block.poses, meas.z[~known], noise))
+    return weights, best
+
+
+def gather_neighbours(ids: np.ndarray, messages: Sequence[LandmarkMessage]) -> Neighbours:
+    """Σ_n μ^n and the count n for each id in ``ids`` over the messages that carry it."""
+    total = np.zeros((len(ids), 2))
+    count = np.zeros(len(ids))
+    where = {int(i): k for k, i in enumerate(ids)}
+    for msg in messages:
+        for lid, mean in zip(msg.ids, msg.means, strict=True):
+            k = where.get(int(lid))
+            if k is not None:
+                total[k] += mean
+                count[k] += 1.0
+    return total, count
+
+
+class PointFastSlam:
+    """One robot's FastSLAM 2.0 / EM-FastSLAM / MBLCC-FastSLAM, by ``config``'s switches.
+
+    Starts with every particle at ``initial_pose`` (the seed's robots work in one known global
+    frame, which MBLCC's exchange of landmark coordinates needs).
+    """
+
+    def __init__(
+        self,
+        config: PointSlamConfig,
+        initial_pose: np.ndarray,
+        rng: np.random.Generator,
+        robot_id: int = 0,
+    ) -> None:
+        self.config = config
+        self.robot_id = robot_id
+        self._rng = rng
+        n = config.particles
+        self.poses = pt.PoseBlock.at(initial_pose, n)
+        self.map = pt.LandmarkBlock(n)
+        self.log_weights = np.full(n, -np.log(n))
+        self._best = 0
+        self._last_ids = np.zeros(0, dtype=np.int64)
+        self._inbox: list[LandmarkMessage] = []
+
+    def step(self, controls: np.ndarray, measurements: PointMeasurements) -> None:
+        neighbours = None
+        if self._inbox:
+            neighbours = gather_neighbours(
+                np.array([i for i in measurements.ids if int(i) in self.map.slots], np.int64),
+                self._inbox,
+            )
+        self.log_weights, self._best = sweep(
+            [self.poses],
+            0,
+            self.map,
+            self.log_weights,
+            controls,
+            measurements,
+            self.config,
+            self._rng,
+            neighbours,
+        )
+        self._last_ids = measurements.ids.copy()
+        self._inbox = []
+
+    def pose(self) -> tuple[np.ndarray, np.ndarray]:
+        return pt.pose_estimate(self.poses.poses, self.log_weights)
+
+    def landmarks(self) -> LandmarkMap:
+        means, covs = pt.map_estimate(self.map, self.log_weights)
+        return LandmarkMap(np.array(self.map.ids, dtype=np.int64), means, covs)
+
+    def export_message(self) -> LandmarkMessage:
+        slots = self.map.slots_of(self._last_ids)
+        return LandmarkMessage(
+            self.robot_id, self._last_ids.copy(), self.map.means[self._best, slots]
+        )
+
+    def import_messages(self, messages: Sequence[LandmarkMessage]) -> None:
+        """Keep the others' messages for the next step's eq. 12 (with ε = 0, as FastSLAM 2.0
+        and EM-FastSLAM run, its term adds exactly zero: the filters stay independent)."""
+        self._inbox = [m for m in messages if m.sender != self.robot_id]
