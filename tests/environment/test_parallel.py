@@ -405,3 +405,19 @@ def test_gymnasium_make__module_prefixed_id_works_in_a_fresh_interpreter() -> No
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["TeamEnv", "True"]
+
+
+def test_episode__quick_frontier_run_raises_no_runtime_warning() -> None:
+    """No-return beams (inf) must never reach arithmetic: an episode with beams into the open
+    and the frontier policy's own map, with RuntimeWarning as an error."""
+    from policies.base import make_team
+
+    env = parallel_env(map="two_rooms", num_robots=2, max_steps=30)
+    team = make_team("frontier", env)
+    rng = np.random.default_rng(0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        obs, _ = env.reset(seed=0)
+        team.reset(0)
+        while env.agents:
+            obs, *_ = env.step(team.act(obs, rng))
