@@ -15,6 +15,7 @@ imported only when the policy is made (so torch loads only for learned policies)
 from __future__ import annotations
 
 import importlib
+import inspect
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
@@ -197,7 +198,21 @@ def make_policy(name: str, env: Any, agent: str, **kwargs: Any) -> Policy:
     context = PolicyContext.from_env(env, agent)
     if "checkpoint" in kwargs and not getattr(factory, "takes_checkpoint", False):
         raise PolicyError(f"policy {name!r} takes no checkpoint, got {kwargs['checkpoint']!r}")
+    if "checkpoint" not in kwargs and _needs_checkpoint(factory):
+        raise CheckpointError(
+            f"policy {name!r} needs a checkpoint file (checkpoint=...; polyslam: --checkpoint"
+            " FILE, e.g. one written by polyslam train)"
+        )
     return factory(context, **kwargs)
+
+
+def _needs_checkpoint(factory: PolicyFactory) -> bool:
+    """Whether ``factory`` has a ``checkpoint`` parameter without a default."""
+    try:
+        param = inspect.signature(factory).parameters.get("checkpoint")
+    except (TypeError, ValueError):  # a callable without a signature: let it decide
+        return False
+    return param is not None and param.default is inspect.Parameter.empty
 
 
 class TeamPolicy:

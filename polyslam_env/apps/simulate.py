@@ -20,6 +20,7 @@ import numpy as np
 
 from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.comms.exchange import ExchangeStep, RendezvousExchange
+from polyslam_env.core.errors import ConfigError, MapFileError
 from polyslam_env.core.geometry import compose_inverse
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.environment import stages
@@ -138,6 +139,11 @@ def simulate(
     wcfg = world_config or WorldConfig()
     scfg = slam_config or SlamConfig()
     layout = map if isinstance(map, Layout) else load_map(map)
+    if num_robots is not None and num_robots > layout.num_start_poses:
+        raise MapFileError(
+            f"map {layout.name!r}: start_poses has {layout.num_start_poses} poses,"
+            f" num_robots={num_robots} needs one each"
+        )
     controller, num_robots, steps = _motion(layout, wcfg, commands, controller, num_robots, steps)
 
     world = World(layout, wcfg, num_robots, make_rngs(seed))
@@ -208,7 +214,7 @@ def _motion(
         num_robots = num_robots or commands.shape[0]
         steps = steps or commands.shape[1]
         if commands.shape[0] < num_robots or commands.shape[1] < steps:
-            raise ValueError(
+            raise ConfigError(
                 f"commands: shape {commands.shape} is too small for {num_robots} robots"
                 f" × {steps} steps"
             )

@@ -5,13 +5,48 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-#: Column headings of the tables, per section.
+#: The columns of each section's table: (heading, width); the first column of ``env`` is
+#: left-aligned, every other right-aligned. Headings and rows are both laid out by
+#: :func:`_columns` from this one list, so they cannot drift apart; the widths hold medians
+#: up to 999,999.9 and spans up to 99,999.9–999,999.9 (a loaded machine's outliers).
+COLUMNS = {
+    "slam": [
+        ("landmarks", 9),
+        ("step µs", 9),
+        ("IQR", 9),
+        ("min–max", 17),
+        ("solve3 µs", 9),
+        ("× solve3", 8),
+        ("beams", 5),
+    ],
+    "world": [
+        ("robots", 9),
+        ("step µs", 9),
+        ("IQR", 9),
+        ("min–max", 17),
+        ("µs/robot", 9),
+        ("pymunk µs", 9),
+        ("× pymunk", 8),
+    ],
+    "env": [("env", 20), ("steps/s", 9), ("IQR", 9), ("min–max", 17), ("× MPE", 7)],
+}
+#: What follows the columns: the SLAM rows end with their stage timings.
+TAILS = {"slam": "  stages (median µs)", "world": "", "env": ""}
+
+
+def _columns(section: str, cells: list[str]) -> str:
+    """``cells`` laid out in ``section``'s columns (a cell wider than its column pushes the
+    rest right rather than being cut)."""
+    out = []
+    for k, (cell, (_, width)) in enumerate(zip(cells, COLUMNS[section], strict=True)):
+        left = section == "env" and k == 0
+        out.append(f"{cell:<{width}}" if left else f"{cell:>{width}}")
+    return " ".join(out)
+
+
 HEADERS = {
-    "slam": f"{'landmarks':>9} {'step µs':>9} {'IQR':>7} {'min–max':>15} {'solve3 µs':>9}"
-    f" {'× solve3':>8} {'beams':>5}  stages (median µs)",
-    "world": f"{'robots':>9} {'step µs':>9} {'IQR':>7} {'min–max':>15} {'µs/robot':>9}"
-    f" {'pymunk µs':>9} {'× pymunk':>8}",
-    "env": f"{'env':<20} {'steps/s':>9} {'IQR':>7} {'min–max':>15} {'× MPE':>7}",
+    section: _columns(section, [heading for heading, _ in columns]) + TAILS[section]
+    for section, columns in COLUMNS.items()
 }
 TITLES = {
     "slam": "SLAM step per robot vs landmarks",
@@ -76,27 +111,36 @@ class _Printer:
         print(FORMATTERS[section](row), flush=True)
 
 
-def _spread(s: dict[str, float], digits: int = 1) -> str:
-    span = f"{s['min']:.{digits}f}–{s['max']:.{digits}f}"
-    return f"{s['iqr']:>7.{digits}f} {span:>15}"
+def _spread(s: dict[str, float], digits: int = 1) -> list[str]:
+    """The IQR and min–max cells of a figure's statistics."""
+    return [f"{s['iqr']:.{digits}f}", f"{s['min']:.{digits}f}–{s['max']:.{digits}f}"]
 
 
 def _slam_row(r: dict[str, Any]) -> str:
     s = r["step_us"]
     stages = "  ".join(f"{k} {v:.0f}" for k, v in r["stages_us"].items())
-    return (
-        f"{r['landmarks']:>9} {s['median']:>9.1f} {_spread(s)}"
-        f" {r['reference_solve3_us']['median']:>9.2f} {r['ratio_to_solve3']:>8.1f}"
-        f" {r['beams_used_per_step']:>5.2f}  {stages}"
-    )
+    cells = [
+        str(r["landmarks"]),
+        f"{s['median']:.1f}",
+        *_spread(s),
+        f"{r['reference_solve3_us']['median']:.2f}",
+        f"{r['ratio_to_solve3']:.1f}",
+        f"{r['beams_used_per_step']:.2f}",
+    ]
+    return _columns("slam", cells) + f"  {stages}"
 
 
 def _world_row(r: dict[str, Any]) -> str:
     s = r["step_us"]
-    return (
-        f"{r['robots']:>9} {s['median']:>9.1f} {_spread(s)} {r['per_robot_us']:>9.1f}"
-        f" {r['reference_pymunk_us']['median']:>9.1f} {r['ratio_to_pymunk']:>8.1f}"
-    )
+    cells = [
+        str(r["robots"]),
+        f"{s['median']:.1f}",
+        *_spread(s),
+        f"{r['per_robot_us']:.1f}",
+        f"{r['reference_pymunk_us']['median']:.1f}",
+        f"{r['ratio_to_pymunk']:.1f}",
+    ]
+    return _columns("world", cells)
 
 
 def _env_row(r: dict[str, Any]) -> str:
@@ -104,7 +148,7 @@ def _env_row(r: dict[str, Any]) -> str:
         return f"{r['label']:<20} {'not installed':>9}"
     s = r["steps_per_s"]
     ratio = r.get("ratio_to_mpe")
-    row = f"{r['label']:<20} {s['median']:>9.1f} {_spread(s)} {_opt(ratio):>7}"
+    row = _columns("env", [r["label"], f"{s['median']:.1f}", *_spread(s), _opt(ratio)])
     if "machine_speedup" in r:  # the vectorised row: what the machine allows in parallel
         row += (
             f"   ({r['processes']} processes of small numpy work run"

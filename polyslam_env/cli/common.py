@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
+
+from polyslam_env.core.errors import OutputError
 
 
 def fmt(value: float) -> str:
@@ -26,6 +29,34 @@ def format_table(
     for k in keys:
         lines.append(f"{k:<{width}}" + "".join(f"{fmt(float(r[k])):>12}" for r in rows))
     return "\n".join(lines)
+
+
+def agent_label(index: int) -> str:
+    """A robot's name in every table and metrics file: the env's agent name ``robot_<i>``."""
+    return f"robot_{index}"
+
+
+def check_output_folder(path: str | Path, flag: str) -> Path:
+    """``path`` if it is, or can become, a folder; else :class:`OutputError` before any work
+    (a regular file at ``path`` or among its parents)."""
+    path = Path(path)
+    for p in (path, *path.parents):
+        if p.exists():
+            if not p.is_dir():
+                where = "is a file" if p == path else f"is under {p}, which is a file"
+                raise OutputError(f"{flag}: {path} {where}, expected a folder")
+            break
+    return path
+
+
+def check_output_file(path: str | Path, flag: str) -> Path:
+    """``path`` if a file can be written there; else :class:`OutputError` before any work
+    (a folder at ``path``, or a regular file among its parents)."""
+    path = Path(path)
+    if path.is_dir():
+        raise OutputError(f"{flag}: {path} is a folder, expected a file name")
+    check_output_folder(path.parent, flag)
+    return path
 
 
 def show_progress(quiet: bool = False) -> bool:

@@ -8,8 +8,8 @@ import io
 from pathlib import Path
 from typing import Any
 
-from polyslam_env.cli.common import fmt, progress_bar
-from polyslam_env.cli.run import add_env_arguments, env_config, policy_kwargs
+from polyslam_env.cli.common import check_output_file, fmt, progress_bar
+from polyslam_env.cli.run import add_env_arguments, env_config, explain_choices, policy_kwargs
 
 
 def register(sub: Any) -> None:
@@ -38,10 +38,14 @@ def run(args: argparse.Namespace) -> int:
     from polyslam_env.core.io import write_json
     from polyslam_env.environment.parallel import parallel_env
 
+    for flag in ("json", "csv", "plot"):
+        if getattr(args, flag):
+            check_output_file(getattr(args, flag), f"--{flag}")
     cfg = env_config(args)
     kwargs = policy_kwargs(args)
     probe = parallel_env(cfg)  # fail here, in one line, on a bad map or policy/env mismatch
     make_team(args.policy, probe, **kwargs)
+    explain_choices(args, cfg)
     probe.close()
     seeds = [args.seed + k for k in range(args.episodes)]
     workers = args.workers or min(2, args.episodes)

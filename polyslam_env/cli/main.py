@@ -45,6 +45,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         value = getattr(args, flag, None)
         if value is not None and value < 1:
             parser.error(f"--{flag}: must be >= 1, got {value}")
+    seed = getattr(args, "seed", None)
+    if seed is not None and seed < 0:
+        parser.error(f"--seed: must be >= 0, got {seed}")
     try:
         return int(args.func(args))
     except (PolyslamError, FileNotFoundError) as err:

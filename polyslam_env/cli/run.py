@@ -3,19 +3,32 @@
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 from pathlib import Path
 from typing import Any
 
-from polyslam_env.cli.common import fmt, format_table, progress_bar
+from polyslam_env.cli.common import (
+    check_output_file,
+    check_output_folder,
+    fmt,
+    format_table,
+    progress_bar,
+)
+from polyslam_env.core.errors import DisplayError
 
 #: With no --map and no --config: the map of each policy's default run (``paper`` replays the
-#: paper paths on the paper map; the others explore the office, which frontier covers to 95 %
-#: in about 100–140 steps with 3 robots).
+#: paper paths on the paper map, and says so; the others explore the office, which frontier
+#: covers to 95 % in about 100–140 steps with 3 robots).
 DEFAULT_MAP = {"paper": "paper"}
 FALLBACK_MAP = "office"
 #: With no --steps and no --config: the paper paths are 200 steps long.
 DEFAULT_STEPS = {"paper": 200}
 FALLBACK_STEPS = 400
+#: Policies that replay fixed paths: their episodes must not end early at the coverage target
+#: (the paper's paths cover the whole paper map before r2 and r3 meet), so ``run`` and
+#: ``evaluate`` set ``coverage_target=None`` for them (and say so).
+REPLAYS_PATHS = ("paper",)
 
 
 def add_env_arguments(parser: argparse.ArgumentParser) -> None:
@@ -45,7 +58,21 @@ def env_config(args: argparse.Namespace) -> Any:
         overrides["max_steps"] = args.steps
     elif not args.config:
         overrides["max_steps"] = DEFAULT_STEPS.get(args.policy, FALLBACK_STEPS)
+    if args.policy in REPLAYS_PATHS:
+        overrides["coverage_target"] = None
     return base.replace(**overrides)
+
+
+def explain_choices(args: argparse.Namespace, cfg: Any) -> None:
+    """Say what the policy chose that the user did not ask for (stderr, one line)."""
+    if args.policy not in REPLAYS_PATHS:
+        return
+    chosen = "" if args.map or args.config else f"map {cfg.map!r} (its paths' map), "
+    print(
+        f"policy {args.policy!r} replays fixed paths: {chosen}{cfg.max_steps} steps,"
+        " no end at a coverage target (the paths play to their end)",
+        file=sys.stderr,
+    )
 
 
 def policy_kwargs(args: argparse.Namespace) -> dict[str, Any]:
@@ -84,7 +111,7 @@ def print_results(result: Any, title: str) -> None:
     names = list(result.robots)
     rows = [result.robots[a] for a in names]
     print(title)
-    print(format_table(rows, ROBOT_METRIC_KEYS, [a.replace("robot_", "r") for a in names]))
+    print(format_table(rows, ROBOT_METRIC_KEYS, names))
     print("team: " + ", ".join(f"{k} {_team_value(v)}" for k, v in result.team.items()))
 
 
@@ -98,12 +125,19 @@ def run(args: argparse.Namespace) -> int:
     from polyslam_env.apps.rollout import run_episode
     from polyslam_env.core.io import write_json
     from polyslam_env.environment.parallel import parallel_env
-    from polyslam_env.render.renderer import Renderer, save_video
+    from polyslam_env.render.renderer import Renderer, check_video_path, save_video
 
+    out = check_output_folder(args.out, "--out")
+    if args.video:
+        check_video_path(args.video)
+        check_output_file(args.video, "--video")
+    if args.render:
+        check_display()
     cfg = env_config(args)
     kwargs = policy_kwargs(args)
     env = parallel_env(cfg, render_mode="human" if args.render else None)
     team = make_team(args.policy, env, **kwargs)
+    explain_choices(args, cfg)
     frames: list[Any] = []
     pictures: list[Renderer] = []
 
@@ -119,7 +153,6 @@ def run(args: argparse.Namespace) -> int:
             result = run_episode(env, team, args.seed, on_step)
         finally:
             env.close()
-    out = Path(args.out)
     print_results(result, f"policy {args.policy!r}, map {cfg.map!r}, seed {args.seed}:")
     data = {"policy": args.policy, "map": cfg.map, "config": cfg.to_dict(), **result.to_dict()}
     write_json(out / "metrics.json", data)
@@ -131,6 +164,18 @@ def run(args: argparse.Namespace) -> int:
         renderer.close()
     print("wrote " + ", ".join(written))
     return 0
+
+
+def check_display() -> None:
+    """--render needs a display: on a machine without one (no DISPLAY or WAYLAND_DISPLAY on
+    Linux, and no SDL_VIDEODRIVER chosen) say how to get the frames instead."""
+    if not sys.platform.startswith("linux") or os.environ.get("SDL_VIDEODRIVER"):
+        return
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise DisplayError(
+            "--render: no display here (DISPLAY is not set); save the frames instead with"
+            " --video out.gif (or set SDL_VIDEODRIVER to draw to another video driver)"
+        )
 
 
 def _picture(env: Any, cache: list[Any]) -> Any:  # (H, W, 3) uint8

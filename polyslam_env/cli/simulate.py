@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import Any
 
-from polyslam_env.cli.common import format_table, progress_bar
+from polyslam_env.cli.common import agent_label, check_output_folder, format_table, progress_bar
 
 KEYS = (
     "nees",
@@ -49,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from polyslam_env.slam.config import SlamConfig
     from polyslam_env.world.config import WorldConfig
 
+    out = check_output_folder(args.out, "--out")
     world_cfg = WorldConfig.from_yaml(args.world_config) if args.world_config else WorldConfig()
     slam_cfg = SlamConfig.from_yaml(args.slam_config) if args.slam_config else SlamConfig()
     with progress_bar(args.steps, "simulate", "step", args.quiet, leave=False) as bar:
@@ -62,10 +62,9 @@ def run(args: argparse.Namespace) -> int:
             progress=lambda k: bar.update(1),
         )
     rows = result.metrics()
-    names = [f"r{i + 1}" for i in range(len(rows))]
+    names = [agent_label(i) for i in range(len(rows))]
     print(f"map {result.layout.name!r}, {len(rows)} robots, {result.steps} steps, seed {args.seed}")
     print(format_table(rows, KEYS, names))
-    out = Path(args.out)
     write_json(
         out / "metrics.json",
         {

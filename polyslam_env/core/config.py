@@ -61,18 +61,21 @@ class Config:
         try:
             return cls(**kwargs)
         except ConfigError as err:
-            if where and not str(err).startswith(where):
-                raise ConfigError(f"{where}.{err}") from None
+            if where:
+                raise ConfigError(_under(where, str(err))) from None
             raise
 
     @classmethod
     def from_yaml(cls: type[C], path: str | Path, **overrides: Any) -> C:
-        """Load from a YAML file; errors name the file as well as the key."""
+        """Load from a YAML file; errors name the file as well as the key. An empty file (or
+        one holding only comments) means "all defaults", like an empty mapping."""
         path = Path(path)
         try:
             text = path.read_text(encoding="utf-8")
         except OSError as err:
             raise ConfigError(f"{path}: cannot read config file ({err.strerror})") from None
+        except UnicodeDecodeError:
+            raise ConfigError(f"{path}: not a YAML text file (not UTF-8 text)") from None
         try:
             data = yaml.safe_load(text)
         except yaml.YAMLError as err:
@@ -123,6 +126,18 @@ def check_choice(name: str, value: str, choices: tuple[str, ...]) -> None:
 # -- internals ------------------------------------------------------------------------------
 def _label(where: str, cls: type) -> str:
     return where or cls.__name__
+
+
+def _under(where: str, message: str) -> str:
+    """``message`` (which a nested ``validate`` may start with its own section name, e.g.
+    ``range_sensor.max_range: ...``) with the full dotted path ``where`` in front, once:
+    ``world.range_sensor.max_range: ...``, not ``world.range_sensor.range_sensor.max_range``."""
+    parts = where.split(".")
+    for k in range(len(parts)):
+        tail = ".".join(parts[k:])
+        if message.startswith((f"{tail}.", f"{tail}:", f"{tail}[")):
+            return ".".join([*parts[:k], message])
+    return f"{where}.{message}"
 
 
 def _dotted(where: str, name: str) -> str:

@@ -13,3 +13,13 @@ class ConfigError(PolyslamError, ValueError):
 
 class MapFileError(PolyslamError, ValueError):
     """A map file (or map data) does not follow the documented schema."""
+
+
+class OutputError(PolyslamError, ValueError):
+    """An output cannot be written where asked: a folder where a file is needed, a path under
+    a regular file, an unknown video extension, or the system refusing the write (full disk,
+    permissions)."""
+
+
+class DisplayError(PolyslamError, RuntimeError):
+    """No window can be opened for ``render_mode="human"`` (e.g. a headless machine)."""

@@ -129,7 +129,7 @@ class EnvConfig(Config):
     reward: RewardConfig = field(default_factory=RewardConfig)
     observation: ObservationConfig = field(default_factory=ObservationConfig)
     action: ActionConfig = field(default_factory=ActionConfig)
-    coverage_target: float = 0.95  # team coverage that terminates the episode
+    coverage_target: float | None = 0.95  # team coverage that terminates; None: never
     coverage_resolution: float = 0.1  # m, cell side of the coverage grid
     faults: tuple[tuple[int, int], ...] = ()  # (robot, step): robot fails at that env step
 
@@ -174,7 +174,8 @@ class EnvConfig(Config):
             raise ConfigError(f"num_robots: must be in 1..64, got {self.num_robots!r}")
         if self.max_steps < 1:
             raise ConfigError(f"max_steps: must be >= 1, got {self.max_steps!r}")
-        check_range("coverage_target", self.coverage_target, 0.0, 1.0)
+        if self.coverage_target is not None:
+            check_range("coverage_target", self.coverage_target, 0.0, 1.0)
         check_positive("coverage_resolution", self.coverage_resolution)
         self._validate_faults()
 
@@ -187,6 +188,11 @@ class EnvConfig(Config):
                 )
             if step < 1:
                 raise ConfigError(f"faults[{i}]: step must be >= 1, got {step!r}")
+            if step > self.max_steps:
+                raise ConfigError(
+                    f"faults[{i}]: step {step} is beyond max_steps={self.max_steps};"
+                    " the fault would never happen"
+                )
             if robot in seen:
                 raise ConfigError(f"faults[{i}]: robot {robot} fails more than once")
             seen.add(robot)
@@ -195,7 +201,19 @@ class EnvConfig(Config):
 def resolve_config(
     config: EnvConfig | Mapping[str, Any] | str | Path | None = None, **overrides: Any
 ) -> EnvConfig:
-    """One validated :class:`EnvConfig` from any accepted form plus ``a__b=value`` overrides."""
+    """One validated :class:`EnvConfig` from any accepted form plus ``a__b=value`` overrides.
+
+    ``max_cycles`` (PettingZoo's usual name) is accepted as an alias of ``max_steps``; giving
+    both with different values is a :class:`ConfigError`.
+    """
+    if "max_cycles" in overrides:
+        cycles = overrides.pop("max_cycles")
+        steps = overrides.setdefault("max_steps", cycles)
+        if steps != cycles:
+            raise ConfigError(
+                f"max_cycles: an alias of max_steps, but max_cycles={cycles!r} and"
+                f" max_steps={steps!r}; give one of them"
+            )
     if config is None:
         base = EnvConfig()
     elif isinstance(config, EnvConfig):

@@ -60,10 +60,10 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     ## Action Space
     ``continuous``: ``Box([v_lo, −ω_max], [v_max, ω_max], float32)`` with ``v_lo = −v_max``
     (or 0 without reverse), units m/s and rad/s. Out-of-range values are **clipped** to the
-    limits; NaN/inf raise ``ValueError`` naming the agent. ``discrete``: ``Discrete(K)``, action
-    ``a`` drives ``action.discrete[a] · (v_max, ω_max)``; an index outside ``0..K−1`` raises.
-    Actions for agents that already left are ignored; an unknown agent name raises
-    ``KeyError``, as does a missing action for a live agent.
+    limits; NaN/inf or complex values raise ``ValueError`` naming the agent. ``discrete``:
+    ``Discrete(K)``, action ``a`` drives ``action.discrete[a] · (v_max, ω_max)``; an index
+    outside ``0..K−1`` raises. Actions for agents that already left are ignored; an unknown
+    agent name raises ``KeyError``, as does a missing action for a live agent.
 
     ## Observation Space
     Only on-board knowledge, float32, all values in [−1, 1]. ``vector`` mode, a flat ``Box``:
@@ -92,7 +92,8 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     gets the mean over the robots that acted this step.
 
     ## Episode End
-    Termination for all when the team coverage reaches ``coverage_target``; truncation for all
+    Termination for all when the team coverage reaches ``coverage_target`` (``None``: never,
+    the episode runs to ``max_steps``, e.g. to replay fixed paths); truncation for all
     at ``max_steps``. A fault ``(robot, step)`` disables the robot at the end of env step
     ``step``: it is terminated and leaves ``agents``, stays as an obstacle, and the others go
     on. At an agent's last step ``infos[agent]`` also holds ``"metrics"`` (per robot: nees,
@@ -103,9 +104,11 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     ## Arguments
     ``parallel_env(config=None, render_mode=None, **overrides)``: ``config`` an
     :class:`~polyslam_env.environment.config.EnvConfig`, a dict or a YAML path; overrides use ``__``
-    for nested keys (``reward__coverage=2.0``). ``render_mode`` is ``"human"``,
-    ``"rgb_array"`` or None. ``reset(seed)`` makes the episode bit-identical for a seed; a
-    reset without seed after a seeded one continues a seeded sequence of episodes.
+    for nested keys (``reward__coverage=2.0``); ``max_cycles`` (PettingZoo's name) is an alias
+    of ``max_steps``. ``render_mode`` is ``"human"``, ``"rgb_array"`` or None. ``reset(seed)``
+    makes the episode bit-identical for a seed (an integer >= 0; anything else raises
+    ``TypeError``/``ValueError`` naming ``seed``); a reset without seed after a seeded one
+    continues a seeded sequence of episodes.
 
     ## Version History
     * v0: initial version.
@@ -211,6 +214,10 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     def _episode_seed(self, seed: int | None) -> int | None:
         """The seed of this episode: ``seed``, or the next of a seeded sequence, or None."""
         if seed is not None:
+            if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+                raise TypeError(f"seed: expected a non-negative integer or None, got {seed!r}")
+            if seed < 0:
+                raise ValueError(f"seed: must be >= 0, got {seed}")
             self._seeder = np.random.default_rng(seed)
             return seed
         if self._seeder is not None:
@@ -290,6 +297,8 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         a = np.asarray(action)
         if not np.issubdtype(a.dtype, np.number):
             raise ValueError(f"action of {agent}: expected numbers, got {action!r}")
+        if np.iscomplexobj(a):
+            raise ValueError(f"action of {agent}: expected real numbers, got {action!r}")
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action of {agent}: not finite, got {action!r}")
         if self.config.action.mode == "discrete":

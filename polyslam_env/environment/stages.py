@@ -370,9 +370,10 @@ def fail_robots(
 def done(
     state: EpisodeState, config: EnvConfig, acting: Mapping[str, int], failed: set[int]
 ) -> tuple[dict[str, bool], dict[str, bool]]:
-    """Coverage target → all terminated; failed robots → terminated; max_steps → all
-    truncated."""
-    reached = state.coverage.coverage >= config.coverage_target
+    """Coverage target (unless None) → all terminated; failed robots → terminated;
+    max_steps → all truncated."""
+    target = config.coverage_target
+    reached = target is not None and state.coverage.coverage >= target
     truncated = state.step_count >= config.max_steps
     terminations = {agent: bool(reached or i in failed) for agent, i in acting.items()}
     truncations = dict.fromkeys(acting, bool(truncated))

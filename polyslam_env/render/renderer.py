@@ -24,6 +24,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from polyslam_env.core.errors import DisplayError, OutputError
+from polyslam_env.core.io import ordinary_permissions
 from polyslam_env.render.state import RenderState
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
@@ -272,9 +274,9 @@ class Renderer:
                 pg.display.init()
                 self._window = pg.display.set_mode((self.width, self.height))
             except pg.error as e:
-                raise RuntimeError(
+                raise DisplayError(
                     f"cannot open a pygame window ({e}); on a headless machine use "
-                    "render_mode='rgb_array' or set SDL_VIDEODRIVER=dummy"
+                    "render_mode='rgb_array' (polyslam run: --video out.gif instead of --render)"
                 ) from e
             pg.display.set_caption(f"polyslam: {self.layout.name}")
             self._clock = pg.time.Clock()
@@ -553,18 +555,19 @@ def save_video(frames: Sequence[np.ndarray], path: str | Path, fps: float = 10) 
     Single-agent (Gymnasium wrapper) users can instead record with Gymnasium's own wrapper,
     which needs ``moviepy``::
 
-        env = gymnasium.make("polyslam/Polyslam-v0", render_mode="rgb_array")
+        env = gymnasium.make("polyslam/Team-v0", render_mode="rgb_array")
         env = gymnasium.wrappers.RecordVideo(env, "videos", episode_trigger=lambda e: True)
     """
-    path = Path(path)
+    path = check_video_path(path)
     array = _check_frames(frames)
     if not fps > 0:
         raise ValueError(f"fps must be > 0, got {fps}")
     suffix = path.suffix.lower()
-    if not suffix:
-        raise ValueError(f"video path {str(path)!r} needs an extension such as .gif or .mp4")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=suffix)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=suffix)
+    except OSError as err:
+        raise OutputError(f"{path}: cannot write ({err.strerror or err})") from None
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -572,10 +575,32 @@ def save_video(frames: Sequence[np.ndarray], path: str | Path, fps: float = 10) 
             _write_gif(array, tmp, fps)
         else:
             _write_with_imageio(array, tmp, fps)
+        ordinary_permissions(tmp)  # mkstemp made it 0600
         os.replace(tmp, path)
+    except OSError as err:
+        tmp.unlink(missing_ok=True)
+        raise OutputError(f"{path}: cannot write ({err.strerror or err})") from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    return path
+
+
+#: Extensions :func:`save_video` writes: GIF with Pillow, the others with imageio's ffmpeg.
+VIDEO_SUFFIXES = (".gif", ".mp4", ".webm", ".avi", ".mkv", ".mov")
+
+
+def check_video_path(path: str | Path) -> Path:
+    """``path`` as a Path if its extension is one :func:`save_video` writes, else
+    :class:`~polyslam_env.core.errors.OutputError` (before any frame is drawn)."""
+    path = Path(path)
+    if path.suffix.lower() not in VIDEO_SUFFIXES:
+        got = f"{path.suffix!r}" if path.suffix else "no extension"
+        raise OutputError(
+            f"{path}: unknown video extension ({got}); use one of {', '.join(VIDEO_SUFFIXES)}"
+        )
+    if path.is_dir():
+        raise OutputError(f"{path}: is a folder, expected a file name")
     return path
 
 

@@ -12,6 +12,9 @@ Schema (YAML or JSON, metres and radians)::
       - [0.5, 0.5, 0.0]
 
 Any other top-level key is an error (a misspelt ``start_pose`` must not be silently ignored).
+So are a zero-length wall segment (two equal consecutive points), a coordinate or radius
+beyond :data:`MAX_COORDINATE` (1,000 m: a typo such as ``40000`` for ``4.0`` would otherwise
+build a world the coverage grid cannot hold) and a closed polyline that crosses itself.
 Every error names the file and the field, e.g. ``maps/x.yaml: walls[1]: a polyline needs at
 least 2 points, got 1``.
 """
@@ -31,6 +34,8 @@ from polyslam_env.world.layout import Layout
 
 REQUIRED_KEYS = ("walls", "start_poses")
 OPTIONAL_KEYS = ("name", "pillars")
+#: Largest |coordinate| (and pillar radius) a map may use, in metres.
+MAX_COORDINATE = 1000.0
 #: Clearance a start pose needs from walls, pillars and other robots' start poses (m).
 DEFAULT_START_CLEARANCE = 0.065
 
@@ -93,6 +98,8 @@ def layout_from_dict(
     if not isinstance(walls_raw, list) or not walls_raw:
         raise fail("walls", "expected a non-empty list of polylines")
     walls = tuple(_points(w, f"walls[{i}]", 2, fail, min_count=2) for i, w in enumerate(walls_raw))
+    for i, wall in enumerate(walls):
+        _check_polyline(wall, f"walls[{i}]", fail)
 
     pillars_raw = data.get("pillars") or []
     if not isinstance(pillars_raw, list):
@@ -147,8 +154,60 @@ def _points(raw: Any, field: str, dim: int, fail: Any, *, min_count: int) -> np.
                 raise fail(f"{field}[{i}][{j}]", f"expected a number, got {v!r}")
             if not math.isfinite(v):
                 raise fail(f"{field}[{i}][{j}]", f"must be finite, got {v!r}")
+            if abs(v) > MAX_COORDINATE and not (dim == 3 and j == 2 and field == "start_poses"):
+                raise fail(
+                    f"{field}[{i}][{j}]",
+                    f"{v!r} is beyond the limit of ±{MAX_COORDINATE:g} m",
+                )
             out[i, j] = float(v)
     return out
+
+
+def _check_polyline(wall: np.ndarray, field: str, fail: Any) -> None:
+    """No zero-length segment; a closed polyline (first == last) must not cross itself."""
+    steps = np.hypot(*np.diff(wall, axis=0).T)  # (k-1,)
+    for j in np.flatnonzero(steps == 0):
+        raise fail(
+            f"{field}[{j + 1}]",
+            f"zero-length segment: ({wall[j, 0]:g}, {wall[j, 1]:g}) repeats the point before",
+        )
+    if len(wall) >= 4 and np.array_equal(wall[0], wall[-1]):
+        crossing = _self_crossing(wall)
+        if crossing is not None:
+            a, b = crossing
+            raise fail(
+                field,
+                f"the closed polyline crosses itself (segment {a} [{a}]→[{a + 1}] and"
+                f" segment {b} [{b}]→[{b + 1}])",
+            )
+
+
+def _self_crossing(ring: np.ndarray) -> tuple[int, int] | None:
+    """The first pair of non-adjacent segments of the closed polyline ``ring`` (k, 2) that
+    touch or cross, or None. Vectorised per segment: O(k²) work, O(k) Python steps."""
+    p, q = ring[:-1], ring[1:]  # (m, 2) segment starts and ends
+    m = len(p)
+    d = q - p  # (m, 2)
+
+    def cross(ax: np.ndarray, ay: np.ndarray, bx: np.ndarray, by: np.ndarray) -> np.ndarray:
+        return ax * by - ay * bx
+
+    for i in range(m - 2):
+        js = np.arange(i + 2, m if i > 0 else m - 1)  # skip neighbours; 0 and m-1 share a point
+        if len(js) == 0:
+            continue
+        o1 = cross(d[i, 0], d[i, 1], p[js, 0] - p[i, 0], p[js, 1] - p[i, 1])
+        o2 = cross(d[i, 0], d[i, 1], q[js, 0] - p[i, 0], q[js, 1] - p[i, 1])
+        o3 = cross(d[js, 0], d[js, 1], p[i, 0] - p[js, 0], p[i, 1] - p[js, 1])
+        o4 = cross(d[js, 0], d[js, 1], q[i, 0] - p[js, 0], q[i, 1] - p[js, 1])
+        hit = (o1 * o2 <= 0) & (o3 * o4 <= 0)
+        # collinear pairs pass the sign test without overlapping: require overlapping boxes
+        lo_i, hi_i = np.minimum(p[i], q[i]), np.maximum(p[i], q[i])
+        lo_j, hi_j = np.minimum(p[js], q[js]), np.maximum(p[js], q[js])
+        hit &= np.all((lo_j <= hi_i) & (lo_i <= hi_j), axis=1)
+        if np.any(hit):
+            return i, int(js[np.argmax(hit)])
+    return None
 
 
 def _check_start_poses(layout: Layout, radius: float, fail: Any) -> None:

@@ -7,6 +7,7 @@ import json
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -166,3 +167,59 @@ def test_benchmark_command__mpe_missing_says_not_installed(
     assert main(["benchmark", "--tiny", "--only", "reference", "--json", str(out)]) == 0
     assert "MPE simple_spread    not installed" in capsys.readouterr().out
     assert json.loads(out.read_text())["reference"]["installed"] is False
+
+
+def _stats(median: float, low: float, high: float) -> dict[str, float]:
+    return {"median": median, "iqr": high - low, "min": low, "max": high}
+
+
+@pytest.mark.parametrize(
+    ("section", "row"),
+    [
+        (
+            "slam",
+            {
+                "landmarks": 300,
+                "step_us": _stats(1234.5, 980.1, 23456.7),
+                "reference_solve3_us": _stats(4.5, 4.0, 5.0),
+                "ratio_to_solve3": 274.3,
+                "beams_used_per_step": 5.0,
+                "stages_us": {"predict": 40.0},
+            },
+        ),
+        (
+            "world",
+            {
+                "robots": 32,
+                "step_us": _stats(12345.6, 2500.0, 150000.2),
+                "per_robot_us": 385.8,
+                "reference_pymunk_us": _stats(19.0, 18.0, 20.0),
+                "ratio_to_pymunk": 649.8,
+            },
+        ),
+        (
+            "env",
+            {
+                "label": "MPE simple_spread",
+                "installed": True,
+                "steps_per_s": _stats(1862.0, 504.5, 13219.4),
+                "ratio_to_mpe": None,
+            },
+        ),
+    ],
+)
+def test_benchmark_tables__header_and_rows_share_column_edges(
+    section: str, row: dict[str, Any]
+) -> None:
+    """Every column's right edge (left edge for the env label) is the same in the heading
+    and in a row with a loaded machine's wide figures."""
+    from polyslam_env.cli.benchmark import COLUMNS, FORMATTERS, HEADERS
+
+    header, line = HEADERS[section], FORMATTERS[section](row)
+    edge = -1
+    for k, (_, width) in enumerate(COLUMNS[section]):
+        edge += width + (1 if k else 0)
+        if section == "env" and k == 0:
+            continue
+        for text in (header, line):
+            assert text[edge] != " " and text[edge + 1 : edge + 2] in (" ", ""), (text, edge)

@@ -29,9 +29,9 @@ def test_simulate__writes_metrics_and_picture(
     )
     assert code == 0
     out = capsys.readouterr().out
-    assert "nu_mean" in out and "r2" in out
+    assert "nu_mean" in out and "robot_1" in out
     data = json.loads((tmp_path / "metrics.json").read_text())
-    assert set(data["robots"]) == {"r1", "r2"}
+    assert set(data["robots"]) == {"robot_0", "robot_1"}
     assert data["steps"] == 40
     assert (tmp_path / "maps.png").stat().st_size > 10_000
 
@@ -85,3 +85,44 @@ def test_main__missing_optional_dependency_names_the_extra(
     err = capsys.readouterr().err
     assert code == 2
     assert "needs torch" in err and "polyslam[rl]" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("command", ["run", "evaluate", "simulate"])
+def test_main__negative_seed_exits_2_naming_it(
+    command: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--seed", "-1", "--steps", "1"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--seed: must be >= 0, got -1" in err and "Traceback" not in err
+
+
+def test_simulate__more_robots_than_start_poses_is_a_one_line_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["simulate", "--robots", "10", "--steps", "2", "--out", str(tmp_path), "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "start_poses" in err and "num_robots=10" in err and len(err.splitlines()) == 1
+
+
+def test_simulate__out_under_a_file_is_a_one_line_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "afile").write_text("x")
+    argv = ["simulate", "--steps", "2", "--out", str(tmp_path / "afile" / "sub"), "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--out" in err and len(err.splitlines()) == 1
+
+
+def test_maps__lists_the_layout_generators_with_their_parameters(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["maps"]) == 0
+    out = capsys.readouterr().out
+    rooms = next(line for line in out.splitlines() if "generator:rooms" in line)
+    cave = next(line for line in out.splitlines() if "generator:cave" in line)
+    assert "min_room_size=1.2" in rooms and "harmonics=7" in cave
+    assert "num_start_poses" not in out  # set by the env from num_robots

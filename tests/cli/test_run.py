@@ -78,3 +78,119 @@ def test_cli__bad_config_key_exits_2_naming_it(
     assert main(["run", "--config", str(config), "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert "bogus_key" in err and len(err.splitlines()) == 1
+
+
+def _one_line_error(capsys: pytest.CaptureFixture[str]) -> str:
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    return err
+
+
+QUICK = ["--map", "two_rooms", "--robots", "1", "--steps", "2", "--quiet"]
+
+
+def test_run__bad_output_paths_exit_2_with_one_line_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    assert main(["run", *QUICK, "--out", str(afile / "sub")]) == 2
+    assert "--out" in _one_line_error(capsys)
+    out = ["--out", str(tmp_path / "o")]
+    assert main(["run", *QUICK, *out, "--video", str(tmp_path / "x.xyz")]) == 2
+    assert "x.xyz" in _one_line_error(capsys)
+    (tmp_path / "v.gif").mkdir()
+    assert main(["run", *QUICK, *out, "--video", str(tmp_path / "v.gif")]) == 2
+    assert "folder" in _one_line_error(capsys)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("flag", ["--json", "--csv", "--plot"])
+def test_evaluate__output_file_that_is_a_folder_exits_2_with_one_line(
+    flag: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["evaluate", "--episodes", "1", *QUICK, flag, str(tmp_path)]) == 2
+    err = _one_line_error(capsys)
+    assert flag in err and "folder" in err
+
+
+def test_run__full_disk_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import errno
+    import os
+
+    def full(*_args: object) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "fsync", full)
+    assert main(["run", *QUICK, "--out", str(tmp_path)]) == 2
+    assert "No space left" in _one_line_error(capsys)
+
+
+def test_run__binary_config_file_exits_2_naming_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    config = tmp_path / "binary.yaml"
+    config.write_bytes(bytes(range(128, 256)))
+    assert main(["run", *QUICK, "--config", str(config), "--out", str(tmp_path)]) == 2
+    assert "binary.yaml" in _one_line_error(capsys)
+
+
+def test_run__empty_config_file_is_all_defaults(tmp_path: Path) -> None:
+    config = tmp_path / "empty.yaml"
+    config.write_text("")
+    assert main(["run", *QUICK, "--config", str(config), "--out", str(tmp_path)]) == 0
+
+
+def test_run__ppo_without_checkpoint_exits_2_with_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["run", "--policy", "ppo", *QUICK, "--out", str(tmp_path)]) == 2
+    err = _one_line_error(capsys)
+    assert "'ppo'" in err and "checkpoint" in err
+    missing = str(tmp_path / "missing.zip")
+    assert main(["run", "--policy", "ppo", "--checkpoint", missing, *QUICK]) == 2
+    assert "missing.zip" in _one_line_error(capsys)
+
+
+def test_run__render_without_a_display_says_to_save_a_video(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for var in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER"):
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setattr("sys.platform", "linux")
+    assert main(["run", *QUICK, "--render", "--out", str(tmp_path)]) == 2
+    assert "--video out.gif" in _one_line_error(capsys)
+
+
+def test_run__video_gif_has_ordinary_permissions(tmp_path: Path) -> None:
+    import os
+
+    video = tmp_path / "ep.gif"
+    assert main(["run", *QUICK, "--out", str(tmp_path), "--video", str(video)]) == 0
+    umask = os.umask(0)
+    os.umask(umask)
+    assert video.stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+def test_run__paper_policy_plays_the_paths_to_their_end_and_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["run", "--policy", "paper", "--quiet", "--out", str(tmp_path)]) == 0
+    err = capsys.readouterr().err
+    assert "map 'paper'" in err and "no end at a coverage target" in err
+    data = json.loads((tmp_path / "metrics.json").read_text())
+    assert data["map"] == "paper" and data["config"]["coverage_target"] is None
+    assert data["steps"] == 200  # the paths' length, not the default coverage target's end
+    assert data["robots"]["robot_1"]["rendezvous"] >= 1  # r2 and r3 meet near the end
+    assert data["robots"]["robot_2"]["rendezvous"] >= 1
+
+
+def test_run__tables_name_robots_as_the_env_does(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["run", *QUICK, "--robots", "2", "--out", str(tmp_path)]) == 0
+    header = capsys.readouterr().out.splitlines()[1]
+    assert header.split() == ["robot_0", "robot_1"]

@@ -83,3 +83,25 @@ def test_slam_config__inconsistent_thresholds_rejected() -> None:
         SlamConfig(rho_min=0.3, rho_max=0.2)
     with pytest.raises(ConfigError, match="eps_z"):
         SlamConfig(eps_z=2)
+
+
+def test_from_dict__nested_validate_error_names_the_path_once() -> None:
+    from polyslam_env.environment.config import EnvConfig
+
+    with pytest.raises(ConfigError) as err:
+        EnvConfig.from_dict({"world": {"range_sensor": {"max_range": -1}}})
+    assert str(err.value).startswith("world.range_sensor.max_range:")
+    assert "range_sensor.range_sensor" not in str(err.value)
+
+
+def test_from_yaml__binary_file_is_a_config_error_naming_it(tmp_path) -> None:
+    path = tmp_path / "binary.yaml"
+    path.write_bytes(bytes(range(128, 256)))
+    with pytest.raises(ConfigError, match="binary.yaml"):
+        WorldConfig.from_yaml(path)
+
+
+def test_from_yaml__empty_file_means_all_defaults(tmp_path) -> None:
+    path = tmp_path / "empty.yaml"
+    path.write_text("# nothing set\n")
+    assert WorldConfig.from_yaml(path) == WorldConfig()

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from polyslam_env.core.errors import OutputError
 from polyslam_env.core.io import write_atomic, write_json
 
 
@@ -34,3 +35,26 @@ def test_write_atomic__interrupt_leaves_old_file_and_no_temp(
         write_atomic(path, "new")
     assert path.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["r.json"]
+
+
+def test_write_atomic__full_disk_is_an_output_error_naming_the_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import errno
+
+    def full(*_args: object) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "fsync", full)
+    with pytest.raises(OutputError, match=r"r\.json.*No space left"):
+        write_atomic(tmp_path / "r.json", "data")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_write_atomic__folder_or_path_under_a_file_is_an_output_error(tmp_path: Path) -> None:
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(OutputError, match="is a folder"):
+        write_atomic(tmp_path / "folder", "data")
+    with pytest.raises(OutputError, match="cannot write"):
+        write_atomic(tmp_path / "file" / "r.json", "data")

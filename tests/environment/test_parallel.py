@@ -340,3 +340,84 @@ def test_render_state__is_built_without_a_renderer() -> None:
     assert state.coverage.dtype == bool and state.coverage.any()
     with pytest.warns(UserWarning, match="render_mode"):
         assert env.render() is None  # no render_mode: nothing drawn
+
+
+# -- PettingZoo / Gymnasium conventions ----------------------------------------------------------
+def test_env__max_cycles_is_an_alias_of_max_steps() -> None:
+    assert parallel_env(map="two_rooms", num_robots=1, max_cycles=7).config.max_steps == 7
+    same = parallel_env(map="two_rooms", num_robots=1, max_cycles=7, max_steps=7)
+    assert same.config.max_steps == 7
+    with pytest.raises(polyslam_env.ConfigError, match="max_cycles"):
+        parallel_env(map="two_rooms", num_robots=1, max_cycles=7, max_steps=8)
+
+
+def test_package__passes_pettingzoo_max_cycles_test_as_a_module() -> None:
+    """PettingZoo's own call: ``mod.parallel_env(max_cycles=4)`` and ``mod.env(max_cycles=4)``."""
+    max_cycles_test(polyslam_env)
+
+
+@pytest.mark.parametrize(
+    ("seed", "error"), [(-1, ValueError), ("abc", TypeError), (1.5, TypeError), (True, TypeError)]
+)
+def test_reset__bad_seed_raises_naming_seed(seed: Any, error: type[Exception]) -> None:
+    env = parallel_env(map="two_rooms", num_robots=1)
+    with pytest.raises(error, match="seed"):
+        env.reset(seed=seed)
+
+
+def test_reset__numpy_integer_seed_is_the_same_episode_as_int() -> None:
+    a, b = (parallel_env(map="two_rooms", num_robots=1) for _ in range(2))
+    np.testing.assert_array_equal(
+        a.reset(seed=5)[0]["robot_0"], b.reset(seed=np.int64(5))[0]["robot_0"]
+    )
+
+
+def test_step__complex_action_raises_naming_the_agent() -> None:
+    env = parallel_env(map="two_rooms", num_robots=2)
+    env.reset(seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no ComplexWarning: the value is refused, not cast
+        with pytest.raises(ValueError, match="robot_1.*real"):
+            env.step({"robot_0": np.zeros(2), "robot_1": np.array([0.1 + 1j, 0.0])})
+
+
+def test_config__fault_beyond_max_steps_is_a_named_error() -> None:
+    with pytest.raises(polyslam_env.ConfigError, match=r"faults\[0\].*max_steps"):
+        parallel_env(map="two_rooms", num_robots=2, max_steps=10, faults=[[1, 11]])
+    parallel_env(map="two_rooms", num_robots=2, max_steps=10, faults=[[1, 10]])  # the last step
+
+
+def test_gymnasium_make__module_prefixed_id_works_in_a_fresh_interpreter() -> None:
+    """``gymnasium.make("polyslam_env:polyslam/Team-v0")`` imports the package itself."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, gymnasium\n"
+        "assert 'polyslam_env' not in sys.modules\n"
+        "env = gymnasium.make('polyslam_env:polyslam/Team-v0', map='two_rooms', num_robots=1)\n"
+        "obs, _ = env.reset(seed=0)\n"
+        "print(type(env.unwrapped).__name__, obs.shape == env.observation_space.shape)\n"
+    )
+    root = str(Path(__file__).resolve().parents[2])
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["TeamEnv", "True"]
+
+
+def test_episode__quick_frontier_run_raises_no_runtime_warning() -> None:
+    """No-return beams (inf) must never reach arithmetic: an episode with beams into the open
+    and the frontier policy's own map, with RuntimeWarning as an error."""
+    from policies.base import make_team
+
+    env = parallel_env(map="two_rooms", num_robots=2, max_steps=30)
+    team = make_team("frontier", env)
+    rng = np.random.default_rng(0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        obs, _ = env.reset(seed=0)
+        team.reset(0)
+        while env.agents:
+            obs, *_ = env.step(team.act(obs, rng))

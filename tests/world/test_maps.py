@@ -203,3 +203,36 @@ def test_paper_map__r1_starts_walled_off_from_r2_and_r3() -> None:
     # and r2, r3 start beyond the 1.5 m camera range of each other.
     assert r1[0] < 2.0 < min(r2[0], r3[0])
     assert np.hypot(*(r2 - r3)) > 1.5
+
+
+@pytest.mark.parametrize(
+    ("change", "field", "words"),
+    [
+        (lambda d: d["walls"][1].insert(1, [3, 0]), r"walls\[1\]\[1\]", "zero-length"),
+        (lambda d: d["walls"].append([[1, 1], [1, 1]]), r"walls\[2\]\[1\]", "zero-length"),
+        (lambda d: d["walls"][0].__setitem__(2, [6, 4000]), r"walls\[0\]\[2\]\[1\]", "1000 m"),
+        (lambda d: d["pillars"].append([-2000, 1, 0.1]), r"pillars\[1\]\[0\]", "1000 m"),
+        (lambda d: d["start_poses"][0].__setitem__(0, 1e6), r"start_poses\[0\]\[0\]", "1000 m"),
+        (
+            # a bow tie: (0,0) → (6,0) → (0,4) → (6,4) → (0,0) crosses itself
+            lambda d: d["walls"].__setitem__(0, [[0, 0], [6, 0], [0, 4], [6, 4], [0, 0]]),
+            r"walls\[0\]",
+            "crosses itself",
+        ),
+    ],
+)
+def test_load_map__degenerate_geometry_is_rejected_naming_file_and_field(
+    tmp_path: Path, change: Any, field: str, words: str
+) -> None:
+    data = copy.deepcopy(VALID)
+    change(data)
+    path = _write(tmp_path, data, "bad.yaml")
+    with pytest.raises(MapFileError, match=rf"bad\.yaml: {field}: .*{words}"):
+        load_map(path)
+
+
+def test_load_map__large_angles_and_a_closed_simple_ring_are_fine(tmp_path: Path) -> None:
+    data = copy.deepcopy(VALID)
+    data["start_poses"][0][2] = 4000.0  # an angle, not a coordinate
+    data["walls"].append([[1, 2.5], [2, 2.5], [2, 3.5], [1, 3.5], [1, 2.5]])  # a closed box
+    assert load_map(_write(tmp_path, data)).num_start_poses == 2
