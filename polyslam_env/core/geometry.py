@@ -28,10 +28,14 @@ def wrap_scalar(angle: float) -> float:
     return math.pi - (math.pi - angle) % (2.0 * math.pi)
 
 
-def wrap_remainder(angle: float) -> float:
-    """One angle wrapped to [−π, π] by the exact IEEE remainder (no rounding of small angles,
-    unlike :func:`wrap_angle`, which maps 1e-20 to 0)."""
-    return math.remainder(angle, 2.0 * math.pi)
+def wrap_remainder(angle: Any) -> Any:
+    """Angles (a float or an array) wrapped to [−π, π] by the exact IEEE remainder (no rounding
+    of small angles, unlike :func:`wrap_angle`, which maps 1e-20 to 0); numpy has no IEEE
+    remainder, so arrays go element by element through :func:`math.remainder`."""
+    if np.ndim(angle) == 0:
+        return math.remainder(angle, 2.0 * math.pi)
+    flat = [math.remainder(a, 2.0 * math.pi) for a in np.asarray(angle, dtype=float).ravel()]
+    return np.array(flat).reshape(np.shape(angle))
 
 
 def symmetric_eigvals3(a: np.ndarray) -> tuple[float, float, float]:

@@ -194,19 +194,18 @@ def record(
     placed with the true poses (beams without return give none).
     """
     poses = world.poses  # (N, 3)
-    true_ranges = sensing.true_ranges  # (N, B)
-    ok = np.isfinite(true_ranges)  # (N, B)
+    ok = np.isfinite(sensing.true_ranges)  # (N, B)
+    phi = poses[:, 2:3] + world.range_sensor.angles  # (N, B)
+    ranges = np.where(ok, sensing.true_ranges, 0.0)  # no inf · cos: no NaN, no warning
+    ends = beam_endpoints(poses[:, None, :2], phi, ranges)  # (N, B, 2)
     for history, i, (est, cov), info in zip(histories, robots, estimates, slam_infos, strict=True):
         if not world.active[i]:
             continue
-        r = true_ranges[i, ok[i]]
-        phi = poses[i, 2] + world.range_sensor.angles[ok[i]]
-        hits = beam_endpoints(poses[i, :2], phi, r)
         history.record(
             poses[i],
             est,
             cov,
-            hits,
+            ends[i][ok[i]],
             None if info is None else info.time_s,
             bool(collided[i]),
             bool(info is not None and info.diverging),
