@@ -111,7 +111,11 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     continues a seeded sequence of episodes.
 
     ## Version History
-    * v0: initial version.
+    * v0: initial version. Later in v0, with episodes unchanged bit for bit: the episode's
+      internals moved from env attributes (``env.world``, ``env.coverage``, ``env.slams``,
+      ``env.step_count``) to one :class:`~polyslam_env.environment.state.EpisodeState`,
+      ``env.episode`` (None before the first reset); ``max_cycles`` is accepted as an alias of
+      ``max_steps``; ``public_facts()`` gives policies the env's static facts.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
