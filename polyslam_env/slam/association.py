@@ -1,7 +1,7 @@
 """Landmark extraction and data association (paper §3.1, SPEC §3).
 
 Each beam point π is compared with every map polynomial by the approximation error ε
-(:func:`approximation_error`); with p* the best polynomial:
+(:func:`nearest_by_error`); with p* the best polynomial:
 
 * ε ≤ ρ_k — good: the beam updates c0 of p* in the EKF;
 * ρ_k < ε ≤ σ_k — the point joins Q_bad(p*); when |Q_bad| > ε_M, p* is refit on Q_bad ∪ R;
@@ -32,42 +32,10 @@ from polyslam_env.slam.fitting import (
     stored_points,
 )
 from polyslam_env.slam.landmarks import LandmarkTable, PolynomialsLike, ShapeRow, pack
-from polyslam_env.slam.polynomial import Polynomial, polyval_rows, value_and_slope
+from polyslam_env.slam.polynomial import Polynomial, value_and_slope
 
 
 # -- approximation error ---------------------------------------------------------------------
-def approximation_error(
-    points: np.ndarray,
-    polys: PolynomialsLike,
-    c0s: Sequence[float] | np.ndarray,
-    squared: bool = False,
-) -> np.ndarray:
-    """(P, n) approximation error of each point by each polynomial (c0 taken from ``c0s``).
-
-    Inside a polynomial's extent: the vertical (variate 1) / horizontal (variate 2) distance
-    |η − p(ξ)|; outside: the distance to the nearer end point. Metres, or the paper's squared
-    form with ``squared=True``. ``polys`` may be packed (the SLAM's hot path).
-    """
-    pts = np.asarray(points, dtype=float).reshape(-1, 2)
-    packed = pack(polys)
-    if len(packed) == 0:
-        return np.zeros((len(pts), 0))
-    coeffs = packed.shape.copy()  # (n, m+1), zero-padded
-    coeffs[:, 0] = np.asarray(c0s, dtype=float)
-    var1 = packed.variate == 1  # (n,)
-    lo, hi = packed.lo, packed.hi
-    xi = np.where(var1, pts[:, :1], pts[:, 1:])  # (P, n)
-    eta = np.where(var1, pts[:, 1:], pts[:, :1])
-    vertical = np.abs(eta - polyval_rows(coeffs, xi.T).T)
-    ends_xi = np.stack([lo, hi], axis=0)  # (2, n)
-    ends_eta = polyval_rows(coeffs, ends_xi.T).T  # (2, n)
-    d_end = np.minimum(
-        np.hypot(xi - ends_xi[0], eta - ends_eta[0]), np.hypot(xi - ends_xi[1], eta - ends_eta[1])
-    )
-    err = np.where((xi >= lo) & (xi <= hi), vertical, d_end)
-    return err**2 if squared else err
-
-
 def nearest_by_error(
     xy: Sequence[Sequence[float]],
     candidates: Sequence[int],
@@ -75,10 +43,14 @@ def nearest_by_error(
     c0s: Sequence[float],
     squared: bool = False,
 ) -> list[tuple[int, float]]:
-    """Per point, (index of the landmark with the smallest approximation error, that error)
-    over ``candidates``, or (−1, inf) without candidates: the argmin of
-    :func:`approximation_error` in plain floats, for a handful of points and landmarks
-    (the SLAM's per-step association), where numpy's per-call cost would dominate."""
+    """Per point, (index of the landmark with the smallest approximation error ε, that ε) over
+    ``candidates``, or (−1, inf) without candidates.
+
+    ε of a point by a polynomial: inside its extent the vertical (variate 1) / horizontal
+    (variate 2) distance |η − p(ξ)|; outside, the distance to the nearer end point; metres, or
+    the paper's squared form with ``squared=True``. In plain floats: the association compares
+    a handful of points with a handful of landmarks per step, and merging a few points with
+    one polynomial, where numpy's per-call cost would dominate."""
     ends = []
     for j in candidates:
         row = rows[j]
@@ -257,22 +229,11 @@ class MapBook:
         rows: Sequence[ShapeRow] | None,
     ) -> list[tuple[int, float]]:
         """(p*, ε) per point over the candidates (all polynomials when None)."""
-        if candidates is not None and rows is not None:
-            xy = [p.xy.tolist() for p in points]
-            return nearest_by_error(xy, candidates.tolist(), rows, list(c0s), squared)
-        xy_all = np.array([p.xy for p in points])  # (P, 2)
-        if candidates is None:
-            err = approximation_error(xy_all, polys, c0s, squared)  # (P, n)
-            index = np.arange(len(polys))
-        else:
-            subset = pack(polys).subset(candidates)
-            err = approximation_error(xy_all, subset, np.asarray(c0s)[candidates], squared)
-            index = candidates
-        out = []
-        for i in range(len(points)):
-            k = int(np.argmin(err[i])) if index.size else -1
-            out.append((int(index[k]), float(err[i, k])) if k >= 0 else (-1, np.inf))
-        return out
+        if rows is None:
+            rows = pack(polys).rows()
+        chosen = range(len(rows)) if candidates is None else candidates.tolist()
+        xy = [p.xy.tolist() for p in points]
+        return nearest_by_error(xy, chosen, rows, list(c0s), squared)
 
     def _add_bad(self, landmark_id: int, point: StoredPoint, result: AssociationResult) -> None:
         """Add to Q_bad; past ε_M points, request (or extend this step's) refit and empty it."""

@@ -66,6 +66,23 @@ class PackedPolynomials:
             self.variate[indices], self.shape[indices], self.lo[indices], self.hi[indices]
         )
 
+    def rows(self) -> list[PlainRow]:
+        """Each polynomial's shape as plain floats (a :class:`ShapeRow`), for the float loops
+        of ``association.nearest_by_error``."""
+        columns = zip(
+            self.variate.tolist(), self.shape, self.lo.tolist(), self.hi.tolist(), strict=True
+        )
+        return [PlainRow(v, _own_order(shape), lo, hi) for v, shape, lo, hi in columns]
+
+
+class PlainRow(NamedTuple):
+    """A polynomial's shape and extent as Python numbers (see :meth:`PackedPolynomials.rows`)."""
+
+    variate: int
+    shape: tuple[float, ...]  # (0, b_1, …, b_m), no zero tail
+    lo: float
+    hi: float
+
 
 PolynomialsLike = Sequence[Polynomial] | PackedPolynomials
 

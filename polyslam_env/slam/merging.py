@@ -24,8 +24,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from polyslam_env.slam.association import approximation_error
+from polyslam_env.slam.association import nearest_by_error
 from polyslam_env.slam.fitting import PointSet, concat, polynomial_points
+from polyslam_env.slam.landmarks import pack
 from polyslam_env.slam.polynomial import Polynomial
 
 _SAMPLES = 64  # samples of p2 used to project it on p's axis
@@ -52,7 +53,7 @@ def merge_gamma(poly: Polynomial, other: Polynomial, a: float, b: float) -> tupl
     """
     m = poly.order
     on_p = poly.equally_spaced(m + 1, a, b)  # (m+1, 2)
-    gamma_p = _rms(approximation_error(on_p, [other], [other.c0])[:, 0])
+    gamma_p = _rms(_errors(on_p, other))
     xi_o = np.linspace(other.lo, other.hi, _SAMPLES)
     samples = other.points_at(xi_o)  # (S, 2)
     xi_s = poly.from_xy(samples)[0]
@@ -60,11 +61,17 @@ def merge_gamma(poly: Polynomial, other: Polynomial, a: float, b: float) -> tupl
     if len(inside) == 0:
         inside = np.arange(_SAMPLES)
     pick = inside[np.unique(np.linspace(0, len(inside) - 1, m + 1).round().astype(int))]
-    gamma_o = _rms(approximation_error(samples[pick], [poly], [poly.c0])[:, 0])
+    gamma_o = _rms(_errors(samples[pick], poly))
     t_p = _tangent(poly, 0.5 * (a + b))
     t_o = _tangent(other, float(xi_o[inside[len(inside) // 2]]))
     angle = float(np.arccos(min(abs(float(t_p @ t_o)), 1.0)))
     return max(gamma_p, gamma_o), angle
+
+
+def _errors(points: np.ndarray, poly: Polynomial) -> np.ndarray:  # (k,)
+    """The approximation error of each point (k, 2) by ``poly`` (``nearest_by_error``)."""
+    rows = pack([poly]).rows()
+    return np.array([eps for _, eps in nearest_by_error(points.tolist(), [0], rows, [poly.c0])])
 
 
 def _rms(values: np.ndarray) -> float:

@@ -16,6 +16,7 @@ exist only so tests can check the fast ones against them:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from math import comb
 from typing import NamedTuple
@@ -32,6 +33,7 @@ from polyslam_env.slam.measurement import (
     REAL_TOL,
     STIFF_TOL,
 )
+from polyslam_env.slam.polynomial import polyval_rows
 
 
 # -- measurement model, vectorised over beams × polynomials ---------------------------------------
@@ -517,3 +519,36 @@ def _joseph(
     B = m_cols @ H.T - K @ R  # (3+n, k)
     new_cov = cov - np.hstack([K, B]) @ np.vstack([PHt.T, K.T])
     return _symmetrise(new_cov)
+
+
+# -- approximation error, vectorised (oracle of association.nearest_by_error) ----------------
+def approximation_error(
+    points: np.ndarray,
+    polys: PolynomialsLike,
+    c0s: Sequence[float] | np.ndarray,
+    squared: bool = False,
+) -> np.ndarray:
+    """(P, n) approximation error of each point by each polynomial (c0 taken from ``c0s``).
+
+    Inside a polynomial's extent: the vertical (variate 1) / horizontal (variate 2) distance
+    |η − p(ξ)|; outside: the distance to the nearer end point. Metres, or the paper's squared
+    form with ``squared=True``. ``polys`` may be packed (the SLAM's hot path).
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    packed = pack(polys)
+    if len(packed) == 0:
+        return np.zeros((len(pts), 0))
+    coeffs = packed.shape.copy()  # (n, m+1), zero-padded
+    coeffs[:, 0] = np.asarray(c0s, dtype=float)
+    var1 = packed.variate == 1  # (n,)
+    lo, hi = packed.lo, packed.hi
+    xi = np.where(var1, pts[:, :1], pts[:, 1:])  # (P, n)
+    eta = np.where(var1, pts[:, 1:], pts[:, :1])
+    vertical = np.abs(eta - polyval_rows(coeffs, xi.T).T)
+    ends_xi = np.stack([lo, hi], axis=0)  # (2, n)
+    ends_eta = polyval_rows(coeffs, ends_xi.T).T  # (2, n)
+    d_end = np.minimum(
+        np.hypot(xi - ends_xi[0], eta - ends_eta[0]), np.hypot(xi - ends_xi[1], eta - ends_eta[1])
+    )
+    err = np.where((xi >= lo) & (xi <= hi), vertical, d_end)
+    return err**2 if squared else err

@@ -9,7 +9,6 @@ from hypothesis import strategies as st
 
 from polyslam_env.slam.association import (
     MapBook,
-    approximation_error,
     fit_cluster,
     nearest_by_error,
     qbad_refit_points,
@@ -24,6 +23,7 @@ from polyslam_env.slam.fitting import (
 from polyslam_env.slam.landmarks import LandmarkTable
 from polyslam_env.slam.polynomial import Polynomial
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
+from tests.slam.reference import approximation_error
 
 
 def point(xy: tuple[float, float] | np.ndarray, beam: int = 0, sigma: float = 0.02) -> StoredPoint:

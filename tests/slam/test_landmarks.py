@@ -10,14 +10,17 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from polyslam_env.slam.association import approximation_error
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.ekf import predict, predict_inplace, spectral_norm_sym
 from polyslam_env.slam.fitting import Fit, StoredPoint
 from polyslam_env.slam.landmarks import LandmarkTable, PackedPolynomials, shape_range
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam, _carry, _median
-from tests.slam.reference import expected_ranges_and_jacobian, ray_intersections
+from tests.slam.reference import (
+    approximation_error,
+    expected_ranges_and_jacobian,
+    ray_intersections,
+)
 
 BEAMS = np.deg2rad([90.0, 45.0, 0.0, -45.0, -90.0])
 
