@@ -16,7 +16,15 @@ from policies.base import TeamPolicy, make_team
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import PolySlamParallelEnv, parallel_env
 
-__all__ = ["EpisodeResult", "evaluate_episode", "run_episode", "summarise"]
+__all__ = [
+    "COMPARED",
+    "EpisodeResult",
+    "compare",
+    "episode_row",
+    "evaluate_episode",
+    "run_episode",
+    "summarise",
+]
 
 
 @dataclass
@@ -117,3 +125,47 @@ def summarise(results: list[EpisodeResult]) -> dict[str, Any]:
             team[key]["reached"] = float(len(values))
     team["steps"] = _spread([float(r.steps) for r in results])
     return {"episodes": len(results), "robots": robots, "team": team}
+
+
+#: The columns of a comparison of policies (``polyslam evaluate --policy a,b``): one value per
+#: episode each (see :func:`episode_row`).
+COMPARED = ("coverage", "steps_to_90", "nu_mean", "completeness", "bytes_sent")
+
+
+def episode_row(result: EpisodeResult) -> dict[str, float | None]:
+    """One episode's values of :data:`COMPARED`: the team coverage and ``steps_to_90`` (None
+    if never reached), the robots' mean ``nu_mean`` and ``completeness`` (NaN when none is
+    finite, e.g. without SLAM) and the bytes all robots sent."""
+
+    def robots(key: str) -> list[float]:
+        values = (m.get(key) for m in result.robots.values())
+        return [float(v) for v in values if v is not None and np.isfinite(v)]
+
+    def mean(values: list[float]) -> float:
+        return float(np.mean(values)) if values else float("nan")
+
+    steps_to_90 = result.team.get("steps_to_90")
+    return {
+        "coverage": float(result.team.get("coverage", float("nan"))),
+        "steps_to_90": None if steps_to_90 is None else float(steps_to_90),
+        "nu_mean": mean(robots("nu_mean")),
+        "completeness": mean(robots("completeness")),
+        "bytes_sent": float(sum(robots("bytes_sent"))),
+    }
+
+
+def compare(by_policy: Mapping[str, list[EpisodeResult]]) -> dict[str, dict[str, dict[str, float]]]:
+    """Per policy and :data:`COMPARED` column: mean, std, min and max over its episodes
+    (``steps_to_90`` over the episodes that reached it: ``reached`` of ``episodes``)."""
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for policy, results in by_policy.items():
+        rows = [episode_row(r) for r in results]
+        stats = {}
+        for key in COMPARED:
+            values = [float(v) for row in rows if (v := row[key]) is not None]
+            stats[key] = _spread(values)
+            if key == "steps_to_90":
+                stats[key]["reached"] = float(len(values))
+                stats[key]["episodes"] = float(len(rows))
+        out[policy] = stats
+    return out

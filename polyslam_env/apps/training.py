@@ -2,16 +2,23 @@
 
 :class:`TrainConfig` is the YAML file (``configs/train_ppo.yaml``): the env config, PPO's
 hyperparameters and the run settings. :func:`train` learns through
-:func:`polyslam_env.environment.vector.make_vec_env`, logs to ``OUT/tb``, writes checkpoints
-``OUT/checkpoints/ppo_<timesteps>_steps.zip`` (periodically, at the end, and on Ctrl-C),
-resumes from the newest one, and compares the policy with the ``random`` policy on a few
-seeded episodes (``OUT/final_eval.json``). Timesteps count robot-steps (one per robot slot
-per env step), as SB3 counts them.
+:func:`polyslam_env.environment.vector.make_vec_env`, logs to ``OUT/tb`` (SB3's scalars plus the
+env's episode metrics under ``polyslam/``), writes checkpoints
+``OUT/checkpoints/ppo_<timesteps>_steps.zip`` atomically (periodically, at the end, on Ctrl-C
+and on SIGTERM), resumes from the newest readable one, and compares the policy with the
+``random`` policy on a few seeded episodes (``OUT/final_eval.json``). One ``OUT`` holds one
+run: a fresh run into a folder with checkpoints is refused. Timesteps count robot-steps (one
+per robot slot per env step), as SB3 counts them.
 """
 
 from __future__ import annotations
 
+import math
+import os
 import re
+import signal
+import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,13 +33,15 @@ from polyslam_env.environment.config import EnvConfig
 __all__ = [
     "PPOConfig",
     "TrainConfig",
+    "TrainingTerminated",
+    "check_run_folder",
     "checkpoints",
     "evaluate_coverage",
     "final_evaluation",
     "train",
 ]
 
-#: Checkpoint file names; SB3's CheckpointCallback writes the same pattern.
+#: Checkpoint file names (the pattern SB3's CheckpointCallback uses).
 CHECKPOINT_PREFIX = "ppo"
 _CHECKPOINT_RE = re.compile(rf"^{CHECKPOINT_PREFIX}_(\d+)_steps\.zip$")
 #: Evaluation episodes use seeds from here on, away from the training seeds.
@@ -132,13 +141,59 @@ def checkpoints(folder: str | Path) -> list[tuple[int, Path]]:
 
 
 def save_checkpoint(model: Any, folder: Path) -> Path:
-    """Save ``model`` as ``ppo_<timesteps>_steps.zip`` (atomically: temp file + rename)."""
+    """Save ``model`` as ``ppo_<timesteps>_steps.zip`` atomically: SB3 writes a temporary file
+    in the same folder, which is flushed to disk and then renamed over the name (a kill or a
+    full disk mid-write leaves the previous checkpoints intact and no partial ``ppo_*.zip``)."""
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{CHECKPOINT_PREFIX}_{model.num_timesteps}_steps.zip"
-    tmp = folder / f".{path.name}.tmp.zip"
-    model.save(tmp)
-    tmp.replace(path)
+    tmp = folder / f".{path.name}.{os.getpid()}.tmp.zip"
+    try:
+        model.save(tmp)
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return path
+
+
+def check_run_folder(out: str | Path, resume: bool) -> None:
+    """One run per output folder: ``--resume`` needs a checkpoint there, a fresh run needs
+    none (it would mix two runs' checkpoints, and ``--resume`` would pick the wrong one)."""
+    ckpt_dir = Path(out) / "checkpoints"
+    found = checkpoints(ckpt_dir)
+    if resume and not found:
+        raise PolyslamError(f"--resume: no checkpoint in {ckpt_dir}")
+    if not resume and found:
+        raise PolyslamError(
+            f"{out}: already holds a training run (checkpoints up to {found[-1][0]} timesteps"
+            " in checkpoints/); continue it with --resume, or train into a new --out folder"
+        )
+
+
+def newest_good_checkpoint(folder: Path) -> tuple[int, Path]:
+    """The newest checkpoint in ``folder`` that loads; damaged newer ones are skipped, and
+    the skip is reported (stderr)."""
+    from policies.base import CheckpointError
+    from policies.ppo import load_checkpoint
+
+    found = checkpoints(folder)
+    skipped = []
+    for steps, path in reversed(found):
+        try:
+            load_checkpoint(path)
+        except CheckpointError as err:
+            skipped.append(str(err))
+            continue
+        for reason in skipped:
+            print(f"--resume: skipped {reason}", file=sys.stderr)
+        if skipped:
+            print(f"--resume: resuming from {path} ({steps} timesteps)", file=sys.stderr)
+        return steps, path
+    raise PolyslamError(
+        f"--resume: no readable checkpoint in {folder} ({len(found)} damaged: {skipped[0]})"
+    )
 
 
 # -- training --------------------------------------------------------------------------------
@@ -168,8 +223,112 @@ def _progress_callback(total: int, start: int, enabled: bool) -> Any:
     return _Bar()
 
 
+class TrainingTerminated(Exception):
+    """Training was stopped by SIGTERM; a checkpoint was saved (``path``)."""
+
+    def __init__(self, path: Path, timesteps: int) -> None:
+        super().__init__(f"terminated (SIGTERM): saved {path} at {timesteps} timesteps")
+        self.path, self.timesteps = path, timesteps
+
+
+def _stop_callback(flag: threading.Event) -> Any:
+    """Stops ``learn`` at the next env step once ``flag`` is set (by the SIGTERM handler)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class _Stop(BaseCallback):
+        def _on_step(self) -> bool:
+            return not flag.is_set()
+
+    return _Stop()
+
+
+def _checkpoint_callback(every: int, folder: Path) -> Any:
+    """Saves with :func:`save_checkpoint` (atomic) whenever the timesteps pass a multiple of
+    ``every`` (counted from zero, so a resumed run keeps the same cadence)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class _Checkpoints(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.next = (self.model.num_timesteps // every + 1) * every
+
+        def _on_step(self) -> bool:
+            if self.model.num_timesteps >= self.next:
+                save_checkpoint(self.model, folder)
+                self.next = (self.model.num_timesteps // every + 1) * every
+            return True
+
+    return _Checkpoints()
+
+
+#: TensorBoard tags of :func:`_metrics_callback` (under ``polyslam/``).
+EPISODE_TAGS = (
+    "team_coverage",
+    "robot_coverage_mean",
+    "robot_coverage_min",
+    "robot_coverage_max",
+    "nu_mean",
+    "completeness",
+    "bytes_sent",
+    "rendezvous",
+    "episodes",
+)
+
+
+def _metrics_callback(num_robots: int) -> Any:
+    """Logs the env's end-of-episode metrics to TensorBoard, per finished team episode.
+
+    Slots ``k·R … k·R+R−1`` are env copy ``k``. A robot's ``infos["metrics"]`` arrive at its
+    last step (a failed robot's earlier); the team episode has ended when all its slots are
+    done, and then ``infos["team"]`` is read from one of them. Values are averaged over the
+    episodes that ended between two log dumps (SB3's ``record_mean``); ``nu_mean`` and
+    ``completeness`` only when finite (they are NaN without SLAM).
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    def finite(values: list[Any]) -> list[float]:
+        return [float(v) for v in values if v is not None and math.isfinite(float(v))]
+
+    class _EpisodeMetrics(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.pending: dict[int, list[dict[str, float]]] = {}
+            self.episodes = 0
+
+        def _on_step(self) -> bool:
+            infos, dones = self.locals["infos"], self.locals["dones"]
+            for k in range(len(infos) // num_robots):
+                slots = range(k * num_robots, (k + 1) * num_robots)
+                pending = self.pending.setdefault(k, [])
+                pending.extend(infos[s]["metrics"] for s in slots if "metrics" in infos[s])
+                if not all(dones[s] for s in slots):
+                    continue
+                team = next((infos[s]["team"] for s in slots if "team" in infos[s]), None)
+                if team is not None:
+                    self._record(team, pending)
+                self.pending[k] = []
+            return True
+
+        def _record(self, team: dict[str, Any], robots: list[dict[str, float]]) -> None:
+            self.episodes += 1
+            rec = self.logger.record_mean
+            rec("polyslam/team_coverage", float(team["coverage"]))
+            coverage = finite([m.get("coverage") for m in robots])
+            if coverage:
+                rec("polyslam/robot_coverage_mean", float(np.mean(coverage)))
+                rec("polyslam/robot_coverage_min", min(coverage))
+                rec("polyslam/robot_coverage_max", max(coverage))
+            for key in ("nu_mean", "completeness"):
+                values = finite([m.get(key) for m in robots])
+                if values:
+                    rec(f"polyslam/{key}", float(np.mean(values)))
+            for key in ("bytes_sent", "rendezvous"):  # team totals
+                rec(f"polyslam/{key}", float(sum(finite([m.get(key) for m in robots]))))
+            self.logger.record("polyslam/episodes", self.episodes)
+
+    return _EpisodeMetrics()
+
+
 def _make_model(cfg: TrainConfig, venv: Any, out: Path, resume: bool) -> Any:
-    """A new PPO, or the newest checkpoint under ``out`` when resuming."""
+    """A new PPO, or the newest readable checkpoint under ``out`` when resuming."""
     from stable_baselines3 import PPO
 
     tb = str(out / "tb")
@@ -177,14 +336,11 @@ def _make_model(cfg: TrainConfig, venv: Any, out: Path, resume: bool) -> Any:
         return PPO(
             "MlpPolicy", venv, seed=cfg.seed, tensorboard_log=tb, verbose=0, **cfg.ppo.sb3_kwargs()
         )
-    found = checkpoints(out / "checkpoints")
-    from policies.ppo import load_checkpoint
-
-    load_checkpoint(found[-1][1])  # clear errors for a damaged file
-    model = PPO.load(found[-1][1], env=venv, device="cpu", tensorboard_log=tb)
+    _, path = newest_good_checkpoint(out / "checkpoints")
+    model = PPO.load(path, env=venv, device="cpu", tensorboard_log=tb)
     if model.observation_space.shape != venv.observation_space.shape:
         raise PolyslamError(
-            f"--resume: {found[-1][1]} expects observations of shape"
+            f"--resume: {path} expects observations of shape"
             f" {model.observation_space.shape}, the configured env gives"
             f" {venv.observation_space.shape}"
         )
@@ -196,42 +352,57 @@ def train(
 ) -> tuple[Any, Path]:
     """Learn until ``cfg.timesteps`` in total; return the model and its last checkpoint.
 
-    On Ctrl-C a checkpoint is saved before ``KeyboardInterrupt`` propagates.
+    On Ctrl-C a checkpoint is saved before ``KeyboardInterrupt`` propagates. On SIGTERM (a
+    cluster scheduler's stop; handled while this runs in the main thread) learning stops at
+    the next env step, a checkpoint is saved and :class:`TrainingTerminated` is raised.
     """
     out = Path(out)
     ckpt_dir = out / "checkpoints"
-    if resume and not checkpoints(ckpt_dir):
-        raise PolyslamError(f"--resume: no checkpoint in {ckpt_dir}")
+    check_run_folder(out, resume)
     import torch
-    from stable_baselines3.common.callbacks import CheckpointCallback
 
     from polyslam_env.environment.vector import make_vec_env
 
     torch.set_num_threads(cfg.torch_threads)
-    venv = make_vec_env(cfg.env, cfg.num_envs, num_cpus=cfg.num_cpus, seed=cfg.seed)
+    terminated = threading.Event()
+    installed, previous = False, None
+    if threading.current_thread() is threading.main_thread():
+        # before the workers are forked (num_cpus > 0), so that a SIGTERM sent to the whole
+        # process group only sets their copy of the flag instead of killing them mid-step
+        previous = signal.signal(signal.SIGTERM, lambda signum, frame: terminated.set())
+        installed = True
     try:
-        model = _make_model(cfg, venv, out, resume)
-        remaining = cfg.timesteps - model.num_timesteps
-        if remaining > 0:
-            callbacks = [
-                CheckpointCallback(
-                    max(cfg.checkpoint_every // cfg.slots, 1),
-                    str(ckpt_dir),
-                    name_prefix=CHECKPOINT_PREFIX,
-                ),
-                _progress_callback(cfg.timesteps, model.num_timesteps, progress),
-            ]
-            try:
-                model.learn(
-                    remaining, callback=callbacks, reset_num_timesteps=not resume, tb_log_name="ppo"
-                )
-            except KeyboardInterrupt:
-                path = save_checkpoint(model, ckpt_dir)
-                print(f"interrupted: saved {path} at {model.num_timesteps} timesteps")
-                raise
-        return model, save_checkpoint(model, ckpt_dir)
+        venv = make_vec_env(cfg.env, cfg.num_envs, num_cpus=cfg.num_cpus, seed=cfg.seed)
+        try:
+            model = _make_model(cfg, venv, out, resume)
+            remaining = cfg.timesteps - model.num_timesteps
+            if remaining > 0:
+                callbacks = [
+                    _stop_callback(terminated),
+                    _checkpoint_callback(cfg.checkpoint_every, ckpt_dir),
+                    _metrics_callback(cfg.env.num_robots),
+                    _progress_callback(cfg.timesteps, model.num_timesteps, progress),
+                ]
+                try:
+                    model.learn(
+                        remaining,
+                        callback=callbacks,
+                        reset_num_timesteps=not resume,
+                        tb_log_name="ppo",
+                    )
+                except KeyboardInterrupt:
+                    path = save_checkpoint(model, ckpt_dir)
+                    print(f"interrupted: saved {path} at {model.num_timesteps} timesteps")
+                    raise
+                if terminated.is_set():
+                    path = save_checkpoint(model, ckpt_dir)
+                    raise TrainingTerminated(path, model.num_timesteps)
+            return model, save_checkpoint(model, ckpt_dir)
+        finally:
+            venv.close()
     finally:
-        venv.close()
+        if installed:
+            signal.signal(signal.SIGTERM, previous)
 
 
 # -- evaluation ------------------------------------------------------------------------------

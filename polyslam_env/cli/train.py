@@ -15,21 +15,36 @@ def register(sub: Any) -> None:
         "train",
         help="train a shared PPO policy for all robots (needs the [rl] extra)",
         description="Train one PPO network that drives every robot on its own observation"
-        " (Stable-Baselines3 through SuperSuit). Writes TensorBoard logs to OUT/tb,"
-        " checkpoints to OUT/checkpoints (periodic, final, and on Ctrl-C), and compares the"
-        " trained policy with random actions in OUT/final_eval.json.",
+        " (Stable-Baselines3 through SuperSuit). Writes TensorBoard logs to OUT/tb (SB3's"
+        " scalars and, per finished episode, polyslam/team_coverage, robot_coverage_mean/min/"
+        "max, nu_mean, completeness, bytes_sent, rendezvous), checkpoints to OUT/checkpoints"
+        " (atomically: periodic, final, on Ctrl-C (exit 130) and on SIGTERM (exit 143)), and"
+        " compares the trained policy with random actions in OUT/final_eval.json. One OUT"
+        " folder holds one run: a fresh run into a folder with checkpoints is refused (exit 2);"
+        " --resume continues it from its newest readable checkpoint.",
     )
     parser.add_argument("--config", default=None, help="training YAML (default: train_ppo.yaml)")
     parser.add_argument("--timesteps", type=int, default=None, help="total timesteps (robot-steps)")
     parser.add_argument("--out", default="out/train", help="output folder (default: out/train)")
-    parser.add_argument("--resume", action="store_true", help="continue from the newest checkpoint")
+    parser.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the run in --out from its newest readable checkpoint (a damaged"
+        " newer one is skipped, and said so)",
+    )
     parser.add_argument("--seed", type=int, default=None, help="seed (default: from the config)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from polyslam_env.apps.training import TrainConfig, final_evaluation, train
+    from polyslam_env.apps.training import (
+        TrainConfig,
+        TrainingTerminated,
+        check_run_folder,
+        final_evaluation,
+        train,
+    )
     from polyslam_env.core.io import write_json
     from polyslam_env.core.resources import configs_dir
 
@@ -41,9 +56,14 @@ def run(args: argparse.Namespace) -> int:
         overrides["seed"] = args.seed
     cfg = TrainConfig.from_yaml(path, **overrides)
     out = Path(args.out)
+    check_run_folder(out, args.resume)  # before train_config.json: never touch another run
     write_json(out / "train_config.json", cfg.to_dict())
     start = time.perf_counter()
-    model, checkpoint = train(cfg, out, resume=args.resume, progress=show_progress(args.quiet))
+    try:
+        model, checkpoint = train(cfg, out, resume=args.resume, progress=show_progress(args.quiet))
+    except TrainingTerminated as stop:
+        print(f"{stop}; continue with --resume", flush=True)
+        return 143  # 128 + SIGTERM, as a shell reports a process that SIGTERM ended
     seconds = time.perf_counter() - start
     print(f"trained to {model.num_timesteps} timesteps in {seconds:.0f} s; saved {checkpoint}")
     if cfg.eval_episodes == 0:

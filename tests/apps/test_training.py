@@ -150,3 +150,108 @@ def test_ppo_policy__missing_corrupt_and_mismatched_checkpoints(tmp_path: Path) 
     with pytest.raises(CheckpointError, match="observation space mismatch") as err:
         make_policy("ppo", other, "robot_0", checkpoint=ckpt)
     assert f"expects shape {d2}" in str(err.value) and f"gives {d3}" in str(err.value)
+
+
+def _base_args(config: Path, out: Path) -> list[str]:
+    return ["train", "--config", str(config), "--out", str(out), "--quiet"]
+
+
+def test_cli_train__sigterm_saves_a_checkpoint_and_exits_143(tmp_path: Path) -> None:
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = _tiny_config(tmp_path, timesteps=1_000_000, eval_episodes=0)
+    out = tmp_path / "out"
+    repo = Path(__file__).resolve().parents[2]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "polyslam_env.cli", *_base_args(path, out)],
+        cwd=repo,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while not checkpoints(out / "checkpoints"):  # a periodic one: it is stepping
+            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr
+            time.sleep(0.1)
+        before = checkpoints(out / "checkpoints")[-1][0]
+        os.kill(proc.pid, signal.SIGTERM)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 143, stderr
+    steps, last = checkpoints(out / "checkpoints")[-1]
+    assert "terminated (SIGTERM)" in stdout and str(last) in stdout and "--resume" in stdout
+    assert steps > before  # written on the way out, not one of the periodic ones
+    from policies.ppo import load_checkpoint
+
+    assert load_checkpoint(last).num_timesteps == steps
+    assert not list((out / "checkpoints").glob(".*"))  # no temporary file left
+
+
+def test_cli_train__one_run_per_out_and_resume_skips_a_damaged_checkpoint(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _tiny_config(tmp_path, eval_episodes=0)
+    out = tmp_path / "out"
+    assert main(_base_args(path, out)) == 0
+    saved = checkpoints(out / "checkpoints")
+    assert [s for s, _ in saved] == [64, 128, 192]
+    written = (out / "train_config.json").read_text()
+    capsys.readouterr()
+    # a fresh run into a folder with another run's checkpoints is refused, nothing touched
+    assert main([*_base_args(path, out), "--seed", "7"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert str(out) in err and "--resume" in err and "new --out" in err
+    assert checkpoints(out / "checkpoints") == saved
+    assert (out / "train_config.json").read_text() == written
+    # a truncated newest checkpoint: --resume says so and continues from the one before
+    newest = saved[-1][1]
+    newest.write_bytes(newest.read_bytes()[:1000])
+    assert main([*_base_args(path, out), "--resume", "--timesteps", "256"]) == 0
+    err = capsys.readouterr().err
+    assert f"skipped checkpoint {str(newest)!r}" in err
+    assert f"resuming from {saved[1][1]} (128 timesteps)" in err
+    from policies.ppo import load_checkpoint
+
+    after = checkpoints(out / "checkpoints")
+    assert after[-1][0] >= 256 and load_checkpoint(after[-1][1]).num_timesteps == after[-1][0]
+    assert load_checkpoint(newest).num_timesteps == 192  # rewritten by the resumed run
+
+
+def test_save_checkpoint__a_failed_write_leaves_no_partial_file(tmp_path: Path) -> None:
+    class Model:
+        num_timesteps = 64
+
+        def save(self, path: Path) -> None:
+            Path(path).write_bytes(b"PK half a zip")
+            raise OSError("disk full")
+
+    folder = tmp_path / "checkpoints"
+    with pytest.raises(OSError, match="disk full"):
+        training.save_checkpoint(Model(), folder)
+    assert list(folder.iterdir()) == []
+
+
+def test_train__tensorboard_has_the_episode_metrics(tmp_path: Path) -> None:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    path = _tiny_config(tmp_path, eval_episodes=0)
+    cfg = TrainConfig.from_yaml(path)
+    cfg = cfg.replace(env=cfg.env.replace(slam_enabled=True))
+    training.train(cfg, tmp_path / "out")
+    (events,) = (tmp_path / "out" / "tb").rglob("events.out.tfevents.*")
+    acc = EventAccumulator(str(events.parent))
+    acc.Reload()
+    tags = set(acc.Tags()["scalars"])
+    assert {f"polyslam/{t}" for t in training.EPISODE_TAGS} <= tags, tags
+    coverage = [e.value for e in acc.Scalars("polyslam/team_coverage")]
+    assert coverage and all(0.0 < c <= 1.0 for c in coverage)
+    low = acc.Scalars("polyslam/robot_coverage_min")[-1].value
+    assert low <= acc.Scalars("polyslam/robot_coverage_max")[-1].value

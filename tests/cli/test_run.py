@@ -194,3 +194,74 @@ def test_run__tables_name_robots_as_the_env_does(
     assert main(["run", *QUICK, "--robots", "2", "--out", str(tmp_path)]) == 0
     header = capsys.readouterr().out.splitlines()[1]
     assert header.split() == ["robot_0", "robot_1"]
+
+
+def test_evaluate__comma_list_compares_policies_on_the_same_seeds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    paths = {k: tmp_path / f"e.{k}" for k in ("json", "csv", "png")}
+    code = main(
+        [
+            "evaluate", "--policy", "frontier,random", "--episodes", "2", "--workers", "2",
+            "--map", "two_rooms", "--robots", "2", "--steps", "10", "--seed", "4", "--quiet",
+            "--json", str(paths["json"]), "--csv", str(paths["csv"]), "--plot", str(paths["png"]),
+        ]
+    )  # fmt: skip
+    assert code == 0
+    printed = capsys.readouterr().out.splitlines()
+    header = next(line for line in printed if line.startswith("policy"))
+    for column in ("team coverage", "steps_to_90", "nu_mean", "completeness", "bytes sent"):
+        assert column in header
+    rows = [line for line in printed if line.split()[:1] in (["frontier"], ["random"])]
+    assert len(rows) == 2 and all(line.count("±") >= 4 for line in rows)
+    data = json.loads(paths["json"].read_text())
+    assert data["policies"] == ["frontier", "random"] and data["seeds"] == [4, 5]
+    for name in data["policies"]:
+        assert [e["seed"] for e in data["episodes"][name]] == [4, 5]
+        cov = data["comparison"][name]["coverage"]
+        assert cov["min"] <= cov["mean"] <= cov["max"] and cov["std"] >= 0
+        assert set(data["comparison"][name]) == {
+            "coverage", "steps_to_90", "nu_mean", "completeness", "bytes_sent"
+        }  # fmt: skip
+    frontier, rnd = data["episodes"]["frontier"], data["episodes"]["random"]
+    assert frontier[0]["coverage"][0] == rnd[0]["coverage"][0]  # same seed, same start
+    rows_csv = list(csv.DictReader(paths["csv"].open()))
+    assert len(rows_csv) == 8  # 2 policies × 2 episodes × 2 robots
+    assert {(r["policy"], r["seed"]) for r in rows_csv} == {
+        (p, s) for p in ("frontier", "random") for s in ("4", "5")
+    }
+    assert paths["png"].read_bytes()[:4] == b"\x89PNG"
+
+
+def test_evaluate__comma_list_passes_the_checkpoint_to_ppo_only(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from stable_baselines3 import PPO
+
+    from polyslam_env.environment.vector import make_vec_env
+
+    venv = make_vec_env({"map": "two_rooms", "num_robots": 2, "max_steps": 5}, 1)
+    ckpt = tmp_path / "small.zip"
+    PPO("MlpPolicy", venv, n_steps=8, batch_size=8, policy_kwargs={"net_arch": [8]}).save(ckpt)
+    venv.close()
+    code = main(
+        [
+            "evaluate", "--policy", "random,ppo", "--checkpoint", str(ckpt), "--episodes", "1",
+            "--map", "two_rooms", "--robots", "2", "--steps", "5", "--quiet",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    out = capsys.readouterr().out
+    assert any(line.startswith("ppo ") for line in out.splitlines())
+
+
+@pytest.mark.parametrize(
+    ("policies", "needle"),
+    [("frontier,frontier", "distinct"), ("paper,frontier", "give --map"), ("frontier,", "commas")],
+)
+def test_evaluate__bad_comma_list_exits_2_with_one_line(
+    policies: str, needle: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["evaluate", "--policy", policies, "--episodes", "1", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert needle in err and len(err.splitlines()) == 1
