@@ -176,7 +176,8 @@ class RandomPolicy(Policy):
     def act(self, observation: Any, rng: np.random.Generator) -> Any:
         space = self.context.action_space
         if isinstance(space, spaces.Discrete):
-            return np.int64(space.start + rng.integers(space.n))
+            discrete: Any = space  # gymnasium 1.2 and 1.4 type start and n differently
+            return np.int64(discrete.start + rng.integers(discrete.n))
         assert isinstance(space, spaces.Box)
         u = rng.uniform(space.low, space.high)  # (2,)
         a = u if self._last is None else self.smoothing * self._last + (1 - self.smoothing) * u

@@ -138,7 +138,7 @@ class TeamEnv(gymnasium.Env[np.ndarray, np.ndarray]):
             info["team"] = next(i["team"] for i in infos.values() if "team" in i)
         return self._concat(obs, shown), reward, terminated, truncated, info
 
-    def render(self) -> np.ndarray | None:
+    def render(self) -> Any:  # an RGB array or None (gymnasium 1.2 types it as RenderFrame)
         return self.par_env.render()
 
     def close(self) -> None:
