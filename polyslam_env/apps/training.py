@@ -407,15 +407,16 @@ def train(
 
 # -- evaluation ------------------------------------------------------------------------------
 def evaluate_coverage(
-    env_cfg: EnvConfig, policy: str, episodes: int, seed: int = EVAL_SEED, **kwargs: Any
+    env_cfg: EnvConfig, policy: Any, episodes: int, seed: int = EVAL_SEED, **kwargs: Any
 ) -> dict[str, Any]:
     """Team coverage and team return at the end of ``episodes`` seeded episodes of the
-    registered ``policy`` (the same for every robot; ``kwargs`` go to its factory)."""
+    registered ``policy`` (a name: the same for every robot; ``kwargs`` go to its factory),
+    or of a ready team (an object with ``reset(seed)`` and ``act(observations, rng)``)."""
     from policies.base import make_team
     from polyslam_env.environment.parallel import parallel_env
 
     env = parallel_env(env_cfg)
-    team = make_team(policy, env, **kwargs)
+    team = make_team(policy, env, **kwargs) if isinstance(policy, str) else policy
     coverage, returns = [], []
     for k in range(episodes):
         rng = np.random.default_rng(seed + k)
