@@ -40,6 +40,7 @@ EXCLUSIVE: dict[str, set[str]] = {
     "stable_baselines3": {"apps", "policies", "environment"},  # environment: the SB3 adapter
     "supersuit": {"environment", "apps"},
     "pettingzoo": {"environment", "apps"},
+    "ray": {"apps"},
 }
 
 

@@ -1,4 +1,8 @@
-"""``polyslam train``: PPO with parameter sharing, checkpoints, resume, final evaluation."""
+"""``polyslam train``: PPO with parameter sharing, checkpoints, resume, final evaluation.
+
+``--backend sb3`` (default): Stable-Baselines3, the ``rl`` extra. ``--backend rllib``: RLlib
+on a local Ray instance or the cluster at ``--address``, the ``ray`` extra.
+"""
 
 from __future__ import annotations
 
@@ -33,6 +37,19 @@ def register(sub: Any) -> None:
         " newer one is skipped, and said so)",
     )
     parser.add_argument("--seed", type=int, default=None, help="seed (default: from the config)")
+    parser.add_argument(
+        "--backend",
+        choices=("sb3", "rllib"),
+        default="sb3",
+        help="sb3: Stable-Baselines3 (default, the [rl] extra); rllib: RLlib PPO on Ray"
+        " (the [ray] extra), checkpoints OUT/checkpoints/rllib_<timesteps>_steps/",
+    )
+    parser.add_argument(
+        "--address",
+        default=None,
+        help="rllib: join the Ray cluster at this address (host:port of `ray start --head`;"
+        " default: $RAY_ADDRESS, else a local Ray instance with num_cpus env runners)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
@@ -45,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
         final_evaluation,
         train,
     )
+    from polyslam_env.core.errors import PolyslamError
     from polyslam_env.core.io import write_json
     from polyslam_env.core.resources import configs_dir
 
@@ -56,6 +74,10 @@ def run(args: argparse.Namespace) -> int:
         overrides["seed"] = args.seed
     cfg = TrainConfig.from_yaml(path, **overrides)
     out = Path(args.out)
+    if args.backend == "rllib":
+        return _run_rllib(args, cfg, out)
+    if args.address is not None:
+        raise PolyslamError("--address: only with --backend rllib")
     check_run_folder(out, args.resume)  # before train_config.json: never touch another run
     write_json(out / "train_config.json", cfg.to_dict())
     start = time.perf_counter()
@@ -75,6 +97,41 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"final evaluation, {cfg.eval_episodes} episodes: team coverage"
         f" ppo {100 * ppo['coverage_mean']:.1f} %, random {100 * rnd['coverage_mean']:.1f} %"
+        f" (return {ppo['return_mean']:.2f} vs {rnd['return_mean']:.2f});"
+        f" wrote {out / 'final_eval.json'}"
+    )
+    return 0
+
+
+def _run_rllib(args: argparse.Namespace, cfg: Any, out: Path) -> int:
+    from polyslam_env.apps import training_rllib as rl
+    from polyslam_env.core.io import write_json
+
+    rl.require_ray()  # the one-line "needs ray" error before anything is written
+    rl.check_run_folder(out, args.resume)
+    write_json(out / "train_config.json", {**cfg.to_dict(), "backend": "rllib"})
+    timesteps, checkpoint, stats = rl.train(
+        cfg, out, resume=args.resume, address=args.address, progress=not args.quiet
+    )
+
+    def rate(seconds: float) -> float:
+        return stats["env_steps"] / seconds if seconds > 0 else float("nan")
+
+    print(
+        f"trained to {timesteps} timesteps in {stats['train_s']:.0f} s ({stats['iterations']}"
+        f" iterations; {stats['env_steps']} env steps: {rate(stats['train_s']):.0f}/s overall,"
+        f" {rate(stats['sample_s']):.0f}/s while sampling); saved {checkpoint}",
+        flush=True,
+    )
+    if cfg.eval_episodes == 0:
+        return 0
+    report = rl.final_evaluation(cfg, checkpoint, timesteps)
+    report["train"] = stats
+    write_json(out / "final_eval.json", report)
+    ppo, rnd = report["rllib"], report["random"]
+    print(
+        f"final evaluation, {cfg.eval_episodes} episodes: team coverage"
+        f" rllib {100 * ppo['coverage_mean']:.1f} %, random {100 * rnd['coverage_mean']:.1f} %"
         f" (return {ppo['return_mean']:.2f} vs {rnd['return_mean']:.2f});"
         f" wrote {out / 'final_eval.json'}"
     )

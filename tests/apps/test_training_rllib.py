@@ -1,0 +1,152 @@
+"""``polyslam train --backend rllib``: RLlib PPO on a local Ray instance and on a cluster.
+
+The Ray tests need the ``ray`` extra and are skipped without it. They hold a file lock so
+that pytest-xdist never runs two at once: ``ray stop --force`` (the cluster test's teardown)
+stops every Ray process on the machine.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from polyslam_env.apps.training_rllib import rllib_checkpoints
+from polyslam_env.cli.main import main
+
+NEEDS_RAY = "needs the [ray] extra: pip install 'polyslam[ray]'"
+HEAD_FLAGS = ("--disable-usage-stats", "--include-dashboard=false")
+
+
+def _tiny_config(tmp_path: Path, **top: Any) -> Path:
+    """two_rooms, 2 robots, 10-step episodes, 2 env runners, 32-robot-step train batches."""
+    cfg = {
+        "timesteps": 32,
+        "num_envs": 2,
+        "num_cpus": 2,
+        "checkpoint_every": 32,
+        "eval_episodes": 1,
+        "env": {"map": "two_rooms", "num_robots": 2, "max_steps": 10, "slam_enabled": False},
+        "ppo": {"n_steps": 8, "batch_size": 16, "n_epochs": 1, "net_arch": [16]},
+        **top,
+    }
+    path = tmp_path / "train.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+@pytest.fixture
+def ray_lock() -> Iterator[None]:
+    """Ray installed, and no other Ray test running (see the module docstring)."""
+    pytest.importorskip("ray", reason=NEEDS_RAY)
+    with open(Path(tempfile.gettempdir()) / "polyslam-ray-tests.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _ray_cli() -> str:
+    here = Path(sys.executable).with_name("ray")
+    found = str(here) if here.exists() else shutil.which("ray")
+    if found is None:
+        pytest.skip("the `ray` command is not on PATH")
+    return found
+
+
+@pytest.fixture
+def ray_head(ray_lock: None, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
+    """A separate Ray head node (`ray start --head`) on a free port; always stopped."""
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    ray, port = _ray_cli(), _free_port()
+    try:
+        subprocess.run(
+            [ray, "start", "--head", f"--port={port}", "--num-cpus=2", *HEAD_FLAGS],
+            check=True,
+            capture_output=True,
+            timeout=120,
+        )
+        yield f"127.0.0.1:{port}"
+    finally:
+        subprocess.run([ray, "stop", "--force"], capture_output=True, timeout=120)
+
+
+def test_missing_ray__one_line_error_naming_the_extra(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ModuleNotFoundError
+    out = tmp_path / "out"
+    config = _tiny_config(tmp_path)
+    code = main(["train", "--backend", "rllib", "--config", str(config), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1 and "polyslam[ray]" in err
+    assert not out.exists()  # nothing written
+
+
+def test_address__only_with_rllib(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["train", "--config", str(_tiny_config(tmp_path)), "--out", str(tmp_path / "o")]
+    assert main([*args, "--address", "127.0.0.1:1"]) == 2
+    assert "--backend rllib" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_rllib__trains_checkpoints_resumes_and_evaluates(
+    ray_lock: None,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    config, out = _tiny_config(tmp_path), tmp_path / "out"
+    args = ["train", "--backend", "rllib", "--config", str(config), "--out", str(out), "--quiet"]
+    assert main(args) == 0
+    first = rllib_checkpoints(out / "checkpoints")
+    assert first and first[-1][0] >= 32
+    assert (first[-1][1] / "rllib_checkpoint.json").is_file()
+    assert not [p for p in (out / "checkpoints").iterdir() if p.name.startswith(".")]
+    report = json.loads((out / "final_eval.json").read_text())
+    assert report["backend"] == "rllib" and report["seeds"] == [10_000]
+    assert 0.0 < report["rllib"]["coverage_mean"] <= 1.0
+    assert 0.0 < report["random"]["coverage_mean"] <= 1.0
+    assert "team coverage rllib" in capsys.readouterr().out
+
+    # a fresh run into the same folder is refused; --resume continues the counters
+    assert main(args) == 2
+    assert "--resume" in capsys.readouterr().err
+    assert main([*args, "--resume", "--timesteps", str(first[-1][0] + 32)]) == 0
+    steps = [s for s, _ in rllib_checkpoints(out / "checkpoints")]
+    assert steps[-1] > first[-1][0] and steps[-1] >= first[-1][0] + 32
+    assert "restoring" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_rllib__joins_a_cluster_with_address(
+    ray_head: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    config = _tiny_config(tmp_path, eval_episodes=0)
+    args = ["train", "--backend", "rllib", "--config", str(config), "--out", str(out)]
+    assert main([*args, "--address", ray_head]) == 0
+    text = capsys.readouterr().out
+    assert "iteration 1:" in text and "iteration 2:" not in text  # 1 iteration: 32 timesteps
+    assert rllib_checkpoints(out / "checkpoints")
+    assert os.environ.get("RAY_ADDRESS") is None
