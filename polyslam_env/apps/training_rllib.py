@@ -228,8 +228,9 @@ def _train_loop(
         sample_s += float(result.get("timers", {}).get("env_runner_sampling_timer", 0.0))
         if env_steps_before is None:  # a resumed run counts from its checkpoint
             env_steps_before = env_steps - _sampled(result)
-        if next_ckpt is None:
-            next_ckpt = (agent_steps // cfg.checkpoint_every + 1) * cfg.checkpoint_every
+        if next_ckpt is None:  # the first multiple above the steps before this iteration
+            before = agent_steps - _lifetime(result, "num_agent_steps_sampled")
+            next_ckpt = (before // cfg.checkpoint_every + 1) * cfg.checkpoint_every
         if progress:
             ret = result.get("env_runners", {}).get("episode_return_mean", float("nan"))
             say(
@@ -279,14 +280,18 @@ def train(
     check_run_folder(out, resume)
     say = log or (lambda line: print(line, flush=True))
     torch.set_num_threads(cfg.torch_threads)
+    if resume:
+        steps, path = rllib_checkpoints(ckpt_dir)[-1]
+        if steps >= cfg.timesteps:  # as the SB3 path: nothing left to learn, Ray not needed
+            say(f"--resume: {path} already has {steps} >= {cfg.timesteps} timesteps")
+            return steps, path, {"iterations": 0, "agent_steps": steps, "env_steps": 0}
     started = not ray.is_initialized()
     if started:
         init_ray(address, max(1, cfg.num_cpus))
     try:
         register_env(ENV_NAME, _make_env)
-        if resume:
-            _, path = rllib_checkpoints(ckpt_dir)[-1]
-            say(f"--resume: restoring {path}")
+        if resume:  # the checkpoint's algorithm config is kept; the YAML's PPO part is not used
+            say(f"--resume: restoring {path} ({steps} timesteps)")
             algo = Algorithm.from_checkpoint(str(path))
         else:
             algo = build_algorithm_config(cfg).build_algo()

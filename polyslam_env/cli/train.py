@@ -117,12 +117,16 @@ def _run_rllib(args: argparse.Namespace, cfg: Any, out: Path) -> int:
     def rate(seconds: float) -> float:
         return stats["env_steps"] / seconds if seconds > 0 else float("nan")
 
-    print(
-        f"trained to {timesteps} timesteps in {stats['train_s']:.0f} s ({stats['iterations']}"
-        f" iterations; {stats['env_steps']} env steps: {rate(stats['train_s']):.0f}/s overall,"
-        f" {rate(stats['sample_s']):.0f}/s while sampling); saved {checkpoint}",
-        flush=True,
-    )
+    if not stats["iterations"]:
+        print(f"nothing to train: {checkpoint} has {timesteps} timesteps", flush=True)
+    else:
+        print(
+            f"trained to {timesteps} timesteps in {stats['train_s']:.0f} s"
+            f" ({stats['iterations']} iterations; {stats['env_steps']} env steps:"
+            f" {rate(stats['train_s']):.0f}/s overall, {rate(stats['sample_s']):.0f}/s while"
+            f" sampling); saved {checkpoint}",
+            flush=True,
+        )
     if cfg.eval_episodes == 0:
         return 0
     report = rl.final_evaluation(cfg, checkpoint, timesteps)

@@ -137,6 +137,11 @@ def test_rllib__trains_checkpoints_resumes_and_evaluates(
     assert steps[-1] > first[-1][0] and steps[-1] >= first[-1][0] + 32
     assert "restoring" in capsys.readouterr().out
 
+    # resuming a run that has its timesteps already trains nothing (and starts no Ray)
+    assert main([*args, "--resume", "--timesteps", str(steps[-1])]) == 0
+    assert "already has" in capsys.readouterr().out
+    assert [s for s, _ in rllib_checkpoints(out / "checkpoints")] == steps
+
 
 @pytest.mark.slow
 def test_rllib__joins_a_cluster_with_address(
