@@ -127,15 +127,18 @@ class TrainConfig(Config):
 
 
 # -- checkpoints -----------------------------------------------------------------------------
-def checkpoints(folder: str | Path) -> list[tuple[int, Path]]:
-    """``(timesteps, path)`` of the checkpoints in ``folder``, oldest first."""
+def checkpoints(
+    folder: str | Path, pattern: re.Pattern[str] = _CHECKPOINT_RE, dirs: bool = False
+) -> list[tuple[int, Path]]:
+    """``(timesteps, path)`` of the checkpoints in ``folder`` whose names match ``pattern``
+    (its group 1 the timesteps; files, or directories with ``dirs``), oldest first."""
     folder = Path(folder)
     if not folder.is_dir():
         return []
     found = []
     for path in folder.iterdir():
-        m = _CHECKPOINT_RE.match(path.name)
-        if m:
+        m = pattern.match(path.name)
+        if m and path.is_dir() == dirs:
             found.append((int(m.group(1)), path))
     return sorted(found)
 

@@ -77,15 +77,7 @@ def require_ray() -> None:
 # -- checkpoints -----------------------------------------------------------------------------
 def rllib_checkpoints(folder: str | Path) -> list[tuple[int, Path]]:
     """``(timesteps, path)`` of the RLlib checkpoint directories in ``folder``, oldest first."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        return []
-    found = []
-    for path in folder.iterdir():
-        m = _CHECKPOINT_RE.match(path.name)
-        if m and path.is_dir():
-            found.append((int(m.group(1)), path))
-    return sorted(found)
+    return checkpoints(folder, _CHECKPOINT_RE, dirs=True)
 
 
 def check_run_folder(out: str | Path, resume: bool) -> None:

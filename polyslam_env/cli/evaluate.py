@@ -225,31 +225,9 @@ def write_csv(path: str | Path, results: list[Any]) -> Path:
 
 
 def plot_coverage(results: list[Any], path: str | Path, title: str) -> Path:
-    """Team coverage vs step: mean over episodes with a min–max band (episodes that ended
-    early hold their last value)."""
-    import numpy as np
-
-    from polyslam_env.core.io import write_atomic
-    from polyslam_env.render.plots import _pyplot
-
-    plt = _pyplot()
-    length = max(len(r.coverage) for r in results)
-    series = np.array([r.coverage + [r.coverage[-1]] * (length - len(r.coverage)) for r in results])
-    steps = np.arange(length)  # (T,)
-    fig, ax = plt.subplots(figsize=(6.0, 3.6))
-    ax.fill_between(steps, series.min(axis=0), series.max(axis=0), alpha=0.25, label="min–max")
-    ax.plot(steps, series.mean(axis=0), lw=1.8, label=f"mean of {len(results)} episodes")
-    ax.set_xlabel("step")
-    ax.set_ylabel("team coverage")
-    ax.set_ylim(0.0, 1.0)
-    ax.set_title(title, fontsize=10)
-    ax.grid(alpha=0.3)
-    ax.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return write_atomic(path, buf.getvalue())
+    """Team coverage vs step of one policy: mean over episodes with a min–max band (episodes
+    that ended early hold their last value); :func:`plot_comparison` with one group."""
+    return plot_comparison({f"mean of {len(results)} episodes": results}, path, title)
 
 
 def _padded(results: list[EpisodeResult]) -> Any:  # (episodes, T)
