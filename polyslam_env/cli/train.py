@@ -92,14 +92,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     report = final_evaluation(cfg, checkpoint, model.num_timesteps)
     report["train_time_s"] = seconds
-    write_json(out / "final_eval.json", report)
-    ppo, rnd = report["ppo"], report["random"]
-    print(
-        f"final evaluation, {cfg.eval_episodes} episodes: team coverage"
-        f" ppo {100 * ppo['coverage_mean']:.1f} %, random {100 * rnd['coverage_mean']:.1f} %"
-        f" (return {ppo['return_mean']:.2f} vs {rnd['return_mean']:.2f});"
-        f" wrote {out / 'final_eval.json'}"
-    )
+    _print_evaluation(report, "ppo", cfg.eval_episodes, write_json(out / "final_eval.json", report))
     return 0
 
 
@@ -131,12 +124,17 @@ def _run_rllib(args: argparse.Namespace, cfg: Any, out: Path) -> int:
         return 0
     report = rl.final_evaluation(cfg, checkpoint, timesteps)
     report["train"] = stats
-    write_json(out / "final_eval.json", report)
-    ppo, rnd = report["rllib"], report["random"]
-    print(
-        f"final evaluation, {cfg.eval_episodes} episodes: team coverage"
-        f" rllib {100 * ppo['coverage_mean']:.1f} %, random {100 * rnd['coverage_mean']:.1f} %"
-        f" (return {ppo['return_mean']:.2f} vs {rnd['return_mean']:.2f});"
-        f" wrote {out / 'final_eval.json'}"
+    _print_evaluation(
+        report, "rllib", cfg.eval_episodes, write_json(out / "final_eval.json", report)
     )
     return 0
+
+
+def _print_evaluation(report: dict[str, Any], learned: str, episodes: int, path: Path) -> None:
+    """One line: the learned policy's team coverage and return next to ``random``'s."""
+    ours, rnd = report[learned], report["random"]
+    print(
+        f"final evaluation, {episodes} episodes: team coverage"
+        f" {learned} {100 * ours['coverage_mean']:.1f} %, random {100 * rnd['coverage_mean']:.1f} %"
+        f" (return {ours['return_mean']:.2f} vs {rnd['return_mean']:.2f}); wrote {path}"
+    )
