@@ -12,6 +12,7 @@ it; :func:`~polyslam_env.metrics.episode.robot_metrics` turns a run into the pap
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -25,6 +26,7 @@ from polyslam_env.core.geometry import compose_inverse
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.environment import stages
 from polyslam_env.metrics.episode import COMMS_METRICS, RobotHistory, RobotRun, robot_metrics
+from polyslam_env.scenarios.paths import builtin_paths, load_paths
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.config import WorldConfig
@@ -266,12 +268,10 @@ def _delivered_log(step: ExchangeStep) -> list[dict[str, Any]]:
     ]
 
 
+@functools.cache
 def _builtin_commands(map_name: str) -> np.ndarray | None:
-    """The precomputed paths shipped for a built-in map, if any."""
-    try:
-        from polyslam_env.scenarios.paths import builtin_paths, load_paths
-    except ImportError:  # pragma: no cover - paths module is part of the package
-        return None
+    """The precomputed paths shipped for a built-in map, if any (read-only; read from their
+    YAML files once per process: parsing them cost more than a paper episode's SLAM)."""
     for name in builtin_paths():
         paths = load_paths(name)
         if paths.map == map_name:
