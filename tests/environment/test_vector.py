@@ -110,19 +110,25 @@ def test_fixed_agents__maps_the_unit_box_to_physical_limits() -> None:
     np.testing.assert_allclose(env.physical(np.array([3.0, 0.0]))[0], high[0])  # clipped
 
 
+def _run_past_one_episode_end(venv: Any, slots: int, action_dim: int) -> None:
+    """Reset, step a vectorised env with zero actions past ``max_steps``, close: every slot
+    ends exactly once (truncated at max_steps, then reset automatically)."""
+    obs = venv.reset()
+    assert obs.shape == (slots, *venv.observation_space.shape)
+    ends = 0
+    for _ in range(SMALL["max_steps"] + 2):
+        obs, rewards, dones, infos = venv.step(np.zeros((slots, action_dim), dtype=np.float32))
+        assert obs.shape[0] == rewards.shape[0] == len(infos) == slots
+        ends += int(dones.all())
+    assert ends == 1
+    venv.close()
+
+
 def test_vec_path__two_worker_processes_build_reset_step_and_close() -> None:
     """What ``polyslam train`` builds with ``num_cpus=2`` (VecMonitor on top), through an
     episode end and its automatic reset."""
     venv = make_vec_env(SMALL, 2, num_cpus=2, seed=1)
-    obs = venv.reset()
-    assert obs.shape == (4, *venv.observation_space.shape)
-    ends = 0
-    for _ in range(SMALL["max_steps"] + 2):
-        obs, rewards, dones, infos = venv.step(np.zeros((4, 2), dtype=np.float32))
-        assert obs.shape[0] == rewards.shape[0] == len(infos) == 4
-        ends += int(dones.all())
-    assert ends == 1  # every slot truncated at max_steps, then reset
-    venv.close()
+    _run_past_one_episode_end(venv, slots=4, action_dim=2)
 
 
 def test_sb3_subproc_vec_env__two_workers_of_the_team_env() -> None:
@@ -132,12 +138,4 @@ def test_sb3_subproc_vec_env__two_workers_of_the_team_env() -> None:
 
     venv = SubprocVecEnv([lambda: TeamEnv(**SMALL) for _ in range(2)])
     venv.seed(3)
-    obs = venv.reset()
-    assert obs.shape == (2, *venv.observation_space.shape)
-    ends = 0
-    for _ in range(SMALL["max_steps"] + 2):
-        obs, rewards, dones, infos = venv.step(np.zeros((2, 4), dtype=np.float32))
-        assert obs.shape[0] == rewards.shape[0] == len(infos) == 2
-        ends += int(dones.all())
-    assert ends == 1
-    venv.close()
+    _run_past_one_episode_end(venv, slots=2, action_dim=4)
