@@ -466,7 +466,7 @@ class RendezvousExchange:
         since_log = self._last_log.get((s, r), 0)
         self._last_meeting[(s, r)] = slam.step_count
         self._last_log[(s, r)] = len(self.scan_logs[s])
-        pose_var = np.diag(slam.pose_cov).clip(min=0.0)
+        pose_var = np.diag(slam.pose_cov_relative).clip(min=0.0)
         kind, precision = self.config.payload, self.config.precision
         variants = self._variants(header, records, s, since_log, polys, kind)
         if self.compare_payloads:

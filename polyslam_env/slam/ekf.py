@@ -29,20 +29,31 @@ def _symmetrise(a: np.ndarray) -> np.ndarray:
 
 
 def predict(
-    mean: np.ndarray, cov: np.ndarray, odometry: np.ndarray, W: np.ndarray
+    mean: np.ndarray,
+    cov: np.ndarray,
+    odometry: np.ndarray,
+    W: np.ndarray,
+    first_xy: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """EKF prediction from odometry (3,) with noise covariance W (3, 3) in the robot frame.
 
     Landmarks are static, so only the pose block (F P_pp Fᵀ + L W Lᵀ) and the pose–landmark
     cross-covariances (F P_pl) change: O(n) arithmetic (plus the copy that keeps it pure).
+    ``first_xy``: see :func:`predict_inplace`.
     """
     new_mean = mean.astype(float, copy=True)
     new_cov = cov.astype(float, copy=True)
-    predict_inplace(new_mean, new_cov, odometry, W)
+    predict_inplace(new_mean, new_cov, odometry, W, first_xy)
     return new_mean, new_cov
 
 
-def predict_inplace(mean: np.ndarray, cov: np.ndarray, odometry: np.ndarray, W: np.ndarray) -> None:
+def predict_inplace(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    odometry: np.ndarray,
+    W: np.ndarray,
+    first_xy: tuple[float, float] | None = None,
+) -> None:
     """:func:`predict` writing into ``mean`` (3+n,) and ``cov`` (3+n, 3+n) (float arrays).
 
     Without the pure version's (3+n)² copy, for the stateful caller whose per-step cost
@@ -51,14 +62,27 @@ def predict_inplace(mean: np.ndarray, cov: np.ndarray, odometry: np.ndarray, W: 
     odometry u = (dx, dy, dθ) in the robot frame and L = ∂f/∂u, so F P_pl
     adds a and b times the heading row to the position rows, and the 3×3 pose block is
     written out in plain floats from its upper triangle (symmetric by construction).
+
+    **First-estimates Jacobian** (Huang, Mourikis & Roumeliotis 2008). The standard F takes
+    a = −Δy, b = Δx from the *updated* pose x̂_{k|k} to the prediction. Given ``first_xy``,
+    the position of this pose's first estimate x̂_{k|k−1} (the prediction before the last
+    update), it takes a = −(ŷ_{k+1|k} − ŷ_{k|k−1}), b = x̂_{k+1|k} − x̂_{k|k−1}: every
+    Jacobian of a pose is then evaluated at one estimate of it, so the product of the
+    propagation Jacobians from step 0 to k depends only on x̂_{k|k−1} − x̂_{0} and the
+    linearised system keeps the nonlinear one's unobservable directions (a global rotation
+    about the start); the standard F lets each update's correction δx̂ leak in as spurious
+    information about the heading.
     """
     x, y, theta = mean[:3].tolist()
     dx, dy, dtheta = np.asarray(odometry, dtype=float).tolist()
     c, s = math.cos(theta), math.sin(theta)
-    a, b = -s * dx - c * dy, c * dx - s * dy  # F[0, 2], F[1, 2]
     mean[0] = x + c * dx - s * dy
     mean[1] = y + s * dx + c * dy
     mean[2] = wrap_scalar(theta + dtheta)
+    if first_xy is None:
+        a, b = -s * dx - c * dy, c * dx - s * dy  # F[0, 2], F[1, 2]
+    else:
+        a, b = -(float(mean[1]) - first_xy[1]), float(mean[0]) - first_xy[0]
     if cov.shape[0] > 3:
         heading = cov[2, 3:]
         cov[0, 3:] += a * heading
@@ -84,6 +108,22 @@ def predict_inplace(mean: np.ndarray, cov: np.ndarray, odometry: np.ndarray, W: 
         (f02 + q02, f12 + q12, p22 + w22),
     )
     cov[:3, :3] = block
+
+
+def start_error_cov(pose: np.ndarray, p0: np.ndarray) -> np.ndarray:  # (3, 3)
+    """Covariance J P0 Jᵀ that an unknown start error e₀ ~ N(0, P0) adds to a pose estimate.
+
+    The filter estimates the pose x_S relative to the robot's *true* start (known exactly
+    there: it is the origin of what the robot measures), while its frame is the nominal start;
+    the true pose in the frame is e₀ ⊕ x_S. Nothing the robot senses is referenced to the
+    frame, so e₀ is unobservable and independent of the filter's error: to first order
+    Cov = J P0 Jᵀ + P_S with J = ∂(e₀ ⊕ x)/∂e₀ at e₀ = 0 = [[1, 0, −y], [0, 1, x], [0, 0, 1]]
+    (a start heading error swings the pose about the start).
+    """
+    x, y = float(pose[0]), float(pose[1])
+    J = np.array([[1.0, 0.0, -y], [0.0, 1.0, x], [0.0, 0.0, 1.0]])
+    out: np.ndarray = J @ np.asarray(p0, dtype=float) @ J.T
+    return _symmetrise(out)
 
 
 # -- update -------------------------------------------------------------------------------------

@@ -104,15 +104,20 @@ class Fit:
 
 
 # -- point constructors ------------------------------------------------------------------
+#: m², the smallest pose uncertainty :func:`prediction_weight` weighs by: a pose known exactly
+#: (the start, without odometry noise) weighs as one known to a micrometre, not infinitely.
+POSE_VAR_FLOOR = 1e-12
+
+
 def prediction_weight(pose_cov: np.ndarray) -> float:
     """LMS weight 1/‖P_{k|k−1}‖ (spectral norm of the pose block).
 
     The block is a covariance (symmetric), so its norm is its largest |eigenvalue|.
     """
     norm = spectral_norm_sym(np.asarray(pose_cov, dtype=float)[:3, :3])
-    if not norm > 0:
-        raise ValueError("pose covariance has zero norm; cannot weight its points")
-    return 1.0 / norm
+    if not norm >= 0:
+        raise ValueError(f"pose covariance has no finite norm ({norm}); cannot weight its points")
+    return 1.0 / max(norm, POSE_VAR_FLOOR)
 
 
 def _beam_directions(theta: float, beam_angles: np.ndarray) -> np.ndarray:

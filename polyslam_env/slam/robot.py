@@ -59,6 +59,16 @@ class PolySlam:
     row i of :attr:`table`, the map's one record. ``mean`` and ``cov`` are working arrays
     (the prediction and the update write into them): copy to keep them.
 
+    **Anchored at the true start.** The robot's frame is its nominal start pose, but where it
+    really started differs by an unknown e₀ ~ N(0, P0), and nothing it senses can tell (no
+    absolute reference). The filter therefore estimates everything relative to the true
+    start, where the pose is known exactly (``cov`` starts at 0): the map lives in that
+    frame, and no measurement can be mistaken for information about e₀ (the paper's form,
+    P starting at P0, lets relinearisation shrink the pose covariance below what e₀ alone
+    implies). :attr:`pose_cov` adds e₀'s share back for the pose as an estimate in the
+    robot's frame; :attr:`pose_cov_relative` is the filter's own. The propagation uses
+    first-estimates Jacobians (:func:`~polyslam_env.slam.ekf.predict_inplace`).
+
     Set :attr:`profile` to a dict to collect per-stage wall times (s) of every step under
     the keys ``predict``, ``association``, ``map`` (extents, refits, new landmarks,
     merges) and ``update``; None (the default) skips the timing.
@@ -75,8 +85,9 @@ class PolySlam:
         self._angles: list[float] = self.beam_angles.tolist()
         self._min_sine = float(np.sin(np.deg2rad(config.tangent_min_deg)))
         self.max_range = float(max_range)
-        self.mean = np.zeros(3)  # (3+n,)
-        self.cov = config.p0.copy()  # (3+n, 3+n)
+        self.mean = np.zeros(3)  # (3+n,) relative to the true start (see class docstring)
+        self.cov = np.zeros((3, 3))  # (3+n, 3+n) ditto: the true start is known exactly
+        self._first_xy: tuple[float, float] | None = None  # x̂_{k|k−1}'s position (FEJ)
         self.table = LandmarkTable()  # the map: ids, shapes, extents, Q_bad, … in state order
         self.book = MapBook(config.eps_m, config.eps_z, config.cluster_radius, self.table)
         self.step_count = 0
@@ -97,6 +108,15 @@ class PolySlam:
 
     @property
     def pose_cov(self) -> np.ndarray:  # (3, 3)
+        """Covariance of :attr:`pose` as an estimate of the pose in the robot's frame: the
+        filter's P_S plus the unobservable start error's J P0 Jᵀ
+        (:func:`~polyslam_env.slam.ekf.start_error_cov`)."""
+        return self.cov[:3, :3] + ekf.start_error_cov(self.mean, self.config.p0)
+
+    @property
+    def pose_cov_relative(self) -> np.ndarray:  # (3, 3)
+        """The filter's P_S: the pose's covariance relative to the robot's true start, the
+        frame its map lives in (what a map exchange must use)."""
         return self.cov[:3, :3].copy()
 
     @property
@@ -209,7 +229,8 @@ class PolySlam:
     def _predict(self, odometry: np.ndarray) -> None:
         """EKF prediction into the working arrays (the mean is small: a fresh copy)."""
         self.mean = self.mean.copy()
-        ekf.predict_inplace(self.mean, self.cov, odometry, self.config.odom_cov)
+        ekf.predict_inplace(self.mean, self.cov, odometry, self.config.odom_cov, self._first_xy)
+        self._first_xy = (float(self.mean[0]), float(self.mean[1]))
 
     def _lap(self, stage: str, since: float) -> float:
         """Record the time since ``since`` under ``stage`` (profiling on); returns now."""
