@@ -119,6 +119,7 @@ class Alignment:
     inliers: int  # correspondences that support the final transform
     candidates: int  # descriptor matches the aligner started from
     reason: str = ""  # why it declined ("" when it did not)
+    raw: np.ndarray | None = None  # (3,) the aligner's own estimate, before :func:`refine`
 
     @property
     def accepted(self) -> bool:
@@ -281,6 +282,8 @@ def _answer(
 ) -> Alignment:
     if transform is None:
         return Alignment(method, None, None, 0, len(matches), "no geometrically consistent pair")
+    raw = transform.copy()
+    raw[2] = wrap_scalar(float(raw[2]))
     refined, cov, pairs = refine(a, b, transform, cfg)
     needed = max(cfg.min_support, chance_supports(a, b, cfg))
     if len(pairs) < needed:
@@ -292,10 +295,11 @@ def _answer(
             len(matches),
             f"{len(pairs)} supports < {needed} needed (min_support {cfg.min_support},"
             " or what a wrong transform reaches by chance)",
+            raw,
         )
     refined = refined.copy()
     refined[2] = wrap_scalar(float(refined[2]))
-    return Alignment(method, refined, cov, len(pairs), len(matches))
+    return Alignment(method, refined, cov, len(pairs), len(matches), "", raw)
 
 
 def _too_few(method: str, matches: np.ndarray, cfg: AlignConfig) -> Alignment | None:
