@@ -65,3 +65,26 @@ def test_cli__writes_summary_and_figures(tmp_path: Path, capsys: pytest.CaptureF
 def test_config__same_robot_twice__is_a_named_error() -> None:
     with pytest.raises(ConfigError, match="robots"):
         AlignmentReproduceConfig(robots=(1, 1))
+
+
+def test_cli__seif_reproduction_writes_summary(tmp_path: Path) -> None:
+    """``--paper seif`` on one run: the summary's table and boolean checks."""
+    code = main(
+        [
+            "reproduce",
+            "--paper",
+            "seif",
+            "--runs",
+            "1",
+            "--workers",
+            "1",
+            "--quiet",
+            "--out",
+            str(tmp_path),
+        ]
+    )
+    assert code == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["runs"] == 1 and summary["pieces"] == 8
+    assert all(isinstance(v, bool) for v in summary["checks"].values())
+    assert summary["table"]["wrong_collapses"] == 0
