@@ -1,0 +1,428 @@
+"""Aligning two landmark maps without a rendezvous (seed 004, Ballesta et al.; SPEC §8).
+
+Two robots map from unknown relative poses. Each map is a :class:`FeatureMap`: landmark
+positions in the robot's own frame and an appearance descriptor per landmark. An aligner finds
+the transform ``T = (t_x, t_y, θ)`` that takes map B's frame into map A's
+(``p_A = R(θ) p_B + t``, the SE(2) convention of :mod:`polyslam_env.core.geometry`):
+
+* ``ransac`` — candidate matches by descriptor (nearest descriptor, distance < th0), then M
+  times: two random candidates that pass the geometric test (their distances in the two maps
+  differ by < th1), the transform they define, its supports (B's landmarks that land within
+  th2 of an A landmark); the transform with the most supports wins;
+* ``svd`` — the candidates that pass the geometric test with most other candidates, aligned
+  in one least-squares solve (the rigid SVD solution of Arun et al., not the seed's affine
+  pseudo-inverse, which can return a non-rigid T);
+* ``icp`` — from one RANSAC-style initial estimate, alternate nearest-neighbour
+  correspondences (within th2) and the SVD solve until the correspondences stop changing;
+* ``imp_icp`` — ICP from three initial estimates; the one with the most supports wins.
+
+Every aligner's estimate is then refined by :func:`refine` — least squares over the
+supporting correspondences that drops outliers (residuals beyond 3 robust standard
+deviations, or beyond th2) until the set is stable — which also gives the transform's
+covariance from the residuals. An aligner **declines** (returns an :class:`Alignment` with
+``transform`` None and the reason) when fewer than ``min_support`` correspondences support
+it: a wrong merge is worse than none.
+
+Where the seed's printed formulas are off we use the geometric meaning: its constraint (1)
+compares *squared* distances against th1 = 0.8 m; we compare the distances themselves.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.stats
+from scipy.spatial import cKDTree
+
+from polyslam_env.core.config import Config, check_positive
+from polyslam_env.core.errors import ConfigError
+from polyslam_env.core.geometry import rotation, wrap_scalar
+
+__all__ = [
+    "ALIGNERS",
+    "AlignConfig",
+    "Alignment",
+    "FeatureMap",
+    "align",
+    "candidate_matches",
+    "icp",
+    "imp_icp",
+    "ransac",
+    "refine",
+    "rigid_fit",
+    "svd",
+    "transform_from_pairs",
+]
+
+
+#: Probability that a wrong transform collects the supports an accepted one needs (see
+#: :func:`chance_supports`).
+CHANCE_P = 1e-6
+
+
+@dataclass(frozen=True)
+class AlignConfig(Config):
+    """Thresholds of the aligners; the defaults are the seed's (§5.1)."""
+
+    descriptor_threshold: float = 0.7  # th0: largest descriptor distance of a candidate match
+    geometric_threshold: float = 0.8  # th1, m: largest difference of a pair's two distances
+    support_threshold: float = 0.4  # th2, m: a support lands this close to an A landmark
+    iterations: int = 70  # M: RANSAC hypotheses
+    min_support: int = 20  # fewer supports than this: decline
+    icp_max_iterations: int = 50  # ICP stops here if the correspondences still change
+    imp_icp_starts: int = 3  # initial estimates of the improved ICP
+    outlier_sigmas: float = 3.0  # refine drops residuals beyond this many robust std devs
+
+    def validate(self) -> None:
+        for name in ("descriptor_threshold", "geometric_threshold", "support_threshold"):
+            check_positive(f"alignment.{name}", getattr(self, name))
+        check_positive("alignment.outlier_sigmas", self.outlier_sigmas)
+        for name in ("iterations", "icp_max_iterations", "imp_icp_starts"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"alignment.{name}: must be >= 1, got {getattr(self, name)!r}")
+        if self.min_support < 3:
+            raise ConfigError(
+                f"alignment.min_support: must be >= 3 (a transform has 3 parameters and"
+                f" the residuals need at least as many points), got {self.min_support!r}"
+            )
+
+
+@dataclass(frozen=True)
+class FeatureMap:
+    """Landmarks of one robot's map: positions (n, 2) in its frame, descriptors (n, d)."""
+
+    positions: np.ndarray
+    descriptors: np.ndarray
+
+    def __post_init__(self) -> None:
+        pos = np.asarray(self.positions, dtype=float).reshape(-1, 2)
+        desc = np.asarray(self.descriptors, dtype=float)
+        desc = desc.reshape(len(pos), -1) if desc.size else np.zeros((len(pos), 0))
+        if len(desc) != len(pos):
+            raise ValueError(f"{len(pos)} positions but {len(desc)} descriptors")
+        object.__setattr__(self, "positions", pos)
+        object.__setattr__(self, "descriptors", desc)
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """An aligner's answer: B's frame in A's, or None with the reason it declined."""
+
+    method: str
+    transform: np.ndarray | None  # (3,) (t_x, t_y, θ), p_A = R(θ) p_B + t
+    covariance: np.ndarray | None  # (3, 3) from the refinement's residuals
+    inliers: int  # correspondences that support the final transform
+    candidates: int  # descriptor matches the aligner started from
+    reason: str = ""  # why it declined ("" when it did not)
+    raw: np.ndarray | None = None  # (3,) the aligner's own estimate, before :func:`refine`
+
+    @property
+    def accepted(self) -> bool:
+        return self.transform is not None
+
+
+# -- building blocks -------------------------------------------------------------------------------
+def candidate_matches(a: FeatureMap, b: FeatureMap, threshold: float) -> np.ndarray:
+    """Pairs (k, 2) of indices (i in A, j in B): for each B landmark its nearest A landmark by
+    descriptor distance, kept when that distance is below ``threshold`` (seed step a)."""
+    if len(a) == 0 or len(b) == 0:
+        return np.zeros((0, 2), dtype=int)
+    dist, nearest = cKDTree(a.descriptors).query(b.descriptors)
+    keep = np.flatnonzero(dist < threshold)
+    return np.column_stack([nearest[keep], keep]).astype(int)
+
+
+def transform_from_pairs(pa: np.ndarray, pb: np.ndarray) -> np.ndarray:
+    """The transform (3,) taking two B points (2, 2) onto two A points (2, 2): θ from the
+    directions of the two segments, t so that the midpoints coincide (seed eqs. 2–4)."""
+    va, vb = pa[0] - pa[1], pb[0] - pb[1]
+    theta = math.atan2(vb[0] * va[1] - vb[1] * va[0], vb[0] * va[0] + vb[1] * va[1])
+    t = pa.mean(axis=0) - rotation(theta) @ pb.mean(axis=0)
+    return np.array([t[0], t[1], theta])
+
+
+def rigid_fit(pa: np.ndarray, pb: np.ndarray) -> np.ndarray:
+    """Least-squares rigid transform (3,) with pa ≈ R pb + t over k ≥ 2 pairs (k, 2): centre
+    both sets, θ from the SVD of their cross-covariance (Arun, Huang & Blostein 1987; in 2-D
+    the angle of Σ (b_c × a_c, b_c · a_c), which is the same solution and never a reflection)."""
+    ca, cb = pa.mean(axis=0), pb.mean(axis=0)
+    da, db = pa - ca, pb - cb
+    sin = float(np.sum(db[:, 0] * da[:, 1] - db[:, 1] * da[:, 0]))
+    cos = float(np.sum(db[:, 0] * da[:, 0] + db[:, 1] * da[:, 1]))
+    theta = math.atan2(sin, cos)
+    t = ca - rotation(theta) @ cb
+    return np.array([t[0], t[1], theta])
+
+
+def _apply(transform: np.ndarray, points: np.ndarray) -> np.ndarray:  # (k, 2)
+    return points @ rotation(float(transform[2])).T + transform[:2]
+
+
+def _supports(
+    transform: np.ndarray, tree_a: cKDTree, b: np.ndarray, threshold: float
+) -> np.ndarray:
+    """Nearest-neighbour correspondences (k, 2) (i in A, j in B) within ``threshold`` of B's
+    landmarks moved by ``transform``; an A landmark supports at most one (the nearest) B one."""
+    if len(b) == 0:
+        return np.zeros((0, 2), dtype=int)
+    dist, nearest = tree_a.query(_apply(transform, b), distance_upper_bound=threshold)
+    ok = np.flatnonzero(np.isfinite(dist))
+    order = ok[np.argsort(dist[ok], kind="stable")]
+    _, first = np.unique(nearest[order], return_index=True)
+    keep = np.sort(order[first])
+    return np.column_stack([nearest[keep], keep]).astype(int)
+
+
+def chance_supports(a: FeatureMap, b: FeatureMap, cfg: AlignConfig) -> int:
+    """Supports a *wrong* transform reaches by chance with probability ≤ ``CHANCE_P``.
+
+    Under a wrong transform B's landmarks land at places unrelated to A's; one lands within
+    th2 of some A landmark with probability p ≈ n_A·π·th2² / area(A) (area of A's bounding
+    box, p capped at 1), so the support count is about Binomial(n_B, p). On dense maps that is
+    more than ``min_support`` (120 landmarks on 20 × 12 m give p ≈ 0.25): accepting 20
+    supports there would accept wrong merges. Returns the binomial's 1 − CHANCE_P quantile + 1.
+    """
+    if len(a) == 0 or len(b) == 0:
+        return 0
+    span = a.positions.max(axis=0) - a.positions.min(axis=0)
+    th2 = cfg.support_threshold
+    area = float(np.prod(np.maximum(span, 2.0 * th2)))
+    p = min(1.0, len(a) * math.pi * th2 * th2 / area)
+    return int(scipy.stats.binom.ppf(1.0 - CHANCE_P, len(b), p)) + 1
+
+
+def _geometric_ok(pa: np.ndarray, pb: np.ndarray, threshold: float) -> bool:
+    """Seed constraint (1), on distances: a rigid motion keeps the pair's distance."""
+    return abs(float(np.hypot(*(pa[0] - pa[1]))) - float(np.hypot(*(pb[0] - pb[1])))) < threshold
+
+
+def _random_hypothesis(
+    a: FeatureMap, b: FeatureMap, matches: np.ndarray, cfg: AlignConfig, rng: np.random.Generator
+) -> np.ndarray | None:
+    """One transform from two random candidates that pass the geometric test (seed step b);
+    None if ``cfg.iterations`` draws find no such pair."""
+    for _ in range(cfg.iterations):
+        k, m = rng.choice(len(matches), size=2, replace=False)
+        (ia, jb), (ia2, jb2) = matches[k], matches[m]
+        pa = a.positions[[ia, ia2]]
+        pb = b.positions[[jb, jb2]]
+        if ia != ia2 and jb != jb2 and _geometric_ok(pa, pb, cfg.geometric_threshold):
+            return transform_from_pairs(pa, pb)
+    return None
+
+
+def refine(
+    a: FeatureMap, b: FeatureMap, transform: np.ndarray, cfg: AlignConfig
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares refinement that drops outliers (the seed's final step).
+
+    Correspondences are the supports of the current transform (within th2); the rigid fit
+    over them is repeated, keeping only correspondences whose residual is within
+    ``outlier_sigmas`` robust standard deviations (1.4826 × the median absolute residual per
+    coordinate, plus a nanometre for rounding), until the kept set stops changing.
+    Returns (transform (3,), covariance (3, 3), pairs (k, 2)). The covariance is
+    σ² (JᵀJ)⁻¹ with σ² the residual variance per coordinate (2k − 3 degrees of freedom) and J
+    the residuals' Jacobian w.r.t. (t_x, t_y, θ) at the solution.
+    """
+    tree = cKDTree(a.positions)
+    pairs = _supports(transform, tree, b.positions, cfg.support_threshold)
+    for _ in range(cfg.icp_max_iterations):
+        if len(pairs) < 3:
+            break
+        transform = rigid_fit(a.positions[pairs[:, 0]], b.positions[pairs[:, 1]])
+        res = a.positions[pairs[:, 0]] - _apply(transform, b.positions[pairs[:, 1]])  # (k, 2)
+        limit = cfg.outlier_sigmas * 1.4826 * float(np.median(np.abs(res))) + 1e-9
+        near = _supports(transform, tree, b.positions, cfg.support_threshold)
+        res = a.positions[near[:, 0]] - _apply(transform, b.positions[near[:, 1]])
+        new_pairs = near[np.all(np.abs(res) <= limit, axis=1)]
+        if np.array_equal(new_pairs, pairs):
+            break
+        pairs = new_pairs
+    if len(pairs) >= 3:
+        transform = rigid_fit(a.positions[pairs[:, 0]], b.positions[pairs[:, 1]])
+    return transform, _covariance(a, b, transform, pairs), pairs
+
+
+def _covariance(
+    a: FeatureMap, b: FeatureMap, transform: np.ndarray, pairs: np.ndarray
+) -> np.ndarray:
+    """σ² (JᵀJ)⁻¹ of the rigid fit over ``pairs`` (see :func:`refine`); inf if underdetermined."""
+    k = len(pairs)
+    if k < 3:
+        return np.full((3, 3), np.inf)
+    pb = b.positions[pairs[:, 1]]
+    moved = _apply(transform, pb)
+    res = a.positions[pairs[:, 0]] - moved
+    sigma2 = float(np.sum(res * res)) / max(2 * k - 3, 1)
+    # residual r = a − (R b + t): ∂r/∂t = −I, ∂r/∂θ = −R' b = −(−(Rb)_y, (Rb)_x)
+    rb = moved - transform[:2]
+    J = np.zeros((2 * k, 3))
+    J[0::2, 0] = J[1::2, 1] = -1.0
+    J[0::2, 2] = rb[:, 1]
+    J[1::2, 2] = -rb[:, 0]
+    info = J.T @ J
+    if np.linalg.matrix_rank(info) < 3:
+        return np.full((3, 3), np.inf)
+    cov: np.ndarray = sigma2 * np.linalg.inv(info)
+    return 0.5 * (cov + cov.T)
+
+
+def _answer(
+    method: str,
+    a: FeatureMap,
+    b: FeatureMap,
+    transform: np.ndarray | None,
+    matches: np.ndarray,
+    cfg: AlignConfig,
+) -> Alignment:
+    if transform is None:
+        return Alignment(method, None, None, 0, len(matches), "no geometrically consistent pair")
+    raw = transform.copy()
+    raw[2] = wrap_scalar(float(raw[2]))
+    refined, cov, pairs = refine(a, b, transform, cfg)
+    needed = max(cfg.min_support, chance_supports(a, b, cfg))
+    if len(pairs) < needed:
+        return Alignment(
+            method,
+            None,
+            None,
+            len(pairs),
+            len(matches),
+            f"{len(pairs)} supports < {needed} needed (min_support {cfg.min_support},"
+            " or what a wrong transform reaches by chance)",
+            raw,
+        )
+    refined = refined.copy()
+    refined[2] = wrap_scalar(float(refined[2]))
+    return Alignment(method, refined, cov, len(pairs), len(matches), "", raw)
+
+
+def _too_few(method: str, matches: np.ndarray, cfg: AlignConfig) -> Alignment | None:
+    if len(matches) < max(2, cfg.min_support):
+        return Alignment(
+            method,
+            None,
+            None,
+            0,
+            len(matches),
+            f"{len(matches)} descriptor matches < min_support {cfg.min_support}",
+        )
+    return None
+
+
+# -- the four aligners -----------------------------------------------------------------------------
+def ransac(
+    a: FeatureMap, b: FeatureMap, rng: np.random.Generator, cfg: AlignConfig | None = None
+) -> Alignment:
+    """RANSAC over descriptor matches (seed §5.1), then :func:`refine`."""
+    cfg = cfg or AlignConfig()
+    matches = candidate_matches(a, b, cfg.descriptor_threshold)
+    if (declined := _too_few("ransac", matches, cfg)) is not None:
+        return declined
+    tree = cKDTree(a.positions)
+    best, best_support = None, -1
+    for _ in range(cfg.iterations):
+        k, m = rng.choice(len(matches), size=2, replace=False)
+        (ia, jb), (ia2, jb2) = matches[k], matches[m]
+        pa, pb = a.positions[[ia, ia2]], b.positions[[jb, jb2]]
+        if ia == ia2 or jb == jb2 or not _geometric_ok(pa, pb, cfg.geometric_threshold):
+            continue
+        hypothesis = transform_from_pairs(pa, pb)
+        support = len(_supports(hypothesis, tree, b.positions, cfg.support_threshold))
+        if support > best_support:
+            best, best_support = hypothesis, support
+    return _answer("ransac", a, b, best, matches, cfg)
+
+
+def svd(
+    a: FeatureMap, b: FeatureMap, rng: np.random.Generator, cfg: AlignConfig | None = None
+) -> Alignment:
+    """One least-squares solve over the descriptor matches that are geometrically consistent
+    with most other matches (seed §5.2), then :func:`refine`. ``rng`` is unused (kept so
+    every aligner has the same signature)."""
+    del rng
+    cfg = cfg or AlignConfig()
+    matches = candidate_matches(a, b, cfg.descriptor_threshold)
+    if (declined := _too_few("svd", matches, cfg)) is not None:
+        return declined
+    pa, pb = a.positions[matches[:, 0]], b.positions[matches[:, 1]]
+    da = np.linalg.norm(pa[:, None] - pa[None], axis=-1)  # (k, k)
+    db = np.linalg.norm(pb[:, None] - pb[None], axis=-1)
+    votes = (np.abs(da - db) < cfg.geometric_threshold).sum(axis=1) - 1  # minus itself
+    consistent = votes > 0.5 * (len(matches) - 1)
+    if consistent.sum() < 2:
+        return _answer("svd", a, b, None, matches, cfg)
+    return _answer("svd", a, b, rigid_fit(pa[consistent], pb[consistent]), matches, cfg)
+
+
+def _icp_from(a: FeatureMap, b: FeatureMap, start: np.ndarray, cfg: AlignConfig) -> np.ndarray:
+    """ICP from ``start``: nearest-neighbour correspondences within th2 and the rigid fit,
+    alternated until the correspondences stop changing (seed §5.3)."""
+    tree = cKDTree(a.positions)
+    transform, pairs = start, None
+    for _ in range(cfg.icp_max_iterations):
+        new = _supports(transform, tree, b.positions, cfg.support_threshold)
+        if len(new) < 2 or (pairs is not None and np.array_equal(new, pairs)):
+            break
+        pairs = new
+        transform = rigid_fit(a.positions[pairs[:, 0]], b.positions[pairs[:, 1]])
+    return transform
+
+
+def icp(
+    a: FeatureMap, b: FeatureMap, rng: np.random.Generator, cfg: AlignConfig | None = None
+) -> Alignment:
+    """ICP from one RANSAC-style initial estimate (seed §5.3), then :func:`refine`."""
+    cfg = cfg or AlignConfig()
+    matches = candidate_matches(a, b, cfg.descriptor_threshold)
+    if (declined := _too_few("icp", matches, cfg)) is not None:
+        return declined
+    start = _random_hypothesis(a, b, matches, cfg, rng)
+    result = None if start is None else _icp_from(a, b, start, cfg)
+    return _answer("icp", a, b, result, matches, cfg)
+
+
+def imp_icp(
+    a: FeatureMap, b: FeatureMap, rng: np.random.Generator, cfg: AlignConfig | None = None
+) -> Alignment:
+    """ICP from ``imp_icp_starts`` initial estimates; the most supported result wins (§5.4)."""
+    cfg = cfg or AlignConfig()
+    matches = candidate_matches(a, b, cfg.descriptor_threshold)
+    if (declined := _too_few("imp_icp", matches, cfg)) is not None:
+        return declined
+    tree = cKDTree(a.positions)
+    best, best_support = None, -1
+    for _ in range(cfg.imp_icp_starts):
+        start = _random_hypothesis(a, b, matches, cfg, rng)
+        if start is None:
+            continue
+        result = _icp_from(a, b, start, cfg)
+        support = len(_supports(result, tree, b.positions, cfg.support_threshold))
+        if support > best_support:
+            best, best_support = result, support
+    return _answer("imp_icp", a, b, best, matches, cfg)
+
+
+ALIGNERS = {"ransac": ransac, "svd": svd, "icp": icp, "imp_icp": imp_icp}
+
+
+def align(
+    method: str,
+    a: FeatureMap,
+    b: FeatureMap,
+    rng: np.random.Generator,
+    cfg: AlignConfig | None = None,
+) -> Alignment:
+    """Run the aligner named ``method`` (one of :data:`ALIGNERS`)."""
+    try:
+        aligner = ALIGNERS[method]
+    except KeyError:
+        raise ConfigError(
+            f"alignment method: unknown {method!r} (known: {', '.join(ALIGNERS)})"
+        ) from None
+    return aligner(a, b, rng, cfg)
