@@ -117,7 +117,7 @@ class ActionConfig(Config):
 class EnvConfig(Config):
     """Everything that defines an episode of ``polyslam_v0``."""
 
-    map: str = "paper"  # built-in name, path to a YAML map, or "generator:rooms" / "generator:cave"
+    map: str = "paper"  # built-in name, path to a YAML map, or "generator:<name>" (GENERATORS)
     map_params: Any = None  # mapping of generator parameters (generator maps only)
     num_robots: int = 3
     max_steps: int = 500  # truncation
