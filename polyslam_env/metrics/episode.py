@@ -17,7 +17,7 @@ robot's history stops at its failure.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,6 +34,7 @@ __all__ = [
     "RobotRun",
     "final_robot_metrics",
     "map_metrics",
+    "meaningful",
     "robot_metrics",
     "team_metrics",
 ]
@@ -233,6 +234,27 @@ def final_robot_metrics(
     out["path_length"] = history.path_length
     for key in ("bytes_sent", "bytes_received", "rendezvous"):
         out[key] = float(counters.get(key, 0.0))
+    return out
+
+
+#: Metrics whose value only means something for a robot with a map (else the stated empty-map
+#: value, which must not enter an average of map errors).
+NEEDS_MAP = frozenset({"nu", "nu_mean", "nu_mean_abs", "map_precision", "duplicates"})
+
+
+def meaningful(robots: Iterable[Mapping[str, float]], key: str) -> list[float]:
+    """``key``'s values over the robots (``infos[agent]["metrics"]`` dicts) for which it is
+    meaningful: :data:`NEEDS_MAP` keys from robots with ``has_map`` 1, the other SLAM metrics
+    from robots with ``slam`` 1, any other key from every robot (absent or None skipped)."""
+    out = []
+    for m in robots:
+        if key in NEEDS_MAP and m.get("has_map", 1.0) != 1.0:
+            continue
+        if key in _SLAM_KEYS and m.get("slam", 1.0) != 1.0:
+            continue
+        value = m.get(key)
+        if value is not None:
+            out.append(float(value))
     return out
 
 

@@ -188,3 +188,15 @@ def test_final_robot_metrics__empty_map_and_no_slam_are_finite_and_flagged() -> 
         assert all(out[k] == 0.0 for k in MAP_METRIC_KEYS if k != "map_precision")
     assert empty["slam"] == 1.0 and none["slam"] == 0.0
     assert none["nees"] == 0.0
+
+
+def test_meaningful__map_errors_only_from_robots_with_a_map_slam_metrics_only_with_slam() -> None:
+    from polyslam_env.metrics.episode import meaningful
+
+    no_map = {"nu_mean": 0.0, "completeness": 0.0, "has_map": 0.0, "slam": 1.0, "coverage": 0.1}
+    mapped = {"nu_mean": 0.03, "completeness": 0.4, "has_map": 1.0, "slam": 1.0, "coverage": 0.2}
+    no_slam = {"nu_mean": 0.0, "completeness": 0.0, "has_map": 0.0, "slam": 0.0, "coverage": 0.3}
+    robots = [no_map, mapped, no_slam]
+    assert meaningful(robots, "nu_mean") == [0.03]
+    assert meaningful(robots, "completeness") == [0.0, 0.4]  # an empty map is 0 % complete
+    assert meaningful(robots, "coverage") == [0.1, 0.2, 0.3]
