@@ -200,3 +200,18 @@ def test_meaningful__map_errors_only_from_robots_with_a_map_slam_metrics_only_wi
     assert meaningful(robots, "nu_mean") == [0.03]
     assert meaningful(robots, "completeness") == [0.0, 0.4]  # an empty map is 0 % complete
     assert meaningful(robots, "coverage") == [0.1, 0.2, 0.3]
+
+
+def test_env_final_metrics__short_episode_without_map_is_finite_and_flagged() -> None:
+    from polyslam_env.environment.parallel import parallel_env
+
+    env = parallel_env(map="generator:cave", num_robots=2, max_steps=2)
+    env.reset(seed=0)
+    info: dict = {}
+    while env.agents:
+        *_, info = env.step({a: np.zeros(2) for a in env.agents})
+    for agent in env.possible_agents:
+        m = info[agent]["metrics"]
+        assert all(math.isfinite(v) for v in m.values()), agent
+        assert m["has_map"] == 0.0 and m["slam"] == 1.0  # 10 hits per landmark: none in 2 steps
+        assert m["nu_mean"] == 0.0 and m["map_precision"] == 1.0
