@@ -15,6 +15,7 @@ import numpy as np
 from policies.base import TeamPolicy, make_team
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import PolySlamParallelEnv, parallel_env
+from polyslam_env.metrics.episode import meaningful
 
 __all__ = [
     "COMPARED",
@@ -134,12 +135,12 @@ COMPARED = ("coverage", "steps_to_90", "nu_mean", "completeness", "bytes_sent")
 
 def episode_row(result: EpisodeResult) -> dict[str, float | None]:
     """One episode's values of :data:`COMPARED`: the team coverage and ``steps_to_90`` (None
-    if never reached), the robots' mean ``nu_mean`` and ``completeness`` (NaN when none is
-    finite, e.g. without SLAM) and the bytes all robots sent."""
+    if never reached), the robots' mean ``nu_mean`` (over robots with a map) and
+    ``completeness`` (over robots with SLAM), NaN when there are none (e.g. without SLAM),
+    and the bytes all robots sent."""
 
     def robots(key: str) -> list[float]:
-        values = (m.get(key) for m in result.robots.values())
-        return [float(v) for v in values if v is not None and np.isfinite(v)]
+        return [v for v in meaningful(result.robots.values(), key) if np.isfinite(v)]
 
     def mean(values: list[float]) -> float:
         return float(np.mean(values)) if values else float("nan")

@@ -29,6 +29,7 @@ import numpy as np
 from polyslam_env.core.config import Config, check_positive, check_range
 from polyslam_env.core.errors import ConfigError, PolyslamError
 from polyslam_env.environment.config import EnvConfig
+from polyslam_env.metrics.episode import meaningful
 
 __all__ = [
     "PPOConfig",
@@ -283,8 +284,8 @@ def _metrics_callback(num_robots: int) -> Any:
     Slots ``k·R … k·R+R−1`` are env copy ``k``. A robot's ``infos["metrics"]`` arrive at its
     last step (a failed robot's earlier); the team episode has ended when all its slots are
     done, and then ``infos["team"]`` is read from one of them. Values are averaged over the
-    episodes that ended between two log dumps (SB3's ``record_mean``); ``nu_mean`` and
-    ``completeness`` only when finite (they are NaN without SLAM).
+    episodes that ended between two log dumps (SB3's ``record_mean``); ``nu_mean`` only over
+    robots with a map and ``completeness`` over robots with SLAM (``metrics.episode.meaningful``).
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -319,8 +320,8 @@ def _metrics_callback(num_robots: int) -> Any:
                 rec("polyslam/robot_coverage_mean", float(np.mean(coverage)))
                 rec("polyslam/robot_coverage_min", min(coverage))
                 rec("polyslam/robot_coverage_max", max(coverage))
-            for key in ("nu_mean", "completeness"):
-                values = finite([m.get(key) for m in robots])
+            for key in ("nu_mean", "completeness"):  # only robots with a map / with SLAM
+                values = finite(list(meaningful(robots, key)))
                 if values:
                     rec(f"polyslam/{key}", float(np.mean(values)))
             for key in ("bytes_sent", "rendezvous"):  # team totals

@@ -13,6 +13,7 @@ COMMANDS = (
     "run",
     "evaluate",
     "reproduce",
+    "fidelity",
     "train",
     "benchmark",
 )

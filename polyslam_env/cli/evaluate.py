@@ -190,12 +190,13 @@ def format_summary(summary: dict[str, Any]) -> str:
     """Per robot then team: ``metric  mean ± std  [min, max]``, one line each."""
     lines = []
     blocks = [*summary["robots"].items(), ("team", summary["team"])]
+    width = max([16, *(len(k) + 1 for _, stats in blocks for k in stats)])
     for name, stats in blocks:
         lines.append(f"{name}:")
         for key, s in stats.items():
             extra = f"  (reached in {int(s['reached'])})" if "reached" in s else ""
             lines.append(
-                f"  {key:<16}{fmt(s['mean']):>10} ± {fmt(s['std']):<10}"
+                f"  {key:<{width}}{fmt(s['mean']):>10} ± {fmt(s['std']):<10}"
                 f" [{fmt(s['min'])}, {fmt(s['max'])}]{extra}"
             )
     return "\n".join(lines)

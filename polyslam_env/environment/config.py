@@ -51,13 +51,16 @@ class RewardConfig(Config):
 
     coverage: float = 1.0  # per m² of newly swept free space
     mapping: float = 1.0  # per unit change of the robot's map completeness
+    # per m² of change of the robot's map error ∫δ ds (the term is −change; same unit as the
+    # coverage term: 1 m of map 1 m off, or 10 m of map 10 cm off, weighs like 1 m² swept)
+    map_error: float = 1.0
     bytes: float = 0.1  # per kB sent (the term is −bytes/1000)
     collision: float = 0.5  # the term is −1 on a step with a collision
     time: float = 0.01  # the term is −1 every step
     shared: bool = False  # True: every robot receives the team mean reward
 
     def validate(self) -> None:
-        for name in ("coverage", "mapping", "bytes", "collision", "time"):
+        for name in ("coverage", "mapping", "map_error", "bytes", "collision", "time"):
             check_range(f"reward.{name}", getattr(self, name), -1e6, 1e6)
 
 
@@ -117,7 +120,7 @@ class ActionConfig(Config):
 class EnvConfig(Config):
     """Everything that defines an episode of ``polyslam_v0``."""
 
-    map: str = "paper"  # built-in name, path to a YAML map, or "generator:rooms" / "generator:cave"
+    map: str = "paper"  # built-in name, path to a YAML map, or "generator:<name>" (GENERATORS)
     map_params: Any = None  # mapping of generator parameters (generator maps only)
     num_robots: int = 3
     max_steps: int = 500  # truncation

@@ -87,9 +87,15 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     for both); ``mapping`` the change of the robot's map completeness (share of the true
     boundary within 5 cm of its polynomials, sampled every 5 cm), re-evaluated only in steps
     where its map changed structurally (a landmark created, refit, merged or received), else 0;
+    ``map_error`` −(change of the robot's map error ∫δ ds, m²: the distance δ of each map point
+    to the nearest true wall integrated over the map's length, sampled every 5 cm, the map
+    placed by the robot's true start), re-evaluated on the same steps, else 0 — negative when
+    the map gets worse, positive when it improves, and deleting correct map earns nothing;
     ``bytes`` −bytes sent this step / 1000; ``collision`` −1 on a step with a collision;
     ``time`` −1. Reward = Σ weight · term (``reward.*``); with ``reward.shared`` every robot
-    gets the mean over the robots that acted this step.
+    gets the mean over the robots that acted this step. ``coverage``, ``mapping`` and
+    ``map_error`` are **privileged**: computed from ground truth the robots never observe
+    (fine for training signals, not available on a real robot).
 
     ## Episode End
     Termination for all when the team coverage reaches ``coverage_target`` (``None``: never,
@@ -97,9 +103,12 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     at ``max_steps``. A fault ``(robot, step)`` disables the robot at the end of env step
     ``step``: it is terminated and leaves ``agents``, stays as an obstacle, and the others go
     on. At an agent's last step ``infos[agent]`` also holds ``"metrics"`` (per robot: nees,
-    nees_paper, nu, nu_mean, completeness, coverage, bytes_sent, bytes_received, rendezvous,
-    slam_time_ms (wall time, not reproducible), collisions, path_length) and ``"team"``
-    (coverage, steps_to_50, steps_to_90, overlap).
+    nees_paper, nu, nu_mean, nu_mean_abs, completeness, completeness_seen, map_precision,
+    duplicates, has_map, slam, coverage, bytes_sent, bytes_received, rendezvous, slam_time_ms
+    (wall time, not reproducible), collisions, path_length; never NaN: a robot without a map
+    has has_map 0 and the values stated in :mod:`polyslam_env.metrics.mapping`, without SLAM
+    slam 0; map metrics place the map by the robot's true start, nu_mean_abs by its nominal
+    frame) and ``"team"`` (coverage, steps_to_50, steps_to_90, overlap).
 
     ## Arguments
     ``parallel_env(config=None, render_mode=None, **overrides)``: ``config`` an

@@ -1,8 +1,10 @@
 """The reward of ``polyslam_v0``: named terms per robot, combined with weights from config.
 
 The terms are pure functions of what the step's stages produced (coverage gains, map changes,
-collisions); they never change the episode state. The bookkeeping behind them (sweeping the
-coverage grid, tracking completeness and bytes sent) is done by the stages
+collisions); they never change the episode state. ``coverage``, ``mapping`` and ``map_error``
+are **privileged**: computed from ground truth (the true walls, the true poses), which the
+robots never see. The bookkeeping behind them (sweeping the coverage grid, tracking
+completeness, map error and bytes sent) is done by the stages
 :func:`~polyslam_env.environment.stages.sweep_coverage` and
 :func:`~polyslam_env.environment.stages.map_bookkeeping`, which return what changed.
 """
@@ -19,8 +21,16 @@ from polyslam_env.environment.config import RewardConfig
 __all__ = ["MAPPING_STEP", "MAPPING_TOL", "REWARD_TERMS", "MapChanges", "combine", "reward_terms"]
 
 #: Names of the reward terms, in the order they appear in ``infos[agent]["reward_terms"]``.
-REWARD_TERMS: tuple[str, ...] = ("coverage", "mapping", "bytes", "collision", "time")
-#: Sampling step (m) and tolerance (m) of the completeness behind the ``mapping`` term.
+REWARD_TERMS: tuple[str, ...] = (
+    "coverage",
+    "mapping",
+    "map_error",
+    "bytes",
+    "collision",
+    "time",
+)
+#: Sampling step (m) and tolerance (m) of the completeness behind the ``mapping`` term; the
+#: map error behind the ``map_error`` term is sampled with the same step.
 MAPPING_STEP, MAPPING_TOL = 0.05, 0.05
 
 
@@ -30,6 +40,7 @@ class MapChanges:
 
     completeness: Mapping[int, float]  # change of map completeness (0 when not re-evaluated)
     bytes_sent: Mapping[int, int]  # bytes sent this step
+    map_error: Mapping[int, float]  # change of map error ∫δ ds, m² (0 when not re-evaluated)
 
 
 def reward_terms(
@@ -44,6 +55,7 @@ def reward_terms(
         agent: {
             "coverage": float(gains[i]),
             "mapping": changes.completeness[i],
+            "map_error": -changes.map_error[i],
             "bytes": -changes.bytes_sent[i] / 1000.0,
             "collision": -1.0 if collided[i] else 0.0,
             "time": -1.0,

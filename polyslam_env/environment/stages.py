@@ -102,6 +102,7 @@ def new_episode(
         sensing=sense(world),
         last_rendezvous=[None] * n,
         completeness=[0.0] * n,
+        map_error=[0.0] * n,
         bytes_sent=[0] * n,
         links=[],
         coverage_series=[],
@@ -318,32 +319,35 @@ def map_bookkeeping(
     slam_infos: Sequence[SlamStepInfo | None],
     exchanged: ExchangeStep | None,
 ) -> MapChanges:
-    """Update each acting robot's map completeness and bytes-sent count (changes both) and
-    return the changes. Completeness is re-evaluated only when the robot's map changed
-    structurally (a landmark created, refit, merged or received), else its change is 0."""
+    """Update each acting robot's map completeness, map error and bytes-sent count (changes
+    them) and return the changes. Completeness and map error (ground truth, the map placed by
+    the robot's true start pose) are re-evaluated only when the robot's map changed
+    structurally (a landmark created, refit, merged or received), else their changes are 0."""
     received = {d.receiver for d in exchanged.delivered} if exchanged is not None else set()
     completeness: dict[int, float] = {}
+    map_error: dict[int, float] = {}
     bytes_sent: dict[int, int] = {}
     for i in acting.values():
-        completeness[i] = _completeness_change(state, i, slam_infos[i], i in received)
+        completeness[i], map_error[i] = _map_change(state, i, slam_infos[i], i in received)
         bytes_sent[i] = _bytes_change(state, i)
-    return MapChanges(completeness, bytes_sent)
+    return MapChanges(completeness, bytes_sent, map_error)
 
 
-def _completeness_change(
+def _map_change(
     state: EpisodeState, i: int, info: SlamStepInfo | None, received: bool
-) -> float:
+) -> tuple[float, float]:
+    """Changes of robot i's completeness and map error ∫δ ds (m²) this step (0, 0 if its map
+    did not change); both sampled every ``MAPPING_STEP``, the map placed by the true start."""
     if info is None or not (info.created or info.refit or info.merged or received):
-        return 0.0
-    comp = metrics.completeness(
-        state.slams[i].polynomials(),
-        state.start_poses[i],
-        state.world.layout,
-        tol=MAPPING_TOL,
-        step=MAPPING_STEP,
-    )
-    delta, state.completeness[i] = comp - state.completeness[i], comp
-    return delta
+        return 0.0, 0.0
+    polys = state.slams[i].polynomials()
+    place = state.histories[i].true[0]  # the true start (see metrics.mapping)
+    layout = state.world.layout
+    comp = metrics.completeness(polys, place, layout, tol=MAPPING_TOL, step=MAPPING_STEP)
+    error = metrics.map_error_length(polys, place, layout, step=MAPPING_STEP)
+    d_comp, state.completeness[i] = comp - state.completeness[i], comp
+    d_error, state.map_error[i] = error - state.map_error[i], error
+    return d_comp, d_error
 
 
 def _bytes_change(state: EpisodeState, i: int) -> int:

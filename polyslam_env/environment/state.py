@@ -57,6 +57,7 @@ class EpisodeState:
     sensing: Sensing  # the latest readings (observations use them)
     last_rendezvous: list[int | None]  # per robot: step of its last rendezvous
     completeness: list[float]  # per robot: map completeness behind the ``mapping`` term
+    map_error: list[float]  # per robot: map error ∫δ ds (m²) behind the ``map_error`` term
     bytes_sent: list[int]  # per robot: bytes sent up to the last step (``bytes`` term)
     links: list[tuple[int, int]]  # pairs (i < j) that see each other (rendering)
     coverage_series: list[float]  # team coverage after each step (0: after reset)

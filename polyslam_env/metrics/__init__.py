@@ -1,11 +1,11 @@
 """Evaluation metrics (SPEC §5), each computed against ground truth the robots never see.
 
 It owns: ``pose`` (frames, NEES in both forms, the χ² band), ``boundary`` (the true boundary
-and distances to it), ``mapping`` (ν in both forms, completeness, hit fraction), ``coverage``
-(the team coverage grid, time to a coverage fraction) and ``episode`` (per-robot histories and
-the end-of-episode metrics of the env and of ``simulate``). numpy/scipy, ``core``, the SLAM's
-polynomials and the world's layouts only: no pymunk, no PettingZoo. The SLAM wall time τ is
-measured by its caller.
+and distances to it), ``mapping`` (ν in both forms, completeness, hit fraction, precision,
+completeness over the seen boundary, duplicates), ``coverage`` (the team coverage grid, time
+to a coverage fraction) and ``episode`` (per-robot histories and the end-of-episode metrics of
+the env and of ``simulate``). numpy/scipy, ``core``, the SLAM's polynomials and the world's
+layouts only: no pymunk, no PettingZoo. The SLAM wall time τ is measured by its caller.
 """
 
 from polyslam_env.core.geometry import wrap_angle
@@ -13,12 +13,18 @@ from polyslam_env.metrics.boundary import boundary_points, boundary_samples, dis
 from polyslam_env.metrics.coverage import CoverageGrid, time_to_fraction
 from polyslam_env.metrics.mapping import (
     completeness,
+    completeness_seen,
+    duplicates,
+    has_map,
     hit_fraction,
     map_distances,
+    map_error_length,
     map_points,
+    map_precision,
     nu,
     nu_mean,
     sample_arclength_batch,
+    seen_boundary,
 )
 from polyslam_env.metrics.pose import (
     cov_to_absolute,
@@ -35,11 +41,16 @@ __all__ = [
     "boundary_points",
     "boundary_samples",
     "completeness",
+    "completeness_seen",
     "cov_to_absolute",
     "distance_to_boundary",
+    "duplicates",
+    "has_map",
     "hit_fraction",
     "map_distances",
+    "map_error_length",
     "map_points",
+    "map_precision",
     "nees",
     "nees_band",
     "nees_paper",
@@ -49,6 +60,7 @@ __all__ = [
     "nu_mean",
     "pose_to_absolute",
     "sample_arclength_batch",
+    "seen_boundary",
     "time_to_fraction",
     "wrap_angle",
 ]

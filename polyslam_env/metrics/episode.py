@@ -17,7 +17,7 @@ robot's history stops at its failure.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,21 +28,31 @@ from polyslam_env.world.layout import Layout
 
 __all__ = [
     "COMMS_METRICS",
+    "MAP_METRIC_KEYS",
     "ROBOT_METRIC_KEYS",
     "RobotHistory",
     "RobotRun",
     "final_robot_metrics",
+    "map_metrics",
+    "meaningful",
     "robot_metrics",
     "team_metrics",
 ]
 
-#: Keys of ``infos[agent]["metrics"]`` (all floats; NaN where undefined).
+#: Keys of ``infos[agent]["metrics"]`` (all finite floats, never NaN; see
+#: :func:`final_robot_metrics` for the values without a map or without SLAM).
 ROBOT_METRIC_KEYS: tuple[str, ...] = (
     "nees",
     "nees_paper",
     "nu",
     "nu_mean",
+    "nu_mean_abs",
     "completeness",
+    "completeness_seen",
+    "map_precision",
+    "duplicates",
+    "has_map",
+    "slam",
     "coverage",
     "bytes_sent",
     "bytes_received",
@@ -51,7 +61,18 @@ ROBOT_METRIC_KEYS: tuple[str, ...] = (
     "collisions",
     "path_length",
 )
-_SLAM_KEYS = ("nees", "nees_paper", "nu", "nu_mean", "completeness", "slam_time_ms")
+#: The map-quality metrics (:func:`map_metrics`), in order.
+MAP_METRIC_KEYS: tuple[str, ...] = (
+    "nu",
+    "nu_mean",
+    "nu_mean_abs",
+    "completeness",
+    "completeness_seen",
+    "map_precision",
+    "duplicates",
+    "has_map",
+)
+_SLAM_KEYS = ("nees", "nees_paper", *MAP_METRIC_KEYS, "slam_time_ms")
 
 
 @dataclass
@@ -74,17 +95,41 @@ class RobotRun:
 COMMS_METRICS = ("bytes_sent", "bytes_received", "rendezvous", "messages_lost")
 
 
+def map_metrics(
+    polys: list[Polynomial],
+    true_start: np.ndarray,
+    frame: np.ndarray,
+    hit_points: np.ndarray,
+    layout: Layout,
+) -> dict[str, float]:
+    """The map-quality metrics (:data:`MAP_METRIC_KEYS`) of one robot's map ``polys`` (own
+    frame): placed by its true start pose ``true_start`` (3,), except ``nu_mean_abs``, placed by
+    its nominal ``frame`` (3,), which includes the unobservable initial offset (see
+    :mod:`polyslam_env.metrics.mapping`). ``hit_points`` (H, 2) are its true beam hits. An empty
+    map gives the stated values with ``has_map`` 0.0."""
+    return {
+        "nu": metrics.nu(polys, true_start, layout),
+        "nu_mean": metrics.nu_mean(polys, true_start, layout),
+        "nu_mean_abs": metrics.nu_mean(polys, frame, layout),
+        "completeness": metrics.completeness(polys, true_start, layout),
+        "completeness_seen": metrics.completeness_seen(polys, true_start, layout, hit_points),
+        "map_precision": metrics.map_precision(polys, true_start, layout),
+        "duplicates": metrics.duplicates(polys),
+        "has_map": metrics.has_map(polys),
+    }
+
+
 def robot_metrics(run: RobotRun, layout: Layout) -> dict[str, float]:
-    """The paper's metrics (SPEC §5) for one robot, plus completeness and timing."""
+    """The paper's metrics (SPEC §5) for one robot, plus the map-quality metrics
+    (:func:`map_metrics`, the map placed by the robot's true start ``true_poses[0]``) and
+    timing. NEES compares the estimate mapped through the nominal frame ``start_pose``."""
     sp = run.start_pose
     polys = run.polynomials
     hit = metrics.hit_fraction(run.hit_points, layout) if len(run.hit_points) else 0.0
     return {
         "nees": metrics.nees(run.true_poses, run.est_poses, run.est_covs, sp),
         "nees_paper": metrics.nees_paper(run.true_poses, run.est_poses, run.est_covs, sp),
-        "nu": metrics.nu(polys, sp, layout),
-        "nu_mean": metrics.nu_mean(polys, sp, layout),
-        "completeness": metrics.completeness(polys, sp, layout),
+        **map_metrics(polys, run.true_poses[0], sp, run.hit_points, layout),
         "hit_fraction": hit,
         "landmarks": float(len(polys)),
         "slam_time_ms": 1e3 * float(np.mean(run.slam_times)) if len(run.slam_times) else 0.0,
@@ -171,16 +216,45 @@ def final_robot_metrics(
     coverage: float,
     counters: Mapping[str, float],
 ) -> dict[str, float]:
-    """``infos[agent]["metrics"]``; ``polys`` None (no SLAM) gives NaN for the SLAM metrics."""
-    out = dict.fromkeys(ROBOT_METRIC_KEYS, float("nan"))
+    """``infos[agent]["metrics"]``: every key of :data:`ROBOT_METRIC_KEYS`, a finite float.
+
+    ``slam`` is 1.0 with SLAM. ``polys`` None (no SLAM: the robot knows its true pose and
+    builds no map) gives ``slam`` 0.0 and, for the SLAM metrics, the values of a robot with an
+    empty map and no estimation error: nees, nees_paper, ν, nu_mean, nu_mean_abs, duplicates,
+    completeness, completeness_seen and slam_time_ms 0.0, map_precision 1.0, has_map 0.0.
+    """
+    out = dict.fromkeys(ROBOT_METRIC_KEYS, 0.0)
+    out["map_precision"] = 1.0
     if polys is not None:
         paper = robot_metrics(history.run(polys), layout)
         out.update({k: float(paper[k]) for k in _SLAM_KEYS})
+        out["slam"] = 1.0
     out["coverage"] = float(coverage)
     out["collisions"] = float(history.collisions)
     out["path_length"] = history.path_length
     for key in ("bytes_sent", "bytes_received", "rendezvous"):
         out[key] = float(counters.get(key, 0.0))
+    return out
+
+
+#: Metrics whose value only means something for a robot with a map (else the stated empty-map
+#: value, which must not enter an average of map errors).
+NEEDS_MAP = frozenset({"nu", "nu_mean", "nu_mean_abs", "map_precision", "duplicates"})
+
+
+def meaningful(robots: Iterable[Mapping[str, float]], key: str) -> list[float]:
+    """``key``'s values over the robots (``infos[agent]["metrics"]`` dicts) for which it is
+    meaningful: :data:`NEEDS_MAP` keys from robots with ``has_map`` 1, the other SLAM metrics
+    from robots with ``slam`` 1, any other key from every robot (absent or None skipped)."""
+    out = []
+    for m in robots:
+        if key in NEEDS_MAP and m.get("has_map", 1.0) != 1.0:
+            continue
+        if key in _SLAM_KEYS and m.get("slam", 1.0) != 1.0:
+            continue
+        value = m.get(key)
+        if value is not None:
+            out.append(float(value))
     return out
 
 

@@ -1,7 +1,24 @@
-"""How good a robot's map is: mapping error ν (both forms), completeness, hit fraction.
+"""How good a robot's map is: mapping error ν (both forms), completeness, hit fraction, and
+the map-quality metrics of issue 14 (precision, completeness over the seen boundary,
+duplicates).
 
-Maps are polynomials in the robot's start frame; they are sampled along their arc length and
-moved to the absolute frame before they are compared with the true boundary.
+Maps are polynomials in the robot's start frame; they are sampled along their arc length
+(every ``step``, so a map's sample count is proportional to its length, give or take one
+sample per polynomial) and moved to the absolute frame by a **placing pose** before they are
+compared with the true boundary.
+
+**Which placing pose.** A robot's map is built from pose estimates that start at 0 in its own
+frame. When the robot's true start differs from its frame origin (``initial_error``: the true
+start is drawn from N(0, P0) around the nominal start), that offset is unobservable without an
+absolute reference, so the map is the world *as seen from the true start*: map quality is
+measured with the map placed by the robot's **true start pose** (``RobotRun.true_poses[0]``).
+``nu_mean_abs`` places it by the nominal frame instead and so includes the initial offset.
+Without initial error the two poses coincide and so do the numbers.
+
+**Empty maps.** Every metric is defined for an empty map: the error metrics (ν, ``nu_mean``,
+``duplicates``) are 0.0 and ``map_precision`` 1.0 (nothing wrong was mapped), the coverage
+metrics (``completeness``, ``completeness_seen``) 0.0 (nothing was mapped); callers report
+``has_map`` beside them so that an empty map is not mistaken for a perfect one.
 """
 
 from __future__ import annotations
@@ -115,11 +132,123 @@ def nu(
 def nu_mean(
     polys: Sequence[Polynomial], start_pose: np.ndarray, layout: Layout, step: float = 0.01
 ) -> float:
-    """Mean δ over all map points (metres). NaN for an empty map (no points, no error defined):
-    callers should skip it when averaging (``np.nanmean``) and report the count of empty maps;
-    a reward should treat it as "no change"."""
+    """Mean δ over all map points (metres), the map placed by ``start_pose`` (see the module
+    docstring for which pose). 0.0 for an empty map (no points, no error): report
+    :func:`has_map` beside it."""
     ds = map_distances(polys, start_pose, layout, step)
-    return float(np.concatenate(ds).mean()) if ds else float("nan")
+    return float(np.concatenate(ds).mean()) if ds else 0.0
+
+
+def has_map(polys: Sequence[Polynomial]) -> float:
+    """1.0 if the map holds at least one polynomial, else 0.0 (the flag beside the metrics)."""
+    return 1.0 if len(polys) else 0.0
+
+
+def map_error_length(
+    polys: Sequence[Polynomial], start_pose: np.ndarray, layout: Layout, step: float = 0.01
+) -> float:
+    """∫ δ ds over the map (m²): each arc-length sample's δ times ``step``. It is ``nu_mean``
+    times the mapped length, so it grows with wrong map and is not lowered by deleting map
+    that is right (the ``map_error`` reward term differences it). 0.0 for an empty map."""
+    ds = map_distances(polys, start_pose, layout, step)
+    return float(np.concatenate(ds).sum()) * step if ds else 0.0
+
+
+def map_precision(
+    polys: Sequence[Polynomial],
+    start_pose: np.ndarray,
+    layout: Layout,
+    tol: float = 0.05,
+    step: float = 0.01,
+) -> float:
+    """Fraction of the map's arc length (its samples every ``step``) within ``tol`` of a true
+    wall: the mirror of :func:`completeness`, lowered by spurious and runaway polynomials.
+    1.0 for an empty map (nothing wrong mapped; report :func:`has_map` beside it)."""
+    ds = map_distances(polys, start_pose, layout, step)
+    if not ds:
+        return 1.0
+    d = np.concatenate(ds)
+    return float(np.count_nonzero(d <= tol)) / len(d)
+
+
+#: Radius (m) around the robot's true beam hits within which the true boundary counts as seen
+#: by :func:`completeness_seen`: half of v_max·T = 0.3 m, the most a robot moves in one step
+#: at the default speed limit, so while a beam sweeps a wall facing it its consecutive hits
+#: are at most 0.3 m apart and every boundary point between them is within 0.15 m of one.
+SEEN_RADIUS = 0.15
+
+
+def seen_boundary(
+    layout: Layout, hit_points_abs: np.ndarray, radius: float = SEEN_RADIUS, step: float = 0.01
+) -> tuple[np.ndarray, np.ndarray]:
+    """The boundary samples (M, 2) within ``radius`` of a true beam hit (H, 2), absolute, and
+    their lengths (M,); non-finite hits are ignored."""
+    bpts, weights = boundary_samples(layout, step)
+    hits = np.asarray(hit_points_abs, dtype=float).reshape(-1, 2)
+    hits = hits[np.all(np.isfinite(hits), axis=1)]
+    if len(hits) == 0:
+        return bpts[:0], weights[:0]
+    d, _ = cKDTree(hits).query(bpts, k=1, distance_upper_bound=radius)
+    seen = np.isfinite(d)
+    return bpts[seen], weights[seen]
+
+
+def completeness_seen(
+    polys: Sequence[Polynomial],
+    start_pose: np.ndarray,
+    layout: Layout,
+    hit_points_abs: np.ndarray,
+    radius: float = SEEN_RADIUS,
+    tol: float = 0.05,
+    step: float = 0.01,
+) -> float:
+    """:func:`completeness` over only the boundary the robot's beams hit: the seen length
+    (:func:`seen_boundary`) within ``tol`` of the map, over the seen length. 0.0 when the map
+    is empty or nothing was seen."""
+    bpts, weights = seen_boundary(layout, hit_points_abs, radius, step)
+    total = float(weights.sum())
+    pts = map_points(polys, start_pose, step)
+    if not pts or total == 0.0:
+        return 0.0
+    d, _ = cKDTree(np.vstack(pts)).query(bpts, k=1, distance_upper_bound=tol)
+    return float(weights[np.isfinite(d)].sum()) / total
+
+
+#: Distance (m) and angle (rad) within which a piece of map duplicates another polynomial: the
+#: 10 cm and 10° of SPEC §5 (10 cm is five range-noise σ, so two fits of one wall from honest
+#: poses lie well inside it; 10° is the near-tangent cut of the measurement model).
+DUPLICATE_TOL, DUPLICATE_ANGLE = 0.10, np.deg2rad(10.0)
+
+
+def duplicates(
+    polys: Sequence[Polynomial],
+    tol: float = DUPLICATE_TOL,
+    angle: float = DUPLICATE_ANGLE,
+    step: float = 0.01,
+) -> float:
+    """Fraction of the map's arc length lying within ``tol`` of, and parallel (tangents within
+    ``angle``, either direction) to, another polynomial of the same map: a sample of polynomial
+    a counts when a sample of a different polynomial b is within ``tol`` with |sin| of the
+    angle between their tangents ≤ sin(angle) (a zero-extent polynomial has no direction and
+    never counts). Tangents are central differences of the samples. Invariant under moving the
+    map, so computed in the robot's frame. 0.0 for an empty map."""
+    own = [p for p in sample_arclength_batch(polys, step) if len(p)]
+    if not own:
+        return 0.0
+    pts = np.vstack(own)  # (M, 2)
+    owner = np.repeat(np.arange(len(own)), [len(p) for p in own])  # (M,)
+    tangent = np.vstack([np.gradient(p, axis=0) if len(p) > 1 else np.zeros((1, 2)) for p in own])
+    norm = np.linalg.norm(tangent, axis=1, keepdims=True)  # 0: a zero-extent polynomial
+    tangent = np.divide(tangent, norm, out=np.zeros_like(tangent), where=norm > 0)
+    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")  # (P, 2)
+    has_dir = norm[:, 0] > 0
+    pairs = pairs[(owner[pairs[:, 0]] != owner[pairs[:, 1]]) & has_dir[pairs].all(axis=1)]
+    ta, tb = tangent[pairs[:, 0]], tangent[pairs[:, 1]]
+    cross = np.abs(ta[:, 0] * tb[:, 1] - ta[:, 1] * tb[:, 0])
+    pairs = pairs[cross <= np.sin(angle)]
+    marked = np.zeros(len(pts), dtype=bool)
+    marked[pairs.ravel()] = True
+    return float(np.count_nonzero(marked)) / len(pts)
 
 
 def _covered_fraction(points: np.ndarray, layout: Layout, tol: float, step: float) -> float:

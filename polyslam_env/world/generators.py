@@ -5,7 +5,15 @@
 * :class:`CaveGenerator` — a smooth random closed outline (a radius made of a few Fourier
   terms, finely sampled) with optional rock islands inside.
 
-Both draw only from the ``rng`` they are given (same generator state ⇒ bit-identical layout)
+Large floor plans (20 × 12 m and up, issue 14), axis-aligned, coordinates multiples of 5 cm:
+
+* :class:`OfficeFloorGenerator` — rooms off one or two long corridors, one door each;
+* :class:`WarehouseGenerator` — shelf rows (long thin closed boxes) with aisles, a cross aisle
+  and free-standing pillars in an open loading area;
+* :class:`LoopGenerator` — a corridor loop around a solid block.
+
+Their start poses keep ``start_separation`` from each other, so a team does not start in one
+room. All draw only from the ``rng`` they are given (same generator state ⇒ bit-identical layout)
 and guarantee, for a robot of ``robot_radius``:
 
 * a closed outer boundary enclosing every wall;
@@ -21,6 +29,7 @@ A draw that fails a check is thrown away and redrawn from the same ``rng`` (at m
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -360,6 +369,348 @@ def _resample_closed(poly: np.ndarray, spacing: float) -> np.ndarray:
     return out
 
 
+# -- large floor plans: shared pieces ---------------------------------------------------------
+Range = tuple[float, float]  # (low, high), both inclusive
+
+
+def _check_span(name: str, span: Range, low: float, high: float) -> None:
+    """``span`` = (a, b) with low <= a <= b <= high, else a ConfigError naming ``name``."""
+    a, b = span
+    check_range(f"{name}[0]", a, low, high)
+    check_range(f"{name}[1]", b, a, high)
+
+
+def _units(value: float) -> int:
+    """``value`` (m) in snap units, rounded."""
+    return round(value / _SNAP)
+
+
+def _draw_snapped(rng: np.random.Generator, span: Range) -> float:
+    """A multiple of the snap uniformly in ``span`` (m), or its lower end if none lies inside."""
+    lo, hi = math.ceil(round(span[0] / _SNAP, 6)), math.floor(round(span[1] / _SNAP, 6))
+    return round((float(rng.integers(lo, hi + 1)) if hi >= lo else span[0] / _SNAP) * _SNAP, 9)
+
+
+def _partition(
+    rng: np.random.Generator, length: float, count: int | None, span: Range
+) -> list[float] | None:
+    """Widths (m, snapped) of ``count`` pieces (None: a feasible count drawn at random) that
+    sum to ``length``, each within ``span``; None if no count fits. Every piece starts at the
+    smallest width and the rest is dealt out one snap unit at a time to random pieces below
+    the largest width."""
+    total, lo, hi = _units(length), math.ceil(round(span[0] / _SNAP, 6)), _units(span[1])
+    n_min, n_max = max(1, math.ceil(total / hi)), total // lo if lo > 0 else 0
+    if count is not None:
+        n_min = n_max = count
+    if n_max < n_min or not n_min * lo <= total <= n_min * hi:
+        return None
+    n = int(rng.integers(n_min, n_max + 1))
+    widths = np.full(n, lo)
+    for _ in range(total - n * lo):
+        open_ = np.flatnonzero(widths < hi)
+        widths[open_[int(rng.integers(len(open_)))]] += 1
+    return [round(float(w) * _SNAP, 9) for w in widths]
+
+
+def _tiles(length: float, span: Range) -> bool:
+    """Whether some number of pieces with widths in ``span`` (snapped) sums to ``length``."""
+    total, lo, hi = _units(length), math.ceil(round(span[0] / _SNAP, 6)), _units(span[1])
+    return lo > 0 and any(n * lo <= total <= n * hi for n in range(1, total // lo + 1))
+
+
+def _box(x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
+    """A closed axis-aligned rectangle (5, 2): a solid block when inside the outline."""
+    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]], dtype=float)
+
+
+def _line_with_gaps(
+    fixed: float, lo: float, hi: float, gaps: list[tuple[float, float]], vertical: bool
+) -> Walls:
+    """The wall ``x = fixed`` (vertical) or ``y = fixed`` from ``lo`` to ``hi`` without the
+    ``gaps`` (doors, openings), as 2-point polylines."""
+    out: Walls = []
+    start = lo
+    for a, b in [*sorted(gaps), (hi, hi)]:
+        if a - start > 1e-9:
+            pts = [[fixed, start], [fixed, a]] if vertical else [[start, fixed], [a, fixed]]
+            out.append(np.array(pts, dtype=float))
+        start = max(start, b)
+    return out
+
+
+def _cuts(lo: float, widths: list[float]) -> list[float]:
+    """Boundaries lo, lo + w0, … of consecutive pieces (snapped sums)."""
+    return [round(lo + float(c), 9) for c in np.concatenate([[0.0], np.cumsum(widths)])]
+
+
+def _outer(width: float, height: float) -> np.ndarray:
+    return _box(0.0, 0.0, width, height)
+
+
+# -- office floor -----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class OfficeFloorGenerator(Config):
+    """An office floor: rooms off one or two long corridors running along the floor's width.
+
+    The floor is cut across its height into bands of rooms and ``corridors`` corridors (a count
+    drawn in the range) of a width drawn from ``corridor_width``; each band is cut along the
+    width into rooms of a width drawn from ``room_width``, separated by full-height walls.
+    Every room has a door (width drawn from ``door_width``) onto a corridor it borders (a room
+    between two corridors onto one or both of them); between two corridors one room slot is
+    left open as a hall joining them. Doors keep ``2·robot_radius + margin`` from corners.
+    """
+
+    width: float = 24.0  # m
+    height: float = 14.0  # m
+    corridors: tuple[int, int] = (1, 2)  # range of the number of long corridors
+    corridor_width: Range = (1.4, 2.0)  # m
+    room_width: Range = (3.0, 5.0)  # m, along the corridor
+    min_room_depth: float = 3.0  # m, across the corridor
+    door_width: Range = (0.8, 1.0)  # m
+    start_separation: float = 4.0  # m, least distance between start poses
+    num_start_poses: int = 3
+    robot_radius: float = 0.065  # m
+    margin: float = 0.05  # m
+    max_tries: int = 20
+    name: str = "office_floor"
+
+    def validate(self) -> None:
+        for key in ("width", "height", "min_room_depth", "robot_radius", "margin"):
+            check_positive(key, getattr(self, key))
+        check_range("start_separation", self.start_separation, 0.0, 1e3)
+        _check_span("corridors", self.corridors, 1, 2)
+        gap = 2 * (self.robot_radius + self.margin)
+        _check_span("corridor_width", self.corridor_width, gap, 0.5 * self.height)
+        _check_span("door_width", self.door_width, gap, self.room_width[0])
+        need = self.door_width[1] + 2 * (2 * self.robot_radius + self.margin)
+        _check_span("room_width", self.room_width, need, self.width)
+        if not _tiles(self.width, self.room_width):
+            raise ConfigError(
+                f"room_width: no number of rooms of {self.room_width!r} m fills the width"
+                f" {self.width!r} m"
+            )
+        bands = self.corridors[1] + 1
+        need_h = bands * self.min_room_depth + self.corridors[1] * self.corridor_width[1]
+        if self.height < need_h:
+            raise ConfigError(
+                f"height: {self.corridors[1]} corridors of up to {self.corridor_width[1]:g} m"
+                f" and {bands} bands of rooms >= min_room_depth need {need_h:g} m,"
+                f" got {self.height!r}"
+            )
+        _check_common(self.num_start_poses, self.max_tries, self.name)
+
+    def __call__(self, rng: np.random.Generator) -> Layout:
+        return _generate(self, self._draw, rng, self.start_separation)
+
+    def _draw(self, rng: np.random.Generator) -> Walls:
+        n_corr = int(rng.integers(self.corridors[0], self.corridors[1] + 1))
+        cw = _draw_snapped(rng, self.corridor_width)
+        depth_span = (self.min_room_depth, self.height)
+        depths = _partition(rng, self.height - n_corr * cw, n_corr + 1, depth_span)
+        if depths is None:
+            return [_outer(self.width, self.height)]  # infeasible draw: fails the start check
+        walls: Walls = [_outer(self.width, self.height)]
+        y = 0.0
+        for band, depth in enumerate(depths):
+            y0, y1 = y, round(y + depth, 9)
+            below, above = band > 0, band < n_corr  # corridor below / above this band
+            walls += self._band(rng, y0, y1, below, above)
+            y = round(y1 + cw, 9)
+        return walls
+
+    def _band(
+        self, rng: np.random.Generator, y0: float, y1: float, below: bool, above: bool
+    ) -> Walls:
+        """Rooms between y0 and y1, doors onto the corridor(s) below and/or above."""
+        widths = _partition(rng, self.width, None, self.room_width)
+        assert widths is not None, "room_width was validated to tile the width"
+        xs = _cuts(0.0, widths)
+        hall = int(rng.integers(len(widths))) if below and above and len(widths) > 1 else None
+        gaps_below: list[tuple[float, float]] = []
+        gaps_above: list[tuple[float, float]] = []
+        corner = 2 * self.robot_radius + self.margin
+        for k, (a, b) in enumerate(itertools.pairwise(xs)):
+            if k == hall:
+                gaps_below.append((a, b))
+                gaps_above.append((a, b))
+                continue
+            sides = [g for g, on in ((gaps_below, below), (gaps_above, above)) if on]
+            if len(sides) == 2 and rng.random() < 0.5:
+                sides = [sides[int(rng.integers(2))]]
+            for gaps in sides:
+                dw = _draw_snapped(rng, self.door_width)
+                start = _draw_snapped(rng, (a + corner, b - corner - dw))
+                gaps.append((start, round(start + dw, 9)))
+        walls = [w for x in xs[1:-1] for w in _line_with_gaps(x, y0, y1, [], vertical=True)]
+        if below:
+            walls += _line_with_gaps(y0, 0.0, self.width, gaps_below, vertical=False)
+        if above:
+            walls += _line_with_gaps(y1, 0.0, self.width, gaps_above, vertical=False)
+        return walls
+
+
+# -- warehouse --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class WarehouseGenerator(Config):
+    """A warehouse: rows of shelves (long thin closed boxes) along the width, with aisles.
+
+    At one end (left or right, drawn) an open loading area of a width drawn from ``open_area``
+    holds ``pillars`` (a count drawn in the range) free-standing square pillars of a side drawn
+    from ``pillar_size``; the rest is shelf rows of a depth drawn from ``shelf_depth``
+    separated by aisles drawn from ``aisle_width`` (also between the rows and the outer walls),
+    every row cut by one cross aisle of a width drawn from ``cross_aisle_width``. Pillars keep
+    ``aisle_width[0]`` from every other wall, so every passage is at least that wide.
+    """
+
+    width: float = 20.0  # m
+    height: float = 12.0  # m
+    shelf_depth: Range = (0.8, 1.2)  # m
+    aisle_width: Range = (1.2, 1.8)  # m
+    cross_aisle_width: Range = (1.6, 2.4)  # m
+    open_area: Range = (3.0, 5.0)  # m
+    pillars: tuple[int, int] = (2, 5)
+    pillar_size: Range = (0.3, 0.5)  # m, side of a square pillar
+    start_separation: float = 4.0  # m
+    num_start_poses: int = 3
+    robot_radius: float = 0.065  # m
+    margin: float = 0.05  # m
+    max_tries: int = 20
+    name: str = "warehouse"
+
+    def validate(self) -> None:
+        for key in ("width", "height", "robot_radius", "margin"):
+            check_positive(key, getattr(self, key))
+        check_range("start_separation", self.start_separation, 0.0, 1e3)
+        gap = 2 * (self.robot_radius + self.margin)
+        _check_span("shelf_depth", self.shelf_depth, _SNAP, self.height)
+        _check_span("aisle_width", self.aisle_width, gap, self.height)
+        _check_span("cross_aisle_width", self.cross_aisle_width, gap, self.width)
+        _check_span("open_area", self.open_area, 0.0, self.width)
+        _check_span("pillars", self.pillars, 0, 64)
+        _check_span("pillar_size", self.pillar_size, _SNAP, 2.0)
+        need_w = self.open_area[1] + self.cross_aisle_width[1] + self.aisle_width[1] + 2.0
+        if self.width < need_w:
+            raise ConfigError(
+                f"width: the open area, cross aisle, an end aisle and two 1 m shelves need"
+                f" {need_w:g} m, got {self.width!r}"
+            )
+        need_h = 2 * self.aisle_width[1] + self.shelf_depth[1]
+        if self.height < need_h:
+            raise ConfigError(
+                f"height: one shelf row between two aisles needs {need_h:g} m, got {self.height!r}"
+            )
+        _check_common(self.num_start_poses, self.max_tries, self.name)
+
+    def __call__(self, rng: np.random.Generator) -> Layout:
+        return _generate(self, self._draw, rng, self.start_separation)
+
+    def _draw(self, rng: np.random.Generator) -> Walls:
+        open_w = _draw_snapped(rng, self.open_area)
+        end_w = _draw_snapped(rng, self.aisle_width)
+        open_left = bool(rng.random() < 0.5)
+        x0, x1 = (open_w, self.width - end_w) if open_left else (end_w, self.width - open_w)
+        cross_w = _draw_snapped(rng, self.cross_aisle_width)
+        third = (x1 - x0 - cross_w) / 3
+        cx = _draw_snapped(rng, (x0 + third, x1 - third - cross_w))
+        walls: Walls = [_outer(self.width, self.height)]
+        y = _draw_snapped(rng, self.aisle_width)
+        while True:
+            depth = _draw_snapped(rng, self.shelf_depth)
+            if self.height - (y + depth) < self.aisle_width[0] - 1e-9:
+                break
+            top = round(y + depth, 9)
+            walls += [_box(x0, y, cx, top), _box(round(cx + cross_w, 9), y, x1, top)]
+            y = round(top + _draw_snapped(rng, self.aisle_width), 9)
+        area = (0.0, x0) if open_left else (x1, self.width)
+        count = int(rng.integers(self.pillars[0], self.pillars[1] + 1))
+        for _ in range(count):
+            pillar = self._pillar(rng, area, walls)
+            if pillar is not None:
+                walls.append(pillar)
+        return walls
+
+    def _pillar(self, rng: np.random.Generator, area: Range, walls: Walls) -> np.ndarray | None:
+        """A square pillar in the open area ``area`` (x range) keeping ``aisle_width[0]`` from
+        every wall, or None after a few tries. Box-to-box distances are exact: the nearest
+        points of two disjoint convex polygons include a vertex of one of them."""
+        clear = self.aisle_width[0]
+        segs = np.vstack([np.hstack([w[:-1], w[1:]]) for w in walls])  # (S, 4)
+        verts = np.vstack(walls)  # (V, 2)
+        for _ in range(20):
+            side = _draw_snapped(rng, self.pillar_size)
+            lo, hi = area[0] + clear, area[1] - clear - side
+            if hi < lo:
+                return None
+            px = _draw_snapped(rng, (lo, hi))
+            py = _draw_snapped(rng, (clear, self.height - clear - side))
+            box = _box(px, py, round(px + side, 9), round(py + side, 9))
+            own = np.hstack([box[:-1], box[1:]])  # (4, 4)
+            near = min(
+                point_segment_distance(box, segs).min(), point_segment_distance(verts, own).min()
+            )
+            if near >= clear - 1e-9:
+                return box
+        return None
+
+
+# -- loop -------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LoopGenerator(Config):
+    """A corridor loop around a solid rectangular block filling the middle of the floor.
+
+    Each of the four sides of the corridor has its own width drawn from ``corridor_width``, so
+    the loop is not symmetric (a robot cannot tell the sides apart by width alone otherwise).
+    The loop's centre line is at least ``2·(width + height) − 4·corridor_width[1]`` long.
+    """
+
+    width: float = 16.0  # m
+    height: float = 10.0  # m
+    corridor_width: Range = (1.2, 1.6)  # m
+    start_separation: float = 4.0  # m
+    num_start_poses: int = 3
+    robot_radius: float = 0.065  # m
+    margin: float = 0.05  # m
+    max_tries: int = 20
+    name: str = "loop"
+
+    def validate(self) -> None:
+        for key in ("width", "height", "robot_radius", "margin"):
+            check_positive(key, getattr(self, key))
+        check_range("start_separation", self.start_separation, 0.0, 1e3)
+        gap = 2 * (self.robot_radius + self.margin)
+        _check_span("corridor_width", self.corridor_width, gap, 0.5 * min(self.width, self.height))
+        block = min(self.width, self.height) - 2 * self.corridor_width[1]
+        if block < 2 * _SNAP:
+            raise ConfigError(
+                f"width/height: no room for the inner block with corridors up to"
+                f" {self.corridor_width[1]:g} m, got {self.width!r} × {self.height!r}"
+            )
+        if self.loop_length < 20.0:
+            raise ConfigError(
+                f"width/height: the loop's centre line ({self.loop_length:g} m) must be"
+                f" >= 20 m, got {self.width!r} × {self.height!r}"
+            )
+        _check_common(self.num_start_poses, self.max_tries, self.name)
+
+    @property
+    def loop_length(self) -> float:
+        """Least length (m) of the loop's centre line, with the widest corridors."""
+        return 2 * (self.width + self.height) - 4 * self.corridor_width[1]
+
+    def __call__(self, rng: np.random.Generator) -> Layout:
+        return _generate(self, self._draw, rng, self.start_separation)
+
+    def _draw(self, rng: np.random.Generator) -> Walls:
+        left, bottom, right, top = (_draw_snapped(rng, self.corridor_width) for _ in range(4))
+        block = _box(left, bottom, round(self.width - right, 9), round(self.height - top, 9))
+        return [_outer(self.width, self.height), block]
+
+
+AnyGenerator = (
+    RoomsGenerator | CaveGenerator | OfficeFloorGenerator | WarehouseGenerator | LoopGenerator
+)
+
+
 # -- shared: checks, start poses, retries ---------------------------------------------------
 def _check_common(num_start_poses: int, max_tries: int, name: str) -> None:
     check_range("num_start_poses", num_start_poses, 1, 64)
@@ -369,11 +720,13 @@ def _check_common(num_start_poses: int, max_tries: int, name: str) -> None:
 
 
 def _generate(
-    gen: RoomsGenerator | CaveGenerator,
+    gen: AnyGenerator,
     draw: Callable[[np.random.Generator], Walls],
     rng: np.random.Generator,
+    separation: float = 0.0,
 ) -> Layout:
-    """Draw walls, check them and place start poses; redraw on failure (bounded)."""
+    """Draw walls, check them and place start poses at least ``separation`` (m) apart (and
+    never closer than ``2·robot_radius + margin``); redraw on failure (bounded)."""
     for _ in range(gen.max_tries):
         layout = Layout(name=gen.name, walls=tuple(draw(rng)))
         if not is_enclosed(layout):
@@ -381,7 +734,7 @@ def _generate(
         grid = _connected_for_robot(layout, gen.robot_radius, gen.margin)
         if grid is None:
             continue
-        poses = _start_poses(layout, grid, gen, rng)
+        poses = _start_poses(layout, grid, gen, rng, separation)
         if poses is None:
             continue
         data = layout_to_dict(Layout(name=gen.name, walls=layout.walls, start_poses=poses))
@@ -422,11 +775,14 @@ def _connected_for_robot(layout: Layout, radius: float, margin: float) -> FreeGr
 def _start_poses(
     layout: Layout,
     grid: FreeGrid,
-    gen: RoomsGenerator | CaveGenerator,
+    gen: AnyGenerator,
     rng: np.random.Generator,
+    separation: float = 0.0,
 ) -> np.ndarray | None:
-    """``num_start_poses`` poses (n, 3) in free space, clear of walls and each other, or None."""
+    """``num_start_poses`` poses (n, 3) in free space, clear of walls, and ``separation`` (at
+    least the wall clearance) from each other, or None."""
     clear = 2 * gen.robot_radius + gen.margin
+    apart = max(clear, separation)
     x0, y0, x1, y1 = layout.bounds
     cand = rng.uniform([x0, y0], [x1, y1], size=(_START_CANDIDATES, 2))  # (C, 2)
     heading = rng.uniform(-np.pi, np.pi, size=_START_CANDIDATES)  # (C,)
@@ -435,7 +791,7 @@ def _start_poses(
     for c0 in range(0, len(free), _CLEARANCE_CHUNK):  # exact clearance only where needed
         idx = free[c0 : c0 + _CLEARANCE_CHUNK]
         for i in idx[layout.clearance(cand[idx]) >= clear]:
-            if all(math.dist(cand[i], cand[j]) >= clear for j in chosen):
+            if all(math.dist(cand[i], cand[j]) >= apart for j in chosen):
                 chosen.append(int(i))
                 if len(chosen) == gen.num_start_poses:
                     return np.column_stack([cand[chosen], heading[chosen]])
@@ -443,14 +799,17 @@ def _start_poses(
 
 
 # -- registry -------------------------------------------------------------------------------
-GENERATORS: dict[str, type[RoomsGenerator] | type[CaveGenerator]] = {
+GENERATORS: dict[str, type[AnyGenerator]] = {
     "rooms": RoomsGenerator,
     "cave": CaveGenerator,
+    "office_floor": OfficeFloorGenerator,
+    "warehouse": WarehouseGenerator,
+    "loop": LoopGenerator,
 }
 
 
 def make_generator(name: str, **kwargs: Any) -> LayoutGenerator:
-    """A generator by name (``"rooms"``, ``"cave"``) with its parameters validated."""
+    """A generator by name (a key of :data:`GENERATORS`) with its parameters validated."""
     cls = GENERATORS.get(name)
     if cls is None:
         raise ValueError(

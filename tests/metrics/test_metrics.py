@@ -183,7 +183,8 @@ def test_map__nu_averages_per_polynomial_sums() -> None:
 def test_map__empty_map_conventions() -> None:
     layout = square_room()
     assert M.nu([], np.zeros(3), layout) == 0.0
-    assert math.isnan(M.nu_mean([], np.zeros(3), layout))
+    assert M.nu_mean([], np.zeros(3), layout) == 0.0  # with has_map 0 beside it
+    assert M.has_map([]) == 0.0
     assert M.completeness([], np.zeros(3), layout) == 0.0
     assert M.map_distances([], np.zeros(3), layout) == []
 

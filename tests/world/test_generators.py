@@ -185,7 +185,9 @@ def test_make_generator__passes_parameters() -> None:
 
 
 def test_make_generator__unknown_name_lists_valid_names() -> None:
-    with pytest.raises(ValueError, match=r"'maze'.*valid names: cave, rooms"):
+    with pytest.raises(
+        ValueError, match=r"'maze'.*valid names: cave, loop, office_floor, rooms, warehouse"
+    ):
         make_generator("maze")
 
 

@@ -1,0 +1,250 @@
+"""The SLAM-fidelity protocol of issue 14 as one run: large generated maps, a frontier team,
+initial error on, the exchange on and off on the same seeds, and the issue's targets checked.
+
+For each map (a layout generator) and seed, two episodes run through the evaluation machinery
+of :mod:`polyslam_env.apps.rollout` (:func:`~polyslam_env.apps.rollout.evaluate_episode`):
+one with the rendezvous exchange on (the default channel) and one with it off, otherwise
+identical (same layout, starts and noise streams). Episodes run the full ``steps`` (no
+coverage target), so every episode is measured at the same horizon. ``initial_error`` is set
+when :class:`~polyslam_env.environment.config.EnvConfig` has that field (else the robots start
+at their frame origins, which the summary records).
+
+:func:`summarise` turns the episodes into a ``table`` per map — mean, min and max over
+robots × seeds of each per-robot metric in :data:`ROBOT_KEYS`, and over seeds of the team
+coverage — and named boolean ``checks`` per map, each computed from the table alone
+(:func:`checks_from_table`) against :data:`TARGETS`, the issue's "done when" targets.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from polyslam_env.apps.rollout import EpisodeResult, evaluate_episode
+from polyslam_env.core.config import Config, check_range
+from polyslam_env.core.errors import ConfigError
+from polyslam_env.environment.config import GENERATOR_PREFIX, EnvConfig
+from polyslam_env.world.generators import GENERATORS
+
+__all__ = [
+    "DEFAULT_MAPS",
+    "ROBOT_KEYS",
+    "TARGETS",
+    "FidelityConfig",
+    "checks_from_table",
+    "episode_config",
+    "markdown",
+    "run_fidelity",
+    "summarise",
+]
+
+DEFAULT_MAPS = ("office_floor", "warehouse", "loop")
+#: Per-robot metrics of the table (``infos[agent]["metrics"]`` keys), in order.
+ROBOT_KEYS = (
+    "nu_mean",
+    "nu_mean_abs",
+    "map_precision",
+    "completeness",
+    "completeness_seen",
+    "duplicates",
+    "nees",
+    "has_map",
+    "rendezvous",
+)
+#: Issue 14's "done when" targets: every robot (the max or min over robots × seeds with the
+#: exchange on) and the team coverage of every seed; exchange on against off compares means.
+TARGETS: dict[str, float] = {
+    "nu_mean_max": 0.05,  # m
+    "map_precision_min": 0.9,
+    "completeness_seen_min": 0.8,
+    "nees_max": 6.0,  # mean standard NEES of each robot's episode
+    "duplicates_max": 0.05,
+    "coverage_min": 0.85,  # team coverage at the episode end
+    "exchange_nu_mean_slack": 0.005,  # m, on may be worse than off by at most this
+}
+#: The two settings of each seed: the exchange on, then off.
+SETTINGS = ("exchange_on", "exchange_off")
+
+
+@dataclass(frozen=True)
+class FidelityConfig(Config):
+    """What :func:`run_fidelity` runs (the CLI's flags)."""
+
+    maps: tuple[str, ...] = DEFAULT_MAPS  # layout generator names
+    seeds: int = 10  # seeds first_seed … first_seed + seeds − 1 per map
+    first_seed: int = 0
+    robots: int = 3
+    steps: int = 600
+    policy: str = "frontier"
+
+    def validate(self) -> None:
+        if not self.maps:
+            raise ConfigError("maps: at least one map is needed")
+        for name in self.maps:
+            if name not in GENERATORS:
+                raise ConfigError(
+                    f"maps: {name!r} is not a layout generator; valid: {', '.join(GENERATORS)}"
+                )
+        check_range("seeds", self.seeds, 1, 100_000)
+        check_range("first_seed", self.first_seed, 0, 2**31)
+        check_range("robots", self.robots, 1, 64)
+        check_range("steps", self.steps, 1, 1_000_000)
+
+
+def has_initial_error() -> bool:
+    """Whether this version's EnvConfig has ``initial_error`` (added by issue 14)."""
+    return "initial_error" in EnvConfig.__dataclass_fields__
+
+
+def episode_config(config: FidelityConfig, name: str, exchange: bool) -> dict[str, Any]:
+    """The EnvConfig (as a dict) of one map and setting: full-length episodes, initial error
+    on where supported, the default channel or none."""
+    fields: dict[str, Any] = {
+        "map": GENERATOR_PREFIX + name,
+        "num_robots": config.robots,
+        "max_steps": config.steps,
+        "coverage_target": None,
+    }
+    if not exchange:
+        fields["channel"] = None
+    if has_initial_error():
+        fields["initial_error"] = True
+    return EnvConfig.from_dict(fields).to_dict()
+
+
+def _run_job(job: tuple[dict[str, Any], str, int]) -> EpisodeResult:
+    config, policy, seed = job
+    return evaluate_episode(config, policy, {}, seed)
+
+
+def run_fidelity(
+    config: FidelityConfig,
+    workers: int = 1,
+    progress: Callable[[int], None] | None = None,
+) -> dict[str, Any]:
+    """Run every map × seed × setting (in ``workers`` processes) and :func:`summarise` them;
+    ``progress(k)`` is called after each finished episode. Adds the settings and wall time."""
+    seeds = [config.first_seed + k for k in range(config.seeds)]
+    keys = [(name, setting, seed) for name in config.maps for setting in SETTINGS for seed in seeds]
+    configs = {
+        (name, setting): episode_config(config, name, setting == "exchange_on")
+        for name in config.maps
+        for setting in SETTINGS
+    }
+    jobs = [(configs[name, setting], config.policy, seed) for name, setting, seed in keys]
+    start = time.perf_counter()
+    results: list[EpisodeResult] = []
+    if workers <= 1:
+        for job in jobs:
+            results.append(_run_job(job))
+            if progress:
+                progress(len(results))
+    else:
+        with ProcessPoolExecutor(workers) as pool:
+            for result in pool.map(_run_job, jobs):
+                results.append(result)
+                if progress:
+                    progress(len(results))
+    grouped: dict[str, dict[str, list[EpisodeResult]]] = {
+        name: {s: [] for s in SETTINGS} for name in config.maps
+    }
+    for (name, setting, _), result in zip(keys, results, strict=True):
+        grouped[name][setting].append(result)
+    summary = summarise(grouped)
+    summary["settings"] = {
+        **config.to_dict(),
+        "seed_list": seeds,
+        "initial_error": has_initial_error(),
+        "coverage_target": None,
+        "workers": workers,
+    }
+    summary["elapsed_s"] = time.perf_counter() - start
+    return summary
+
+
+def _spread(values: Sequence[float]) -> dict[str, float]:
+    a = np.asarray(values, dtype=float)
+    return {"mean": float(a.mean()), "min": float(a.min()), "max": float(a.max())}
+
+
+def setting_table(results: Sequence[EpisodeResult]) -> dict[str, dict[str, float]]:
+    """Mean, min, max over robots × episodes of each of :data:`ROBOT_KEYS`, and over episodes
+    of the team ``coverage``."""
+    table = {
+        key: _spread([m[key] for r in results for m in r.robots.values()]) for key in ROBOT_KEYS
+    }
+    table["coverage"] = _spread([r.team["coverage"] for r in results])
+    return table
+
+
+def checks_from_table(table: Mapping[str, Mapping[str, Mapping[str, float]]]) -> dict[str, bool]:
+    """The issue's targets for one map, from its table alone (``table[setting][metric]``)."""
+    on, off = table["exchange_on"], table["exchange_off"]
+    t = TARGETS
+    return {
+        "every_robot_has_map": on["has_map"]["min"] == 1.0,
+        "nu_mean_le_0.05": on["nu_mean"]["max"] <= t["nu_mean_max"],
+        "map_precision_ge_0.9": on["map_precision"]["min"] >= t["map_precision_min"],
+        "completeness_seen_ge_0.8": on["completeness_seen"]["min"] >= t["completeness_seen_min"],
+        "nees_le_6": on["nees"]["max"] <= t["nees_max"],
+        "duplicates_le_0.05": on["duplicates"]["max"] <= t["duplicates_max"],
+        "coverage_ge_0.85": on["coverage"]["min"] >= t["coverage_min"],
+        "exchange_completeness_higher": on["completeness"]["mean"] > off["completeness"]["mean"],
+        "exchange_nu_mean_within_5mm": on["nu_mean"]["mean"]
+        <= off["nu_mean"]["mean"] + t["exchange_nu_mean_slack"],
+    }
+
+
+def summarise(grouped: Mapping[str, Mapping[str, Sequence[EpisodeResult]]]) -> dict[str, Any]:
+    """``table[map][setting][metric]`` (mean/min/max), ``checks[map][name]`` (bool),
+    ``passed`` (all checks of all maps) and the episodes (``episodes[map][setting]``)."""
+    table = {
+        name: {setting: setting_table(results) for setting, results in by_setting.items()}
+        for name, by_setting in grouped.items()
+    }
+    checks = {name: checks_from_table(t) for name, t in table.items()}
+    return {
+        "targets": dict(TARGETS),
+        "table": table,
+        "checks": checks,
+        "passed": all(ok for c in checks.values() for ok in c.values()),
+        "episodes": {
+            name: {s: [r.to_dict() for r in rs] for s, rs in by_setting.items()}
+            for name, by_setting in grouped.items()
+        },
+    }
+
+
+def markdown(summary: Mapping[str, Any]) -> str:
+    """One markdown table per map (metric × setting: mean [min, max]) and its checks."""
+    lines: list[str] = []
+    settings = summary.get("settings", {})
+    if settings:
+        lines.append(
+            f"{settings['policy']} team of {settings['robots']}, {settings['steps']} steps,"
+            f" {settings['seeds']} seeds from {settings['first_seed']}, initial_error"
+            f" {'on' if settings['initial_error'] else 'off (not in this EnvConfig)'};"
+            " per-robot metrics over robots × seeds, coverage (team) over seeds."
+        )
+        lines.append("")
+    for name, by_setting in summary["table"].items():
+        lines += [f"### {name}", "", "| metric | exchange on | exchange off |", "|---|---|---|"]
+        for key in (*ROBOT_KEYS, "coverage"):
+            cells = [_cell(by_setting[s][key]) for s in SETTINGS]
+            lines.append(f"| {key} | {cells[0]} | {cells[1]} |")
+        lines.append("")
+        checks = summary["checks"][name]
+        lines.append(
+            "checks: " + ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in checks.items())
+        )
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _cell(s: Mapping[str, float]) -> str:
+    return f"{s['mean']:.3g} [{s['min']:.3g}, {s['max']:.3g}]"

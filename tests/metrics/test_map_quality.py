@@ -1,0 +1,217 @@
+"""Map precision, completeness over the seen boundary, duplicates, the placing pose, and the
+values of empty maps (issue 14), each against a brute-force oracle or a hand-computed value."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from polyslam_env import metrics as M
+from polyslam_env.metrics.episode import (
+    MAP_METRIC_KEYS,
+    ROBOT_METRIC_KEYS,
+    RobotHistory,
+    RobotRun,
+    final_robot_metrics,
+    robot_metrics,
+)
+from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.world.layout import Layout, point_segment_distance
+
+SIDE = 4.0
+#: The documented accuracy (m) of distance_to_boundary; samples nearer than this to a
+#: tolerance may fall either side of it.
+DIST_ACC = 1e-3
+
+
+def square_room() -> Layout:
+    wall = np.array([[0.0, 0.0], [SIDE, 0.0], [SIDE, SIDE], [0.0, SIDE], [0.0, 0.0]])
+    return Layout("square", (wall,))
+
+
+def _random_map(rng: np.random.Generator, count: int) -> list[Polynomial]:
+    """Polynomials near the walls of the square room (some on them, some off), both variates."""
+    polys = []
+    for _ in range(count):
+        variate = int(rng.integers(1, 3))
+        c0 = rng.choice([0.0, SIDE]) + rng.normal(0.0, 0.08)
+        coeffs = np.array([c0, rng.normal(0, 0.02), rng.normal(0, 0.01)])
+        lo = rng.uniform(0.2, 2.5)
+        polys.append(Polynomial(variate, coeffs, lo, lo + rng.uniform(0.3, 1.4)))
+    return polys
+
+
+def _brute_distances(points: np.ndarray, layout: Layout) -> np.ndarray:  # (n,)
+    return np.array([point_segment_distance(p, layout.segments).min() for p in points])
+
+
+# -- map precision ------------------------------------------------------------------------------
+@pytest.mark.parametrize("seed", range(4))
+def test_map_precision__matches_brute_force(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    layout, pose = square_room(), np.array([0.1, -0.05, 0.02])
+    polys = _random_map(rng, 6)
+    tol = 0.05
+    pts = np.vstack(M.map_points(polys, pose, 0.01))
+    d = _brute_distances(pts, layout)
+    expected = np.count_nonzero(d <= tol) / len(d)
+    undecided = np.count_nonzero(np.abs(d - tol) <= DIST_ACC) / len(d)
+    assert abs(M.map_precision(polys, pose, layout, tol=tol) - expected) <= undecided
+
+
+def test_map_precision__half_on_the_wall_half_off() -> None:
+    layout = square_room()
+    on = Polynomial(1, np.array([0.0, 0.0]), 1.0, 2.0)  # on y = 0
+    off = Polynomial(1, np.array([0.5, 0.0]), 1.0, 2.0)  # 0.5 m inside
+    # Equal lengths, so equal sample counts: exactly half the samples within 5 cm.
+    assert M.map_precision([on, off], np.zeros(3), layout) == 0.5
+    assert M.map_precision([], np.zeros(3), layout) == 1.0
+
+
+# -- completeness over the seen boundary ----------------------------------------------------------
+def test_completeness_seen__matches_brute_force() -> None:
+    rng = np.random.default_rng(7)
+    layout, pose = square_room(), np.zeros(3)
+    polys = _random_map(rng, 5)
+    hits = np.vstack([[x, 0.0] for x in np.arange(0.5, 3.0, 0.2)] + [[[SIDE, 1.0]], [[np.inf] * 2]])
+    radius, tol = M.mapping.SEEN_RADIUS, 0.05
+    bpts, weights = M.boundary_samples(layout, 0.01)
+    finite = hits[np.isfinite(hits).all(axis=1)]
+    map_pts = np.vstack(M.map_points(polys, pose, 0.01))
+    seen = np.array([np.hypot(*(finite - b).T).min() <= radius for b in bpts])
+    covered = np.array([np.hypot(*(map_pts - b).T).min() <= tol for b in bpts])
+    expected = weights[seen & covered].sum() / weights[seen].sum()
+    got = M.completeness_seen(polys, pose, layout, hits, radius=radius, tol=tol)
+    assert got == pytest.approx(expected, abs=1e-12)
+
+
+def test_completeness_seen__full_on_the_seen_stretch_where_completeness_is_not() -> None:
+    layout = square_room()
+    wall = Polynomial(1, np.zeros(2), 1.0, 3.0)  # maps y = 0 between x = 1 and 3
+    hits = np.column_stack([np.arange(1.2, 2.81, 0.1), np.zeros(17)])  # seen: x ∈ [1.05, 2.95]
+    assert M.completeness_seen([wall], np.zeros(3), layout, hits) == 1.0
+    assert M.completeness([wall], np.zeros(3), layout) < 0.2
+    assert M.completeness_seen([], np.zeros(3), layout, hits) == 0.0
+    assert M.completeness_seen([wall], np.zeros(3), layout, np.zeros((0, 2))) == 0.0
+
+
+# -- duplicates -----------------------------------------------------------------------------------
+def test_duplicates__two_overlapping_parallel_lines_and_a_crossing_one() -> None:
+    a = Polynomial(1, np.array([0.0, 0.0]), 0.0, 2.0)
+    b = Polynomial(1, np.array([0.05, 0.0]), 1.0, 3.0)  # 5 cm away, overlapping on x ∈ [1, 2]
+    c = Polynomial(2, np.array([1.5, 0.0]), -0.5, 0.5)  # x = 1.5, crossing both at 90°
+    # A point of a is within 10 cm of b from x = 1 − √(0.1² − 0.05²) on, and b likewise up to
+    # 2 + that; c is perpendicular to both and counts nowhere.
+    reach = 1.0 + math.sqrt(0.1**2 - 0.05**2)
+    n = [len(p.sample_arclength(0.01)) for p in (a, b, c)]
+    expected = (reach / 2.0 * n[0] + reach / 2.0 * n[1]) / sum(n)
+    # Each of the two band ends is decided per sample: off by at most one sample each.
+    got = M.duplicates([a, b, c])
+    assert abs(got - expected) <= 2 / sum(n)
+
+
+def test_duplicates__matches_brute_force_with_analytic_tangents() -> None:
+    rng = np.random.default_rng(3)
+    polys = _random_map(rng, 8)
+    tol, angle = M.mapping.DUPLICATE_TOL, M.mapping.DUPLICATE_ANGLE
+    own = [p.sample_arclength(0.01) for p in polys]
+    tangents = []
+    for p, pts in zip(polys, own, strict=True):
+        xi, _ = p.from_xy(pts)
+        d = np.column_stack([np.ones_like(xi), p.slope(xi)])  # (dξ, dη)
+        t = d if p.variate == 1 else d[:, ::-1]
+        tangents.append(t / np.linalg.norm(t, axis=1, keepdims=True))
+    marked = 0
+    near_threshold = 0
+    for i, (pi, ti) in enumerate(zip(own, tangents, strict=True)):
+        for k in range(len(pi)):
+            hit = edge = False
+            for j, (pj, tj) in enumerate(zip(own, tangents, strict=True)):
+                if j == i:
+                    continue
+                dist = np.hypot(*(pj - pi[k]).T)
+                sin = np.abs(ti[k, 0] * tj[:, 1] - ti[k, 1] * tj[:, 0])
+                hit |= bool(((dist <= tol) & (sin <= math.sin(angle))).any())
+                # Finite-difference tangents differ from analytic ones by ~1e-3 rad (the
+                # curvature times the step): pairs that close to the angle cut are undecided.
+                edge |= bool(((dist <= tol) & (np.abs(sin - math.sin(angle)) < 2e-3)).any())
+            marked += hit
+            near_threshold += edge
+    total = sum(len(p) for p in own)
+    assert 0 < marked < total  # the map has some duplicates and some not: a real comparison
+    assert abs(M.duplicates(polys) - marked / total) <= near_threshold / total
+
+
+def test_duplicates__a_wall_mapped_twice_is_all_duplicate_one_wall_none() -> None:
+    a = Polynomial(1, np.array([0.0, 0.0]), 0.0, 2.0)
+    assert M.duplicates([a]) == 0.0
+    assert M.duplicates([a, a.with_c0(0.02)]) == 1.0
+    assert M.duplicates([]) == 0.0
+    assert M.duplicates([a, Polynomial(2, np.array([1.0, 0.0]), 0.5, 0.5)]) == 0.0  # a point
+
+
+# -- placing pose, empty maps, no SLAM -----------------------------------------------------------
+def _run(true_start: np.ndarray, frame: np.ndarray, polys: list[Polynomial]) -> RobotRun:
+    history = RobotHistory(frame, np.zeros(3), np.diag([0.05**2, 0.05**2, 0.0175**2]), true_start)
+    history.record(
+        true_start, np.zeros(3), np.eye(3) * 1e-4, np.array([[0.0, 1.0]]), 0.0, False, False
+    )
+    return history.run(polys)
+
+
+def test_robot_metrics__map_placed_by_true_start_abs_by_frame() -> None:
+    layout = square_room()
+    true_start = np.array([1.0, 1.0, 0.0])
+    frame = np.array([1.05, 1.0, 0.0])  # the nominal start, 5 cm off along x
+    wall = Polynomial(2, np.array([-1.0, 0.0]), -0.5, 0.5)  # x = 0 seen from the true start
+    m = robot_metrics(_run(true_start, frame, [wall]), layout)
+    assert m["nu_mean"] <= DIST_ACC
+    assert m["nu_mean_abs"] == pytest.approx(0.05, abs=DIST_ACC)
+    assert m["map_precision"] == 1.0 and m["has_map"] == 1.0
+    same = robot_metrics(_run(true_start, true_start, [wall]), layout)
+    assert same["nu_mean"] == same["nu_mean_abs"]
+
+
+def test_final_robot_metrics__empty_map_and_no_slam_are_finite_and_flagged() -> None:
+    layout = square_room()
+    start = np.array([1.0, 1.0, 0.0])
+    history = RobotHistory(start, np.zeros(3), np.eye(3) * 1e-3)
+    history.record(start, np.zeros(3), np.eye(3) * 1e-3, np.zeros((0, 2)), 0.0, False, False)
+    empty = final_robot_metrics(history, [], layout, 0.1, {})
+    none = final_robot_metrics(history, None, layout, 0.1, {})
+    for out in (empty, none):
+        assert set(out) == set(ROBOT_METRIC_KEYS)
+        assert all(math.isfinite(v) for v in out.values())
+        assert out["has_map"] == 0.0 and out["map_precision"] == 1.0
+        assert all(out[k] == 0.0 for k in MAP_METRIC_KEYS if k != "map_precision")
+    assert empty["slam"] == 1.0 and none["slam"] == 0.0
+    assert none["nees"] == 0.0
+
+
+def test_meaningful__map_errors_only_from_robots_with_a_map_slam_metrics_only_with_slam() -> None:
+    from polyslam_env.metrics.episode import meaningful
+
+    no_map = {"nu_mean": 0.0, "completeness": 0.0, "has_map": 0.0, "slam": 1.0, "coverage": 0.1}
+    mapped = {"nu_mean": 0.03, "completeness": 0.4, "has_map": 1.0, "slam": 1.0, "coverage": 0.2}
+    no_slam = {"nu_mean": 0.0, "completeness": 0.0, "has_map": 0.0, "slam": 0.0, "coverage": 0.3}
+    robots = [no_map, mapped, no_slam]
+    assert meaningful(robots, "nu_mean") == [0.03]
+    assert meaningful(robots, "completeness") == [0.0, 0.4]  # an empty map is 0 % complete
+    assert meaningful(robots, "coverage") == [0.1, 0.2, 0.3]
+
+
+def test_env_final_metrics__short_episode_without_map_is_finite_and_flagged() -> None:
+    from polyslam_env.environment.parallel import parallel_env
+
+    env = parallel_env(map="generator:cave", num_robots=2, max_steps=2)
+    env.reset(seed=0)
+    info: dict = {}
+    while env.agents:
+        *_, info = env.step({a: np.zeros(2) for a in env.agents})
+    for agent in env.possible_agents:
+        m = info[agent]["metrics"]
+        assert all(math.isfinite(v) for v in m.values()), agent
+        assert m["has_map"] == 0.0 and m["slam"] == 1.0  # 10 hits per landmark: none in 2 steps
+        assert m["nu_mean"] == 0.0 and m["map_precision"] == 1.0
