@@ -30,6 +30,7 @@ from polyslam_env.core.seeding import make_rngs
 from polyslam_env.environment import stages
 from polyslam_env.environment.config import EnvConfig, resolve_config
 from polyslam_env.environment.facts import public_facts
+from polyslam_env.environment.faults import FaultEvent, FaultPlan
 from polyslam_env.environment.observations import ObservationEncoder
 from polyslam_env.environment.rewards import REWARD_TERMS, combine, reward_terms
 from polyslam_env.environment.state import EpisodeState, estimate, estimates
@@ -154,7 +155,7 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
             cfg.world.robot.v_max,
             cfg.world.robot.omega_max,
         )  # (K, 2) physical (v, ω)
-        self._fault_at = {robot: step for robot, step in cfg.faults}
+        self._faults = FaultPlan(cfg)
         self._seeder: np.random.Generator | None = None
         # The current episode, made by reset(). Not named ``state``: that is PettingZoo's
         # global-state method ``ParallelEnv.state()``, which this env leaves unimplemented.
@@ -266,7 +267,8 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         acting = self._acting()
         commands = self._apply_actions(actions)
         state.step_count += 1
-        result = stages.simulate(state.world, commands)
+        result = stages.simulate(state.world, commands, self._faults.slip(state.step_count))
+        events = stages.inject_faults(state, self._faults)
         state.sensing = stages.sense(state.world)
         slam_infos = stages.slam(state, result.odometry)
         exchanged = stages.exchange(state)
@@ -277,9 +279,10 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         changes = stages.map_bookkeeping(state, acting, slam_infos, exchanged)
         terms = reward_terms(acting, result.collided, gains, changes)
         rewards = combine(terms, self.config.reward)
-        failed = stages.fail_robots(state, acting, self._fault_at)
+        failed = stages.fail_robots(state, acting, self._faults.fail_at)
+        events += [FaultEvent("fail", i, state.step_count) for i in sorted(failed)]
         terminations, truncations = stages.done(state, self.config, acting, failed)
-        infos = stages.infos(state, acting, terms, terminations, truncations)
+        infos = stages.infos(state, acting, terms, terminations, truncations, events)
         self.agents = [a for a in acting if not (terminations[a] or truncations[a])]
         return observations, rewards, terminations, truncations, infos
 
