@@ -95,12 +95,15 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     ## Episode End
     Termination for all when the team coverage reaches ``coverage_target`` (``None``: never,
     the episode runs to ``max_steps``, e.g. to replay fixed paths); truncation for all
-    at ``max_steps``. A fault ``(robot, step)`` disables the robot at the end of env step
-    ``step``: it is terminated and leaves ``agents``, stays as an obstacle, and the others go
-    on. At an agent's last step ``infos[agent]`` also holds ``"metrics"`` (per robot: nees,
-    nees_paper, nu, nu_mean, completeness, coverage, bytes_sent, bytes_received, rendezvous,
-    slam_time_ms (wall time, not reproducible), collisions, path_length) and ``"team"``
-    (coverage, steps_to_50, steps_to_90, overlap).
+    at ``max_steps``. A fault ``(robot, step)`` (kind ``fail``) disables the robot at the end of
+    env step ``step``: it is terminated and leaves ``agents``, stays as an obstacle, and the
+    others go on. Kinds ``kidnap`` and ``slip`` (see ``FaultConfig``) move the true pose unseen
+    by odometry, or make the odometry over-report the motion; ``infos[agent]`` holds the
+    step's ``faults`` and the divergence flag (``diverging``, ``diverged_at``). At an agent's
+    last step ``infos[agent]`` also holds ``"metrics"`` (per robot: nees, nees_paper, nu,
+    nu_mean, completeness, coverage, bytes_sent, bytes_received, rendezvous, slam_time_ms
+    (wall time, not reproducible), collisions, path_length) and ``"team"`` (coverage,
+    steps_to_50, steps_to_90, overlap).
 
     ## Arguments
     ``parallel_env(config=None, render_mode=None, **overrides)``: ``config`` an
@@ -116,7 +119,9 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
       internals moved from env attributes (``env.world``, ``env.coverage``, ``env.slams``,
       ``env.step_count``) to one :class:`~polyslam_env.environment.state.EpisodeState`,
       ``env.episode`` (None before the first reset); ``max_cycles`` is accepted as an alias of
-      ``max_steps``; ``public_facts()`` gives policies the env's static facts.
+      ``max_steps``; ``public_facts()`` gives policies the env's static facts. Issue 14
+      (episodes change): ``initial_error`` (default on) draws the true starts from P0; fault
+      kinds ``kidnap`` and ``slip``; ``diverging``/``diverged_at``/``faults`` in ``infos``.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
