@@ -287,6 +287,7 @@ class PolySlam:
             return True
         return sum(self._screen) >= self._screen_alarm
 
+    # -- public landmark insertion (map exchange) -----------------------------------------------
     def insert_landmark(self, fit: Fit, merge: bool = True) -> int:
         """Add a landmark from an external fit (e.g. a received polynomial refitted in this
         robot's frame); ``fit.Gx``/``fit.Gy``/``fit.V`` must describe its c0's dependence on
