@@ -288,10 +288,10 @@ def normalised_innovations(
     :func:`update_sparse_inplace`): S_ii = h P_pp hᵀ + 2 h_c h P_pc + h_c² P_cc + r_i with
     h = ``h_pose[i]`` (3,), h_c = ``h_c0[i]``, c = ``c0_index[i]``; cov (3+n, 3+n)."""
     P_pp = cov[:3, :3]  # (3, 3)
-    P_pc = cov[:3, c0_index].T  # (k, 3)
+    P_pc = cov[:3, c0_index]  # (3, k)
     P_cc = cov[c0_index, c0_index]  # (k,)
-    s = np.einsum("ki,ij,kj->k", h_pose, P_pp, h_pose)
-    s += 2.0 * h_c0 * np.einsum("ki,ki->k", h_pose, P_pc) + h_c0 * h_c0 * P_cc + r
+    s = ((h_pose @ P_pp) * h_pose).sum(axis=1)  # h P_pp hᵀ per row (k rows ≈ 5: no einsum)
+    s += 2.0 * h_c0 * (h_pose * P_pc.T).sum(axis=1) + h_c0 * h_c0 * P_cc + r
     return np.asarray(innovation * innovation / s)
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from polyslam_env.slam.config import SlamConfig
-from polyslam_env.slam.ekf import outlier_count_threshold
+from polyslam_env.slam.ekf import normalised_innovations, outlier_count_threshold
 from polyslam_env.slam.robot import PolySlam
 from tests.slam.divergence_trials import (
     DEADLINE,
@@ -33,6 +33,23 @@ def test_outlier_count_threshold__is_the_smallest_count_within_the_false_alarm(
     m = outlier_count_threshold(n, p, alpha)
     assert _binomial_tail(n, p, m) <= alpha
     assert m == 1 or _binomial_tail(n, p, m - 1) > alpha
+
+
+def test_normalised_innovations__match_the_dense_h_p_ht_plus_r() -> None:
+    """ν_i² / (H P Hᵀ + R)_ii with a dense H built row by row (the oracle), two rows on one c0."""
+    rng = np.random.default_rng(3)
+    n = 9
+    a = rng.normal(size=(n, n))
+    cov = a @ a.T  # (n, n) symmetric positive definite
+    c0_index = np.array([3, 7, 7, 5])
+    h_pose, h_c0 = rng.normal(size=(4, 3)), rng.normal(size=4)
+    r, innovation = np.full(4, 0.02**2), rng.normal(size=4)
+    H = np.zeros((4, n))
+    H[:, :3] = h_pose
+    H[np.arange(4), c0_index] = h_c0
+    expected = innovation**2 / (np.diag(H @ cov @ H.T) + r)
+    got = normalised_innovations(cov, innovation, h_pose, c0_index, h_c0, r)
+    np.testing.assert_allclose(got, expected, rtol=1e-12)  # rounding of a few products
 
 
 def test_outlier_count_threshold__never_when_even_all_outliers_is_too_likely() -> None:
