@@ -22,6 +22,7 @@ import numpy as np
 
 from polyslam_env.core.geometry import compose
 from polyslam_env.environment.config import EnvConfig, FaultConfig
+from polyslam_env.world.grid import FreeGrid
 from polyslam_env.world.physics import World
 
 __all__ = ["FaultEvent", "FaultPlan", "kidnap", "perturb_starts"]
@@ -36,9 +37,10 @@ def perturb_starts(world: World, p0: np.ndarray, rng: np.random.Generator) -> No
     nominal pose x_i to x_i ⊕ e_i, e_i ~ N(0, ``p0``) (3, 3) in the robot's frame.
 
     A draw where the robot does not fit (:meth:`World.robot_fits`: walls, pillars, the robots
-    placed so far) is redrawn (rejection sampling: e_i is then N(0, P0) conditioned on a free
-    start); after :data:`MAX_DRAWS` misses the robot keeps its nominal pose. With P0's 5 cm and
-    start poses placed with clearance to spare, a redraw is rare.
+    placed so far; a few cm from a valid start cannot reach the inside of a closed obstacle)
+    is redrawn (rejection sampling: e_i is then N(0, P0) conditioned on a free start); after
+    :data:`MAX_DRAWS` misses the robot keeps its nominal pose. With P0's 5 cm and start poses
+    placed with clearance to spare, a redraw is rare.
     """
     chol = np.linalg.cholesky(p0)  # (3, 3)
     nominal = world.poses
@@ -91,17 +93,26 @@ class FaultPlan:
         return out
 
 
-def kidnap(world: World, fault: FaultConfig, rng: np.random.Generator) -> FaultEvent:
+def fits(world: World, free: FreeGrid, i: int, pose: np.ndarray) -> bool:
+    """Whether robot ``i`` may be put at ``pose`` (3,): clear of walls, pillars and the other
+    robots (:meth:`World.robot_fits`) and in a free cell of ``free`` (which also rules out
+    the inside of closed obstacles)."""
+    return bool(free.free_at(pose[:2])) and world.robot_fits(i, pose)
+
+
+def kidnap(
+    world: World, fault: FaultConfig, rng: np.random.Generator, free: FreeGrid
+) -> FaultEvent:
     """Move robot ``fault.robot``'s true pose by ``fault.distance`` in a random direction and
     turn it by ``fault.angle`` (changes the world). Directions are drawn from ``rng`` until the
-    robot fits there (:meth:`World.robot_fits`), at most :data:`MAX_DRAWS`; if none fits the
-    robot stays and the event says ``done=False``."""
+    robot fits there (:func:`fits` with the free cells ``free``), at most :data:`MAX_DRAWS`;
+    if none fits the robot stays and the event says ``done=False``."""
     i = fault.robot
     pose = world.poses[i]
     for psi in rng.uniform(-math.pi, math.pi, MAX_DRAWS).tolist():
         move = (fault.distance * math.cos(psi), fault.distance * math.sin(psi), fault.angle)
         target = pose + np.array(move)
-        if world.robot_fits(i, target):
+        if fits(world, free, i, target):
             world.displace(i, target)
             return FaultEvent("kidnap", i, fault.step, moved=move, done=True)
     return FaultEvent("kidnap", i, fault.step, moved=(0.0, 0.0, 0.0), done=False)

@@ -373,11 +373,12 @@ def inject_faults(state: EpisodeState, plan: FaultPlan) -> list[FaultEvent]:
     robots whose kidnap is due (stream ``faults``); returns the kidnaps and the slips that
     start this step (the slip itself acts in :func:`simulate`)."""
     k = state.step_count
-    events = [
-        kidnap(state.world, f, state.rngs["faults"])
-        for f in plan.due(k, "kidnap")
-        if state.world.active[f.robot]
-    ]
+    kidnaps = [f for f in plan.due(k, "kidnap") if state.world.active[f.robot]]
+    events = []
+    if kidnaps:
+        cov = state.coverage  # its free cells: the same free space as the env's FreeGrid
+        free = FreeGrid(np.asarray(cov.free), cov.origin, cov.resolution)
+        events = [kidnap(state.world, f, state.rngs["faults"], free) for f in kidnaps]
     events += [
         FaultEvent("slip", f.robot, k, last_step=f.last_step, scale=f.scale)
         for f in plan.due(k, "slip")

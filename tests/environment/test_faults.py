@@ -163,3 +163,24 @@ def test_slip__reported_in_infos_at_its_first_step() -> None:
     ]
     assert seen[3]["robot_0"]["faults"] == [{"kind": "fail", "robot": 0, "step": 3}]
     assert all("faults" not in i for k in (1, 3) for a, i in seen[k].items() if a == "robot_1")
+
+
+def test_kidnap__lands_in_free_space_clear_of_walls() -> None:
+    """Seeded 1 m kidnaps on generated caves (rocks inside): the new true pose is a free cell
+    of the coverage grid (never inside a rock) with the clearance a start pose needs."""
+    kidnap = {"kind": "kidnap", "robot": 0, "step": 1, "distance": 1.0}
+    env = parallel_env(map="generator:cave", num_robots=1, faults=[kidnap], max_steps=1)
+    for seed in range(10):
+        env.reset(seed=seed)
+        _, _, _, _, infos = env.step({"robot_0": np.zeros(2)})
+        state = env.episode
+        assert state is not None
+        world, cov = state.world, state.coverage
+        xy = world.poses[:, :2]
+        (event,) = infos["robot_0"]["faults"]
+        if not event["done"]:
+            continue
+        row, col, inside = cov.cells_of(xy)
+        assert inside[0] and cov.free[row[0], col[0]]
+        need = world.config.robot.radius + world.config.wall_radius
+        assert world.layout.clearance(xy)[0] >= need
