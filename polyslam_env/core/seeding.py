@@ -13,7 +13,16 @@ from collections.abc import Iterable
 import numpy as np
 
 #: The streams an episode uses. Others may be asked for by name.
-STREAMS: tuple[str, ...] = ("layout", "motion", "sensor", "camera", "channel", "policy", "faults")
+STREAMS: tuple[str, ...] = (
+    "layout",
+    "motion",
+    "sensor",
+    "camera",
+    "channel",
+    "policy",
+    "faults",
+    "start_error",
+)
 
 
 def _name_key(name: str) -> int:

@@ -8,6 +8,7 @@ episode settings. :func:`resolve_config` turns what users pass to ``parallel_env
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +25,7 @@ __all__ = [
     "GENERATOR_PREFIX",
     "ActionConfig",
     "EnvConfig",
+    "FaultConfig",
     "ObservationConfig",
     "RewardConfig",
     "resolve_config",
@@ -116,6 +118,55 @@ class ActionConfig(Config):
             check_range(f"action.discrete[{i}][1]", w, -1.0, 1.0)
 
 
+#: The fault kinds of :class:`FaultConfig`.
+FAULT_KINDS: tuple[str, ...] = ("fail", "kidnap", "slip")
+
+
+@dataclass(frozen=True)
+class FaultConfig(Config):
+    """One injected fault of robot ``robot`` at env step ``step`` (1-based).
+
+    * ``fail``: the robot stops for good at the end of step ``step`` (it leaves ``agents``);
+    * ``kidnap``: after the motion of step ``step`` the robot's *true* pose jumps by
+      ``distance`` m in a random direction (stream ``faults``) to a free spot and turns by
+      ``angle`` rad; its odometry does not report the jump;
+    * ``slip``: during steps ``step … step + steps − 1`` the wheels slip: the robot moves
+      ``scale`` times the commanded motion while its odometry reports the commanded one
+      (true motion = scale × odometry).
+    """
+
+    kind: Literal["fail", "kidnap", "slip"] = "fail"
+    robot: int = 0
+    step: int = 1
+    distance: float = 0.0  # m, kidnap only
+    angle: float = 0.0  # rad, kidnap only
+    scale: float = 1.0  # slip only: true motion / reported motion, in (0, 1]
+    steps: int = 1  # slip only: number of slipping steps
+
+    def validate(self) -> None:
+        if self.kind == "kidnap":
+            check_positive("distance", self.distance)
+            check_range("angle", self.angle, -math.pi, math.pi)
+        else:
+            for name in ("distance", "angle"):
+                if getattr(self, name) != 0.0:
+                    raise ConfigError(f"{name}: only for kind 'kidnap', not {self.kind!r}")
+        if self.kind == "slip":
+            if not (math.isfinite(self.scale) and 0.0 < self.scale <= 1.0):
+                raise ConfigError(f"scale: must be in (0, 1], got {self.scale!r}")
+            if self.steps < 1:
+                raise ConfigError(f"steps: must be >= 1, got {self.steps!r}")
+        else:
+            for name, default in (("scale", 1.0), ("steps", 1)):
+                if getattr(self, name) != default:
+                    raise ConfigError(f"{name}: only for kind 'slip', not {self.kind!r}")
+
+    @property
+    def last_step(self) -> int:
+        """The last step the fault acts in (``step + steps − 1`` for slip, else ``step``)."""
+        return self.step + self.steps - 1
+
+
 @dataclass(frozen=True)
 class EnvConfig(Config):
     """Everything that defines an episode of ``polyslam_v0``."""
@@ -134,7 +185,9 @@ class EnvConfig(Config):
     action: ActionConfig = field(default_factory=ActionConfig)
     coverage_target: float | None = 0.95  # team coverage that terminates; None: never
     coverage_resolution: float = 0.1  # m, cell side of the coverage grid
-    faults: tuple[tuple[int, int], ...] = ()  # (robot, step): robot fails at that env step
+    initial_error: bool = True  # true start drawn from N(0, P0) around the frame origin
+    # (robot, step) pairs (= kind "fail") or FaultConfig mappings; pairs become FaultConfigs
+    faults: tuple[FaultConfig | tuple[int, int], ...] = ()
 
     def __post_init__(self) -> None:
         if self.slam_preset is not None:
@@ -145,6 +198,11 @@ class EnvConfig(Config):
                     " parameters; give one or the other"
                 )
             object.__setattr__(self, "slam", preset)
+        faults = tuple(
+            f if isinstance(f, FaultConfig) else _pair_fault(i, f)
+            for i, f in enumerate(self.faults)
+        )
+        object.__setattr__(self, "faults", faults)
         super().__post_init__()
 
     @property
@@ -182,23 +240,60 @@ class EnvConfig(Config):
         check_positive("coverage_resolution", self.coverage_resolution)
         self._validate_faults()
 
+    @property
+    def fault_list(self) -> tuple[FaultConfig, ...]:
+        """``faults``, every entry a :class:`FaultConfig` (pairs are turned into them on
+        construction; this property only narrows the type)."""
+        return tuple(f for f in self.faults if isinstance(f, FaultConfig))
+
     def _validate_faults(self) -> None:
-        seen: set[int] = set()
-        for i, (robot, step) in enumerate(self.faults):
-            if not 0 <= robot < self.num_robots:
+        """Robot and step ranges, one ``fail`` per robot and nothing after it, slip windows of
+        one robot disjoint."""
+        failed_at: dict[int, int] = {}
+        for i, f in enumerate(self.fault_list):
+            if f.kind == "fail" and f.robot in failed_at:
+                raise ConfigError(f"faults[{i}]: robot {f.robot} fails more than once")
+            if f.kind == "fail":
+                failed_at[f.robot] = f.step
+        windows: dict[int, list[tuple[int, int]]] = {}
+        for i, f in enumerate(self.fault_list):
+            if not 0 <= f.robot < self.num_robots:
                 raise ConfigError(
-                    f"faults[{i}]: robot {robot!r} is not in 0..{self.num_robots - 1}"
+                    f"faults[{i}].robot: {f.robot!r} is not in 0..{self.num_robots - 1}"
                 )
-            if step < 1:
-                raise ConfigError(f"faults[{i}]: step must be >= 1, got {step!r}")
-            if step > self.max_steps:
+            if f.step < 1:
+                raise ConfigError(f"faults[{i}].step: must be >= 1, got {f.step!r}")
+            if f.last_step > self.max_steps:
                 raise ConfigError(
-                    f"faults[{i}]: step {step} is beyond max_steps={self.max_steps};"
-                    " the fault would never happen"
+                    f"faults[{i}].step: {f.kind} at step {f.step}"
+                    + (f" for {f.steps} steps" if f.kind == "slip" else "")
+                    + f" goes beyond max_steps={self.max_steps}; the fault would never happen"
                 )
-            if robot in seen:
-                raise ConfigError(f"faults[{i}]: robot {robot} fails more than once")
-            seen.add(robot)
+            end = failed_at.get(f.robot)
+            if f.kind != "fail" and end is not None and f.last_step > end:
+                raise ConfigError(
+                    f"faults[{i}].step: robot {f.robot} has failed at step {end}, before this"
+                    f" {f.kind} ends (step {f.last_step})"
+                )
+            if f.kind == "slip":
+                for lo, hi in windows.get(f.robot, []):
+                    if f.step <= hi and lo <= f.last_step:
+                        raise ConfigError(
+                            f"faults[{i}].step: slip of robot {f.robot} over steps"
+                            f" {f.step}..{f.last_step} overlaps another slip ({lo}..{hi})"
+                        )
+                windows.setdefault(f.robot, []).append((f.step, f.last_step))
+
+
+def _pair_fault(i: int, pair: tuple[int, int]) -> FaultConfig:
+    """A ``(robot, step)`` pair as the ``fail`` fault it stands for."""
+    try:
+        robot, step = pair
+    except (TypeError, ValueError):
+        raise ConfigError(
+            f"faults[{i}]: expected (robot, step) or a fault mapping, got {pair!r}"
+        ) from None
+    return FaultConfig(kind="fail", robot=int(robot), step=int(step))
 
 
 def resolve_config(

@@ -30,6 +30,7 @@ from polyslam_env.core.seeding import make_rngs
 from polyslam_env.environment import stages
 from polyslam_env.environment.config import EnvConfig, resolve_config
 from polyslam_env.environment.facts import public_facts
+from polyslam_env.environment.faults import FaultEvent, FaultPlan
 from polyslam_env.environment.observations import ObservationEncoder
 from polyslam_env.environment.rewards import REWARD_TERMS, combine, reward_terms
 from polyslam_env.environment.state import EpisodeState, estimate, estimates
@@ -100,15 +101,18 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     ## Episode End
     Termination for all when the team coverage reaches ``coverage_target`` (``None``: never,
     the episode runs to ``max_steps``, e.g. to replay fixed paths); truncation for all
-    at ``max_steps``. A fault ``(robot, step)`` disables the robot at the end of env step
-    ``step``: it is terminated and leaves ``agents``, stays as an obstacle, and the others go
-    on. At an agent's last step ``infos[agent]`` also holds ``"metrics"`` (per robot: nees,
-    nees_paper, nu, nu_mean, nu_mean_abs, completeness, completeness_seen, map_precision,
-    duplicates, has_map, slam, coverage, bytes_sent, bytes_received, rendezvous, slam_time_ms
-    (wall time, not reproducible), collisions, path_length; never NaN: a robot without a map
-    has has_map 0 and the values stated in :mod:`polyslam_env.metrics.mapping`, without SLAM
-    slam 0; map metrics place the map by the robot's true start, nu_mean_abs by its nominal
-    frame) and ``"team"`` (coverage, steps_to_50, steps_to_90, overlap).
+    at ``max_steps``. A fault ``(robot, step)`` (kind ``fail``) disables the robot at the end of
+    env step ``step``: it is terminated and leaves ``agents``, stays as an obstacle, and the
+    others go on. Kinds ``kidnap`` and ``slip`` (see ``FaultConfig``) move the true pose unseen
+    by odometry, or make the odometry over-report the motion; ``infos[agent]`` holds the
+    step's ``faults`` and the divergence flag (``diverging``, ``diverged_at``). At an agent's
+    last step ``infos[agent]`` also holds ``"metrics"`` (per robot: nees, nees_paper, nu,
+    nu_mean, nu_mean_abs, completeness, completeness_seen, map_precision, duplicates, has_map,
+    slam, coverage, bytes_sent, bytes_received, rendezvous, slam_time_ms (wall time, not
+    reproducible), collisions, path_length; never NaN: a robot without a map has has_map 0 and
+    the values stated in :mod:`polyslam_env.metrics.mapping`, without SLAM slam 0; map metrics
+    place the map by the robot's true start, nu_mean_abs by its nominal frame) and ``"team"``
+    (coverage, steps_to_50, steps_to_90, overlap).
 
     ## Arguments
     ``parallel_env(config=None, render_mode=None, **overrides)``: ``config`` an
@@ -124,7 +128,9 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
       internals moved from env attributes (``env.world``, ``env.coverage``, ``env.slams``,
       ``env.step_count``) to one :class:`~polyslam_env.environment.state.EpisodeState`,
       ``env.episode`` (None before the first reset); ``max_cycles`` is accepted as an alias of
-      ``max_steps``; ``public_facts()`` gives policies the env's static facts.
+      ``max_steps``; ``public_facts()`` gives policies the env's static facts. Issue 14
+      (episodes change): ``initial_error`` (default on) draws the true starts from P0; fault
+      kinds ``kidnap`` and ``slip``; ``diverging``/``diverged_at``/``faults`` in ``infos``.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -163,7 +169,7 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
             cfg.world.robot.v_max,
             cfg.world.robot.omega_max,
         )  # (K, 2) physical (v, ω)
-        self._fault_at = {robot: step for robot, step in cfg.faults}
+        self._faults = FaultPlan(cfg)
         self._seeder: np.random.Generator | None = None
         # The current episode, made by reset(). Not named ``state``: that is PettingZoo's
         # global-state method ``ParallelEnv.state()``, which this env leaves unimplemented.
@@ -275,7 +281,8 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         acting = self._acting()
         commands = self._apply_actions(actions)
         state.step_count += 1
-        result = stages.simulate(state.world, commands)
+        result = stages.simulate(state.world, commands, self._faults.slip(state.step_count))
+        events = stages.inject_faults(state, self._faults)
         state.sensing = stages.sense(state.world)
         slam_infos = stages.slam(state, result.odometry)
         exchanged = stages.exchange(state)
@@ -286,9 +293,10 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         changes = stages.map_bookkeeping(state, acting, slam_infos, exchanged)
         terms = reward_terms(acting, result.collided, gains, changes)
         rewards = combine(terms, self.config.reward)
-        failed = stages.fail_robots(state, acting, self._fault_at)
+        failed = stages.fail_robots(state, acting, self._faults.fail_at)
+        events += [FaultEvent("fail", i, state.step_count) for i in sorted(failed)]
         terminations, truncations = stages.done(state, self.config, acting, failed)
-        infos = stages.infos(state, acting, terms, terminations, truncations)
+        infos = stages.infos(state, acting, terms, terminations, truncations, events)
         self.agents = [a for a in acting if not (terminations[a] or truncations[a])]
         return observations, rewards, terminations, truncations, infos
 

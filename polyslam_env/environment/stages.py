@@ -29,6 +29,7 @@ from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.comms.exchange import ExchangeStep, RendezvousExchange
 from polyslam_env.core.geometry import beam_endpoints
 from polyslam_env.environment.config import EnvConfig
+from polyslam_env.environment.faults import FaultEvent, FaultPlan, kidnap, perturb_starts
 from polyslam_env.environment.observations import (
     BeliefGrid,
     MapSampler,
@@ -53,6 +54,7 @@ __all__ = [
     "exchange_maps",
     "fail_robots",
     "infos",
+    "inject_faults",
     "make_exchange",
     "map_bookkeeping",
     "new_episode",
@@ -75,12 +77,20 @@ def new_episode(
 ) -> EpisodeState:
     """A fresh episode on ``layout`` (its free-space grid ``free``) with the named streams
     ``rngs``: a new pymunk world, fresh SLAMs, grids and histories, the first sensor readings
-    and the first coverage sweep."""
+    and the first coverage sweep.
+
+    Each robot's frame is its nominal start pose (the layout's); with ``initial_error`` (and
+    SLAM on) its true start is drawn around it from N(0, P0) (:func:`perturb_starts`, stream
+    ``start_error``), while its SLAM starts at x̂ = 0 with covariance P0. Without SLAM the robot
+    knows its true pose, so ``initial_error`` has no effect there.
+    """
     n = config.num_robots
     wc, oc = config.world, config.observation
     world = World(layout, wc, n, rngs)
     coverage = metrics.CoverageGrid(free.mask, free.origin, free.resolution)
     start_poses = world.poses  # (N, 3), each robot's frame in the absolute frame
+    if config.initial_error and config.slam_enabled:
+        perturb_starts(world, config.slam.p0, rngs["start_error"])
     angles = np.asarray(wc.range_sensor.angles)  # (B,)
     max_range = wc.range_sensor.max_range
     slams = (
@@ -107,7 +117,10 @@ def new_episode(
         links=[],
         coverage_series=[],
     )
-    state.histories = [RobotHistory(start_poses[i], *estimate(state, i)) for i in range(n)]
+    state.histories = [
+        RobotHistory(start_poses[i], *estimate(state, i), true_pose=world.poses[i])
+        for i in range(n)
+    ]
     sweep_coverage(state)
     return state
 
@@ -134,9 +147,10 @@ def make_exchange(
 
 
 # -- shared with simulate -------------------------------------------------------------------------
-def simulate(world: World, commands: np.ndarray) -> StepResult:
-    """Drive the world (changes it) with (v, ω) commands (N, 2) for one control period."""
-    return world.step(commands)
+def simulate(world: World, commands: np.ndarray, slip: np.ndarray | None = None) -> StepResult:
+    """Drive the world (changes it) with (v, ω) commands (N, 2) for one control period;
+    ``slip`` (N,) the wheel-slip factors of the step (None: no slip, see ``World.step``)."""
+    return world.step(commands, slip)
 
 
 def sense(world: World, camera: bool = True) -> Sensing:
@@ -358,6 +372,24 @@ def _bytes_change(state: EpisodeState, i: int) -> int:
     return delta
 
 
+def inject_faults(state: EpisodeState, plan: FaultPlan) -> list[FaultEvent]:
+    """The fault stage, after the motion of the step (changes the world): kidnap the active
+    robots whose kidnap is due (stream ``faults``); returns the kidnaps and the slips that
+    start this step (the slip itself acts in :func:`simulate`)."""
+    k = state.step_count
+    kidnaps = [f for f in plan.due(k, "kidnap") if state.world.active[f.robot]]
+    events = []
+    if kidnaps:
+        cov = state.coverage  # its free cells: the same free space as the env's FreeGrid
+        free = FreeGrid(np.asarray(cov.free), cov.origin, cov.resolution)
+        events = [kidnap(state.world, f, state.rngs["faults"], free) for f in kidnaps]
+    events += [
+        FaultEvent("slip", f.robot, k, last_step=f.last_step, scale=f.scale)
+        for f in plan.due(k, "slip")
+    ]
+    return events
+
+
 # -- episode end ----------------------------------------------------------------------------------
 def fail_robots(
     state: EpisodeState, acting: Mapping[str, int], fault_at: Mapping[int, int]
@@ -389,13 +421,25 @@ def infos(
     terms: Mapping[str, dict[str, float]],
     terminations: Mapping[str, bool],
     truncations: Mapping[str, bool],
+    events: Sequence[FaultEvent] = (),
 ) -> dict[str, dict[str, Any]]:
-    """Per agent: its reward terms and the step; at its last step also its final metrics and
-    the team's."""
+    """Per agent: its reward terms, the step, whether its SLAM flags divergence now
+    (``diverging``) and the first step it did (``diverged_at``, None if never), and the
+    faults that hit it this step (``faults``, only when some did); at its last step also its
+    final metrics and the team's."""
     out: dict[str, dict[str, Any]] = {}
     team: dict[str, Any] | None = None
     for agent, i in acting.items():
-        info: dict[str, Any] = {"reward_terms": terms[agent], "step": state.step_count}
+        history = state.histories[i]
+        info: dict[str, Any] = {
+            "reward_terms": terms[agent],
+            "step": state.step_count,
+            "diverging": bool(state.slams and state.slams[i].diverging),
+            "diverged_at": history.diverged_at,
+        }
+        hits = [e.to_info() for e in events if e.robot == i]
+        if hits:
+            info["faults"] = hits
         if terminations[agent] or truncations[agent]:
             if team is None:
                 team = team_metrics(state.coverage_series, state.coverage)

@@ -166,6 +166,7 @@ class RobotHistory:
         self.collisions = 0
         self.path_length = 0.0  # m, true distance travelled
         self.diverged = False
+        self.diverged_at: int | None = None  # first step (1-based) flagged diverging
 
     def record(
         self,
@@ -187,6 +188,8 @@ class RobotHistory:
         if slam_time is not None:
             self.slam_times.append(slam_time)
         self.collisions += int(collided)
+        if diverging and not self.diverged:
+            self.diverged_at = len(self.true) - 1
         self.diverged |= diverging
 
     def true_path(self) -> np.ndarray:  # (k, 2)

@@ -316,6 +316,42 @@ def is_diverging(
     return bool(values.mean() > _chi2_upper(values.size, nis_prob) / values.size)
 
 
+def normalised_innovations(
+    cov: np.ndarray,
+    innovation: np.ndarray,
+    h_pose: np.ndarray,
+    c0_index: np.ndarray,
+    h_c0: np.ndarray,
+    r: np.ndarray,
+) -> np.ndarray:  # (k,)
+    """ν_i² / S_ii for range rows that touch the pose and one c0 each (the rows of
+    :func:`update_sparse_inplace`): S_ii = h P_pp hᵀ + 2 h_c h P_pc + h_c² P_cc + r_i with
+    h = ``h_pose[i]`` (3,), h_c = ``h_c0[i]``, c = ``c0_index[i]``; cov (3+n, 3+n)."""
+    P_pp = cov[:3, :3]  # (3, 3)
+    P_pc = cov[:3, c0_index]  # (3, k)
+    P_cc = cov[c0_index, c0_index]  # (k,)
+    s = ((h_pose @ P_pp) * h_pose).sum(axis=1)  # h P_pp hᵀ per row (k rows ≈ 5: no einsum)
+    s += 2.0 * h_c0 * (h_pose * P_pc.T).sum(axis=1) + h_c0 * h_c0 * P_cc + r
+    return np.asarray(innovation * innovation / s)
+
+
+@lru_cache(maxsize=32)
+def outlier_count_threshold(window: int, outlier_prob: float, false_alarm: float) -> int:
+    """The smallest m with P(Bin(``window``, ``outlier_prob``) ≥ m) ≤ ``false_alarm``: an
+    alarm on "at least m outliers among ``window`` independent beams, each an outlier with
+    probability ``outlier_prob``" then fires with probability ≤ ``false_alarm``. Returns
+    ``window + 1`` (never) if even m = window is too likely."""
+    if not 0.0 <= outlier_prob <= 1.0 or not 0.0 < false_alarm < 1.0 or window < 1:
+        raise ValueError(
+            f"outlier_count_threshold: bad window={window}, outlier_prob={outlier_prob},"
+            f" false_alarm={false_alarm}"
+        )
+    for m in range(1, window + 1):
+        if scipy.special.bdtrc(m - 1, window, outlier_prob) <= false_alarm:  # P(X > m − 1)
+            return m
+    return window + 1
+
+
 def _chi2_upper(dof: int, prob: float) -> float:
     """χ² quantile with ``dof`` degrees of freedom (scipy.special, no scipy.stats import)."""
     return float(scipy.special.chdtri(dof, 1.0 - prob))

@@ -34,6 +34,11 @@ at every reset), the robot bodies and the sensors. Design choices (the spec is s
   ignores commands, and cameras no longer see it (nor does it see). Its odometry is noise only;
   noise is drawn for every robot every step so the streams do not depend on failures.
 * Walls are thick (``wall_radius``) only for the physics; sensors see thin lines.
+* Faults (issue 14): ``step(commands, slip)`` makes slipping wheels move the robot ``slip``
+  times the commanded motion while the odometry reports the unslipped displacement (the true
+  displacement divided by ``slip``, component-wise: exact for straight lines and turns in
+  place, first order in ω·dt for arcs); :meth:`World.displace` moves a robot's true pose
+  without any odometry (a kidnap).
 """
 
 from __future__ import annotations
@@ -196,6 +201,31 @@ class World:
     def _read_positions(self) -> np.ndarray:  # (N, 2)
         return np.array([tuple(b.position) for b in self.bodies])
 
+    def robot_fits(self, i: int, pose: np.ndarray) -> bool:
+        """Whether robot ``i`` could stand at ``pose`` (3,): clear of walls and pillars like a
+        start pose, and of the other robots by two radii plus the contact skin."""
+        xy = np.asarray(pose, dtype=float)[None, :2]  # (1, 2)
+        r = self.config.robot.radius
+        if (
+            not self.layout.contains(xy)[0]
+            or self.layout.clearance(xy)[0] < r + self.config.wall_radius
+        ):
+            return False
+        others = np.delete(self._pose[:, :2], i, axis=0)  # (N-1, 2)
+        gap = np.hypot(*(others - xy).T)
+        return bool(np.all(gap >= 2 * (r + self.skin)))
+
+    def displace(self, i: int, pose: np.ndarray) -> None:
+        """Put robot ``i`` at ``pose`` (3,) at once (a kidnap): no odometry reports it. The
+        caller checks :meth:`robot_fits`."""
+        x, y, th = (float(v) for v in pose)
+        self._pose[i] = (x, y, th)
+        body = self.bodies[i]
+        body.position = (x, y)
+        body.angle = th
+        body.velocity = (0.0, 0.0)
+        self.space.reindex_shapes_for_body(body)
+
     def disable(self, i: int) -> None:
         """Fail robot ``i``: it stops, becomes an immovable obstacle and leaves camera views."""
         if not self.active[i]:
@@ -222,19 +252,25 @@ class World:
             out[~self.active] = 0.0
         return out
 
-    def step(self, commands: np.ndarray) -> StepResult:
-        """Drive every robot with its (v, ω) for one control period ``dt``."""
+    def step(self, commands: np.ndarray, slip: np.ndarray | None = None) -> StepResult:
+        """Drive every robot with its (v, ω) for one control period ``dt``.
+
+        ``slip`` (N,) in (0, 1], default all 1: robot i moves ``slip[i]`` times its command and
+        its odometry reports the true displacement divided by ``slip[i]`` (module doc).
+        """
         cmd = self.clip_commands(commands)
         start = self._pose
         self._touched[:] = False
-        heading = self._integrate(cmd)
+        scale = None if slip is None else np.asarray(slip, dtype=float)  # (N,)
+        heading = self._integrate(cmd if scale is None else cmd * scale[:, None])
         self._pose = self._guard(start, np.column_stack([self._read_positions(), heading]))
         true_odo = between(start, self._pose)
+        reported = true_odo if scale is None else true_odo / scale[:, None]
         odo = self.config.odometry
         sigma = np.array([odo.sigma_xy, odo.sigma_xy, odo.sigma_theta])  # (3,)
         noise = self.rngs["motion"].standard_normal((self.num_robots, 3)) * sigma
         return StepResult(
-            odometry=true_odo + noise,
+            odometry=reported + noise,
             true_odometry=true_odo,
             collided=self._touched.copy(),
             commands=cmd,

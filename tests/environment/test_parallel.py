@@ -327,7 +327,7 @@ def test_ground_truth_mode__runs_without_slam() -> None:
 
 
 def test_render_state__is_built_without_a_renderer() -> None:
-    env = parallel_env(map="two_rooms", num_robots=2)
+    env = parallel_env(map="two_rooms", num_robots=2, initial_error=False)
     env.reset(seed=0)
     env.step({a: np.array([0.2, 0.1]) for a in env.agents})
     state = env.render_state()

@@ -85,7 +85,9 @@ def test_simulate_and_env__same_seed_and_commands_give_identical_histories() -> 
     """simulate and the env run the same stages (exchange off: the env's reset also takes a
     camera frame for the first observation, which simulate does not)."""
     steps = 40
-    env = parallel_env(map="paper", channel=None, max_steps=steps, coverage_target=1.0)
+    env = parallel_env(
+        map="paper", channel=None, max_steps=steps, coverage_target=1.0, initial_error=False
+    )
     commands = load_paths("paper").commands
     env.reset(seed=5)
     for k in range(steps):

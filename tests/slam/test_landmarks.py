@@ -4,8 +4,6 @@ pure or brute-force versions they replace."""
 
 from __future__ import annotations
 
-from collections import deque
-
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -15,7 +13,7 @@ from polyslam_env.slam.ekf import predict, predict_inplace, spectral_norm_sym
 from polyslam_env.slam.fitting import Fit, StoredPoint
 from polyslam_env.slam.landmarks import LandmarkTable, PackedPolynomials, shape_range
 from polyslam_env.slam.polynomial import Polynomial
-from polyslam_env.slam.robot import PolySlam, _carry, _median
+from polyslam_env.slam.robot import PolySlam, _carry
 from tests.slam.reference import (
     approximation_error,
     expected_ranges_and_jacobian,
@@ -199,13 +197,6 @@ def test_spectral_norm_sym__matches_svd_norm() -> None:
 
 
 # -- PolySlam helpers ----------------------------------------------------------------------------
-def test_median__matches_numpy() -> None:
-    rng = np.random.default_rng(9)
-    for size in (1, 2, 9, 10, 50):
-        values = deque(rng.normal(size=size).tolist())
-        assert _median(values) == np.median(np.array(values))
-
-
 def test_carry__moves_points_rigidly_with_the_pose_correction() -> None:
     before, after = np.array([1.0, 2.0, 0.3]), np.array([1.05, 1.9, 0.35])
     point = StoredPoint(np.array([2.0, 2.5]), np.array([0.0, 1.0]), 0.02, 3.0, before.copy(), 1, 4)

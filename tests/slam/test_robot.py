@@ -111,12 +111,12 @@ def test_divergence__covariance_beyond_k_p0_is_flagged_not_silent() -> None:
     assert slam.diverging  # stays flagged: P only grows without measurements
 
 
-def test_divergence__persistently_inconsistent_innovations_are_flagged() -> None:
-    """Most recent normalised innovations above the 95 % χ² quantile: flagged; a few: not."""
+def test_divergence__most_screened_beams_outliers_are_flagged() -> None:
+    """The innovation screen: 7 outliers among the last 10 screened beams flag; 6 do not."""
     slam = PolySlam(SlamConfig(), np.radians([0.0]), 2.0)
-    slam._nis.extend([0.5] * 40 + [500.0] * 5)  # association outliers only
+    slam._screen.extend([False] * 4 + [True] * 6)  # a run of gross outliers: not yet
     assert not slam._is_diverging()
-    slam._nis.extend([9.0] * 30)  # the bulk is now inconsistent
+    slam._screen.append(True)  # seven of the last ten
     assert slam._is_diverging()
 
 
