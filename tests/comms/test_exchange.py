@@ -318,6 +318,36 @@ def test_meeting__needs_both_the_gap_and_the_interval() -> None:
     assert starts == [0, 35, 66]
 
 
+@settings(max_examples=30, deadline=None)
+@given(
+    seen=st.lists(st.booleans(), min_size=60, max_size=60),
+    gap=st.integers(0, 6),
+    interval=st.integers(0, 25),
+)
+def test_meeting__starts_follow_the_stated_rule(seen: list[bool], gap: int, interval: int) -> None:
+    """Oracle: a sighting at k starts a meeting iff it is the pair's first, or the pair was
+    unseen for ≥ max(gap, 1) steps before k and the last meeting began ≥ interval steps ago."""
+    sender, receiver, p_s, p_r = _two_robot_setup()
+    ex = _exchange(meeting_gap=gap, meeting_interval=interval)
+    slams, active, view, apart = [sender, receiver], np.ones(2, bool), _mutual(p_s, p_r), [[], []]
+    got = [
+        bool(ex.step(k, slams, view if v else apart, active).new_rendezvous)
+        for k, v in enumerate(seen)
+    ]
+    expected: list[bool] = []
+    last_seen: int | None = None  # the pair's last step in mutual sight
+    last_start = 0  # the step its last meeting began (set by the first sighting)
+    for k, v in enumerate(seen):
+        start = v and (
+            last_seen is None or (k - last_seen - 1 >= max(gap, 1) and k - last_start >= interval)
+        )
+        expected.append(start)
+        last_seen = k if v else last_seen
+        last_start = k if start else last_start
+    assert got == expected
+    assert ex.counters(0)["rendezvous"] == ex.counters(0)["messages_sent"] == sum(expected)
+
+
 def _version(slam: PolySlam, old: int, wall: np.ndarray, pose_var: float) -> int:
     """A newer version of landmark ``old``: the robot localised (pose variance ``pose_var``
     on x and y) and refit the wall, which gets a new id (as PolySlam's refits do)."""
