@@ -683,7 +683,7 @@ class RendezvousExchange:
         var = normal_variance(fit.poly, _c0_variance(fit, slam.cov))
         walls = _same_wall(slam, fit.poly.with_c0(fit.c0))
         better = [
-            slam.polynomials()[slam.table.index_of(lid)]
+            slam.shapes[lid].with_c0(float(slam.mean[slam.table.state_index(lid)]))
             for lid in walls
             if normal_variance(slam.shapes[lid], slam.c0_variance(lid)) <= var * _ROUNDOFF
         ]
