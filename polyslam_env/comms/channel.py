@@ -71,6 +71,9 @@ class ChannelConfig(Config):
     # mapped something new (a longer interval cost completeness on held-out maps).
     meeting_gap: int = 5  # steps out of mutual sight
     meeting_interval: int = 20  # steps between the starts of two meetings of one pair
+    # Refine the camera's frame transform on the walls both maps hold before fusing received
+    # walls (comms/alignment.py); False: the paper's camera-only transform.
+    align_maps: bool = True
 
     def validate(self) -> None:
         check_positive("range", self.range)

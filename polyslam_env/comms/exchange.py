@@ -89,6 +89,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 import scipy.linalg
 
+from polyslam_env.comms.alignment import align_transform, frame_points
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
 from polyslam_env.comms.messages import (
     GridMessage,
@@ -108,7 +109,7 @@ from polyslam_env.comms.relative_pose import (
     relative_pose_covariance,
 )
 from polyslam_env.core.geometry import compose, compose_with_jacobians, inverse, rotation
-from polyslam_env.slam.fitting import J_ROT, Fit, PointSet, fit_polynomial
+from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
 from polyslam_env.slam.landmarks import boxes_near
 from polyslam_env.slam.merging import find_merge
 from polyslam_env.slam.polynomial import Polynomial
@@ -235,13 +236,10 @@ def received_point_set(
     covariance is ``noise_cov`` (6, 6). The point set's noise is [sender's c0 ; those 6].
     """
     poly = record.polynomial
-    q = polyline_points(piecewise_linear(poly, chord_tol), spacing)  # (N, 2) sender frame
+    q = chain_points(poly, chord_tol, spacing)  # (N, 2) sender frame
     rot = rotation(transform[2])
-    rq = q @ rot.T  # (N, 2)
+    xy, dp_dt = frame_points(q, transform)  # (N, 2), (N, 2, 3) ∂p/∂T
     n_pts = len(q)
-    dp_dt = np.zeros((n_pts, 2, 3))  # ∂p/∂T
-    dp_dt[:, :, :2] = np.eye(2)
-    dp_dt[:, :, 2] = rq @ J_ROT.T
     d_state = np.zeros((n_pts, 2, n_state))
     d_state[:, :, :3] = dp_dt @ d_transform_state
     eta_axis = np.array([0.0, 1.0]) if poly.variate == 1 else np.array([1.0, 0.0])
@@ -253,12 +251,18 @@ def received_point_set(
         axis=2,
     )  # (N, 2, 7)
     return PointSet(
-        xy=transform[:2] + rq,
+        xy=xy,
         d_state=d_state,
         d_noise=d_noise,
         noise_cov=scipy.linalg.block_diag([[record.c0_var]], noise_cov),
         weights=np.ones(n_pts),
     )
+
+
+def chain_points(poly: Polynomial, chord_tol: float, spacing: float) -> np.ndarray:
+    """(N, 2) points every ``spacing`` (m) along the piecewise-linear chain of ``poly``
+    (chord error ≤ ``chord_tol``), in its own frame."""
+    return polyline_points(piecewise_linear(poly, chord_tol), spacing)
 
 
 def _subset(points: PointSet, rows: slice) -> PointSet:
@@ -652,6 +656,8 @@ class RendezvousExchange:
         t, d_state, d_noise, noise_cov = self._transform(
             slam.pose, sighting, message.header, pose_var
         )
+        if self.config.align_maps and message.records:
+            t = self._align(slam, message, t, d_noise @ noise_cov @ d_noise.T, sender)
         received: list[Polynomial] = []
         ids: list[int] = []
         for record in message.records:
@@ -664,6 +670,29 @@ class RendezvousExchange:
                 ids += self._fuse(slam, piece, fit, sender, r, 0)
         self._carry_sources(r, slam)
         return received, ids
+
+    def _align(
+        self,
+        slam: PolySlam,
+        message: PolynomialMessage,
+        t: np.ndarray,
+        cov_t: np.ndarray,
+        sender: int,
+    ) -> np.ndarray:
+        """The transform refined on the receiver's walls (:func:`align_transform`): anchors
+        are its landmarks holding no data of this sender (an earlier copy would pull T back
+        to that meeting's error); one (chain, wall) pair weighs as one offset of the range
+        noise σ."""
+        sources = self._sources[message.header.receiver]
+        anchors = [
+            poly
+            for lid, poly in zip(slam.table.ids, slam.polynomials(), strict=True)
+            if sender not in sources.get(lid, ())
+        ]
+        chains = [
+            chain_points(rec.polynomial, self.chord_tol, self.spacing) for rec in message.records
+        ]
+        return align_transform(t, cov_t, chains, anchors, slam.config.range_sigma)
 
     def _fuse(
         self, slam: PolySlam, points: PointSet, fit: Fit, sender: int, r: int, depth: int

@@ -391,19 +391,26 @@ def _snapshot(receiver: PolySlam) -> tuple[np.ndarray, np.ndarray, list[int]]:
     return receiver.mean.copy(), receiver.cov.copy(), receiver.landmark_ids
 
 
-def test_exchange__fusing_the_same_message_twice_changes_nothing() -> None:
-    """Two exchanges build the same messages from the same states; the second delivery of
-    each finds its copy already held (equal variance: rule 1) and leaves both maps as they are."""
+def test_exchange__receiving_the_same_landmark_twice_changes_nothing() -> None:
+    """The sender's wall is marked changed without changing (as a refreshed extent would) and
+    sent again at the next meeting: the receiver finds its copy already held (equal variance:
+    rule 1) and its state stays bit-identical — the variance is not reduced twice."""
     sender, receiver, p_s, p_r = _two_robot_setup()
-    slams, active, view = [sender, receiver], np.ones(2, bool), _mutual(p_s, p_r)
-    _exchange().step(0, slams, view, active)
-    once = [_snapshot(s) for s in slams]
-    again = _exchange().step(0, slams, view, active)
-    assert sorted(d.n_polynomials for d in again.delivered) == [2, 2]  # whole maps re-sent
-    for slam, (mean, cov, ids) in zip(slams, once, strict=True):
-        assert slam.landmark_ids == ids
-        np.testing.assert_array_equal(slam.mean, mean)
-        np.testing.assert_array_equal(slam.cov, cov)
+    ex = _exchange()
+    slams, active, view, apart = [sender, receiver], np.ones(2, bool), _mutual(p_s, p_r), [[], []]
+    ex.step(0, slams, view, active)
+    ex.step(1, slams, apart, active)
+    once = _snapshot(receiver)
+    k = ex.config.meeting_interval
+    for slam in slams:
+        slam.step_count = k
+    sender.table.changed_at[0] = k  # the same wall, marked changed
+    again = ex.step(k, slams, view, active)
+    assert {d.sender: d.n_polynomials for d in again.delivered} == {0: 1, 1: 0}
+    mean, cov, ids = once
+    assert receiver.landmark_ids == ids
+    np.testing.assert_array_equal(receiver.mean, mean)
+    np.testing.assert_array_equal(receiver.cov, cov)
 
 
 def test_exchange__received_wall_never_replaces_a_better_own_one() -> None:
