@@ -16,12 +16,14 @@ Once per control step, after every robot's SLAM step, :meth:`RendezvousExchange.
 4. lets the channel deliver (loss, retry at the next step in view, bandwidth cap, expiry);
 5. applies every delivered message exactly once at its receiver: relative pose from the
    receiver's range and bearing of the sender (taken at the step the message was sent) and
-   the sender's bearing from the header; ``T_{l0,j0} = T_{j,j0} T_{l,j} T_{l,l0}⁻¹``; each
-   polynomial → piecewise-linear chain (chord error ≤ ``chord_tol``, 5 mm) → points every
-   ``spacing`` (5 cm) along it → into the receiver's frame → weighted LMS refit within
-   ``refit_tol`` (2.5 mm) of those points, halving the chain where one polynomial cannot
-   follow it (:func:`refit_received`) → fused by the rules below. Each received landmark thus
-   lies within 7.5 mm of the sender's curve mapped through the estimated transform.
+   the sender's bearing from the header; ``T_{l0,j0} = T_{j,j0} T_{l,j} T_{l,l0}⁻¹``, refined
+   on the walls the receiver already holds (``align_maps``; :mod:`.alignment`: the mean only,
+   the camera's covariance is kept); each polynomial → piecewise-linear chain (chord error
+   ≤ ``chord_tol``, 5 mm) → points every ``spacing`` (5 cm) along it → into the receiver's
+   frame → weighted LMS refit within ``refit_tol`` (2.5 mm) of those points, halving the chain
+   where one polynomial cannot follow it (:func:`refit_received`) → fused by the rules below.
+   Each received landmark thus lies within 7.5 mm of the sender's curve mapped through the
+   estimated transform.
 
 **Fusion: never the same information twice.** The correlation between a received polynomial
 and what the receiver holds is unknown (the sender's map may contain data that came from the
