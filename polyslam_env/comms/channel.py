@@ -19,14 +19,19 @@ Semantics (SPEC §4):
 
 * A message whose age ``step − sent_step`` exceeds ``max_age`` (``None``: never) is dropped
   before the step's attempts and counted as expired; the drops of the last call are listed in
-  ``last_expired``. Nothing is ever lost silently.
+  ``last_expired``.
+* :meth:`Channel.drop_robot` drops every queued message to or from a failed robot (failure is
+  permanent: such a message could never be delivered) and counts it as dropped.
+
+Nothing is ever lost silently.
 
 Counters per robot: as sender ``messages_sent`` (queued), ``attempts``, ``messages_lost``
 (lost attempts), ``bytes_sent`` (every attempt's bytes), ``bytes_lost``, ``messages_delivered``,
-``messages_expired``; as receiver ``messages_received`` and ``bytes_received`` (full size of
-delivered messages). Without a cap, ``attempts == messages_delivered + messages_lost`` and
+``messages_expired``, ``messages_dropped``; as receiver ``messages_received`` and
+``bytes_received`` (full size of delivered messages). Without a cap,
+``attempts == messages_delivered + messages_lost`` and
 ``bytes_sent == bytes_received + bytes_lost`` summed over robots; always
-``messages_sent == messages_delivered + messages_expired + pending``.
+``messages_sent == messages_delivered + messages_expired + messages_dropped + pending``.
 
 The only randomness is one ``rng.random()`` draw per attempt, in queue order, so a channel is
 deterministic given its generator.
@@ -56,6 +61,19 @@ class ChannelConfig(Config):
     precision: Literal["float32", "float64"] = "float64"  # float width in messages
     payload: Literal["polynomials", "points", "grid"] = "polynomials"  # what is exchanged
     max_age: int | None = None  # steps a message may wait; None = until delivered
+    # A pair's mutual sighting that starts is a new rendezvous (a meeting) only if the pair
+    # has been out of mutual sight for at least ``meeting_gap`` steps (a camera that loses the
+    # other robot for a frame or two does not make a new meeting) and the pair's last meeting
+    # started at least ``meeting_interval`` steps ago (robots that keep crossing exchange at
+    # most once per interval). 0 and 0: every start of a mutual sighting is a meeting.
+    # Defaults, at the paper's T = 1 s: 5 steps is more than a frame or two of flicker; in 20
+    # steps a robot at v_max (0.3 m/s) covers up to 6 m, four camera ranges, enough to have
+    # mapped something new (a longer interval cost completeness on held-out maps).
+    meeting_gap: int = 5  # steps out of mutual sight
+    meeting_interval: int = 20  # steps between the starts of two meetings of one pair
+    # Refine the camera's frame transform on the walls both maps hold before fusing received
+    # walls (comms/alignment.py); False: the paper's camera-only transform.
+    align_maps: bool = True
 
     def validate(self) -> None:
         check_positive("range", self.range)
@@ -67,6 +85,10 @@ class ChannelConfig(Config):
         check_range("loss_prob", self.loss_prob, 0.0, 1.0)
         if self.max_age is not None and self.max_age < 0:
             raise ConfigError(f"max_age: must be >= 0 or null, got {self.max_age!r}")
+        for name in ("meeting_gap", "meeting_interval"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ConfigError(f"{name}: must be an integer >= 0 (steps), got {value!r}")
 
 
 @dataclass
@@ -78,6 +100,7 @@ class Counters:
     messages_lost: int = 0
     messages_delivered: int = 0
     messages_expired: int = 0
+    messages_dropped: int = 0  # dropped because the sender or the receiver failed
     messages_received: int = 0
     bytes_sent: int = 0
     bytes_lost: int = 0
@@ -99,7 +122,8 @@ class Delivered:
 
 @dataclass(frozen=True)
 class Expired:
-    """A message dropped after waiting longer than ``max_age`` steps."""
+    """A message dropped after waiting longer than ``max_age`` steps, or (``drop_robot``)
+    because its sender or receiver failed; ``expired_step`` is the step it was dropped."""
 
     msg_id: int
     sender: int
@@ -173,6 +197,18 @@ class Channel:
                 self._queue.remove(msg)
                 delivered.append(self._complete(msg, step))
         return delivered
+
+    def drop_robot(self, robot: int, step: int) -> tuple[Expired, ...]:
+        """Drop every queued message to or from ``robot`` (it failed), counted per sender as
+        ``messages_dropped``; returns the drops."""
+        gone = [m for m in self._queue if robot in (m.sender, m.receiver)]
+        for m in gone:
+            self._queue.remove(m)
+            self._counter(m.sender).messages_dropped += 1
+        return tuple(
+            Expired(m.msg_id, m.sender, m.receiver, len(m.payload), m.sent_step, step, m.done)
+            for m in gone
+        )
 
     def pending(self, sender: int | None = None, receiver: int | None = None) -> int:
         """Number of queued messages, optionally only those of one sender and/or receiver."""

@@ -2,22 +2,48 @@
 
 Once per control step, after every robot's SLAM step, :meth:`RendezvousExchange.step`
 
-1. finds the **mutual sightings**: i's camera sees j and j's sees i, both robots active, and
+1. drops the queued messages to and from robots that failed (failure is permanent), counted
+   as ``messages_dropped``;
+2. finds the **mutual sightings**: i's camera sees j and j's sees i, both robots active, and
    both measured distances within the channel range;
-2. for every pair whose mutual sighting **starts** this step (a new rendezvous, counted once
-   per meeting) builds one message each way and queues it on the :class:`Channel`: the sender's
-   landmarks changed (created, refit, merged) since its last rendezvous with that receiver,
-   its pose estimate and its bearing measurement of the receiver;
-3. lets the channel deliver (loss, retry at the next step in view, bandwidth cap, expiry);
-4. applies every delivered message exactly once at its receiver: relative pose from the
+3. for every pair whose mutual sighting starts a **meeting** (a new rendezvous, counted once
+   per meeting: the pair was out of mutual sight for at least ``meeting_gap`` steps, so a
+   flickering camera does not make a new one, and its last meeting began at least
+   ``meeting_interval`` steps ago) builds one message each way and queues it on the
+   :class:`Channel`: the sender's landmarks changed (created, refit, merged) since its last
+   meeting with that receiver, except those it received from that receiver and has not
+   changed since (no echo), its pose estimate and its bearing measurement of the receiver;
+4. lets the channel deliver (loss, retry at the next step in view, bandwidth cap, expiry);
+5. applies every delivered message exactly once at its receiver: relative pose from the
    receiver's range and bearing of the sender (taken at the step the message was sent) and
-   the sender's bearing from the header; ``T_{l0,j0} = T_{j,j0} T_{l,j} T_{l,l0}⁻¹``; each
-   polynomial → piecewise-linear chain (chord error ≤ ``chord_tol``, 5 mm) → points every
-   ``spacing`` (5 cm) along it → into the receiver's frame → weighted LMS refit within
-   ``refit_tol`` (2.5 mm) of those points, halving the chain where one polynomial cannot
-   follow it (:func:`refit_received`) → :meth:`PolySlam.insert_landmark` (which runs the
-   merge check). Each received landmark thus lies within 7.5 mm of the sender's curve
-   mapped through the estimated transform.
+   the sender's bearing from the header; ``T_{l0,j0} = T_{j,j0} T_{l,j} T_{l,l0}⁻¹``, refined
+   on the walls the receiver already holds (``align_maps``; :mod:`.alignment`: the mean only,
+   the camera's covariance is kept); each polynomial → piecewise-linear chain (chord error
+   ≤ ``chord_tol``, 5 mm) → points every ``spacing`` (5 cm) along it → into the receiver's
+   frame → weighted LMS refit within ``refit_tol`` (2.5 mm) of those points, halving the chain
+   where one polynomial cannot follow it (:func:`refit_received`) → fused by the rules below.
+   Each received landmark thus lies within 7.5 mm of the sender's curve mapped through the
+   estimated transform.
+
+**Fusion: never the same information twice.** The correlation between a received polynomial
+and what the receiver holds is unknown (the sender's map may contain data that came from the
+receiver, or an earlier version of the same wall). Each received piece is compared with the
+receiver's landmarks of the same wall (those PolySlam's merge test pairs it with) by the
+variance of their offset along the curve's normal (:func:`normal_variance`):
+
+* rule 1, keep the better: covariance intersection of two scalar estimates with unknown
+  correlation, min over ω of (ω/σ₁² + (1−ω)/σ₂²)⁻¹, is the smaller of the two variances (ω ∈
+  {0, 1}): the better estimate alone. So where a held landmark is at least as good, the
+  piece's points it covers are dropped; only the uncovered runs of the chain (at least
+  ``merge_min_overlap`` long) are refitted and fused in turn. A received polynomial thus never
+  overwrites or moves a better own one, and fusing the same message twice changes nothing;
+* rule 2, a newer version replaces the older: when the piece is better than every held
+  landmark of its wall, those holding data from the same sender (an earlier version it sent,
+  or a merge with one; provenance is kept per landmark and carried over the receiver's refits
+  and merges) are removed from the state before the piece is inserted;
+* rule 3: the piece is inserted with :meth:`PolySlam.insert_landmark`, whose merge check fuses
+  it with an overlapping landmark made of independent data (own beams, or a third robot's).
+  Chains of provenance through a third robot are not tracked.
 
 **Wire frame.** A message on the channel is ``encode(message)`` (``messages.py``) followed by
 an exchange trailer: the sender's pose variances σ²_x, σ²_y, σ²_θ (3 floats of the message's
@@ -38,7 +64,7 @@ kept, and the old pose is expressed as ``x_now ⊕ Δ⁻¹`` with Δ the estimat
 the transform's Jacobian is taken w.r.t. the *current* pose (identity chain when Δ = 0).
 
 **Bookkeeping.** Per ordered pair (sender, receiver): the sender's SLAM step at their last
-rendezvous; only landmarks with ``changed_at`` after it are sent. Landmarks inserted from a
+meeting; only landmarks with ``changed_at`` after it are sent. Landmarks inserted from a
 message get ``changed_at`` = the receiver's step, so they are not sent back at the same
 meeting; an inserted landmark that was *not* merged is also remembered as known to its
 sender and never echoed back to it later (a merged one carries the receiver's own data and
@@ -65,6 +91,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 import scipy.linalg
 
+from polyslam_env.comms.alignment import align_transform, frame_points
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
 from polyslam_env.comms.messages import (
     GridMessage,
@@ -84,7 +111,9 @@ from polyslam_env.comms.relative_pose import (
     relative_pose_covariance,
 )
 from polyslam_env.core.geometry import compose, compose_with_jacobians, inverse, rotation
-from polyslam_env.slam.fitting import J_ROT, Fit, PointSet, fit_polynomial
+from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
+from polyslam_env.slam.landmarks import boxes_near
+from polyslam_env.slam.merging import find_merge
 from polyslam_env.slam.polynomial import Polynomial
 
 if TYPE_CHECKING:
@@ -95,6 +124,11 @@ _FLOAT: dict[int, np.dtype[np.floating]] = {4: np.dtype("<f4"), 8: np.dtype("<f8
 PAYLOAD_KINDS = ("polynomials", "points", "grid")
 PRECISIONS = ("float32", "float64")
 _MAX_SPLIT_DEPTH = 3  # a received polynomial is cut into at most 2**3 pieces to refit
+_MAX_TRIM_DEPTH = 2  # trimming covered points off a piece, then off its remainders: no more
+_BOX_SAMPLES = 16  # samples of a received curve for its bounding box (γ_M covers the rest)
+#: Relative margin when comparing normal-offset variances: the same fit recomputed on a grown
+#: state differs by round-off only, and must count as "no better" (rule 1 keeps the held one).
+_ROUNDOFF = 1.0 + 1e-9
 
 
 class DetectionLike(Protocol):
@@ -149,6 +183,7 @@ class ExchangeStep:
     sent: tuple[tuple[int, int, int], ...]  # (sender, receiver, bytes) queued this step
     delivered: tuple[DeliveredMessage, ...]
     expired: tuple[Expired, ...]
+    dropped: tuple[Expired, ...] = ()  # messages to or from robots that failed this step
 
 
 @dataclass(frozen=True, eq=False)
@@ -203,13 +238,10 @@ def received_point_set(
     covariance is ``noise_cov`` (6, 6). The point set's noise is [sender's c0 ; those 6].
     """
     poly = record.polynomial
-    q = polyline_points(piecewise_linear(poly, chord_tol), spacing)  # (N, 2) sender frame
+    q = chain_points(poly, chord_tol, spacing)  # (N, 2) sender frame
     rot = rotation(transform[2])
-    rq = q @ rot.T  # (N, 2)
+    xy, dp_dt = frame_points(q, transform)  # (N, 2), (N, 2, 3) ∂p/∂T
     n_pts = len(q)
-    dp_dt = np.zeros((n_pts, 2, 3))  # ∂p/∂T
-    dp_dt[:, :, :2] = np.eye(2)
-    dp_dt[:, :, 2] = rq @ J_ROT.T
     d_state = np.zeros((n_pts, 2, n_state))
     d_state[:, :, :3] = dp_dt @ d_transform_state
     eta_axis = np.array([0.0, 1.0]) if poly.variate == 1 else np.array([1.0, 0.0])
@@ -221,12 +253,18 @@ def received_point_set(
         axis=2,
     )  # (N, 2, 7)
     return PointSet(
-        xy=transform[:2] + rq,
+        xy=xy,
         d_state=d_state,
         d_noise=d_noise,
         noise_cov=scipy.linalg.block_diag([[record.c0_var]], noise_cov),
         weights=np.ones(n_pts),
     )
+
+
+def chain_points(poly: Polynomial, chord_tol: float, spacing: float) -> np.ndarray:
+    """(N, 2) points every ``spacing`` (m) along the piecewise-linear chain of ``poly``
+    (chord error ≤ ``chord_tol``), in its own frame."""
+    return polyline_points(piecewise_linear(poly, chord_tol), spacing)
 
 
 def _subset(points: PointSet, rows: slice) -> PointSet:
@@ -248,18 +286,25 @@ def refit_received(
     than ``tol`` the chain is halved (at most :data:`_MAX_SPLIT_DEPTH` times). Coefficients are
     padded to ``order + 1``; fits with non-finite values are dropped.
     """
+    return [fit for _, fit in refit_pieces(points, order, auto_order, tol, depth)]
+
+
+def refit_pieces(
+    points: PointSet, order: int, auto_order: bool, tol: float, depth: int = 0
+) -> list[tuple[PointSet, Fit]]:
+    """:func:`refit_received` with, for each fit, the points (a run of the chain) it fits."""
     fit, worst = _fit_chain(points, order, auto_order, tol)
     n_pts = points.n_points
     if worst > tol and depth < _MAX_SPLIT_DEPTH and n_pts >= 4:
         mid = n_pts // 2
         halves = (slice(0, mid + 1), slice(mid, n_pts))  # they share the middle point
         return [
-            fit
+            piece
             for rows in halves
-            for fit in refit_received(_subset(points, rows), order, auto_order, tol, depth + 1)
+            for piece in refit_pieces(_subset(points, rows), order, auto_order, tol, depth + 1)
         ]
     finite = np.isfinite(fit.c0) and np.all(np.isfinite(fit.Gx)) and np.all(np.isfinite(fit.Gy))
-    return [fit] if finite else []
+    return [(points, fit)] if finite else []
 
 
 def _fit_chain(points: PointSet, order: int, auto_order: bool, tol: float) -> tuple[Fit, float]:
@@ -360,7 +405,14 @@ class RendezvousExchange:
         self._sightings: dict[tuple[int, int, int], _Sighting] = {}  # (r, s, step) → r's view
         self._seq: dict[tuple[int, int], int] = {}
         self._applied: set[int] = set()
-        self._in_view: set[tuple[int, int]] = set()
+        self._last_seen: dict[tuple[int, int], int] = {}  # pair → last step in mutual sight
+        self._last_start: dict[tuple[int, int], int] = {}  # pair → step its last meeting began
+        self._failed: set[int] = set()
+        # provenance, per receiver: landmark id → senders whose data it holds (rules 1–3)
+        self._sources: list[dict[int, frozenset[int]]] = [{} for _ in range(num_robots)]
+        self._ids_seen: list[set[int]] = [set() for _ in range(num_robots)]
+        self._boxes_seen: list[dict[int, np.ndarray]] = [{} for _ in range(num_robots)]
+        self.superseded = [0] * num_robots  # landmarks replaced by a newer version (rule 2)
         self._rendezvous = [0] * num_robots
         self._polys_sent = [0] * num_robots
         self._polys_received = [0] * num_robots
@@ -386,8 +438,12 @@ class RendezvousExchange:
                 f"expected {self.num_robots} robots, got {len(slams)} SLAMs and"
                 f" {len(detections)} detection lists"
             )
-        sightings = _mutual_sightings(detections, np.asarray(active, bool), self.config.range)
-        new = tuple(pair for pair in sightings if pair not in self._in_view)
+        active = np.asarray(active, bool)
+        dropped = self._drop_failed(k, active)
+        for r, slam in enumerate(slams):
+            self._carry_sources(r, slam)
+        sightings = _mutual_sightings(detections, active, self.config.range)
+        new = tuple(pair for pair in sightings if self._is_meeting(k, pair))
         sent = [out for pair in new for out in self._meet(k, pair, sightings[pair], slams)]
         linked: Callable[[int, int], bool] = lambda s, r: (min(s, r), max(s, r)) in sightings  # noqa: E731
         delivered = [self._apply(d, slams) for d in self.channel.deliver(k, linked)]
@@ -397,8 +453,36 @@ class RendezvousExchange:
             s, r, ids = self._sent_ids.pop(e.msg_id)
             self._resend.setdefault((s, r), set()).update(ids)
             self._sightings.pop((r, s, e.sent_step), None)
-        self._in_view = set(sightings)
-        return ExchangeStep(k, tuple(sightings), new, tuple(sent), tuple(delivered), expired)
+        for pair in sightings:
+            self._last_seen[pair] = k
+        for pair in new:
+            self._last_start[pair] = k
+        return ExchangeStep(
+            k, tuple(sightings), new, tuple(sent), tuple(delivered), expired, dropped
+        )
+
+    def _is_meeting(self, k: int, pair: tuple[int, int]) -> bool:
+        """Whether the pair's mutual sighting at step k starts a meeting (ChannelConfig's
+        ``meeting_gap`` and ``meeting_interval``)."""
+        last = self._last_seen.get(pair)
+        if last is None:
+            return True
+        out_of_sight = k - last - 1  # steps between the last sighting and this one
+        if out_of_sight < max(self.config.meeting_gap, 1):
+            return False  # the same sighting goes on (or flickered)
+        return k - self._last_start[pair] >= self.config.meeting_interval
+
+    def _drop_failed(self, k: int, active: np.ndarray) -> tuple[Expired, ...]:
+        """Drop the queued messages to and from robots that failed (failure is permanent)."""
+        dropped: list[Expired] = []
+        for i in np.flatnonzero(~active).tolist():
+            if i not in self._failed:
+                self._failed.add(i)
+                dropped += self.channel.drop_robot(i, k)
+        for e in dropped:
+            self._sent_ids.pop(e.msg_id)
+            self._sightings.pop((e.receiver, e.sender, e.sent_step), None)
+        return tuple(dropped)
 
     def counters(self, i: int) -> dict[str, int]:
         """Robot i's traffic: bytes, rendezvous, messages and polynomials."""
@@ -412,6 +496,7 @@ class RendezvousExchange:
             "messages_received": c.messages_received,
             "messages_lost": c.messages_lost,
             "messages_expired": c.messages_expired,
+            "messages_dropped": c.messages_dropped,
             "messages_pending": self.channel.pending(sender=i),
             "polynomials_sent": self._polys_sent[i],
             "polynomials_received": self._polys_received[i],
@@ -565,10 +650,16 @@ class RendezvousExchange:
         sighting: _Sighting,
         sender: int,
     ) -> tuple[list[Polynomial], list[int]]:
-        """Refit every record in the receiver's frame and insert it; returns fits and ids."""
+        """Refit every record in the receiver's frame and fuse it (see "Fusion" in the module
+        docstring); returns the refits (before any trimming or merge) and the ids now holding
+        what was inserted."""
+        r = message.header.receiver
+        self._carry_sources(r, slam)
         t, d_state, d_noise, noise_cov = self._transform(
             slam.pose, sighting, message.header, pose_var
         )
+        if self.config.align_maps and message.records:
+            t = self._align(slam, message, t, d_noise @ noise_cov @ d_noise.T, sender)
         received: list[Polynomial] = []
         ids: list[int] = []
         for record in message.records:
@@ -576,23 +667,171 @@ class RendezvousExchange:
                 record, t, d_state, d_noise, noise_cov, slam.mean.size, self.chord_tol,
                 self.spacing,
             )  # fmt: skip
-            for fit in refit_received(pts, self.order, self.auto_order, self.refit_tol):
-                fit = _on_state(fit, slam.mean.size)
-                before = slam.n_landmarks
-                lid = slam.insert_landmark(fit)
+            for piece, fit in refit_pieces(pts, self.order, self.auto_order, self.refit_tol):
                 received.append(fit.poly)
-                ids.append(lid)
-                if slam.n_landmarks > before:  # not merged: a pure copy of the sender's one
-                    self._known[message.header.receiver].setdefault(lid, set()).add(sender)
+                ids += self._fuse(slam, piece, fit, sender, r, 0)
+        self._carry_sources(r, slam)
         return received, ids
+
+    def _align(
+        self,
+        slam: PolySlam,
+        message: PolynomialMessage,
+        t: np.ndarray,
+        cov_t: np.ndarray,
+        sender: int,
+    ) -> np.ndarray:
+        """The transform refined on the receiver's walls (:func:`align_transform`): anchors
+        are its landmarks holding no data of this sender (an earlier copy would pull T back
+        to that meeting's error); one (chain, wall) pair weighs as one offset of the range
+        noise σ."""
+        sources = self._sources[message.header.receiver]
+        anchors = [
+            poly
+            for lid, poly in zip(slam.table.ids, slam.polynomials(), strict=True)
+            if sender not in sources.get(lid, ())
+        ]
+        chains = [
+            chain_points(rec.polynomial, self.chord_tol, self.spacing) for rec in message.records
+        ]
+        return align_transform(t, cov_t, chains, anchors, slam.config.range_sigma)
+
+    def _fuse(
+        self, slam: PolySlam, points: PointSet, fit: Fit, sender: int, r: int, depth: int
+    ) -> list[int]:
+        """Fuse one received piece into receiver r's map; returns the ids that hold it.
+
+        Rule 1 (keep the better): where a landmark of the same wall (PolySlam's merge test)
+        has a normal-offset variance no larger than the piece's, the piece's points it covers
+        are dropped and only the uncovered runs (at least ``merge_min_overlap`` long) are
+        refitted and fused. Rule 2 (newer version): otherwise landmarks of that wall holding
+        information from the same sender are removed first. Rule 3: the piece is inserted with
+        :meth:`PolySlam.insert_landmark`, whose merge check fuses it with an overlapping
+        landmark built from independent (own or third-party) data.
+        """
+        fit = _on_state(fit, slam.mean.size)
+        cfg = slam.config
+        var = normal_variance(fit.poly, _c0_variance(fit, slam.cov))
+        walls = _same_wall(slam, fit.poly.with_c0(fit.c0))
+        better = [
+            slam.shapes[lid].with_c0(float(slam.mean[slam.table.state_index(lid)]))
+            for lid in walls
+            if normal_variance(slam.shapes[lid], slam.c0_variance(lid)) <= var * _ROUNDOFF
+        ]
+        if better:
+            if depth >= _MAX_TRIM_DEPTH:
+                return []
+            keep = ~covered_points(points.xy, better, cfg.gamma_max)
+            return [
+                lid
+                for rows in uncovered_runs(keep, points.xy, cfg.merge_min_overlap)
+                for piece, sub in refit_pieces(
+                    _subset(points, rows), self.order, self.auto_order, self.refit_tol
+                )
+                for lid in self._fuse(slam, piece, sub, sender, r, depth + 1)
+            ]
+        sources = self._sources[r]
+        for lid in walls:
+            if sender in sources.get(lid, ()):
+                slam.remove_landmark(lid)
+                sources.pop(lid)
+                self.superseded[r] += 1
+        before = set(slam.table.ids)
+        lid = slam.insert_landmark(_on_state(fit, slam.mean.size))
+        merged = before - set(slam.table.ids)
+        sources[lid] = frozenset({sender}.union(*(sources.pop(g, ()) for g in merged)))
+        if not merged:  # a pure copy of the sender's landmark: never echo it back
+            self._known[r].setdefault(lid, set()).add(sender)
+        return [lid]
+
+    def _carry_sources(self, r: int, slam: PolySlam) -> None:
+        """Carry the provenance of receiver r's landmarks over its own refits and merges since
+        the last call: a new landmark inherits the senders of every vanished landmark whose
+        box (when last seen) lies within γ_M of its own — the only ones it can come from."""
+        sources = self._sources[r]
+        if not sources:
+            self._ids_seen[r] = set(slam.table.ids)
+            return
+        now = set(slam.table.ids)
+        seen = self._ids_seen[r]
+        gone = [lid for lid in seen - now if lid in sources]
+        table = slam.table
+        boxes = table.boxes(slam.mean[3:])  # (n, 4)
+        if gone:
+            old = [(sources.pop(g), self._boxes_seen[r][g]) for g in gone]
+            reach = slam.config.gamma_max
+            for lid in sorted(now - seen):
+                box = boxes[table.index_of(lid)]
+                heirs = [src for src, b in old if len(boxes_near(b[None], box, reach))]
+                if heirs:
+                    sources[lid] = frozenset(sources.get(lid, frozenset()).union(*heirs))
+        self._ids_seen[r] = now
+        self._boxes_seen[r] = {lid: boxes[table.index_of(lid)] for lid in sources}
+
+
+def normal_variance(poly: Polynomial, c0_var: float) -> float:
+    """Variance (m²) of a landmark's offset along the curve's normal.
+
+    A shape landmark moves only through c0, along η; the normal component of that shift at
+    the middle of the extent is c0 · cos(atan B'), so var_n = var(c0) / (1 + B'²). Unlike
+    var(c0) it compares landmarks of either variate.
+    """
+    slope = float(poly.slope(0.5 * (poly.lo + poly.hi)))
+    return c0_var / (1.0 + slope * slope)
+
+
+def covered_points(xy: np.ndarray, polys: Sequence[Polynomial], reach: float) -> np.ndarray:
+    """(N,) True where a point (N, 2) lies within ``polys``' extents (its ξ) and within
+    ``reach`` (m) of the curve along η."""
+    out = np.zeros(len(xy), dtype=bool)
+    for poly in polys:
+        xi, eta = poly.from_xy(xy)
+        out |= (xi >= poly.lo) & (xi <= poly.hi) & (np.abs(eta - poly.value(xi)) <= reach)
+    return out
+
+
+def uncovered_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> list[slice]:
+    """Maximal runs of consecutive ``keep`` points (N,) of a chain (N, 2) whose length along
+    the chain is at least ``min_length`` (m)."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(int), [0]])))
+    runs = []
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if float(np.linalg.norm(np.diff(xy[a:b], axis=0), axis=1).sum()) >= min_length:
+            runs.append(slice(int(a), int(b)))
+    return runs
+
+
+def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
+    """Ids of the landmarks PolySlam's merge test (:func:`find_merge`) pairs with ``poly``."""
+    cfg = slam.config
+    c0s = slam.mean[3:]
+    xy = poly.equally_spaced(_BOX_SAMPLES)
+    box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
+    out = []
+    for j in slam.table.near(box, c0s, cfg.gamma_max).tolist():
+        other = slam.table.polys[j]
+        match = find_merge(
+            poly, poly.c0, [other], [float(c0s[j])], cfg.gamma_max, cfg.merge_min_overlap
+        )
+        if match is not None:
+            out.append(slam.table.ids[j])
+    return out
+
+
+def _c0_variance(fit: Fit, cov: np.ndarray) -> float:
+    """var(c0) of a fit once augmented: G_x P G_xᵀ + G_y V G_yᵀ (paper eq. 5)."""
+    gx, gy = fit.Gx.reshape(-1), fit.Gy.reshape(-1)
+    return float(gx @ cov @ gx + gy @ fit.V @ gy)
 
 
 def _on_state(fit: Fit, n_state: int) -> Fit:
-    """The fit with G_x padded to the receiver's current state size (it grows per insert)."""
+    """The fit with G_x sized to the receiver's current state (it changes with every insert
+    and removal). A received fit depends on the state only through the pose (first three
+    columns; :func:`received_point_set`), so the rest is zeros."""
     if fit.Gx.shape[1] == n_state:
         return fit
     gx = np.zeros((1, n_state))
-    gx[:, : fit.Gx.shape[1]] = fit.Gx
+    gx[:, :3] = fit.Gx[:, :3]
     return Fit(fit.poly, fit.c0, gx, fit.Gy, fit.V, fit.rms, fit.order)
 
 

@@ -320,6 +320,12 @@ class PolySlam:
             return self.table.ids[-1]
         return lid
 
+    def remove_landmark(self, landmark_id: int) -> None:
+        """Drop a landmark from the map and its c0 from the state (a marginalisation: the
+        rest of the covariance is unchanged), e.g. a received landmark superseded by a newer
+        version from the same sender."""
+        self._remove(landmark_id)
+
     def changed_since(self, step: int) -> list[int]:
         """Ids of the landmarks created, refit or merged after ``step`` (exchange payloads)."""
         table = self.table

@@ -140,6 +140,28 @@ def test_channel__expiry_is_counted_and_reported() -> None:
     assert channel.pending() == 0
 
 
+def test_channel__messages_to_or_from_a_failed_robot_are_dropped_and_counted() -> None:
+    channel = Channel(ChannelConfig(loss_prob=1.0), np.random.default_rng(0))
+    to_failed = channel.send(0, 1, b"abcd", step=0)
+    from_failed = channel.send(1, 2, b"xy", step=0)
+    channel.send(0, 2, b"keep", step=0)  # robots 0 and 2 are healthy: kept
+    channel.deliver(0, always)  # every attempt lost: all three stay queued
+    dropped = channel.drop_robot(1, step=4)
+    assert sorted(e.msg_id for e in dropped) == sorted([to_failed, from_failed])
+    assert all(e.expired_step == 4 for e in dropped)
+    assert channel.pending() == 1 and channel.pending(sender=0, receiver=2) == 1
+    assert [channel.counters(r).messages_dropped for r in range(3)] == [1, 1, 0]
+    for robot in range(3):
+        c = channel.counters(robot)
+        pending = channel.pending(sender=robot)
+        assert (
+            c.messages_sent
+            == c.messages_delivered + c.messages_expired + c.messages_dropped + pending
+        )
+    assert channel.counters(0).bytes_sent == 4 + 4  # the lost attempts still cost their bytes
+    assert channel.drop_robot(1, step=5) == ()
+
+
 def test_channel__random_schedule_counters_add_up() -> None:
     rng = np.random.default_rng(3)
     cfg = ChannelConfig(loss_prob=0.3, bandwidth_bytes_per_step=200, max_age=15)
@@ -206,6 +228,9 @@ def test_channel__bad_calls_raise() -> None:
         ({"payload": "images"}, "payload"),
         ({"max_age": -2}, "max_age"),
         ({"lossprob": 0.1}, "lossprob"),
+        ({"meeting_gap": -1}, "meeting_gap"),
+        ({"meeting_interval": 2.5}, "meeting_interval"),
+        ({"meeting_interval": True}, "meeting_interval"),
     ],
 )
 def test_channel_config__invalid_values_name_the_key(data: dict[str, object], key: str) -> None:

@@ -17,6 +17,7 @@ from polyslam_env.comms.exchange import (
     RendezvousExchange,
     frame_message,
     map_transform,
+    normal_variance,
     received_point_set,
     unframe_message,
 )
@@ -49,16 +50,18 @@ def _slam(pose: np.ndarray) -> PolySlam:
     return slam
 
 
-def _add_wall(slam: PolySlam, points_abs: np.ndarray, frame: np.ndarray) -> int:
+def _add_wall(
+    slam: PolySlam, points_abs: np.ndarray, frame: np.ndarray, sigma: float = 1e-3
+) -> int:
     """Insert a landmark fitted to absolute wall points seen from a robot whose frame is
-    ``frame``; the points hang on its pose with 1 mm noise, as a SLAM fit would."""
+    ``frame``; the points hang on its pose with ``sigma`` (m) noise, as a SLAM fit would."""
     xy = transform_points(points_abs, inverse(frame))  # (N, 2) robot frame
     n = len(xy)
     d_state = np.zeros((n, 2, slam.mean.size))
     d_state[:, :, :2] = np.eye(2)
     d_noise = np.zeros((n, 2, n))
     d_noise[np.arange(n), 1, np.arange(n)] = 1.0
-    pts = PointSet(xy, d_state, d_noise, np.eye(n) * 1e-6, np.ones(n))
+    pts = PointSet(xy, d_state, d_noise, np.eye(n) * sigma**2, np.ones(n))
     return slam.insert_landmark(fit_polynomial(pts, 3, shape_fixed=True), merge=False)
 
 
@@ -222,7 +225,8 @@ def test_exchange__meeting_twice_sends_only_what_is_new() -> None:
         slam.step_count += 5  # time passes
     new_wall = np.stack([np.linspace(-1.5, -0.5, 20), np.full(20, -1.0)], 1)
     _add_wall(sender, new_wall, np.zeros(3))
-    second = ex.step(3, slams, view, active)
+    again = ex.config.meeting_interval  # apart long enough for a new meeting
+    second = ex.step(again, slams, view, active)
     assert second.new_rendezvous == ((0, 1),)
     by_sender = {d.sender: d.n_polynomials for d in second.delivered}
     # sender: only the new wall; receiver: nothing new of its own, and what it received
@@ -281,6 +285,211 @@ def test_exchange__other_payloads_count_bytes_without_touching_the_slam(payload:
     assert {d.kind for d in out.delivered} == {payload}
     assert ex.counters(1)["bytes_received"] > 0
     np.testing.assert_array_equal(receiver.mean, before)
+
+
+# -- meetings --------------------------------------------------------------------------------
+def test_meeting__flickering_sight_is_not_a_new_rendezvous() -> None:
+    sender, receiver, p_s, p_r = _two_robot_setup()
+    ex = _exchange()
+    slams, active, view, apart = [sender, receiver], np.ones(2, bool), _mutual(p_s, p_r), [[], []]
+    gap = ex.config.meeting_gap
+    assert gap >= 3  # the default tolerates a camera losing the other robot for two frames
+    ex.step(0, slams, view, active)
+    for k in (1, 2):
+        ex.step(k, slams, apart, active)
+    back = ex.step(3, slams, view, active)
+    assert back.new_rendezvous == () and back.sent == ()
+    assert ex.counters(0)["rendezvous"] == ex.counters(1)["rendezvous"] == 1
+    assert ex.counters(0)["messages_sent"] == 1
+
+
+def test_meeting__needs_both_the_gap_and_the_interval() -> None:
+    cfg = {"meeting_gap": 4, "meeting_interval": 30}
+    sender, receiver, p_s, p_r = _two_robot_setup()
+    ex = _exchange(**cfg)
+    slams, active, view, apart = [sender, receiver], np.ones(2, bool), _mutual(p_s, p_r), [[], []]
+    starts = []
+    for k in range(100):
+        seen = k in (0, 10, 11, 35, 60, 66, 90)  # isolated sightings
+        if ex.step(k, slams, view if seen else apart, active).new_rendezvous:
+            starts.append(k)
+    # 10: only 10 steps after the meeting at 0; 11: continues 10; 35: 35 after 0, 23 steps
+    # unseen; 60: only 25 after 35; 66: 31 after 35, 5 steps unseen (≥ 4); 90: 24 after 66
+    assert starts == [0, 35, 66]
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seen=st.lists(st.booleans(), min_size=60, max_size=60),
+    gap=st.integers(0, 6),
+    interval=st.integers(0, 25),
+)
+def test_meeting__starts_follow_the_stated_rule(seen: list[bool], gap: int, interval: int) -> None:
+    """Oracle: a sighting at k starts a meeting iff it is the pair's first, or the pair was
+    unseen for ≥ max(gap, 1) steps before k and the last meeting began ≥ interval steps ago."""
+    sender, receiver, p_s, p_r = _two_robot_setup()
+    ex = _exchange(meeting_gap=gap, meeting_interval=interval)
+    slams, active, view, apart = [sender, receiver], np.ones(2, bool), _mutual(p_s, p_r), [[], []]
+    got = [
+        bool(ex.step(k, slams, view if v else apart, active).new_rendezvous)
+        for k, v in enumerate(seen)
+    ]
+    expected: list[bool] = []
+    last_seen: int | None = None  # the pair's last step in mutual sight
+    last_start = 0  # the step its last meeting began (set by the first sighting)
+    for k, v in enumerate(seen):
+        start = v and (
+            last_seen is None or (k - last_seen - 1 >= max(gap, 1) and k - last_start >= interval)
+        )
+        expected.append(start)
+        last_seen = k if v else last_seen
+        last_start = k if start else last_start
+    assert got == expected
+    assert ex.counters(0)["rendezvous"] == ex.counters(0)["messages_sent"] == sum(expected)
+
+
+def _version(slam: PolySlam, old: int, wall: np.ndarray, pose_var: float) -> int:
+    """A newer version of landmark ``old``: the robot localised (pose variance ``pose_var``
+    on x and y) and refit the wall, which gets a new id (as PolySlam's refits do)."""
+    slam.remove_landmark(old)
+    slam.cov[:2, :2] = np.eye(2) * pose_var
+    new = _add_wall(slam, wall, np.zeros(3))
+    slam.table.changed_at[slam.table.index_of(new)] = slam.step_count
+    return new
+
+
+def test_exchange__repeated_meetings_send_only_changes_and_do_not_grow_the_map() -> None:
+    sender, receiver, p_s, p_r = _two_robot_setup()
+    ex = _exchange()
+    slams, active, view, apart = [sender, receiver], np.ones(2, bool), _mutual(p_s, p_r), [[], []]
+    every = ex.config.meeting_interval
+    wall_id = sender.landmark_ids[0]
+    counts, by_pair = [], []
+    for n in range(5):
+        k = n * every
+        for slam in slams:
+            slam.step_count = k
+        if n:  # between meetings the sender improves its wall: a new version each time
+            wall_id = _version(sender, wall_id, WALL, 1e-3 / 4**n)
+        out = ex.step(k, slams, view, active)
+        assert out.new_rendezvous == ((0, 1),)
+        assert all(size > 0 for _, _, size in out.sent)  # every message costs bytes
+        by_pair.append({d.sender: d.n_polynomials for d in out.delivered})
+        ex.step(k + 1, slams, apart, active)
+        counts.append(receiver.n_landmarks)
+    # first meeting: each sends its one wall; then the sender sends only its new version and
+    # the receiver nothing (its wall is unchanged, the copy it holds is not echoed back)
+    assert by_pair == [{0: 1, 1: 1}] + [{0: 1, 1: 0}] * 4
+    # the receiver holds its own wall and one copy of the sender's: every newer version
+    # replaces the earlier copy (rule 2) instead of piling up
+    assert counts == [counts[0]] * 5
+    assert ex.superseded[1] == 4
+    assert ex.counters(0)["bytes_sent"] == sum(d.bytes for d in ex.history if d.sender == 0)
+
+
+def _snapshot(receiver: PolySlam) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    return receiver.mean.copy(), receiver.cov.copy(), receiver.landmark_ids
+
+
+def test_exchange__receiving_the_same_landmark_twice_changes_nothing() -> None:
+    """The sender's wall is marked changed without changing (as a refreshed extent would) and
+    sent again at the next meeting: the receiver finds its copy already held (equal variance:
+    rule 1) and its state stays bit-identical — the variance is not reduced twice."""
+    sender, receiver, p_s, p_r = _two_robot_setup()
+    ex = _exchange()
+    slams, active, view, apart = [sender, receiver], np.ones(2, bool), _mutual(p_s, p_r), [[], []]
+    ex.step(0, slams, view, active)
+    ex.step(1, slams, apart, active)
+    once = _snapshot(receiver)
+    k = ex.config.meeting_interval
+    for slam in slams:
+        slam.step_count = k
+    sender.table.changed_at[0] = k  # the same wall, marked changed
+    again = ex.step(k, slams, view, active)
+    assert {d.sender: d.n_polynomials for d in again.delivered} == {0: 1, 1: 0}
+    mean, cov, ids = once
+    assert receiver.landmark_ids == ids
+    np.testing.assert_array_equal(receiver.mean, mean)
+    np.testing.assert_array_equal(receiver.cov, cov)
+
+
+def test_exchange__received_wall_never_replaces_a_better_own_one() -> None:
+    f = np.zeros(3)
+    p_s, p_r = np.array([0.0, 0.5, 0.0]), np.array([1.0, 0.3, np.pi])
+    sender, receiver = _slam(p_s), _slam(p_r)
+    receiver.cov[:3, :3] = np.diag([1e-6, 1e-6, 1e-8])  # a well-localised receiver
+    own = _add_wall(receiver, WALL, f)
+    _add_wall(sender, WALL[5:-5] + np.array([0.0, 0.03]), f)  # the same wall, 3 cm off, less of it
+    k = receiver.table.state_index(own)
+    before = receiver.mean[k], receiver.cov[k, k], receiver.n_landmarks
+    out = _exchange().step(0, [sender, receiver], _mutual(p_s, p_r), np.ones(2, bool))
+    got = next(d for d in out.delivered if d.receiver == 1)
+    assert got.n_polynomials == 1 and got.landmark_ids == ()  # covered: nothing inserted
+    k = receiver.table.state_index(own)
+    assert (receiver.mean[k], receiver.cov[k, k], receiver.n_landmarks) == before
+
+
+def test_exchange__better_received_wall_merges_with_a_worse_independent_one() -> None:
+    f = np.zeros(3)
+    p_s, p_r = np.array([0.0, 0.5, 0.0]), np.array([1.0, 0.3, np.pi])
+    sender, receiver = _slam(p_s), _slam(p_r)
+    for slam in (sender, receiver):
+        slam.cov[:3, :3] = np.diag([1e-6, 1e-6, 1e-8])  # both well localised
+    _add_wall(sender, WALL, f)
+    # the receiver's own fit of the wall, 3 cm off, from very noisy points (σ = 0.3 m)
+    own = _add_wall(receiver, WALL + np.array([0.0, 0.03]), f, sigma=0.3)
+    var_own = normal_variance(receiver.shapes[own], receiver.c0_variance(own))
+    out = _exchange().step(0, [sender, receiver], _mutual(p_s, p_r), np.ones(2, bool))
+    (lid,) = next(d for d in out.delivered if d.receiver == 1).landmark_ids
+    assert receiver.n_landmarks == 1 and own not in receiver.landmark_ids  # one wall
+    assert normal_variance(receiver.shapes[lid], receiver.c0_variance(lid)) < var_own
+    assert _psd(receiver.cov)
+
+
+def _far_wall_error(align: bool) -> float:
+    """Mean distance (m) of the received copy of a wall 3 m from the meeting to the true
+    wall, when the receiver's bearing of the sender is 1.1° off and it holds two other walls
+    of the sender's map (a corner) exactly."""
+    lines = [
+        np.stack([np.linspace(-0.5, 1.5, 40), np.full(40, 1.6)], 1),  # y = 1.6
+        np.stack([np.full(40, 2.0), np.linspace(-1.0, 1.5, 40)], 1),  # x = 2
+    ]
+    far = np.stack([np.linspace(-3.0, -1.0, 40), np.full(40, -2.0)], 1)  # y = −2
+    p_s, p_r = np.array([0.0, 0.5, 0.0]), np.array([1.0, 0.3, np.pi])
+    sender, receiver = _slam(p_s), _slam(p_r)
+    for slam in (sender, receiver):
+        slam.cov[:3, :3] = np.diag([1e-6, 1e-6, 1e-8])  # well localised: own walls are exact
+    for wall in (*lines, far):
+        _add_wall(sender, wall, np.zeros(3))
+    for wall in lines:
+        _add_wall(receiver, wall, np.zeros(3))
+    view = _mutual(p_s, p_r)
+    biased = Det(0, view[1][0].distance, view[1][0].bearing + 0.02)
+    ex = _exchange(align_maps=align)
+    ex.step(0, [sender, receiver], [view[0], [biased]], np.ones(2, bool))
+    (lid,) = set(receiver.landmark_ids) - {0, 1}  # the only wall it did not hold
+    k = receiver.table.state_index(lid)
+    pts = receiver.shapes[lid].with_c0(receiver.mean[k]).sample_arclength(0.05)
+    return float(np.mean(np.abs(pts[:, 1] + 2.0)))
+
+
+def test_exchange__aligning_on_shared_walls_brings_far_received_walls_closer() -> None:
+    # 1.1° of heading error over the ~3 m from the meeting: several cm without alignment
+    assert _far_wall_error(align=True) < _far_wall_error(align=False)
+
+
+def test_exchange__messages_to_a_failed_robot_are_dropped_not_pending() -> None:
+    sender, receiver, p_s, p_r = _two_robot_setup()
+    ex = _exchange(loss_prob=1.0)  # nothing gets through: both messages stay queued
+    slams = [sender, receiver]
+    ex.step(0, slams, _mutual(p_s, p_r), np.ones(2, bool))
+    assert ex.counters(0)["messages_pending"] == ex.counters(1)["messages_pending"] == 1
+    out = ex.step(1, slams, [[], []], np.array([True, False]))
+    assert sorted((e.sender, e.receiver) for e in out.dropped) == [(0, 1), (1, 0)]
+    for i in range(2):
+        c = ex.counters(i)
+        assert (c["messages_pending"], c["messages_dropped"]) == (0, 1)
+        assert c["bytes_sent"] > 0  # the lost attempt still counts
 
 
 # -- the paper episode -------------------------------------------------------------------------

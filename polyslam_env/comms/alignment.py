@@ -1,0 +1,142 @@
+"""Refining a rendezvous transform on the walls both maps hold (received walls → own walls).
+
+The camera fixes the transform T_{l0,j0} between the sender's and the receiver's frames to
+about 1.4° in heading (1° bearing noise on each side) and 2–3 cm in position; a received wall
+3 m from the meeting point is then several centimetres off. Where the received walls overlap
+walls the receiver already holds, those overlaps measure T much better.
+
+:func:`align_transform` is a maximum a posteriori estimate of T: the camera's estimate t0 with
+its covariance Σ_T is the prior; every point of a received chain that lies, once mapped, within
+the extent of a receiver's landmark of the same direction and within a 3σ gate of it gives a
+residual (its normal distance to that landmark), weighted so that each (chain, landmark) pair
+counts as **one** observation of standard deviation ``sigma`` (the points of one wall share
+its errors: they are not independent). Gauss–Newton, correspondences found again at every
+iteration. A result that the camera noise makes unlikely (Mahalanobis distance from t0 above
+the χ²₃ 99 % quantile) is refused: the walls were matched to the wrong ones.
+
+Only the mean is refined: the exchange keeps the camera's covariance for the received
+landmarks, which is then conservative (the alignment makes them correlated with the walls
+they were matched to, a correlation the state could not hold).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from polyslam_env.core.geometry import rotation
+from polyslam_env.slam.fitting import J_ROT
+from polyslam_env.slam.polynomial import Polynomial
+
+#: χ²₃ 99 % quantile: a correction of T further than this (in Σ_T's metric) is refused.
+CHI2_3DOF_99 = 11.345
+GATE_SIGMAS = 3.0  # a point pairs with a wall within 3σ of its predicted normal distance
+MAX_ANGLE_DEG = 30.0  # same direction: tangents within 30° (the merge test's angle)
+
+
+def frame_points(q: np.ndarray, transform: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points ``q`` (N, 2) of the sender's frame in the receiver's, p = R(θ) q + t, and the
+    Jacobian ∂p/∂T (N, 2, 3) w.r.t. T = (t_x, t_y, θ)."""
+    rq = q @ rotation(transform[2]).T  # (N, 2)
+    dp_dt = np.zeros((len(q), 2, 3))
+    dp_dt[:, :, :2] = np.eye(2)
+    dp_dt[:, :, 2] = rq @ J_ROT.T
+    return transform[:2] + rq, dp_dt
+
+
+def align_transform(
+    t0: np.ndarray,
+    cov_t: np.ndarray,
+    chains: Sequence[np.ndarray],
+    walls: Sequence[Polynomial],
+    sigma: float,
+    iterations: int = 5,
+) -> np.ndarray:
+    """MAP refinement (3,) of the transform ``t0`` (3,) with prior covariance ``cov_t``
+    (3, 3), from received ``chains`` (each (N_k, 2), sender frame, points along a curve) and
+    the receiver's ``walls`` (with their current c0); ``sigma`` (m) is the standard deviation
+    of one (chain, wall) pair's offset. Returns ``t0`` when nothing matches, Σ_T is singular,
+    or the correction fails the χ²₃ 99 % test."""
+    t0 = np.asarray(t0, dtype=float)
+    try:
+        info_prior = np.linalg.inv(np.linalg.cholesky(cov_t))  # L⁻¹, Σ⁻¹ = L⁻ᵀ L⁻¹
+    except np.linalg.LinAlgError:
+        return t0
+    info_prior = info_prior.T @ info_prior  # (3, 3)
+    if not walls or not chains:
+        return t0
+    q = np.vstack(chains)  # (N, 2)
+    chain_of = np.concatenate([np.full(len(c), k) for k, c in enumerate(chains)])
+    tangents_q = np.vstack([_tangents(c) for c in chains])  # (N, 2) sender frame
+    t = t0.copy()
+    for _ in range(iterations):
+        p, dp_dt = frame_points(q, t)
+        tangents = tangents_q @ rotation(t[2]).T
+        match = _match(p, dp_dt, tangents, walls, cov_t, sigma)
+        if match is None:
+            return t0
+        residual, grad, wall, keep = match  # (M,), (M, 3), (M,), (N,)
+        pair = chain_of[keep] * len(walls) + wall  # (chain, wall) key
+        _, inverse, counts = np.unique(pair, return_inverse=True, return_counts=True)
+        weight = 1.0 / (sigma * sigma * counts[inverse])  # each pair counts once
+        info = info_prior + (grad * weight[:, None]).T @ grad
+        rhs = -(grad * weight[:, None]).T @ residual - info_prior @ (t - t0)
+        step = np.linalg.solve(info, rhs)
+        t = t + step
+        if np.max(np.abs(step)) < 1e-9:
+            break
+    d = t - t0
+    if float(d @ info_prior @ d) > CHI2_3DOF_99:
+        return t0
+    return t
+
+
+def _tangents(chain: np.ndarray) -> np.ndarray:
+    """(N, 2) unit tangents along a chain of points (N, 2)."""
+    if len(chain) < 2:
+        return np.tile([1.0, 0.0], (len(chain), 1))
+    d = np.gradient(chain, axis=0)
+    return np.asarray(d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12))
+
+
+def _match(
+    p: np.ndarray,
+    dp_dt: np.ndarray,
+    tangents: np.ndarray,
+    walls: Sequence[Polynomial],
+    cov_t: np.ndarray,
+    sigma: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """Per point (N, 2) the wall it pairs with (smallest normalised normal distance within
+    the gate, same direction, inside the extent): for the M points that pair, residuals (M,),
+    their gradients w.r.t. T (M, 3) and wall indices (M,), and which points pair (N,) bool;
+    None if none does."""
+    n_pts = len(p)
+    best = np.full(n_pts, np.inf)  # normalised |r|
+    residual = np.zeros(n_pts)
+    grad = np.zeros((n_pts, 3))
+    wall_of = np.full(n_pts, -1)
+    cos_max = np.cos(np.radians(MAX_ANGLE_DEG))
+    for w, poly in enumerate(walls):
+        xi, eta = poly.from_xy(p)
+        inside = (xi >= poly.lo) & (xi <= poly.hi)
+        if not inside.any():
+            continue
+        slope = poly.slope(xi)
+        norm = np.sqrt(1.0 + slope * slope)
+        if poly.variate == 1:
+            normal = np.stack([-slope, np.ones_like(slope)], axis=1) / norm[:, None]
+        else:
+            normal = np.stack([np.ones_like(slope), -slope], axis=1) / norm[:, None]
+        r = (eta - poly.value(xi)) / norm
+        g = np.einsum("ni,nij->nj", normal, dp_dt)  # (N, 3) ∂r/∂T
+        pred = np.sqrt(np.einsum("ni,ij,nj->n", g, cov_t, g) + sigma * sigma)
+        parallel = np.abs(np.einsum("ni,ni->n", normal, tangents)) <= np.sqrt(1 - cos_max**2)
+        score = np.abs(r) / pred
+        ok = inside & parallel & (score <= GATE_SIGMAS) & (score < best)
+        best[ok], residual[ok], grad[ok], wall_of[ok] = score[ok], r[ok], g[ok], w
+    keep = wall_of >= 0
+    if not keep.any():
+        return None
+    return residual[keep], grad[keep], wall_of[keep], keep

@@ -1,0 +1,76 @@
+"""Refining the rendezvous transform on shared walls: Jacobian, recovery, refusal."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from polyslam_env.comms import alignment
+from polyslam_env.comms.alignment import CHI2_3DOF_99, align_transform, frame_points
+from polyslam_env.core.geometry import inverse, transform_points
+from polyslam_env.slam.polynomial import Polynomial
+
+# Walls in the receiver's frame: a corner and a curved wall, so that all of T is observable.
+WALLS = [
+    Polynomial(1, [1.0, 0.0, 0.0, 0.0], -1.0, 2.0),  # y = 1
+    Polynomial(2, [2.0, 0.0, 0.0, 0.0], -1.0, 1.0),  # x = 2
+    Polynomial(1, [-1.0, 0.1, 0.2, 0.0], -1.0, 1.5),  # y = −1 + 0.1x + 0.2x²
+]
+T_TRUE = np.array([0.3, -0.2, 0.4])  # sender's frame in the receiver's
+COV_T = np.diag([0.03**2, 0.03**2, 0.025**2])  # camera: ~3 cm, ~1.4°
+
+
+def _chains(walls: list[Polynomial]) -> list[np.ndarray]:
+    """The walls as the sender holds them: points every ~5 cm in the sender's frame."""
+    return [transform_points(w.sample_arclength(0.05), inverse(T_TRUE)) for w in walls]
+
+
+def test_frame_points__jacobian_matches_finite_differences() -> None:
+    q = np.random.default_rng(0).normal(size=(7, 2))
+    _, jac = frame_points(q, T_TRUE)
+    eps = 1e-6
+    for col in range(3):
+        e = np.zeros(3)
+        e[col] = eps
+        num = (frame_points(q, T_TRUE + e)[0] - frame_points(q, T_TRUE - e)[0]) / (2 * eps)
+        np.testing.assert_allclose(num, jac[:, :, col], atol=1e-8)  # central FD error ~eps²
+
+
+def test_align_transform__recovers_the_transform_from_noise_free_walls() -> None:
+    # camera error of about 1σ on each component; Mahalanobis 2.1 < χ²₃ 99 %
+    t0 = T_TRUE + np.array([0.03, -0.02, 0.02])
+    # a pair's σ of 0.1 mm makes the prior's pull ~ (σ/σ_T)² ≈ 1e-5 of the 3 cm offset
+    t = align_transform(t0, COV_T, _chains(WALLS), WALLS, sigma=1e-4)
+    np.testing.assert_allclose(t, T_TRUE, atol=1e-5)
+
+
+def test_align_transform__with_realistic_weight_moves_towards_the_truth() -> None:
+    t0 = T_TRUE + np.array([0.03, -0.02, 0.02])
+    t = align_transform(t0, COV_T, _chains(WALLS), WALLS, sigma=0.02)
+    # MAP of a linear-Gaussian problem shrinks the error, never grows it (in Σ_T's metric)
+    info = np.linalg.inv(COV_T)
+    before, after = t0 - T_TRUE, t - T_TRUE
+    assert after @ info @ after < before @ info @ before
+
+
+def test_align_transform__refuses_a_correction_the_camera_makes_unlikely(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # 2.5σ on every component: Mahalanobis 18.75 > χ²₃ 99 % = 11.34; the walls still pair
+    offset = 2.5 * np.sqrt(np.diag(COV_T)) * np.array([1.0, -1.0, 1.0])
+    assert offset @ np.linalg.inv(COV_T) @ offset > CHI2_3DOF_99
+    t0 = T_TRUE + offset
+    t = align_transform(t0, COV_T, _chains(WALLS), WALLS, sigma=1e-4)
+    np.testing.assert_array_equal(t, t0)
+    monkeypatch.setattr(alignment, "CHI2_3DOF_99", np.inf)  # without the test: it converges
+    t = align_transform(t0, COV_T, _chains(WALLS), WALLS, sigma=1e-4)
+    np.testing.assert_allclose(t, T_TRUE, atol=1e-5)
+
+
+def test_align_transform__without_shared_walls_keeps_the_camera_transform() -> None:
+    t0 = T_TRUE + np.array([0.03, -0.02, 0.02])
+    far = [Polynomial(1, [10.0, 0.0, 0.0, 0.0], 9.0, 12.0)]  # nothing near the chains
+    np.testing.assert_array_equal(align_transform(t0, COV_T, _chains(WALLS), far, 0.02), t0)
+    np.testing.assert_array_equal(align_transform(t0, COV_T, [], WALLS, 0.02), t0)
+    singular = np.zeros((3, 3))  # an exact camera: nothing to refine
+    np.testing.assert_array_equal(align_transform(t0, singular, _chains(WALLS), WALLS, 0.02), t0)
