@@ -206,6 +206,8 @@ def _two_robot_setup() -> tuple[PolySlam, PolySlam, np.ndarray, np.ndarray]:
     f = np.zeros(3)
     p_s, p_r = np.array([0.0, 0.5, 0.0]), np.array([1.0, 0.3, np.pi])
     sender, receiver = _slam(p_s), _slam(p_r)
+    for slam in (sender, receiver):  # some pose uncertainty, as after a while of driving
+        slam.cov[:2, :2] = np.eye(2) * 0.05**2
     _add_wall(sender, WALL, f)
     _add_wall(receiver, np.stack([np.full(20, 2.0), np.linspace(-1.0, 1.0, 20)], 1), f)
     return sender, receiver, p_s, p_r
