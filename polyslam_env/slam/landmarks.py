@@ -26,6 +26,15 @@ from polyslam_env.slam.polynomial import Polynomial, taylor_shift
 if TYPE_CHECKING:
     from polyslam_env.slam.fitting import StoredPoint
 
+#: m, how far a landmark's curve may reach past the beam hits that support it: 2.5 × the
+#: 2 cm range noise (a hit's own position along the wall is uncertain by about that). The
+#: extents are the hull of the supporting hits by construction — a fit's extent is its
+#: points' ξ range (cluster hits; a refit's bad hits and points sampled on the old extent; a
+#: merge's points on both old extents), ``PolySlam._extend_extents`` only reaches a hit, and a
+#: join bridges at most ``merging.JOIN_GAP`` = 2 × this margin — so no curve point lies
+#: farther than this margin from its evidence along ξ (tested on seeded episodes).
+EXTENT_MARGIN = 0.05
+
 
 @dataclass(frozen=True, eq=False)
 class PackedPolynomials:
@@ -158,7 +167,8 @@ class LandmarkTable:
     ``variate``, ``lo``/``hi``, ``eta_range`` (bounds on B over the extent, for the boxes),
     ``pivot`` (ξ of the centroid the landmark was fitted around), ``xi_var`` (the pose
     variance along ξ when it was made), ``model_var`` (its fit variance beyond the range
-    noise) and ``fit_half`` (half the extent it was fitted over; see PolySlam).
+    noise), ``side`` (the face its beams saw, see ``merging``) and ``fit_half`` (half the
+    extent it was fitted over; see PolySlam).
 
     Arrays are replaced, never written in place, so a :class:`PackedPolynomials` handed out
     earlier stays valid; ``ids`` is changed in place (readers may hold it).
@@ -178,6 +188,7 @@ class LandmarkTable:
         self.xi_var = np.zeros(0)  # (n,)
         self.model_var = np.zeros(0)  # (n,)
         self.fit_half = np.zeros(0)  # (n,) half the extent it was fitted over
+        self.side = np.zeros(0, dtype=int)  # (n,) face seen: +1 from +η, −1 from −η, 0 unknown
         self.shapes = ShapesView(self)
         self.version = 0  # bumped by every change, for caches built on the table
         self._next_id = 0
@@ -216,6 +227,7 @@ class LandmarkTable:
         model_var: float,
         fit_half: float,
         step: int = 0,
+        side: int = 0,
     ) -> int:
         """Add a landmark at the end (its c0 was appended to the state); returns its new id."""
         landmark_id = self._next_id
@@ -240,6 +252,7 @@ class LandmarkTable:
         self.xi_var = np.append(self.xi_var, xi_var)
         self.model_var = np.append(self.model_var, model_var)
         self.fit_half = np.append(self.fit_half, fit_half)
+        self.side = np.append(self.side, int(side))
         self._changed(ids=True)
         return landmark_id
 
@@ -250,7 +263,7 @@ class LandmarkTable:
         del self.changed_at[index]
         del self.qbad[landmark_id]
         names = ("variate", "shape", "lo", "hi", "eta_range", "pivot", "xi_var", "model_var")
-        for name in (*names, "fit_half"):
+        for name in (*names, "fit_half", "side"):
             setattr(self, name, np.delete(getattr(self, name), index, axis=0))
         self._changed(ids=True)
         return landmark_id

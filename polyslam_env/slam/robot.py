@@ -24,7 +24,7 @@ from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_point
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit, PointSet, StoredPoint, fit_polynomial, store_beams
 from polyslam_env.slam.landmarks import LandmarkRow, LandmarkTable, ShapesView, boxes_near
-from polyslam_env.slam.merging import find_merge, merge_points
+from polyslam_env.slam.merging import JOIN_GAP, choose_merge, face_normal, merge_points
 from polyslam_env.slam.polynomial import Polynomial, value_and_slope
 
 #: Number of recent normalised innovations the divergence test looks at.
@@ -280,8 +280,9 @@ class PolySlam:
         return [lid for lid, at in zip(table.ids, table.changed_at, strict=True) if at > step]
 
     # -- landmark generation (paper eq. 4–5) ------------------------------------------------------
-    def _augment(self, fit: Fit) -> int:
-        """Append a fitted landmark to the state; returns its new id."""
+    def _augment(self, fit: Fit, side: int = 0) -> int:
+        """Append a fitted landmark to the state; returns its new id. ``side``: the face its
+        beams saw (+1 from +η, −1 from −η, 0 unknown; see :mod:`~polyslam_env.slam.merging`)."""
         self.mean, self.cov = ekf.augment(self.mean, self.cov, fit.c0, fit.Gx, fit.Gy, fit.V)
         poly = fit.poly
         return self.table.append(
@@ -291,6 +292,7 @@ class PolySlam:
             model_var=max(fit.rms**2 - self.config.range_sigma**2, 0.0),
             fit_half=max(0.5 * (poly.hi - poly.lo), 0.05),
             step=self.step_count,
+            side=side,
         )
 
     def _remove(self, landmark_id: int) -> None:
@@ -298,9 +300,9 @@ class PolySlam:
         self.mean, self.cov = ekf.remove(self.mean, self.cov, 3 + idx)
         self.table.remove(idx)
 
-    def _replace(self, old_ids: Sequence[int], fit: Fit) -> int:
+    def _replace(self, old_ids: Sequence[int], fit: Fit, side: int = 0) -> int:
         """Add the fit (its G_x may touch the old c0s) and then drop the old landmarks."""
-        new_id = self._augment(fit)
+        new_id = self._augment(fit, side)
         for lid in old_ids:
             self._remove(lid)
         return new_id
@@ -323,7 +325,8 @@ class PolySlam:
         fit = self._fit(pts)
         if fit is None or fit.rms > self._max_fit_rms(rho):
             return 0  # the bad points do not make one wall with p*: keep p* as it is
-        new_id = self._replace([landmark_id], fit)
+        side = self._side_in(int(self.table.side[state_index - 3]), poly, fit.poly)
+        new_id = self._replace([landmark_id], fit, side)
         self._merge_into_map(new_id)
         return 1
 
@@ -342,7 +345,7 @@ class PolySlam:
         self.book.restore_cluster(result.leftover)
         if result.fit is None:
             return None
-        return self._augment(result.fit)
+        return self._augment(result.fit, _observed_side(result.used, result.fit.poly.variate))
 
     def _max_fit_rms(self, rho: float) -> float:
         """Largest RMS residual a new or refit polynomial may have: min(ρ_k, 2.5 σ_range).
@@ -355,14 +358,28 @@ class PolySlam:
         return min(rho, 2.5 * self.config.range_sigma)
 
     def _merge_into_map(self, landmark_id: int) -> int:
-        """Merge a new or changed landmark with an overlapping one (paper §3.3); 1 if merged.
+        """Merge a new or changed landmark with overlapping or adjoining ones (paper §3.3 and
+        the joins of :mod:`~polyslam_env.slam.merging`); returns the number of merges.
 
         Only landmarks whose bounding box lies within γ_M of this one's are handed to
-        :func:`find_merge`: every approximation error of a farther one is at least the box
-        distance, so its γ could not be below γ_M (same choice, in the same order).
+        :func:`choose_merge`: every approximation error of a farther one is at least the box
+        distance, so its γ could not be below γ_M (same choice, in the same order), and a
+        join needs end points within ``JOIN_GAP`` < γ_M. A merged landmark is checked again
+        (a wall seen in pieces becomes one landmark), at most once per landmark in the map.
         """
+        merges = 0
+        for _ in range(len(self.table)):
+            merged_id = self._merge_once(landmark_id)
+            if merged_id is None:
+                break
+            landmark_id = merged_id
+            merges += 1
+        return merges
+
+    def _merge_once(self, landmark_id: int) -> int | None:
+        """One merge of ``landmark_id`` with its best partner; the merged id, or None."""
         if landmark_id not in self.table:
-            return 0
+            return None
         idx = self.table.index_of(landmark_id)
         c0s = self.mean[3:]
         cfg = self.config
@@ -370,23 +387,28 @@ class PolySlam:
         near = self.table.near(self._box(idx), c0s, reach)
         near = near[near != idx]
         poly = self._polynomial(idx)
-        j_near = find_merge(
+        sides = self.table.side
+        choice = choose_merge(
             poly,
             float(c0s[idx]),
             [self._polynomial(int(j)) for j in near],
             c0s[near],
             cfg.gamma_max,
             cfg.merge_min_overlap,
+            new_side=int(sides[idx]),
+            sides=sides[near].tolist(),
+            join_gap=JOIN_GAP,
         )
-        if j_near is None:
-            return 0
-        j = int(near[j_near])
+        if choice is None:
+            return None
+        j = int(near[choice.partner])
         other_id = self.table.ids[j]
+        other = self._polynomial(j)
         pts = merge_points(
             poly,
             3 + idx,
             float(self.cov[3 + idx, 3 + idx]),
-            self._polynomial(j),
+            other,
             3 + j,
             float(self.cov[3 + j, 3 + j]),
             cfg.eps_m,
@@ -394,9 +416,22 @@ class PolySlam:
         )
         fit = self._fit(pts)
         if fit is None:
+            return None
+        if choice.joined and fit.rms > 2.5 * cfg.range_sigma:
+            return None  # one polynomial does not explain both pieces: not one wall
+        side = _combine_sides(
+            self._side_in(int(sides[idx]), poly, fit.poly),
+            self._side_in(int(sides[j]), other, fit.poly),
+        )
+        return self._replace([landmark_id, other_id], fit, side)
+
+    @staticmethod
+    def _side_in(side: int, old: Polynomial, new: Polynomial) -> int:
+        """The face ``side`` of ``old`` expressed on ``new`` (their variates may differ)."""
+        if side == 0:
             return 0
-        self._replace([landmark_id, other_id], fit)
-        return 1
+        normal = face_normal(old, 0.5 * (old.lo + old.hi), side)
+        return 1 if float(normal @ face_normal(new, 0.5 * (new.lo + new.hi), 1)) >= 0 else -1
 
     def _polynomial(self, index: int) -> Polynomial:
         """Landmark ``index`` (state 3 + index) with its current c0."""
@@ -593,6 +628,21 @@ def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> 
             rows[:, :2], rows[:, 2:4], rows[:, 4:], points, strict=True
         )
     ]
+
+
+def _observed_side(points: Sequence[StoredPoint], variate: int) -> int:
+    """The face the beams of ``points`` saw on a curve of ``variate``: beams travelling
+    towards +η came from the −η side (−1), and vice versa; 0 if they cancel."""
+    axis = 1 if variate == 1 else 0
+    total = sum(float(p.direction[axis]) for p in points)
+    return -1 if total > 0 else (1 if total < 0 else 0)
+
+
+def _combine_sides(a: int, b: int) -> int:
+    """Face of a merge: the common one, the known one, or 0 (both faces: a thin wall)."""
+    if a == b or b == 0:
+        return a
+    return b if a == 0 else 0
 
 
 def _median(values: deque[float]) -> float:
