@@ -23,7 +23,15 @@ from polyslam_env.slam import ekf, measurement
 from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit, PointSet, StoredPoint, fit_polynomial, store_beams
-from polyslam_env.slam.landmarks import LandmarkRow, LandmarkTable, ShapesView, boxes_near
+from polyslam_env.slam.landmarks import (
+    LandmarkRow,
+    LandmarkTable,
+    ShapesView,
+    boxes_near,
+    clip_to_evidence,
+    evidence_on,
+    hull,
+)
 from polyslam_env.slam.merging import JOIN_GAP, choose_merge, face_normal, merge_points
 from polyslam_env.slam.polynomial import Polynomial, value_and_slope
 
@@ -242,7 +250,7 @@ class PolySlam:
             c0 = self.mean[3 + idx]
             if abs(eta - c0 - float(poly.with_c0(0.0).value(xi))) > limit:
                 continue
-            table.set_extent(idx, min(poly.lo, xi), max(poly.hi, xi))
+            table.extend_to_hit(idx, xi)
 
     def _is_diverging(self) -> bool:
         """The paper's test (P beyond K·P0) or most recent innovations inconsistent.
@@ -280,11 +288,15 @@ class PolySlam:
         return [lid for lid, at in zip(table.ids, table.changed_at, strict=True) if at > step]
 
     # -- landmark generation (paper eq. 4–5) ------------------------------------------------------
-    def _augment(self, fit: Fit, side: int = 0) -> int:
+    def _augment(self, fit: Fit, side: int = 0, evidence: tuple[float, float] | None = None) -> int:
         """Append a fitted landmark to the state; returns its new id. ``side``: the face its
-        beams saw (+1 from +η, −1 from −η, 0 unknown; see :mod:`~polyslam_env.slam.merging`)."""
+        beams saw (+1 from +η, −1 from −η, 0 unknown; see :mod:`~polyslam_env.slam.merging`);
+        ``evidence``: the ξ-interval of its supporting hits (default: the fit's extent, i.e.
+        its points' — a received landmark keeps the sender's evidence so); the extent is cut
+        to it ± ``landmarks.EXTENT_MARGIN``."""
         self.mean, self.cov = ekf.augment(self.mean, self.cov, fit.c0, fit.Gx, fit.Gy, fit.V)
-        poly = fit.poly
+        evidence = (fit.poly.lo, fit.poly.hi) if evidence is None else evidence
+        poly = clip_to_evidence(fit.poly, evidence)
         return self.table.append(
             poly,
             pivot=0.5 * (poly.lo + poly.hi),  # ξ of the centroid of its fit points
@@ -293,6 +305,7 @@ class PolySlam:
             fit_half=max(0.5 * (poly.hi - poly.lo), 0.05),
             step=self.step_count,
             side=side,
+            evidence=evidence,
         )
 
     def _remove(self, landmark_id: int) -> None:
@@ -300,9 +313,15 @@ class PolySlam:
         self.mean, self.cov = ekf.remove(self.mean, self.cov, 3 + idx)
         self.table.remove(idx)
 
-    def _replace(self, old_ids: Sequence[int], fit: Fit, side: int = 0) -> int:
+    def _replace(
+        self,
+        old_ids: Sequence[int],
+        fit: Fit,
+        side: int = 0,
+        evidence: tuple[float, float] | None = None,
+    ) -> int:
         """Add the fit (its G_x may touch the old c0s) and then drop the old landmarks."""
-        new_id = self._augment(fit, side)
+        new_id = self._augment(fit, side, evidence)
         for lid in old_ids:
             self._remove(lid)
         return new_id
@@ -326,7 +345,13 @@ class PolySlam:
         if fit is None or fit.rms > self._max_fit_rms(rho):
             return 0  # the bad points do not make one wall with p*: keep p* as it is
         side = self._side_in(int(self.table.side[state_index - 3]), poly, fit.poly)
-        new_id = self._replace([landmark_id], fit, side)
+        xy = np.array([p.xy for p in bad], dtype=float)  # (k, 2) the bad hits
+        xi_bad = xy[:, 0] if fit.poly.variate == 1 else xy[:, 1]
+        evidence = hull(
+            evidence_on(self._evidence(state_index - 3), poly, fit.poly),
+            (float(xi_bad.min()), float(xi_bad.max())),
+        )
+        new_id = self._replace([landmark_id], fit, side, evidence)
         self._merge_into_map(new_id)
         return 1
 
@@ -423,7 +448,16 @@ class PolySlam:
             self._side_in(int(sides[idx]), poly, fit.poly),
             self._side_in(int(sides[j]), other, fit.poly),
         )
-        return self._replace([landmark_id, other_id], fit, side)
+        evidence = hull(
+            evidence_on(self._evidence(idx), poly, fit.poly),
+            evidence_on(self._evidence(j), other, fit.poly),
+        )
+        return self._replace([landmark_id, other_id], fit, side, evidence)
+
+    def _evidence(self, index: int) -> tuple[float, float]:
+        """ξ-interval (on its own axis) of the hits supporting landmark ``index``."""
+        lo, hi = self.table.evidence[index].tolist()
+        return lo, hi
 
     @staticmethod
     def _side_in(side: int, old: Polynomial, new: Polynomial) -> int:

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.fitting import Fit
 from polyslam_env.slam.landmarks import EXTENT_MARGIN
 from polyslam_env.slam.merging import JOIN_GAP
+from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 
 BEAMS_DEG = (90.0, 45.0, 0.0, -45.0, -90.0)
@@ -140,3 +142,37 @@ def test_extents__reach_no_further_than_the_supporting_hits_plus_margin() -> Non
             xy = p.equally_spaced(100)
             nearest = np.min(np.linalg.norm(xy[:, None, :] - all_hits[None], axis=2), axis=1)
             assert nearest.max() <= tol, (seed, p.lo, p.hi, nearest.max(), tol)
+
+
+def test_evidence__extents_stay_within_the_evidence_of_their_hits_at_every_step() -> None:
+    """The table's own invariant on a seeded run (walls, a doorway, a corner, back and forth):
+    after every step each landmark's extent lies within its evidence interval ± EXTENT_MARGIN
+    (that the evidence is where true hits are is the test above)."""
+    walls = np.array(
+        [[[-1.0, 0.8], [2.0, 0.8]], [[2.6, 0.8], [5.0, 0.8]], [[5.0, 0.8], [5.0, -0.9]]]
+    )
+    cfg = SlamConfig()
+    rng = np.random.default_rng(11)
+    angles = np.radians(BEAMS_DEG)
+    slam = PolySlam(cfg, angles, MAX_RANGE)
+    pose = np.zeros(3)
+    for dist, turn in straight(4.0) + turn_around() + straight(3.0):
+        pose = pose + np.array([dist * math.cos(pose[2]), dist * math.sin(pose[2]), turn])
+        ranges = cast(pose, walls, angles) + rng.normal(0.0, RANGE_SIGMA, len(angles))
+        slam.step(np.array([dist, 0.0, turn]), ranges)
+        table = slam.table
+        for i, poly in enumerate(table.polys):
+            ev_lo, ev_hi = table.evidence[i]
+            assert ev_lo - EXTENT_MARGIN - 1e-12 <= poly.lo <= poly.hi
+            assert poly.hi <= ev_hi + EXTENT_MARGIN + 1e-12
+    assert slam.n_landmarks >= 3
+
+
+def test_insert_landmark__keeps_the_senders_extent_as_its_evidence() -> None:
+    slam = PolySlam(SlamConfig(), np.radians(BEAMS_DEG), MAX_RANGE)
+    poly = Polynomial(1, np.array([0.8, 0.0, 0.0, 0.0]), 1.0, 2.5)
+    fit = Fit(poly, 0.8, np.zeros((1, 3)), np.ones((1, 1)) * 1.0, np.eye(1) * 1e-4, 0.01, 1)
+    lid = slam.insert_landmark(fit)
+    i = slam.table.index_of(lid)
+    assert tuple(slam.table.evidence[i]) == (1.0, 2.5)
+    assert (slam.table.polys[i].lo, slam.table.polys[i].hi) == (1.0, 2.5)
