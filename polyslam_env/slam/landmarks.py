@@ -26,13 +26,13 @@ from polyslam_env.slam.polynomial import Polynomial, taylor_shift
 if TYPE_CHECKING:
     from polyslam_env.slam.fitting import StoredPoint
 
-#: m, how far a landmark's curve may reach past the beam hits that support it: 2.5 × the
-#: 2 cm range noise (a hit's own position along the wall is uncertain by about that). The
-#: extents are the hull of the supporting hits by construction — a fit's extent is its
-#: points' ξ range (cluster hits; a refit's bad hits and points sampled on the old extent; a
-#: merge's points on both old extents), ``PolySlam._extend_extents`` only reaches a hit, and a
-#: join bridges at most ``merging.JOIN_GAP`` = 2 × this margin — so no curve point lies
-#: farther than this margin from its evidence along ξ (tested on seeded episodes).
+#: m, how far a landmark's curve may reach past the outermost beam hits that support it: 2.5 ×
+#: the 2 cm range noise (a hit's own position along the wall is uncertain by about that).
+#: Each landmark keeps the ξ-interval of its supporting hits (``LandmarkTable.evidence``: a
+#: cluster's hits; a hit an extension reached; a refit's bad hits with the old evidence; both
+#: evidences of a merge or join; a received landmark's extent, the sender's evidence) and its
+#: extent is cut to that interval ± this margin. Inside, a join may bridge a gap of up to
+#: ``association.GAP_SPLIT`` (narrower gaps are sampling, wider ones doorways).
 EXTENT_MARGIN = 0.05
 
 

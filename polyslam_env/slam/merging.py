@@ -42,17 +42,18 @@ from typing import NamedTuple
 
 import numpy as np
 
-from polyslam_env.slam.association import nearest_by_error
+from polyslam_env.slam.association import GAP_SPLIT, nearest_by_error
 from polyslam_env.slam.fitting import PointSet, concat, polynomial_points
 from polyslam_env.slam.landmarks import pack
 from polyslam_env.slam.polynomial import Polynomial
 
 _SAMPLES = 64  # samples of p2 used to project it on p's axis
 #: m, largest gap between the nearer end points of two pieces that may be joined into one
-#: landmark: twice :data:`~polyslam_env.slam.landmarks.EXTENT_MARGIN`, so that every point of
-#: the joined curve stays within that margin of a supporting hit along the wall; far below
-#: the smallest doorway (the robot's 0.13 m diameter), which must stay a gap.
-JOIN_GAP = 0.1
+#: landmark: the gap below which points along a wall are sampling, not a doorway — the same
+#: threshold a cluster fit is cut at (``association.GAP_SPLIT``), so a join never bridges
+#: what a fit would have split. Pieces of one wall re-observed after a few cm of drift start
+#: a little past the old end (the points between went to a cluster), ~0.15 m in the tests.
+JOIN_GAP = GAP_SPLIT
 #: degrees: tangents of two pieces joined end to end must agree within this (the
 #: ``duplicates`` metric's notion of parallel, SPEC §5).
 JOIN_ANGLE_DEG = 10.0

@@ -40,6 +40,7 @@ NIS_WINDOW = 50
 #: Slack (m) added to box distances when selecting the landmarks a beam can reach: covers
 #: the root polishing and rounding of the hit point, which the exact test then decides.
 REACH_MARGIN = 1e-3
+JOIN_RMS = 1.0
 
 
 @dataclass(frozen=True)
@@ -389,7 +390,7 @@ class PolySlam:
         Only landmarks whose bounding box lies within γ_M of this one's are handed to
         :func:`choose_merge`: every approximation error of a farther one is at least the box
         distance, so its γ could not be below γ_M (same choice, in the same order), and a
-        join needs end points within ``JOIN_GAP`` < γ_M. A merged landmark is checked again
+        join needs end points within ``JOIN_GAP`` ≤ γ_M. A merged landmark is checked again
         (a wall seen in pieces becomes one landmark), at most once per landmark in the map.
         """
         merges = 0
@@ -442,7 +443,7 @@ class PolySlam:
         fit = self._fit(pts)
         if fit is None:
             return None
-        if choice.joined and fit.rms > 2.5 * cfg.range_sigma:
+        if choice.joined and fit.rms > JOIN_RMS * cfg.range_sigma:
             return None  # one polynomial does not explain both pieces: not one wall
         side = _combine_sides(
             self._side_in(int(sides[idx]), poly, fit.poly),

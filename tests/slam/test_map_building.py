@@ -42,18 +42,19 @@ def cast(pose: np.ndarray, walls: np.ndarray, angles: np.ndarray) -> np.ndarray:
 
 def drive(
     walls: np.ndarray, moves: list[tuple[float, float]], seed: int
-) -> tuple[PolySlam, list[np.ndarray], np.ndarray]:
+) -> tuple[PolySlam, list[np.ndarray], np.ndarray, np.ndarray]:
     """Run a PolySlam along unicycle ``moves`` (v·T, Δθ) from the origin among ``walls``.
 
     Odometry and ranges get the SLAM config's noise (seeded); the robot's frame is the world
-    frame. Returns the SLAM, the true hit points of each step and the true poses (K+1, 3).
+    frame. Returns the SLAM, the true hit points of each step, the true poses (K+1, 3) and
+    the estimated ones (K+1, 3).
     """
     rng = np.random.default_rng(seed)
     cfg = SlamConfig()
     angles = np.radians(BEAMS_DEG)
     slam = PolySlam(cfg, angles, MAX_RANGE)
     pose = np.zeros(3)
-    poses, hits = [pose.copy()], []
+    poses, hits, estimates = [pose.copy()], [], [slam.pose]
     odo_sigma = np.array([cfg.odom_sigma_xy, cfg.odom_sigma_xy, math.radians(0.01)])
     for dist, turn in moves:
         pose = pose + np.array([dist * math.cos(pose[2]), dist * math.sin(pose[2]), turn])
@@ -65,7 +66,8 @@ def drive(
         noisy = ranges + rng.normal(0.0, RANGE_SIGMA, len(ranges))
         odometry = np.array([dist, 0.0, turn]) + rng.normal(0.0, odo_sigma)
         slam.step(odometry, noisy)
-    return slam, hits, np.array(poses)
+        estimates.append(slam.pose)
+    return slam, hits, np.array(poses), np.array(estimates)
 
 
 def straight(length: float, step: float = 0.08) -> list[tuple[float, float]]:
@@ -76,30 +78,39 @@ def turn_around(steps: int = 12) -> list[tuple[float, float]]:
     return [(0.0, math.pi / steps)] * steps
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known limitation (issue 14, open): over repeated passes the pose estimate drifts by"
-    " several cm (shape slopes fitted on 0.35 m clusters bias the heading), a re-observed"
-    " stretch lands > THIN_WALL off the old piece or > JOIN_GAP past its end and becomes a"
-    " second landmark; 1 landmark in 4 of 6 seeds after two passes, 3 of 6 after three",
-)
+ONE_WALL = np.array([[[-1.0, 0.8], [6.0, 0.8]]])  # the only wall: y = 0.8, x ∈ [−1, 6]
+
+
 def test_reobserved_wall__creates_no_second_landmark() -> None:
-    """Drive past a 6 m wall (y = 0.8), turn, drive back past it, turn, pass it again: the
-    world has one wall, so the map must hold exactly one landmark after every pass."""
-    walls = np.array([[[-1.0, 0.8], [6.0, 0.8]]])
+    """Drive 4 m past a 6 m wall, turn around, drive back past it (10 seeds): the world has
+    one wall, so the map holds exactly one landmark after each pass. (Before issue 14's joins,
+    every one of these runs held 4 landmarks after the first pass and 4–6 after the second.)
+    """
     one = straight(4.0)
     two = one + turn_around() + straight(4.0)
-    three = two + turn_around() + straight(4.0)
-    for seed in range(6):
-        counts = [drive(walls, moves, seed)[0].n_landmarks for moves in (one, two, three)]
-        assert counts == [1, 1, 1], (seed, counts)
+    for seed in range(10):
+        counts = [drive(ONE_WALL, moves, seed)[0].n_landmarks for moves in (one, two)]
+        assert counts == [1, 1], (seed, counts)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known limitation (issue 14, open): by the third pass the pose estimate is off its"
+    " own map by 5-11 cm in some runs (heading error up to 2.6 deg), the re-observed stretch"
+    " lies more than THIN_WALL from the old piece and becomes a second landmark (3 of 10 seeds;"
+    " 5-7 landmarks in every seed before issue 14)",
+)
+def test_reobserved_wall__third_pass_creates_no_second_landmark() -> None:
+    three = straight(4.0) + turn_around() + straight(4.0) + turn_around() + straight(4.0)
+    counts = [drive(ONE_WALL, three, seed)[0].n_landmarks for seed in range(10)]
+    assert counts == [1] * 10, counts
 
 
 def test_doorway__wall_with_a_gap_is_two_landmarks_not_bridged() -> None:
     """A wall with a 0.6 m doorway (x ∈ [2, 2.6]): no polynomial spans the doorway."""
     walls = np.array([[[-1.0, 0.8], [2.0, 0.8]], [[2.6, 0.8], [6.0, 0.8]]])
     for seed in range(3):
-        slam, _, _ = drive(walls, straight(4.5), seed)
+        slam, *_ = drive(walls, straight(4.5), seed)
         for p in slam.polynomials():
             xy = p.equally_spaced(50)
             inside = (xy[:, 0] > 2.0 + EXTENT_MARGIN) & (xy[:, 0] < 2.6 - EXTENT_MARGIN)
@@ -111,7 +122,7 @@ def test_corner__is_not_one_polynomial_bending_around_it() -> None:
     (within 3σ of the range noise plus the odometry drift of the short run, < 1 cm)."""
     walls = np.array([[[-1.0, 0.8], [3.0, 0.8]], [[3.0, 0.8], [3.0, -2.0]]])
     for seed in range(3):
-        slam, _, _ = drive(walls, straight(2.6), seed)
+        slam, *_ = drive(walls, straight(2.6), seed)
         for p in slam.polynomials():
             xy = p.equally_spaced(50)
             d_a = np.abs(xy[:, 1] - 0.8)
@@ -120,9 +131,10 @@ def test_corner__is_not_one_polynomial_bending_around_it() -> None:
 
 
 def test_extents__reach_no_further_than_the_supporting_hits_plus_margin() -> None:
-    """Every map point lies within EXTENT_MARGIN (+ the run's largest true position error,
-    by which the whole map can be displaced, + 3σ range noise across the wall) of a true hit;
-    a join bridges at most JOIN_GAP = 2 × EXTENT_MARGIN, its middle within the margin."""
+    """Each polynomial's end points lie within EXTENT_MARGIN of a true hit, and its inside
+    within JOIN_GAP / 2 (a join bridges at most JOIN_GAP), plus what the estimate adds: the
+    map is placed with the estimated pose, off by at most max|Δp| + MAX_RANGE · max|Δθ| over
+    the run, and 3σ of range noise across the wall."""
     walls = np.array(
         [
             [[-1.0, 0.8], [2.0, 0.8]],
@@ -131,17 +143,18 @@ def test_extents__reach_no_further_than_the_supporting_hits_plus_margin() -> Non
             [[6.0, 0.8], [6.0, -0.9]],
         ]
     )
-    assert JOIN_GAP <= 2 * EXTENT_MARGIN
     for seed in range(3):
         moves = straight(4.5) + turn_around() + straight(4.0)
-        slam, hits, poses = drive(walls, moves, seed)
+        slam, hits, poses, estimates = drive(walls, moves, seed)
         all_hits = np.vstack(hits)
-        pose_err = float(np.max(np.linalg.norm(slam.pose[:2] - poses[-1, :2])))
-        tol = EXTENT_MARGIN + pose_err + 3 * RANGE_SIGMA
+        d_theta = np.abs(np.angle(np.exp(1j * (estimates[:, 2] - poses[:, 2]))))
+        displaced = np.linalg.norm(estimates[:, :2] - poses[:, :2], axis=1).max()
+        slack = displaced + MAX_RANGE * d_theta.max() + 3 * RANGE_SIGMA
         for p in slam.polynomials():
             xy = p.equally_spaced(100)
             nearest = np.min(np.linalg.norm(xy[:, None, :] - all_hits[None], axis=2), axis=1)
-            assert nearest.max() <= tol, (seed, p.lo, p.hi, nearest.max(), tol)
+            assert max(nearest[0], nearest[-1]) <= EXTENT_MARGIN + slack, (seed, p.lo, p.hi)
+            assert nearest.max() <= JOIN_GAP / 2 + slack, (seed, p.lo, p.hi)
 
 
 def test_evidence__extents_stay_within_the_evidence_of_their_hits_at_every_step() -> None:
