@@ -385,7 +385,8 @@ class PolySlam:
 
     def _merge_into_map(self, landmark_id: int) -> int:
         """Merge a new or changed landmark with overlapping or adjoining ones (paper §3.3 and
-        the joins of :mod:`~polyslam_env.slam.merging`); returns the number of merges.
+        the joins of :mod:`~polyslam_env.slam.merging` when ``config.join_pieces``); returns
+        the number of merges.
 
         Only landmarks whose bounding box lies within γ_M of this one's are handed to
         :func:`choose_merge`: every approximation error of a farther one is at least the box
@@ -423,7 +424,7 @@ class PolySlam:
             cfg.merge_min_overlap,
             new_side=int(sides[idx]),
             sides=sides[near].tolist(),
-            join_gap=JOIN_GAP,
+            join_gap=JOIN_GAP if cfg.join_pieces else None,
         )
         if choice is None:
             return None

@@ -41,7 +41,10 @@ def cast(pose: np.ndarray, walls: np.ndarray, angles: np.ndarray) -> np.ndarray:
 
 
 def drive(
-    walls: np.ndarray, moves: list[tuple[float, float]], seed: int
+    walls: np.ndarray,
+    moves: list[tuple[float, float]],
+    seed: int,
+    cfg: SlamConfig | None = None,
 ) -> tuple[PolySlam, list[np.ndarray], np.ndarray, np.ndarray]:
     """Run a PolySlam along unicycle ``moves`` (v·T, Δθ) from the origin among ``walls``.
 
@@ -49,8 +52,8 @@ def drive(
     frame. Returns the SLAM, the true hit points of each step, the true poses (K+1, 3) and
     the estimated ones (K+1, 3).
     """
+    cfg = SlamConfig() if cfg is None else cfg
     rng = np.random.default_rng(seed)
-    cfg = SlamConfig()
     angles = np.radians(BEAMS_DEG)
     slam = PolySlam(cfg, angles, MAX_RANGE)
     pose = np.zeros(3)
@@ -79,18 +82,22 @@ def turn_around(steps: int = 12) -> list[tuple[float, float]]:
 
 
 ONE_WALL = np.array([[[-1.0, 0.8], [6.0, 0.8]]])  # the only wall: y = 0.8, x ∈ [−1, 6]
+JOINING = SlamConfig(join_pieces=True)
+CONFIGS, CONFIG_IDS = [SlamConfig(), JOINING], ["paper-merging", "join-pieces"]
 
 
 def test_reobserved_wall__creates_no_second_landmark() -> None:
     """Drive 4 m past a 6 m wall, turn around, drive back past it (10 seeds): the world has
-    one wall, so the map holds exactly one landmark after each pass. (Before issue 14's joins,
-    every one of these runs held 4 landmarks after the first pass and 4–6 after the second.)
+    one wall, so the map holds exactly one landmark after each pass, with ``join_pieces``.
+    Without it (the default, the paper's merging) every one of these runs holds 4 landmarks
+    after the first pass and 4–6 after the second: pieces of ~1 m, each a cluster's fit.
     """
     one = straight(4.0)
     two = one + turn_around() + straight(4.0)
     for seed in range(10):
-        counts = [drive(ONE_WALL, moves, seed)[0].n_landmarks for moves in (one, two)]
+        counts = [drive(ONE_WALL, moves, seed, JOINING)[0].n_landmarks for moves in (one, two)]
         assert counts == [1, 1], (seed, counts)
+    assert drive(ONE_WALL, one, 0)[0].n_landmarks > 1  # the pieces the joins remove
 
 
 @pytest.mark.xfail(
@@ -102,27 +109,29 @@ def test_reobserved_wall__creates_no_second_landmark() -> None:
 )
 def test_reobserved_wall__third_pass_creates_no_second_landmark() -> None:
     three = straight(4.0) + turn_around() + straight(4.0) + turn_around() + straight(4.0)
-    counts = [drive(ONE_WALL, three, seed)[0].n_landmarks for seed in range(10)]
+    counts = [drive(ONE_WALL, three, seed, JOINING)[0].n_landmarks for seed in range(10)]
     assert counts == [1] * 10, counts
 
 
-def test_doorway__wall_with_a_gap_is_two_landmarks_not_bridged() -> None:
+@pytest.mark.parametrize("cfg", CONFIGS, ids=CONFIG_IDS)
+def test_doorway__wall_with_a_gap_is_two_landmarks_not_bridged(cfg: SlamConfig) -> None:
     """A wall with a 0.6 m doorway (x ∈ [2, 2.6]): no polynomial spans the doorway."""
     walls = np.array([[[-1.0, 0.8], [2.0, 0.8]], [[2.6, 0.8], [6.0, 0.8]]])
     for seed in range(3):
-        slam, *_ = drive(walls, straight(4.5), seed)
+        slam, *_ = drive(walls, straight(4.5), seed, cfg)
         for p in slam.polynomials():
             xy = p.equally_spaced(50)
             inside = (xy[:, 0] > 2.0 + EXTENT_MARGIN) & (xy[:, 0] < 2.6 - EXTENT_MARGIN)
             assert not np.any(inside & (np.abs(xy[:, 1] - 0.8) < 0.1)), (seed, p.lo, p.hi)
 
 
-def test_corner__is_not_one_polynomial_bending_around_it() -> None:
+@pytest.mark.parametrize("cfg", CONFIGS, ids=CONFIG_IDS)
+def test_corner__is_not_one_polynomial_bending_around_it(cfg: SlamConfig) -> None:
     """Along a wall that turns by 90° (a room's corner): every landmark stays on one wall
     (within 3σ of the range noise plus the odometry drift of the short run, < 1 cm)."""
     walls = np.array([[[-1.0, 0.8], [3.0, 0.8]], [[3.0, 0.8], [3.0, -2.0]]])
     for seed in range(3):
-        slam, *_ = drive(walls, straight(2.6), seed)
+        slam, *_ = drive(walls, straight(2.6), seed, cfg)
         for p in slam.polynomials():
             xy = p.equally_spaced(50)
             d_a = np.abs(xy[:, 1] - 0.8)
@@ -130,7 +139,8 @@ def test_corner__is_not_one_polynomial_bending_around_it() -> None:
             assert min(d_a.max(), d_b.max()) <= 3 * RANGE_SIGMA + 0.01, (seed, p.lo, p.hi)
 
 
-def test_extents__reach_no_further_than_the_supporting_hits_plus_margin() -> None:
+@pytest.mark.parametrize("cfg", CONFIGS, ids=CONFIG_IDS)
+def test_extents__reach_no_further_than_the_supporting_hits_plus_margin(cfg: SlamConfig) -> None:
     """Each polynomial's end points lie within EXTENT_MARGIN of a true hit, and its inside
     within JOIN_GAP / 2 (a join bridges at most JOIN_GAP), plus what the estimate adds: the
     map is placed with the estimated pose, off by at most max|Δp| + MAX_RANGE · max|Δθ| over
@@ -145,7 +155,7 @@ def test_extents__reach_no_further_than_the_supporting_hits_plus_margin() -> Non
     )
     for seed in range(3):
         moves = straight(4.5) + turn_around() + straight(4.0)
-        slam, hits, poses, estimates = drive(walls, moves, seed)
+        slam, hits, poses, estimates = drive(walls, moves, seed, cfg)
         all_hits = np.vstack(hits)
         d_theta = np.abs(np.angle(np.exp(1j * (estimates[:, 2] - poses[:, 2]))))
         displaced = np.linalg.norm(estimates[:, :2] - poses[:, :2], axis=1).max()
@@ -157,14 +167,14 @@ def test_extents__reach_no_further_than_the_supporting_hits_plus_margin() -> Non
             assert nearest.max() <= JOIN_GAP / 2 + slack, (seed, p.lo, p.hi)
 
 
-def test_evidence__extents_stay_within_the_evidence_of_their_hits_at_every_step() -> None:
+@pytest.mark.parametrize("cfg", CONFIGS, ids=CONFIG_IDS)
+def test_evidence__extents_stay_within_their_hits_evidence_at_every_step(cfg: SlamConfig) -> None:
     """The table's own invariant on a seeded run (walls, a doorway, a corner, back and forth):
     after every step each landmark's extent lies within its evidence interval ± EXTENT_MARGIN
     (that the evidence is where true hits are is the test above)."""
     walls = np.array(
         [[[-1.0, 0.8], [2.0, 0.8]], [[2.6, 0.8], [5.0, 0.8]], [[5.0, 0.8], [5.0, -0.9]]]
     )
-    cfg = SlamConfig()
     rng = np.random.default_rng(11)
     angles = np.radians(BEAMS_DEG)
     slam = PolySlam(cfg, angles, MAX_RANGE)
