@@ -299,8 +299,9 @@ def fit_cluster(
     shape_fixed: bool = False,
     auto_order: bool = False,
     min_noise_var: float = 0.0,
+    max_gap: float | None = None,
 ) -> ClusterFit:
-    """A new polynomial from a cluster, without cutting across corners.
+    """A new polynomial from a cluster, without cutting across corners or gaps.
 
     The paper fits one cubic to the whole cluster, but a cluster of radius R = 0.35 m can
     straddle a corner, and a cubic through both walls rounds the corner off (by ~5 cm for a
@@ -315,6 +316,9 @@ def fit_cluster(
        points and makes ≥ ``corner_angle_deg`` with the first, it is a corner: fit the points
        within ``line_tol`` of the first line and nearer to it than to the second. Otherwise
        the points are one curved wall and all are fitted;
+    3b. the wall's points are ordered along its principal direction and cut at every gap
+       wider than ``max_gap`` (default :data:`GAP_SPLIT`: a doorway or an occlusion, which a
+       polynomial must not bridge); the run with most points is fitted (ties: the first);
     4. the fit is accepted with ≥ order + 2 points and rms ≤ ``max_rms`` (the caller's ρ_k);
        otherwise no landmark and every point is left over. ``shape_fixed`` is passed to
        :func:`~polyslam_env.slam.fitting.fit_polynomial`, and so are ``auto_order`` and
@@ -329,6 +333,7 @@ def fit_cluster(
     xy = np.array([p.xy for p in pts], dtype=float)  # (N, 2)
     tol = line_tol if line_tol is not None else max(3.0 * max(p.sigma for p in pts), 0.01)
     mask = _select_wall(xy, tol, min_second, np.radians(corner_angle_deg))
+    mask = _largest_run(xy, mask, max_gap)
     if np.count_nonzero(mask) >= min(order + 2, len(pts)) and np.count_nonzero(mask) >= 2:
         used = [p for p, m in zip(pts, mask, strict=True) if m]
         fit = fit_polynomial(
@@ -342,6 +347,33 @@ def fit_cluster(
         if fit.rms <= max_rms:
             return ClusterFit(fit, used, [p for p, m in zip(pts, mask, strict=True) if not m])
     return ClusterFit(None, [], pts)
+
+
+#: m, widest gap between neighbouring points (along the wall) that one landmark may span. The
+#: smallest doorway a robot can pass is its diameter 0.13 m; consecutive hits of one beam
+#: along a wall are ≤ 0.1 m apart at the robots' speeds (≤ 0.1 m per step) and two beams
+#: interleave, so 0.3 m — well above the point spacing, below any real door (≥ 0.6 m in the
+#: generators) plus the robot's own clearance — separates a gap from sparse sampling.
+GAP_SPLIT = 0.3
+
+
+def _largest_run(xy: np.ndarray, mask: np.ndarray, max_gap: float | None) -> np.ndarray:
+    """``mask`` (N,) restricted to the largest run of its points without a gap > ``max_gap``
+    along their principal direction (step 3b of :func:`fit_cluster`)."""
+    gap = GAP_SPLIT if max_gap is None else max_gap
+    chosen = np.flatnonzero(mask)
+    if len(chosen) < 2:
+        return mask
+    along = xy[chosen] @ _tls_direction(xy[chosen])  # (k,)
+    order = np.argsort(along, kind="stable")
+    cuts = np.flatnonzero(np.diff(along[order]) > gap) + 1
+    if len(cuts) == 0:
+        return mask
+    runs = np.split(order, cuts)
+    best = max(runs, key=len)  # first of the longest on ties
+    out = np.zeros_like(mask)
+    out[chosen[best]] = True
+    return out
 
 
 def _select_wall(xy: np.ndarray, tol: float, min_second: int, corner_angle: float) -> np.ndarray:

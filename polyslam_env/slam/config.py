@@ -35,6 +35,7 @@ class SlamConfig(Config):
     tangent_min_deg: float = 10.0  # beams hitting closer to tangent than this are skipped
     squared_error: bool = False  # the paper's squared end-point distance in association
     shape_follows_pose: bool = True  # shapes move with the pose error in ∂h/∂pose (robot.py)
+    join_pieces: bool = False  # join end-to-end pieces of one wall (merging.py, issue 14)
     blas_threads: int = 1  # BLAS threads during a step (polyslam_env/core/blas.py); 0: leave as is
 
     def validate(self) -> None:

@@ -26,6 +26,15 @@ from polyslam_env.slam.polynomial import Polynomial, taylor_shift
 if TYPE_CHECKING:
     from polyslam_env.slam.fitting import StoredPoint
 
+#: m, how far a landmark's curve may reach past the outermost beam hits that support it: 2.5 ×
+#: the 2 cm range noise (a hit's own position along the wall is uncertain by about that).
+#: Each landmark keeps the ξ-interval of its supporting hits (``LandmarkTable.evidence``: a
+#: cluster's hits; a hit an extension reached; a refit's bad hits with the old evidence; both
+#: evidences of a merge or join; a received landmark's extent, the sender's evidence) and its
+#: extent is cut to that interval ± this margin. Inside, a join may bridge a gap of up to
+#: ``association.GAP_SPLIT`` (narrower gaps are sampling, wider ones doorways).
+EXTENT_MARGIN = 0.05
+
 
 @dataclass(frozen=True, eq=False)
 class PackedPolynomials:
@@ -158,7 +167,8 @@ class LandmarkTable:
     ``variate``, ``lo``/``hi``, ``eta_range`` (bounds on B over the extent, for the boxes),
     ``pivot`` (ξ of the centroid the landmark was fitted around), ``xi_var`` (the pose
     variance along ξ when it was made), ``model_var`` (its fit variance beyond the range
-    noise) and ``fit_half`` (half the extent it was fitted over; see PolySlam).
+    noise), ``side`` (the face its beams saw, see ``merging``) and ``fit_half`` (half the
+    extent it was fitted over; see PolySlam).
 
     Arrays are replaced, never written in place, so a :class:`PackedPolynomials` handed out
     earlier stays valid; ``ids`` is changed in place (readers may hold it).
@@ -178,6 +188,8 @@ class LandmarkTable:
         self.xi_var = np.zeros(0)  # (n,)
         self.model_var = np.zeros(0)  # (n,)
         self.fit_half = np.zeros(0)  # (n,) half the extent it was fitted over
+        self.side = np.zeros(0, dtype=int)  # (n,) face seen: +1 from +η, −1 from −η, 0 unknown
+        self.evidence = np.zeros((0, 2))  # (n, 2) ξ-interval of the hits supporting it
         self.shapes = ShapesView(self)
         self.version = 0  # bumped by every change, for caches built on the table
         self._next_id = 0
@@ -216,8 +228,14 @@ class LandmarkTable:
         model_var: float,
         fit_half: float,
         step: int = 0,
+        side: int = 0,
+        evidence: tuple[float, float] | None = None,
     ) -> int:
-        """Add a landmark at the end (its c0 was appended to the state); returns its new id."""
+        """Add a landmark at the end (its c0 was appended to the state); returns its new id.
+
+        ``evidence`` (default: the extent) is the ξ-interval of the hits that support it; the
+        extent must lie within it ± :data:`EXTENT_MARGIN` (the caller clips, see
+        :func:`clip_to_evidence`)."""
         landmark_id = self._next_id
         self._next_id += 1
         self.ids.append(landmark_id)
@@ -240,6 +258,9 @@ class LandmarkTable:
         self.xi_var = np.append(self.xi_var, xi_var)
         self.model_var = np.append(self.model_var, model_var)
         self.fit_half = np.append(self.fit_half, fit_half)
+        self.side = np.append(self.side, int(side))
+        ev = (poly.lo, poly.hi) if evidence is None else evidence
+        self.evidence = np.concatenate([self.evidence, np.array([ev], dtype=float)])
         self._changed(ids=True)
         return landmark_id
 
@@ -250,10 +271,18 @@ class LandmarkTable:
         del self.changed_at[index]
         del self.qbad[landmark_id]
         names = ("variate", "shape", "lo", "hi", "eta_range", "pivot", "xi_var", "model_var")
-        for name in (*names, "fit_half"):
+        for name in (*names, "fit_half", "side", "evidence"):
             setattr(self, name, np.delete(getattr(self, name), index, axis=0))
         self._changed(ids=True)
         return landmark_id
+
+    def extend_to_hit(self, index: int, xi: float) -> None:
+        """Stretch landmark ``index``'s extent and evidence to a supporting hit at ``xi``."""
+        ev_lo, ev_hi = self.evidence[index]
+        self.evidence = self.evidence.copy()
+        self.evidence[index] = min(ev_lo, xi), max(ev_hi, xi)
+        poly = self.polys[index]
+        self.set_extent(index, min(poly.lo, xi), max(poly.hi, xi))
 
     def set_extent(self, index: int, lo: float, hi: float) -> None:
         """New extent [lo, hi] of landmark ``index`` (same shape)."""
@@ -348,6 +377,35 @@ class ShapesView(Mapping[int, Polynomial]):
 
     def __contains__(self, landmark_id: object) -> bool:
         return landmark_id in self._table
+
+
+def clip_to_evidence(poly: Polynomial, evidence: tuple[float, float]) -> Polynomial:
+    """``poly`` with its extent cut to ``evidence`` ± :data:`EXTENT_MARGIN` (same object if
+    it already lies within)."""
+    lo = max(poly.lo, evidence[0] - EXTENT_MARGIN)
+    hi = min(poly.hi, evidence[1] + EXTENT_MARGIN)
+    if lo == poly.lo and hi == poly.hi:
+        return poly
+    if hi < lo:  # no overlap at all (cannot happen for a fit to its own evidence): keep ends
+        lo = hi = min(max(0.5 * (evidence[0] + evidence[1]), poly.lo), poly.hi)
+    return Polynomial(poly.variate, poly.coeffs, lo, hi)
+
+
+def evidence_on(
+    evidence: tuple[float, float], old: Polynomial, new: Polynomial, samples: int = 16
+) -> tuple[float, float]:
+    """The ξ-interval, on ``new``'s axis, of ``old``'s curve over its ``evidence`` interval
+    (both with their current c0; their variates may differ): ``samples`` points of the curve
+    are projected, so a bulge between the ends counts."""
+    xi = np.linspace(evidence[0], evidence[1], samples)
+    xy = old.points_at(xi)  # (S, 2)
+    on_new = xy[:, 0] if new.variate == 1 else xy[:, 1]
+    return float(on_new.min()), float(on_new.max())
+
+
+def hull(*intervals: tuple[float, float]) -> tuple[float, float]:
+    """The smallest interval holding all ``intervals``."""
+    return min(a for a, _ in intervals), max(b for _, b in intervals)
 
 
 def boxes_near(boxes: np.ndarray, box: np.ndarray, distance: float) -> np.ndarray:

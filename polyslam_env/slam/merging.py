@@ -16,20 +16,50 @@ Choices where the paper is silent:
   tangents of the two curves in the overlap must be within ``max_angle_deg`` (30°): with the
   paper's γ_M = 0.35 m the one-sided test alone would merge perpendicular walls at a corner,
   whose projection on p's axis is a short interval "included" in p.
+
+One wall, one landmark (issue 14). The paper merges only overlapping polynomials, so a wall
+seen piece by piece stays a chain of short landmarks whose ends touch or overlap by a few
+centimetres (on a 20 × 12 m rooms map about 10 % of the map's length lay within 10 cm of, and
+parallel to, another polynomial). With ``join_gap`` set, :func:`find_merge` also proposes
+**joins**: two polynomials whose nearer end points are within ``join_gap`` (default
+:data:`JOIN_GAP`), whose tangents there agree within :data:`JOIN_ANGLE_DEG` and whose end
+points each lie within :data:`THIN_WALL` of the other's tangent line at its end. The caller
+fits one polynomial through both (the merged fit) and keeps it only if that fit explains
+both within its acceptance RMS, as for any new landmark.
+
+Faces: a wall's face is seen from one side only. ``sides`` gives each landmark's observed
+side (+1: the beams came from its +η side, −1: from −η, 0: unknown, e.g. received). Two
+landmarks seen from opposite sides are the two faces of a wall (or two walls of a corridor)
+and merge only when their distance γ is at most :data:`THIN_WALL` — a wall thinner than that is
+one curve at this sensor's resolution (2.5 σ of the 2 cm range noise), while the faces of a
+10 cm wall stay apart.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
-from polyslam_env.slam.association import nearest_by_error
+from polyslam_env.slam.association import GAP_SPLIT, nearest_by_error
 from polyslam_env.slam.fitting import PointSet, concat, polynomial_points
 from polyslam_env.slam.landmarks import pack
 from polyslam_env.slam.polynomial import Polynomial
 
 _SAMPLES = 64  # samples of p2 used to project it on p's axis
+#: m, largest gap between the nearer end points of two pieces that may be joined into one
+#: landmark: the gap below which points along a wall are sampling, not a doorway — the same
+#: threshold a cluster fit is cut at (``association.GAP_SPLIT``), so a join never bridges
+#: what a fit would have split. Pieces of one wall re-observed after a few cm of drift start
+#: a little past the old end (the points between went to a cluster), ~0.15 m in the tests.
+JOIN_GAP = GAP_SPLIT
+#: degrees: tangents of two pieces joined end to end must agree within this (the
+#: ``duplicates`` metric's notion of parallel, SPEC §5).
+JOIN_ANGLE_DEG = 10.0
+#: m, 2.5 × the 2 cm range noise: the largest lateral offset between two pieces of one
+#: face that noise explains; also the thickness below which two opposite faces are one curve.
+THIN_WALL = 0.05
 
 
 def overlap_interval(poly: Polynomial, other: Polynomial) -> tuple[float, float, bool] | None:
@@ -85,6 +115,14 @@ def _tangent(poly: Polynomial, xi: float) -> np.ndarray:
     return np.asarray(t / np.linalg.norm(t))
 
 
+class MergeChoice(NamedTuple):
+    """The partner chosen by :func:`choose_merge` and whether it is an end-to-end join."""
+
+    partner: int  # index into the candidates given
+    gamma: float
+    joined: bool
+
+
 def find_merge(
     new_poly: Polynomial,
     new_c0: float,
@@ -94,28 +132,115 @@ def find_merge(
     min_overlap: float = 0.1,
     max_angle_deg: float = 30.0,
     exclude: int | None = None,
+    *,
+    new_side: int = 0,
+    sides: Sequence[int] | None = None,
+    join_gap: float | None = None,
 ) -> int | None:
-    """Index of the map polynomial to merge ``new_poly`` with (smallest γ < γ_M), or None.
+    """Index of the map polynomial to merge ``new_poly`` with (see :func:`choose_merge`)."""
+    choice = choose_merge(
+        new_poly,
+        new_c0,
+        polys,
+        c0s,
+        gamma_max,
+        min_overlap,
+        max_angle_deg,
+        exclude,
+        new_side=new_side,
+        sides=sides,
+        join_gap=join_gap,
+    )
+    return None if choice is None else choice.partner
+
+
+def choose_merge(
+    new_poly: Polynomial,
+    new_c0: float,
+    polys: Sequence[Polynomial],
+    c0s: Sequence[float] | np.ndarray,
+    gamma_max: float,
+    min_overlap: float = 0.1,
+    max_angle_deg: float = 30.0,
+    exclude: int | None = None,
+    *,
+    new_side: int = 0,
+    sides: Sequence[int] | None = None,
+    join_gap: float | None = None,
+) -> MergeChoice | None:
+    """The map polynomial to merge ``new_poly`` with (smallest γ < γ_M), or None.
 
     ``exclude`` skips one index (the new polynomial itself when it is already in the map).
+    ``new_side`` / ``sides`` are the observed faces (see the module docstring; 0 or None:
+    unknown, any pairing allowed); a pair seen from opposite sides needs γ ≤ :data:`THIN_WALL`.
+    With ``join_gap`` (m) pieces that do not overlap enough are joined end to end when
+    :func:`join_gamma` accepts them (their γ is that function's offset).
     """
     p = new_poly.with_c0(new_c0)
-    best: int | None = None
+    best: MergeChoice | None = None
     best_gamma = gamma_max
     for j, (p2, c02) in enumerate(zip(polys, c0s, strict=True)):
         if j == exclude:
             continue
         other = p2.with_c0(float(c02))
+        side = 0 if sides is None else int(sides[j])
+        opposite = new_side * side < 0 and _faces_opposite(p, new_side, other, side)
+        limit = min(best_gamma, THIN_WALL) if opposite else best_gamma
         overlap = overlap_interval(p, other)
-        if overlap is None:
-            continue
-        a, b, included = overlap
-        if not (included or b - a >= min_overlap):
-            continue
-        gamma, angle = merge_gamma(p, other, a, b)
-        if gamma < best_gamma and np.degrees(angle) <= max_angle_deg:
-            best, best_gamma = j, gamma
+        gamma: float | None = None
+        joined = False
+        if overlap is not None:
+            a, b, included = overlap
+            if included or b - a >= min_overlap:
+                g, angle = merge_gamma(p, other, a, b)
+                if np.degrees(angle) <= max_angle_deg:
+                    gamma = g
+        if gamma is None and join_gap is not None:
+            gamma, joined = join_gamma(p, other, join_gap), True
+        if gamma is not None and gamma < limit:
+            best, best_gamma = MergeChoice(j, gamma, joined), gamma
     return best
+
+
+def join_gamma(poly: Polynomial, other: Polynomial, max_gap: float) -> float | None:
+    """Lateral offset (m) of two pieces meeting end to end, or None if they cannot be joined.
+
+    The nearer pair of end points must be within ``max_gap``; the tangents there within
+    :data:`JOIN_ANGLE_DEG`; the offset is the larger distance of each end point from the other
+    curve's tangent line at its end, and must be at most :data:`THIN_WALL`.
+    """
+    ends_p = poly.points_at(np.array([poly.lo, poly.hi]))  # (2, 2)
+    ends_o = other.points_at(np.array([other.lo, other.hi]))
+    gaps = np.linalg.norm(ends_p[:, None, :] - ends_o[None, :, :], axis=2)  # (2, 2)
+    i, k = np.unravel_index(int(np.argmin(gaps)), gaps.shape)
+    if gaps[i, k] > max_gap:
+        return None
+    t_p = _tangent(poly, poly.lo if i == 0 else poly.hi)
+    t_o = _tangent(other, other.lo if k == 0 else other.hi)
+    if np.degrees(np.arccos(min(abs(float(t_p @ t_o)), 1.0))) > JOIN_ANGLE_DEG:
+        return None
+    delta = ends_o[k] - ends_p[i]
+    offset = max(abs(_cross(t_p, delta)), abs(_cross(t_o, delta)))
+    return offset if offset <= THIN_WALL else None
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+def face_normal(poly: Polynomial, xi: float, side: int) -> np.ndarray:
+    """(2,) unit normal at ξ pointing to the side the face was seen from (side ±1)."""
+    t = _tangent(poly, xi)
+    # +90° turns the tangent (1, B') to +η for variate 1; −90° turns (B', 1) to +η (= +x¹)
+    plus_eta = np.array([-t[1], t[0]]) if poly.variate == 1 else np.array([t[1], -t[0]])
+    return np.asarray(side * plus_eta)
+
+
+def _faces_opposite(poly: Polynomial, side: int, other: Polynomial, other_side: int) -> bool:
+    """Whether the two faces look in opposite directions (normals at their middles)."""
+    n_p = face_normal(poly, 0.5 * (poly.lo + poly.hi), side)
+    n_o = face_normal(other, 0.5 * (other.lo + other.hi), other_side)
+    return float(n_p @ n_o) < 0.0
 
 
 def merge_points(

@@ -23,8 +23,16 @@ from polyslam_env.slam import ekf, measurement
 from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit, PointSet, StoredPoint, fit_polynomial, store_beams
-from polyslam_env.slam.landmarks import LandmarkRow, LandmarkTable, ShapesView, boxes_near
-from polyslam_env.slam.merging import find_merge, merge_points
+from polyslam_env.slam.landmarks import (
+    LandmarkRow,
+    LandmarkTable,
+    ShapesView,
+    boxes_near,
+    clip_to_evidence,
+    evidence_on,
+    hull,
+)
+from polyslam_env.slam.merging import JOIN_GAP, choose_merge, face_normal, merge_points
 from polyslam_env.slam.polynomial import Polynomial, value_and_slope
 
 #: The innovation screen of the divergence test (:meth:`PolySlam._is_diverging`): the last
@@ -41,6 +49,7 @@ SCREEN_FALSE_ALARM = 1e-3
 #: Slack (m) added to box distances when selecting the landmarks a beam can reach: covers
 #: the root polishing and rounding of the hit point, which the exact test then decides.
 REACH_MARGIN = 1e-3
+JOIN_RMS = 1.0
 
 
 @dataclass(frozen=True)
@@ -277,7 +286,7 @@ class PolySlam:
             c0 = self.mean[3 + idx]
             if abs(eta - c0 - float(poly.with_c0(0.0).value(xi))) > limit:
                 continue
-            table.set_extent(idx, min(poly.lo, xi), max(poly.hi, xi))
+            table.extend_to_hit(idx, xi)
 
     def _screen_innovations(self, ranges: np.ndarray) -> None:
         """Hook of :meth:`_is_diverging`, run right after the prediction: the NIS of every beam
@@ -332,10 +341,15 @@ class PolySlam:
         return [lid for lid, at in zip(table.ids, table.changed_at, strict=True) if at > step]
 
     # -- landmark generation (paper eq. 4–5) ------------------------------------------------------
-    def _augment(self, fit: Fit) -> int:
-        """Append a fitted landmark to the state; returns its new id."""
+    def _augment(self, fit: Fit, side: int = 0, evidence: tuple[float, float] | None = None) -> int:
+        """Append a fitted landmark to the state; returns its new id. ``side``: the face its
+        beams saw (+1 from +η, −1 from −η, 0 unknown; see :mod:`~polyslam_env.slam.merging`);
+        ``evidence``: the ξ-interval of its supporting hits (default: the fit's extent, i.e.
+        its points' — a received landmark keeps the sender's evidence so); the extent is cut
+        to it ± ``landmarks.EXTENT_MARGIN``."""
         self.mean, self.cov = ekf.augment(self.mean, self.cov, fit.c0, fit.Gx, fit.Gy, fit.V)
-        poly = fit.poly
+        evidence = (fit.poly.lo, fit.poly.hi) if evidence is None else evidence
+        poly = clip_to_evidence(fit.poly, evidence)
         return self.table.append(
             poly,
             pivot=0.5 * (poly.lo + poly.hi),  # ξ of the centroid of its fit points
@@ -343,6 +357,8 @@ class PolySlam:
             model_var=max(fit.rms**2 - self.config.range_sigma**2, 0.0),
             fit_half=max(0.5 * (poly.hi - poly.lo), 0.05),
             step=self.step_count,
+            side=side,
+            evidence=evidence,
         )
 
     def _remove(self, landmark_id: int) -> None:
@@ -350,9 +366,15 @@ class PolySlam:
         self.mean, self.cov = ekf.remove(self.mean, self.cov, 3 + idx)
         self.table.remove(idx)
 
-    def _replace(self, old_ids: Sequence[int], fit: Fit) -> int:
+    def _replace(
+        self,
+        old_ids: Sequence[int],
+        fit: Fit,
+        side: int = 0,
+        evidence: tuple[float, float] | None = None,
+    ) -> int:
         """Add the fit (its G_x may touch the old c0s) and then drop the old landmarks."""
-        new_id = self._augment(fit)
+        new_id = self._augment(fit, side, evidence)
         for lid in old_ids:
             self._remove(lid)
         return new_id
@@ -375,7 +397,14 @@ class PolySlam:
         fit = self._fit(pts)
         if fit is None or fit.rms > self._max_fit_rms(rho):
             return 0  # the bad points do not make one wall with p*: keep p* as it is
-        new_id = self._replace([landmark_id], fit)
+        side = self._side_in(int(self.table.side[state_index - 3]), poly, fit.poly)
+        xy = np.array([p.xy for p in bad], dtype=float)  # (k, 2) the bad hits
+        xi_bad = xy[:, 0] if fit.poly.variate == 1 else xy[:, 1]
+        evidence = hull(
+            evidence_on(self._evidence(state_index - 3), poly, fit.poly),
+            (float(xi_bad.min()), float(xi_bad.max())),
+        )
+        new_id = self._replace([landmark_id], fit, side, evidence)
         self._merge_into_map(new_id)
         return 1
 
@@ -394,7 +423,7 @@ class PolySlam:
         self.book.restore_cluster(result.leftover)
         if result.fit is None:
             return None
-        return self._augment(result.fit)
+        return self._augment(result.fit, _observed_side(result.used, result.fit.poly.variate))
 
     def _max_fit_rms(self, rho: float) -> float:
         """Largest RMS residual a new or refit polynomial may have: min(ρ_k, 2.5 σ_range).
@@ -407,14 +436,29 @@ class PolySlam:
         return min(rho, 2.5 * self.config.range_sigma)
 
     def _merge_into_map(self, landmark_id: int) -> int:
-        """Merge a new or changed landmark with an overlapping one (paper §3.3); 1 if merged.
+        """Merge a new or changed landmark with overlapping or adjoining ones (paper §3.3 and
+        the joins of :mod:`~polyslam_env.slam.merging` when ``config.join_pieces``); returns
+        the number of merges.
 
         Only landmarks whose bounding box lies within γ_M of this one's are handed to
-        :func:`find_merge`: every approximation error of a farther one is at least the box
-        distance, so its γ could not be below γ_M (same choice, in the same order).
+        :func:`choose_merge`: every approximation error of a farther one is at least the box
+        distance, so its γ could not be below γ_M (same choice, in the same order), and a
+        join needs end points within ``JOIN_GAP`` ≤ γ_M. A merged landmark is checked again
+        (a wall seen in pieces becomes one landmark), at most once per landmark in the map.
         """
+        merges = 0
+        for _ in range(len(self.table)):
+            merged_id = self._merge_once(landmark_id)
+            if merged_id is None:
+                break
+            landmark_id = merged_id
+            merges += 1
+        return merges
+
+    def _merge_once(self, landmark_id: int) -> int | None:
+        """One merge of ``landmark_id`` with its best partner; the merged id, or None."""
         if landmark_id not in self.table:
-            return 0
+            return None
         idx = self.table.index_of(landmark_id)
         c0s = self.mean[3:]
         cfg = self.config
@@ -422,23 +466,28 @@ class PolySlam:
         near = self.table.near(self._box(idx), c0s, reach)
         near = near[near != idx]
         poly = self._polynomial(idx)
-        j_near = find_merge(
+        sides = self.table.side
+        choice = choose_merge(
             poly,
             float(c0s[idx]),
             [self._polynomial(int(j)) for j in near],
             c0s[near],
             cfg.gamma_max,
             cfg.merge_min_overlap,
+            new_side=int(sides[idx]),
+            sides=sides[near].tolist(),
+            join_gap=JOIN_GAP if cfg.join_pieces else None,
         )
-        if j_near is None:
-            return 0
-        j = int(near[j_near])
+        if choice is None:
+            return None
+        j = int(near[choice.partner])
         other_id = self.table.ids[j]
+        other = self._polynomial(j)
         pts = merge_points(
             poly,
             3 + idx,
             float(self.cov[3 + idx, 3 + idx]),
-            self._polynomial(j),
+            other,
             3 + j,
             float(self.cov[3 + j, 3 + j]),
             cfg.eps_m,
@@ -446,9 +495,31 @@ class PolySlam:
         )
         fit = self._fit(pts)
         if fit is None:
+            return None
+        if choice.joined and fit.rms > JOIN_RMS * cfg.range_sigma:
+            return None  # one polynomial does not explain both pieces: not one wall
+        side = _combine_sides(
+            self._side_in(int(sides[idx]), poly, fit.poly),
+            self._side_in(int(sides[j]), other, fit.poly),
+        )
+        evidence = hull(
+            evidence_on(self._evidence(idx), poly, fit.poly),
+            evidence_on(self._evidence(j), other, fit.poly),
+        )
+        return self._replace([landmark_id, other_id], fit, side, evidence)
+
+    def _evidence(self, index: int) -> tuple[float, float]:
+        """ξ-interval (on its own axis) of the hits supporting landmark ``index``."""
+        lo, hi = self.table.evidence[index].tolist()
+        return lo, hi
+
+    @staticmethod
+    def _side_in(side: int, old: Polynomial, new: Polynomial) -> int:
+        """The face ``side`` of ``old`` expressed on ``new`` (their variates may differ)."""
+        if side == 0:
             return 0
-        self._replace([landmark_id, other_id], fit)
-        return 1
+        normal = face_normal(old, 0.5 * (old.lo + old.hi), side)
+        return 1 if float(normal @ face_normal(new, 0.5 * (new.lo + new.hi), 1)) >= 0 else -1
 
     def _polynomial(self, index: int) -> Polynomial:
         """Landmark ``index`` (state 3 + index) with its current c0."""
@@ -663,3 +734,19 @@ def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> 
             rows[:, :2], rows[:, 2:4], rows[:, 4:], points, strict=True
         )
     ]
+
+
+def _observed_side(points: Sequence[StoredPoint], variate: int) -> int:
+    """The face the beams of ``points`` saw on a curve of ``variate``: beams travelling
+    towards +η came from the −η side (−1), and vice versa; 0 if they cancel."""
+    axis = 1 if variate == 1 else 0
+    total = sum(float(p.direction[axis]) for p in points)
+    return -1 if total > 0 else (1 if total < 0 else 0)
+
+
+def _combine_sides(a: int, b: int) -> int:
+    """Face of a merge: the common one, the known one, or 0 (both faces: a thin wall)."""
+    if a == b or b == 0:
+        return a
+    return b if a == 0 else 0
+

@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from polyslam_env.slam.association import (
+    GAP_SPLIT,
     MapBook,
     fit_cluster,
     nearest_by_error,
@@ -330,3 +331,22 @@ def test_fit_cluster__scattered_points_are_rejected() -> None:
     book = MapBook(eps_z=10)
     book.restore_cluster(res.leftover)
     assert len(book.clusters) == 1 and len(book.clusters[0]) == 10  # newest ε_Z kept
+
+
+def test_fit_cluster__wall_points_across_a_doorway_gap_are_cut_there() -> None:
+    """7 points on one side of a gap wider than GAP_SPLIT, 4 on the other (one line): the fit
+    covers the larger run only and the other run is left over, whatever the order of points."""
+    rng = np.random.default_rng(7)
+    left = np.linspace(0.0, 0.48, 7)
+    right = np.linspace(0.48 + GAP_SPLIT + 0.05, 0.48 + GAP_SPLIT + 0.29, 4)
+    x = np.concatenate([right[:2], left, right[2:]])
+    pts = [point(q) for q in np.column_stack([x, 0.3 + rng.normal(0, 0.005, len(x))])]
+    res = fit_cluster(pts, np.zeros(3), 3, max_rms=0.08)
+    assert res.fit is not None
+    assert (res.fit.poly.lo, res.fit.poly.hi) == pytest.approx((0.0, 0.48))
+    assert sorted(float(p.xy[0]) for p in res.leftover) == pytest.approx(sorted(right))
+    # a gap just below the threshold is sampling, not a door: one fit over every point
+    close = np.concatenate([left, left[-1] + GAP_SPLIT - 0.01 + np.linspace(0, 0.2, 4)])
+    pts = [point(q) for q in np.column_stack([close, np.full(len(close), 0.3)])]
+    res = fit_cluster(pts, np.zeros(3), 3, max_rms=0.08)
+    assert res.fit is not None and res.leftover == []

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from polyslam_env.slam.fitting import PointSet, fit_polynomial
-from polyslam_env.slam.merging import find_merge, merge_points, overlap_interval
+from polyslam_env.slam.merging import (
+    JOIN_GAP,
+    THIN_WALL,
+    face_normal,
+    find_merge,
+    merge_points,
+    overlap_interval,
+)
 from polyslam_env.slam.polynomial import Polynomial
 
 GAMMA_M = 0.35  # paper value
@@ -135,3 +142,67 @@ def test_find_merge__picks_the_best_and_skips_excluded() -> None:
     assert find_merge(p, p.c0, polys, c0s, GAMMA_M, exclude=1) == 2
     assert find_merge(p, p.c0, polys, c0s, GAMMA_M) == 1  # itself, γ = 0
     assert find_merge(p, p.c0, [near], [near.c0], GAMMA_M) == 0
+
+
+# -- joins and faces (issue 14) -----------------------------------------------------------------
+def test_find_merge__pieces_of_one_wall_end_to_end_are_joined_not_across_a_door() -> None:
+    p = line(1, 1.0, 0.0, 0.0, 1.0)
+    next_piece = line(1, 1.01, 0.0, 1.06, 2.0)  # 6 cm gap < JOIN_GAP, 1 cm offset
+    across_door = line(1, 1.0, 0.0, 1.6, 2.5)  # 0.6 m doorway
+    offset = line(1, 1.08, 0.0, 1.02, 2.0)  # 8 cm off: another wall's face, not a continuation
+    assert find_merge(p, p.c0, [next_piece], [next_piece.c0], GAMMA_M) is None  # paper rule
+    assert find_merge(p, p.c0, [next_piece], [next_piece.c0], GAMMA_M, join_gap=JOIN_GAP) == 0
+    for other in (across_door, offset):
+        assert find_merge(p, p.c0, [other], [other.c0], GAMMA_M, join_gap=JOIN_GAP) is None
+
+
+def test_find_merge__corner_pieces_meeting_end_to_end_are_not_joined() -> None:
+    p = line(1, 1.0, 0.0, 0.0, 1.0)
+    wall = line(2, 1.02, 0.0, 0.0, 0.98)  # x = 1.02 for y ∈ [0, 0.98]: ends 2 cm apart
+    assert find_merge(p, p.c0, [wall], [wall.c0], GAMMA_M, join_gap=JOIN_GAP) is None
+
+
+@pytest.mark.parametrize(
+    ("offset", "sides", "merged"),
+    [
+        (0.10, (1, 1), True),  # a duplicate of one face 10 cm off (within γ_M): merge
+        (0.05, (1, 1), True),
+        (0.10, (1, -1), False),  # the two faces of a 10 cm thick wall: keep both
+        (1.20, (1, -1), False),  # the two walls of a corridor
+        (0.02, (1, -1), True),  # a wall thinner than THIN_WALL is one curve
+        (0.10, (0, -1), True),  # a face of unknown side (received): the paper's rule
+    ],
+)
+def test_find_merge__faces_seen_from_opposite_sides_merge_only_when_thin(
+    offset: float, sides: tuple[int, int], merged: bool
+) -> None:
+    p = line(1, 1.0, 0.0, 0.0, 1.0)
+    other = line(1, 1.0 + offset, 0.0, 0.2, 1.2)
+    gamma = 1.3 if offset > 1 else GAMMA_M  # let γ_M admit the corridor, to test the faces
+    found = find_merge(p, p.c0, [other], [other.c0], gamma, new_side=sides[0], sides=[sides[1]])
+    assert (found == 0) is merged
+    assert offset > THIN_WALL or merged  # the table's cases are on the stated rule's sides
+
+
+def test_face_normal__points_to_the_observed_side_for_both_variates() -> None:
+    horizontal = line(1, 1.0, 0.0, 0.0, 1.0)  # y = 1
+    vertical = line(2, 2.0, 0.0, 0.0, 1.0)  # x = 2
+    np.testing.assert_allclose(face_normal(horizontal, 0.5, 1), [0.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(face_normal(vertical, 0.5, 1), [1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(face_normal(vertical, 0.5, -1), [-1.0, 0.0], atol=1e-12)
+
+
+def test_merge_points__merged_c0_variance_does_not_double_count_shared_information() -> None:
+    """Two landmarks with the very same information (fully correlated c0s, variance s²):
+    the merged c0's variance G_x P G_xᵀ is s², not the s²/2 two independent ones would give.
+    """
+    a = line(1, 1.0, 0.0, 0.0, 1.0)
+    b = line(1, 1.0, 0.0, 0.5, 1.5)
+    s2 = 1e-4
+    cov = np.zeros((5, 5))
+    cov[3:, 3:] = s2  # c0_a ≡ c0_b
+    fit = fit_polynomial(merge_points(a, 3, s2, b, 4, s2, 5, 5), 3, shape_fixed=True)
+    merged_var = float((fit.Gx @ cov @ fit.Gx.T)[0, 0])
+    assert merged_var == pytest.approx(s2, rel=1e-9)
+    independent = np.diag([0.0, 0.0, 0.0, s2, s2])
+    assert float((fit.Gx @ independent @ fit.Gx.T)[0, 0]) == pytest.approx(s2 / 2, rel=1e-9)

@@ -1,0 +1,201 @@
+"""The map itself (issue 14): one wall one landmark, evidence-bounded extents, splits at
+gaps and corners, faces kept apart — on a synthetic scan generator and seeded episodes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.fitting import Fit
+from polyslam_env.slam.landmarks import EXTENT_MARGIN
+from polyslam_env.slam.merging import JOIN_GAP
+from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.robot import PolySlam
+
+BEAMS_DEG = (90.0, 45.0, 0.0, -45.0, -90.0)
+MAX_RANGE = 2.0
+RANGE_SIGMA = 0.02
+
+
+def cast(pose: np.ndarray, walls: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Brute-force ranges (B,) from ``pose`` (3,) to segments ``walls`` (W, 2, 2); inf if none
+    within MAX_RANGE (the oracle the SLAM's own ray casting is not)."""
+    out = np.full(len(angles), np.inf)
+    p = pose[:2]
+    for b, phi in enumerate(pose[2] + angles):
+        u = np.array([math.cos(phi), math.sin(phi)])
+        for a, c in walls:
+            e = c - a
+            den = u[0] * (-e[1]) - u[1] * (-e[0])
+            if abs(den) < 1e-12:
+                continue
+            d = a - p
+            t = (d[0] * (-e[1]) - d[1] * (-e[0])) / den
+            s = (u[0] * d[1] - u[1] * d[0]) / den
+            if 0 < t <= MAX_RANGE and 0 <= s <= 1:
+                out[b] = min(out[b], t)
+    return out
+
+
+def drive(
+    walls: np.ndarray,
+    moves: list[tuple[float, float]],
+    seed: int,
+    cfg: SlamConfig | None = None,
+) -> tuple[PolySlam, list[np.ndarray], np.ndarray, np.ndarray]:
+    """Run a PolySlam along unicycle ``moves`` (v·T, Δθ) from the origin among ``walls``.
+
+    Odometry and ranges get the SLAM config's noise (seeded); the robot's frame is the world
+    frame. Returns the SLAM, the true hit points of each step, the true poses (K+1, 3) and
+    the estimated ones (K+1, 3).
+    """
+    cfg = SlamConfig() if cfg is None else cfg
+    rng = np.random.default_rng(seed)
+    angles = np.radians(BEAMS_DEG)
+    slam = PolySlam(cfg, angles, MAX_RANGE)
+    pose = np.zeros(3)
+    poses, hits, estimates = [pose.copy()], [], [slam.pose]
+    odo_sigma = np.array([cfg.odom_sigma_xy, cfg.odom_sigma_xy, math.radians(0.01)])
+    for dist, turn in moves:
+        pose = pose + np.array([dist * math.cos(pose[2]), dist * math.sin(pose[2]), turn])
+        poses.append(pose.copy())
+        ranges = cast(pose, walls, angles)
+        ok = np.isfinite(ranges)
+        phi = pose[2] + angles[ok]
+        hits.append(pose[:2] + ranges[ok, None] * np.stack([np.cos(phi), np.sin(phi)], axis=1))
+        noisy = ranges + rng.normal(0.0, RANGE_SIGMA, len(ranges))
+        odometry = np.array([dist, 0.0, turn]) + rng.normal(0.0, odo_sigma)
+        slam.step(odometry, noisy)
+        estimates.append(slam.pose)
+    return slam, hits, np.array(poses), np.array(estimates)
+
+
+def straight(length: float, step: float = 0.08) -> list[tuple[float, float]]:
+    return [(step, 0.0)] * round(length / step)
+
+
+def turn_around(steps: int = 12) -> list[tuple[float, float]]:
+    return [(0.0, math.pi / steps)] * steps
+
+
+ONE_WALL = np.array([[[-1.0, 0.8], [6.0, 0.8]]])  # the only wall: y = 0.8, x ∈ [−1, 6]
+JOINING = SlamConfig(join_pieces=True)
+CONFIGS, CONFIG_IDS = [SlamConfig(), JOINING], ["paper-merging", "join-pieces"]
+
+
+def test_reobserved_wall__creates_no_second_landmark() -> None:
+    """Drive 4 m past a 6 m wall, turn around, drive back past it (10 seeds): the world has
+    one wall, so the map holds exactly one landmark after each pass, with ``join_pieces``.
+    Without it (the default, the paper's merging) every one of these runs holds 4 landmarks
+    after the first pass and 4–6 after the second: pieces of ~1 m, each a cluster's fit.
+    """
+    one = straight(4.0)
+    two = one + turn_around() + straight(4.0)
+    for seed in range(10):
+        counts = [drive(ONE_WALL, moves, seed, JOINING)[0].n_landmarks for moves in (one, two)]
+        assert counts == [1, 1], (seed, counts)
+    assert drive(ONE_WALL, one, 0)[0].n_landmarks > 1  # the pieces the joins remove
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known limitation (issue 14, open): by the third pass the pose estimate is off its"
+    " own map by 5-11 cm in some runs (heading error up to 2.6 deg), the re-observed stretch"
+    " lies more than THIN_WALL from the old piece and becomes a second landmark (3 of 10 seeds;"
+    " 5-7 landmarks in every seed before issue 14)",
+)
+def test_reobserved_wall__third_pass_creates_no_second_landmark() -> None:
+    three = straight(4.0) + turn_around() + straight(4.0) + turn_around() + straight(4.0)
+    counts = [drive(ONE_WALL, three, seed, JOINING)[0].n_landmarks for seed in range(10)]
+    assert counts == [1] * 10, counts
+
+
+@pytest.mark.parametrize("cfg", CONFIGS, ids=CONFIG_IDS)
+def test_doorway__wall_with_a_gap_is_two_landmarks_not_bridged(cfg: SlamConfig) -> None:
+    """A wall with a 0.6 m doorway (x ∈ [2, 2.6]): no polynomial spans the doorway."""
+    walls = np.array([[[-1.0, 0.8], [2.0, 0.8]], [[2.6, 0.8], [6.0, 0.8]]])
+    for seed in range(3):
+        slam, *_ = drive(walls, straight(4.5), seed, cfg)
+        for p in slam.polynomials():
+            xy = p.equally_spaced(50)
+            inside = (xy[:, 0] > 2.0 + EXTENT_MARGIN) & (xy[:, 0] < 2.6 - EXTENT_MARGIN)
+            assert not np.any(inside & (np.abs(xy[:, 1] - 0.8) < 0.1)), (seed, p.lo, p.hi)
+
+
+@pytest.mark.parametrize("cfg", CONFIGS, ids=CONFIG_IDS)
+def test_corner__is_not_one_polynomial_bending_around_it(cfg: SlamConfig) -> None:
+    """Along a wall that turns by 90° (a room's corner): every landmark stays on one wall
+    (within 3σ of the range noise plus the odometry drift of the short run, < 1 cm)."""
+    walls = np.array([[[-1.0, 0.8], [3.0, 0.8]], [[3.0, 0.8], [3.0, -2.0]]])
+    for seed in range(3):
+        slam, *_ = drive(walls, straight(2.6), seed, cfg)
+        for p in slam.polynomials():
+            xy = p.equally_spaced(50)
+            d_a = np.abs(xy[:, 1] - 0.8)
+            d_b = np.abs(xy[:, 0] - 3.0)
+            assert min(d_a.max(), d_b.max()) <= 3 * RANGE_SIGMA + 0.01, (seed, p.lo, p.hi)
+
+
+@pytest.mark.parametrize("cfg", CONFIGS, ids=CONFIG_IDS)
+def test_extents__reach_no_further_than_the_supporting_hits_plus_margin(cfg: SlamConfig) -> None:
+    """Each polynomial's end points lie within EXTENT_MARGIN of a true hit, and its inside
+    within JOIN_GAP / 2 (a join bridges at most JOIN_GAP), plus what the estimate adds: the
+    map is placed with the estimated pose, off by at most max|Δp| + MAX_RANGE · max|Δθ| over
+    the run, and 3σ of range noise across the wall."""
+    walls = np.array(
+        [
+            [[-1.0, 0.8], [2.0, 0.8]],
+            [[2.6, 0.8], [6.0, 0.8]],
+            [[-1.0, -0.9], [6.0, -0.9]],
+            [[6.0, 0.8], [6.0, -0.9]],
+        ]
+    )
+    for seed in range(3):
+        moves = straight(4.5) + turn_around() + straight(4.0)
+        slam, hits, poses, estimates = drive(walls, moves, seed, cfg)
+        all_hits = np.vstack(hits)
+        d_theta = np.abs(np.angle(np.exp(1j * (estimates[:, 2] - poses[:, 2]))))
+        displaced = np.linalg.norm(estimates[:, :2] - poses[:, :2], axis=1).max()
+        slack = displaced + MAX_RANGE * d_theta.max() + 3 * RANGE_SIGMA
+        for p in slam.polynomials():
+            xy = p.equally_spaced(100)
+            nearest = np.min(np.linalg.norm(xy[:, None, :] - all_hits[None], axis=2), axis=1)
+            assert max(nearest[0], nearest[-1]) <= EXTENT_MARGIN + slack, (seed, p.lo, p.hi)
+            assert nearest.max() <= JOIN_GAP / 2 + slack, (seed, p.lo, p.hi)
+
+
+@pytest.mark.parametrize("cfg", CONFIGS, ids=CONFIG_IDS)
+def test_evidence__extents_stay_within_their_hits_evidence_at_every_step(cfg: SlamConfig) -> None:
+    """The table's own invariant on a seeded run (walls, a doorway, a corner, back and forth):
+    after every step each landmark's extent lies within its evidence interval ± EXTENT_MARGIN
+    (that the evidence is where true hits are is the test above)."""
+    walls = np.array(
+        [[[-1.0, 0.8], [2.0, 0.8]], [[2.6, 0.8], [5.0, 0.8]], [[5.0, 0.8], [5.0, -0.9]]]
+    )
+    rng = np.random.default_rng(11)
+    angles = np.radians(BEAMS_DEG)
+    slam = PolySlam(cfg, angles, MAX_RANGE)
+    pose = np.zeros(3)
+    for dist, turn in straight(4.0) + turn_around() + straight(3.0):
+        pose = pose + np.array([dist * math.cos(pose[2]), dist * math.sin(pose[2]), turn])
+        ranges = cast(pose, walls, angles) + rng.normal(0.0, RANGE_SIGMA, len(angles))
+        slam.step(np.array([dist, 0.0, turn]), ranges)
+        table = slam.table
+        for i, poly in enumerate(table.polys):
+            ev_lo, ev_hi = table.evidence[i]
+            assert ev_lo - EXTENT_MARGIN - 1e-12 <= poly.lo <= poly.hi
+            assert poly.hi <= ev_hi + EXTENT_MARGIN + 1e-12
+    assert slam.n_landmarks >= 3
+
+
+def test_insert_landmark__keeps_the_senders_extent_as_its_evidence() -> None:
+    slam = PolySlam(SlamConfig(), np.radians(BEAMS_DEG), MAX_RANGE)
+    poly = Polynomial(1, np.array([0.8, 0.0, 0.0, 0.0]), 1.0, 2.5)
+    fit = Fit(poly, 0.8, np.zeros((1, 3)), np.ones((1, 1)) * 1.0, np.eye(1) * 1e-4, 0.01, 1)
+    lid = slam.insert_landmark(fit)
+    i = slam.table.index_of(lid)
+    assert tuple(slam.table.evidence[i]) == (1.0, 2.5)
+    assert (slam.table.polys[i].lo, slam.table.polys[i].hi) == (1.0, 2.5)
