@@ -100,13 +100,6 @@ def test_reobserved_wall__creates_no_second_landmark() -> None:
     assert drive(ONE_WALL, one, 0)[0].n_landmarks > 1  # the pieces the joins remove
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known limitation (issue 14, open): by the third pass the pose estimate is off its"
-    " own map by 5-11 cm in some runs (heading error up to 2.6 deg), the re-observed stretch"
-    " lies more than THIN_WALL from the old piece and becomes a second landmark (3 of 10 seeds;"
-    " 5-7 landmarks in every seed before issue 14)",
-)
 def test_reobserved_wall__third_pass_creates_no_second_landmark() -> None:
     three = straight(4.0) + turn_around() + straight(4.0) + turn_around() + straight(4.0)
     counts = [drive(ONE_WALL, three, seed, JOINING)[0].n_landmarks for seed in range(10)]
