@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+import scipy.stats
 
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.ekf import normalised_innovations, outlier_count_threshold
@@ -91,7 +92,11 @@ def test_divergence__fires_within_20_steps_of_a_fault_in_90_percent_of_runs(
 
 @pytest.mark.slow
 def test_divergence__quiet_in_99_percent_of_healthy_episodes() -> None:
-    """100 healthy episodes as long as a fault trial: the flag fires in at most one."""
+    """100 healthy episodes as long as a fault trial: the false-alarm rate is ≤ 1 % unless the
+    count is improbably high for that rate. A detector at exactly 1 % fires in ≥ 4 of 100 with
+    probability 1.8 % (binomial), so more than 3 alarms rejects "≤ 1 %" at the 5 % level;
+    demanding ≤ 1 alarm would fail a 1 % detector in 26 % of samples."""
     alarms = [first_alarm(seed, None, FAULT_STEP + DEADLINE) for seed in range(100)]
     fired = [(seed, a) for seed, a in enumerate(alarms) if a is not None]
-    assert len(fired) <= 1, f"false alarms (seed, step): {fired}"
+    limit = int(scipy.stats.binom.ppf(0.95, 100, 0.01))  # 3: P(X > 3 | p = 1 %) < 5 %
+    assert len(fired) <= limit, f"false alarms (seed, step): {fired}"
