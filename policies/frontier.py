@@ -322,7 +322,7 @@ class FrontierPolicy(Policy):
         return bool(frontier[cell[0] - r0, cell[1] - c0])
 
     def _plan(self, pose: np.ndarray) -> None:
-        """Path to the nearest frontier (at least ``min_goal`` away when possible), or None."""
+        """Path to the frontier of best utility (:meth:`_select`), or None when none is left."""
         self._since_plan = 0
         self.path, self.goal = None, None
         m = self.map
