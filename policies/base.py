@@ -2,9 +2,9 @@
 
 A :class:`Policy` sees only its agent's observation and a :class:`PolicyContext`: the spaces
 and the env's public facts (``env.unwrapped.public_facts()``: beam angles, ranges, speed limits,
-dt, observation layout, map), taken once at construction. It never holds the env, so it cannot
-read ground truth. Policies import nothing of ``polyslam_env`` but ``core`` and ``scenarios``
-(``tests/test_architecture.py`` checks it).
+dt, observation layout, map and its size), taken once at construction. It never holds the env,
+so it cannot read ground truth. Policies import nothing of ``polyslam_env`` but ``core`` and
+``scenarios`` (``tests/test_architecture.py`` checks it).
 
 ``make_policy(name, env, agent, **kwargs)`` builds one by registry name; :class:`TeamPolicy`
 holds one per agent. New policies register a factory ``factory(context, **kwargs) -> Policy``
@@ -69,6 +69,7 @@ class PolicyContext:
     grid_size: int  # G of the local G × G map
     grid_resolution: float  # m per local map cell
     pose_scale: float  # m; the observed position is pose / pose_scale
+    map_size: tuple[float, float]  # m, width and height of the map's bounding box
     beam_angles: np.ndarray  # (B,) rad, in the robot frame
     max_range: float  # m
     camera_range: float  # m

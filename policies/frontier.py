@@ -3,21 +3,27 @@
 Each step the policy folds the observation's egocentric local grid (occupied = the robot's
 own polynomials, free = cells its beams swept) and its current beams into an :class:`OwnMap`
 in the robot's own start frame, placed with the pose estimate from the observation — no
-ground truth. It then
+ground truth. The own map is sized from the public map size (its bounding box) so that it holds
+the whole map from any start, as the env's belief grid does. It then
 
 1. finds frontiers: known free cells next to unknown space, after closing the gaps between the
    five beams' swept stripes (else every beam line would be a frontier);
-2. plans the cheapest path (Dijkstra, 8-connected) on the grid with obstacles inflated by the
-   robot radius plus a margin and a soft cost near obstacles, to the nearest frontier at least
-   ``min_goal`` away (the nearest one at all if none is that far);
-3. follows it by pure pursuit within the (v, ω) limits, slowing down or turning away when a
-   front beam is short;
+2. plans the cheapest paths (Dijkstra, 8-connected) on the grid with obstacles inflated by the
+   robot radius plus a margin and a soft cost near obstacles, and picks the frontier of best
+   utility: the unknown area within ``gain_radius`` of it discounted by
+   ``exp(−path length / decay)`` (rather than the nearest: a room's worth of unknown space
+   beats a sliver next door), preferring goals at least ``min_goal`` away;
+3. follows the path by pure pursuit within the (v, ω) limits, slowing down or turning away
+   when a front beam is short;
 4. replans when the goal is reached, stops being a frontier, the path gets blocked, the robot
-   stalls, or every ``replan_every`` steps; a goal it could not reach is blacklisted for a while.
+   stalls, a robot is seen near the goal, or every ``replan_every`` steps; a goal it could not
+   reach is blacklisted for a while.
 
-When no frontier is left it falls back to right-hand wall following. Each robot explores alone
-(no team coordination): maps received at a rendezvous show up in its local grid's occupied
-channel, but robots do not split frontiers between them.
+Team coordination uses only what a robot sees: when its camera detects another robot, the
+frontiers nearer to where that robot was seen than to where this one stood (within
+``claim_radius``, for ``claim_steps`` steps) are left to it, so two robots that meet split the
+map between them and head apart. When no frontier is left it falls back to right-hand wall
+following.
 """
 
 from __future__ import annotations
@@ -166,19 +172,29 @@ class FrontierPolicy(Policy):
         self,
         context: PolicyContext,
         resolution: float = 0.1,
-        map_size: float = 32.0,
+        map_size: float | None = None,
         margin: float = 0.09,
         lookahead: float = 0.4,
         min_goal: float = 0.8,
         replan_every: int = 8,
         close_gaps: float = 0.3,
+        gain_radius: float = 1.0,
+        decay: float = 8.0,
+        claim_radius: float = 8.0,
+        claim_steps: int = 150,
     ) -> None:
         super().__init__(context)
+        if map_size is None:  # the map seen from any start, as the env's belief grid
+            map_size = 2.0 * (math.hypot(*context.map_size) + context.max_range)
         for name, value in (
             ("resolution", resolution),
             ("map_size", map_size),
             ("lookahead", lookahead),
             ("replan_every", replan_every),
+            ("gain_radius", gain_radius),
+            ("decay", decay),
+            ("claim_radius", claim_radius),
+            ("claim_steps", claim_steps),
         ):
             if not value > 0:
                 raise PolicyError(f"frontier: {name} must be > 0, got {value!r}")
@@ -189,6 +205,9 @@ class FrontierPolicy(Policy):
         self.lookahead, self.min_goal = float(lookahead), float(min_goal)
         self.replan_every = int(replan_every)
         self.close_cells = max(1, round(close_gaps / resolution))
+        self.gain_cells = max(1, round(gain_radius / resolution))
+        self.decay = float(decay)
+        self.claim_radius, self.claim_steps = float(claim_radius), int(claim_steps)
         self.reset()
 
     def reset(self, seed: int | None = None) -> None:
@@ -200,6 +219,9 @@ class FrontierPolicy(Policy):
         self._step = 0
         self._trail: list[np.ndarray] = []  # recent positions, for stall detection
         self._wall_error = 0.0
+        #: (other robot's position, own position, step it expires) in the own frame, from
+        #: camera sightings: frontiers nearer the other robot are left to it (module doc)
+        self._claims: list[tuple[np.ndarray, np.ndarray, int]] = []
 
     # -- act -------------------------------------------------------------------------------
     def act(self, observation: Any, rng: np.random.Generator) -> Any:
@@ -209,7 +231,8 @@ class FrontierPolicy(Policy):
         self._update_map(pose, ranges, ctx.local_grid(observation))
         self._step += 1
         self._trail = [*self._trail[-7:], pose[:2].copy()]
-        if self._needs_plan(pose):
+        detections = ctx.detections(observation)
+        if self._claim(pose, detections) or self._needs_plan(pose):
             self._plan(pose)
         if self.path is None:
             v, omega, self._wall_error = wall_follow_command(
@@ -218,8 +241,34 @@ class FrontierPolicy(Policy):
         else:
             v, omega = self._pursue(pose, ranges)
             v = self._safe_speed(pose, v, omega)
-        v, omega = avoid_robots(v, omega, ctx.detections(observation), ctx)
+        v, omega = avoid_robots(v, omega, detections, ctx)
         return ctx.action(v, omega)
+
+    def _claim(self, pose: np.ndarray, detections: np.ndarray) -> bool:
+        """Remember the robots the camera sees (k, 2: distance m, bearing rad) as claims;
+        True when the current goal now lies in a new claim (time to replan)."""
+        self._claims = [c for c in self._claims if c[2] > self._step]
+        if len(detections) == 0:
+            return False
+        phi = pose[2] + detections[:, 1]
+        others = pose[:2] + detections[:, :1] * np.column_stack([np.cos(phi), np.sin(phi)])
+        fresh = [(o, pose[:2].copy(), self._step + self.claim_steps) for o in others]
+        self._claims = [*self._claims, *fresh][-8:]
+        if self.goal is None:
+            return False
+        goal = self.map.centre(*self.goal)[None]  # (1, 2)
+        return bool(self._claimed(goal, fresh)[0])
+
+    def _claimed(
+        self, points: np.ndarray, claims: list[tuple[np.ndarray, np.ndarray, int]]
+    ) -> np.ndarray:  # (M,) bool
+        """Points (M, 2) left to another robot: within ``claim_radius`` of where it was seen
+        and nearer to it than to where this robot stood then (its side of the bisector)."""
+        out = np.zeros(len(points), dtype=bool)
+        for other, own, _ in claims:
+            d_other = np.hypot(*(points - other).T)
+            out |= (d_other < self.claim_radius) & (d_other < np.hypot(*(points - own).T))
+        return out
 
     def _update_map(self, pose: np.ndarray, ranges: np.ndarray, local: np.ndarray) -> None:
         ctx = self.context
@@ -256,16 +305,24 @@ class FrontierPolicy(Policy):
         if len(self._trail) >= 8 and np.hypot(*(self._trail[-1] - self._trail[0])) < 0.1:
             self._blacklist[self.goal] = self._step + 60  # stalled: give this goal a rest
             return True
-        window = self.map.bbox(pose, 4)
-        frontier, _, _ = self._frontier_and_cost(window)
-        r, c = self.goal[0] - window[0].start, self.goal[1] - window[1].start
-        if not (0 <= r < frontier.shape[0] and 0 <= c < frontier.shape[1]) or not frontier[r, c]:
+        if not self._still_frontier(self.goal):
             return True
         rows, cols = self.map.cells(self.path)
         return bool(np.any(self.map.obstacles[rows, cols]))
 
+    def _still_frontier(self, cell: tuple[int, int]) -> bool:
+        """Whether ``cell`` is a frontier, computed on a window around it: wide enough that
+        every operation of :meth:`_frontier_and_cost` at the cell (closing, opening, dilation,
+        clearance up to the inflation radius) sees the same cells as on the whole map."""
+        m = self.map
+        half = 2 * self.close_cells + 4 + math.ceil(self.inflate / m.res)
+        r0, c0 = max(cell[0] - half, 0), max(cell[1] - half, 0)
+        window = (slice(r0, min(cell[0] + half + 1, m.n)), slice(c0, min(cell[1] + half + 1, m.n)))
+        frontier, _, _ = self._frontier_and_cost(window)
+        return bool(frontier[cell[0] - r0, cell[1] - c0])
+
     def _plan(self, pose: np.ndarray) -> None:
-        """Path to the nearest frontier (at least ``min_goal`` away when possible), or None."""
+        """Path to the frontier of best utility (:meth:`_select`), or None when none is left."""
         self._since_plan = 0
         self.path, self.goal = None, None
         m = self.map
@@ -281,13 +338,35 @@ class FrontierPolicy(Policy):
         self._drop_blacklisted(frontier, window)
         if not frontier.any():
             return
-        d = np.where(frontier, dist, np.inf) * m.res  # (H, W) m
-        far = d >= self.min_goal
-        pick = np.where(far, d, np.inf) if far[frontier].any() else d
-        goal = np.unravel_index(int(np.argmin(pick)), d.shape)
-        cells = self._walk_back(pred, goal[0] * d.shape[1] + goal[1], start, d.shape[1])
+        goal = self._select(frontier, dist * m.res, window)
+        width = frontier.shape[1]
+        cells = self._walk_back(pred, goal[0] * width + goal[1], start, width)
         self.path = np.array([m.centre(r + window[0].start, c + window[1].start) for r, c in cells])
         self.goal = (int(goal[0]) + window[0].start, int(goal[1]) + window[1].start)
+
+    def _select(
+        self, frontier: np.ndarray, dist: np.ndarray, window: tuple[slice, slice]
+    ) -> tuple[int, int]:
+        """The frontier cell (row, col) of ``window`` with the best utility: the unknown area
+        within ``gain_radius`` of it (what its beams may reveal) discounted by
+        ``exp(−path length / decay)``, ``dist`` (H, W) m being the path lengths. Cells at
+        least ``min_goal`` away and not claimed by another robot are preferred whenever any
+        exist."""
+        m = self.map
+        known = m.free[window] | m.obstacles[window]
+        size = 2 * self.gain_cells + 1
+        gain = ndimage.uniform_filter((~known).astype(np.float32), size, mode="constant")
+        utility = np.where(frontier, (gain + 1e-3) * np.exp(-dist / self.decay), -np.inf)
+        rows, cols = np.nonzero(frontier)
+        preferred = dist[rows, cols] >= self.min_goal
+        if self._claims:
+            pts = np.column_stack([cols + window[1].start, rows + window[0].start])
+            pts = (pts + 0.5) * m.res + m.origin  # (F, 2) own-frame cell centres
+            preferred &= ~self._claimed(pts, self._claims)
+        if preferred.any() and not preferred.all():
+            utility[rows[~preferred], cols[~preferred]] = -np.inf
+        r, c = np.unravel_index(int(np.argmax(utility)), utility.shape)
+        return int(r), int(c)
 
     @staticmethod
     def _free_start(passable: np.ndarray, obst: np.ndarray, start: tuple[int, int]) -> None:

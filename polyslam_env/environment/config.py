@@ -28,6 +28,7 @@ __all__ = [
     "FaultConfig",
     "ObservationConfig",
     "RewardConfig",
+    "map_reach",
     "resolve_config",
 ]
 
@@ -66,17 +67,41 @@ class RewardConfig(Config):
             check_range(f"reward.{name}", getattr(self, name), -1e6, 1e6)
 
 
+#: m; the pose scale of maps that fit in it (the fixed scale before maps of any size), kept
+#: there so that small-map observations and policies trained on them stay as they were.
+MIN_POSE_SCALE = 20.0
+#: Most belief cells a side (memory: two bool grids of this side squared per robot).
+MAX_BELIEF_CELLS = 4096
+
+
+def map_reach(map_size: tuple[float, float], max_range: float) -> float:
+    """m: how far from its start (its frame's origin) a robot may place anything it senses.
+
+    The start and every point of the map lie in the map's bounding box of ``map_size``
+    (width, height), so they are at most its diagonal apart; a beam ends at a wall inside
+    the box; ``max_range`` more is the margin for the drift of the pose estimate. The robot's
+    frame has any heading, so the reach holds in every direction.
+    """
+    return math.hypot(*map_size) + max_range
+
+
 @dataclass(frozen=True)
 class ObservationConfig(Config):
-    """What the observation contains and how big its local map is."""
+    """What the observation contains and how big its local map is.
+
+    ``belief_size`` and ``pose_scale`` default to ``None``: derived from the map's size (its
+    bounding box, a public fact like a floor plan's dimensions; where a robot starts in it is
+    not) so that every start and every map size fits, see :meth:`belief_side` and
+    :meth:`position_scale`.
+    """
 
     mode: Literal["vector", "grid"] = "vector"
     grid_size: int = 11  # G: local egocentric grid is G × G cells
     grid_resolution: float = 0.2  # m per local grid cell
-    belief_size: float = 16.0  # m, side of each robot's own free-space grid around its start
+    belief_size: float | None = None  # m, side of each robot's own grid around its start
     belief_resolution: float = 0.1  # m per belief cell
     max_detections: int | None = None  # camera slots; None = num_robots − 1
-    pose_scale: float = 20.0  # m; the position estimate is divided by it (then clipped to ±1)
+    pose_scale: float | None = None  # m; the position estimate is divided by it (then clipped)
     rendezvous_cap: int = 10  # the rendezvous count is reported as min(count, cap) / cap
 
     def validate(self) -> None:
@@ -85,22 +110,53 @@ class ObservationConfig(Config):
                 f"observation.grid_size: must be an odd integer in 1..101, got {self.grid_size!r}"
             )
         check_positive("observation.grid_resolution", self.grid_resolution)
-        check_positive("observation.belief_size", self.belief_size)
         check_positive("observation.belief_resolution", self.belief_resolution)
-        if self.belief_size / self.belief_resolution > 4096:
-            raise ConfigError(
-                f"observation.belief_size: {self.belief_size} m at {self.belief_resolution} m"
-                " is more than 4096 cells a side"
-            )
+        if self.belief_size is not None:
+            check_positive("observation.belief_size", self.belief_size)
+            self._check_belief_cells(self.belief_size, "")
         if self.max_detections is not None and self.max_detections < 0:
             raise ConfigError(
                 f"observation.max_detections: must be >= 0 or null, got {self.max_detections!r}"
             )
-        check_positive("observation.pose_scale", self.pose_scale)
+        if self.pose_scale is not None:
+            check_positive("observation.pose_scale", self.pose_scale)
         if self.rendezvous_cap < 1:
             raise ConfigError(
                 f"observation.rendezvous_cap: must be >= 1, got {self.rendezvous_cap!r}"
             )
+
+    def _check_belief_cells(self, side: float, why: str) -> None:
+        if side / self.belief_resolution > MAX_BELIEF_CELLS:
+            raise ConfigError(
+                f"observation.belief_size: {side:g} m{why} at {self.belief_resolution} m"
+                f" is more than {MAX_BELIEF_CELLS} cells a side"
+            )
+
+    def belief_side(self, map_size: tuple[float, float], max_range: float) -> float:
+        """m: side of each robot's belief grid: ``belief_size``, or for ``None`` twice the
+        map's reach (:func:`map_reach`) rounded up to an even number of cells, so the grid
+        centred on any start holds the whole map.
+        A derived side too large for ``MAX_BELIEF_CELLS`` raises :class:`ConfigError`."""
+        if self.belief_size is not None:
+            return self.belief_size
+        # an even number of cells, so cell edges fall on multiples of the resolution from
+        # the start, as with any even count (the 16 m of fixed-size grids: 160 cells)
+        cells = 2 * math.ceil(map_reach(map_size, max_range) / self.belief_resolution)
+        side = cells * self.belief_resolution
+        self._check_belief_cells(side, f" (null: twice the reach of a {_size(map_size)} map)")
+        return side
+
+    def position_scale(self, map_size: tuple[float, float], max_range: float) -> float:
+        """m: the observed position is the estimate divided by this (then clipped to ±1):
+        ``pose_scale``, or for ``None`` the larger of ``MIN_POSE_SCALE`` and the map's reach
+        (:func:`map_reach`), so no honest estimate is clipped on a map of any size."""
+        if self.pose_scale is not None:
+            return self.pose_scale
+        return max(MIN_POSE_SCALE, map_reach(map_size, max_range))
+
+
+def _size(map_size: tuple[float, float]) -> str:
+    return f"{map_size[0]:g} × {map_size[1]:g} m"
 
 
 @dataclass(frozen=True)

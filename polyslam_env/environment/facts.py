@@ -18,12 +18,15 @@ from polyslam_env.environment.observations import ObservationEncoder
 from polyslam_env.world.maps import resolve_map_path
 
 
-def public_facts(config: EnvConfig) -> dict[str, Any]:
-    """Static facts of an env with ``config`` (the same for every agent).
+def public_facts(config: EnvConfig, map_size: tuple[float, float]) -> dict[str, Any]:
+    """Static facts of an env with ``config`` on a map of ``map_size`` (the same for every
+    agent).
 
     ``map`` is the config's value (a name, a path or ``"generator:<name>"``); ``map_file`` the
     map file it resolves to (None for generator maps), so a policy tied to one map (``paper``)
-    can check it without loading the map.
+    can check it without loading the map. ``map_size`` is (width, height) m of the map's
+    bounding box (a floor plan's dimensions; not where the robot starts in it); ``pose_scale``
+    the scale in force (:meth:`~polyslam_env.environment.config.ObservationConfig.position_scale`).
     """
     rc, wc, oc = config.world.robot, config.world, config.observation
     map_file: Path | None = None
@@ -36,10 +39,11 @@ def public_facts(config: EnvConfig) -> dict[str, Any]:
         "action_mode": config.action.mode,
         "discrete": np.array(config.action.discrete, dtype=float) * (rc.v_max, rc.omega_max),
         "obs_mode": oc.mode,
-        "vector_layout": dict(ObservationEncoder(config).vector_layout),
+        "vector_layout": dict(ObservationEncoder(config, map_size).vector_layout),
         "grid_size": oc.grid_size,
         "grid_resolution": oc.grid_resolution,
-        "pose_scale": oc.pose_scale,
+        "pose_scale": oc.position_scale(map_size, wc.range_sensor.max_range),
+        "map_size": (float(map_size[0]), float(map_size[1])),
         "beam_angles": np.deg2rad(np.asarray(wc.range_sensor.angles_deg, dtype=float)),
         "max_range": wc.range_sensor.max_range,
         "camera_range": wc.camera.range,

@@ -22,12 +22,19 @@ from gymnasium import spaces
 
 from polyslam_env.core import raster
 from polyslam_env.core.geometry import rotation
-from polyslam_env.environment.config import EnvConfig
+from polyslam_env.environment.config import EnvConfig, ObservationConfig
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.sensors import Detection
 
-__all__ = ["BeliefGrid", "MapSampler", "ObservationEncoder", "RobotView", "sweep_beliefs"]
+__all__ = [
+    "BeliefGrid",
+    "MapSampler",
+    "ObservationEncoder",
+    "RobotView",
+    "belief_grids",
+    "sweep_beliefs",
+]
 
 #: Values of the one-channel local map in vector mode.
 FREE, UNKNOWN, OCCUPIED = 0.0, 0.5, 1.0
@@ -44,7 +51,7 @@ class BeliefGrid:
 
     def __init__(self, size: float, resolution: float, max_range: float) -> None:
         self.resolution = float(resolution)
-        self.n = math.ceil(size / resolution)
+        self.n = math.ceil(round(size / resolution, 9))  # cells a side (no float noise)
         self.origin = -0.5 * self.n * self.resolution  # x and y of the lower-left corner
         self.free = np.zeros((self.n, self.n), dtype=bool)  # (n, n)
         self.hit = np.zeros((self.n, self.n), dtype=bool)  # (n, n)
@@ -63,10 +70,28 @@ class BeliefGrid:
         hit (or to ``max_range`` without return), and the hit cells."""
         sweep_beliefs([self], pose[None], angles, ranges[None])
 
+    def inside(self, points: np.ndarray) -> np.ndarray:  # (M,) bool
+        """Whether each of the points (M, 2) falls in a cell of the grid."""
+        return self._flat_cells(points)[1]
+
     def lookup(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(free, hit) (M,) at points (M, 2); False outside the grid."""
         flat, inside = self._flat_cells(points)
         return self.free.reshape(-1)[flat] & inside, self.hit.reshape(-1)[flat] & inside
+
+
+def belief_grids(
+    config: ObservationConfig,
+    bounds: tuple[float, float, float, float],
+    max_range: float,
+    n: int,
+) -> list[BeliefGrid]:
+    """``n`` empty belief grids for a map of ``bounds`` (x0, y0, x1, y1) m, each of side
+    :meth:`~polyslam_env.environment.config.ObservationConfig.belief_side`, so the grid
+    centred on any start holds the whole map."""
+    x0, y0, x1, y1 = bounds
+    side = config.belief_side((x1 - x0, y1 - y0), max_range)
+    return [BeliefGrid(side, config.belief_resolution, max_range) for _ in range(n)]
 
 
 def sweep_beliefs(
@@ -163,7 +188,10 @@ class RobotView:
 class ObservationEncoder:
     """Builds the observation space once and encodes :class:`RobotView` s into it."""
 
-    def __init__(self, config: EnvConfig) -> None:
+    def __init__(self, config: EnvConfig, map_size: tuple[float, float]) -> None:
+        """``map_size``: (width, height) m of the map's bounding box; it sets the pose scale
+        (:meth:`~polyslam_env.environment.config.ObservationConfig.position_scale`) and is
+        checked against the belief grid's size limit now rather than at the first reset."""
         oc = config.observation
         self.config = config
         self.mode = oc.mode
@@ -172,6 +200,8 @@ class ObservationEncoder:
         self.k = config.num_detections
         self.beams = len(config.world.range_sensor.angles_deg)
         self.max_range = config.world.range_sensor.max_range
+        self.pose_scale = oc.position_scale(map_size, self.max_range)  # m
+        oc.belief_side(map_size, self.max_range)  # raises if the derived grid is too large
         self.use_hits = not config.slam_enabled
         h = self.g // 2
         q, r = np.meshgrid(np.arange(self.g) - h, np.arange(self.g) - h)  # columns x, rows y
@@ -264,7 +294,7 @@ class ObservationEncoder:
         out[lay["ranges"]] = np.fmin(view.ranges / self.max_range, 1.0)  # no return (inf) → 1
         out[lay["no_return"]] = ~np.isfinite(view.ranges)
         x, y, theta = view.pose.tolist()
-        scale = oc.pose_scale
+        scale = self.pose_scale
         out[lay["pose"]] = (
             min(max(x / scale, -1.0), 1.0),
             min(max(y / scale, -1.0), 1.0),

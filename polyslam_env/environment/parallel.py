@@ -25,7 +25,7 @@ from pettingzoo.utils import wrappers
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from polyslam_env import metrics
-from polyslam_env.core.errors import MapFileError
+from polyslam_env.core.errors import ConfigError, MapFileError
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.environment import stages
 from polyslam_env.environment.config import EnvConfig, resolve_config
@@ -69,8 +69,9 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     ## Observation Space
     Only on-board knowledge, float32, all values in [−1, 1]. ``vector`` mode, a flat ``Box``:
     ranges/r_max (no return → 1), a no-return flag per beam, the pose estimate
-    ``(x/s, y/s, cos θ, sin θ)`` in the robot's start frame (``s = observation.pose_scale``,
-    clipped), pose standard deviations ``(σx/1 m, σy/1 m, σθ/π)`` clipped to 1, the
+    ``(x/s, y/s, cos θ, sin θ)`` in the robot's start frame (``s``: ``observation.pose_scale``
+    or, for ``None``, the larger of 20 m and the map's reach, its diagonal + r_max; clipped),
+    pose standard deviations ``(σx/1 m, σy/1 m, σθ/π)`` clipped to 1, the
     egocentric ``G × G`` local map flattened (0 free, 0.5 unknown, 1 occupied; x forward along
     columns, y left along rows, the robot in the centre cell, rotated with the *estimated*
     heading; occupied = the robot's own polynomials, free = cells its own beams swept, placed
@@ -131,6 +132,10 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
       ``max_steps``; ``public_facts()`` gives policies the env's static facts. Issue 14
       (episodes change): ``initial_error`` (default on) draws the true starts from P0; fault
       kinds ``kidnap`` and ``slip``; ``diverging``/``diverged_at``/``faults`` in ``infos``.
+      Observations for maps of any size: ``observation.belief_size`` and ``pose_scale``
+      default to ``None``, derived from the map's bounding box (a public fact, ``map_size``),
+      so every start fits and no position estimate is clipped; on maps whose reach is under
+      20 m the observations are as before.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -162,7 +167,8 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         self._free: FreeGrid | None = None
         if self._layout is not None:
             self._free = free_space_grid(self._layout, cfg.coverage_resolution)
-        self._encoder = ObservationEncoder(cfg)
+        self._map_size = self._bounding_size()
+        self._encoder = ObservationEncoder(cfg, self._map_size)
         self._observation_spaces = {a: self._make_obs_space() for a in self.possible_agents}
         self._action_spaces = {a: self._make_action_space() for a in self.possible_agents}
         self._discrete = np.array(cfg.action.discrete) * (
@@ -195,6 +201,22 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
             )
         return layout, None
 
+    def _bounding_size(self) -> tuple[float, float]:
+        """(width, height) m of the map's bounding box: the fixed layout's, or the box a
+        generator draws in (its ``width`` and ``height``). A public fact, as a floor plan's
+        dimensions are; where a robot starts in the map is not."""
+        if self._layout is not None:
+            x0, y0, x1, y1 = self._layout.bounds
+            return (x1 - x0, y1 - y0)
+        width = getattr(self._generator, "width", None)
+        height = getattr(self._generator, "height", None)
+        if not isinstance(width, int | float) or not isinstance(height, int | float):
+            raise ConfigError(
+                f"map {self.config.map!r}: the generator declares no width and height, so the"
+                " map's size is unknown"
+            )
+        return (float(width), float(height))
+
     def _make_obs_space(self) -> spaces.Space[Any]:
         """A fresh copy per agent (each agent's space is seeded on its own)."""
         enc = self._encoder
@@ -216,7 +238,7 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     def public_facts(self) -> dict[str, Any]:
         """Static facts a policy may know (beam angles, limits, dt, observation layout, map);
         see :func:`~polyslam_env.environment.facts.public_facts`."""
-        return public_facts(self.config)
+        return public_facts(self.config, self._map_size)
 
     def observation_space(self, agent: str) -> spaces.Space[Any]:
         return self._observation_spaces[self._check_agent(agent)]

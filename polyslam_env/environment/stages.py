@@ -31,10 +31,10 @@ from polyslam_env.core.geometry import beam_endpoints
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.faults import FaultEvent, FaultPlan, kidnap, perturb_starts
 from polyslam_env.environment.observations import (
-    BeliefGrid,
     MapSampler,
     ObservationEncoder,
     RobotView,
+    belief_grids,
     sweep_beliefs,
 )
 from polyslam_env.environment.rewards import MAPPING_STEP, MAPPING_TOL, MapChanges
@@ -106,7 +106,7 @@ def new_episode(
         exchange=None
         if config.channel is None or not config.slam_enabled
         else make_exchange(config.channel, n, rngs["channel"], wc, config.slam),
-        beliefs=[BeliefGrid(oc.belief_size, oc.belief_resolution, max_range) for _ in range(n)],
+        beliefs=belief_grids(oc, layout.bounds, max_range, n),
         samplers=[MapSampler(0.5 * oc.grid_resolution) for _ in range(n)],
         histories=[],  # filled below: a history starts from the robot's estimate
         sensing=sense(world),

@@ -6,8 +6,12 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from polyslam_env.environment.observations import BeliefGrid, sweep_beliefs
+from polyslam_env.core.errors import ConfigError
+from polyslam_env.environment.config import MIN_POSE_SCALE, ObservationConfig
+from polyslam_env.environment.observations import BeliefGrid, belief_grids, sweep_beliefs
 from polyslam_env.environment.parallel import parallel_env
 
 
@@ -93,3 +97,67 @@ def test_observations__vector_mode_folds_the_grid_mode_channels() -> None:
             assert np.array_equal(vec[layout["local_map"]].reshape(g, g), folded)
             rest = np.delete(vec, np.arange(len(vec))[layout["local_map"]])
             assert np.array_equal(rest, short)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    size=st.tuples(st.floats(0.5, 60.0), st.floats(0.5, 60.0)),
+    u=st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0, 1)),
+    heading=st.floats(-math.pi, math.pi),
+    drift=st.tuples(st.floats(0.0, 0.999), st.floats(-math.pi, math.pi)),
+)
+def test_belief_grid__default_size_holds_the_map_seen_from_any_start(
+    size: tuple[float, float],
+    u: tuple[float, float, float, float],
+    heading: float,
+    drift: tuple[float, float],
+) -> None:
+    # Any start and any point of a w × h box, the point placed with an estimate that drifted
+    # up to one max range (the margin the default size states), fall inside the grid.
+    max_range = 2.0
+    (grid,) = belief_grids(ObservationConfig(), (0.0, 0.0, *size), max_range, 1)
+    w, h = size
+    start, point = np.array([u[0] * w, u[1] * h]), np.array([u[2] * w, u[3] * h])
+    c, s = math.cos(heading), math.sin(heading)
+    own = (point - start) @ np.array([[c, -s], [s, c]])  # the point in the start frame
+    own += drift[0] * max_range * np.array([math.cos(drift[1]), math.sin(drift[1])])
+    assert grid.inside(own[None])[0]
+    assert grid.n % 2 == 0  # cell edges on multiples of the resolution from the start
+
+
+def test_belief_grid__env_grids_hold_every_wall_of_a_large_map_in_each_start_frame() -> None:
+    params = {"width": 24, "height": 14, "min_room_size": 1.5, "max_room_size": 5}
+    env = parallel_env(map="generator:rooms", map_params=params, num_robots=3)
+    env.reset(seed=2)
+    state = env.episode
+    assert state is not None
+    walls = np.vstack(state.world.layout.walls)  # (V, 2) absolute
+    for grid, (x, y, th) in zip(state.beliefs, state.start_poses, strict=True):
+        c, s = math.cos(th), math.sin(th)
+        own = (walls - (x, y)) @ np.array([[c, -s], [s, c]])
+        assert grid.inside(own).all()
+    # the former fixed 16 m grid would not: the map's diagonal alone is 27.8 m
+    assert not BeliefGrid(16.0, 0.1, 2.0).inside(np.array([[0.0, math.hypot(24, 14)]]))[0]
+
+
+def test_observation_config__explicit_sizes_are_kept_and_null_ones_follow_the_map() -> None:
+    oc = ObservationConfig()
+    small, large = (6.0, 4.0), (24.0, 14.0)
+    # 20 m (the fixed scale of small maps) where the reach (diagonal + range) is below it
+    assert oc.position_scale(small, 2.0) == MIN_POSE_SCALE
+    assert oc.position_scale(large, 2.0) == pytest.approx(math.hypot(24, 14) + 2.0)
+    assert ObservationConfig(pose_scale=5.0).position_scale(large, 2.0) == 5.0
+    assert ObservationConfig(belief_size=16.0).belief_side(large, 2.0) == 16.0
+    assert BeliefGrid(16.0, 0.1, 2.0).n == 160
+    env = parallel_env(map="generator:rooms", map_params={"width": 24, "height": 14})
+    facts = env.public_facts()
+    assert facts["map_size"] == large
+    assert facts["pose_scale"] == oc.position_scale(large, 2.0)
+
+
+def test_observation_config__a_derived_grid_too_large_is_a_one_line_error() -> None:
+    with pytest.raises(ConfigError, match=r"observation\.belief_size: .*cells a side") as err:
+        parallel_env(map="generator:rooms", map_params={"width": 300, "height": 300})
+    assert "\n" not in str(err.value)
+    with pytest.raises(ConfigError, match=r"observation\.belief_size"):
+        ObservationConfig(belief_size=500.0)

@@ -1,0 +1,117 @@
+"""Frontier exploration: acts on observations only, deterministic, team claims, map size."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+import polyslam_env
+from policies import make_policy, make_team
+from policies.frontier import FrontierPolicy
+
+LARGE = {"width": 24, "height": 14, "min_room_size": 1.5, "max_room_size": 5}
+
+
+def _rollout(env: Any, seed: int, steps: int) -> tuple[list[Any], list[Any]]:
+    """(observations, actions) of the first ``steps`` steps of a seeded frontier episode."""
+    team = make_team("frontier", env)
+    obs, _ = env.reset(seed=seed)
+    team.reset(seed)
+    rng = np.random.default_rng(seed)
+    seen, done = [], []
+    while env.agents and len(done) < steps:
+        actions = team.act(obs, rng)
+        seen.append(obs)
+        done.append(actions)
+        obs, *_ = env.step(actions)
+    return seen, done
+
+
+def test_frontier__actions_are_a_function_of_the_observations_alone() -> None:
+    # Replaying an episode's observations into a policy built from *another* env (another
+    # layout, other true poses) gives the same actions: nothing but the observations and
+    # the public facts reach the policy, so its goals cannot use ground truth.
+    kwargs = {"map": "generator:rooms", "map_params": {"width": 8, "height": 5}}
+    env = polyslam_env.parallel_env(**kwargs, num_robots=2)
+    observations, actions = _rollout(env, seed=5, steps=60)
+    other = polyslam_env.parallel_env(**kwargs, num_robots=2)
+    other.reset(seed=99)
+    for agent in env.possible_agents:
+        policy = make_policy("frontier", other, agent)
+        policy.reset(5)
+        rng = np.random.default_rng(0)
+        replay = [policy.act(obs[agent], rng) for obs in observations]
+        assert all(np.array_equal(a, b[agent]) for a, b in zip(replay, actions, strict=True))
+
+
+def test_frontier__same_seed_same_actions() -> None:
+    runs = [
+        _rollout(polyslam_env.parallel_env(map="generator:rooms", num_robots=3), 4, 80)[1]
+        for _ in range(2)
+    ]
+    assert len(runs[0]) > 20
+    for a, b in zip(*runs, strict=True):
+        assert a.keys() == b.keys()
+        assert all(np.array_equal(a[k], b[k]) for k in a)
+
+
+def test_frontier__own_map_holds_a_large_map_from_any_start() -> None:
+    env = polyslam_env.parallel_env(map="generator:rooms", map_params=LARGE)
+    policy = make_policy("frontier", env, "robot_0")
+    assert isinstance(policy, FrontierPolicy)
+    # every point of the 24 × 14 m box is within its diagonal of any start, whatever the
+    # start heading; one max range more is the margin for estimate drift
+    reach = math.hypot(24, 14) + env.public_facts()["max_range"]
+    assert -policy.map.origin >= reach  # the grid is centred on the start
+
+
+def test_frontier__frontiers_on_a_seen_robots_side_are_claimed() -> None:
+    env = polyslam_env.parallel_env(map="two_rooms", num_robots=2)
+    policy = make_policy("frontier", env, "robot_0")
+    assert isinstance(policy, FrontierPolicy)
+    policy.reset(0)
+    pose = np.array([0.0, 0.0, 0.5 * math.pi])  # facing +y
+    policy._claim(pose, np.array([[1.0, 0.0]]))  # a robot 1 m straight ahead: at (0, 1)
+    points = np.array([[0.0, 3.0], [0.0, -3.0], [3.0, 0.4], [3.0, 0.6], [0.0, 20.0]])
+    claimed = policy._claimed(points, policy._claims)
+    # beyond it: claimed; behind us: ours; the bisector is y = 0.5; past claim_radius: ours
+    assert claimed.tolist() == [True, False, False, True, False]
+    policy._step += policy.claim_steps
+    policy._claim(pose, np.zeros((0, 2)))
+    assert not policy._claims  # claims expire
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_frontier__team_covers_80_percent_of_a_generated_map_within_a_stated_budget(
+    seed: int,
+) -> None:
+    # Budget from a hard bound: a step's beams mark at most n_beams · (r_max/res + 1) cells
+    # of res², so 3 robots need at least T = 0.8 · A / (3 · that) steps for 80 % of the free
+    # area A. The budget is 12 T: in rooms at most 2.5 m wide a beam ends at a wall within
+    # about half its range (×2), a 0.3 m step re-marks most cells of the forward beams (×2),
+    # every room is a dead end entered and left by its door (×2), and turning to a new goal
+    # costs steps without travel (×1.5).
+    env = polyslam_env.parallel_env(
+        map="generator:rooms",
+        map_params={"width": 10, "height": 6},
+        num_robots=3,
+        max_steps=1000,
+        coverage_target=0.8,
+    )
+    team = make_team("frontier", env)
+    obs, _ = env.reset(seed=seed)
+    team.reset(seed)
+    state = env.episode
+    assert state is not None
+    facts = env.public_facts()
+    res = state.coverage.resolution
+    area = state.coverage.n_free * res**2  # m²
+    per_step = len(facts["beam_angles"]) * (facts["max_range"] / res + 1) * res**2  # m²
+    budget = math.ceil(12 * 0.8 * area / (3 * per_step))
+    rng = np.random.default_rng(seed)
+    while env.agents and state.step_count < budget:
+        obs, *_ = env.step(team.act(obs, rng))
+    assert state.coverage.coverage >= 0.8, (state.step_count, budget)
