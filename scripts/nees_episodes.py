@@ -86,10 +86,14 @@ def main() -> None:
         print(f"seed {seed}: final NEES frame {np.round(f[-1], 2)} relative {np.round(r[-1], 2)}")
     n = len(finals_f)
     lo, hi = scipy.stats.chi2.ppf([0.025, 0.975], 3 * n) / n
-    print(f"{args.runs} runs × {args.robots} robots, {args.steps} steps on {args.map},"
-          f" initial_error={args.initial_error}, {time.perf_counter() - start:.0f} s")
-    print(f"final-step mean NEES: frame {np.mean(finals_f):.2f}, relative {np.mean(finals_r):.2f}"
-          f"  (95 % band of the mean of {n}: {lo:.2f}–{hi:.2f})")
+    print(
+        f"{args.runs} runs × {args.robots} robots, {args.steps} steps on {args.map},"
+        f" initial_error={args.initial_error}, {time.perf_counter() - start:.0f} s"
+    )
+    print(
+        f"final-step mean NEES: frame {np.mean(finals_f):.2f}, relative {np.mean(finals_r):.2f}"
+        f"  (95 % band of the mean of {n}: {lo:.2f}–{hi:.2f})"
+    )
     print(f"episode-mean NEES:    frame {np.mean(means_f):.2f}, relative {np.mean(means_r):.2f}")
 
 

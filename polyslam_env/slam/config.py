@@ -35,7 +35,7 @@ class SlamConfig(Config):
     tangent_min_deg: float = 10.0  # beams hitting closer to tangent than this are skipped
     squared_error: bool = False  # the paper's squared end-point distance in association
     shape_follows_pose: bool = True  # shapes move with the pose error in ∂h/∂pose (robot.py)
-    join_pieces: bool = False  # join end-to-end pieces of one wall (merging.py, issue 14)
+    join_pieces: bool = True  # join end-to-end pieces of one wall (merging.py; paper: False)
     blas_threads: int = 1  # BLAS threads during a step (polyslam_env/core/blas.py); 0: leave as is
 
     def validate(self) -> None:
@@ -85,7 +85,8 @@ class SlamConfig(Config):
         return np.diag([self.odom_sigma_xy**2, self.odom_sigma_xy**2, s_th**2])
 
 
-PRESETS: dict[str, SlamConfig] = {"paper": SlamConfig()}
+#: ``paper``: the paper's algorithm (no joins of end-to-end pieces, our addition).
+PRESETS: dict[str, SlamConfig] = {"paper": SlamConfig(join_pieces=False)}
 
 
 def slam_preset(name: str) -> SlamConfig:

@@ -749,4 +749,3 @@ def _combine_sides(a: int, b: int) -> int:
     if a == b or b == 0:
         return a
     return b if a == 0 else 0
-

@@ -80,7 +80,7 @@ def test_env_config__unknown_top_level_key_in_yaml_names_key_and_file(tmp_path: 
 
 
 def test_env_config__slam_preset_replaces_slam_and_conflicts_with_custom_slam() -> None:
-    assert EnvConfig(slam_preset="paper").slam == SlamConfig()
+    assert EnvConfig(slam_preset="paper").slam == SlamConfig(join_pieces=False)
     with pytest.raises(ConfigError, match="slam_preset"):
         EnvConfig(slam=SlamConfig(rho_min=0.05), slam_preset="paper")
 
