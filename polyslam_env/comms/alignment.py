@@ -53,29 +53,44 @@ def align_transform(
     sigma: float,
     iterations: int = 5,
 ) -> np.ndarray:
+    """:func:`refine_transform`'s transform only."""
+    return refine_transform(t0, cov_t, chains, walls, sigma, iterations)[0]
+
+
+def refine_transform(
+    t0: np.ndarray,
+    cov_t: np.ndarray,
+    chains: Sequence[np.ndarray],
+    walls: Sequence[Polynomial],
+    sigma: float,
+    iterations: int = 5,
+) -> tuple[np.ndarray, np.ndarray]:
     """MAP refinement (3,) of the transform ``t0`` (3,) with prior covariance ``cov_t``
     (3, 3), from received ``chains`` (each (N_k, 2), sender frame, points along a curve) and
     the receiver's ``walls`` (with their current c0); ``sigma`` (m) is the standard deviation
-    of one (chain, wall) pair's offset. Returns ``t0`` when nothing matches, Σ_T is singular,
-    or the correction fails the χ²₃ 99 % test."""
+    of one (chain, wall) pair's offset. Returns the transform and its posterior covariance
+    (Σ_T⁻¹ + Jᵀ W J)⁻¹ at the solution; ``(t0, cov_t)`` when nothing matches, Σ_T is
+    singular, or the correction fails the χ²₃ 99 % test."""
     t0 = np.asarray(t0, dtype=float)
+    cov_t = np.asarray(cov_t, dtype=float)
     try:
         info_prior = np.linalg.inv(np.linalg.cholesky(cov_t))  # L⁻¹, Σ⁻¹ = L⁻ᵀ L⁻¹
     except np.linalg.LinAlgError:
-        return t0
+        return t0, cov_t
     info_prior = info_prior.T @ info_prior  # (3, 3)
     if not walls or not chains:
-        return t0
+        return t0, cov_t
     q = np.vstack(chains)  # (N, 2)
     chain_of = np.concatenate([np.full(len(c), k) for k, c in enumerate(chains)])
     tangents_q = np.vstack([_tangents(c) for c in chains])  # (N, 2) sender frame
     t = t0.copy()
+    info = info_prior
     for _ in range(iterations):
         p, dp_dt = frame_points(q, t)
         tangents = tangents_q @ rotation(t[2]).T
         match = _match(p, dp_dt, tangents, walls, cov_t, sigma)
         if match is None:
-            return t0
+            return t0, cov_t
         residual, grad, wall, keep = match  # (M,), (M, 3), (M,), (N,)
         pair = chain_of[keep] * len(walls) + wall  # (chain, wall) key
         _, inverse, counts = np.unique(pair, return_inverse=True, return_counts=True)
@@ -88,8 +103,9 @@ def align_transform(
             break
     d = t - t0
     if float(d @ info_prior @ d) > CHI2_3DOF_99:
-        return t0
-    return t
+        return t0, cov_t
+    posterior = np.linalg.inv(info)
+    return t, 0.5 * (posterior + posterior.T)
 
 
 def _tangents(chain: np.ndarray) -> np.ndarray:

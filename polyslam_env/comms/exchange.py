@@ -91,7 +91,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 import scipy.linalg
 
-from polyslam_env.comms.alignment import align_transform, frame_points
+from polyslam_env.comms.alignment import frame_points, refine_transform
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
 from polyslam_env.comms.messages import (
     GridMessage,
@@ -413,6 +413,7 @@ class RendezvousExchange:
         self._ids_seen: list[set[int]] = [set() for _ in range(num_robots)]
         self._boxes_seen: list[dict[int, np.ndarray]] = [{} for _ in range(num_robots)]
         self.superseded = [0] * num_robots  # landmarks replaced by a newer version (rule 2)
+        self.dropped_points = [0] * num_robots  # received points too uncertain to keep
         self._rendezvous = [0] * num_robots
         self._polys_sent = [0] * num_robots
         self._polys_received = [0] * num_robots
@@ -658,8 +659,10 @@ class RendezvousExchange:
         t, d_state, d_noise, noise_cov = self._transform(
             slam.pose, sighting, message.header, pose_var
         )
+        cov_t = d_noise @ noise_cov @ d_noise.T
         if self.config.align_maps and message.records:
-            t = self._align(slam, message, t, d_noise @ noise_cov @ d_noise.T, sender)
+            t, cov_t = self._align(slam, message, t, cov_t, sender)
+        limit = slam.config.rho_min / RECEIVED_SIGMAS
         received: list[Polynomial] = []
         ids: list[int] = []
         for record in message.records:
@@ -667,9 +670,15 @@ class RendezvousExchange:
                 record, t, d_state, d_noise, noise_cov, slam.mean.size, self.chord_tol,
                 self.spacing,
             )  # fmt: skip
-            for piece, fit in refit_pieces(pts, self.order, self.auto_order, self.refit_tol):
-                received.append(fit.poly)
-                ids += self._fuse(slam, piece, fit, sender, r, 0)
+            sure = transform_normal_sigma(record.polynomial, t, cov_t, self.chord_tol,
+                                          self.spacing) <= limit  # fmt: skip
+            self.dropped_points[r] += int(np.count_nonzero(~sure))
+            for rows in uncovered_runs(sure, pts.xy, slam.config.merge_min_overlap):
+                for piece, fit in refit_pieces(
+                    _subset(pts, rows), self.order, self.auto_order, self.refit_tol
+                ):
+                    received.append(fit.poly)
+                    ids += self._fuse(slam, piece, fit, sender, r, 0)
         self._carry_sources(r, slam)
         return received, ids
 
@@ -680,8 +689,9 @@ class RendezvousExchange:
         t: np.ndarray,
         cov_t: np.ndarray,
         sender: int,
-    ) -> np.ndarray:
-        """The transform refined on the receiver's walls (:func:`align_transform`): anchors
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The transform refined on the receiver's walls and its covariance
+        (:func:`refine_transform`): anchors
         are its landmarks holding no data of this sender (an earlier copy would pull T back
         to that meeting's error); one (chain, wall) pair weighs as one offset of the range
         noise σ."""
@@ -694,7 +704,7 @@ class RendezvousExchange:
         chains = [
             chain_points(rec.polynomial, self.chord_tol, self.spacing) for rec in message.records
         ]
-        return align_transform(t, cov_t, chains, anchors, slam.config.range_sigma)
+        return refine_transform(t, cov_t, chains, anchors, slam.config.range_sigma)
 
     def _fuse(
         self, slam: PolySlam, points: PointSet, fit: Fit, sender: int, r: int, depth: int
@@ -767,6 +777,30 @@ class RendezvousExchange:
                     sources[lid] = frozenset(sources.get(lid, frozenset()).union(*heirs))
         self._ids_seen[r] = now
         self._boxes_seen[r] = {lid: boxes[table.index_of(lid)] for lid in sources}
+
+
+#: A received point is kept only if the transform's uncertainty moves it along the wall's
+#: normal by at most ρ_min / RECEIVED_SIGMAS at 1σ: its 3σ band then stays within the
+#: receiver's own good-approximation threshold at zero uncertainty, ρ_min. Points further off
+#: (far from the meeting point when the camera alone fixes the heading to ~1.4°) would be
+#: walls the receiver could not even recognise as its own: a wrong wall is worse than none.
+RECEIVED_SIGMAS = 3.0
+
+
+def transform_normal_sigma(
+    poly: Polynomial, transform: np.ndarray, cov_t: np.ndarray, chord_tol: float, spacing: float
+) -> np.ndarray:
+    """Per chain point of a received ``poly`` (as :func:`received_point_set` samples it), the
+    standard deviation (m) of its position along the curve's normal that the transform's
+    covariance ``cov_t`` (3, 3) causes, in the receiver's frame."""
+    q = chain_points(poly, chord_tol, spacing)
+    _, dp_dt = frame_points(q, transform)  # (N, 2, 3)
+    d = np.gradient(q, axis=0) if len(q) > 1 else np.array([[1.0, 0.0]])
+    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    normal = np.stack([-d[:, 1], d[:, 0]], axis=1) @ rotation(float(transform[2])).T  # (N, 2)
+    g = np.einsum("ni,nij->nj", normal, dp_dt)  # (N, 3) ∂(normal offset)/∂T
+    out: np.ndarray = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", g, cov_t, g), 0.0))
+    return out
 
 
 def normal_variance(poly: Polynomial, c0_var: float) -> float:
