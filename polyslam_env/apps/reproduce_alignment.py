@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from polyslam_env.apps.reproduce_mblcc import matched_filter_config
 from polyslam_env.core.blas import blas_threads
 from polyslam_env.core.config import Config
 from polyslam_env.core.errors import ConfigError
@@ -110,15 +111,8 @@ class AlignmentReproduceConfig(Config):
             raise ConfigError(f"descriptor_sigma: must be >= 0, got {self.descriptor_sigma}")
 
     def filter_config(self) -> PointSlamConfig:
-        w = self.world
-        return self.slam.replace(
-            sigma_v=w.sigma_v,
-            sigma_g_deg=w.sigma_g_deg,
-            sigma_r=w.sigma_r,
-            sigma_b_deg=w.sigma_b_deg,
-            dt=w.dt,
-            wheelbase=w.wheelbase,
-        )
+        """The filters' settings with the world's true noise, period and wheelbase."""
+        return matched_filter_config(self.slam, self.world)
 
 
 Record = dict[str, Any]  # one alignment: method, stage, accepted, errors, time, matches

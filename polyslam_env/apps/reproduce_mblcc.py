@@ -97,15 +97,20 @@ class MblccReproduceConfig(Config):
 
     def filter_config(self) -> PointSlamConfig:
         """The filters' settings with the world's true noise, period and wheelbase."""
-        w = self.world
-        return self.slam.replace(
-            sigma_v=w.sigma_v,
-            sigma_g_deg=w.sigma_g_deg,
-            sigma_r=w.sigma_r,
-            sigma_b_deg=w.sigma_b_deg,
-            dt=w.dt,
-            wheelbase=w.wheelbase,
-        )
+        return matched_filter_config(self.slam, self.world)
+
+
+def matched_filter_config(slam: PointSlamConfig, world: KinematicConfig) -> PointSlamConfig:
+    """``slam`` with the kinematic world's true noise, control period and wheelbase (every
+    point-landmark study runs its filters on the models that made the data)."""
+    return slam.replace(
+        sigma_v=world.sigma_v,
+        sigma_g_deg=world.sigma_g_deg,
+        sigma_r=world.sigma_r,
+        sigma_b_deg=world.sigma_b_deg,
+        dt=world.dt,
+        wheelbase=world.wheelbase,
+    )
 
 
 RunMetrics = dict[str, list[dict[str, float]]]  # algorithm → per robot → metric → value

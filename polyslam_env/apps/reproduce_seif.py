@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from polyslam_env.apps.reproduce_mblcc import matched_filter_config
 from polyslam_env.core.blas import blas_threads
 from polyslam_env.core.config import Config
 from polyslam_env.core.errors import ConfigError
@@ -73,15 +74,8 @@ class SeifReproduceConfig(Config):
             )
 
     def filter_config(self) -> PointSlamConfig:
-        w = self.world
-        return self.slam.replace(
-            sigma_v=w.sigma_v,
-            sigma_g_deg=w.sigma_g_deg,
-            sigma_r=w.sigma_r,
-            sigma_b_deg=w.sigma_b_deg,
-            dt=w.dt,
-            wheelbase=w.wheelbase,
-        )
+        """The filters' settings with the world's true noise, period and wheelbase."""
+        return matched_filter_config(self.slam, self.world)
 
 
 def _info_map(seif: PointSeif) -> InformationMap:

@@ -115,6 +115,25 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _study_config(cls: Any, args: argparse.Namespace) -> Any:
+    """A seed study's config: ``--config`` or the defaults, with ``--runs`` applied."""
+    config = cls.from_yaml(args.config) if args.config else cls()
+    return config if args.runs is None else config.replace(runs=args.runs)
+
+
+def _finish(summary: dict[str, Any], config: Any, elapsed: float, workers: int) -> None:
+    """Stamp a study's summary with its run settings."""
+    summary["elapsed_s"] = elapsed
+    summary["workers"] = workers
+    summary["config"] = config.to_dict()
+
+
+def _print_checks(checks: dict[str, Any]) -> None:
+    for name, ok in checks.items():
+        if isinstance(ok, bool):
+            print(f"check {name}: {'yes' if ok else 'NO'}")
+
+
 def run_mblcc(args: argparse.Namespace) -> int:
     """Seed 003: the table over ``runs`` seeds, Fig 5's particle sweep, summary and figure."""
     from polyslam_env.apps.reproduce_mblcc import (
@@ -127,9 +146,7 @@ def run_mblcc(args: argparse.Namespace) -> int:
     from polyslam_env.cli.common import progress_bar
     from polyslam_env.core.io import write_json
 
-    config = MblccReproduceConfig.from_yaml(args.config) if args.config else MblccReproduceConfig()
-    if args.runs is not None:
-        config = config.replace(runs=args.runs)
+    config = _study_config(MblccReproduceConfig, args)
     out = Path(args.out)
     start = time.perf_counter()
     sweep = [n for n in config.fig5_particles if n != config.slam.particles]
@@ -138,15 +155,12 @@ def run_mblcc(args: argparse.Namespace) -> int:
         runs, by_n = reproduce(config, workers=args.workers, progress=lambda n: bar.update(1))
     elapsed = time.perf_counter() - start
     summary = summarise(runs, by_n)
-    summary["elapsed_s"] = elapsed
-    summary["workers"] = args.workers
-    summary["config"] = config.to_dict()
+    _finish(summary, config, elapsed, args.workers)
 
     print(f"{config.runs} runs (+ {total - config.runs} for Fig 5), {elapsed:.0f} s,")
     print(f"{args.workers} workers; mean ± std over runs, seed's Table 1 mean alongside")
     print(table_text(summary))
-    for name, ok in summary["checks"].items():
-        print(f"check {name}: {'yes' if ok else 'NO'}")
+    _print_checks(summary["checks"])
     print("paired differences (mean ± standard error over runs), r1 / r2 / r3:")
     for metric, pairs in summary["paired"].items():
         for pair, cells in pairs.items():
@@ -171,27 +185,18 @@ def run_alignment(args: argparse.Namespace) -> int:
     from polyslam_env.cli.common import progress_bar
     from polyslam_env.core.io import write_json
 
-    config = (
-        AlignmentReproduceConfig.from_yaml(args.config)
-        if args.config
-        else AlignmentReproduceConfig()
-    )
-    if args.runs is not None:
-        config = config.replace(runs=args.runs)
+    config = _study_config(AlignmentReproduceConfig, args)
     out = Path(args.out)
     start = time.perf_counter()
     with progress_bar(config.runs, "reproduce alignment", "run", args.quiet, leave=False) as bar:
         records = reproduce(config, workers=args.workers, progress=bar.update)
     elapsed = time.perf_counter() - start
     summary = summarise(config, records)
-    summary["elapsed_s"] = elapsed
-    summary["workers"] = args.workers
-    summary["config"] = config.to_dict()
+    _finish(summary, config, elapsed, args.workers)
     print(f"{config.runs} runs, {elapsed:.0f} s, {args.workers} workers; errors of the")
     print("accepted alignments against the true transform between the start frames")
     print(table_text(summary))
-    for name, ok in summary["checks"].items():
-        print(f"check {name}: {'yes' if ok else 'NO'}")
+    _print_checks(summary["checks"])
     write_json(out / "summary.json", summary)
     figures = [
         plot_errors(summary, out / "figs3-5_errors.png"),
@@ -212,22 +217,17 @@ def run_seif(args: argparse.Namespace) -> int:
     from polyslam_env.cli.common import progress_bar
     from polyslam_env.core.io import write_json
 
-    config = SeifReproduceConfig.from_yaml(args.config) if args.config else SeifReproduceConfig()
-    if args.runs is not None:
-        config = config.replace(runs=args.runs)
+    config = _study_config(SeifReproduceConfig, args)
     out = Path(args.out)
     start = time.perf_counter()
     with progress_bar(config.runs, "reproduce seif", "run", args.quiet, leave=False) as bar:
         runs = reproduce(config, workers=args.workers, progress=bar.update)
     elapsed = time.perf_counter() - start
     summary = summarise(config, runs)
-    summary["elapsed_s"] = elapsed
-    summary["workers"] = args.workers
-    summary["config"] = config.to_dict()
+    _finish(summary, config, elapsed, args.workers)
     print(f"{config.runs} runs of {config.pieces} pieces, {elapsed:.0f} s, {args.workers} workers")
     print(table_text(summary))
-    for name, ok in summary["checks"].items():
-        print(f"check {name}: {'yes' if ok else 'NO'}")
+    _print_checks(summary["checks"])
     write_json(out / "summary.json", summary)
     print(f"wrote {out / 'summary.json'}")
     return 0

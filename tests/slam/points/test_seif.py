@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from polyslam_env.apps.reproduce_mblcc import matched_filter_config
 from polyslam_env.slam.points import PointMeasurements, PointSlamConfig
 from polyslam_env.slam.points.seif import PointSeif
 from polyslam_env.world.kinematic import KinematicConfig, simulate_episode
@@ -14,15 +15,7 @@ WORLD = KinematicConfig(landmarks=150, sigma_v=0.1, sigma_g_deg=1.0, sigma_r=0.1
 
 
 def _filter_config() -> PointSlamConfig:
-    w = WORLD
-    return PointSlamConfig(
-        sigma_v=w.sigma_v,
-        sigma_g_deg=w.sigma_g_deg,
-        sigma_r=w.sigma_r,
-        sigma_b_deg=w.sigma_b_deg,
-        dt=w.dt,
-        wheelbase=w.wheelbase,
-    )
+    return matched_filter_config(PointSlamConfig(), WORLD)
 
 
 def _run(backend: object, sweeps: int, seed: int = 0) -> object:
