@@ -382,23 +382,32 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         return self._renderer.render(self.render_state())
 
     def render_state(self) -> RenderState:
-        """A snapshot of the episode for the renderer (ground truth and estimates, absolute)."""
+        """A snapshot of the episode for the renderer (ground truth and estimates, absolute).
+
+        Estimates and maps are placed by each robot's **true** start, as the map metrics are:
+        the offset of its frame from where it really started is unobservable, so a picture in
+        the nominal frame would show that offset as a mapping error on every wall. The
+        ellipse is then the filter's own covariance relative to the true start."""
         state = self.episode
         if state is None:
             raise RuntimeError("render_state() called before reset()")
         n = self.config.num_robots
+        starts = [h.true[0] for h in state.histories]
         est = np.array([estimate(state, i)[0] for i in range(n)])
-        cov = np.array([estimate(state, i)[1] for i in range(n)])
+        cov = np.array(
+            [
+                state.slams[i].pose_cov_relative if state.slams else estimate(state, i)[1]
+                for i in range(n)
+            ]
+        )
         est_abs = np.array(
-            [metrics.pose_to_absolute(est[i : i + 1], state.start_poses[i])[0] for i in range(n)]
+            [metrics.pose_to_absolute(est[i : i + 1], starts[i])[0] for i in range(n)]
         )
         cov_abs = np.array(
-            [metrics.cov_to_absolute(cov[i : i + 1], state.start_poses[i])[0] for i in range(n)]
+            [metrics.cov_to_absolute(cov[i : i + 1], starts[i])[0] for i in range(n)]
         )
         maps = [
-            metrics.map_points(state.slams[i].polynomials(), state.start_poses[i], 0.02)
-            if state.slams
-            else []
+            metrics.map_points(state.slams[i].polynomials(), starts[i], 0.02) if state.slams else []
             for i in range(n)
         ]
         grid = state.coverage

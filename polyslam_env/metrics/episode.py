@@ -196,7 +196,9 @@ class RobotHistory:
         return np.array([p[:2] for p in self.true])
 
     def est_path_abs(self) -> np.ndarray:  # (k, 2)
-        return metrics.pose_to_absolute(np.array(self.est), self.start_pose)[:, :2]
+        """Estimated positions in the absolute frame, placed by the true start (as the map
+        metrics place the map; the frame's offset from the true start is unobservable)."""
+        return metrics.pose_to_absolute(np.array(self.est), self.true[0])[:, :2]
 
     def run(self, polys: list[Polynomial]) -> RobotRun:
         return RobotRun(

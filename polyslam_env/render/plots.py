@@ -41,8 +41,10 @@ def draw_layout(ax, layout: Layout) -> None:  # type: ignore[no-untyped-def]
 
 
 def draw_robot_map(ax, run, color: str = "tab:green") -> None:  # type: ignore[no-untyped-def]
-    """One robot's polynomials, true path and estimated path, in the absolute frame."""
-    sp = run.start_pose
+    """One robot's polynomials, true path and estimated path, in the absolute frame, placed
+    by the robot's true start (as the map metrics place them: the frame's offset from the
+    true start is unobservable)."""
+    sp = run.true_poses[0]
     for poly in run.polynomials:
         pts = transform_points(poly.sample_arclength(0.01), sp)
         ax.plot(pts[:, 0], pts[:, 1], color=color, lw=2.2, zorder=3)
