@@ -53,6 +53,7 @@ ROBOT_KEYS = (
     "completeness_seen",
     "duplicates",
     "nees",
+    "nees_rel",
     "has_map",
     "rendezvous",
 )

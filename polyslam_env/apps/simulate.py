@@ -168,7 +168,7 @@ def simulate(
     every = slams + shadows  # the exchanging SLAMs, then the lone shadows
     robots = list(range(num_robots)) + shadow  # every[j] runs on world robot robots[j]
     histories = [
-        RobotHistory(frames[r], s.pose, s.pose_cov, true_pose=world.poses[r])
+        RobotHistory(frames[r], s.pose, s.pose_cov, true_pose=world.poses[r], p0=scfg.p0)
         for s, r in zip(every, robots, strict=True)
     ]
     ex = _make_exchange(exchange, num_robots, seed, wcfg, scfg)

@@ -118,7 +118,12 @@ def new_episode(
         coverage_series=[],
     )
     state.histories = [
-        RobotHistory(start_poses[i], *estimate(state, i), true_pose=world.poses[i])
+        RobotHistory(
+            start_poses[i],
+            *estimate(state, i),
+            true_pose=world.poses[i],
+            p0=config.slam.p0 if config.slam_enabled else None,
+        )
         for i in range(n)
     ]
     sweep_coverage(state)

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from polyslam_env import metrics
+from polyslam_env.slam.ekf import start_error_cov
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
 
@@ -43,6 +44,7 @@ __all__ = [
 #: :func:`final_robot_metrics` for the values without a map or without SLAM).
 ROBOT_METRIC_KEYS: tuple[str, ...] = (
     "nees",
+    "nees_rel",
     "nees_paper",
     "nu",
     "nu_mean",
@@ -72,7 +74,7 @@ MAP_METRIC_KEYS: tuple[str, ...] = (
     "duplicates",
     "has_map",
 )
-_SLAM_KEYS = ("nees", "nees_paper", *MAP_METRIC_KEYS, "slam_time_ms")
+_SLAM_KEYS = ("nees", "nees_rel", "nees_paper", *MAP_METRIC_KEYS, "slam_time_ms")
 
 
 @dataclass
@@ -89,6 +91,7 @@ class RobotRun:
     diverged: bool  # flagged at any step
     collisions: int
     comms: dict[str, int] = field(default_factory=dict)  # exchange counters (empty: no exchange)
+    p0: np.ndarray | None = None  # (3, 3) the start-error covariance est_covs include, if any
 
 
 #: Exchange counters that :func:`robot_metrics` reports (zeros when there was no exchange).
@@ -119,6 +122,19 @@ def map_metrics(
     }
 
 
+def nees_relative(run: RobotRun) -> float:
+    """Mean NEES of the filter itself: the estimate against the true pose seen from the
+    robot's **true** start, with the covariance minus the start error's share J P0 Jᵀ
+    (:func:`~polyslam_env.slam.ekf.start_error_cov`), i.e. the filter's own P_S. Unlike
+    ``nees``, it does not carry the robot's unobservable start offset e₀ᵀP0⁻¹e₀ ~ χ²(3) for the
+    whole episode. Step 0 is left out (P_S = 0 there: the start is known exactly in that
+    frame). Without ``p0`` (no start-error model) it equals ``nees``."""
+    if run.p0 is None or len(run.est_poses) < 2:
+        return metrics.nees(run.true_poses, run.est_poses, run.est_covs, run.start_pose)
+    covs = run.est_covs[1:] - np.array([start_error_cov(e, run.p0) for e in run.est_poses[1:]])
+    return metrics.nees(run.true_poses[1:], run.est_poses[1:], covs, run.true_poses[0])
+
+
 def robot_metrics(run: RobotRun, layout: Layout) -> dict[str, float]:
     """The paper's metrics (SPEC §5) for one robot, plus the map-quality metrics
     (:func:`map_metrics`, the map placed by the robot's true start ``true_poses[0]``) and
@@ -128,6 +144,7 @@ def robot_metrics(run: RobotRun, layout: Layout) -> dict[str, float]:
     hit = metrics.hit_fraction(run.hit_points, layout) if len(run.hit_points) else 0.0
     return {
         "nees": metrics.nees(run.true_poses, run.est_poses, run.est_covs, sp),
+        "nees_rel": nees_relative(run),
         "nees_paper": metrics.nees_paper(run.true_poses, run.est_poses, run.est_covs, sp),
         **map_metrics(polys, run.true_poses[0], sp, run.hit_points, layout),
         "hit_fraction": hit,
@@ -155,8 +172,10 @@ class RobotHistory:
         est_pose: np.ndarray,
         est_cov: np.ndarray,
         true_pose: np.ndarray | None = None,
+        p0: np.ndarray | None = None,
     ) -> None:
         self.start_pose = np.asarray(start_pose, dtype=float).copy()  # (3,) absolute
+        self.p0 = None if p0 is None else np.asarray(p0, dtype=float)  # start-error cov in cov
         first = self.start_pose if true_pose is None else np.asarray(true_pose, dtype=float)
         self.true: list[np.ndarray] = [first.copy()]  # (3,) each, absolute
         self.est: list[np.ndarray] = [np.asarray(est_pose, dtype=float).copy()]  # (3,) own frame
@@ -211,6 +230,7 @@ class RobotHistory:
             slam_times=np.array(self.slam_times),
             diverged=self.diverged,
             collisions=self.collisions,
+            p0=self.p0,
         )
 
 
