@@ -107,7 +107,7 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     others go on. Kinds ``kidnap`` and ``slip`` (see ``FaultConfig``) move the true pose unseen
     by odometry, or make the odometry over-report the motion; ``infos[agent]`` holds the
     step's ``faults`` and the divergence flag (``diverging``, ``diverged_at``). At an agent's
-    last step ``infos[agent]`` also holds ``"metrics"`` (per robot: nees, nees_paper, nu,
+    last step ``infos[agent]`` also holds ``"metrics"`` (per robot: nees, nees_rel, nees_paper, nu,
     nu_mean, nu_mean_abs, completeness, completeness_seen, map_precision, duplicates, has_map,
     slam, coverage, bytes_sent, bytes_received, rendezvous, slam_time_ms (wall time, not
     reproducible), collisions, path_length; never NaN: a robot without a map has has_map 0 and
