@@ -14,6 +14,7 @@ from polyslam_env import metrics
 from polyslam_env.apps.simulate import SimulationResult, simulate
 from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.comms.exchange import (
+    RECEIVED_CI_WEIGHT,
     RendezvousExchange,
     chain_points,
     frame_message,
@@ -168,7 +169,8 @@ def test_received_point_set__derivatives_match_finite_differences() -> None:
     plus = received_point_set(shifted, t, np.eye(3), j_noise, np.eye(6), 5).xy
     # c0 moves the chain rigidly (same ξ knots), so the FD is exact up to round-off
     np.testing.assert_allclose((plus - pts.xy) / eps, pts.d_noise[:, :, 0], atol=1e-6)
-    assert pts.noise_cov[0, 0] == 4e-4
+    # the sender's c0 variance, divided by the covariance-intersection weight
+    assert pts.noise_cov[0, 0] == 4e-4 / RECEIVED_CI_WEIGHT
 
 
 @settings(max_examples=20, deadline=None)
