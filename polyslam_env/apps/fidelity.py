@@ -19,12 +19,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from polyslam_env.apps.jobs import run_jobs
 from polyslam_env.apps.rollout import EpisodeResult, evaluate_episode
 from polyslam_env.core.config import Config, check_range
 from polyslam_env.core.errors import ConfigError
@@ -139,18 +139,7 @@ def run_fidelity(
     }
     jobs = [(configs[name, setting], config.policy, seed) for name, setting, seed in keys]
     start = time.perf_counter()
-    results: list[EpisodeResult] = []
-    if workers <= 1:
-        for job in jobs:
-            results.append(_run_job(job))
-            if progress:
-                progress(len(results))
-    else:
-        with ProcessPoolExecutor(workers) as pool:
-            for result in pool.map(_run_job, jobs):
-                results.append(result)
-                if progress:
-                    progress(len(results))
+    results = run_jobs(_run_job, jobs, workers, progress)
     grouped: dict[str, dict[str, list[EpisodeResult]]] = {
         name: {s: [] for s in SETTINGS} for name in config.maps
     }

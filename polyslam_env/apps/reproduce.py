@@ -9,13 +9,13 @@ seeds in parallel processes and :func:`summarise` turns them into the table.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from polyslam_env.apps.jobs import run_jobs
 from polyslam_env.apps.simulate import SimulationResult, simulate
 from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.core.config import Config
@@ -138,20 +138,8 @@ def reproduce(
     """All runs (seeds 0..runs−1 unless given), in ``workers`` processes, in seed order."""
     seeds = list(range(config.runs)) if seeds is None else list(seeds)
     jobs = [(config, s) for s in seeds]
-    if workers <= 1:
-        out = []
-        for job in jobs:
-            out.append(_run_job(job))
-            if progress:
-                progress(len(out))
-        return out
-    results: list[RunResult] = []
-    with ProcessPoolExecutor(workers) as pool:
-        for r in pool.map(_run_job, jobs, chunksize=max(1, len(jobs) // (8 * workers))):
-            results.append(r)
-            if progress:
-                progress(len(results))
-    return results
+    chunk = max(1, len(jobs) // (8 * max(workers, 1)))
+    return run_jobs(_run_job, jobs, workers, progress, chunksize=chunk)
 
 
 def summarise(runs: Sequence[RunResult]) -> dict[str, Any]:

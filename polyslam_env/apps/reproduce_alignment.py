@@ -28,13 +28,13 @@ import io
 import math
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from polyslam_env.apps.jobs import run_jobs
 from polyslam_env.apps.reproduce_mblcc import matched_filter_config
 from polyslam_env.core.blas import blas_threads
 from polyslam_env.core.config import Config
@@ -195,21 +195,10 @@ def reproduce(
     workers: int = 2,
     progress: Callable[[int], None] | None = None,
 ) -> list[Record]:
-    """All runs (seeds 0..runs−1), in parallel over ``workers`` processes."""
+    """All runs' records (seeds 0..runs−1), in parallel over ``workers`` processes;
+    ``progress(k)`` after the k-th run."""
     jobs = [(config, s) for s in range(config.runs)]
-    records: list[Record] = []
-    if workers <= 1:
-        for job in jobs:
-            records += _job(job)
-            if progress:
-                progress(1)
-    else:
-        with ProcessPoolExecutor(workers) as pool:
-            for r in pool.map(_job, jobs):
-                records += r
-                if progress:
-                    progress(1)
-    return records
+    return [r for run in run_jobs(_job, jobs, workers, progress) for r in run]
 
 
 def summarise(config: AlignmentReproduceConfig, records: Sequence[Record]) -> dict[str, Any]:

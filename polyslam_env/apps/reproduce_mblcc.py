@@ -28,13 +28,13 @@ observations (r2: 50 %), while the shared map keeps every robot's information fo
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from polyslam_env.apps.jobs import run_jobs
 from polyslam_env.core.blas import blas_threads
 from polyslam_env.core.config import Config
 from polyslam_env.core.errors import ConfigError
@@ -190,18 +190,7 @@ def reproduce(
     ]
     sweep = [p for p in config.fig5_particles if p != n]
     jobs += [(config, s, p) for p in sweep for s in range(config.fig5_runs)]
-    results: list[RunMetrics] = []
-    if workers <= 1:
-        for job in jobs:
-            results.append(_job(job))
-            if progress:
-                progress(len(results))
-    else:
-        with ProcessPoolExecutor(workers) as pool:
-            for r in pool.map(_job, jobs):
-                results.append(r)
-                if progress:
-                    progress(len(results))
+    results = run_jobs(_job, jobs, workers, progress)
     table_runs = results[: config.runs]
     by_n = {n: table_runs[: config.fig5_runs]} if n in config.fig5_particles else {}
     for k, p in enumerate(sweep):

@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from polyslam_env.apps.jobs import run_jobs
 from polyslam_env.apps.reproduce_mblcc import matched_filter_config
 from polyslam_env.core.blas import blas_threads
 from polyslam_env.core.config import Config
@@ -171,19 +171,7 @@ def reproduce(
     progress: Callable[[int], None] | None = None,
 ) -> list[dict[str, Any]]:
     jobs = [(config, s) for s in range(config.runs)]
-    out: list[dict[str, Any]] = []
-    if workers <= 1:
-        for job in jobs:
-            out.append(_job(job))
-            if progress:
-                progress(1)
-    else:
-        with ProcessPoolExecutor(workers) as pool:
-            for r in pool.map(_job, jobs):
-                out.append(r)
-                if progress:
-                    progress(1)
-    return out
+    return run_jobs(_job, jobs, workers, progress)
 
 
 def summarise(config: SeifReproduceConfig, runs: list[dict[str, Any]]) -> dict[str, Any]:

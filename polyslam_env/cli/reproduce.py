@@ -189,7 +189,7 @@ def run_alignment(args: argparse.Namespace) -> int:
     out = Path(args.out)
     start = time.perf_counter()
     with progress_bar(config.runs, "reproduce alignment", "run", args.quiet, leave=False) as bar:
-        records = reproduce(config, workers=args.workers, progress=bar.update)
+        records = reproduce(config, workers=args.workers, progress=lambda _: bar.update(1))
     elapsed = time.perf_counter() - start
     summary = summarise(config, records)
     _finish(summary, config, elapsed, args.workers)
@@ -221,7 +221,7 @@ def run_seif(args: argparse.Namespace) -> int:
     out = Path(args.out)
     start = time.perf_counter()
     with progress_bar(config.runs, "reproduce seif", "run", args.quiet, leave=False) as bar:
-        runs = reproduce(config, workers=args.workers, progress=bar.update)
+        runs = reproduce(config, workers=args.workers, progress=lambda _: bar.update(1))
     elapsed = time.perf_counter() - start
     summary = summarise(config, runs)
     _finish(summary, config, elapsed, args.workers)
