@@ -486,7 +486,8 @@ class RendezvousExchange:
         return tuple(dropped)
 
     def counters(self, i: int) -> dict[str, int]:
-        """Robot i's traffic: bytes, rendezvous, messages and polynomials."""
+        """Robot i's traffic: bytes, rendezvous, messages and polynomials, and the received
+        points it did not take (too uncertain, see :data:`RECEIVED_SIGMAS`)."""
         c = self.channel.counters(i)
         return {
             "bytes_sent": c.bytes_sent,
@@ -501,6 +502,7 @@ class RendezvousExchange:
             "messages_pending": self.channel.pending(sender=i),
             "polynomials_sent": self._polys_sent[i],
             "polynomials_received": self._polys_received[i],
+            "received_points_dropped": self.dropped_points[i],
         }
 
     # -- sending -----------------------------------------------------------------------------------

@@ -456,10 +456,11 @@ def test_exchange__better_received_wall_merges_with_a_worse_independent_one() ->
     assert _psd(receiver.cov)
 
 
-def _far_wall_error(align: bool) -> float | None:
+def _far_wall_error(align: bool) -> tuple[float | None, RendezvousExchange]:
     """Mean distance (m) of the received copy of a wall 3 m from the meeting to the true
     wall, when the receiver's bearing of the sender is 1.1° off and it holds two other walls
-    of the sender's map (a corner) exactly; None if the receiver did not take the wall."""
+    of the sender's map (a corner) exactly (None if the receiver did not take the wall), and
+    the exchange."""
     lines = [
         np.stack([np.linspace(-0.5, 1.5, 40), np.full(40, 1.6)], 1),  # y = 1.6
         np.stack([np.full(40, 2.0), np.linspace(-1.0, 1.5, 40)], 1),  # x = 2
@@ -479,11 +480,11 @@ def _far_wall_error(align: bool) -> float | None:
     ex.step(0, [sender, receiver], [view[0], [biased]], np.ones(2, bool))
     new = set(receiver.landmark_ids) - {0, 1}  # the only wall it did not hold
     if not new:
-        return None
+        return None, ex
     (lid,) = new
     k = receiver.table.state_index(lid)
     pts = receiver.shapes[lid].with_c0(receiver.mean[k]).sample_arclength(0.05)
-    return float(np.mean(np.abs(pts[:, 1] + 2.0)))
+    return float(np.mean(np.abs(pts[:, 1] + 2.0))), ex
 
 
 def test_exchange__far_wall_too_uncertain_is_not_taken() -> None:
@@ -491,7 +492,9 @@ def test_exchange__far_wall_too_uncertain_is_not_taken() -> None:
     along the far wall's normal, beyond ρ_min / RECEIVED_SIGMAS = 2.7 cm, so the far wall is
     not taken (a wrong wall is worse than none), while the corner walls near the meeting are
     held already."""
-    assert _far_wall_error(align=False) is None
+    error, ex = _far_wall_error(align=False)
+    assert error is None
+    assert ex.counters(1)["received_points_dropped"] > 0  # counted, not silent
 
 
 def test_transform_normal_sigma__matches_monte_carlo() -> None:
