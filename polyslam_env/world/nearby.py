@@ -1,106 +1,120 @@
-"""Which wall segments can be near a point: a uniform grid of candidate lists (numpy only).
+"""The static wall index: a uniform grid listing the wall segments that touch each cell.
 
-The physics guard asks, every control step, whether a robot is within a few decimetres of any
-wall segment or crossed one. On a map of a few hundred segments nearly all are far away, so
-testing all of them costs several times more than testing the few a grid cell lists. The
-answer does not change: every segment within ``reach`` of a point is among the candidates of
-the point's cell (see :class:`SegmentGrid`), so "is any segment within ``reach``" and "the
-nearest one, if within ``reach``" come out the same over the candidates as over all.
+Walls never move, so one index per layout serves every episode on it. The compiled kernels
+(:mod:`~polyslam_env.world.kernels`) ask it for the segments that may meet an axis-aligned box
+— the bounding box of a beam, of a camera's line of sight, of a robot's path grown by its
+radius — and test only those instead of every wall of the map.
+
+A cell lists every segment whose bounding box, grown by ``MARGIN``, overlaps the cell, so a
+segment that meets a box meets it in a cell the box overlaps (boxes are grown by the same
+margin in the kernels), and that cell lists it: tests over the candidates give the same answers
+as tests over all segments. A segment may be listed by several cells of a box and be tested
+more than once; the kernels keep minima and "any", which repeats do not change.
 """
 
 from __future__ import annotations
 
 import math
 import weakref
+from dataclasses import dataclass
 
 import numpy as np
 
 from polyslam_env.world.layout import Layout
 
-__all__ = ["SegmentGrid", "segment_grid"]
+__all__ = ["MARGIN", "IndexArrays", "WallIndex", "wall_index"]
 
-#: Slack added to the candidate radius of a cell, m: far above any round-off of the distances.
-_MARGIN = 1e-3
+#: The index as the kernels take it: segments, origin, cell, rows, cols, starts, items.
+IndexArrays = tuple[np.ndarray, np.ndarray, float, int, int, np.ndarray, np.ndarray]
+
+#: Growth of segment and query boxes, m: far above any round-off of the coordinates.
+MARGIN = 1e-6
+#: Default cell side, m: a 2 m beam's box spans a few cells, a robot's guard box one to four.
+CELL = 0.5
 
 
-class SegmentGrid:
-    """Candidate segments near points, exact for distances up to ``reach``.
+@dataclass(frozen=True, eq=False)
+class WallIndex:
+    """Segments (S, 4) and, per grid cell, the ids of those that may touch it (CSR layout).
 
-    A grid of square cells (side ``cell``) covers the segments' bounding box grown by
-    ``reach``; each cell lists (at least) the segments within ``reach`` + half its diagonal of
-    its centre, which by the triangle inequality includes every segment within ``reach`` of
-    any point of the cell. Points outside the grid are farther than ``reach`` from every segment.
+    Cell ``(row, col)`` covers ``[ox + col·cell, ox + (col+1)·cell) × [oy + row·cell, …)``;
+    the segments of cell ``c = row · cols + col`` are ``items[starts[c]:starts[c + 1]]``.
     """
 
-    def __init__(self, segments: np.ndarray, reach: float, cell: float) -> None:
-        if not (reach >= 0 and cell > 0):
-            raise ValueError(f"need reach >= 0 and cell > 0, got {reach}, {cell}")
-        self.segments = np.asarray(segments, dtype=float).reshape(-1, 4)  # (S, 4)
-        self.reach = float(reach)
-        self.cell = float(cell)
-        if len(self.segments) == 0:
-            self.origin = np.zeros(2)
-            self.shape = (0, 0)
-            self._near = np.zeros((0, 0), dtype=bool)
-            return
-        xy = self.segments.reshape(-1, 2)  # (2S, 2) every end point
-        self.origin = xy.min(axis=0) - reach - _MARGIN  # (2,) lower-left corner of the grid
-        extent = xy.max(axis=0) + reach + _MARGIN - self.origin
-        cols, rows = (max(math.ceil(e / cell), 1) for e in extent)
-        self.shape = (rows, cols)
-        # A cell must list every segment within ``radius`` of its centre (reach plus half the
-        # cell's diagonal). Marked from samples every cell/2 along each segment: a centre within
-        # ``radius`` of a segment is within ``radius + spacing/2`` of one of its samples.
-        spacing = cell / 2
-        radius = reach + cell * math.sqrt(0.5) + spacing / 2 + _MARGIN
-        pts, seg_id = _samples(self.segments, spacing)  # (K, 2), (K,)
-        home = np.floor((pts - self.origin) / cell).astype(np.intp)  # (K, 2): col, row
-        w = math.ceil(radius / cell + 0.5)  # cells within radius lie within w of the home cell
-        off = np.arange(-w, w + 1)
-        col = home[:, 0, None, None] + off[None, None, :]  # (K, 1, 2w+1)
-        row = home[:, 1, None, None] + off[None, :, None]  # (K, 2w+1, 1)
-        dx = self.origin[0] + cell * (col + 0.5) - pts[:, 0, None, None]
-        dy = self.origin[1] + cell * (row + 0.5) - pts[:, 1, None, None]
-        keep = (dx * dx + dy * dy <= radius * radius) & (col >= 0) & (col < cols)
-        keep &= (row >= 0) & (row < rows)  # (K, 2w+1, 2w+1)
-        flat = np.broadcast_to(row * cols + col, keep.shape)[keep]
-        self._near = np.zeros((rows * cols, len(self.segments)), dtype=bool)  # (cells, S)
-        self._near[flat, np.broadcast_to(seg_id[:, None, None], keep.shape)[keep]] = True
+    segments: np.ndarray  # (S, 4) x0, y0, x1, y1
+    origin: np.ndarray  # (2,) lower-left corner of cell (0, 0)
+    cell: float  # cell side, m
+    rows: int
+    cols: int
+    starts: np.ndarray  # (rows · cols + 1,) int64
+    items: np.ndarray  # (K,) int64 segment ids
 
-    def candidates(self, points: np.ndarray) -> np.ndarray:  # (k,) segment indices, sorted
-        """Indices of the segments that may lie within ``reach`` of any of ``points`` (M, 2)."""
-        p = np.asarray(points, dtype=float).reshape(-1, 2)
-        rows, cols = self.shape
-        ij = np.floor((p - self.origin) / self.cell).astype(np.intp)  # (M, 2): col, row
-        inside = (ij[:, 0] >= 0) & (ij[:, 0] < cols) & (ij[:, 1] >= 0) & (ij[:, 1] < rows)
-        if not inside.any():
-            return np.zeros(0, dtype=np.intp)
-        flat = ij[inside, 1] * cols + ij[inside, 0]
-        return np.flatnonzero(self._near[flat].any(axis=0))
+    @classmethod
+    def build(cls, segments: np.ndarray, cell: float = CELL) -> WallIndex:
+        """The index of ``segments`` (S, 4) with square cells of side ``cell``."""
+        if not (math.isfinite(cell) and cell > 0):
+            raise ValueError(f"cell: must be a finite number > 0, got {cell!r}")
+        segs = np.ascontiguousarray(np.asarray(segments, dtype=float).reshape(-1, 4))
+        if len(segs) == 0:
+            empty = np.zeros(1, dtype=np.int64)
+            return cls(segs, np.zeros(2), float(cell), 0, 0, empty, np.zeros(0, dtype=np.int64))
+        lo = np.minimum(segs[:, 0:2], segs[:, 2:4]) - MARGIN  # (S, 2)
+        hi = np.maximum(segs[:, 0:2], segs[:, 2:4]) + MARGIN
+        origin = lo.min(axis=0) - cell  # one empty cell of border on every side
+        cols, rows = (int(v) + 2 for v in np.floor((hi.max(axis=0) - origin) / cell))
+        first = np.floor((lo - origin) / cell).astype(np.int64)  # (S, 2) col, row
+        last = np.floor((hi - origin) / cell).astype(np.int64)
+        cells: list[np.ndarray] = []
+        owners: list[np.ndarray] = []
+        for s in range(len(segs)):
+            c = np.arange(first[s, 0], last[s, 0] + 1)
+            r = np.arange(first[s, 1], last[s, 1] + 1)
+            flat = (r[:, None] * cols + c[None, :]).reshape(-1)
+            cells.append(flat)
+            owners.append(np.full(len(flat), s, dtype=np.int64))
+        flat_all, owner_all = np.concatenate(cells), np.concatenate(owners)
+        order = np.lexsort((owner_all, flat_all))  # by cell, then segment id
+        counts = np.bincount(flat_all, minlength=rows * cols)
+        starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        return cls(segs, origin, float(cell), rows, cols, starts, owner_all[order])
+
+    @property
+    def arrays(self) -> IndexArrays:
+        """The index's fields in the kernels' argument order."""
+        return (
+            self.segments,
+            self.origin,
+            self.cell,
+            self.rows,
+            self.cols,
+            self.starts,
+            self.items,
+        )
+
+    def candidates(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:  # (k,) sorted ids
+        """Ids of the segments listed by the cells that the box ``lo``–``hi`` (2,) overlaps
+        (grown by ``MARGIN``): a superset of those that meet the box."""
+        if self.rows == 0:
+            return np.zeros(0, dtype=np.int64)
+        c0, r0 = np.floor((np.asarray(lo) - MARGIN - self.origin) / self.cell).astype(np.int64)
+        c1, r1 = np.floor((np.asarray(hi) + MARGIN - self.origin) / self.cell).astype(np.int64)
+        c0, r0 = max(c0, 0), max(r0, 0)
+        c1, r1 = min(c1, self.cols - 1), min(r1, self.rows - 1)
+        found = [
+            self.items[self.starts[r * self.cols + c] : self.starts[r * self.cols + c + 1]]
+            for r in range(r0, r1 + 1)
+            for c in range(c0, c1 + 1)
+        ]
+        return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
 
 
-def _samples(segments: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
-    """Points (K, 2) at most ``spacing`` apart along each segment (S, 4), both ends included,
-    and the segment of each (K,)."""
-    length = np.hypot(segments[:, 2] - segments[:, 0], segments[:, 3] - segments[:, 1])
-    pieces = np.maximum(np.ceil(length / spacing).astype(np.intp), 1)  # (S,)
-    seg_id = np.repeat(np.arange(len(segments)), pieces + 1)  # (K,)
-    first = np.repeat(np.cumsum(pieces + 1) - (pieces + 1), pieces + 1)
-    frac = (np.arange(len(seg_id)) - first) / pieces[seg_id]  # (K,) in [0, 1]
-    a, b = segments[seg_id, 0:2], segments[seg_id, 2:4]
-    return a + frac[:, None] * (b - a), seg_id
+_INDEXES: weakref.WeakKeyDictionary[Layout, WallIndex] = weakref.WeakKeyDictionary()
 
 
-_GRIDS: weakref.WeakKeyDictionary[Layout, dict[tuple[float, float], SegmentGrid]] = (
-    weakref.WeakKeyDictionary()
-)
-
-
-def segment_grid(layout: Layout, reach: float, cell: float) -> SegmentGrid:
-    """The :class:`SegmentGrid` of a layout's segments, built once per layout and parameters
-    (a world is rebuilt at every reset; the layout usually is not)."""
-    per_layout = _GRIDS.setdefault(layout, {})
-    key = (float(reach), float(cell))
-    if key not in per_layout:
-        per_layout[key] = SegmentGrid(layout.segments, reach, cell)
-    return per_layout[key]
+def wall_index(layout: Layout) -> WallIndex:
+    """The :class:`WallIndex` of a layout's segments, built once per layout (a world is rebuilt
+    at every reset; the layout usually is not)."""
+    index = _INDEXES.get(layout)
+    if index is None:
+        index = _INDEXES[layout] = WallIndex.build(layout.segments)
+    return index

@@ -34,6 +34,12 @@ at every reset), the robot bodies and the sensors. Design choices (the spec is s
   ignores commands, and cameras no longer see it (nor does it see). Its odometry is noise only;
   noise is drawn for every robot every step so the streams do not depend on failures.
 * Walls are thick (``wall_radius``) only for the physics; sensors see thin lines.
+* The step around pymunk is lean (issue 15): drive forces, the guard and the sensors are
+  compiled kernels (:mod:`~polyslam_env.world.kernels`, walls looked up in the layout's static
+  :class:`~polyslam_env.world.nearby.WallIndex`), and the sub-step loop calls chipmunk's C
+  functions through pymunk's cffi ``lib`` directly: ``Space.step`` and the ``Body`` properties
+  check and queue things this world never uses (bodies added during a step, post-step
+  callbacks) and cost more than the physics of a few robots.
 * Faults (issue 14): ``step(commands, slip)`` makes slipping wheels move the robot ``slip``
   times the commanded motion while the odometry reports the unslipped displacement (the true
   displacement divided by ``slip``, component-wise: exact for straight lines and turns in
@@ -43,18 +49,19 @@ at every reset), the robot bodies and the sensors. Design choices (the spec is s
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pymunk
+from pymunk._chipmunk_cffi import lib as chipmunk
 
 from polyslam_env.core.errors import MapFileError
 from polyslam_env.core.geometry import between, wrap_angle
+from polyslam_env.world import kernels
 from polyslam_env.world.config import WorldConfig
-from polyslam_env.world.layout import Layout, point_segment_distance
-from polyslam_env.world.nearby import segment_grid
+from polyslam_env.world.layout import Layout
+from polyslam_env.world.nearby import wall_index
 from polyslam_env.world.sensors import Camera, Detection, RangeSensor
 
 #: Solver iterations per physics step, fixed so results do not depend on pymunk defaults; 40
@@ -62,14 +69,8 @@ from polyslam_env.world.sensors import Camera, Detection, RangeSensor
 SOLVER_ITERATIONS = 40
 #: Share of a true-shape overlap that the solver removes in one sub-step.
 OVERLAP_CORRECTION = 0.5
-#: ``Body.force`` setter called directly: half the cost of ``body.force = f`` in the sub-step loop.
-_SET_FORCE: Callable[[pymunk.Body, Sequence[float]], None] = vars(pymunk.Body)["force"].fset
 #: Overlap of the true shapes (beyond the skin) that the guard tolerates, m.
 GUARD_TOLERANCE = 1e-3
-#: The guard tests only the walls near the robots (:mod:`~polyslam_env.world.nearby`) when no
-#: robot moved more than this many times ``v_max · dt`` in the step (else all walls); the
-#: slack covers robots pushed by others. Cell side of that grid, m.
-GUARD_TRAVEL, GUARD_CELL = 1.25, 0.2
 
 
 @dataclass(frozen=True)
@@ -102,9 +103,12 @@ class World:
         self.segments = layout.segments  # (S, 4), thin lines for sensing
         self.pillars = np.asarray(layout.pillars, dtype=float).reshape(-1, 3)  # (P, 3)
         self.skin = config.robot.v_max * config.dt / config.substeps  # m, see module doc
-        self._travel = GUARD_TRAVEL * config.robot.v_max * config.dt  # m, see _guard_walls
-        reach = config.robot.radius + config.wall_radius + self._travel
-        self._walls_near = segment_grid(layout, reach, GUARD_CELL)
+        self.walls = wall_index(layout)  # static index of the segments (sensors, guard)
+        self._walls = self.walls.arrays
+        r = config.robot.radius
+        self._clearance = (r + config.wall_radius - GUARD_TOLERANCE, r - GUARD_TOLERANCE)
+        odo = config.odometry
+        self._odo_sigma = np.array([odo.sigma_xy, odo.sigma_xy, odo.sigma_theta])  # (3,)
         self.active = np.ones(num_robots, dtype=bool)  # (N,)
         self.guard_reverts = 0
         self._h = config.dt / config.substeps  # s, one physics sub-step
@@ -115,6 +119,8 @@ class World:
         self.space = self._make_space()
         self.bodies = [self._add_robot(p) for p in self._pose]
         self._shape_index = {s: i for i, b in enumerate(self.bodies) for s in b.shapes}
+        self._space_c = self.space._space  # chipmunk's cpSpace* (see the module doc)
+        self._bodies_c = [b._body for b in self.bodies]  # cpBody* of each robot
 
     # -- construction -----------------------------------------------------------------------
     def _start_poses(self, start_poses: np.ndarray | None) -> np.ndarray:
@@ -198,9 +204,6 @@ class World:
         out[:, 2] = wrap_angle(out[:, 2])
         return out
 
-    def _read_positions(self) -> np.ndarray:  # (N, 2)
-        return np.array([tuple(b.position) for b in self.bodies])
-
     def robot_fits(self, i: int, pose: np.ndarray) -> bool:
         """Whether robot ``i`` could stand at ``pose`` (3,): clear of walls and pillars like a
         start pose, and of the other robots by two radii plus the contact skin."""
@@ -262,13 +265,11 @@ class World:
         start = self._pose
         self._touched[:] = False
         scale = None if slip is None else np.asarray(slip, dtype=float)  # (N,)
-        heading = self._integrate(cmd if scale is None else cmd * scale[:, None])
-        self._pose = self._guard(start, np.column_stack([self._read_positions(), heading]))
+        end = self._integrate(cmd if scale is None else cmd * scale[:, None])
+        self._pose = self._guard(start, end)
         true_odo = between(start, self._pose)
         reported = true_odo if scale is None else true_odo / scale[:, None]
-        odo = self.config.odometry
-        sigma = np.array([odo.sigma_xy, odo.sigma_xy, odo.sigma_theta])  # (3,)
-        noise = self.rngs["motion"].standard_normal((self.num_robots, 3)) * sigma
+        noise = self.rngs["motion"].standard_normal((self.num_robots, 3)) * self._odo_sigma
         return StepResult(
             odometry=reported + noise,
             true_odometry=true_odo,
@@ -277,94 +278,70 @@ class World:
         )
 
     def _integrate(self, cmd: np.ndarray) -> np.ndarray:
-        """Run the sub-steps; return the end headings (N,), θ unwrapped.
+        """Run the sub-steps; return the end poses (N, 3), θ unwrapped.
 
         Robots start the period at rest. Pymunk moves positions with the velocity solved in the
         previous sub-step, so the first sub-step does not move them and the translation solved
         in the last one is applied here by hand: each period moves by exactly ``substeps``
-        solved sub-steps and turns by exactly ``ω dt``.
+        solved sub-steps and turns by exactly ``ω dt``. Each sub-step moves along the chord of
+        its arc (mid-step heading, speed × sinc(ω h / 2)), so a free robot lands exactly on the
+        unicycle arc; force m·v/h gives velocity v (damping 0).
         """
         n, h = self.config.substeps, self._h
         th0 = self._pose[:, 2]  # (N,)
-        mid = th0[:, None] + cmd[:, 1:2] * h * (np.arange(n)[None, :] + 0.5)  # (N, n)
-        # Speed scaled by sinc(ω h / 2): each sub-step then moves along the chord of its arc, so
-        # a free robot lands exactly on the unicycle arc. Force m·v/h gives velocity v (damping 0).
-        half = cmd[:, 1:2] * (h / 2)  # (N, 1): half the turn of one sub-step
-        safe = np.where(half == 0.0, 1.0, half)
-        chord = np.where(half == 0.0, 1.0, np.sin(safe) / safe)  # (N, 1): sinc(ω h / 2)
-        gain = cmd[:, 0:1] * chord * self.config.robot.mass / h  # (N, 1)
-        force = np.stack([gain * np.cos(mid), gain * np.sin(mid)], axis=-1)  # (N, n, 2)
+        force = np.empty((self.num_robots, n, 2))
+        kernels.drive_forces(th0, cmd, h, n, self.config.robot.mass, force)
+        forces = force.tolist()
         # Robots with v = 0 need no force (damping 0 stops them) but may still be pushed.
-        driven = [(b, force[i].tolist()) for i, b in enumerate(self.bodies) if cmd[i, 0] != 0.0]
-        set_force = _SET_FORCE  # the property setter, minus pymunk's __setattr__ hook (hot loop)
+        driven = [(b, forces[i]) for i, b in enumerate(self._bodies_c) if cmd[i, 0] != 0.0]
+        set_force, space_step, space = chipmunk.cpBodySetForce, chipmunk.cpSpaceStep, self._space_c
         for k in range(n):
             for body, f in driven:
                 set_force(body, f[k])
-            self.space.step(h)
-        heading = th0 + cmd[:, 1] * self.config.dt  # (N,)
-        for body in (b for b, a in zip(self.bodies, self.active, strict=True) if a):
-            p, vel = body.position, body.velocity
-            body.position = (p.x + vel.x * h, p.y + vel.y * h)
-            body.velocity = (0.0, 0.0)
-        return np.asarray(heading)
+            space_step(space, h)
+        end = np.empty((self.num_robots, 3))
+        end[:, 2] = th0 + cmd[:, 1] * self.config.dt
+        for i, (body, active) in enumerate(zip(self._bodies_c, self.active, strict=True)):
+            if active:
+                p, vel = chipmunk.cpBodyGetPosition(body), chipmunk.cpBodyGetVelocity(body)
+                chipmunk.cpBodySetPosition(body, (p.x + vel.x * h, p.y + vel.y * h))
+                chipmunk.cpBodySetVelocity(body, (0.0, 0.0))
+            p = chipmunk.cpBodyGetPosition(body)
+            end[i, 0], end[i, 1] = p.x, p.y
+        return end
 
     def _guard(self, start: np.ndarray, end: np.ndarray) -> np.ndarray:
         """Put back any robot whose centre crossed a wall or ended inside one (module doc).
 
-        start, end (N, 3); returns the poses after the guard, and syncs ``body.angle``.
+        start, end (N, 3); returns the poses after the guard (``end``, changed), and syncs the
+        bodies' angles. Wall segments come from the static index around each robot's path.
         """
-        walls = self._guard_walls(start, end)  # (k, 4)
-        crossed = segments_cross(start[:, :2], end[:, :2], walls)  # (N,)
-        bad = (crossed | self._too_deep(end[:, :2], walls)) & self.active
-        end = np.where(bad[:, None], start, end)
-        for i in np.nonzero(bad)[0]:
-            self.bodies[int(i)].position = (float(start[i, 0]), float(start[i, 1]))
+        bad = np.empty(self.num_robots, dtype=bool)
+        wall_gap, pillar_gap = self._clearance
+        kernels.guard_violations(
+            start, end, self.active, wall_gap, pillar_gap, *self._walls, self.pillars, bad
+        )
+        for i in np.flatnonzero(bad).tolist():
+            end[i] = start[i]
+            chipmunk.cpBodySetPosition(self._bodies_c[i], (float(start[i, 0]), float(start[i, 1])))
             self._touched[i] = True
             self.guard_reverts += 1
-        for body, th, a in zip(self.bodies, end[:, 2], self.active, strict=True):
+        for body, th, a in zip(self._bodies_c, end[:, 2].tolist(), self.active, strict=True):
             if a:
-                body.angle = float(th)
+                chipmunk.cpBodySetAngle(body, th)
         return end
-
-    def _guard_walls(self, start: np.ndarray, end: np.ndarray) -> np.ndarray:  # (k, 4)
-        """The wall segments the guard must test for robots moving start → end (N, 3).
-
-        A wall crossed on the way lies within ``|end − start|`` of the end point, and a wall
-        the robot overlaps within ``radius + wall_radius`` of it. When no robot moved more than
-        the travel allowance, the segments near the end points (the grid's reach covers both)
-        therefore give the same answers as all segments, for a fraction of the work.
-        """
-        d = end[:, :2] - start[:, :2]
-        if float(np.hypot(d[:, 0], d[:, 1]).max(initial=0.0)) > self._travel:
-            return self.segments
-        return self.segments[self._walls_near.candidates(end[:, :2])]
-
-    def _too_deep(self, centres: np.ndarray, walls: np.ndarray | None = None) -> np.ndarray:
-        """Whether each centre (N, 2) overlaps a wall or pillar by more than the tolerance;
-        ``walls`` (k, 4) the segments to test (default: all)."""
-        r = self.config.robot.radius
-        walls = self.segments if walls is None else walls
-        deep = np.zeros(len(centres), dtype=bool)
-        if len(walls):
-            wall = point_segment_distance(centres, walls).min(axis=1)
-            deep |= wall < r + self.config.wall_radius - GUARD_TOLERANCE
-        if len(self.pillars):
-            rel = centres[:, None, :] - self.pillars[None, :, :2]  # (N, P, 2)
-            gap = np.hypot(rel[..., 0], rel[..., 1]) - self.pillars[None, :, 2]
-            deep |= gap.min(axis=1) < r - GUARD_TOLERANCE
-        return deep
 
     # -- sensing ----------------------------------------------------------------------------
     def true_scan(self) -> np.ndarray:  # (N, B)
         """Noiseless ranges of every robot's beams (``inf`` = no return)."""
         return self.range_sensor.true_ranges(
-            self._pose, self.segments, self.pillars, self.config.robot.radius
+            self._pose, self.walls, self.pillars, self.config.robot.radius
         )
 
     def scan(self) -> np.ndarray:  # (N, B)
         """Noisy ranges (noise from ``rngs["sensor"]``), clipped to ≥ 0; no return is ``inf``."""
         return self.range_sensor.measure(
-            self._pose, self.segments, self.pillars, self.rngs["sensor"], self.config.robot.radius
+            self._pose, self.walls, self.pillars, self.rngs["sensor"], self.config.robot.radius
         )
 
     def scan_with_truth(self) -> tuple[np.ndarray, np.ndarray]:  # (N, B) each
@@ -376,21 +353,5 @@ class World:
     def camera(self) -> list[list[Detection]]:
         """Per robot, the other robots it sees (noise from ``rngs["camera"]``)."""
         return self.camera_sensor.detect(
-            self._pose, self.active, self.segments, self.pillars, self.rngs["camera"]
+            self._pose, self.active, self.walls, self.pillars, self.rngs["camera"]
         )
-
-
-def segments_cross(p0: np.ndarray, p1: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """Whether each path p0→p1 (N, 2) properly intersects any segment (S, 4): (N,) bool."""
-    if len(segments) == 0:
-        return np.zeros(len(p0), dtype=bool)
-    a, e = segments[:, 0:2], segments[:, 2:4] - segments[:, 0:2]  # (S, 2)
-    d = p1 - p0  # (N, 2)
-    w = a[None, :, :] - p0[:, None, :]  # (N, S, 2)
-    denom = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]  # (N, S)
-    t = w[..., 0] * e[None, :, 1] - w[..., 1] * e[None, :, 0]  # path parameter · denom
-    u = w[..., 0] * d[:, None, 1] - w[..., 1] * d[:, None, 0]  # segment parameter · denom
-    sign = np.sign(denom)
-    t, u, denom = t * sign, u * sign, denom * sign
-    hit = (denom > 0) & (t > 0) & (t < denom) & (u > 0) & (u < denom)
-    return np.asarray(hit.any(axis=1))

@@ -1,7 +1,10 @@
-"""Range beams and the robot-detecting camera: pure numpy geometry (no pymunk).
+"""Range beams and the robot-detecting camera: geometry on compiled kernels (no pymunk).
 
 Sensing geometry is kept apart from the physics so it can be tested against brute force and
-reused by metrics. Conventions:
+reused by metrics. The ray casting is :mod:`~polyslam_env.world.kernels` against the layout's
+static :class:`~polyslam_env.world.nearby.WallIndex` (a bare (S, 4) array of segments is
+indexed on the fly); the readable numpy version is the oracle in ``tests/world/reference.py``.
+Conventions:
 
 * Walls are **infinitely thin lines** for sensing: ``WorldConfig.wall_radius`` only thickens
   them in the physics (so a robot stops ``wall_radius`` before the line, and its beams measure
@@ -21,80 +24,47 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyslam_env.core.geometry import wrap_angle
+from polyslam_env.world import kernels
 from polyslam_env.world.config import CameraConfig, RangeSensorConfig
+from polyslam_env.world.nearby import WallIndex
 
-#: Rays and segments more parallel than this (|sin| of the angle between them) never hit.
-_PARALLEL_EPS = 1e-12
-
-
-def _ray_segment_hits(
-    ox: np.ndarray, oy: np.ndarray, dx: np.ndarray, dy: np.ndarray, segments: np.ndarray
-) -> np.ndarray:
-    """Ray parameter t of each ray (R,) against each segment (S, 4): shape (R, S), inf if none."""
-    ax, ay = segments[:, 0], segments[:, 1]  # (S,)
-    ex, ey = segments[:, 2] - ax, segments[:, 3] - ay  # (S,)
-    wx, wy = ax[None, :] - ox[:, None], ay[None, :] - oy[:, None]  # (R, S): origin → a
-    denom = dx[:, None] * ey[None, :] - dy[:, None] * ex[None, :]  # (R, S): cross(d, e)
-    parallel = np.abs(denom) <= _PARALLEL_EPS
-    safe = np.where(parallel, 1.0, denom)
-    t = (wx * ey[None, :] - wy * ex[None, :]) / safe  # cross(w, e) / cross(d, e)
-    u = (wx * dy[:, None] - wy * dx[:, None]) / safe  # cross(w, d) / cross(d, e)
-    ok = ~parallel & (t >= 0.0) & (u >= 0.0) & (u <= 1.0)
-    return np.where(ok, t, np.inf)
+Walls = np.ndarray | WallIndex  # segments (S, 4), or their static index
 
 
-def _ray_circle_hits(
-    ox: np.ndarray,
-    oy: np.ndarray,
-    dx: np.ndarray,
-    dy: np.ndarray,
-    circles: np.ndarray,
-    exclude: np.ndarray | None,
-) -> np.ndarray:
-    """Ray parameter t of each ray (R,) against each circle (C, 3): shape (R, C), inf if none.
+def _index(walls: Walls) -> WallIndex:
+    """The static index of ``walls``: as given, or built for a bare (S, 4) array."""
+    return walls if isinstance(walls, WallIndex) else WallIndex.build(walls)
 
-    A ray starting inside a circle is blocked at once (t = 0). ``exclude`` (R,) names one circle
-    per ray to ignore (−1 for none): a robot's own body for its beams.
-    """
-    fx, fy = ox[:, None] - circles[None, :, 0], oy[:, None] - circles[None, :, 1]  # (R, C)
-    b = fx * dx[:, None] + fy * dy[:, None]  # (R, C), unit direction so a = 1
-    c = fx * fx + fy * fy - circles[None, :, 2] ** 2
-    disc = b * b - c
-    root = np.sqrt(np.maximum(disc, 0.0))
-    t_near = -b - root
-    t_far = -b + root
-    t = np.where(t_near >= 0.0, t_near, np.where(t_far >= 0.0, 0.0, np.inf))
-    t = np.where(disc >= 0.0, t, np.inf)
-    if exclude is not None:
-        t = np.where(exclude[:, None] == np.arange(len(circles))[None, :], np.inf, t)
-    return t
+
+def _circles(circles: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(np.asarray(circles, dtype=float).reshape(-1, 3))
 
 
 def cast_rays(
     origins: np.ndarray,
     directions: np.ndarray,
-    segments: np.ndarray,
+    walls: Walls,
     circles: np.ndarray,
     max_range: float,
     exclude: np.ndarray | None = None,
 ) -> np.ndarray:
     """Distance along each ray to the first segment or circle, ``inf`` beyond ``max_range``.
 
-    origins (R, 2); directions (R,) angles in radians; segments (S, 4) x0, y0, x1, y1 (thin
-    lines); circles (C, 3) x, y, r; exclude (R,) index of a circle each ray ignores (−1: none).
-    Returns (R,). Vectorised over rays × segments and rays × circles.
+    origins (R, 2); directions (R,) angles in radians; walls the segments (S, 4) x0, y0, x1, y1
+    (thin lines) or their :class:`WallIndex`; circles (C, 3) x, y, r; exclude (R,) index of a
+    circle each ray ignores (−1: none). Returns (R,). A ray starting inside a circle is blocked
+    at once (0); rays parallel to a segment (within 1e-12) never hit it.
     """
-    origins = np.asarray(origins, dtype=float).reshape(-1, 2)
+    o = np.asarray(origins, dtype=float).reshape(-1, 2)
     ang = np.asarray(directions, dtype=float).reshape(-1)
-    ox, oy = origins[:, 0], origins[:, 1]
-    dx, dy = np.cos(ang), np.sin(ang)
-    best = np.full(len(ang), np.inf)
-    if len(segments):
-        best = np.minimum(best, _ray_segment_hits(ox, oy, dx, dy, segments).min(axis=1))
-    if len(circles):
-        hits = _ray_circle_hits(ox, oy, dx, dy, np.asarray(circles, dtype=float), exclude)
-        best = np.minimum(best, hits.min(axis=1))
-    return np.where(best <= max_range, best, np.inf)
+    poses = np.ascontiguousarray(np.column_stack([o, ang]))  # each ray a "robot" with one beam
+    ex = np.full(len(ang), -1, dtype=np.int64) if exclude is None else np.asarray(exclude)
+    out = np.empty((len(ang), 1))
+    kernels.beam_ranges(
+        poses, np.zeros(1), float(max_range), *_index(walls).arrays, _circles(circles),
+        ex.astype(np.int64), out,
+    )  # fmt: skip
+    return out.reshape(-1)
 
 
 class RangeSensor:
@@ -109,28 +79,33 @@ class RangeSensor:
         return len(self.angles)
 
     def true_ranges(
-        self, poses: np.ndarray, segments: np.ndarray, circles: np.ndarray, robot_radius: float
+        self, poses: np.ndarray, walls: Walls, circles: np.ndarray, robot_radius: float
     ) -> np.ndarray:
-        """Noiseless ranges (N, B) for poses (N, 3); circles (C, 3) are pillars only.
+        """Noiseless ranges (N, B) for poses (N, 3); walls (S, 4) or their index; circles
+        (C, 3) are pillars only.
 
         When ``hit_robots`` is set, the other robots (radius ``robot_radius``) are appended to
         the circles, and each robot's beams skip its own body.
         """
-        n, nb = len(poses), self.num_beams
-        origins = np.repeat(poses[:, :2], nb, axis=0)  # (N·B, 2)
-        dirs = (poses[:, 2:3] + self.angles[None, :]).reshape(-1)  # (N·B,)
-        exclude = None
+        p = np.ascontiguousarray(np.asarray(poses, dtype=float).reshape(-1, 3))
+        n = len(p)
+        circ = _circles(circles)
+        exclude = np.full(n, -1, dtype=np.int64)
         if self.config.hit_robots and n > 0:
-            bodies = np.column_stack([poses[:, :2], np.full(n, robot_radius)])  # (N, 3)
-            circles = np.vstack([np.asarray(circles, dtype=float).reshape(-1, 3), bodies])
-            exclude = len(circles) - n + np.repeat(np.arange(n), nb)  # (N·B,) own body
-        d = cast_rays(origins, dirs, segments, circles, self.config.max_range, exclude)
-        return d.reshape(n, nb)
+            bodies = np.column_stack([p[:, :2], np.full(n, robot_radius)])  # (N, 3)
+            circ = np.ascontiguousarray(np.vstack([circ, bodies]))
+            exclude = len(circ) - n + np.arange(n, dtype=np.int64)  # own body
+        out = np.empty((n, self.num_beams))
+        kernels.beam_ranges(
+            p, self.angles, float(self.config.max_range), *_index(walls).arrays, circ,
+            exclude, out,
+        )  # fmt: skip
+        return out
 
     def measure(
         self,
         poses: np.ndarray,
-        segments: np.ndarray,
+        walls: Walls,
         circles: np.ndarray,
         rng: np.random.Generator,
         robot_radius: float = 0.0,
@@ -139,7 +114,7 @@ class RangeSensor:
 
         A noisy hit near ``max_range`` may read slightly above it (the noise is not truncated).
         """
-        return self.add_noise(self.true_ranges(poses, segments, circles, robot_radius), rng)
+        return self.add_noise(self.true_ranges(poses, walls, circles, robot_radius), rng)
 
     def add_noise(self, true: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy ranges from noiseless ones (N, B), as :meth:`measure` (one draw per beam)."""
@@ -169,35 +144,35 @@ class Camera:
         self.half_fov = math.radians(config.fov_deg) / 2.0
 
     def visible(
-        self, poses: np.ndarray, active: np.ndarray, segments: np.ndarray, circles: np.ndarray
+        self, poses: np.ndarray, active: np.ndarray, walls: Walls, circles: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Noiseless (mask, distance, bearing), each (N, N): row = observer, column = target."""
-        n = len(poses)
-        rel = poses[None, :, :2] - poses[:, None, :2]  # (N, N, 2): target − observer
+        """Noiseless (mask, distance, bearing), each (N, N): row = observer, column = target;
+        walls (S, 4) or their index, circles (C, 3) the pillars."""
+        p = np.ascontiguousarray(np.asarray(poses, dtype=float).reshape(-1, 3))
+        n = len(p)
+        rel = p[None, :, :2] - p[:, None, :2]  # (N, N, 2): target − observer
         dist = np.hypot(rel[..., 0], rel[..., 1])  # (N, N)
-        bearing = wrap_angle(np.arctan2(rel[..., 1], rel[..., 0]) - poses[:, None, 2])
-        mask = active[:, None] & active[None, :] & ~np.eye(n, dtype=bool)
-        mask &= dist <= self.config.range
-        if self.config.fov_deg < 360.0:
-            mask &= np.abs(bearing) <= self.half_fov
-        obs, tgt = np.nonzero(mask)
-        if len(obs):
-            ang = np.arctan2(rel[obs, tgt, 1], rel[obs, tgt, 0])
-            hit = cast_rays(poses[obs, :2], ang, segments, circles, np.inf)
-            mask[obs[hit < dist[obs, tgt]], tgt[hit < dist[obs, tgt]]] = False
+        direction = np.arctan2(rel[..., 1], rel[..., 0])  # (N, N) absolute
+        mask = np.empty((n, n), dtype=bool)
+        bearing = np.empty((n, n))
+        kernels.camera_visible(
+            p, np.asarray(active, dtype=bool), dist, direction, float(self.config.range),
+            self.half_fov, self.config.fov_deg < 360.0, *_index(walls).arrays,
+            _circles(circles), mask, bearing,
+        )  # fmt: skip
         return mask, dist, bearing
 
     def detect(
         self,
         poses: np.ndarray,
         active: np.ndarray,
-        segments: np.ndarray,
+        walls: Walls,
         circles: np.ndarray,
         rng: np.random.Generator,
     ) -> list[list[Detection]]:
         """Per observer, its detections with noisy distance (≥ 0) and bearing (wrapped)."""
         n = len(poses)
-        mask, dist, bearing = self.visible(poses, np.asarray(active, dtype=bool), segments, circles)
+        mask, dist, bearing = self.visible(poses, np.asarray(active, dtype=bool), walls, circles)
         noise = rng.standard_normal((n, n, 2))  # drawn for every pair, seen or not
         d = np.maximum(dist + noise[..., 0] * self.config.sigma_d, 0.0)
         b = wrap_angle(bearing + noise[..., 1] * self.config.sigma_bearing)

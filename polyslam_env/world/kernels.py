@@ -1,0 +1,273 @@
+"""Compiled kernels of the world: beams, the camera's line of sight, the guard, drive forces.
+
+Plain loops over arrays, compiled by :func:`polyslam_env.core.jit.njit`. Each kernel does the
+same floating-point operations in the same order as the readable numpy version it replaced
+(kept in ``tests/world/reference.py`` as the oracle), so results are bit-identical. Walls are
+looked up in the static :class:`~polyslam_env.world.nearby.WallIndex`: a query visits the cells
+overlapped by a box and tests the segments they list (some more than once, which changes no
+minimum and no "any").
+
+The index is passed as its arrays, in this order: ``segments (S, 4), origin (2,), cell, rows,
+cols, starts (rows·cols + 1,), items (K,)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from polyslam_env.core.jit import njit
+
+#: Rays and segments more parallel than this (|sin| of the angle between them) never hit.
+PARALLEL_EPS = 1e-12
+#: Growth of query boxes, m (the index grows segment boxes by the same).
+MARGIN = 1e-6
+
+
+@njit
+def _cell_range(lo: float, hi: float, origin: float, cell: float, n: int) -> tuple[int, int]:
+    """First and last cell (clamped to 0…n−1) overlapped by lo…hi grown by MARGIN; first >
+    last when none."""
+    a = math.floor((lo - MARGIN - origin) / cell)
+    b = math.floor((hi + MARGIN - origin) / cell)
+    return max(a, 0), min(b, n - 1)
+
+
+@njit
+def segment_hit(ox: float, oy: float, dx: float, dy: float, segments: np.ndarray, s: int) -> float:
+    """Ray parameter t of the ray o + t·d (d a unit vector) at segment ``s``; inf if none."""
+    ax, ay = segments[s, 0], segments[s, 1]
+    ex, ey = segments[s, 2] - ax, segments[s, 3] - ay
+    wx, wy = ax - ox, ay - oy  # origin → a
+    denom = dx * ey - dy * ex  # cross(d, e)
+    if abs(denom) <= PARALLEL_EPS:
+        return math.inf
+    t = (wx * ey - wy * ex) / denom  # cross(w, e) / cross(d, e)
+    u = (wx * dy - wy * dx) / denom  # cross(w, d) / cross(d, e)
+    if t >= 0.0 and u >= 0.0 and u <= 1.0:
+        return t
+    return math.inf
+
+
+@njit
+def circle_hit(ox: float, oy: float, dx: float, dy: float, circles: np.ndarray, c: int) -> float:
+    """Ray parameter t of the ray o + t·d at circle ``c`` (x, y, r); 0 from inside; inf if none."""
+    fx, fy = ox - circles[c, 0], oy - circles[c, 1]
+    b = fx * dx + fy * dy  # unit direction, so a = 1
+    cc = fx * fx + fy * fy - circles[c, 2] * circles[c, 2]
+    disc = b * b - cc
+    if not disc >= 0.0:
+        return math.inf
+    root = math.sqrt(max(disc, 0.0))
+    if -b - root >= 0.0:
+        return -b - root
+    if -b + root >= 0.0:
+        return 0.0
+    return math.inf
+
+
+@njit
+def first_hit(
+    ox: float,
+    oy: float,
+    dx: float,
+    dy: float,
+    reach: float,
+    segments: np.ndarray,
+    origin: np.ndarray,
+    cell: float,
+    rows: int,
+    cols: int,
+    starts: np.ndarray,
+    items: np.ndarray,
+    circles: np.ndarray,
+    exclude: int,
+) -> float:
+    """Smallest t of the ray o + t·d over the segments listed in the cells of the ray's box up
+    to ``reach`` and over all circles but ``exclude`` (−1: none). Exact for every t ≤ reach; a
+    larger result only says there is no hit up to ``reach``."""
+    best = math.inf
+    if reach < math.inf:
+        ex, ey = ox + reach * dx, oy + reach * dy
+        c0, c1 = _cell_range(min(ox, ex), max(ox, ex), origin[0], cell, cols)
+        r0, r1 = _cell_range(min(oy, ey), max(oy, ey), origin[1], cell, rows)
+    else:  # unbounded: every cell
+        c0, c1, r0, r1 = 0, cols - 1, 0, rows - 1
+    for row in range(r0, r1 + 1):
+        for col in range(c0, c1 + 1):
+            k = row * cols + col
+            for j in range(starts[k], starts[k + 1]):
+                t = segment_hit(ox, oy, dx, dy, segments, items[j])
+                if t < best:
+                    best = t
+    for c in range(circles.shape[0]):
+        if c != exclude:
+            t = circle_hit(ox, oy, dx, dy, circles, c)
+            if t < best:
+                best = t
+    return best
+
+
+@njit
+def beam_ranges(
+    poses: np.ndarray,
+    angles: np.ndarray,
+    max_range: float,
+    segments: np.ndarray,
+    origin: np.ndarray,
+    cell: float,
+    rows: int,
+    cols: int,
+    starts: np.ndarray,
+    items: np.ndarray,
+    circles: np.ndarray,
+    exclude: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """Noiseless ranges ``out`` (N, B) of the beams at ``angles`` (B,) from ``poses`` (N, 3):
+    the first wall or circle along each beam, inf beyond ``max_range``; robot i's beams ignore
+    circle ``exclude[i]`` (−1: none)."""
+    for i in range(poses.shape[0]):
+        ox, oy = poses[i, 0], poses[i, 1]
+        for b in range(angles.shape[0]):
+            phi = poses[i, 2] + angles[b]
+            dx, dy = math.cos(phi), math.sin(phi)
+            t = first_hit(
+                ox, oy, dx, dy, max_range, segments, origin, cell, rows, cols, starts, items,
+                circles, exclude[i],
+            )  # fmt: skip
+            out[i, b] = t if t <= max_range else math.inf
+
+
+@njit
+def camera_visible(
+    poses: np.ndarray,
+    active: np.ndarray,
+    dist: np.ndarray,
+    direction: np.ndarray,
+    cam_range: float,
+    half_fov: float,
+    limit_fov: bool,
+    segments: np.ndarray,
+    origin: np.ndarray,
+    cell: float,
+    rows: int,
+    cols: int,
+    starts: np.ndarray,
+    items: np.ndarray,
+    circles: np.ndarray,
+    mask: np.ndarray,
+    bearing: np.ndarray,
+) -> None:
+    """Which robot (column) each robot (row) sees: ``mask`` (N, N), and the ``bearing`` (N, N)
+    of every pair, from the distances ``dist`` and absolute directions ``direction`` (N, N)
+    of target − observer. Seen: both active, not itself, within ``cam_range``, within the field
+    of view when ``limit_fov``, and no wall or circle on the line of sight before the target."""
+    n = poses.shape[0]
+    for o in range(n):
+        for g in range(n):
+            rel = direction[o, g] - poses[o, 2]
+            bearing[o, g] = math.pi - np.mod(math.pi - rel, 2.0 * math.pi)  # wrap to (−π, π]
+            seen = active[o] and active[g] and o != g and dist[o, g] <= cam_range
+            if seen and limit_fov:
+                seen = abs(bearing[o, g]) <= half_fov
+            if seen:
+                a = direction[o, g]
+                hit = first_hit(
+                    poses[o, 0], poses[o, 1], math.cos(a), math.sin(a), dist[o, g], segments,
+                    origin, cell, rows, cols, starts, items, circles, -1,
+                )  # fmt: skip
+                seen = not hit < dist[o, g]
+            mask[o, g] = seen
+
+
+@njit
+def _crosses(px: float, py: float, qx: float, qy: float, segments: np.ndarray, s: int) -> bool:
+    """Whether the path p → q properly intersects segment ``s`` (ends and touching excluded)."""
+    ax, ay = segments[s, 0], segments[s, 1]
+    ex, ey = segments[s, 2] - ax, segments[s, 3] - ay
+    dx, dy = qx - px, qy - py
+    wx, wy = ax - px, ay - py
+    denom = dx * ey - dy * ex
+    t = wx * ey - wy * ex  # path parameter · denom
+    u = wx * dy - wy * dx  # segment parameter · denom
+    if denom > 0.0:
+        return t > 0.0 and t < denom and u > 0.0 and u < denom
+    if denom < 0.0:  # both sides times −1, exactly
+        return -t > 0.0 and -t < -denom and -u > 0.0 and -u < -denom
+    return False
+
+
+@njit
+def _segment_distance(px: float, py: float, segments: np.ndarray, s: int) -> float:
+    """Distance from point p to segment ``s``."""
+    ax, ay = segments[s, 0], segments[s, 1]
+    abx, aby = segments[s, 2] - ax, segments[s, 3] - ay
+    denom = max(abx * abx + aby * aby, 1e-300)
+    t = min(max(((px - ax) * abx + (py - ay) * aby) / denom, 0.0), 1.0)
+    dx, dy = px - (ax + t * abx), py - (ay + t * aby)
+    return math.sqrt(dx * dx + dy * dy)
+
+
+@njit
+def guard_violations(
+    start: np.ndarray,
+    end: np.ndarray,
+    active: np.ndarray,
+    wall_clearance: float,
+    pillar_clearance: float,
+    segments: np.ndarray,
+    origin: np.ndarray,
+    cell: float,
+    rows: int,
+    cols: int,
+    starts: np.ndarray,
+    items: np.ndarray,
+    pillars: np.ndarray,
+    bad: np.ndarray,
+) -> None:
+    """``bad`` (N,): active robots whose centre path start → end (N, ≥2) properly crossed a
+    wall, or whose end lies closer than ``wall_clearance`` to a wall or than
+    ``pillar_clearance`` to a pillar's surface."""
+    for i in range(start.shape[0]):
+        bad[i] = False
+        if not active[i]:
+            continue
+        px, py, qx, qy = start[i, 0], start[i, 1], end[i, 0], end[i, 1]
+        c0, c1 = _cell_range(
+            min(px, qx) - wall_clearance, max(px, qx) + wall_clearance, origin[0], cell, cols
+        )
+        r0, r1 = _cell_range(
+            min(py, qy) - wall_clearance, max(py, qy) + wall_clearance, origin[1], cell, rows
+        )
+        for row in range(r0, r1 + 1):
+            for col in range(c0, c1 + 1):
+                k = row * cols + col
+                for j in range(starts[k], starts[k + 1]):
+                    s = items[j]
+                    if _crosses(px, py, qx, qy, segments, s) or (
+                        _segment_distance(qx, qy, segments, s) < wall_clearance
+                    ):
+                        bad[i] = True
+        for p in range(pillars.shape[0]):
+            gap = math.hypot(qx - pillars[p, 0], qy - pillars[p, 1]) - pillars[p, 2]
+            if gap < pillar_clearance:
+                bad[i] = True
+
+
+@njit
+def drive_forces(
+    heading: np.ndarray, cmd: np.ndarray, h: float, substeps: int, mass: float, out: np.ndarray
+) -> None:
+    """Drive force ``out`` (N, substeps, 2) of each robot in each sub-step of length ``h``: along
+    the sub-step's mid heading, of size m·v·sinc(ω h / 2)/h (see ``World._integrate``)."""
+    for i in range(heading.shape[0]):
+        v, w = cmd[i, 0], cmd[i, 1]
+        half = w * (h / 2)  # half the turn of one sub-step
+        chord = 1.0 if half == 0.0 else math.sin(half) / half  # sinc(ω h / 2)
+        gain = v * chord * mass / h
+        for k in range(substeps):
+            mid = heading[i] + w * h * (k + 0.5)
+            out[i, k, 0] = gain * math.cos(mid)
+            out[i, k, 1] = gain * math.sin(mid)
