@@ -119,8 +119,22 @@ class World:
         self.space = self._make_space()
         self.bodies = [self._add_robot(p) for p in self._pose]
         self._shape_index = {s: i for i, b in enumerate(self.bodies) for s in b.shapes}
-        self._space_c = self.space._space  # chipmunk's cpSpace* (see the module doc)
+        self._attach_chipmunk()
+
+    def _attach_chipmunk(self) -> None:
+        """Chipmunk's pointers of the space and the robot bodies (see the module doc)."""
+        self._space_c = self.space._space  # cpSpace*
         self._bodies_c = [b._body for b in self.bodies]  # cpBody* of each robot
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without the C pointers (pymunk pickles the space and bodies)."""
+        state = self.__dict__.copy()
+        del state["_space_c"], state["_bodies_c"]
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._attach_chipmunk()
 
     # -- construction -----------------------------------------------------------------------
     def _start_poses(self, start_poses: np.ndarray | None) -> np.ndarray:
