@@ -4,11 +4,21 @@ Grid convention shared by every grid that beams are swept into (the coverage gri
 metrics, the robots' belief grids, the frontier policy's own map): cell ``(row, col)`` covers
 ``x ∈ [ox + col·res, ox + (col+1)·res)``, ``y ∈ [oy + row·res, oy + (row+1)·res)`` with
 ``origin = (ox, oy)`` the grid's lower-left corner, and its flat id is ``row · W + col`` for a
-grid of ``shape = (H, W)``. A beam is sampled at distances along it; callers choose the
-distances (every ≤ res/2, so a cell a beam crosses over at least res/2 is always hit).
+grid of ``shape = (H, W)``. A sample at distance t along a beam of absolute angle φ from
+(x0, y0) is the point ``(x0 + t·cos φ, y0 + t·sin φ)``; the distances are every ≤ res/2, so a
+cell a beam crosses over at least res/2 is always hit.
 
-numpy only, and nothing of the package but ``core``; the slow per-beam oracle is in
-``tests/core/test_raster.py``.
+Two sampling rules, both compiled kernels (:func:`polyslam_env.core.jit.njit`):
+
+* :func:`scan_cells` / :func:`mark_scan` (belief grids, frontier map): fixed ``fractions``
+  (:func:`beam_fractions`) of each beam's length, which stops half a cell short of a hit, plus
+  the hit cell;
+* :func:`even_beam_cells` (coverage): each scan's beams sampled ``linspace(0, 1, n)`` of their
+  length, with ``n`` set by the scan's longest beam, both ends included.
+
+:func:`count_new` and :func:`mark_cells` count and mark cells of a boolean grid. The readable
+numpy versions are the oracles in ``tests/core/reference.py``; the kernels do the same float
+operations in the same order, so cells are identical. Nothing of the package but ``core``.
 """
 
 from __future__ import annotations
@@ -17,7 +27,181 @@ import math
 
 import numpy as np
 
+from polyslam_env.core.jit import njit
 
+__all__ = [
+    "beam_fractions",
+    "count_new",
+    "even_beam_cells",
+    "mark_cells",
+    "mark_scan",
+    "point_cells",
+    "scan_cells",
+]
+
+
+# -- kernels ----------------------------------------------------------------------------------
+@njit
+def _cell(x: float, y: float, ox: float, oy: float, res: float, h: int, w: int) -> int:
+    """Flat id of the cell holding (x, y); −1 outside the grid."""
+    col = math.floor((x - ox) / res)
+    row = math.floor((y - oy) / res)
+    if 0 <= row < h and 0 <= col < w:
+        return row * w + col
+    return -1
+
+
+@njit
+def _point_cells(
+    x: np.ndarray, y: np.ndarray, ox: float, oy: float, res: float, h: int, w: int, out: np.ndarray
+) -> None:
+    for i in range(x.shape[0]):
+        out[i] = _cell(x[i], y[i], ox, oy, res, h, w)
+
+
+@njit
+def _scan_cells(
+    poses: np.ndarray,
+    angles: np.ndarray,
+    ranges: np.ndarray,
+    max_range: float,
+    fractions: np.ndarray,
+    ox: float,
+    oy: float,
+    res: float,
+    h: int,
+    w: int,
+    free: np.ndarray,
+    hit: np.ndarray,
+) -> None:
+    """Free ids ``free`` (K, B, S) and hit ids ``hit`` (K, B) of K scans (−1: outside the grid,
+    or no return for a hit); see :func:`scan_cells`."""
+    for k in range(poses.shape[0]):
+        for b in range(angles.shape[0]):
+            r_raw = ranges[k, b]
+            returned = math.isfinite(r_raw)
+            r = r_raw if r_raw < max_range else max_range  # fmin: inf and nan → max_range
+            length = max(r - 0.5 * res, 0.0) if returned else r
+            phi = poses[k, 2] + angles[b]
+            c, s = math.cos(phi), math.sin(phi)
+            for j in range(fractions.shape[0]):
+                t = length * fractions[j]
+                free[k, b, j] = _cell(poses[k, 0] + t * c, poses[k, 1] + t * s, ox, oy, res, h, w)
+            end = _cell(poses[k, 0] + r * c, poses[k, 1] + r * s, ox, oy, res, h, w)
+            hit[k, b] = end if returned else -1
+
+
+@njit
+def _mark_scan(
+    pose: np.ndarray,
+    angles: np.ndarray,
+    ranges: np.ndarray,
+    max_range: float,
+    fractions: np.ndarray,
+    ox: float,
+    oy: float,
+    res: float,
+    h: int,
+    w: int,
+    free: np.ndarray,
+    hit: np.ndarray,
+) -> None:
+    """Set the free cells and the hit cells of one scan in the flat grids ``free``, ``hit``."""
+    for b in range(angles.shape[0]):
+        r_raw = ranges[b]
+        returned = math.isfinite(r_raw)
+        r = r_raw if r_raw < max_range else max_range
+        length = max(r - 0.5 * res, 0.0) if returned else r
+        phi = pose[2] + angles[b]
+        c, s = math.cos(phi), math.sin(phi)
+        for j in range(fractions.shape[0]):
+            t = length * fractions[j]
+            cell = _cell(pose[0] + t * c, pose[1] + t * s, ox, oy, res, h, w)
+            if cell >= 0:
+                free[cell] = True
+        if returned:
+            cell = _cell(pose[0] + r * c, pose[1] + r * s, ox, oy, res, h, w)
+            if cell >= 0:
+                hit[cell] = True
+
+
+@njit
+def _linspace_fraction(i: int, n: int) -> float:
+    """``numpy.linspace(0.0, 1.0, n)[i]``, computed as numpy does."""
+    if n == 1:
+        return 0.0
+    if i == n - 1:
+        return 1.0
+    return i * (1.0 / (n - 1)) + 0.0
+
+
+@njit
+def _even_beam_cells(
+    ox: np.ndarray,
+    oy: np.ndarray,
+    phi: np.ndarray,
+    ranges: np.ndarray,
+    max_range: float,
+    gx: float,
+    gy: float,
+    res: float,
+    h: int,
+    w: int,
+    out: np.ndarray,
+) -> None:
+    """Ids ``out`` (K, R, width) of the cells under each beam's samples (−1: outside the grid
+    or past the scan's sample count); see :func:`even_beam_cells`."""
+    spacing = 0.5 * res
+    for k in range(phi.shape[0]):
+        longest = 0.0
+        for b in range(phi.shape[1]):
+            length = ranges[k, b] if ranges[k, b] < max_range else max_range
+            longest = max(longest, length)
+        n = math.ceil(max(longest, 0.0) / spacing) + 1
+        for b in range(phi.shape[1]):
+            length = ranges[k, b] if ranges[k, b] < max_range else max_range
+            c, s = math.cos(phi[k, b]), math.sin(phi[k, b])
+            for j in range(out.shape[2]):
+                if j < n:
+                    t = length * _linspace_fraction(j, n)
+                    out[k, b, j] = _cell(ox[k, b] + t * c, oy[k, b] + t * s, gx, gy, res, h, w)
+                else:
+                    out[k, b, j] = -1
+
+
+@njit
+def _count_new(cells: np.ndarray, mask: np.ndarray, marked: np.ndarray) -> int:
+    """How many distinct ids among ``cells`` (−1 skipped) are in ``mask`` and not ``marked``
+    (flat grids); ``marked`` is left as it was."""
+    fresh = np.empty(cells.shape[0], dtype=np.int64)
+    n = 0
+    for c in cells:
+        if c >= 0 and mask[c] and not marked[c]:
+            marked[c] = True  # counted once; undone below
+            fresh[n] = c
+            n += 1
+    for i in range(n):
+        marked[fresh[i]] = False
+    return n
+
+
+@njit
+def _mark_cells(cells: np.ndarray, mask: np.ndarray, marked: np.ndarray, mine: np.ndarray) -> int:
+    """Mark ``cells`` (−1 skipped) in ``marked`` and ``mine`` (flat grids; ``mine`` may be
+    empty: not marked); return how many were in ``mask`` and not ``marked`` before."""
+    own = mine.shape[0] > 0
+    n = 0
+    for c in cells:
+        if c >= 0:
+            if mask[c] and not marked[c]:
+                n += 1
+            marked[c] = True
+            if own:
+                mine[c] = True
+    return n
+
+
+# -- wrappers -------------------------------------------------------------------------------
 def point_cells(
     x: np.ndarray,
     y: np.ndarray,
@@ -26,29 +210,13 @@ def point_cells(
     shape: tuple[int, int],
 ) -> tuple[np.ndarray, np.ndarray]:
     """Flat ids and whether each point lies inside the grid, for coordinates ``x``, ``y``
-    (same shape). Ids of points outside are meaningless: mask them with the second result."""
-    col = np.floor((x - origin[0]) / resolution).astype(np.intp)
-    row = np.floor((y - origin[1]) / resolution).astype(np.intp)
-    h, w = shape
-    # Negative indices wrap to huge unsigned values, so one comparison per axis suffices.
-    inside = (row.view(np.uintp) < h) & (col.view(np.uintp) < w)
-    return row * w + col, inside
-
-
-def beam_cells(
-    x0: np.ndarray,
-    y0: np.ndarray,
-    angles: np.ndarray,
-    distances: np.ndarray,
-    origin: tuple[float, float],
-    resolution: float,
-    shape: tuple[int, int],
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`point_cells` of the samples ``distances`` (…, R, S) along beams of absolute
-    ``angles`` (…, R) from origins ``x0``, ``y0`` (broadcast against (…, R, 1))."""
-    x = x0 + distances * np.cos(angles)[..., None]
-    y = y0 + distances * np.sin(angles)[..., None]
-    return point_cells(x, y, origin, resolution, shape)
+    (same shape). Ids of points outside are −1."""
+    xs = np.ascontiguousarray(x, dtype=float).reshape(-1)
+    ys = np.ascontiguousarray(y, dtype=float).reshape(-1)
+    out = np.empty(xs.shape, dtype=np.int64)
+    _point_cells(xs, ys, float(origin[0]), float(origin[1]), float(resolution), *shape, out)
+    flat = out.reshape(np.shape(x))
+    return flat, flat >= 0
 
 
 def beam_fractions(max_range: float, resolution: float) -> np.ndarray:  # (S,)
@@ -74,14 +242,77 @@ def scan_cells(
     without a return. Hit: the cell of the end point of each beam with a return.
     Returns free ids and inside mask (K, B, S), hit ids (K, B) and hit mask (K, B).
     """
-    finite = np.isfinite(ranges)  # (K, B)
-    r = np.fmin(ranges, max_range)  # (K, B); no return (inf, nan) → max_range
-    length = np.where(finite, np.maximum(r - 0.5 * resolution, 0.0), r)
-    phi = poses[:, 2:3] + angles  # (K, B)
-    # Each beam's S free samples and its end point (used only for hits) in one array.
-    t = np.empty((*r.shape, fractions.size + 1))  # (K, B, S + 1)
-    np.multiply(length[..., None], fractions, out=t[..., :-1])
-    t[..., -1] = r
-    x0, y0 = poses[:, 0, None, None], poses[:, 1, None, None]
-    flat, inside = beam_cells(x0, y0, phi, t, origin, resolution, shape)  # (K, B, S + 1)
-    return flat[..., :-1], inside[..., :-1], flat[..., -1], inside[..., -1] & finite
+    p = np.ascontiguousarray(poses, dtype=float).reshape(-1, 3)
+    a = np.ascontiguousarray(angles, dtype=float).reshape(-1)
+    r = np.ascontiguousarray(ranges, dtype=float).reshape(len(p), len(a))
+    f = np.ascontiguousarray(fractions, dtype=float)
+    free = np.empty((len(p), len(a), len(f)), dtype=np.int64)
+    hit = np.empty((len(p), len(a)), dtype=np.int64)
+    ox, oy = float(origin[0]), float(origin[1])
+    _scan_cells(p, a, r, float(max_range), f, ox, oy, float(resolution), *shape, free, hit)
+    return free, free >= 0, hit, hit >= 0
+
+
+def mark_scan(
+    pose: np.ndarray,
+    angles: np.ndarray,
+    ranges: np.ndarray,
+    max_range: float,
+    fractions: np.ndarray,
+    origin: tuple[float, float],
+    resolution: float,
+    free: np.ndarray,
+    hit: np.ndarray,
+) -> None:
+    """Set (in place) the free and hit cells of one scan from ``pose`` (3,) in the boolean
+    grids ``free`` and ``hit`` (H, W), C-contiguous; the cells of :func:`scan_cells`."""
+    h, w = free.shape
+    _mark_scan(
+        np.ascontiguousarray(pose, dtype=float), np.ascontiguousarray(angles, dtype=float),
+        np.ascontiguousarray(ranges, dtype=float), float(max_range), fractions,
+        float(origin[0]), float(origin[1]), float(resolution), h, w, free.reshape(-1),
+        hit.reshape(-1),
+    )  # fmt: skip
+
+
+def even_beam_cells(
+    ox: np.ndarray,
+    oy: np.ndarray,
+    phi: np.ndarray,
+    ranges: np.ndarray,
+    max_range: float,
+    origin: tuple[float, float],
+    resolution: float,
+    shape: tuple[int, int],
+) -> np.ndarray:  # (K, R, width) int64, −1 for no cell
+    """Cells under the samples of K scans of R beams from (``ox``, ``oy``) (K, R) at absolute
+    angles ``phi`` (K, R), ``ranges`` (K, R) (inf, nan: no return, the beam runs to
+    ``max_range``; longer ranges are cut there). Each scan's beams are sampled at
+    ``linspace(0, 1, n)`` of their length, ``n = ⌈longest / (res/2)⌉ + 1`` from the scan's
+    longest beam (so samples are ≤ res/2 apart, both ends included); ``width`` is ``n`` of a
+    beam of ``max_range``, and slots past a scan's ``n`` are −1."""
+    width = math.ceil(max(float(max_range), 0.0) / (0.5 * resolution)) + 1
+    out = np.empty((*np.shape(phi), width), dtype=np.int64)
+    _even_beam_cells(
+        ox, oy, phi, ranges, float(max_range), float(origin[0]), float(origin[1]),
+        float(resolution), *shape, out,
+    )  # fmt: skip
+    return out
+
+
+def count_new(cells: np.ndarray, mask: np.ndarray, marked: np.ndarray) -> int:
+    """Distinct ids among ``cells`` (any shape; −1 skipped) that are in ``mask`` and not in
+    ``marked`` (boolean grids of one shape, C-contiguous; ``marked`` is not changed)."""
+    flat = np.ascontiguousarray(cells, dtype=np.int64).reshape(-1)
+    return int(_count_new(flat, mask.reshape(-1), marked.reshape(-1)))
+
+
+def mark_cells(
+    cells: np.ndarray, mask: np.ndarray, marked: np.ndarray, mine: np.ndarray | None = None
+) -> int:
+    """Mark ``cells`` (any shape; −1 skipped) in ``marked`` and, if given, ``mine`` (boolean
+    grids of ``mask``'s shape, C-contiguous, changed in place); return how many distinct cells
+    were in ``mask`` and not ``marked`` before."""
+    flat = np.ascontiguousarray(cells, dtype=np.int64).reshape(-1)
+    own = np.zeros(0, dtype=bool) if mine is None else mine.reshape(-1)
+    return int(_mark_cells(flat, mask.reshape(-1), marked.reshape(-1), own))

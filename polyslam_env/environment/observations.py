@@ -97,21 +97,15 @@ def belief_grids(
 def sweep_beliefs(
     grids: Sequence[BeliefGrid], poses: np.ndarray, angles: np.ndarray, ranges: np.ndarray
 ) -> None:
-    """:meth:`BeliefGrid.sweep` of several robots' scans into their own grids, in one numpy
-    pass (the grids share size, resolution and range): poses (K, 3), ranges (K, B).
-
-    With a handful of beams per robot the cost is numpy call overhead, so doing all robots
-    together costs little more than one; the cells are those of separate sweeps.
-    """
+    """:meth:`BeliefGrid.sweep` of several robots' scans into their own grids (the grids share
+    size, resolution and range): poses (K, 3), ranges (K, B); the compiled
+    :func:`~polyslam_env.core.raster.mark_scan` of each."""
     g = grids[0]
     if any((h.n, h.resolution, h.max_range) != (g.n, g.resolution, g.max_range) for h in grids):
         raise ValueError("sweep_beliefs needs grids of the same size, resolution and range")
-    free, free_in, hit, hit_in = raster.scan_cells(
-        poses, angles, ranges, g.max_range, g._t, *g._grid
-    )
-    for k, grid in enumerate(grids):
-        grid.free.reshape(-1)[free[k][free_in[k]]] = True
-        grid.hit.reshape(-1)[hit[k][hit_in[k]]] = True
+    origin, res, _ = g._grid
+    for grid, pose, r in zip(grids, poses, ranges, strict=True):
+        raster.mark_scan(pose, angles, r, g.max_range, g._t, origin, res, grid.free, grid.hit)
 
 
 class MapSampler:

@@ -317,17 +317,14 @@ def sweep_coverage(state: EpisodeState) -> np.ndarray:  # (N,) m²
     max_range = state.world.config.range_sensor.max_range
     active = np.flatnonzero(state.world.active).tolist()
     scans = state.sensing.ranges
-    scan_cells = grid.scan_cells(
-        poses[active, :2], poses[active, 2:3] + state.angles, scans[active], max_range
-    )
-    cells = dict(zip(active, scan_cells, strict=True))
     # Gains against the grid as it was before this step (counted before anything is marked),
     # so a cell first swept by two robots at once counts for both.
+    new_cells = grid.sweep_team(
+        poses[active, :2], poses[active, 2:3] + state.angles, scans[active], max_range, active
+    )
     gains = np.zeros(state.world.num_robots)
-    for i, c in cells.items():
-        gains[i] = grid.new_free_cells(c) * grid.resolution**2
-    for i, c in cells.items():
-        grid.mark(c, robot=i)
+    gains[active] = new_cells
+    gains *= grid.resolution**2
     state.coverage_series.append(grid.coverage)
     return gains
 

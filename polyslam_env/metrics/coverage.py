@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from polyslam_env.core import raster
@@ -18,6 +16,7 @@ class CoverageGrid:
     y ∈ [oy + i·res, oy + (i+1)·res) with ``origin = (ox, oy)`` its lower-left corner (row
     index grows with y). Beams are sampled every res/2 (both ends included), so a cell that a
     beam crosses over at least res/2 is always marked and a barely clipped corner may not be.
+    The sampling, counting and marking are compiled kernels of :mod:`polyslam_env.core.raster`.
     """
 
     def __init__(self, free: np.ndarray, origin: tuple[float, float], resolution: float) -> None:
@@ -26,15 +25,28 @@ class CoverageGrid:
             raise ValueError(f"free must be a boolean (H, W) mask, got {mask.dtype} {mask.shape}")
         if not resolution > 0:
             raise ValueError(f"resolution must be > 0, got {resolution}")
-        self.free = _frozen(mask.copy())  # (H, W)
+        self.free = _frozen(np.ascontiguousarray(mask).copy())  # (H, W)
         self.origin = (float(origin[0]), float(origin[1]))
         self.resolution = float(resolution)
         self.n_free = int(mask.sum())
-        self.swept = np.zeros_like(mask)  # (H, W): swept by any beam (free or not)
-        self.robot_swept: dict[int, np.ndarray] = {}  # robot -> (H, W)
+        self.swept = np.zeros_like(self.free)  # (H, W): swept by any beam (free or not)
+        self._masks = np.zeros((0, *mask.shape), dtype=bool)  # (R, H, W): per swept robot
+        self._rows: dict[int, int] = {}  # robot -> its row of _masks, in order of first sweep
         self.gain = 0  # new free cells of the team in the last sweep
         self._n_swept_free = 0
-        self._linspaces: dict[tuple[int, int], np.ndarray] = {}
+
+    @property
+    def robot_swept(self) -> dict[int, np.ndarray]:  # robot -> (H, W) view
+        """Per robot that swept anything, the cells its beams swept."""
+        return {robot: self._masks[row] for robot, row in self._rows.items()}
+
+    def _mine(self, robot: int) -> np.ndarray:  # (H, W) view into _masks
+        """Robot ``robot``'s own mask, made (empty) at its first sweep."""
+        row = self._rows.get(robot)
+        if row is None:
+            row = self._rows[robot] = len(self._masks)
+            self._masks = np.concatenate([self._masks, np.zeros((1, *self.free.shape), bool)])
+        return self._masks[row]
 
     def cells_of(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rows, columns (N,) of points (N, 2) and whether each lies inside the grid."""
@@ -45,19 +57,9 @@ class CoverageGrid:
         inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
         return row, col, inside
 
-    def _fractions(self, n: int, width: int) -> np.ndarray:  # (width,)
-        """``linspace(0, 1, n)`` padded with 1.0 to ``width`` (a beam's end sampled again, which
-        adds no cell), cached: only a few ``n`` occur and linspace is slow."""
-        out = self._linspaces.get((n, width))
-        if out is None:
-            out = np.ones(width)
-            out[:n] = np.linspace(0.0, 1.0, n)
-            self._linspaces[n, width] = _frozen(out)
-        return out
-
     def beam_cells(
         self, origins: np.ndarray, angles: np.ndarray, ranges: np.ndarray, max_range: float
-    ) -> np.ndarray:  # (M,) flat cell ids, repeats kept
+    ) -> np.ndarray:  # (M,) flat cell ids
         """Flat ids (row · W + col) of the grid cells under the samples of each beam.
 
         Arguments as in :meth:`sweep`; ``origins`` may also be one (2,) origin for all beams.
@@ -69,12 +71,10 @@ class CoverageGrid:
         r = np.asarray(ranges, dtype=float).reshape(1, -1)
         return self.scan_cells(o, a, r, max_range)[0]
 
-    def scan_cells(
+    def _scan_ids(
         self, origins: np.ndarray, angles: np.ndarray, ranges: np.ndarray, max_range: float
-    ) -> list[np.ndarray]:  # K × (M_k,) flat cell ids, repeats kept
-        """:meth:`beam_cells` of K scans in one numpy pass (a robot's beams are few, so numpy
-        call overhead is most of the cost): ``origins`` (K, 2) or (K, R, 2), ``angles`` and
-        ``ranges`` (K, R). Each scan is sampled as if alone (its own sample count)."""
+    ) -> np.ndarray:  # (K, R, width) int64, −1 for none
+        """Checked arguments of :meth:`scan_cells` → the cell ids of every sample."""
         if not max_range > 0:
             raise ValueError(f"max_range must be > 0, got {max_range}")
         a = np.asarray(angles, dtype=float)
@@ -87,37 +87,34 @@ class CoverageGrid:
             raise ValueError(f"origins {o.shape}, angles {a.shape}, ranges {r.shape} disagree")
         if (r < 0).any():
             raise ValueError("ranges must be >= 0 (use inf or nan for no return)")
-        if len(a) == 0:
-            return []
-        length = np.fmin(r, max_range)  # (K, R): fmin maps nan (and inf) to max_range
-        spacing = 0.5 * self.resolution
-        counts = [math.ceil(max(m, 0.0) / spacing) + 1 for m in length.max(axis=1, initial=0.0)]
-        width = max(counts)
-        frac = np.array([self._fractions(n, width) for n in counts])  # (K, width)
-        t = length[:, :, None] * frac[:, None, :]  # (K, R, width), spacing ≤ res/2
-        flat, inside = raster.beam_cells(
-            o[..., 0:1], o[..., 1:2], a, t, self.origin, self.resolution, self.free.shape
-        )  # (K, R, width)
-        return [flat[k][inside[k]] for k in range(len(flat))]
+        ox = np.ascontiguousarray(np.broadcast_to(o[..., 0], a.shape))
+        oy = np.ascontiguousarray(np.broadcast_to(o[..., 1], a.shape))
+        return raster.even_beam_cells(
+            ox, oy, np.ascontiguousarray(a), np.ascontiguousarray(r), max_range, self.origin,
+            self.resolution, self.free.shape,
+        )  # fmt: skip
+
+    def scan_cells(
+        self, origins: np.ndarray, angles: np.ndarray, ranges: np.ndarray, max_range: float
+    ) -> list[np.ndarray]:  # K × (M_k,) flat cell ids, repeats kept
+        """:meth:`beam_cells` of K scans: ``origins`` (K, 2) or (K, R, 2), ``angles`` and
+        ``ranges`` (K, R). Each scan is sampled as if alone (its own sample count)."""
+        ids = self._scan_ids(origins, angles, ranges, max_range)
+        return [k[k >= 0] for k in ids.reshape(len(ids), ids[0].size if len(ids) else 0)]
 
     def new_free_cells(self, cells: np.ndarray) -> int:
         """How many distinct free cells among ``cells`` (flat ids, repeats allowed) nobody has
         swept yet."""
-        free, swept = self.free.reshape(-1), self.swept.reshape(-1)  # (H·W,) views
-        fresh = cells[free[cells] & ~swept[cells]]  # few, usually none
-        return _count_distinct(fresh)
+        return raster.count_new(cells, self.free, self.swept)
 
     def mark(self, cells: np.ndarray, robot: int | None = None) -> int:
         """Mark ``cells`` (flat ids from :meth:`beam_cells`) swept, and ``robot``'s own mask.
 
         Returns (and stores as ``gain``) the number of newly swept free cells of the team.
         """
-        self.gain = self.new_free_cells(cells)
+        mine = None if robot is None else self._mine(int(robot))
+        self.gain = raster.mark_cells(cells, self.free, self.swept, mine)
         self._n_swept_free += self.gain
-        self.swept.reshape(-1)[cells] = True
-        if robot is not None:
-            mine = self.robot_swept.setdefault(int(robot), np.zeros_like(self.swept))
-            mine.reshape(-1)[cells] = True
         return self.gain
 
     def sweep(
@@ -136,6 +133,24 @@ class CoverageGrid:
         """
         return self.mark(self.beam_cells(origins, angles, ranges, max_range), robot)
 
+    def sweep_team(
+        self,
+        origins: np.ndarray,
+        angles: np.ndarray,
+        ranges: np.ndarray,
+        max_range: float,
+        robots: list[int],
+    ) -> list[int]:
+        """Sweep the scans of several robots at once: ``origins`` (K, 2), absolute ``angles``
+        and ``ranges`` (K, R), ``robots`` (K,) whose masks they mark. Returns each scan's new
+        free cells counted against the grid as it was before this call (a cell first swept by
+        two robots at once counts for both); the team's coverage counts it once."""
+        ids = self._scan_ids(origins, angles, ranges, max_range)
+        gains = [self.new_free_cells(ids[k]) for k in range(len(ids))]
+        for k, robot in enumerate(robots):
+            self.mark(ids[k], robot)
+        return gains
+
     @property
     def coverage(self) -> float:
         """Swept free cells / free cells (0.0 for a grid without free cells)."""
@@ -145,10 +160,10 @@ class CoverageGrid:
 
     def robot_coverage(self, robot: int) -> float:
         """Free cells swept by ``robot`` / free cells."""
-        mine = self.robot_swept.get(int(robot))
-        if mine is None or self.n_free == 0:
+        row = self._rows.get(int(robot))
+        if row is None or self.n_free == 0:
             return 0.0
-        return int(np.count_nonzero(mine & self.free)) / self.n_free
+        return int(np.count_nonzero(self._masks[row] & self.free)) / self.n_free
 
     def overlap(self) -> float:
         """Free cells swept by ≥ 2 robots / free cells swept by any (0.0 if none swept).
@@ -156,18 +171,10 @@ class CoverageGrid:
         Sweeps without a ``robot`` count in the denominator only.
         """
         swept = self._n_swept_free
-        if swept == 0 or not self.robot_swept:
+        if swept == 0 or not self._rows:
             return 0.0
-        counts = np.sum([m & self.free for m in self.robot_swept.values()], axis=0)
+        counts = np.sum(self._masks & self.free, axis=0)
         return int(np.count_nonzero(counts >= 2)) / swept
-
-
-def _count_distinct(values: np.ndarray) -> int:
-    """Number of distinct values in a 1-D integer array (cheaper than ``len(np.unique(…))``)."""
-    if len(values) < 2:
-        return len(values)
-    v = np.sort(values)
-    return 1 + int(np.count_nonzero(v[1:] != v[:-1]))
 
 
 def time_to_fraction(series: np.ndarray, fraction: float) -> int | None:

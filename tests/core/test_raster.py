@@ -1,4 +1,5 @@
-"""Beam rasterisation against a slow per-beam, per-sample oracle and the sampling guarantee."""
+"""Beam rasterisation: the compiled kernels against the numpy oracles (``reference.py``, exact)
+and a slow per-beam, per-sample oracle, and the sampling guarantee."""
 
 from __future__ import annotations
 
@@ -7,7 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from polyslam_env.core.raster import beam_cells, beam_fractions, point_cells, scan_cells
+from polyslam_env.core import raster
+from polyslam_env.core.raster import beam_fractions, even_beam_cells, point_cells, scan_cells
+from tests.core import reference
 
 
 def _oracle_cells(
@@ -74,30 +77,99 @@ def test_scan_cells__match_the_per_sample_oracle(res: float) -> None:
             assert set(hit[j][hit_in[j]].tolist()) == want_hit
 
 
-def test_beam_cells__samples_res_half_apart_hit_every_cell_crossed_over_half_a_cell() -> None:
+def test_even_beam_cells__samples_res_half_apart_hit_every_cell_crossed_over_half_a_cell() -> None:
     rng = np.random.default_rng(8)
     res, shape, origin = 0.1, (60, 60), (0.0, 0.0)
     for _ in range(200):
         x0, y0 = rng.uniform(1.0, 5.0, 2)
         angle, length = rng.uniform(-np.pi, np.pi), rng.uniform(0.0, 0.9)
-        n = math.ceil(length / (0.5 * res)) + 1
-        flat, inside = beam_cells(
-            np.array([[x0]]),
-            np.array([[y0]]),
-            np.array([angle]),
-            np.linspace(0.0, length, n)[None, :],
-            origin,
-            res,
-            shape,
-        )
-        got = set(flat[inside].tolist())
+        ids = even_beam_cells(
+            np.array([[x0]]), np.array([[y0]]), np.array([[angle]]), np.array([[length]]), 1.0,
+            origin, res, shape,
+        )  # fmt: skip
+        got = set(ids[ids >= 0].tolist())
         # dense reference: how far the beam runs inside each cell
         step = res / 500
         t = np.arange(0.0, length, step)
         dense, ok = point_cells(x0 + t * np.cos(angle), y0 + t * np.sin(angle), origin, res, shape)
-        ids, counts = np.unique(dense[ok], return_counts=True)
-        crossed = {int(c) for c, m in zip(ids, counts, strict=True) if (m - 2) * step > 0.5 * res}
+        ids_, counts = np.unique(dense[ok], return_counts=True)
+        crossed = {int(c) for c, m in zip(ids_, counts, strict=True) if (m - 2) * step > 0.5 * res}
         assert crossed <= got
+
+
+def test_point_cells__equal_the_oracle() -> None:
+    rng = np.random.default_rng(9)
+    x, y = rng.uniform(-3, 8, 5000), rng.uniform(-3, 8, 5000)
+    x[:20] = np.round(x[:20], 1)  # on cell borders
+    for res, shape, origin in [(0.1, (50, 40), (0.0, 0.0)), (0.13, (7, 90), (-1.3, 2.2))]:
+        flat, inside = point_cells(x, y, origin, res, shape)
+        want, want_in = reference.point_cells(x, y, origin, res, shape)
+        np.testing.assert_array_equal(inside, want_in)
+        np.testing.assert_array_equal(flat[inside], want[want_in])
+        assert (flat[~inside] == -1).all()
+
+
+@pytest.mark.parametrize("res", [0.05, 0.13])
+def test_scan_cells_and_mark_scan__equal_the_oracle(res: float) -> None:
+    rng = np.random.default_rng(10)
+    shape, origin, max_range = (37, 52), (-1.3, -0.7), 2.5
+    fractions = beam_fractions(max_range, res)
+    for _ in range(40):
+        poses = np.column_stack([rng.uniform(-2.0, 5.0, (3, 2)), rng.uniform(-7, 7, 3)])
+        angles = rng.uniform(-np.pi, np.pi, 5)
+        ranges = rng.uniform(0.0, 4.0, (3, 5))
+        ranges[rng.random((3, 5)) < 0.2] = np.inf
+        ranges[rng.random((3, 5)) < 0.1] = np.nan
+        got = scan_cells(poses, angles, ranges, max_range, fractions, origin, res, shape)
+        want = reference.scan_cells(poses, angles, ranges, max_range, fractions, origin, res, shape)
+        for ids, inside, want_ids, want_in in [(got[0], got[1], *want[:2]), (*got[2:], *want[2:])]:
+            np.testing.assert_array_equal(inside, want_in)
+            np.testing.assert_array_equal(ids[inside], want_ids[want_in])
+        for k in range(3):
+            free, hit = np.zeros(shape, dtype=bool), np.zeros(shape, dtype=bool)
+            raster.mark_scan(
+                poses[k], angles, ranges[k], max_range, fractions, origin, res, free, hit
+            )
+            assert set(np.flatnonzero(free)) == set(want[0][k][want[1][k]].tolist())
+            assert set(np.flatnonzero(hit)) == set(want[2][k][want[3][k]].tolist())
+
+
+def test_even_beam_cells__equal_the_oracle() -> None:
+    rng = np.random.default_rng(11)
+    shape, origin, res, max_range = (40, 50), (-0.5, -0.2), 0.1, 1.7
+    for _ in range(60):
+        k, b = 4, 6
+        o = rng.uniform(-1.0, 5.0, (k, b, 2))
+        phi = rng.uniform(-7, 7, (k, b))
+        ranges = rng.uniform(0.0, 2.5, (k, b))
+        ranges[rng.random((k, b)) < 0.2] = np.inf
+        ranges[rng.random((k, b)) < 0.1] = np.nan
+        ids = even_beam_cells(o[..., 0].copy(), o[..., 1].copy(), phi, ranges, max_range, origin,
+                              res, shape)  # fmt: skip
+        want = reference.even_scan_cells(o, phi, ranges, max_range, origin, res, shape)
+        for j in range(k):
+            assert set(ids[j][ids[j] >= 0].tolist()) == set(want[j].tolist())
+
+
+def test_linspace_fraction__equals_numpy_linspace() -> None:
+    for n in range(1, 700):
+        got = [raster._linspace_fraction(i, n) for i in range(n)]
+        assert got == np.linspace(0.0, 1.0, n).tolist()
+
+
+def test_count_new_and_mark_cells__equal_the_oracle() -> None:
+    rng = np.random.default_rng(12)
+    mask = rng.random((20, 30)) < 0.7
+    marked = rng.random((20, 30)) < 0.3
+    for _ in range(50):
+        cells = rng.integers(0, 600, int(rng.integers(0, 80)))
+        want = reference.count_distinct_new(cells, mask, marked)
+        before = marked.copy()
+        assert raster.count_new(cells, mask, marked) == want
+        np.testing.assert_array_equal(marked, before)  # not changed
+        mine = np.zeros_like(marked)
+        assert raster.mark_cells(np.concatenate([cells, [-1]]), mask, marked, mine) == want
+        assert marked[np.unravel_index(cells, mask.shape)].all() and mine.sum() == len(set(cells))
 
 
 def test_point_cells__half_open_cells_and_outside_mask() -> None:
@@ -107,3 +179,4 @@ def test_point_cells__half_open_cells_and_outside_mask() -> None:
     flat, inside = point_cells(x, y, origin, res, shape)
     np.testing.assert_array_equal(inside, [True, True, True, True, False, False, False])
     np.testing.assert_array_equal(flat[inside], [0, 0, 4, 5])
+    assert (flat[~inside] == -1).all()
