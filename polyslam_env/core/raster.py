@@ -31,6 +31,7 @@ from polyslam_env.core.jit import njit
 
 __all__ = [
     "beam_fractions",
+    "count_and_mark",
     "count_new",
     "even_beam_cells",
     "mark_cells",
@@ -201,6 +202,25 @@ def _mark_cells(cells: np.ndarray, mask: np.ndarray, marked: np.ndarray, mine: n
     return n
 
 
+@njit
+def _count_and_mark(
+    ids: np.ndarray,
+    mask: np.ndarray,
+    marked: np.ndarray,
+    mines: np.ndarray,
+    rows: np.ndarray,
+    gains: np.ndarray,
+) -> tuple[int, int]:
+    """:func:`count_and_mark` on flat grids: ``ids`` (K, M), ``mines`` (R, H·W)."""
+    for k in range(ids.shape[0]):
+        gains[k] = _count_new(ids[k], mask, marked)
+    total = last = 0
+    for k in range(ids.shape[0]):
+        last = _mark_cells(ids[k], mask, marked, mines[rows[k]])
+        total += last
+    return total, last
+
+
 # -- wrappers -------------------------------------------------------------------------------
 def point_cells(
     x: np.ndarray,
@@ -316,3 +336,21 @@ def mark_cells(
     flat = np.ascontiguousarray(cells, dtype=np.int64).reshape(-1)
     own = np.zeros(0, dtype=bool) if mine is None else mine.reshape(-1)
     return int(_mark_cells(flat, mask.reshape(-1), marked.reshape(-1), own))
+
+
+def count_and_mark(
+    ids: np.ndarray, mask: np.ndarray, marked: np.ndarray, mines: np.ndarray, rows: np.ndarray
+) -> tuple[np.ndarray, int, int]:
+    """K sets of cells at once: first :func:`count_new` of each set ``ids[k]`` against
+    ``marked`` as it is, then :func:`mark_cells` of each in order, in ``marked`` and in its own
+    grid ``mines[rows[k]]``. ``ids`` (K, …) int64 (−1 skipped); ``mask``, ``marked`` (H, W) and
+    ``mines`` (R, H, W) boolean, C-contiguous, changed in place. Returns the counts (K,), the
+    total newly marked cells of ``mask`` and those of the last set."""
+    k = len(ids)
+    gains = np.zeros(k, dtype=np.int64)
+    total, last = _count_and_mark(
+        np.ascontiguousarray(ids, dtype=np.int64).reshape(k, -1 if k else 0), mask.reshape(-1),
+        marked.reshape(-1), mines.reshape(len(mines), -1), np.asarray(rows, dtype=np.int64),
+        gains,
+    )  # fmt: skip
+    return gains, int(total), int(last)

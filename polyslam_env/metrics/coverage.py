@@ -40,13 +40,13 @@ class CoverageGrid:
         """Per robot that swept anything, the cells its beams swept."""
         return {robot: self._masks[row] for robot, row in self._rows.items()}
 
-    def _mine(self, robot: int) -> np.ndarray:  # (H, W) view into _masks
-        """Robot ``robot``'s own mask, made (empty) at its first sweep."""
+    def _row(self, robot: int) -> int:
+        """Robot ``robot``'s row of ``_masks``, made (empty) at its first sweep."""
         row = self._rows.get(robot)
         if row is None:
             row = self._rows[robot] = len(self._masks)
             self._masks = np.concatenate([self._masks, np.zeros((1, *self.free.shape), bool)])
-        return self._masks[row]
+        return row
 
     def cells_of(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rows, columns (N,) of points (N, 2) and whether each lies inside the grid."""
@@ -87,11 +87,12 @@ class CoverageGrid:
             raise ValueError(f"origins {o.shape}, angles {a.shape}, ranges {r.shape} disagree")
         if (r < 0).any():
             raise ValueError("ranges must be >= 0 (use inf or nan for no return)")
-        ox = np.ascontiguousarray(np.broadcast_to(o[..., 0], a.shape))
-        oy = np.ascontiguousarray(np.broadcast_to(o[..., 1], a.shape))
+        ox, oy = o[..., 0], o[..., 1]
+        if o.shape[1] != a.shape[1]:  # one origin per scan
+            ox, oy = np.repeat(ox, a.shape[1], axis=1), np.repeat(oy, a.shape[1], axis=1)
         return raster.even_beam_cells(
-            ox, oy, np.ascontiguousarray(a), np.ascontiguousarray(r), max_range, self.origin,
-            self.resolution, self.free.shape,
+            np.ascontiguousarray(ox), np.ascontiguousarray(oy), np.ascontiguousarray(a),
+            np.ascontiguousarray(r), max_range, self.origin, self.resolution, self.free.shape,
         )  # fmt: skip
 
     def scan_cells(
@@ -112,7 +113,8 @@ class CoverageGrid:
 
         Returns (and stores as ``gain``) the number of newly swept free cells of the team.
         """
-        mine = None if robot is None else self._mine(int(robot))
+        row = None if robot is None else self._row(int(robot))  # before _masks may grow
+        mine = None if row is None else self._masks[row]
         self.gain = raster.mark_cells(cells, self.free, self.swept, mine)
         self._n_swept_free += self.gain
         return self.gain
@@ -146,10 +148,14 @@ class CoverageGrid:
         free cells counted against the grid as it was before this call (a cell first swept by
         two robots at once counts for both); the team's coverage counts it once."""
         ids = self._scan_ids(origins, angles, ranges, max_range)
-        gains = [self.new_free_cells(ids[k]) for k in range(len(ids))]
-        for k, robot in enumerate(robots):
-            self.mark(ids[k], robot)
-        return gains
+        rows = [self._row(int(robot)) for robot in robots]
+        gains, total, last = raster.count_and_mark(
+            ids, self.free, self.swept, self._masks, np.array(rows, dtype=np.int64)
+        )
+        if len(ids):
+            self.gain = last
+        self._n_swept_free += total
+        return gains.tolist()
 
     @property
     def coverage(self) -> float:
