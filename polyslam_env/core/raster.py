@@ -31,6 +31,7 @@ from polyslam_env.core.jit import njit
 
 __all__ = [
     "beam_fractions",
+    "cell_id",
     "count_and_mark",
     "count_new",
     "even_beam_cells",
@@ -43,8 +44,9 @@ __all__ = [
 
 # -- kernels ----------------------------------------------------------------------------------
 @njit
-def _cell(x: float, y: float, ox: float, oy: float, res: float, h: int, w: int) -> int:
-    """Flat id of the cell holding (x, y); −1 outside the grid."""
+def cell_id(x: float, y: float, ox: float, oy: float, res: float, h: int, w: int) -> int:
+    """Flat id of the cell holding (x, y) in a grid of origin (ox, oy), cell side ``res`` and
+    shape (h, w); −1 outside the grid. A kernel: callable from other kernels."""
     col = math.floor((x - ox) / res)
     row = math.floor((y - oy) / res)
     if 0 <= row < h and 0 <= col < w:
@@ -57,7 +59,7 @@ def _point_cells(
     x: np.ndarray, y: np.ndarray, ox: float, oy: float, res: float, h: int, w: int, out: np.ndarray
 ) -> None:
     for i in range(x.shape[0]):
-        out[i] = _cell(x[i], y[i], ox, oy, res, h, w)
+        out[i] = cell_id(x[i], y[i], ox, oy, res, h, w)
 
 
 @njit
@@ -87,8 +89,8 @@ def _scan_cells(
             c, s = math.cos(phi), math.sin(phi)
             for j in range(fractions.shape[0]):
                 t = length * fractions[j]
-                free[k, b, j] = _cell(poses[k, 0] + t * c, poses[k, 1] + t * s, ox, oy, res, h, w)
-            end = _cell(poses[k, 0] + r * c, poses[k, 1] + r * s, ox, oy, res, h, w)
+                free[k, b, j] = cell_id(poses[k, 0] + t * c, poses[k, 1] + t * s, ox, oy, res, h, w)
+            end = cell_id(poses[k, 0] + r * c, poses[k, 1] + r * s, ox, oy, res, h, w)
             hit[k, b] = end if returned else -1
 
 
@@ -117,11 +119,11 @@ def _mark_scan(
         c, s = math.cos(phi), math.sin(phi)
         for j in range(fractions.shape[0]):
             t = length * fractions[j]
-            cell = _cell(pose[0] + t * c, pose[1] + t * s, ox, oy, res, h, w)
+            cell = cell_id(pose[0] + t * c, pose[1] + t * s, ox, oy, res, h, w)
             if cell >= 0:
                 free[cell] = True
         if returned:
-            cell = _cell(pose[0] + r * c, pose[1] + r * s, ox, oy, res, h, w)
+            cell = cell_id(pose[0] + r * c, pose[1] + r * s, ox, oy, res, h, w)
             if cell >= 0:
                 hit[cell] = True
 
@@ -165,7 +167,7 @@ def _even_beam_cells(
             for j in range(out.shape[2]):
                 if j < n:
                     t = length * _linspace_fraction(j, n)
-                    out[k, b, j] = _cell(ox[k, b] + t * c, oy[k, b] + t * s, gx, gy, res, h, w)
+                    out[k, b, j] = cell_id(ox[k, b] + t * c, oy[k, b] + t * s, gx, gy, res, h, w)
                 else:
                     out[k, b, j] = -1
 

@@ -22,6 +22,7 @@ from gymnasium import spaces
 
 from polyslam_env.core import raster
 from polyslam_env.core.geometry import rotation
+from polyslam_env.environment import kernels
 from polyslam_env.environment.config import EnvConfig, ObservationConfig
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
@@ -41,6 +42,7 @@ FREE, UNKNOWN, OCCUPIED = 0.0, 0.5, 1.0
 #: Caps of the reported pose standard deviations (x m, y m, θ rad); std/cap is clipped to 1.
 STD_CAPS = np.array([1.0, 1.0, math.pi])
 _CAPS = STD_CAPS.tolist()
+_NO_POINTS = np.zeros((0, 2))
 
 
 class BeliefGrid:
@@ -241,20 +243,19 @@ class ObservationEncoder:
     # -- encoding -------------------------------------------------------------------------
     def local_cells(self, view: RobotView) -> tuple[np.ndarray, np.ndarray]:
         """Occupied and free cells (G²,) bool of the egocentric grid (x forward = columns,
-        row-major); a cell is never both, and neither means unknown."""
-        g = self.g
+        row-major); a cell is never both, and neither means unknown. Occupied: the robot's map
+        points (and, with ``use_hits``, the belief grid's hits); free: the belief grid's free
+        cells (compiled :func:`~polyslam_env.environment.kernels.local_cells`)."""
         rot = rotation(view.pose[2])  # ego → own frame; (own − xy) @ rot = ego
-        occ = np.zeros(g * g, dtype=bool)  # (G²,)
-        if len(view.map_points):
-            ego = (view.map_points - view.pose[:2]) @ rot  # (M, 2)
-            idx = np.floor(ego / self.res + (g // 2 + 0.5)).astype(np.intp)  # (M, 2)
-            u = idx.view(np.uintp)  # negatives wrap to huge values
-            ok = (u[:, 0] < g) & (u[:, 1] < g)
-            occ[idx[ok, 1] * g + idx[ok, 0]] = True
-        free, hit = view.belief.lookup(self.cell_centres @ rot.T + view.pose[:2])
-        if self.use_hits:
-            occ |= hit
-        free &= ~occ
+        ego = (view.map_points - view.pose[:2]) @ rot if len(view.map_points) else _NO_POINTS
+        centres = self.cell_centres @ rot.T + view.pose[:2]  # (G², 2) in the own frame
+        occ = np.empty(self.g * self.g, dtype=bool)
+        free = np.empty(self.g * self.g, dtype=bool)
+        b = view.belief
+        kernels.local_cells(
+            centres, ego, self.g, self.res, b.free.reshape(-1), b.hit.reshape(-1), b.origin,
+            b.resolution, b.n, self.use_hits, occ, free,
+        )  # fmt: skip
         return occ, free
 
     def local_map(self, view: RobotView) -> np.ndarray:  # (3, G, G) float32

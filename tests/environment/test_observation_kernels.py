@@ -1,0 +1,33 @@
+"""The observation kernels against their numpy oracle (``reference.py``): identical cells."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from polyslam_env.environment.config import resolve_config
+from polyslam_env.environment.observations import BeliefGrid, ObservationEncoder, RobotView
+from tests.environment import reference
+
+
+@pytest.mark.parametrize("slam_enabled", [True, False])
+def test_local_cells__equal_the_oracle(slam_enabled: bool) -> None:
+    config = resolve_config(None, slam_enabled=slam_enabled)
+    encoder = ObservationEncoder(config, (10.0, 8.0))
+    rng = np.random.default_rng(0)
+    belief = BeliefGrid(12.0, 0.1, 2.0)
+    for _ in range(100):
+        belief.free[:] = rng.random(belief.free.shape) < 0.5
+        belief.hit[:] = rng.random(belief.hit.shape) < 0.1
+        pose = np.array([*rng.uniform(-7.0, 7.0, 2), rng.uniform(-4, 4)])  # near edges too
+        points = pose[:2] + rng.uniform(-1.5, 1.5, (int(rng.integers(0, 40)), 2))
+        view = RobotView(
+            ranges=np.ones(5), pose=pose, pose_std=np.zeros(3), map_points=points, belief=belief,
+            detections=[], steps_since_rendezvous=None, rendezvous=0, step=0,
+        )  # fmt: skip
+        occ, free = encoder.local_cells(view)
+        want_occ, want_free = reference.local_cells(
+            pose, points, belief, encoder.cell_centres, encoder.g, encoder.res, not slam_enabled
+        )
+        np.testing.assert_array_equal(occ, want_occ)
+        np.testing.assert_array_equal(free, want_free)
