@@ -50,3 +50,45 @@ def local_cells(
         if c >= 0 and use_hits and belief_hit[c]:
             occ[i] = True
         free[i] = c >= 0 and belief_free[c] and not occ[i]
+
+
+@njit
+def _clip(v: float, lo: float, hi: float) -> float:
+    """``min(max(v, lo), hi)`` with Python's builtins' semantics (the first argument wins ties
+    and NaN comparisons)."""
+    v = lo if lo > v else v
+    return hi if hi < v else v
+
+
+@njit
+def vector_head(
+    ranges: np.ndarray,
+    max_range: float,
+    pose: np.ndarray,
+    scale: float,
+    std: np.ndarray,
+    caps: np.ndarray,
+    occ: np.ndarray,
+    free: np.ndarray,
+    codes: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """The vector observation's first parts in ``out`` (float32): ranges / max_range (no
+    return → 1), a no-return flag per beam, the pose (x/scale, y/scale clipped to ±1, cos θ,
+    sin θ), the pose standard deviations / caps clipped to 0…1, then, when ``occ`` is not
+    empty, the local map coded ``codes`` = (free, unknown, occupied) per cell."""
+    nb = ranges.shape[0]
+    for b in range(nb):
+        v = ranges[b] / max_range
+        out[b] = v if v < 1.0 else 1.0  # fmin: inf and nan → 1
+        out[nb + b] = 0.0 if math.isfinite(ranges[b]) else 1.0
+    p = 2 * nb
+    out[p] = _clip(pose[0] / scale, -1.0, 1.0)
+    out[p + 1] = _clip(pose[1] / scale, -1.0, 1.0)
+    out[p + 2] = math.cos(pose[2])
+    out[p + 3] = math.sin(pose[2])
+    for j in range(3):
+        out[p + 4 + j] = _clip(std[j] / caps[j], 0.0, 1.0)
+    m = p + 7
+    for i in range(occ.shape[0]):
+        out[m + i] = codes[0] if free[i] else (codes[2] if occ[i] else codes[1])

@@ -41,8 +41,9 @@ __all__ = [
 FREE, UNKNOWN, OCCUPIED = 0.0, 0.5, 1.0
 #: Caps of the reported pose standard deviations (x m, y m, θ rad); std/cap is clipped to 1.
 STD_CAPS = np.array([1.0, 1.0, math.pi])
-_CAPS = STD_CAPS.tolist()
 _NO_POINTS = np.zeros((0, 2))
+_NO_CELLS = np.zeros(0, dtype=bool)
+_CODES = np.array([FREE, UNKNOWN, OCCUPIED])
 
 
 class BeliefGrid:
@@ -280,30 +281,17 @@ class ObservationEncoder:
         """The flat vector; the local map's (occupied, free) ``cells`` (G²,) are folded in as
         one coded channel if given.
 
-        The few scalar parts are written as Python floats: numpy calls on 2–4 element arrays
-        cost more than the arithmetic (the float32 values are the same either way).
+        Ranges, pose, standard deviations and local map are written by the compiled
+        :func:`~polyslam_env.environment.kernels.vector_head`; the rest as Python floats.
         """
         oc = self.config.observation
         lay = self._layout
         out = np.empty(self.vector_space.shape, dtype=np.float32)
-        out[lay["ranges"]] = np.fmin(view.ranges / self.max_range, 1.0)  # no return (inf) → 1
-        out[lay["no_return"]] = ~np.isfinite(view.ranges)
-        x, y, theta = view.pose.tolist()
-        scale = self.pose_scale
-        out[lay["pose"]] = (
-            min(max(x / scale, -1.0), 1.0),
-            min(max(y / scale, -1.0), 1.0),
-            math.cos(theta),
-            math.sin(theta),
-        )
-        std = zip(view.pose_std.tolist(), _CAPS, strict=True)
-        out[lay["pose_std"]] = [min(max(sd / cap, 0.0), 1.0) for sd, cap in std]
-        if cells is not None:
-            occ, free = cells
-            local = out[lay["local_map"]]
-            local.fill(UNKNOWN)
-            local[occ] = OCCUPIED
-            local[free] = FREE
+        occ, free = (_NO_CELLS, _NO_CELLS) if cells is None else cells
+        kernels.vector_head(
+            view.ranges, self.max_range, view.pose, self.pose_scale, view.pose_std, STD_CAPS,
+            occ, free, _CODES, out,
+        )  # fmt: skip
         since, t = view.steps_since_rendezvous, self.config.max_steps
         # detections, channel and progress are adjacent: one assignment
         out[lay["detections"].start : lay["progress"].stop] = [

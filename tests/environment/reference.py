@@ -3,10 +3,20 @@ the oracles of the kernel tests (same float operations in the same order: identi
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from polyslam_env.core.geometry import rotation
-from polyslam_env.environment.observations import BeliefGrid
+from polyslam_env.environment.observations import (
+    FREE,
+    OCCUPIED,
+    STD_CAPS,
+    UNKNOWN,
+    BeliefGrid,
+    ObservationEncoder,
+    RobotView,
+)
 from tests.core.reference import point_cells
 
 
@@ -37,3 +47,38 @@ def local_cells(
         occ |= hit
     free &= ~occ
     return occ, free
+
+
+def vector(
+    encoder: ObservationEncoder, view: RobotView, cells: tuple[np.ndarray, np.ndarray] | None
+) -> np.ndarray:
+    """The flat vector observation (``ObservationEncoder.vector``), written part by part."""
+    oc = encoder.config.observation
+    lay = encoder.vector_layout
+    out = np.empty(encoder.vector_space.shape, dtype=np.float32)
+    out[lay["ranges"]] = np.fmin(view.ranges / encoder.max_range, 1.0)  # no return (inf) → 1
+    out[lay["no_return"]] = ~np.isfinite(view.ranges)
+    x, y, theta = view.pose.tolist()
+    scale = encoder.pose_scale
+    out[lay["pose"]] = (
+        min(max(x / scale, -1.0), 1.0),
+        min(max(y / scale, -1.0), 1.0),
+        math.cos(theta),
+        math.sin(theta),
+    )
+    std = zip(view.pose_std.tolist(), STD_CAPS.tolist(), strict=True)
+    out[lay["pose_std"]] = [min(max(sd / cap, 0.0), 1.0) for sd, cap in std]
+    if cells is not None:
+        occ, free = cells
+        local = out[lay["local_map"]]
+        local.fill(UNKNOWN)
+        local[occ] = OCCUPIED
+        local[free] = FREE
+    since, t = view.steps_since_rendezvous, encoder.config.max_steps
+    out[lay["detections"].start : lay["progress"].stop] = [
+        *encoder._detections(view.detections),
+        1.0 if since is None else min(since / t, 1.0),
+        min(view.rendezvous, oc.rendezvous_cap) / oc.rendezvous_cap,
+        min(view.step / t, 1.0),
+    ]
+    return out

@@ -7,6 +7,7 @@ import pytest
 
 from polyslam_env.environment.config import resolve_config
 from polyslam_env.environment.observations import BeliefGrid, ObservationEncoder, RobotView
+from polyslam_env.world.sensors import Detection
 from tests.environment import reference
 
 
@@ -31,3 +32,30 @@ def test_local_cells__equal_the_oracle(slam_enabled: bool) -> None:
         )
         np.testing.assert_array_equal(occ, want_occ)
         np.testing.assert_array_equal(free, want_free)
+
+
+@pytest.mark.parametrize("mode", ["vector", "grid"])
+def test_vector__equals_the_oracle(mode: str) -> None:
+    config = resolve_config(None, observation__mode=mode)
+    encoder = ObservationEncoder(config, (10.0, 8.0))
+    rng = np.random.default_rng(1)
+    belief = BeliefGrid(12.0, 0.1, 2.0)
+    belief.free[:] = rng.random(belief.free.shape) < 0.5
+    for k in range(200):
+        ranges = rng.uniform(0.0, 3.0, 5)
+        ranges[rng.random(5) < 0.3] = np.inf
+        pose = np.array([*rng.uniform(-30.0, 30.0, 2), rng.uniform(-4, 4)])  # some clipped
+        detections = [
+            Detection(int(j), float(rng.uniform(0, 2)), float(rng.uniform(-3, 3)))
+            for j in range(int(rng.integers(0, 4)))
+        ]
+        view = RobotView(
+            ranges=ranges, pose=pose, pose_std=rng.uniform(0.0, 4.0, 3),
+            map_points=np.zeros((0, 2)), belief=belief, detections=detections,
+            steps_since_rendezvous=None if k % 3 else int(rng.integers(0, 500)),
+            rendezvous=int(rng.integers(0, 20)), step=int(rng.integers(0, 600)),
+        )  # fmt: skip
+        cells = encoder.local_cells(view) if mode == "vector" else None
+        np.testing.assert_array_equal(
+            encoder.vector(view, cells), reference.vector(encoder, view, cells)
+        )
