@@ -183,6 +183,26 @@ def camera_visible(
 
 
 @njit
+def camera_noise(
+    dist: np.ndarray,
+    bearing: np.ndarray,
+    noise: np.ndarray,
+    sigma_d: float,
+    sigma_bearing: float,
+    d: np.ndarray,
+    b: np.ndarray,
+) -> None:
+    """Noisy distances ``d`` (≥ 0) and bearings ``b`` (wrapped to (−π, π]), each (N, N), from
+    the noiseless ones and standard normal ``noise`` (N, N, 2)."""
+    for o in range(dist.shape[0]):
+        for g in range(dist.shape[1]):
+            v = dist[o, g] + noise[o, g, 0] * sigma_d
+            d[o, g] = v if v >= 0.0 or v != v else 0.0  # np.maximum(v, 0): NaN stays
+            a = bearing[o, g] + noise[o, g, 1] * sigma_bearing
+            b[o, g] = math.pi - np.mod(math.pi - a, 2.0 * math.pi)
+
+
+@njit
 def _crosses(px: float, py: float, qx: float, qy: float, segments: np.ndarray, s: int) -> bool:
     """Whether the path p → q properly intersects segment ``s`` (ends and touching excluded)."""
     ax, ay = segments[s, 0], segments[s, 1]

@@ -23,7 +23,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyslam_env.core.geometry import wrap_angle
 from polyslam_env.world import kernels
 from polyslam_env.world.config import CameraConfig, RangeSensorConfig
 from polyslam_env.world.nearby import WallIndex
@@ -174,9 +173,15 @@ class Camera:
         n = len(poses)
         mask, dist, bearing = self.visible(poses, np.asarray(active, dtype=bool), walls, circles)
         noise = rng.standard_normal((n, n, 2))  # drawn for every pair, seen or not
-        d = np.maximum(dist + noise[..., 0] * self.config.sigma_d, 0.0)
-        b = wrap_angle(bearing + noise[..., 1] * self.config.sigma_bearing)
         out: list[list[Detection]] = [[] for _ in range(n)]
-        for i, j in zip(*np.nonzero(mask), strict=True):
-            out[int(i)].append(Detection(int(j), float(d[i, j]), float(b[i, j])))
+        if not mask.any():
+            return out
+        d, b = np.empty((n, n)), np.empty((n, n))
+        cfg = self.config
+        kernels.camera_noise(dist, bearing, noise, cfg.sigma_d, cfg.sigma_bearing, d, b)
+        obs, tgt = np.nonzero(mask)
+        for i, j, dj, bj in zip(
+            obs.tolist(), tgt.tolist(), d[mask].tolist(), b[mask].tolist(), strict=True
+        ):
+            out[i].append(Detection(j, dj, bj))
         return out

@@ -174,3 +174,12 @@ def drive_forces(
     chord = np.where(half == 0.0, 1.0, np.sin(safe) / safe)  # (N, 1): sinc(ω h / 2)
     gain = cmd[:, 0:1] * chord * mass / h  # (N, 1)
     return np.stack([gain * np.cos(mid), gain * np.sin(mid)], axis=-1)
+
+
+def camera_noise(
+    dist: np.ndarray, bearing: np.ndarray, noise: np.ndarray, sigma_d: float, sigma_bearing: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Noisy distances (≥ 0) and wrapped bearings (N, N) from noise (N, N, 2)."""
+    d = np.maximum(dist + noise[..., 0] * sigma_d, 0.0)
+    b = wrap_angle(bearing + noise[..., 1] * sigma_bearing)
+    return d, b

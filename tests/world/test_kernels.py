@@ -174,3 +174,17 @@ def test_wall_index__cached_per_layout_and_bad_cell_raises() -> None:
     assert wall_index(layout) is wall_index(layout)
     with pytest.raises(ValueError, match="cell"):
         WallIndex.build(layout.segments, 0.0)
+
+
+def test_camera_noise__equals_the_oracle() -> None:
+    rng = np.random.default_rng(7)
+    dist = rng.uniform(0.0, 0.05, (9, 9))  # some noisy distances below 0
+    bearing = rng.uniform(-math.pi, math.pi, (9, 9))
+    bearing[0, :3] = (math.pi, -math.pi, 0.0)
+    noise = rng.standard_normal((9, 9, 2))
+    d, b = np.empty((9, 9)), np.empty((9, 9))
+    kernels.camera_noise(dist, bearing, noise, 0.02, 0.5, d, b)
+    want_d, want_b = reference.camera_noise(dist, bearing, noise, 0.02, 0.5)
+    np.testing.assert_array_equal(d, want_d)
+    np.testing.assert_array_equal(b, want_b)
+    assert (d == 0.0).any()
