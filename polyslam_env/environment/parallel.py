@@ -13,6 +13,7 @@ never feeds observations.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -175,6 +176,7 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
             cfg.world.robot.v_max,
             cfg.world.robot.omega_max,
         )  # (K, 2) physical (v, ω)
+        self._is_discrete = cfg.action.mode == "discrete"
         self._faults = FaultPlan(cfg)
         self._seeder: np.random.Generator | None = None
         # The current episode, made by reset(). Not named ``state``: that is PettingZoo's
@@ -334,7 +336,16 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
             commands[self._index[agent]] = self._command(agent, actions[agent])
         return commands
 
-    def _command(self, agent: str, action: Action) -> np.ndarray:  # (2,)
+    def _command(self, agent: str, action: Action) -> np.ndarray | tuple[float, float]:  # (2,)
+        if (
+            type(action) is np.ndarray
+            and action.shape == (2,)
+            and action.dtype.kind == "f"
+            and not self._is_discrete
+        ):  # the common case, checked without numpy calls: a float (v, omega) array
+            v, w = action.tolist()
+            if math.isfinite(v) and math.isfinite(w):
+                return v, w
         if action is None:
             raise ValueError(f"action of {agent}: None for a live agent")
         a = np.asarray(action)
