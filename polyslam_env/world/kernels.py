@@ -144,7 +144,7 @@ def beam_ranges(
 def camera_visible(
     poses: np.ndarray,
     active: np.ndarray,
-    dist: np.ndarray,
+    rel: np.ndarray,
     direction: np.ndarray,
     cam_range: float,
     half_fov: float,
@@ -158,17 +158,20 @@ def camera_visible(
     items: np.ndarray,
     circles: np.ndarray,
     mask: np.ndarray,
+    dist: np.ndarray,
     bearing: np.ndarray,
 ) -> None:
-    """Which robot (column) each robot (row) sees: ``mask`` (N, N), and the ``bearing`` (N, N)
-    of every pair, from the distances ``dist`` and absolute directions ``direction`` (N, N)
-    of target − observer. Seen: both active, not itself, within ``cam_range``, within the field
-    of view when ``limit_fov``, and no wall or circle on the line of sight before the target."""
+    """Which robot (column) each robot (row) sees: ``mask`` (N, N), and the distance ``dist``
+    and ``bearing`` (N, N) of every pair, from the offsets ``rel`` (N, N, 2) and absolute
+    directions ``direction`` (N, N) (numpy's arctan2 of ``rel``) of target − observer. Seen:
+    both active, not itself, within ``cam_range``, within the field of view when
+    ``limit_fov``, and no wall or circle on the line of sight before the target."""
     n = poses.shape[0]
     for o in range(n):
         for g in range(n):
-            rel = direction[o, g] - poses[o, 2]
-            bearing[o, g] = math.pi - np.mod(math.pi - rel, 2.0 * math.pi)  # wrap to (−π, π]
+            dist[o, g] = math.hypot(rel[o, g, 0], rel[o, g, 1])
+            turn = direction[o, g] - poses[o, 2]
+            bearing[o, g] = math.pi - np.mod(math.pi - turn, 2.0 * math.pi)  # wrap to (−π, π]
             seen = active[o] and active[g] and o != g and dist[o, g] <= cam_range
             if seen and limit_fov:
                 seen = abs(bearing[o, g]) <= half_fov

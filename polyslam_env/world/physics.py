@@ -109,6 +109,9 @@ class World:
         self._walls = self.walls.arrays
         r = config.robot.radius
         self._clearance = (r + config.wall_radius - GUARD_TOLERANCE, r - GUARD_TOLERANCE)
+        rc = config.robot
+        self._cmd_lo = np.array([-rc.v_max if rc.allow_reverse else 0.0, -rc.omega_max])  # (2,)
+        self._cmd_hi = np.array([rc.v_max, rc.omega_max])  # (2,)
         odo = config.odometry
         self._odo_sigma = np.array([odo.sigma_xy, odo.sigma_xy, odo.sigma_theta])  # (3,)
         self.active = np.ones(num_robots, dtype=bool)  # (N,)
@@ -126,7 +129,7 @@ class World:
         """Chipmunk's pointers of the space and the robot bodies (see the module doc)."""
         self._space_c = self.space._space  # cpSpace*
         self._bodies_c = [b._body for b in self.bodies]  # cpBody* of each robot
-        self._robot_of = {_address(b): i for i, b in enumerate(self._bodies_c)}
+        self._robot_of = {b: i for i, b in enumerate(self._bodies_c)}  # pointers hash by address
         self._arbiter_bodies = (ffi.new("cpBody *[1]"), ffi.new("cpBody *[1]"))
 
     def __getstate__(self) -> dict[str, Any]:
@@ -215,7 +218,7 @@ class World:
         a, b = self._arbiter_bodies
         chipmunk.cpArbiterGetBodies(arbiter._arbiter, a, b)
         for body in (a[0], b[0]):
-            i = self._robot_of.get(_address(body))
+            i = self._robot_of.get(body)
             if i is not None:
                 self._touched[i] = True
 
@@ -271,9 +274,7 @@ class World:
         if not np.isfinite(cmd).all():
             i = int(np.argmax(~np.isfinite(cmd).all(axis=1)))
             raise ValueError(f"commands[{i}] (robot_{i}): not finite, got {tuple(cmd[i])}")
-        rc = self.config.robot
-        v_lo = -rc.v_max if rc.allow_reverse else 0.0
-        out = np.clip(cmd, (v_lo, -rc.omega_max), (rc.v_max, rc.omega_max))  # per column
+        out = np.clip(cmd, self._cmd_lo, self._cmd_hi)  # per column
         if not self.active.all():
             out[~self.active] = 0.0
         return out
@@ -378,8 +379,3 @@ class World:
         return self.camera_sensor.detect(
             self._pose, self.active, self.walls, self.pillars, self.rngs["camera"]
         )
-
-
-def _address(pointer: Any) -> int:
-    """The address of a cffi pointer, as a dictionary key."""
-    return int(ffi.cast("uintptr_t", pointer))

@@ -150,14 +150,12 @@ class Camera:
         p = np.ascontiguousarray(np.asarray(poses, dtype=float).reshape(-1, 3))
         n = len(p)
         rel = p[None, :, :2] - p[:, None, :2]  # (N, N, 2): target − observer
-        dist = np.hypot(rel[..., 0], rel[..., 1])  # (N, N)
         direction = np.arctan2(rel[..., 1], rel[..., 0])  # (N, N) absolute
-        mask = np.empty((n, n), dtype=bool)
-        bearing = np.empty((n, n))
+        mask, dist, bearing = np.empty((n, n), dtype=bool), np.empty((n, n)), np.empty((n, n))
         kernels.camera_visible(
-            p, np.asarray(active, dtype=bool), dist, direction, float(self.config.range),
+            p, np.asarray(active, dtype=bool), rel, direction, float(self.config.range),
             self.half_fov, self.config.fov_deg < 360.0, *_index(walls).arrays,
-            _circles(circles), mask, bearing,
+            _circles(circles), mask, dist, bearing,
         )  # fmt: skip
         return mask, dist, bearing
 
