@@ -32,13 +32,13 @@ from polyslam_env.core.jit import njit
 __all__ = [
     "beam_fractions",
     "cell_id",
-    "count_and_mark",
     "count_new",
     "even_beam_cells",
     "mark_cells",
     "mark_scan",
     "point_cells",
     "scan_cells",
+    "sweep_team",
 ]
 
 
@@ -139,6 +139,40 @@ def _linspace_fraction(i: int, n: int) -> float:
 
 
 @njit
+def _even_scan(
+    ox: np.ndarray,
+    oy: np.ndarray,
+    phi: np.ndarray,
+    ranges: np.ndarray,
+    max_range: float,
+    gx: float,
+    gy: float,
+    res: float,
+    h: int,
+    w: int,
+    out: np.ndarray,
+) -> None:
+    """Ids ``out`` (R, width) of the cells under the samples of one scan's R beams from
+    (``ox``, ``oy``) (R,) at angles ``phi`` (R,) (−1: outside the grid or past the scan's
+    sample count); see :func:`even_beam_cells`."""
+    spacing = 0.5 * res
+    longest = 0.0
+    for b in range(phi.shape[0]):
+        length = ranges[b] if ranges[b] < max_range else max_range  # fmin: inf, nan → max
+        longest = max(longest, length)
+    n = math.ceil(max(longest, 0.0) / spacing) + 1
+    for b in range(phi.shape[0]):
+        length = ranges[b] if ranges[b] < max_range else max_range
+        c, s = math.cos(phi[b]), math.sin(phi[b])
+        for j in range(out.shape[1]):
+            if j < n:
+                t = length * _linspace_fraction(j, n)
+                out[b, j] = cell_id(ox[b] + t * c, oy[b] + t * s, gx, gy, res, h, w)
+            else:
+                out[b, j] = -1
+
+
+@njit
 def _even_beam_cells(
     ox: np.ndarray,
     oy: np.ndarray,
@@ -152,24 +186,9 @@ def _even_beam_cells(
     w: int,
     out: np.ndarray,
 ) -> None:
-    """Ids ``out`` (K, R, width) of the cells under each beam's samples (−1: outside the grid
-    or past the scan's sample count); see :func:`even_beam_cells`."""
-    spacing = 0.5 * res
+    """:func:`_even_scan` of K scans: ``out`` (K, R, width)."""
     for k in range(phi.shape[0]):
-        longest = 0.0
-        for b in range(phi.shape[1]):
-            length = ranges[k, b] if ranges[k, b] < max_range else max_range
-            longest = max(longest, length)
-        n = math.ceil(max(longest, 0.0) / spacing) + 1
-        for b in range(phi.shape[1]):
-            length = ranges[k, b] if ranges[k, b] < max_range else max_range
-            c, s = math.cos(phi[k, b]), math.sin(phi[k, b])
-            for j in range(out.shape[2]):
-                if j < n:
-                    t = length * _linspace_fraction(j, n)
-                    out[k, b, j] = cell_id(ox[k, b] + t * c, oy[k, b] + t * s, gx, gy, res, h, w)
-                else:
-                    out[k, b, j] = -1
+        _even_scan(ox[k], oy[k], phi[k], ranges[k], max_range, gx, gy, res, h, w, out[k])
 
 
 @njit
@@ -213,13 +232,54 @@ def _count_and_mark(
     rows: np.ndarray,
     gains: np.ndarray,
 ) -> tuple[int, int]:
-    """:func:`count_and_mark` on flat grids: ``ids`` (K, M), ``mines`` (R, H·W)."""
+    """K sets of cells ``ids`` (K, M) (−1 skipped) at once: first :func:`_count_new` of each
+    against ``marked`` as it is into ``gains`` (K,), then :func:`_mark_cells` of each in
+    order, in ``marked`` and its own grid ``mines[rows[k]]`` (flat grids). Returns the total
+    newly marked cells of ``mask`` and those of the last set."""
     for k in range(ids.shape[0]):
         gains[k] = _count_new(ids[k], mask, marked)
     total = last = 0
     for k in range(ids.shape[0]):
         last = _mark_cells(ids[k], mask, marked, mines[rows[k]])
         total += last
+    return total, last
+
+
+@njit
+def _sweep_team(
+    poses: np.ndarray,
+    angles: np.ndarray,
+    ranges: np.ndarray,
+    active: np.ndarray,
+    max_range: float,
+    gx: float,
+    gy: float,
+    res: float,
+    h: int,
+    w: int,
+    mask: np.ndarray,
+    marked: np.ndarray,
+    mines: np.ndarray,
+    rows: np.ndarray,
+    gains: np.ndarray,
+) -> tuple[int, int]:
+    """:func:`sweep_team` on flat grids; ``gains`` (N,) of inactive robots are left alone."""
+    width = math.ceil(max(max_range, 0.0) / (0.5 * res)) + 1
+    nb = angles.shape[0]
+    robots = np.flatnonzero(active)
+    ids = np.empty((robots.shape[0], nb * width), dtype=np.int64)
+    phi = np.empty(nb)
+    for k in range(robots.shape[0]):
+        i = robots[k]
+        for b in range(nb):
+            phi[b] = poses[i, 2] + angles[b]
+        ox, oy = np.full(nb, poses[i, 0]), np.full(nb, poses[i, 1])
+        out = ids[k].reshape((nb, width))
+        _even_scan(ox, oy, phi, ranges[i], max_range, gx, gy, res, h, w, out)
+    team = np.empty(robots.shape[0], dtype=np.int64)
+    total, last = _count_and_mark(ids, mask, marked, mines, rows[robots], team)
+    for k in range(robots.shape[0]):
+        gains[robots[k]] = team[k]
     return total, last
 
 
@@ -340,19 +400,31 @@ def mark_cells(
     return int(_mark_cells(flat, mask.reshape(-1), marked.reshape(-1), own))
 
 
-def count_and_mark(
-    ids: np.ndarray, mask: np.ndarray, marked: np.ndarray, mines: np.ndarray, rows: np.ndarray
+def sweep_team(
+    poses: np.ndarray,
+    angles: np.ndarray,
+    ranges: np.ndarray,
+    active: np.ndarray,
+    max_range: float,
+    origin: tuple[float, float],
+    resolution: float,
+    mask: np.ndarray,
+    marked: np.ndarray,
+    mines: np.ndarray,
+    rows: np.ndarray,
 ) -> tuple[np.ndarray, int, int]:
-    """K sets of cells at once: first :func:`count_new` of each set ``ids[k]`` against
-    ``marked`` as it is, then :func:`mark_cells` of each in order, in ``marked`` and in its own
-    grid ``mines[rows[k]]``. ``ids`` (K, …) int64 (−1 skipped); ``mask``, ``marked`` (H, W) and
-    ``mines`` (R, H, W) boolean, C-contiguous, changed in place. Returns the counts (K,), the
-    total newly marked cells of ``mask`` and those of the last set."""
-    k = len(ids)
-    gains = np.zeros(k, dtype=np.int64)
-    total, last = _count_and_mark(
-        np.ascontiguousarray(ids, dtype=np.int64).reshape(k, -1 if k else 0), mask.reshape(-1),
-        marked.reshape(-1), mines.reshape(len(mines), -1), np.asarray(rows, dtype=np.int64),
-        gains,
+    """Count, then mark the :func:`even_beam_cells` of the ``active`` (N,) robots' scans, in
+    one kernel call. Robot i stands at ``poses[i]`` (3,), its beams at ``angles`` (B,)
+    relative to its heading read ``ranges[i]`` (B,), its own grid is ``mines[rows[i]]``.
+    First each scan's distinct cells of ``mask`` not yet ``marked`` are counted (before any
+    of this call's marks), then its cells are marked in ``marked`` and its own grid, in
+    order. Returns the counts (N,) (0 for inactive robots), the total newly marked cells of
+    ``mask`` and those of the last active robot."""
+    gains = np.zeros(len(poses), dtype=np.int64)
+    h, w = mask.shape
+    total, last = _sweep_team(
+        poses, angles, ranges, active, float(max_range), float(origin[0]), float(origin[1]),
+        float(resolution), h, w, mask.reshape(-1), marked.reshape(-1),
+        mines.reshape(len(mines), -1), rows, gains,
     )  # fmt: skip
     return gains, int(total), int(last)

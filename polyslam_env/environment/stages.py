@@ -313,18 +313,14 @@ def sweep_coverage(state: EpisodeState) -> np.ndarray:  # (N,) m²
     the team coverage to the series (changes both); return the area of free cells first swept
     by the team now, per robot."""
     grid = state.coverage
-    poses = state.world.poses
-    max_range = state.world.config.range_sensor.max_range
-    active = np.flatnonzero(state.world.active).tolist()
-    scans = state.sensing.ranges
+    world = state.world
+    max_range = world.config.range_sensor.max_range
     # Gains against the grid as it was before this step (counted before anything is marked),
     # so a cell first swept by two robots at once counts for both.
     new_cells = grid.sweep_team(
-        poses[active, :2], poses[active, 2:3] + state.angles, scans[active], max_range, active
+        world.poses, state.angles, state.sensing.ranges, max_range, world.active
     )
-    gains = np.zeros(state.world.num_robots)
-    gains[active] = new_cells
-    gains *= grid.resolution**2
+    gains = new_cells * grid.resolution**2
     state.coverage_series.append(grid.coverage)
     return gains
 

@@ -137,25 +137,30 @@ class CoverageGrid:
 
     def sweep_team(
         self,
-        origins: np.ndarray,
+        poses: np.ndarray,
         angles: np.ndarray,
         ranges: np.ndarray,
         max_range: float,
-        robots: list[int],
-    ) -> list[int]:
-        """Sweep the scans of several robots at once: ``origins`` (K, 2), absolute ``angles``
-        and ``ranges`` (K, R), ``robots`` (K,) whose masks they mark. Returns each scan's new
-        free cells counted against the grid as it was before this call (a cell first swept by
-        two robots at once counts for both); the team's coverage counts it once."""
-        ids = self._scan_ids(origins, angles, ranges, max_range)
-        rows = [self._row(int(robot)) for robot in robots]
-        gains, total, last = raster.count_and_mark(
-            ids, self.free, self.swept, self._masks, np.array(rows, dtype=np.int64)
-        )
-        if len(ids):
+        active: np.ndarray,
+    ) -> np.ndarray:  # (N,) int
+        """Sweep the scans of a team's active robots at once (one kernel call): robot i at
+        ``poses[i]`` (N, 3) with beams at ``angles`` (B,) relative to its heading and
+        ``ranges`` (N, B), if ``active[i]`` (N,). Returns each robot's new free cells counted
+        against the grid as it was before this call (a cell first swept by two robots at once
+        counts for both; 0 for inactive robots); the team's coverage counts it once."""
+        if not max_range > 0:
+            raise ValueError(f"max_range must be > 0, got {max_range}")
+        act = np.asarray(active, dtype=bool)
+        rows = np.array([self._row(i) if a else -1 for i, a in enumerate(act.tolist())])
+        gains, total, last = raster.sweep_team(
+            np.ascontiguousarray(poses, dtype=float), np.ascontiguousarray(angles, dtype=float),
+            np.ascontiguousarray(ranges, dtype=float), act, max_range, self.origin,
+            self.resolution, self.free, self.swept, self._masks, rows,
+        )  # fmt: skip
+        if act.any():
             self.gain = last
         self._n_swept_free += total
-        return gains.tolist()
+        return gains
 
     @property
     def coverage(self) -> float:
