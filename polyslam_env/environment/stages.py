@@ -69,6 +69,7 @@ __all__ = [
 ]
 
 Obs = np.ndarray | dict[str, np.ndarray]
+_NO_POINTS = np.zeros((0, 2))  # (0, 2): the map of a robot without SLAM
 
 
 # -- reset ----------------------------------------------------------------------------------------
@@ -299,7 +300,7 @@ def _view(state: EpisodeState, i: int, pose: np.ndarray, cov: np.ndarray) -> Rob
         ranges=state.sensing.ranges[i],
         pose=pose,
         pose_std=np.sqrt(np.maximum(np.diag(cov), 0.0)),
-        map_points=state.samplers[i].points(state.slams[i]) if state.slams else np.zeros((0, 2)),
+        map_points=state.samplers[i].points(state.slams[i]) if state.slams else _NO_POINTS,
         belief=state.beliefs[i],
         detections=state.sensing.detections[i],
         steps_since_rendezvous=None if last is None else state.step_count - last,

@@ -121,6 +121,8 @@ class World:
         self._w = [0.0] * num_robots  # commanded turn rate
         self._touched = np.zeros(num_robots, dtype=bool)  # (N,), set by the contact callback
         self._pose = self._start_poses(start_poses)  # (N, 3), θ unwrapped like pymunk's
+        self._wrapped = self._pose  # (N, 3): _wrapped_of with θ wrapped (see ``poses``)
+        self._wrapped_of: np.ndarray | None = None
         self.space = self._make_space()
         self.bodies = [self._add_robot(p) for p in self._pose]
         self._attach_chipmunk()
@@ -226,9 +228,11 @@ class World:
     @property
     def poses(self) -> np.ndarray:  # (N, 3)
         """True poses (x, y, θ), θ wrapped to (−π, π]."""
-        out = self._pose.copy()
-        out[:, 2] = wrap_angle(out[:, 2])
-        return out
+        if self._wrapped_of is not self._pose:  # the poses changed: wrap once per change
+            wrapped = self._pose.copy()
+            wrapped[:, 2] = wrap_angle(wrapped[:, 2])
+            self._wrapped, self._wrapped_of = wrapped, self._pose
+        return self._wrapped.copy()
 
     def robot_fits(self, i: int, pose: np.ndarray) -> bool:
         """Whether robot ``i`` could stand at ``pose`` (3,): clear of walls and pillars like a
@@ -249,6 +253,7 @@ class World:
         caller checks :meth:`robot_fits`."""
         x, y, th = (float(v) for v in pose)
         self._pose[i] = (x, y, th)
+        self._wrapped_of = None  # changed in place
         body = self.bodies[i]
         body.position = (x, y)
         body.angle = th
