@@ -66,8 +66,9 @@ def reward_terms(
 
 def combine(terms: Mapping[str, Mapping[str, float]], weights: RewardConfig) -> dict[str, float]:
     """Σ weight · term per agent; the team mean for everyone in shared mode."""
+    w = {name: getattr(weights, name) for name in REWARD_TERMS}  # looked up once per step
     rewards = {
-        agent: float(sum(getattr(weights, name) * value for name, value in t.items()))
+        agent: float(sum([w[name] * value for name, value in t.items()]))
         for agent, t in terms.items()
     }
     if weights.shared and rewards:
