@@ -10,7 +10,7 @@ cell a beam crosses over at least res/2 is always hit.
 
 Two sampling rules, both compiled kernels (:func:`polyslam_env.core.jit.njit`):
 
-* :func:`scan_cells` / :func:`mark_scan` (belief grids, frontier map): fixed ``fractions``
+* :func:`scan_cells` / :func:`mark_scans` (belief grids, frontier map): fixed ``fractions``
   (:func:`beam_fractions`) of each beam's length, which stops half a cell short of a hit, plus
   the hit cell;
 * :func:`even_beam_cells` (coverage): each scan's beams sampled ``linspace(0, 1, n)`` of their
@@ -35,7 +35,7 @@ __all__ = [
     "count_new",
     "even_beam_cells",
     "mark_cells",
-    "mark_scan",
+    "mark_scans",
     "point_cells",
     "scan_cells",
     "sweep_team",
@@ -95,8 +95,8 @@ def _scan_cells(
 
 
 @njit
-def _mark_scan(
-    pose: np.ndarray,
+def _mark_scans(
+    poses: np.ndarray,
     angles: np.ndarray,
     ranges: np.ndarray,
     max_range: float,
@@ -108,24 +108,28 @@ def _mark_scan(
     w: int,
     free: np.ndarray,
     hit: np.ndarray,
+    rows: np.ndarray,
 ) -> None:
-    """Set the free cells and the hit cells of one scan in the flat grids ``free``, ``hit``."""
-    for b in range(angles.shape[0]):
-        r_raw = ranges[b]
-        returned = math.isfinite(r_raw)
-        r = r_raw if r_raw < max_range else max_range
-        length = max(r - 0.5 * res, 0.0) if returned else r
-        phi = pose[2] + angles[b]
-        c, s = math.cos(phi), math.sin(phi)
-        for j in range(fractions.shape[0]):
-            t = length * fractions[j]
-            cell = cell_id(pose[0] + t * c, pose[1] + t * s, ox, oy, res, h, w)
-            if cell >= 0:
-                free[cell] = True
-        if returned:
-            cell = cell_id(pose[0] + r * c, pose[1] + r * s, ox, oy, res, h, w)
-            if cell >= 0:
-                hit[cell] = True
+    """Set the free and hit cells of K scans, scan k in the flat grids ``free[rows[k]]``,
+    ``hit[rows[k]]``; see :func:`mark_scans`."""
+    for k in range(poses.shape[0]):
+        own_free, own_hit = free[rows[k]], hit[rows[k]]
+        for b in range(angles.shape[0]):
+            r_raw = ranges[k, b]
+            returned = math.isfinite(r_raw)
+            r = r_raw if r_raw < max_range else max_range
+            length = max(r - 0.5 * res, 0.0) if returned else r
+            phi = poses[k, 2] + angles[b]
+            c, s = math.cos(phi), math.sin(phi)
+            for j in range(fractions.shape[0]):
+                t = length * fractions[j]
+                cell = cell_id(poses[k, 0] + t * c, poses[k, 1] + t * s, ox, oy, res, h, w)
+                if cell >= 0:
+                    own_free[cell] = True
+            if returned:
+                cell = cell_id(poses[k, 0] + r * c, poses[k, 1] + r * s, ox, oy, res, h, w)
+                if cell >= 0:
+                    own_hit[cell] = True
 
 
 @njit
@@ -335,8 +339,8 @@ def scan_cells(
     return free, free >= 0, hit, hit >= 0
 
 
-def mark_scan(
-    pose: np.ndarray,
+def mark_scans(
+    poses: np.ndarray,
     angles: np.ndarray,
     ranges: np.ndarray,
     max_range: float,
@@ -345,15 +349,18 @@ def mark_scan(
     resolution: float,
     free: np.ndarray,
     hit: np.ndarray,
+    rows: np.ndarray,
 ) -> None:
-    """Set (in place) the free and hit cells of one scan from ``pose`` (3,) in the boolean
-    grids ``free`` and ``hit`` (H, W), C-contiguous; the cells of :func:`scan_cells`."""
-    h, w = free.shape
-    _mark_scan(
-        np.ascontiguousarray(pose, dtype=float), np.ascontiguousarray(angles, dtype=float),
+    """Set (in place) the free and hit cells of K scans from ``poses`` (K, 3) (beams at
+    ``angles`` (B,), ``ranges`` (K, B)) in stacks of boolean grids ``free`` and ``hit``
+    (R, H, W), C-contiguous: scan k in grids ``rows[k]`` (K,). The cells of
+    :func:`scan_cells`."""
+    r, h, w = free.shape
+    _mark_scans(
+        np.ascontiguousarray(poses, dtype=float), np.ascontiguousarray(angles, dtype=float),
         np.ascontiguousarray(ranges, dtype=float), float(max_range), fractions,
-        float(origin[0]), float(origin[1]), float(resolution), h, w, free.reshape(-1),
-        hit.reshape(-1),
+        float(origin[0]), float(origin[1]), float(resolution), h, w, free.reshape(r, -1),
+        hit.reshape(r, -1), rows,
     )  # fmt: skip
 
 

@@ -46,22 +46,49 @@ _NO_CELLS = np.zeros(0, dtype=bool)
 _CODES = np.array([FREE, UNKNOWN, OCCUPIED])
 
 
+def _cells_a_side(size: float, resolution: float) -> int:
+    return math.ceil(round(size / resolution, 9))  # no float noise
+
+
 class BeliefGrid:
     """A robot's own square grid centred on its start (its frame's origin), rows = y.
 
     ``free`` marks cells its beams crossed, ``hit`` cells where a beam ended on something.
+    Both are views of row ``row`` of a stack of grids (``stack``: free and hit, each (R, n, n);
+    its own stack of one by default), so that the compiled kernels sweep and read the grids of
+    a whole team (:func:`belief_grids`) in one call.
     """
 
-    def __init__(self, size: float, resolution: float, max_range: float) -> None:
+    def __init__(
+        self,
+        size: float,
+        resolution: float,
+        max_range: float,
+        stack: tuple[np.ndarray, np.ndarray] | None = None,
+        row: int = 0,
+    ) -> None:
         self.resolution = float(resolution)
-        self.n = math.ceil(round(size / resolution, 9))  # cells a side (no float noise)
+        self.n = _cells_a_side(size, resolution)  # cells a side
         self.origin = -0.5 * self.n * self.resolution  # x and y of the lower-left corner
-        self.free = np.zeros((self.n, self.n), dtype=bool)  # (n, n)
-        self.hit = np.zeros((self.n, self.n), dtype=bool)  # (n, n)
+        if stack is None:
+            stack = (np.zeros((1, self.n, self.n), bool), np.zeros((1, self.n, self.n), bool))
+        self.stack, self.row = stack, row
+        self.free = stack[0][row]  # (n, n) view
+        self.hit = stack[1][row]  # (n, n) view
         self.max_range = float(max_range)
         #: (origin, resolution, shape) in the arguments' order of polyslam_env.core.raster
         self._grid = ((self.origin, self.origin), self.resolution, (self.n, self.n))
         self._t = raster.beam_fractions(max_range, self.resolution)  # (S,) beam samples
+
+    def __getstate__(self) -> dict[str, object]:
+        """Pickled without the views (a pickled view is a copy): rebuilt from the stack."""
+        state = self.__dict__.copy()
+        del state["free"], state["hit"]
+        return state
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        self.free, self.hit = self.stack[0][self.row], self.stack[1][self.row]
 
     def _flat_cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Flat cell index (M,) of points (M, 2) (0 where outside) and whether each is inside."""
@@ -94,7 +121,9 @@ def belief_grids(
     centred on any start holds the whole map."""
     x0, y0, x1, y1 = bounds
     side = config.belief_side((x1 - x0, y1 - y0), max_range)
-    return [BeliefGrid(side, config.belief_resolution, max_range) for _ in range(n)]
+    cells = _cells_a_side(side, config.belief_resolution)
+    stack = (np.zeros((n, cells, cells), bool), np.zeros((n, cells, cells), bool))
+    return [BeliefGrid(side, config.belief_resolution, max_range, stack, i) for i in range(n)]
 
 
 def sweep_beliefs(
@@ -102,13 +131,20 @@ def sweep_beliefs(
 ) -> None:
     """:meth:`BeliefGrid.sweep` of several robots' scans into their own grids (the grids share
     size, resolution and range): poses (K, 3), ranges (K, B); the compiled
-    :func:`~polyslam_env.core.raster.mark_scan` of each."""
+    :func:`~polyslam_env.core.raster.mark_scans`, in one call when the grids share a stack."""
     g = grids[0]
     if any((h.n, h.resolution, h.max_range) != (g.n, g.resolution, g.max_range) for h in grids):
         raise ValueError("sweep_beliefs needs grids of the same size, resolution and range")
     origin, res, _ = g._grid
-    for grid, pose, r in zip(grids, poses, ranges, strict=True):
-        raster.mark_scan(pose, angles, r, g.max_range, g._t, origin, res, grid.free, grid.hit)
+    if all(h.stack is g.stack for h in grids):  # one kernel call for the team
+        rows = np.array([h.row for h in grids], dtype=np.int64)
+        raster.mark_scans(poses, angles, ranges, g.max_range, g._t, origin, res, *g.stack, rows)
+        return
+    for h, pose, r in zip(grids, poses, ranges, strict=True):
+        rows = np.array([h.row], dtype=np.int64)
+        raster.mark_scans(
+            pose[None], angles, r[None], h.max_range, h._t, origin, res, *h.stack, rows
+        )
 
 
 class MapSampler:

@@ -110,7 +110,7 @@ def test_point_cells__equal_the_oracle() -> None:
 
 
 @pytest.mark.parametrize("res", [0.05, 0.13])
-def test_scan_cells_and_mark_scan__equal_the_oracle(res: float) -> None:
+def test_scan_cells_and_mark_scans__equal_the_oracle(res: float) -> None:
     rng = np.random.default_rng(10)
     shape, origin, max_range = (37, 52), (-1.3, -0.7), 2.5
     fractions = beam_fractions(max_range, res)
@@ -125,13 +125,13 @@ def test_scan_cells_and_mark_scan__equal_the_oracle(res: float) -> None:
         for ids, inside, want_ids, want_in in [(got[0], got[1], *want[:2]), (*got[2:], *want[2:])]:
             np.testing.assert_array_equal(inside, want_in)
             np.testing.assert_array_equal(ids[inside], want_ids[want_in])
+        free, hit = np.zeros((4, *shape), dtype=bool), np.zeros((4, *shape), dtype=bool)
+        rows = np.array([3, 0, 2])  # scan k into grid rows[k]; grid 1 stays empty
+        raster.mark_scans(poses, angles, ranges, max_range, fractions, origin, res, free, hit, rows)
         for k in range(3):
-            free, hit = np.zeros(shape, dtype=bool), np.zeros(shape, dtype=bool)
-            raster.mark_scan(
-                poses[k], angles, ranges[k], max_range, fractions, origin, res, free, hit
-            )
-            assert set(np.flatnonzero(free)) == set(want[0][k][want[1][k]].tolist())
-            assert set(np.flatnonzero(hit)) == set(want[2][k][want[3][k]].tolist())
+            assert set(np.flatnonzero(free[rows[k]])) == set(want[0][k][want[1][k]].tolist())
+            assert set(np.flatnonzero(hit[rows[k]])) == set(want[2][k][want[3][k]].tolist())
+        assert not free[1].any() and not hit[1].any()
 
 
 def test_even_beam_cells__equal_the_oracle() -> None:

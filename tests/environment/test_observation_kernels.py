@@ -59,3 +59,24 @@ def test_vector__equals_the_oracle(mode: str) -> None:
         np.testing.assert_array_equal(
             encoder.vector(view, cells), reference.vector(encoder, view, cells)
         )
+
+
+def test_belief_grids__share_a_stack_that_survives_pickling() -> None:
+    import pickle
+
+    from polyslam_env.environment.config import ObservationConfig
+    from polyslam_env.environment.observations import belief_grids, sweep_beliefs
+
+    grids = belief_grids(ObservationConfig(), (0.0, 0.0, 4.0, 3.0), 1.5, 3)
+    copies = pickle.loads(pickle.dumps(grids))
+    poses = np.array([[0.0, 0.0, 0.0], [0.5, 0.5, 1.0], [-1.0, 0.0, 3.0]])
+    angles, ranges = np.array([0.0, 1.0]), np.array([[1.0, np.inf], [0.5, 0.7], [np.inf, 1.2]])
+    for team in (grids, copies):
+        assert all(g.stack is team[0].stack for g in team)
+        sweep_beliefs(team, poses, angles, ranges)
+        alone = [BeliefGrid(g.n * g.resolution, g.resolution, 1.5) for g in team]
+        for g, a, pose, r in zip(team, alone, poses, ranges, strict=True):
+            a.sweep(pose, angles, r)
+            np.testing.assert_array_equal(g.free, a.free)
+            np.testing.assert_array_equal(g.hit, a.hit)
+            assert g.free.any() and np.shares_memory(g.free, g.stack[0])
