@@ -21,10 +21,12 @@ from polyslam_env.core.raster import cell_id
 def local_cells(
     centres: np.ndarray,
     ego_points: np.ndarray,
+    ego_starts: np.ndarray,
     g: int,
     cell: float,
     belief_free: np.ndarray,
     belief_hit: np.ndarray,
+    rows: np.ndarray,
     origin: float,
     resolution: float,
     n: int,
@@ -32,24 +34,27 @@ def local_cells(
     occ: np.ndarray,
     free: np.ndarray,
 ) -> None:
-    """Occupied ``occ`` and free ``free`` (G²,) cells of a G × G egocentric grid of side
-    ``cell``: occupied where an ego point (M, 2) falls (and, with ``use_hits``, where the belief
-    grid saw a hit), free where the belief grid (flat, n × n, lower-left corner (origin,
-    origin), cell side ``resolution``) is free at the cell's centre ``centres`` (G², 2, in the
-    belief grid's frame) and not occupied."""
+    """Occupied ``occ`` and free ``free`` (K, G²) cells of K robots' G × G egocentric grids of
+    side ``cell``. Robot k: occupied where one of its ego points ``ego_points[ego_starts[k]:
+    ego_starts[k + 1]]`` falls (and, with ``use_hits``, where its belief grid saw a hit); free
+    where its belief grid is free at the cell's centre ``centres[k]`` (G², 2, in the belief
+    grid's frame) and not occupied. Belief grids: flat rows ``rows[k]`` of ``belief_free``,
+    ``belief_hit`` (R, n·n), lower-left corner (origin, origin), cell side ``resolution``."""
     half = g // 2 + 0.5
-    for i in range(g * g):
-        occ[i] = False
-    for m in range(ego_points.shape[0]):
-        col = math.floor(ego_points[m, 0] / cell + half)
-        row = math.floor(ego_points[m, 1] / cell + half)
-        if 0 <= col < g and 0 <= row < g:
-            occ[row * g + col] = True
-    for i in range(g * g):
-        c = cell_id(centres[i, 0], centres[i, 1], origin, origin, resolution, n, n)
-        if c >= 0 and use_hits and belief_hit[c]:
-            occ[i] = True
-        free[i] = c >= 0 and belief_free[c] and not occ[i]
+    for k in range(centres.shape[0]):
+        own_free, own_hit = belief_free[rows[k]], belief_hit[rows[k]]
+        for i in range(g * g):
+            occ[k, i] = False
+        for m in range(ego_starts[k], ego_starts[k + 1]):
+            col = math.floor(ego_points[m, 0] / cell + half)
+            row = math.floor(ego_points[m, 1] / cell + half)
+            if 0 <= col < g and 0 <= row < g:
+                occ[k, row * g + col] = True
+        for i in range(g * g):
+            c = cell_id(centres[k, i, 0], centres[k, i, 1], origin, origin, resolution, n, n)
+            if c >= 0 and use_hits and own_hit[c]:
+                occ[k, i] = True
+            free[k, i] = c >= 0 and own_free[c] and not occ[k, i]
 
 
 @njit
@@ -64,31 +69,33 @@ def _clip(v: float, lo: float, hi: float) -> float:
 def vector_head(
     ranges: np.ndarray,
     max_range: float,
-    pose: np.ndarray,
+    poses: np.ndarray,
     scale: float,
-    std: np.ndarray,
+    stds: np.ndarray,
     caps: np.ndarray,
     occ: np.ndarray,
     free: np.ndarray,
     codes: np.ndarray,
     out: np.ndarray,
 ) -> None:
-    """The vector observation's first parts in ``out`` (float32): ranges / max_range (no
-    return → 1), a no-return flag per beam, the pose (x/scale, y/scale clipped to ±1, cos θ,
-    sin θ), the pose standard deviations / caps clipped to 0…1, then, when ``occ`` is not
-    empty, the local map coded ``codes`` = (free, unknown, occupied) per cell."""
-    nb = ranges.shape[0]
-    for b in range(nb):
-        v = ranges[b] / max_range
-        out[b] = v if v < 1.0 else 1.0  # fmin: inf and nan → 1
-        out[nb + b] = 0.0 if math.isfinite(ranges[b]) else 1.0
-    p = 2 * nb
-    out[p] = _clip(pose[0] / scale, -1.0, 1.0)
-    out[p + 1] = _clip(pose[1] / scale, -1.0, 1.0)
-    out[p + 2] = math.cos(pose[2])
-    out[p + 3] = math.sin(pose[2])
-    for j in range(3):
-        out[p + 4 + j] = _clip(std[j] / caps[j], 0.0, 1.0)
-    m = p + 7
-    for i in range(occ.shape[0]):
-        out[m + i] = codes[0] if free[i] else (codes[2] if occ[i] else codes[1])
+    """The first parts of K robots' vector observations, row k of ``out`` (K, D) float32 from
+    ``ranges[k]`` (B,), ``poses[k]`` (3,), ``stds[k]`` (3,): ranges / max_range (no return →
+    1), a no-return flag per beam, the pose (x/scale, y/scale clipped to ±1, cos θ, sin θ), the
+    pose standard deviations / caps clipped to 0…1, then, when ``occ`` (K, G²) has columns, the
+    local map coded ``codes`` = (free, unknown, occupied) per cell."""
+    nb = ranges.shape[1]
+    for k in range(ranges.shape[0]):
+        for b in range(nb):
+            v = ranges[k, b] / max_range
+            out[k, b] = v if v < 1.0 else 1.0  # fmin: inf and nan → 1
+            out[k, nb + b] = 0.0 if math.isfinite(ranges[k, b]) else 1.0
+        p = 2 * nb
+        out[k, p] = _clip(poses[k, 0] / scale, -1.0, 1.0)
+        out[k, p + 1] = _clip(poses[k, 1] / scale, -1.0, 1.0)
+        out[k, p + 2] = math.cos(poses[k, 2])
+        out[k, p + 3] = math.sin(poses[k, 2])
+        for j in range(3):
+            out[k, p + 4 + j] = _clip(stds[k, j] / caps[j], 0.0, 1.0)
+        m = p + 7
+        for i in range(occ.shape[1]):
+            out[k, m + i] = codes[0] if free[k, i] else (codes[2] if occ[k, i] else codes[1])

@@ -21,7 +21,6 @@ import numpy as np
 from gymnasium import spaces
 
 from polyslam_env.core import raster
-from polyslam_env.core.geometry import rotation
 from polyslam_env.environment import kernels
 from polyslam_env.environment.config import EnvConfig, ObservationConfig
 from polyslam_env.slam.polynomial import Polynomial
@@ -42,7 +41,7 @@ FREE, UNKNOWN, OCCUPIED = 0.0, 0.5, 1.0
 #: Caps of the reported pose standard deviations (x m, y m, θ rad); std/cap is clipped to 1.
 STD_CAPS = np.array([1.0, 1.0, math.pi])
 _NO_POINTS = np.zeros((0, 2))
-_NO_CELLS = np.zeros(0, dtype=bool)
+_NO_CELLS = np.zeros((1, 0), dtype=bool)  # (1, 0): no local map
 _CODES = np.array([FREE, UNKNOWN, OCCUPIED])
 
 
@@ -282,17 +281,44 @@ class ObservationEncoder:
         """Occupied and free cells (G²,) bool of the egocentric grid (x forward = columns,
         row-major); a cell is never both, and neither means unknown. Occupied: the robot's map
         points (and, with ``use_hits``, the belief grid's hits); free: the belief grid's free
-        cells (compiled :func:`~polyslam_env.environment.kernels.local_cells`)."""
-        rot = rotation(view.pose[2])  # ego → own frame; (own − xy) @ rot = ego
-        ego = (view.map_points - view.pose[:2]) @ rot if len(view.map_points) else _NO_POINTS
-        centres = self.cell_centres @ rot.T + view.pose[:2]  # (G², 2) in the own frame
-        occ = np.empty(self.g * self.g, dtype=bool)
-        free = np.empty(self.g * self.g, dtype=bool)
-        b = view.belief
-        kernels.local_cells(
-            centres, ego, self.g, self.res, b.free.reshape(-1), b.hit.reshape(-1), b.origin,
-            b.resolution, b.n, self.use_hits, occ, free,
-        )  # fmt: skip
+        cells."""
+        occ, free = self._local_cells([view])
+        return occ[0], free[0]
+
+    def _local_cells(self, views: Sequence[RobotView]) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`local_cells` of K views (K, G²) each, by the compiled
+        :func:`~polyslam_env.environment.kernels.local_cells`: in one call when the views'
+        belief grids share a stack (a team's do), else one call per view."""
+        k, gg = len(views), self.g * self.g
+        poses = np.array([v.pose for v in views])  # (K, 3)
+        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        rots = np.empty((k, 2, 2))  # core.geometry.rotation of each heading: ego → own frame
+        rots[:, 0, 0], rots[:, 0, 1], rots[:, 1, 0], rots[:, 1, 1] = c, -s, s, c
+        # (K, G², 2) cell centres in the own frames; numpy's matrix products (BLAS) as before
+        centres = self.cell_centres[None] @ rots.transpose(0, 2, 1) + poses[:, None, :2]
+        ego = [
+            (v.map_points - v.pose[:2]) @ rots[j] if len(v.map_points) else _NO_POINTS
+            for j, v in enumerate(views)
+        ]
+        starts = np.zeros(k + 1, dtype=np.int64)
+        starts[1:] = np.cumsum([len(e) for e in ego])
+        points = np.concatenate(ego) if starts[-1] else _NO_POINTS  # (M, 2) ego frames
+        occ, free = np.empty((k, gg), dtype=bool), np.empty((k, gg), dtype=bool)
+        b = views[0].belief
+        if all(v.belief.stack is b.stack for v in views):
+            groups = [(slice(0, k), b, np.array([v.belief.row for v in views], dtype=np.int64))]
+        else:
+            groups = [
+                (slice(j, j + 1), v.belief, np.array([v.belief.row])) for j, v in enumerate(views)
+            ]
+        for sl, grid, rows in groups:
+            free_stack, hit_stack = grid.stack
+            kernels.local_cells(
+                centres[sl], points, starts[sl.start : sl.stop + 1],
+                self.g, self.res, free_stack.reshape(len(free_stack), -1),
+                hit_stack.reshape(len(hit_stack), -1), rows, grid.origin, grid.resolution,
+                grid.n, self.use_hits, occ[sl], free[sl],
+            )  # fmt: skip
         return occ, free
 
     def local_map(self, view: RobotView) -> np.ndarray:  # (3, G, G) float32
@@ -315,31 +341,49 @@ class ObservationEncoder:
         self, view: RobotView, cells: tuple[np.ndarray, np.ndarray] | None
     ) -> np.ndarray:  # (D,) float32
         """The flat vector; the local map's (occupied, free) ``cells`` (G²,) are folded in as
-        one coded channel if given.
+        one coded channel if given."""
+        if cells is None:
+            return self._vectors([view], _NO_CELLS, _NO_CELLS)[0]
+        return self._vectors([view], cells[0][None], cells[1][None])[0]
 
-        Ranges, pose, standard deviations and local map are written by the compiled
-        :func:`~polyslam_env.environment.kernels.vector_head`; the rest as Python floats.
-        """
+    def _vectors(
+        self, views: Sequence[RobotView], occ: np.ndarray, free: np.ndarray
+    ) -> np.ndarray:  # (K, D) float32
+        """:meth:`vector` of K views, the local maps' cells ``occ``, ``free`` (K, G²) or
+        (K, 0) for none. Ranges, pose, standard deviations and local map are written by the
+        compiled :func:`~polyslam_env.environment.kernels.vector_head` (one call), the rest
+        as Python floats."""
         oc = self.config.observation
         lay = self._layout
-        out = np.empty(self.vector_space.shape, dtype=np.float32)
-        occ, free = (_NO_CELLS, _NO_CELLS) if cells is None else cells
+        out = np.empty((len(views), *self.vector_space.shape), dtype=np.float32)
         kernels.vector_head(
-            view.ranges, self.max_range, view.pose, self.pose_scale, view.pose_std, STD_CAPS,
-            occ, free, _CODES, out,
+            np.array([v.ranges for v in views]), self.max_range, np.array([v.pose for v in views]),
+            self.pose_scale, np.array([v.pose_std for v in views]), STD_CAPS, occ, free,
+            _CODES, out,
         )  # fmt: skip
-        since, t = view.steps_since_rendezvous, self.config.max_steps
-        # detections, channel and progress are adjacent: one assignment
-        out[lay["detections"].start : lay["progress"].stop] = [
-            *self._detections(view.detections),
-            1.0 if since is None else min(since / t, 1.0),
-            min(view.rendezvous, oc.rendezvous_cap) / oc.rendezvous_cap,
-            min(view.step / t, 1.0),
-        ]
+        t = self.config.max_steps
+        tail = slice(lay["detections"].start, lay["progress"].stop)
+        for row, view in zip(out, views, strict=True):
+            since = view.steps_since_rendezvous
+            # detections, channel and progress are adjacent: one assignment
+            row[tail] = [
+                *self._detections(view.detections),
+                1.0 if since is None else min(since / t, 1.0),
+                min(view.rendezvous, oc.rendezvous_cap) / oc.rendezvous_cap,
+                min(view.step / t, 1.0),
+            ]
         return out
 
     def encode(self, view: RobotView) -> np.ndarray | dict[str, np.ndarray]:
         """The observation of one robot in :attr:`space`."""
+        return self.encode_team([view])[0]
+
+    def encode_team(self, views: Sequence[RobotView]) -> list[np.ndarray | dict[str, np.ndarray]]:
+        """The observations of K robots (:meth:`encode` of each), the vectors' numerical
+        parts computed for all robots in one call of each kernel."""
         if self.mode == "grid":
-            return {"grid": self.local_map(view), "vector": self.vector(view, None)}
-        return self.vector(view, self.local_cells(view))
+            return [{"grid": self.local_map(v), "vector": self.vector(v, None)} for v in views]
+        if not views:
+            return []
+        occ, free = self._local_cells(views)
+        return [row.copy() for row in self._vectors(views, occ, free)]

@@ -289,7 +289,8 @@ def observe(
         poses = np.array([estimates[i][0] for i in sweeping])  # (K, 3)
         grids = [state.beliefs[i] for i in sweeping]
         sweep_beliefs(grids, poses, state.angles, state.sensing.ranges[sweeping])
-    return {agent: encoder.encode(_view(state, i, *estimates[i])) for agent, i in acting.items()}
+    views = [_view(state, i, *estimates[i]) for i in acting.values()]
+    return dict(zip(acting, encoder.encode_team(views), strict=True))
 
 
 def _view(state: EpisodeState, i: int, pose: np.ndarray, cov: np.ndarray) -> RobotView:

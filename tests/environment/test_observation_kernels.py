@@ -80,3 +80,40 @@ def test_belief_grids__share_a_stack_that_survives_pickling() -> None:
             np.testing.assert_array_equal(g.free, a.free)
             np.testing.assert_array_equal(g.hit, a.hit)
             assert g.free.any() and np.shares_memory(g.free, g.stack[0])
+
+
+def test_encode_team__equals_each_view_alone_and_the_oracle() -> None:
+    from polyslam_env.environment.config import ObservationConfig
+    from polyslam_env.environment.observations import belief_grids
+
+    config = resolve_config(None, slam_enabled=True)
+    encoder = ObservationEncoder(config, (10.0, 8.0))
+    rng = np.random.default_rng(3)
+    grids = belief_grids(ObservationConfig(), (0.0, 0.0, 10.0, 8.0), 2.0, 4)
+    for g in grids:
+        g.free[:] = rng.random(g.free.shape) < 0.5
+    views = []
+    for k, g in enumerate(grids):
+        pose = np.array([*rng.uniform(-5.0, 5.0, 2), rng.uniform(-4, 4)])
+        points = pose[:2] + rng.uniform(-1.5, 1.5, (3 * k, 2))  # the first has no map
+        views.append(
+            RobotView(
+                ranges=rng.uniform(0.0, 3.0, 5),
+                pose=pose,
+                pose_std=rng.uniform(0, 2, 3),
+                map_points=points,
+                belief=g,
+                detections=[],
+                steps_since_rendezvous=k,
+                rendezvous=k,
+                step=10 * k,
+            )
+        )
+    team = encoder.encode_team(views)
+    for view, got in zip(views, team, strict=True):
+        np.testing.assert_array_equal(got, encoder.encode(view))
+        cells = reference.local_cells(
+            view.pose, view.map_points, view.belief, encoder.cell_centres, encoder.g,
+            encoder.res, False,
+        )  # fmt: skip
+        np.testing.assert_array_equal(got, reference.vector(encoder, view, cells))
