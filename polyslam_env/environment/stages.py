@@ -289,18 +289,24 @@ def observe(
         poses = np.array([estimates[i][0] for i in sweeping])  # (K, 3)
         grids = [state.beliefs[i] for i in sweeping]
         sweep_beliefs(grids, poses, state.angles, state.sensing.ranges[sweeping])
-    views = [_view(state, i, *estimates[i]) for i in acting.values()]
+    robots = list(acting.values())
+    if not robots:
+        return {}
+    covs = np.array([estimates[i][1] for i in robots])  # (K, 3, 3)
+    stds = np.sqrt(np.maximum(np.diagonal(covs, axis1=1, axis2=2), 0.0))  # (K, 3)
+    views = [_view(state, i, estimates[i][0], std) for i, std in zip(robots, stds, strict=True)]
     return dict(zip(acting, encoder.encode_team(views), strict=True))
 
 
-def _view(state: EpisodeState, i: int, pose: np.ndarray, cov: np.ndarray) -> RobotView:
-    """What robot i knows, with its estimated pose (3,) and covariance (3, 3)."""
+def _view(state: EpisodeState, i: int, pose: np.ndarray, pose_std: np.ndarray) -> RobotView:
+    """What robot i knows, with its estimated pose (3,) and the standard deviations (3,) of
+    its pose estimate."""
     last = state.last_rendezvous[i]
     count = state.exchange.counters(i)["rendezvous"] if state.exchange is not None else 0
     return RobotView(
         ranges=state.sensing.ranges[i],
         pose=pose,
-        pose_std=np.sqrt(np.maximum(np.diag(cov), 0.0)),
+        pose_std=pose_std,
         map_points=state.samplers[i].points(state.slams[i]) if state.slams else _NO_POINTS,
         belief=state.beliefs[i],
         detections=state.sensing.detections[i],
