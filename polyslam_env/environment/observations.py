@@ -292,12 +292,16 @@ class ObservationEncoder:
         k, gg = len(views), self.g * self.g
         poses = np.array([v.pose for v in views])  # (K, 3)
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        rots = np.empty((k, 2, 2))  # core.geometry.rotation of each heading: ego → own frame
-        rots[:, 0, 0], rots[:, 0, 1], rots[:, 1, 0], rots[:, 1, 1] = c, -s, s, c
-        # (K, G², 2) cell centres in the own frames; numpy's matrix products (BLAS) as before
-        centres = self.cell_centres[None] @ rots.transpose(0, 2, 1) + poses[:, None, :2]
+        # R(θ)ᵀ (core.geometry.rotation, transposed) of each heading, C-contiguous: numpy's
+        # batched product then equals the products of one robot at a time (the same BLAS
+        # kernel, bit for bit) at half their cost.
+        rots_t = np.empty((k, 2, 2))
+        rots_t[:, 0, 0], rots_t[:, 0, 1], rots_t[:, 1, 0], rots_t[:, 1, 1] = c, s, -s, c
+        centres = self.cell_centres @ rots_t + poses[:, None, :2]  # (K, G², 2) own frames
         ego = [
-            (v.map_points - v.pose[:2]) @ rots[j] if len(v.map_points) else _NO_POINTS
+            (v.map_points - v.pose[:2]) @ np.ascontiguousarray(rots_t[j].T)  # @ R(θ): ego
+            if len(v.map_points)
+            else _NO_POINTS
             for j, v in enumerate(views)
         ]
         starts = np.zeros(k + 1, dtype=np.int64)
