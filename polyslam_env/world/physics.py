@@ -330,7 +330,7 @@ class World:
             space_step(space, h)
         end = np.empty((self.num_robots, 3))
         end[:, 2] = th0 + cmd[:, 1] * self.config.dt
-        for i, (body, active) in enumerate(zip(self._bodies_c, self.active, strict=True)):
+        for i, (body, active) in enumerate(zip(self._bodies_c, self.active.tolist(), strict=True)):
             if active:
                 p, vel = chipmunk.cpBodyGetPosition(body), chipmunk.cpBodyGetVelocity(body)
                 chipmunk.cpBodySetPosition(body, (p.x + vel.x * h, p.y + vel.y * h))
@@ -355,7 +355,8 @@ class World:
             chipmunk.cpBodySetPosition(self._bodies_c[i], (float(start[i, 0]), float(start[i, 1])))
             self._touched[i] = True
             self.guard_reverts += 1
-        for body, th, a in zip(self._bodies_c, end[:, 2].tolist(), self.active, strict=True):
+        active = self.active.tolist()
+        for body, th, a in zip(self._bodies_c, end[:, 2].tolist(), active, strict=True):
             if a:
                 chipmunk.cpBodySetAngle(body, th)
         return end
