@@ -148,7 +148,10 @@ def update_sparse_inplace(
         )
     if k and (idx.min() < 3 or idx.max() >= n):
         raise ValueError(f"update: c0 indices must lie in [3, {n}), got {idx.tolist()}")
-    return kernels.update_sparse(mean, cov, nu, hp, idx, hc, rv, chi2_1dof_quantile(gate_prob))
+    accepted, nis = np.empty(k, dtype=bool), np.empty(k)
+    gate = chi2_1dof_quantile(gate_prob)
+    kernels.update_sparse(mean, cov, nu, hp, idx, hc, rv, gate, accepted, nis)
+    return accepted, nis
 
 
 # -- augmentation and removal --------------------------------------------------------------------
@@ -266,14 +269,17 @@ def normalised_innovations(
     """ν_i² / S_ii for range rows that touch the pose and one c0 each (the rows of
     :func:`update_sparse_inplace`): S_ii = h P_pp hᵀ + 2 h_c h P_pc + h_c² P_cc + r_i with
     h = ``h_pose[i]`` (3,), h_c = ``h_c0[i]``, c = ``c0_index[i]``; cov (3+n, 3+n)."""
-    return kernels.normalised_innovations(
+    out = np.empty(np.size(r))
+    kernels.normalised_innovations(
         cov,
         np.ascontiguousarray(innovation, dtype=float),
         np.ascontiguousarray(h_pose, dtype=float).reshape(-1, 3),
         np.ascontiguousarray(c0_index, dtype=np.int64),
         np.ascontiguousarray(h_c0, dtype=float),
         np.ascontiguousarray(r, dtype=float),
+        out,
     )
+    return out
 
 
 @lru_cache(maxsize=32)

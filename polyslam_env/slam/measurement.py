@@ -159,7 +159,6 @@ def range_rows(
     theta: float,
     beam_angles: Sequence[float] | np.ndarray,
     ranges: Sequence[float] | np.ndarray,
-    candidates: Sequence[int] | np.ndarray,
     shapes: ShapeArrays | Sequence[ShapeRow],
     c0s: Sequence[float] | np.ndarray,
     max_range: float,
@@ -167,36 +166,43 @@ def range_rows(
     range_var: float,
     boxes: Sequence[Sequence[float]] | np.ndarray | None = None,
 ) -> Rows:
-    """The EKF rows of the measurement model alone (R = ``range_var``): per beam with a hit
-    whose incidence sine |D|/√(1 + B'²) is at least ``min_sine`` (SPEC §3 skips hits closer
-    to tangent than 10°), the innovation ``ranges[b]`` − t*, the pose part of H and 1/D on
-    the c0 hit. ``PolySlam`` adds its landmarks' model terms to the same kernel."""
-    arrays, cand, c0, box = _checked(shapes, candidates, c0s, boxes)
+    """The EKF rows of the measurement model alone (R = ``range_var``), against every
+    landmark: per beam with a hit whose incidence sine |D|/√(1 + B'²) is at least
+    ``min_sine`` (SPEC §3 skips hits closer to tangent than 10°), the innovation
+    ``ranges[b]`` − t*, the pose part of H and 1/D on the c0 hit. ``PolySlam`` adds its
+    landmarks' model terms in the same kernel."""
+    arrays = shape_arrays(shapes)
+    n, width = len(arrays.variate), arrays.shape.shape[1]
+    _, _, c0, box = _checked(arrays, np.arange(n), c0s, boxes)
     angles = np.ascontiguousarray(beam_angles, dtype=float).reshape(-1)
     z = np.ascontiguousarray(ranges, dtype=float).reshape(-1)
     if z.shape != angles.shape:
         raise ValueError(f"{z.size} ranges for {angles.size} beams")
-    n, width = len(arrays.variate), arrays.shape.shape[1]
-    return Rows(
-        *kernels.beam_rows(
-            float(x),
-            float(y),
-            float(theta),
-            angles,
-            z,
-            cand,
-            *arrays,
-            c0,
-            box,
-            float(max_range),
-            float(min_sine),
-            float(range_var),
-            np.zeros(n),
-            False,
-            np.zeros(n),
-            np.zeros(n),
-            np.ones(n),
-            np.zeros((width, width, width)),
-            1,
-        )
+    k = angles.size
+    rows = Rows(
+        np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k), np.empty(k)
     )
+    used = kernels.beam_rows(
+        float(x),
+        float(y),
+        float(theta),
+        angles,
+        z,
+        np.arange(k),
+        math.inf,
+        *arrays,
+        c0,
+        box,
+        float(max_range),
+        float(min_sine),
+        float(range_var),
+        np.zeros(n),
+        False,
+        np.zeros(n),
+        np.zeros(n),
+        np.ones(n),
+        np.zeros((width, width, width)),
+        1,
+        *rows,
+    )
+    return Rows(*(column[:used] for column in rows))

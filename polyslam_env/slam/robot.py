@@ -100,6 +100,15 @@ class PolySlam:
         self.config = config
         self.beam_angles = np.asarray(beam_angles, dtype=float)  # (B,)
         self._all_beams = np.arange(self.beam_angles.size)  # (B,)
+        n_beams = self.beam_angles.size  # the rows' buffers (kernels write, not return)
+        self._rows = measurement.Rows(
+            np.empty(n_beams),
+            np.empty((n_beams, 3)),
+            np.empty(n_beams, dtype=np.int64),
+            np.empty(n_beams),
+            np.empty(n_beams),
+        )
+        self._nis, self._accepted = np.empty(n_beams), np.empty(n_beams, dtype=bool)
         self._min_sine = float(np.sin(np.deg2rad(config.tangent_min_deg)))
         self.max_range = float(max_range)
         self.mean = np.zeros(3)  # (3+n,) relative to the true start (see class docstring)
@@ -295,7 +304,8 @@ class PolySlam:
         seen = np.where(np.isfinite(ranges), ranges, self.max_range)
         rows = self._beam_rows(self._all_beams, seen)
         if rows is not None:
-            nis = ekf.normalised_innovations(self.cov, *rows)
+            nis = self._nis[: rows.innovation.size]
+            kernels.normalised_innovations(self.cov, *rows, nis)
             self._screen.extend((nis > self._gate).tolist())
 
     def _is_diverging(self) -> bool:
@@ -551,16 +561,18 @@ class PolySlam:
             return 0
         mean = self.mean
         before = mean[:3].copy()
-        accepted, _ = ekf.update_sparse_inplace(mean, self.cov, *rows, self.config.gate_prob)
+        k = rows.innovation.size
+        accepted, nis = self._accepted[:k], self._nis[:k]
+        used = kernels.update_sparse(mean, self.cov, *rows, self._gate, accepted, nis)
         self._state_version += 1
-        used = int(accepted.sum())
         if used:  # else the pose did not move
             self._carry_stored_points(before, mean[:3])
         return used
 
     def _beam_rows(self, beams: np.ndarray, ranges: np.ndarray) -> measurement.Rows | None:
         """The measurement rows of ``beams`` (int64 indices) against the current map at the
-        current mean, or None when no beam has a usable hit.
+        current mean, or None when no beam has a usable hit: views of buffers that the next
+        call overwrites.
 
         Each beam's hit (one :func:`~polyslam_env.slam.kernels.beam_rows` call for the scan,
         on the landmarks within range) gives one row of H: the pose part and 1/D on the c0
@@ -596,33 +608,31 @@ class PolySlam:
             return None
         mean, table, cfg = self.mean, self.table, self.config
         x, y, theta = float(mean[0]), float(mean[1]), float(mean[2])
-        boxes = self._boxes()  # (n, 4)
-        reach = boxes_near(boxes, np.array([x, x, y, y]), self.max_range + REACH_MARGIN)
         n_fit = cfg.eps_z + 1
-        rows = measurement.Rows(
-            *kernels.beam_rows(
-                x,
-                y,
-                theta,
-                self.beam_angles[beams],
-                ranges[beams],
-                reach,
-                *table.arrays(),
-                mean[3:],
-                boxes,
-                self.max_range,
-                self._min_sine,
-                cfg.range_sigma**2,
-                table.model_var,
-                cfg.shape_follows_pose,
-                table.pivot,
-                table.xi_var,
-                table.fit_half,
-                _fit_inverse_table(n_fit, table.shape.shape[1] - 1),
-                n_fit,
-            )
+        used = kernels.beam_rows(
+            x,
+            y,
+            theta,
+            self.beam_angles,
+            ranges,
+            beams,
+            self.max_range + REACH_MARGIN,
+            *table.arrays(),
+            mean[3:],
+            self._boxes(),
+            self.max_range,
+            self._min_sine,
+            cfg.range_sigma**2,
+            table.model_var,
+            cfg.shape_follows_pose,
+            table.pivot,
+            table.xi_var,
+            table.fit_half,
+            _fit_inverse_table(n_fit, table.shape.shape[1] - 1),
+            n_fit,
+            *self._rows,
         )
-        return rows if rows.innovation.size else None
+        return measurement.Rows(*(column[:used] for column in self._rows)) if used else None
 
     def _carry_stored_points(self, before: np.ndarray, after: np.ndarray) -> None:
         """Move cluster and Q_bad points rigidly with a pose correction.

@@ -458,6 +458,7 @@ def update_sparse_inplace(
     r: np.ndarray,
     gate_prob: float = 0.99,
     work: np.ndarray | None = None,
+    gate_value: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Gated, batched EKF update with range rows that touch the pose and one c0 each, in place.
 
@@ -490,7 +491,7 @@ def update_sparse_inplace(
     H.flat[3 :: k + 4] = h_c0
     PHt = cov[:, cols] @ H.T  # (3+n, k)
     S = H @ PHt[cols]  # (k, k) = H P Hᵀ
-    gate = chi2_1dof_quantile(gate_prob)
+    gate = chi2_1dof_quantile(gate_prob) if gate_value is None else gate_value
     nis_list = [  # k ≤ 5 or so: Python floats beat numpy's per-call cost
         v * v / (s + q)
         for v, s, q in zip(innovation.tolist(), S.diagonal().tolist(), r.tolist(), strict=True)
@@ -523,6 +524,27 @@ def update_sparse_inplace(
     K -= W
     cov += np.matmul(K, K.T, out=work)
     return accepted, nis
+
+
+def update_sparse(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    innovation: np.ndarray,
+    h_pose: np.ndarray,
+    c0_index: np.ndarray,
+    h_c0: np.ndarray,
+    r: np.ndarray,
+    gate: float,
+    accepted: np.ndarray,
+    nis: np.ndarray,
+) -> int:
+    """:func:`update_sparse_inplace` with the signature of ``kernels.update_sparse`` (the χ²
+    quantile given, outputs written), to stand in for it."""
+    ok, values = update_sparse_inplace(
+        mean, cov, innovation, h_pose, c0_index, h_c0, r, gate_value=gate
+    )
+    accepted[:], nis[:] = ok, values
+    return int(ok.sum())
 
 
 def normalised_innovations(

@@ -337,7 +337,6 @@ def run_filter(
             theta,
             BEAMS[returns],
             z[returns],
-            np.arange(len(WALLS)),
             WALL_ROWS.arrays(),
             mean[3:],
             2.0,

@@ -160,21 +160,27 @@ def test_beam_rows__bit_identical_to_oracle(
     x, y, theta = pose.tolist()
     model = ref.RowModel(min_sine=math.sin(math.radians(10.0)), range_sigma=0.02,
                          shape_follows_pose=follows, eps_z=10)  # fmt: skip
-    every = np.arange(len(polys))
+    reach = float(rng.uniform(1.0, 6.0))
+    every = ref.boxes_near(boxes, np.array([x, x, y, y]), reach)  # the landmarks within reach
+    order = rng.permutation(beams.size)  # any subset of beams, in any order
+    subset = order[: rng.integers(1, beams.size + 1)]
     want = ref.beam_rows(
-        x, y, theta, beams, ranges, every.tolist(), table.rows(), c0s, 2.5, boxes.tolist(), model
-    )
-    width = table.shape.shape[1]
-    got = kernels.beam_rows(
-        x, y, theta, beams, ranges, every, *table.arrays(), c0s, boxes, 2.5, model.min_sine,
-        model.range_sigma**2, table.model_var, follows, table.pivot, table.xi_var,
-        table.fit_half, _fit_inverse_table(model.eps_z + 1, width - 1), model.eps_z + 1,
+        x, y, theta, beams[subset], ranges[subset], every.tolist(), table.rows(), c0s, 2.5,
+        boxes[every].tolist(), model,
+    )  # fmt: skip
+    width, k = table.shape.shape[1], subset.size
+    got = (np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k), np.empty(k))
+    used = kernels.beam_rows(
+        x, y, theta, beams, ranges, subset, reach, *table.arrays(), c0s, boxes, 2.5,
+        model.min_sine, model.range_sigma**2, table.model_var, follows, table.pivot,
+        table.xi_var, table.fit_half, _fit_inverse_table(model.eps_z + 1, width - 1),
+        model.eps_z + 1, *got,
     )  # fmt: skip
     if want is None:
-        assert got[0].size == 0
+        assert used == 0
         return
     for g, w in zip(got, want, strict=True):
-        np.testing.assert_array_equal(g, w)  # EXACT
+        np.testing.assert_array_equal(g[:used], w)  # EXACT
 
 
 def test_shape_fit_var__bit_identical_to_oracle_over_many_positions() -> None:
@@ -208,7 +214,8 @@ def test_nearest_by_error__bit_identical_to_oracle(
     want = ref.nearest_by_error(
         xy.tolist(), candidates.tolist(), table.rows(), c0s.tolist(), squared
     )
-    best, err = kernels.nearest_by_error(xy, candidates, *table.arrays(), c0s, squared)
+    best, err = np.empty(8, dtype=np.int64), np.empty(8)
+    kernels.nearest_by_error(xy, candidates, *table.arrays(), c0s, squared, best, err)
     assert list(zip(best.tolist(), err.tolist(), strict=True)) == want  # EXACT
 
 
@@ -296,7 +303,7 @@ def test_slam_steps__compiled_update_tracks_numpy_update_over_a_short_horizon(
     compiled = make_slam(walls)
     for odometry, ranges in inputs:
         compiled.step(odometry, ranges)
-    monkeypatch.setattr(ekf, "update_sparse_inplace", ref.update_sparse_inplace)
+    monkeypatch.setattr(kernels, "update_sparse", ref.update_sparse)
     numpy_run = make_slam(walls)
     for odometry, ranges in inputs:
         numpy_run.step(odometry, ranges)
