@@ -100,6 +100,8 @@ class PolySlam:
         self.config = config
         self.beam_angles = np.asarray(beam_angles, dtype=float)  # (B,)
         self._all_beams = np.arange(self.beam_angles.size)  # (B,)
+        self._range_var = float(config.range_sigma**2)
+        self._n_fit = config.eps_z + 1  # points of the cluster a landmark is born from
         n_beams = self.beam_angles.size  # the rows' buffers (kernels write, not return)
         self._rows = measurement.Rows(
             np.empty(n_beams),
@@ -606,9 +608,8 @@ class PolySlam:
         """
         if not beams.size or self.n_landmarks == 0:
             return None
-        mean, table, cfg = self.mean, self.table, self.config
+        mean, table, n_fit = self.mean, self.table, self._n_fit
         x, y, theta = float(mean[0]), float(mean[1]), float(mean[2])
-        n_fit = cfg.eps_z + 1
         used = kernels.beam_rows(
             x,
             y,
@@ -617,14 +618,18 @@ class PolySlam:
             ranges,
             beams,
             self.max_range + REACH_MARGIN,
-            *table.arrays(),
+            table.variate,
+            table.order,
+            table.shape,
+            table.lo,
+            table.hi,
             mean[3:],
             self._boxes(),
             self.max_range,
             self._min_sine,
-            cfg.range_sigma**2,
+            self._range_var,
             table.model_var,
-            cfg.shape_follows_pose,
+            self.config.shape_follows_pose,
             table.pivot,
             table.xi_var,
             table.fit_half,
@@ -632,7 +637,12 @@ class PolySlam:
             n_fit,
             *self._rows,
         )
-        return measurement.Rows(*(column[:used] for column in self._rows)) if used else None
+        if not used:
+            return None
+        innovation, h_pose, c0_index, h_c0, variance = self._rows
+        return measurement.Rows(
+            innovation[:used], h_pose[:used], c0_index[:used], h_c0[:used], variance[:used]
+        )
 
     def _carry_stored_points(self, before: np.ndarray, after: np.ndarray) -> None:
         """Move cluster and Q_bad points rigidly with a pose correction.
@@ -647,9 +657,18 @@ class PolySlam:
         flat = [p for group in groups for p in group]
         if not flat:
             return
-        moved = iter(_carry(flat, before, after))
-        book.clusters = [[next(moved) for _ in c] for c in book.clusters]
-        table.qbad = {lid: [next(moved) for _ in pts] for lid, pts in table.qbad.items()}
+        moved = _carry(flat, before, after)
+        start = 0
+        clusters = []
+        for group in book.clusters:
+            clusters.append(moved[start : start + len(group)])
+            start += len(group)
+        book.clusters = clusters
+        qbad = {}
+        for lid, pts in table.qbad.items():  # most landmarks have none
+            qbad[lid] = moved[start : start + len(pts)] if pts else []
+            start += len(pts)
+        table.qbad = qbad
 
 
 @functools.lru_cache(maxsize=16)
