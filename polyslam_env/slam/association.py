@@ -66,8 +66,6 @@ def nearest_by_error(
     n = len(arrays.variate)
     if c0.shape != (n,):
         raise ValueError(f"c0s must have shape ({n},), got {c0.shape}")
-    if cand.size and (cand.min() < 0 or cand.max() >= n):
-        raise ValueError(f"candidates must index the {n} landmarks, got {cand.tolist()}")
     best, err = np.empty(len(points), dtype=np.int64), np.empty(len(points))
     kernels.nearest_by_error(points, cand, *arrays, c0, bool(squared), best, err)
     return list(zip(best.tolist(), err.tolist(), strict=True))

@@ -540,6 +540,9 @@ def nearest_by_error(
     (first on ties) and that ε: |η − p(ξ)| inside the extent, else the distance to the
     nearer end point; squared with ``squared``."""
     n_cand = candidates.size
+    for k in range(n_cand):
+        if candidates[k] < 0 or candidates[k] >= variate.size:
+            raise IndexError("nearest_by_error: a candidate does not index the landmarks")
     ends = np.empty((n_cand, 2))
     for k in range(n_cand):
         j = candidates[k]

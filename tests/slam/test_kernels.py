@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 from polyslam_env.apps.benchmark import make_inputs, make_slam, make_walls
 from polyslam_env.slam import ekf, kernels
+from polyslam_env.slam.association import nearest_by_error
 from polyslam_env.slam.landmarks import LandmarkTable, boxes_near
 from polyslam_env.slam.measurement import cast
 from polyslam_env.slam.polynomial import Polynomial
@@ -331,3 +332,10 @@ def test_boxes__bit_identical_to_oracle(n: int) -> None:
         np.testing.assert_array_equal(
             boxes_near(got, np.array(box), distance), ref.boxes_near(got, np.array(box), distance)
         )
+
+
+def test_nearest_by_error__rejects_candidates_outside_the_map() -> None:
+    table = _table([Polynomial(1, np.array([0.5, 0.0]), -1.0, 1.0)])
+    with pytest.raises(IndexError, match="candidate"):
+        nearest_by_error([[0.0, 0.0]], [1], table.arrays(), [0.5])
+    assert nearest_by_error([[0.0, 0.0]], [0], table.arrays(), [0.5]) == [(0, 0.5)]
