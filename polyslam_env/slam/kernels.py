@@ -3,9 +3,13 @@ update, landmark boxes (STYLE habit 20).
 
 Plain loops over flat arrays, compiled by :func:`polyslam_env.core.jit.njit` (no fastmath): each
 kernel does the operations of the readable version it replaced in the same order, so results are
-bit-identical to it, except :func:`update_sparse` (see there). The readable versions are the test
-oracles in ``tests/slam/reference.py``; the typed wrappers that own validation live in the modules
-that use them (``measurement``, ``association``, ``ekf``, ``landmarks``, ``robot``).
+bit-identical to it, except where that version called BLAS or LAPACK: :func:`update_sparse` and
+:func:`normalised_innovations` (plain sums instead of BLAS's products) and :func:`_companion`
+(orders 4–5 only), equal to rounding. The readable versions are the test oracles in
+``tests/slam/reference_floats.py``; the typed wrappers that own validation live in the modules
+that use them (``measurement``, ``association``, ``ekf``, ``landmarks``, ``robot``). Kernels
+write into caller buffers rather than return arrays where they run every step: numba boxes each
+returned array into a new Python object.
 
 Landmarks are passed as the :class:`~polyslam_env.slam.landmarks.LandmarkTable`'s hot-path
 arrays: ``variate`` (n,), ``order`` (n,) (each shape's own order, no zero tail), ``shape``
