@@ -771,3 +771,100 @@ def update_sparse(
         for j in range(i):
             cov[i, j] = cov[j, i]
     return count
+
+
+# -- the SLAM step's two scans --------------------------------------------------------------------
+@njit
+def screen_scan(
+    mean: np.ndarray,  # (3+n,) the predicted state
+    cov: np.ndarray,  # (3+n, 3+n)
+    angles: np.ndarray,  # (B,) every beam's angle
+    ranges: np.ndarray,  # (B,) every beam's reading (inf or nan: no return)
+    outlier: np.ndarray,  # (B,) bool out: NIS above the gate, per row
+    reach: float,
+    variate: np.ndarray,
+    order: np.ndarray,
+    shape: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    boxes: np.ndarray,
+    max_range: float,
+    min_sine: float,
+    range_var: float,
+    model_var: np.ndarray,
+    shape_follows_pose: bool,
+    pivot: np.ndarray,
+    xi_var: np.ndarray,
+    fit_half: np.ndarray,
+    fit_inverse: np.ndarray,
+    n_fit: int,
+    gate: float,  # χ²(1) quantile
+) -> int:
+    """Every beam's row (:func:`beam_rows`, a missing return counting as ``max_range``) and
+    whether its NIS (:func:`normalised_innovations`) exceeds ``gate``, into the first rows of
+    ``outlier``; returns how many rows (the divergence screen of ``PolySlam``)."""
+    n_beams = angles.size
+    seen = np.empty(n_beams)
+    for b in range(n_beams):
+        seen[b] = ranges[b] if math.isfinite(ranges[b]) else max_range
+    innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))
+    c0_index, h_c0, variance = np.empty(n_beams, np.int64), np.empty(n_beams), np.empty(n_beams)
+    k = beam_rows(
+        mean[0], mean[1], mean[2], angles, seen, np.arange(n_beams), reach, variate, order,
+        shape, lo, hi, mean[3:], boxes, max_range, min_sine, range_var, model_var,
+        shape_follows_pose, pivot, xi_var, fit_half, fit_inverse, n_fit,
+        innovation, h_pose, c0_index, h_c0, variance,
+    )  # fmt: skip
+    nis = np.empty(k)
+    normalised_innovations(
+        cov, innovation[:k], h_pose[:k], c0_index[:k], h_c0[:k], variance[:k], nis
+    )
+    for i in range(k):
+        outlier[i] = nis[i] > gate
+    return k
+
+
+@njit
+def update_scan(
+    mean: np.ndarray,  # (3+n,) written in place
+    cov: np.ndarray,  # (3+n, 3+n) written in place
+    angles: np.ndarray,  # (B,) every beam's angle
+    ranges: np.ndarray,  # (B,) every beam's reading
+    beams: np.ndarray,  # (k,) int64: the beams to update with, in this order
+    reach: float,
+    variate: np.ndarray,
+    order: np.ndarray,
+    shape: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    boxes: np.ndarray,
+    max_range: float,
+    min_sine: float,
+    range_var: float,
+    model_var: np.ndarray,
+    shape_follows_pose: bool,
+    pivot: np.ndarray,
+    xi_var: np.ndarray,
+    fit_half: np.ndarray,
+    fit_inverse: np.ndarray,
+    n_fit: int,
+    gate: float,  # χ²(1) quantile
+) -> int:
+    """The rows of ``beams`` (:func:`beam_rows`) and the gated update with them
+    (:func:`update_sparse`); returns how many rows passed the gate, or −1 when no beam had a
+    usable row (then nothing ran)."""
+    n_beams = beams.size
+    innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))
+    c0_index, h_c0, variance = np.empty(n_beams, np.int64), np.empty(n_beams), np.empty(n_beams)
+    k = beam_rows(
+        mean[0], mean[1], mean[2], angles, ranges, beams, reach, variate, order, shape, lo, hi,
+        mean[3:], boxes, max_range, min_sine, range_var, model_var, shape_follows_pose, pivot,
+        xi_var, fit_half, fit_inverse, n_fit, innovation, h_pose, c0_index, h_c0, variance,
+    )  # fmt: skip
+    if k == 0:
+        return -1
+    accepted, nis = np.empty(k, np.bool_), np.empty(k)
+    return update_sparse(
+        mean, cov, innovation[:k], h_pose[:k], c0_index[:k], h_c0[:k], variance[:k], gate,
+        accepted, nis,
+    )  # fmt: skip

@@ -15,11 +15,12 @@ import time
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from polyslam_env.core.blas import blas_threads
-from polyslam_env.slam import ekf, kernels, measurement
+from polyslam_env.slam import ekf, kernels
 from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit, PointSet, StoredPoint, fit_polynomial, store_beams
@@ -99,18 +100,9 @@ class PolySlam:
     ) -> None:
         self.config = config
         self.beam_angles = np.asarray(beam_angles, dtype=float)  # (B,)
-        self._all_beams = np.arange(self.beam_angles.size)  # (B,)
         self._range_var = float(config.range_sigma**2)
         self._n_fit = config.eps_z + 1  # points of the cluster a landmark is born from
-        n_beams = self.beam_angles.size  # the rows' buffers (kernels write, not return)
-        self._rows = measurement.Rows(
-            np.empty(n_beams),
-            np.empty((n_beams, 3)),
-            np.empty(n_beams, dtype=np.int64),
-            np.empty(n_beams),
-            np.empty(n_beams),
-        )
-        self._nis, self._accepted = np.empty(n_beams), np.empty(n_beams, dtype=bool)
+        self._outlier = np.empty(self.beam_angles.size, dtype=bool)  # the screen's flags
         self._min_sine = float(np.sin(np.deg2rad(config.tangent_min_deg)))
         self.max_range = float(max_range)
         self.mean = np.zeros(3)  # (3+n,) relative to the true start (see class docstring)
@@ -303,12 +295,12 @@ class PolySlam:
         would explain the very beams they were made of), at the predicted pose. A beam without
         return whose predicted hit lies within range counts with the range r_max: a lower
         bound of its true range, so its NIS is a lower bound too."""
-        seen = np.where(np.isfinite(ranges), ranges, self.max_range)
-        rows = self._beam_rows(self._all_beams, seen)
-        if rows is not None:
-            nis = self._nis[: rows.innovation.size]
-            kernels.normalised_innovations(self.cov, *rows, nis)
-            self._screen.extend((nis > self._gate).tolist())
+        if self.n_landmarks == 0:
+            return
+        outlier = self._outlier
+        args = (self.mean, self.cov, self.beam_angles, ranges, outlier)
+        k = kernels.screen_scan(*args, *self._map_args())
+        self._screen.extend(outlier[:k].tolist())
 
     def _is_diverging(self) -> bool:
         """The paper's test (P beyond K·P0) or the innovation screen: at least
@@ -556,27 +548,28 @@ class PolySlam:
 
     # -- EKF update -------------------------------------------------------------------------------
     def _update(self, beams: list[int], ranges: np.ndarray) -> int:
-        """Batched, gated update with the associated beams (their rows from
-        :meth:`_beam_rows`); returns how many were used."""
-        rows = self._beam_rows(np.array(beams, dtype=np.int64), ranges)
-        if rows is None:
+        """Batched, gated update with the associated beams (their rows as in
+        :meth:`_map_args`); returns how many were used."""
+        if not beams or self.n_landmarks == 0:
             return 0
         mean = self.mean
         before = mean[:3].copy()
-        k = rows.innovation.size
-        accepted, nis = self._accepted[:k], self._nis[:k]
-        used = kernels.update_sparse(mean, self.cov, *rows, self._gate, accepted, nis)
+        chosen = np.array(beams, dtype=np.int64)
+        args = (mean, self.cov, self.beam_angles, ranges, chosen)
+        used = kernels.update_scan(*args, *self._map_args())
+        if used < 0:  # no usable row: nothing ran
+            return 0
         self._state_version += 1
         if used:  # else the pose did not move
             self._carry_stored_points(before, mean[:3])
         return used
 
-    def _beam_rows(self, beams: np.ndarray, ranges: np.ndarray) -> measurement.Rows | None:
-        """The measurement rows of ``beams`` (int64 indices) against the current map at the
-        current mean, or None when no beam has a usable hit: views of buffers that the next
-        call overwrites.
+    def _map_args(self) -> tuple[Any, ...]:  # the kernels type their arguments
+        """The map and model arguments of the scan kernels (``kernels.screen_scan``,
+        ``kernels.update_scan``): the landmarks within range at the current mean, the table's
+        arrays, the model constants and the χ² gate.
 
-        Each beam's hit (one :func:`~polyslam_env.slam.kernels.beam_rows` call for the scan,
+        Each beam's hit (:func:`~polyslam_env.slam.kernels.beam_rows`, a whole scan per call,
         on the landmarks within range) gives one row of H: the pose part and 1/D on the c0
         hit (SPEC §3, :mod:`~polyslam_env.slam.measurement`). Near-tangent hits are skipped.
         R adds to the range noise the landmark's fit variance beyond the noise, and with
@@ -606,24 +599,14 @@ class PolySlam:
         (~σ²·m/N) and grows fast where the curve is extrapolated. N = ε_Z + 1, the size of the
         cluster a landmark is born from.
         """
-        if not beams.size or self.n_landmarks == 0:
-            return None
-        mean, table, n_fit = self.mean, self.table, self._n_fit
-        x, y, theta = float(mean[0]), float(mean[1]), float(mean[2])
-        used = kernels.beam_rows(
-            x,
-            y,
-            theta,
-            self.beam_angles,
-            ranges,
-            beams,
+        table, n_fit = self.table, self._n_fit
+        return (
             self.max_range + REACH_MARGIN,
             table.variate,
             table.order,
             table.shape,
             table.lo,
             table.hi,
-            mean[3:],
             self._boxes(),
             self.max_range,
             self._min_sine,
@@ -635,13 +618,7 @@ class PolySlam:
             table.fit_half,
             _fit_inverse_table(n_fit, table.shape.shape[1] - 1),
             n_fit,
-            *self._rows,
-        )
-        if not used:
-            return None
-        innovation, h_pose, c0_index, h_c0, variance = self._rows
-        return measurement.Rows(
-            innovation[:used], h_pose[:used], c0_index[:used], h_c0[:used], variance[:used]
+            self._gate,
         )
 
     def _carry_stored_points(self, before: np.ndarray, after: np.ndarray) -> None:

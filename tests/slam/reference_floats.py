@@ -20,7 +20,7 @@ import functools
 import math
 from collections.abc import Sequence
 from math import comb
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -545,6 +545,35 @@ def update_sparse(
     )
     accepted[:], nis[:] = ok, values
     return int(ok.sum())
+
+
+def update_scan(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    angles: np.ndarray,
+    ranges: np.ndarray,
+    beams: np.ndarray,
+    *args: Any,
+) -> int:
+    """``kernels.update_scan`` with the numpy update (:func:`update_sparse_inplace`) in place
+    of the compiled one, to stand in for it (``args``: reach … n_fit, gate)."""
+    from polyslam_env.slam import kernels
+
+    *map_args, gate = args
+    reach, variate, order, shape, lo, hi, boxes, *model = map_args
+    k = beams.size
+    rows = (np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k), np.empty(k))
+    x, y, theta = float(mean[0]), float(mean[1]), float(mean[2])
+    used = kernels.beam_rows(
+        x, y, theta, angles, ranges, beams, reach, variate, order, shape, lo, hi, mean[3:],
+        boxes, *model, *rows,
+    )  # fmt: skip
+    if used == 0:
+        return -1
+    accepted, _ = update_sparse_inplace(
+        mean, cov, *(column[:used] for column in rows), gate_value=gate
+    )
+    return int(accepted.sum())
 
 
 def normalised_innovations(

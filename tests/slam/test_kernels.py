@@ -304,7 +304,7 @@ def test_slam_steps__compiled_update_tracks_numpy_update_over_a_short_horizon(
     compiled = make_slam(walls)
     for odometry, ranges in inputs:
         compiled.step(odometry, ranges)
-    monkeypatch.setattr(kernels, "update_sparse", ref.update_sparse)
+    monkeypatch.setattr(kernels, "update_scan", ref.update_scan)
     numpy_run = make_slam(walls)
     for odometry, ranges in inputs:
         numpy_run.step(odometry, ranges)
