@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from polyslam_env.slam import kernels
 from polyslam_env.slam.fitting import (
     Fit,
     PointSet,
@@ -31,52 +32,43 @@ from polyslam_env.slam.fitting import (
     polynomial_points,
     stored_points,
 )
-from polyslam_env.slam.landmarks import LandmarkTable, PolynomialsLike, ShapeRow, pack
-from polyslam_env.slam.polynomial import Polynomial, value_and_slope
+from polyslam_env.slam.landmarks import (
+    LandmarkTable,
+    PolynomialsLike,
+    ShapeArrays,
+    ShapeRow,
+    pack,
+    shape_arrays,
+)
+from polyslam_env.slam.polynomial import Polynomial
 
 
 # -- approximation error ---------------------------------------------------------------------
 def nearest_by_error(
-    xy: Sequence[Sequence[float]],
-    candidates: Sequence[int],
-    rows: Sequence[ShapeRow],
-    c0s: Sequence[float],
+    xy: Sequence[Sequence[float]] | np.ndarray,
+    candidates: Sequence[int] | np.ndarray,
+    shapes: ShapeArrays | Sequence[ShapeRow],
+    c0s: Sequence[float] | np.ndarray,
     squared: bool = False,
 ) -> list[tuple[int, float]]:
-    """Per point, (index of the landmark with the smallest approximation error ε, that ε) over
-    ``candidates``, or (−1, inf) without candidates.
+    """Per point (``xy`` (P, 2)), (index of the landmark with the smallest approximation
+    error ε, that ε) over ``candidates``, or (−1, inf) without candidates.
 
     ε of a point by a polynomial: inside its extent the vertical (variate 1) / horizontal
     (variate 2) distance |η − p(ξ)|; outside, the distance to the nearer end point; metres, or
-    the paper's squared form with ``squared=True``. In plain floats: the association compares
-    a handful of points with a handful of landmarks per step, and merging a few points with
-    one polynomial, where numpy's per-call cost would dominate."""
-    ends = []
-    for j in candidates:
-        row = rows[j]
-        c0 = c0s[j]
-        ends.append(
-            (value_and_slope(row.shape, row.lo, c0)[0], value_and_slope(row.shape, row.hi, c0)[0])
-        )
-    out = []
-    for x, y in xy:
-        best, best_err = -1, math.inf
-        for k, j in enumerate(candidates):
-            row = rows[j]
-            xi, eta = (x, y) if row.variate == 1 else (y, x)
-            if row.lo <= xi <= row.hi:
-                err = abs(eta - value_and_slope(row.shape, xi, c0s[j])[0])
-            else:
-                eta_lo, eta_hi = ends[k]
-                err = min(
-                    math.hypot(xi - row.lo, eta - eta_lo), math.hypot(xi - row.hi, eta - eta_hi)
-                )
-            if squared:
-                err = err * err
-            if err < best_err:
-                best, best_err = j, err
-        out.append((best, best_err))
-    return out
+    the paper's squared form with ``squared=True``. Compiled
+    (:func:`~polyslam_env.slam.kernels.nearest_by_error`); ``shapes`` as
+    ``LandmarkTable.arrays()`` or rows."""
+    arrays = shape_arrays(shapes)
+    points = np.ascontiguousarray(xy, dtype=float).reshape(-1, 2)
+    cand = np.asarray(candidates, dtype=np.int64).reshape(-1)
+    c0 = np.ascontiguousarray(c0s, dtype=float)
+    n = len(arrays.variate)
+    if c0.shape != (n,):
+        raise ValueError(f"c0s must have shape ({n},), got {c0.shape}")
+    best, err = np.empty(len(points), dtype=np.int64), np.empty(len(points))
+    kernels.nearest_by_error(points, cand, *arrays, c0, bool(squared), best, err)
+    return list(zip(best.tolist(), err.tolist(), strict=True))
 
 
 # -- bookkeeping ------------------------------------------------------------------------------
@@ -179,7 +171,7 @@ class MapBook:
         sigma: float,
         squared: bool = False,
         candidates: np.ndarray | None = None,
-        rows: Sequence[ShapeRow] | None = None,
+        rows: ShapeArrays | Sequence[ShapeRow] | None = None,
     ) -> AssociationResult:
         """Classify this step's beam points against the map as it stood at the step's start.
 
@@ -192,9 +184,9 @@ class MapBook:
         polynomials. It must hold every polynomial that could lie within σ_k of a point (ε is
         never below the distance to a curve's bounding box, so the boxes within σ_k of the
         points' box will do): then every point is classified exactly as against the whole
-        map; only ``errors`` reads inf for a point no candidate is near. With ``rows`` (the
-        same polynomials as plain floats, e.g. ``LandmarkTable.rows()``) the candidates are
-        compared in floats (:func:`nearest_by_error`) instead of numpy arrays.
+        map; only ``errors`` reads inf for a point no candidate is near. ``rows``, the same
+        polynomials as the kernels take them (e.g. ``LandmarkTable.arrays()``), saves packing
+        ``polys`` again.
         """
         if len(polys) != len(self.ids) or len(c0s) != len(self.ids):
             raise ValueError(f"{len(polys)} polys / {len(c0s)} c0s for {len(self.ids)} landmarks")
@@ -226,14 +218,13 @@ class MapBook:
         c0s: Sequence[float] | np.ndarray,
         squared: bool,
         candidates: np.ndarray | None,
-        rows: Sequence[ShapeRow] | None,
+        rows: ShapeArrays | Sequence[ShapeRow] | None,
     ) -> list[tuple[int, float]]:
         """(p*, ε) per point over the candidates (all polynomials when None)."""
-        if rows is None:
-            rows = pack(polys).rows()
-        chosen = range(len(rows)) if candidates is None else candidates.tolist()
-        xy = [p.xy.tolist() for p in points]
-        return nearest_by_error(xy, chosen, rows, list(c0s), squared)
+        shapes = pack(polys).arrays() if rows is None else shape_arrays(rows)
+        chosen = np.arange(len(shapes.variate)) if candidates is None else candidates
+        xy = np.array([p.xy for p in points], dtype=float).reshape(-1, 2)
+        return nearest_by_error(xy, chosen, shapes, c0s, squared)
 
     def _add_bad(self, landmark_id: int, point: StoredPoint, result: AssociationResult) -> None:
         """Add to Q_bad; past ε_M points, request (or extend this step's) refit and empty it."""

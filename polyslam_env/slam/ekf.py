@@ -18,7 +18,8 @@ from functools import lru_cache
 import numpy as np
 import scipy.special
 
-from polyslam_env.core.geometry import symmetric_eigvals3, wrap_angle, wrap_scalar
+from polyslam_env.core.geometry import symmetric_eigvals3, wrap_angle
+from polyslam_env.slam import kernels
 
 
 def _symmetrise(a: np.ndarray) -> np.ndarray:
@@ -73,41 +74,15 @@ def predict_inplace(
     about the start); the standard F lets each update's correction δx̂ leak in as spurious
     information about the heading.
     """
-    x, y, theta = mean[:3].tolist()
-    dx, dy, dtheta = np.asarray(odometry, dtype=float).tolist()
-    c, s = math.cos(theta), math.sin(theta)
-    mean[0] = x + c * dx - s * dy
-    mean[1] = y + s * dx + c * dy
-    mean[2] = wrap_scalar(theta + dtheta)
-    if first_xy is None:
-        a, b = -s * dx - c * dy, c * dx - s * dy  # F[0, 2], F[1, 2]
-    else:
-        a, b = -(float(mean[1]) - first_xy[1]), float(mean[0]) - first_xy[0]
-    if cov.shape[0] > 3:
-        heading = cov[2, 3:]
-        cov[0, 3:] += a * heading
-        cov[1, 3:] += b * heading
-        cov[3:, 0] = cov[0, 3:]
-        cov[3:, 1] = cov[1, 3:]
-    (p00, p01, p02), (_, p11, p12), (_, _, p22) = cov[:3, :3].tolist()  # upper triangle
-    # F P Fᵀ, F = I + a·e₀e₂ᵀ + b·e₁e₂ᵀ
-    f02, f12 = p02 + a * p22, p12 + b * p22
-    f00 = p00 + a * p02 + a * f02
-    f01 = p01 + a * p12 + b * f02
-    f11 = p11 + b * p12 + b * f12
-    # L W Lᵀ, L = rotation by θ on (x, y), 1 on θ
-    (w00, w01, w02), (w10, w11, w12), (_, _, w22) = np.asarray(W, dtype=float).tolist()
-    r00, r01 = c * w00 - s * w10, c * w01 - s * w11  # rows of L W
-    r10, r11 = s * w00 + c * w10, s * w01 + c * w11
-    q00, q01 = r00 * c - r01 * s, r00 * s + r01 * c
-    q11 = r10 * s + r11 * c
-    q02, q12 = c * w02 - s * w12, s * w02 + c * w12
-    block = (
-        (f00 + q00, f01 + q01, f02 + q02),
-        (f01 + q01, f11 + q11, f12 + q12),
-        (f02 + q02, f12 + q12, p22 + w22),
-    )
-    cov[:3, :3] = block
+    if mean.dtype != np.float64 or cov.dtype != np.float64:
+        raise TypeError("predict_inplace: mean and cov must be float64 arrays")
+    n = mean.size
+    if mean.shape != (n,) or cov.shape != (n, n) or n < 3:
+        raise ValueError(f"predict_inplace: mean {mean.shape} and cov {cov.shape} do not match")
+    u = np.ascontiguousarray(odometry, dtype=float).reshape(3)
+    w = np.ascontiguousarray(W, dtype=float).reshape(3, 3)
+    fx, fy = (math.nan, math.nan) if first_xy is None else (float(first_xy[0]), float(first_xy[1]))
+    kernels.predict(mean, cov, u, w, fx, fy)
 
 
 def start_error_cov(pose: np.ndarray, p0: np.ndarray) -> np.ndarray:  # (3, 3)
@@ -144,71 +119,38 @@ def update_sparse_inplace(
     h_c0: np.ndarray,
     r: np.ndarray,
     gate_prob: float = 0.99,
-    work: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Gated, batched EKF update with range rows that touch the pose and one c0 each, in place.
 
     Row i of H is ``h_pose[i]`` (3,) on the pose and ``h_c0[i]`` on state index
     ``c0_index[i]``; R = diag(``r``) (k,); ``innovation`` (k,) must be finite. Writes the new
-    estimate into ``mean`` (3+n,) and ``cov`` (3+n, 3+n) and returns (accepted (k,), nis (k,)).
-    ``work`` is an optional (3+n, 3+n) scratch array for the products: a caller that updates
-    every step keeps one, because a fresh array that large costs more in page faults than the
-    arithmetic that fills it.
+    estimate into ``mean`` (3+n,) and ``cov`` (3+n, 3+n, symmetric) and returns
+    (accepted (k,), nis (k,)).
 
     Each measurement is gated on its own normalised innovation ν_i²/S_ii against the χ²
     (1 dof) quantile ``gate_prob`` (1.0 disables the gate); the accepted ones update together
     with the Joseph form P⁺ = (I−KH) P (I−KH)ᵀ + K R Kᵀ (the oracle in tests computes it
-    literally), arranged for speed at large n:
-
-    * P Hᵀ = P[:, :3] h_poseᵀ + P[:, c0] h_c0, with no dense H;
-    * expanded, the Joseph form is P⁺ = P − (K Wᵀ + W Kᵀ) with W = P Hᵀ − ½ K S (for any
-      gain K; here K = P Hᵀ S⁻¹);
-    * K Wᵀ + W Kᵀ = Z₊Z₊ᵀ − Z₋Z₋ᵀ with Z± = (K' ± W')/√2, where K' and W' are K and W with
-      column l scaled by a_l and 1/a_l (a_l = √(‖W_l‖/‖K_l‖) keeps both terms the size of the
-      result, so nothing is lost to cancellation). BLAS computes Z Zᵀ as an exactly
-      symmetric syrk, so P⁺ stays exactly symmetric with no (3+n)² transpose pass: O(n²k).
-
+    literally), expanded as P⁺ = P − (K Wᵀ + W Kᵀ) with W = P Hᵀ − ½ K S, in one compiled pass
+    over P that keeps it exactly symmetric (:func:`~polyslam_env.slam.kernels.update_sparse`).
     K comes from a solve with S (SPEC §3: ``solve``, not ``inv``).
     """
-    k = r.size
-    cols = np.array([0, 1, 2, *c0_index.tolist()])  # (3+k,) the state columns H touches
-    H = np.zeros((k, 3 + k))  # H on ``cols``: row i is h_pose[i], then h_c0[i] at 3+i
-    H[:, :3] = h_pose
-    H.flat[3 :: k + 4] = h_c0
-    PHt = cov[:, cols] @ H.T  # (3+n, k)
-    S = H @ PHt[cols]  # (k, k) = H P Hᵀ
+    n, k = mean.size, np.size(r)
+    if mean.dtype != np.float64 or cov.dtype != np.float64 or cov.shape != (n, n):
+        raise ValueError(f"update: mean {mean.shape} and cov {cov.shape} must be float64, matching")
+    nu = np.ascontiguousarray(innovation, dtype=float).reshape(-1)
+    hp = np.ascontiguousarray(h_pose, dtype=float).reshape(-1, 3)
+    idx = np.ascontiguousarray(c0_index, dtype=np.int64).reshape(-1)
+    hc = np.ascontiguousarray(h_c0, dtype=float).reshape(-1)
+    rv = np.ascontiguousarray(r, dtype=float).reshape(-1)
+    if not nu.size == hp.shape[0] == idx.size == hc.size == k:
+        raise ValueError(
+            f"update: {nu.size} innovations, {hp.shape[0]}/{idx.size}/{hc.size}/{k} rows"
+        )
+    if k and (idx.min() < 3 or idx.max() >= n):
+        raise ValueError(f"update: c0 indices must lie in [3, {n}), got {idx.tolist()}")
+    accepted, nis = np.empty(k, dtype=bool), np.empty(k)
     gate = chi2_1dof_quantile(gate_prob)
-    nis_list = [  # k ≤ 5 or so: Python floats beat numpy's per-call cost
-        v * v / (s + q)
-        for v, s, q in zip(innovation.tolist(), S.diagonal().tolist(), r.tolist(), strict=True)
-    ]
-    passed = [v <= gate for v in nis_list]
-    accepted, nis = np.array(passed), np.array(nis_list)
-    if not all(passed):
-        if not any(passed):
-            return accepted, nis
-        a = np.flatnonzero(accepted)
-        PHt, S, innovation, r = PHt[:, a], S[np.ix_(a, a)], innovation[a], r[a]
-    S = _symmetrise(S)
-    S.flat[:: r.size + 1] += r  # + R
-    K = np.linalg.solve(S, PHt.T).T  # (3+n, k_a) = P Hᵀ S⁻¹
-    mean += K @ innovation
-    mean[2] = wrap_scalar(float(mean[2]))
-    W = PHt - 0.5 * (K @ S)
-    k_sq, w_sq = np.einsum("ij,ij->j", K, K).tolist(), np.einsum("ij,ij->j", W, W).tolist()
-    scale = [  # a_l, or 1 where a column is zero
-        math.sqrt(math.sqrt(ws / ks)) if ks > 0.0 and ws > 0.0 else 1.0
-        for ks, ws in zip(k_sq, w_sq, strict=True)
-    ]
-    sqrt2 = math.sqrt(2.0)
-    K *= np.array([a_l / sqrt2 for a_l in scale])
-    W /= np.array([a_l * sqrt2 for a_l in scale])
-    if work is None or work.shape != cov.shape:
-        work = np.empty_like(cov)
-    z = K + W
-    cov -= np.matmul(z, z.T, out=work)
-    K -= W
-    cov += np.matmul(K, K.T, out=work)
+    kernels.update_sparse(mean, cov, nu, hp, idx, hc, rv, gate, accepted, nis)
     return accepted, nis
 
 
@@ -327,12 +269,17 @@ def normalised_innovations(
     """ν_i² / S_ii for range rows that touch the pose and one c0 each (the rows of
     :func:`update_sparse_inplace`): S_ii = h P_pp hᵀ + 2 h_c h P_pc + h_c² P_cc + r_i with
     h = ``h_pose[i]`` (3,), h_c = ``h_c0[i]``, c = ``c0_index[i]``; cov (3+n, 3+n)."""
-    P_pp = cov[:3, :3]  # (3, 3)
-    P_pc = cov[:3, c0_index]  # (3, k)
-    P_cc = cov[c0_index, c0_index]  # (k,)
-    s = ((h_pose @ P_pp) * h_pose).sum(axis=1)  # h P_pp hᵀ per row (k rows ≈ 5: no einsum)
-    s += 2.0 * h_c0 * (h_pose * P_pc.T).sum(axis=1) + h_c0 * h_c0 * P_cc + r
-    return np.asarray(innovation * innovation / s)
+    out = np.empty(np.size(r))
+    kernels.normalised_innovations(
+        cov,
+        np.ascontiguousarray(innovation, dtype=float),
+        np.ascontiguousarray(h_pose, dtype=float).reshape(-1, 3),
+        np.ascontiguousarray(c0_index, dtype=np.int64),
+        np.ascontiguousarray(h_c0, dtype=float),
+        np.ascontiguousarray(r, dtype=float),
+        out,
+    )
+    return out
 
 
 @lru_cache(maxsize=32)

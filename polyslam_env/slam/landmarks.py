@@ -21,7 +21,8 @@ from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
 
-from polyslam_env.slam.polynomial import Polynomial, taylor_shift
+from polyslam_env.slam import kernels
+from polyslam_env.slam.polynomial import Polynomial
 
 if TYPE_CHECKING:
     from polyslam_env.slam.fitting import StoredPoint
@@ -75,9 +76,12 @@ class PackedPolynomials:
             self.variate[indices], self.shape[indices], self.lo[indices], self.hi[indices]
         )
 
+    def arrays(self) -> ShapeArrays:
+        """The shapes as the kernels take them (each row's own order computed)."""
+        return ShapeArrays(self.variate, own_orders(self.shape), self.shape, self.lo, self.hi)
+
     def rows(self) -> list[PlainRow]:
-        """Each polynomial's shape as plain floats (a :class:`ShapeRow`), for the float loops
-        of ``association.nearest_by_error``."""
+        """Each polynomial's shape as plain floats (a :class:`ShapeRow`)."""
         columns = zip(
             self.variate.tolist(), self.shape, self.lo.tolist(), self.hi.tolist(), strict=True
         )
@@ -97,8 +101,7 @@ PolynomialsLike = Sequence[Polynomial] | PackedPolynomials
 
 
 class ShapeRow(Protocol):
-    """A landmark's shape as plain floats (e.g. a :class:`LandmarkRow`), for the per-beam
-    loops of ``measurement.cast`` and ``association.nearest_by_error``."""
+    """A landmark's shape as plain floats (e.g. a :class:`LandmarkRow`)."""
 
     @property
     def variate(self) -> int: ...
@@ -108,6 +111,41 @@ class ShapeRow(Protocol):
     def lo(self) -> float: ...
     @property
     def hi(self) -> float: ...
+
+
+class ShapeArrays(NamedTuple):
+    """Shapes as the compiled kernels read them (:mod:`polyslam_env.slam.kernels`)."""
+
+    variate: np.ndarray  # (n,) int64, 1 or 2
+    order: np.ndarray  # (n,) int64, each shape's own order (no zero tail, ≥ 1)
+    shape: np.ndarray  # (n, M+1) float: [0, b_1, …, b_M], zero-padded
+    lo: np.ndarray  # (n,) extent on ξ
+    hi: np.ndarray  # (n,)
+
+
+def own_orders(shape: np.ndarray) -> np.ndarray:
+    """(n,) int64: each zero-padded shape row's own order (its last non-zero power, ≥ 1), the
+    length of :func:`_own_order`'s row minus one."""
+    nonzero = shape != 0.0  # (n, M+1)
+    last = shape.shape[1] - 1 - np.argmax(nonzero[:, ::-1], axis=1)
+    return np.maximum(np.where(nonzero.any(axis=1), last, 0), 1).astype(np.int64)
+
+
+def shape_arrays(shapes: ShapeArrays | Sequence[ShapeRow]) -> ShapeArrays:
+    """``shapes`` as :class:`ShapeArrays` (no copy when already packed)."""
+    if isinstance(shapes, ShapeArrays):
+        return shapes
+    width = max((len(row.shape) for row in shapes), default=2)
+    shape = np.zeros((len(shapes), width))
+    for i, row in enumerate(shapes):
+        shape[i, : len(row.shape)] = row.shape
+    return ShapeArrays(
+        np.array([row.variate for row in shapes], dtype=np.int64),
+        np.array([len(row.shape) - 1 for row in shapes], dtype=np.int64),
+        shape,
+        np.array([row.lo for row in shapes], dtype=float),
+        np.array([row.hi for row in shapes], dtype=float),
+    )
 
 
 def pack(polys: PolynomialsLike) -> PackedPolynomials:
@@ -125,8 +163,12 @@ def shape_range(shape: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray
     box tests rely on that); loose only by the curvature terms of short segments.
     """
     mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)  # (n,)
-    rows = zip(shape.tolist(), mid.tolist(), strict=True)
-    taylor = np.array([taylor_shift(row, m) for row, m in rows]).reshape(shape.shape)  # (n, M+1)
+    shape = np.ascontiguousarray(shape, dtype=float)
+    if shape.shape[1] > kernels.MAX_ORDER + 1:
+        raise ValueError(f"shape order {shape.shape[1] - 1} above {kernels.MAX_ORDER}")
+    taylor = np.empty_like(shape)  # (n, M+1)
+    for i in range(len(shape)):
+        kernels.taylor_shift(shape[i], shape.shape[1] - 1, float(mid[i]), taylor[i])
     powers = half[:, None] ** np.arange(shape.shape[1])  # (n, M+1)
     spread = (np.abs(taylor[:, 1:]) * powers[:, 1:]).sum(axis=1)
     # a relative pad absorbs the rounding of T_0 and of the exact values this bounds
@@ -179,7 +221,8 @@ class LandmarkTable:
         self.polys: list[Polynomial] = []  # (n,) shape and extent
         self.changed_at: list[int] = []  # (n,) step created, refit or merged
         self.qbad: dict[int, list[StoredPoint]] = {}  # id → its badly approximated points
-        self.variate = np.zeros(0, dtype=int)  # (n,)
+        self.variate = np.zeros(0, dtype=np.int64)  # (n,)
+        self.order = np.zeros(0, dtype=np.int64)  # (n,) each shape's own order
         self.shape = np.zeros((0, 2))  # (n, M+1)
         self.lo = np.zeros(0)  # (n,)
         self.hi = np.zeros(0)  # (n,)
@@ -250,6 +293,7 @@ class LandmarkTable:
         shape[-1] = row[0]
         self.shape = shape
         self.variate = np.append(self.variate, poly.variate)
+        self.order = np.append(self.order, len(_own_order(row[0])) - 1)
         self.lo = np.append(self.lo, poly.lo)
         self.hi = np.append(self.hi, poly.hi)
         rng = shape_range(row, np.array([poly.lo]), np.array([poly.hi]))  # (1, 2)
@@ -270,8 +314,8 @@ class LandmarkTable:
         del self.polys[index]
         del self.changed_at[index]
         del self.qbad[landmark_id]
-        names = ("variate", "shape", "lo", "hi", "eta_range", "pivot", "xi_var", "model_var")
-        for name in (*names, "fit_half", "side", "evidence"):
+        names = ("variate", "order", "shape", "lo", "hi", "eta_range", "pivot", "xi_var")
+        for name in (*names, "model_var", "fit_half", "side", "evidence"):
             setattr(self, name, np.delete(getattr(self, name), index, axis=0))
         self._changed(ids=True)
         return landmark_id
@@ -315,10 +359,12 @@ class LandmarkTable:
             self._packed = PackedPolynomials(self.variate, self.shape, self.lo, self.hi)
         return self._packed
 
+    def arrays(self) -> ShapeArrays:
+        """The shapes as the kernels take them (the table's own arrays, no copy)."""
+        return ShapeArrays(self.variate, self.order, self.shape, self.lo, self.hi)
+
     def rows(self) -> list[LandmarkRow]:
-        """Row i as plain Python numbers (cached until the next change), for the per-beam
-        loops of :func:`polyslam_env.slam.measurement.cast` and the update, where indexing
-        numpy arrays element by element would cost more than the arithmetic."""
+        """Row i as plain Python numbers (cached until the next change)."""
         if self._rows is None:
             columns = zip(
                 self.variate.tolist(),
@@ -346,10 +392,8 @@ class LandmarkTable:
         key = None if state_version is None else (self.version, state_version)
         if key is not None and key == self._boxes_key:
             return self._boxes
-        eta = c0s[:, None] + self.eta_range  # (n, 2)
-        v1 = (self.variate == 1)[:, None]
-        xi = np.stack([self.lo, self.hi], axis=-1)  # (n, 2)
-        boxes = np.concatenate([np.where(v1, xi, eta), np.where(v1, eta, xi)], axis=1)
+        c0s = np.ascontiguousarray(c0s, dtype=float)
+        boxes = kernels.boxes(c0s, self.variate, self.lo, self.hi, self.eta_range)
         if key is not None:
             self._boxes, self._boxes_key = boxes, key
         return boxes
@@ -409,7 +453,9 @@ def hull(*intervals: tuple[float, float]) -> tuple[float, float]:
 
 
 def boxes_near(boxes: np.ndarray, box: np.ndarray, distance: float) -> np.ndarray:
-    """Indices (ascending) of ``boxes`` (n, 4) within ``distance`` of ``box`` (4,)."""
-    gap_x = np.maximum(np.maximum(boxes[:, 0] - box[1], box[0] - boxes[:, 1]), 0.0)
-    gap_y = np.maximum(np.maximum(boxes[:, 2] - box[3], box[2] - boxes[:, 3]), 0.0)
-    return np.flatnonzero(gap_x * gap_x + gap_y * gap_y <= distance * distance)
+    """Indices (ascending, int64) of ``boxes`` (n, 4) within ``distance`` of ``box`` (4,)."""
+    boxes = np.ascontiguousarray(boxes, dtype=float).reshape(-1, 4)
+    box = np.ascontiguousarray(box, dtype=float)
+    if box.shape != (4,):
+        raise ValueError(f"boxes_near: box must have shape (4,), got {box.shape}")
+    return kernels.boxes_near(boxes, box, float(distance))

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from math import comb
 
 import numpy as np
 
@@ -112,12 +111,12 @@ class Polynomial:
         return self.points_at(np.linspace(a, b, n))
 
 
-# -- evaluation: the one Horner scheme, in three shapes -----------------------------------------
+# -- evaluation: Horner's scheme on arrays (one point in floats: kernels.horner) -----------------
 def polyval(
     x: np.ndarray | float, coeffs: np.ndarray | Sequence[float], derivative: int = 0
 ) -> np.ndarray:
     """Σ_j coeffs[j] x^j (increasing powers) at any array ``x``, or its ``derivative``-th
-    derivative: numpy's ``polyval`` (of ``polyder``), the reference for the other two."""
+    derivative: numpy's ``polyval`` (of ``polyder``), the reference for the other forms."""
     c = np.polynomial.polynomial.polyder(coeffs, derivative) if derivative else coeffs
     return np.asarray(np.polynomial.polynomial.polyval(x, c))
 
@@ -133,33 +132,3 @@ def polyval_rows(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
     for i in range(2, coeffs.shape[1] + 1):
         value = coeffs[:, -i, None] + value * x
     return np.asarray(value)
-
-
-def value_and_slope(
-    coeffs: Sequence[float], x: float, c0: float | None = None
-) -> tuple[float, float]:
-    """(p(x), p'(x)) of one polynomial [c_0, …, c_m] (m ≥ 1) in plain floats, by Horner's
-    scheme: the per-beam and per-point loops of the SLAM, where numpy's per-call cost would
-    dominate. ``c0``, when given, replaces ``coeffs[0]`` (a landmark's c0 from the state)."""
-    value = coeffs[-1]
-    slope = 0.0
-    for b in coeffs[-2:0:-1]:
-        slope = slope * x + value
-        value = value * x + b
-    slope = slope * x + value
-    value = value * x + (coeffs[0] if c0 is None else c0)
-    return value, slope
-
-
-# -- Taylor shift ------------------------------------------------------------------------------
-def taylor_shift(coeffs: Sequence[float], x0: float) -> list[float]:
-    """Taylor coefficients T_k = Σ_{i≥k} C(i, k) c_i x0^(i−k) of [c_0, …, c_m] about x0, so
-    p(x0 + u) = Σ_k T_k u^k, in plain floats (the per-beam ray casting and the per-landmark
-    box bounds)."""
-    m = len(coeffs) - 1
-    powers = [1.0]
-    for _ in range(m):
-        powers.append(powers[-1] * x0)
-    return [
-        sum(coeffs[i] * (powers[i - k] * comb(i, k)) for i in range(k, m + 1)) for k in range(m + 1)
-    ]

@@ -15,16 +15,16 @@ import time
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from polyslam_env.core.blas import blas_threads
-from polyslam_env.slam import ekf, measurement
+from polyslam_env.slam import ekf, kernels
 from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit, PointSet, StoredPoint, fit_polynomial, store_beams
 from polyslam_env.slam.landmarks import (
-    LandmarkRow,
     LandmarkTable,
     ShapesView,
     boxes_near,
@@ -33,7 +33,7 @@ from polyslam_env.slam.landmarks import (
     hull,
 )
 from polyslam_env.slam.merging import JOIN_GAP, choose_merge, face_normal, merge_points
-from polyslam_env.slam.polynomial import Polynomial, value_and_slope
+from polyslam_env.slam.polynomial import Polynomial
 
 #: The innovation screen of the divergence test (:meth:`PolySlam._is_diverging`): the last
 #: SCREEN_WINDOW beams whose return (or lack of one) the map predicts, each an outlier when
@@ -100,7 +100,9 @@ class PolySlam:
     ) -> None:
         self.config = config
         self.beam_angles = np.asarray(beam_angles, dtype=float)  # (B,)
-        self._angles: list[float] = self.beam_angles.tolist()
+        self._range_var = float(config.range_sigma**2)
+        self._n_fit = config.eps_z + 1  # points of the cluster a landmark is born from
+        self._outlier = np.empty(self.beam_angles.size, dtype=bool)  # the screen's flags
         self._min_sine = float(np.sin(np.deg2rad(config.tangent_min_deg)))
         self.max_range = float(max_range)
         self.mean = np.zeros(3)  # (3+n,) relative to the true start (see class docstring)
@@ -112,7 +114,6 @@ class PolySlam:
         self.diverging = False
         self.divergence_f = 0.0
         self.profile: dict[str, list[float]] | None = None
-        self._work = np.empty(0)  # scratch for the update's covariance products
         self._state_version = 0  # bumped by every update (map changes bump the table's version)
         kp0_eig = np.linalg.eigvalsh(config.k_divergence * config.p0)  # (3,) ascending
         self._kp0_norm = float(max(-kp0_eig[0], kp0_eig[-1]))  # ‖K P0‖
@@ -196,7 +197,7 @@ class PolySlam:
             sigma,
             cfg.squared_error,
             candidates=self._association_candidates(points, sigma),
-            rows=self.table.rows(),
+            rows=self.table.arrays(),
         )
         if self.profile is not None:
             lap = self._lap("association", lap)
@@ -294,11 +295,12 @@ class PolySlam:
         would explain the very beams they were made of), at the predicted pose. A beam without
         return whose predicted hit lies within range counts with the range r_max: a lower
         bound of its true range, so its NIS is a lower bound too."""
-        seen = np.where(np.isfinite(ranges), ranges, self.max_range)
-        rows = self._beam_rows(list(range(len(seen))), seen)
-        if rows is not None:
-            nis = ekf.normalised_innovations(self.cov, *rows)
-            self._screen.extend((nis > self._gate).tolist())
+        if self.n_landmarks == 0:
+            return
+        outlier = self._outlier
+        args = (self.mean, self.cov, self.beam_angles, ranges, outlier)
+        k = kernels.screen_scan(*args, *self._map_args())
+        self._screen.extend(outlier[:k].tolist())
 
     def _is_diverging(self) -> bool:
         """The paper's test (P beyond K·P0) or the innovation screen: at least
@@ -546,97 +548,32 @@ class PolySlam:
 
     # -- EKF update -------------------------------------------------------------------------------
     def _update(self, beams: list[int], ranges: np.ndarray) -> int:
-        """Batched, gated update with the associated beams (their rows from
-        :meth:`_beam_rows`); returns how many were used."""
-        rows = self._beam_rows(beams, ranges)
-        if rows is None:
+        """Batched, gated update with the associated beams (their rows as in
+        :meth:`_map_args`); returns how many were used."""
+        if not beams or self.n_landmarks == 0:
             return 0
-        innovation, h_pose, c0_index, h_c0, variance = rows
         mean = self.mean
         before = mean[:3].copy()
-        accepted, _ = ekf.update_sparse_inplace(
-            mean,
-            self.cov,
-            innovation,
-            h_pose,
-            c0_index,
-            h_c0,
-            variance,
-            self.config.gate_prob,
-            self._workspace(),
-        )
+        chosen = np.array(beams, dtype=np.int64)
+        args = (mean, self.cov, self.beam_angles, ranges, chosen)
+        used = kernels.update_scan(*args, *self._map_args())
+        if used < 0:  # no usable row: nothing ran
+            return 0
         self._state_version += 1
-        used = int(accepted.sum())
         if used:  # else the pose did not move
             self._carry_stored_points(before, mean[:3])
         return used
 
-    def _beam_rows(
-        self, beams: list[int], ranges: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-        """The measurement rows of ``beams`` against the current map at the current mean:
-        (innovation (k,), h_pose (k, 3), c0 state index (k,), h_c0 (k,), R diagonal (k,)), or
-        None when no beam has a usable hit.
+    def _map_args(self) -> tuple[Any, ...]:  # the kernels type their arguments
+        """The map and model arguments of the scan kernels (``kernels.screen_scan``,
+        ``kernels.update_scan``): the landmarks within range at the current mean, the table's
+        arrays, the model constants and the χ² gate.
 
-        Each beam's hit (:func:`~polyslam_env.slam.measurement.cast`, on the landmarks within
-        range) gives one row of H: the pose part and 1/D on the c0 hit (SPEC §3,
-        :meth:`~polyslam_env.slam.measurement.BeamHit.jacobian`). Near-tangent hits are
-        skipped. R adds to the range noise the landmark's fit variance beyond the noise, and
-        with ``shape_follows_pose`` the shape's own errors (:meth:`_shape_terms`).
-        """
-        if not beams or self.n_landmarks == 0:
-            return None
-        mean = self.mean
-        x, y, theta = float(mean[0]), float(mean[1]), float(mean[2])
-        rows = self.table.rows()
-        boxes = self._boxes()  # (n, 4)
-        reach = boxes_near(boxes, np.array([x, x, y, y]), self.max_range + REACH_MARGIN)
-        hits = measurement.cast(
-            x,
-            y,
-            theta,
-            [self._angles[b] for b in beams],
-            reach.tolist(),
-            rows,
-            mean[3:].tolist(),
-            self.max_range,
-            boxes[reach].tolist(),
-        )
-        range_var = self.config.range_sigma**2
-        innovation, h_pose, c0_index, h_c0, variance = [], [], [], [], []
-        for b, hit in zip(beams, hits, strict=True):
-            if hit is None or hit.incidence_sine < self._min_sine:
-                continue  # no hit, or near-tangent: too sensitive to linearise
-            (h_x, h_y, h_theta), inv_d = hit.jacobian()
-            row = rows[hit.landmark]
-            var = range_var + row.model_var * (inv_d * inv_d)
-            if self.config.shape_follows_pose:
-                lever, extra = self._shape_terms(row, hit.xi, inv_d)
-                h_theta += (1.0 if hit.variate == 1 else -1.0) * lever * inv_d
-                var += extra
-            innovation.append(float(ranges[b]) - hit.t)
-            h_pose.append((h_x, h_y, h_theta))
-            c0_index.append(3 + hit.landmark)
-            h_c0.append(inv_d)
-            variance.append(var)
-        if not innovation:
-            return None
-        return (
-            np.array(innovation),
-            np.array(h_pose),
-            np.array(c0_index),
-            np.array(h_c0),
-            np.array(variance),
-        )
-
-    def _workspace(self) -> np.ndarray:
-        """Scratch the size of ``cov``, kept between steps (see ekf.update_sparse_inplace)."""
-        if self._work.shape != self.cov.shape:
-            self._work = np.empty_like(self.cov)
-        return self._work
-
-    def _shape_terms(self, row: LandmarkRow, xi: float, inv_d: float) -> tuple[float, float]:
-        """A frozen shape's error in a beam's range: (rotation lever, extra variance).
+        Each beam's hit (:func:`~polyslam_env.slam.kernels.beam_rows`, a whole scan per call,
+        on the landmarks within range) gives one row of H: the pose part and 1/D on the c0
+        hit (SPEC §3, :mod:`~polyslam_env.slam.measurement`). Near-tangent hits are skipped.
+        R adds to the range noise the landmark's fit variance beyond the noise, and with
+        ``shape_follows_pose`` the frozen shape's own errors:
 
         A shape was fitted to points placed with the pose estimate of its time, so that
         pose's error moves the whole shape rigidly. ``c0``'s Jacobian G_x carries the part of
@@ -649,40 +586,40 @@ class PolySlam:
 
         The heading error changes little after a landmark is made (odometry turns it by
         little and a wall hardly corrects absolute heading), so the shape's rotation is taken
-        equal to the robot's current heading error: the caller adds ±lever/D to ∂h/∂θ
+        equal to the robot's current heading error: ±lever/D is added to ∂h/∂θ
         (∂h/∂η = ∂h/∂c0 = 1/D). Without it a frozen slope makes the absolute heading look
         observable: P_θθ shrinks while the error stays. The position error, in contrast, is
         corrected by the update, so the translation term is treated as noise: its variance
         ((B'(ξ*) − B'(ξ_c))/D)²·σ²_ξ, with σ²_ξ the pose variance along ξ when the landmark was
-        made, goes into R together with the shape's own fit error (:meth:`_shape_fit_var`).
+        made, goes into R together with the shape's own fit error: the shape was fitted to
+        noisy points, so its estimation error is a bias every later beam on it shares. For N
+        points equally spaced over the fitted extent, the fit's η at t = (ξ* − ξ_c)/half-extent
+        has variance σ² a(t)ᵀM⁻¹a(t) (a = [1, t, …, t^m]); the constant part σ²/N is c0's and
+        already in the state, the rest goes into R. It is small inside the fitted extent
+        (~σ²·m/N) and grows fast where the curve is extrapolated. N = ε_Z + 1, the size of the
+        cluster a landmark is born from.
         """
-        value, slope = value_and_slope(row.shape, xi)
-        value_c, slope_c = value_and_slope(row.shape, row.pivot)
-        shift = (slope - slope_c) * inv_d
-        extra = shift * shift * row.xi_var
-        extra += inv_d * inv_d * self._shape_fit_var(row.shape, (xi - row.pivot) / row.fit_half)
-        lever = (xi - row.pivot) + slope * (value - value_c)
-        return lever, extra
-
-    def _shape_fit_var(self, shape: tuple[float, ...], t: float) -> float:
-        """Variance of a frozen shape's η at scaled position t = (ξ* − ξ_c)/half-extent.
-
-        The shape was fitted to noisy points and is not in the state, so its own estimation
-        error is a bias every later beam on it shares. For N points equally spaced over the
-        fitted extent, the fit's η at t has variance σ² a(t)ᵀM⁻¹a(t) (a = [1, t, …, t^m]);
-        the constant part σ²/N is c0's and already in the state, the rest goes into R. It is
-        small inside the fitted extent (~σ²·m/N) and grows fast where the curve is
-        extrapolated. N = ε_Z + 1, the size of the cluster a landmark is born from.
-        """
-        order = len(shape) - 1 if shape[-1] != 0.0 else 0  # shapes carry no zero tail
-        if order == 0:
-            return 0.0
-        n_fit = self.config.eps_z + 1
-        a = [t**i for i in range(order + 1)]
-        quad = 0.0
-        for a_i, row in zip(a, _uniform_fit_inverse(n_fit, order), strict=True):
-            quad += a_i * sum(m_ij * a_j for m_ij, a_j in zip(row, a, strict=True))
-        return float(self.config.range_sigma**2 * max(quad - 1.0 / n_fit, 0.0))
+        table, n_fit = self.table, self._n_fit
+        return (
+            self.max_range + REACH_MARGIN,
+            table.variate,
+            table.order,
+            table.shape,
+            table.lo,
+            table.hi,
+            self._boxes(),
+            self.max_range,
+            self._min_sine,
+            self._range_var,
+            table.model_var,
+            self.config.shape_follows_pose,
+            table.pivot,
+            table.xi_var,
+            table.fit_half,
+            _fit_inverse_table(n_fit, table.shape.shape[1] - 1),
+            n_fit,
+            self._gate,
+        )
 
     def _carry_stored_points(self, before: np.ndarray, after: np.ndarray) -> None:
         """Move cluster and Q_bad points rigidly with a pose correction.
@@ -697,17 +634,30 @@ class PolySlam:
         flat = [p for group in groups for p in group]
         if not flat:
             return
-        moved = iter(_carry(flat, before, after))
-        book.clusters = [[next(moved) for _ in c] for c in book.clusters]
-        table.qbad = {lid: [next(moved) for _ in pts] for lid, pts in table.qbad.items()}
+        moved = _carry(flat, before, after)
+        start = 0
+        clusters = []
+        for group in book.clusters:
+            clusters.append(moved[start : start + len(group)])
+            start += len(group)
+        book.clusters = clusters
+        qbad = {}
+        for lid, pts in table.qbad.items():  # most landmarks have none
+            qbad[lid] = moved[start : start + len(pts)] if pts else []
+            start += len(pts)
+        table.qbad = qbad
 
 
 @functools.lru_cache(maxsize=16)
-def _uniform_fit_inverse(n_points: int, order: int) -> list[list[float]]:
-    """(AᵀA)⁻¹ (m+1, m+1) for monomials of t at n points equally spaced over [−1, 1]."""
-    a = np.linspace(-1.0, 1.0, n_points)[:, None] ** np.arange(order + 1)
-    inverse: list[list[float]] = np.linalg.inv(a.T @ a).tolist()
-    return inverse
+def _fit_inverse_table(n_points: int, max_order: int) -> np.ndarray:
+    """(M+1, M+1, M+1): [m, :m+1, :m+1] is (AᵀA)⁻¹ for monomials of t up to order m at
+    ``n_points`` points equally spaced over [−1, 1] (m = 1 … M; the rest zero)."""
+    table = np.zeros((max_order + 1,) * 3)
+    for order in range(1, max_order + 1):
+        if n_points > order:  # else no fit of that order exists
+            a = np.linspace(-1.0, 1.0, n_points)[:, None] ** np.arange(order + 1)
+            table[order, : order + 1, : order + 1] = np.linalg.inv(a.T @ a)
+    return table
 
 
 def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> list[StoredPoint]:

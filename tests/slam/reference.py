@@ -5,9 +5,10 @@ exist only so tests can check the fast ones against them:
 
 * the vectorised measurement model (:func:`ray_intersections`,
   :func:`expected_ranges_and_jacobian`) — beams × polynomials in numpy, checked against brute
-  force and finite differences in ``test_reference.py``; production casts beams one by one in
-  floats (:func:`polyslam_env.slam.measurement.cast`), checked against it in
-  ``test_measurement.py``;
+  force and finite differences in ``test_reference.py``; production casts a scan per call,
+  compiled (:func:`polyslam_env.slam.measurement.cast`), checked against it in
+  ``test_measurement.py`` (and bit for bit against the per-beam float version it replaced,
+  ``reference_floats.py``, in ``test_kernels.py``);
 * the dense EKF update (:func:`update`, any H and R) — production's
   :func:`polyslam_env.slam.ekf.update_sparse_inplace` is checked against it;
 * the textbook prediction (:func:`predict_dense`, F P Fᵀ + L W Lᵀ with the Jacobians of

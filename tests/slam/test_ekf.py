@@ -21,7 +21,7 @@ from polyslam_env.slam.ekf import (
     wrap_angle,
 )
 from polyslam_env.slam.landmarks import LandmarkTable
-from polyslam_env.slam.measurement import BeamHit, cast
+from polyslam_env.slam.measurement import BeamHit, cast, range_rows
 from polyslam_env.slam.polynomial import Polynomial
 from tests.slam.reference import motion_jacobians, predict_dense, update
 
@@ -144,7 +144,6 @@ def test_update_sparse_inplace__stays_exactly_symmetric_over_many_updates() -> N
     rng = np.random.default_rng(7)
     n_state = 40
     mean, cov = np.zeros(n_state), random_spd(rng, n_state, 0.01)
-    work = np.empty_like(cov)
     for _ in range(200):
         k = int(rng.integers(1, 6))
         update_sparse_inplace(
@@ -156,7 +155,6 @@ def test_update_sparse_inplace__stays_exactly_symmetric_over_many_updates() -> N
             rng.normal(size=k),
             np.full(k, 4e-4),
             1.0,
-            work,
         )
         cov[:3, :3] += 1e-4 * np.eye(3)  # some process noise so P does not collapse
     assert_symmetric_psd(cov)
@@ -331,15 +329,22 @@ def run_filter(
         mean, cov = predict(mean, cov, u_meas, W_filter)
         truth = [h.t if h else np.inf for h in _cast(true_pose, true_c0)]
         z = np.array(truth) + rng.normal(0.0, SIGMA_RANGE, BEAMS.size) + range_bias
-        rows = [  # the SLAM's rows: a hit, not near-tangent, with a return
-            (float(z[b]) - hit.t, *hit.jacobian(), 3 + hit.landmark)
-            for b, hit in enumerate(_cast(mean[:3], mean[3:]))
-            if hit is not None and hit.incidence_sine >= SIN_10 and np.isfinite(z[b])
-        ]
-        if rows:
-            innovation, h_pose, h_c0, c0_index = (np.array(c) for c in zip(*rows, strict=True))
-            r = np.full(len(rows), SIGMA_RANGE**2)
-            _, nis = update_sparse_inplace(mean, cov, innovation, h_pose, c0_index, h_c0, r)
+        returns = np.flatnonzero(np.isfinite(z))
+        x, y, theta = mean[:3].tolist()
+        rows = range_rows(  # the SLAM's rows: a hit, not near-tangent, with a return
+            x,
+            y,
+            theta,
+            BEAMS[returns],
+            z[returns],
+            WALL_ROWS.arrays(),
+            mean[3:],
+            2.0,
+            SIN_10,
+            SIGMA_RANGE**2,
+        )
+        if rows.innovation.size:
+            _, nis = update_sparse_inplace(mean, cov, *rows)
             all_nis.extend(nis.tolist())
         out[k] = nees(true_pose - mean[:3], cov[:3, :3])
     return out, cov[:3, :3], mean, all_nis

@@ -1,4 +1,4 @@
-"""Polynomial evaluation: the float, row-wise and Taylor forms against numpy's polyval."""
+"""Polynomial evaluation: the compiled point, row-wise and Taylor forms against numpy's polyval."""
 
 from __future__ import annotations
 
@@ -8,8 +8,24 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.polynomial import Polynomial as NpPoly
 
-from polyslam_env.slam.polynomial import polyval, polyval_rows, taylor_shift, value_and_slope
+from polyslam_env.slam import kernels
+from polyslam_env.slam.polynomial import polyval, polyval_rows
+from tests.slam import reference_floats
 from tests.slam.reference import taylor_at
+
+
+def value_and_slope(coeffs: list[float], x: float, c0: float | None = None) -> tuple[float, float]:
+    """:func:`kernels.horner` on a list."""
+    c = np.array(coeffs, dtype=float)
+    return kernels.horner(c, len(coeffs) - 1, x, c[0] if c0 is None else c0)
+
+
+def taylor_shift(coeffs: list[float], x0: float) -> list[float]:
+    """:func:`kernels.taylor_shift` on a list."""
+    out = np.empty(len(coeffs))
+    kernels.taylor_shift(np.array(coeffs, dtype=float), len(coeffs) - 1, x0, out)
+    return out.tolist()
+
 
 coefficients = st.lists(st.floats(-5.0, 5.0), min_size=2, max_size=6)
 
@@ -24,6 +40,8 @@ def test_value_and_slope__matches_polyval(coeffs: list[float], x: float, c0: flo
     assert slope == pytest.approx(float(polyval(x, np.array(coeffs), derivative=1)), abs=1e-9)
     shifted = [c0, *coeffs[1:]]
     assert value_and_slope(coeffs, x, c0) == value_and_slope(shifted, x)
+    # the float version the SLAM ran before compiling: the very same floats
+    assert value_and_slope(coeffs, x, c0) == reference_floats.value_and_slope(coeffs, x, c0)
 
 
 def test_polyval_rows__bit_identical_to_polyval_per_row() -> None:
@@ -48,3 +66,4 @@ def test_taylor_shift__expands_about_x0(coeffs: list[float], x0: float, u: float
     padded[0, : len(coeffs)] = coeffs
     oracle = taylor_at(padded, np.array([x0]))[0]
     np.testing.assert_array_equal(taylor_shift(padded[0].tolist(), x0), oracle)
+    assert taylor == reference_floats.taylor_shift(coeffs, x0)

@@ -1,0 +1,870 @@
+"""Compiled kernels of the SLAM step: measurement model, association error, EKF prediction and
+update, landmark boxes (STYLE habit 20).
+
+Plain loops over flat arrays, compiled by :func:`polyslam_env.core.jit.njit` (no fastmath): each
+kernel does the operations of the readable version it replaced in the same order, so results are
+bit-identical to it, except where that version called BLAS or LAPACK: :func:`update_sparse` and
+:func:`normalised_innovations` (plain sums instead of BLAS's products) and :func:`_companion`
+(orders 4–5 only), equal to rounding. The readable versions are the test oracles in
+``tests/slam/reference_floats.py``; the typed wrappers that own validation live in the modules
+that use them (``measurement``, ``association``, ``ekf``, ``landmarks``, ``robot``). Kernels
+write into caller buffers rather than return arrays where they run every step: numba boxes each
+returned array into a new Python object.
+
+Landmarks are passed as the :class:`~polyslam_env.slam.landmarks.LandmarkTable`'s hot-path
+arrays: ``variate`` (n,), ``order`` (n,) (each shape's own order, no zero tail), ``shape``
+(n, M+1) rows [0, b_1, …, b_M], ``lo``/``hi`` (n,), and the c0s (n,) from the state.
+
+Python's scalar semantics are kept where they differ from C's: ``max(a, b)`` / ``min(a, b)``
+keep the first argument unless the second is strictly larger / smaller (:func:`_max`,
+:func:`_min`, which matters for nan), ``x ** i`` is libm's ``pow`` and ``math.hypot`` is
+CPython's correctly rounded algorithm (:func:`hypot`), not libm's.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from polyslam_env.core.jit import njit
+
+#: Leading coefficients below this fraction of the largest coefficient (with t scaled to
+#: [0, 1] by r_max) are treated as zero: the degree drops (e.g. a beam parallel to ξ).
+DEGREE_DROP_TOL = 1e-8
+#: Rows whose leading coefficient is below this fraction of the largest are solved one
+#: degree lower and Newton-refined (see :func:`_real_roots`). Closed-form cubic errors grow
+#: like eps/ratio²: ~1e-7 at 1e-4, still within reach of POLISH_MAX.
+STIFF_TOL = 2e-4
+#: A root (in units of r_max) is taken as real when |Im| ≤ this · max(1, |Re|). A double
+#: (tangent) root splits into a complex pair of size ~√eps ≈ 1e-8 in floating point.
+IMAG_TOL = 1e-6
+#: The closed forms take a discriminant down to −REAL_TOL × (its terms' size) as zero, which
+#: accepts complex pairs with |Im| ≲ 1e-6 like IMAG_TOL does.
+REAL_TOL = 1e-12
+#: Largest Newton correction (units of r_max) applied to a winning root.
+POLISH_MAX = 1e-6
+#: Slack (m) around a landmark's box when deciding whether a beam can reach it: far above the
+#: error of any accepted root (the closed forms plus Newton are accurate to ~1e-9 m).
+BOX_MARGIN = 1e-3
+#: Largest shape order the kernels take (the SLAM's is at most 5: SlamConfig.order).
+MAX_ORDER = 15
+
+_TINY = 2.2250738585072014e-308  # smallest normal float: np.finfo(float).tiny
+_BINOM = np.array(
+    [[float(math.comb(i, k)) for k in range(MAX_ORDER + 1)] for i in range(MAX_ORDER + 1)]
+)  # (M+1, M+1): C(i, k)
+
+
+# -- Python's scalar semantics --------------------------------------------------------------------
+@njit
+def _max(a: float, b: float) -> float:
+    """Python's ``max(a, b)``: ``a`` unless ``b > a``."""
+    return b if b > a else a
+
+
+@njit
+def _min(a: float, b: float) -> float:
+    """Python's ``min(a, b)``: ``a`` unless ``b < a``."""
+    return b if b < a else a
+
+
+@njit
+def _maximum(a: float, b: float) -> float:
+    """numpy's ``np.maximum(a, b)``: nan if either is nan."""
+    if a != a or b != b:
+        return math.nan
+    return a if a >= b else b
+
+
+@njit
+def _two_product(x: float, y: float) -> tuple[float, float]:
+    """x·y as hi + lo, exactly (Dekker's product with Veltkamp's split)."""
+    t = x * 134217729.0  # 2**27 + 1
+    x_hi = t - (t - x)
+    x_lo = x - x_hi
+    t = y * 134217729.0
+    y_hi = t - (t - y)
+    y_lo = y - y_hi
+    p = x_hi * y_hi
+    q = x_hi * y_lo + x_lo * y_hi
+    z = p + q
+    zz = p - z + q + x_lo * y_lo
+    return z, zz
+
+
+@njit
+def hypot(x: float, y: float) -> float:
+    """CPython's ``math.hypot(x, y)`` (its ``vector_norm``: scaled, compensated, with a
+    differential correction of the root), bit for bit; libm's hypot rounds differently."""
+    a, b = abs(x), abs(y)
+    if math.isinf(a) or math.isinf(b):
+        return math.inf
+    if math.isnan(a) or math.isnan(b):
+        return math.nan
+    big = b if b > a else a
+    if big == 0.0:
+        return big
+    unscale = 1.0
+    _, exponent = math.frexp(big)
+    if exponent < -1023:  # subnormal: to normals first
+        a, b, big = a / _TINY, b / _TINY, big / _TINY
+        unscale = _TINY
+        _, exponent = math.frexp(big)
+    scale = math.ldexp(1.0, -exponent)
+    csum, frac1, frac2 = 1.0, 0.0, 0.0
+    for v in (a, b):
+        v *= scale
+        hi, lo = _two_product(v, v)
+        total = csum + hi
+        frac2 += (csum - total) + hi
+        csum = total
+        frac1 += lo
+    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
+    hi, lo = _two_product(-h, h)
+    total = csum + hi
+    frac2 += (csum - total) + hi
+    csum = total
+    frac1 += lo
+    v = csum - 1.0 + (frac1 + frac2)
+    h += v / (2.0 * h)
+    return unscale * (h / scale)
+
+
+# -- polynomials ----------------------------------------------------------------------------------
+@njit
+def horner(c: np.ndarray, m: int, x: float, c0: float) -> tuple[float, float]:
+    """(p(x), p'(x)) of c[0..m] (m ≥ 1) with ``c0`` in place of c[0], by Horner's scheme."""
+    value = c[m]
+    slope = 0.0
+    for i in range(m - 1, 0, -1):
+        slope = slope * x + value
+        value = value * x + c[i]
+    slope = slope * x + value
+    value = value * x + c0
+    return value, slope
+
+
+@njit
+def taylor_shift(c: np.ndarray, m: int, x0: float, out: np.ndarray) -> None:
+    """out[k] = Σ_{i≥k} C(i, k) c_i x0^(i−k), k ≤ m: p(x0 + u) = Σ_k out[k] u^k."""
+    powers = np.empty(m + 1)
+    powers[0] = 1.0
+    for i in range(1, m + 1):
+        powers[i] = powers[i - 1] * x0
+    for k in range(m + 1):
+        total = 0.0
+        for i in range(k, m + 1):
+            total += c[i] * (powers[i - k] * _BINOM[i, k])
+        out[k] = total
+
+
+# -- real roots of a ray polynomial (units of r_max) ----------------------------------------------
+@njit
+def _newton(c: np.ndarray, m: int, s: float, steps: int, max_step: float) -> float:
+    """Guarded Newton steps on a root ``s`` of Σ_k c[k] s^k, k ≤ m (nan stays nan)."""
+    for _ in range(steps):
+        value, deriv = horner(c, m, s, c[0])
+        step = value / deriv if deriv != 0.0 else 0.0
+        if abs(step) <= max_step:
+            s = s - step
+    return s
+
+
+@njit
+def _quadratic(c: float, b: float, a: float, roots: np.ndarray) -> None:
+    """Real roots of c + b s + a s², cancellation-free; nan if none. A slightly negative
+    discriminant (relative to its terms) counts as a double root: a ray grazing a curve must
+    be found and flagged as tangent, not missed."""
+    disc = b * b - 4.0 * a * c
+    if not disc >= -REAL_TOL * (b * b + abs(4.0 * a * c)):
+        roots[0] = roots[1] = math.nan
+        return
+    q = -0.5 * (b + math.copysign(math.sqrt(_max(disc, 0.0)), b))
+    roots[0] = q / a
+    roots[1] = c / (q if q != 0.0 else 1.0)
+
+
+@njit
+def _cubic(k0: float, k1: float, k2: float, lead: float, roots: np.ndarray) -> None:
+    """Real roots of k0 + k1 s + k2 s² + lead s³, nan-padded: one from Viète's
+    trigonometric form (three real roots) or Cardano without cancellation (one), the other
+    two from the deflated quadratic; :func:`_newton` refines the winner afterwards."""
+    a, b, k = k2 / lead, k1 / lead, k0 / lead
+    a3 = a / 3.0
+    p3 = b / 3.0 - a3 * a3
+    h = a3 * a3 * a3 - 0.5 * a3 * b + 0.5 * k
+    h2, p3_cubed = h * h, p3 * p3 * p3
+    disc = h2 + p3_cubed
+    if disc <= REAL_TOL * (h2 + abs(p3_cubed)):  # three real roots: Viète
+        neg_p3 = _max(-p3, 0.0)
+        root_neg_p3 = math.sqrt(neg_p3)
+        denom = _max(neg_p3 * root_neg_p3, abs(h))
+        cos_arg = -h / (denom if denom > 0.0 else 1.0)
+        y1 = 2.0 * root_neg_p3 * math.cos(math.acos(cos_arg) / 3.0)
+        half_root = 0.5 * math.sqrt(_max(-3.0 * y1 * y1 - 12.0 * p3, 0.0))
+        roots[0] = y1 - a3
+        roots[1] = -0.5 * y1 + half_root - a3
+        roots[2] = -0.5 * y1 - half_root - a3
+        return
+    u = np.cbrt(-h - math.copysign(math.sqrt(_max(disc, 0.0)), h))
+    y1 = u - p3 / u if u != 0.0 else u
+    roots[0] = y1 - a3
+    roots[1] = roots[2] = math.nan
+
+
+@njit
+def _companion(c: np.ndarray, d: int, roots: np.ndarray) -> None:
+    """Degree > 3 (orders above the paper's cubics): eigenvalues of the companion matrix.
+
+    Complex LAPACK (zgeev): numba's real eigvals refuses complex eigenvalues. Roots differ
+    from numpy's real dgeev by rounding only (~1e-16 relative), and Newton polishes the
+    winner."""
+    companion = np.zeros((d, d), dtype=np.complex128)
+    for i in range(1, d):
+        companion[i, i - 1] = 1.0
+    for i in range(d):
+        companion[i, d - 1] = -c[i] / c[d]
+    eig = np.linalg.eigvals(companion)
+    for i in range(d):
+        re, im = eig[i].real, eig[i].imag
+        roots[i] = re if abs(im) <= IMAG_TOL * np.maximum(1.0, abs(re)) else math.nan
+
+
+@njit
+def _solve(c: np.ndarray, d: int, roots: np.ndarray) -> None:
+    if d == 1:
+        roots[0] = -c[0] / c[1]
+    elif d == 2:
+        _quadratic(c[0], c[1], c[2], roots)
+    elif d == 3:
+        _cubic(c[0], c[1], c[2], c[3], roots)
+    else:
+        _companion(c, d, roots)
+
+
+@njit
+def real_roots(c: np.ndarray, degree: int, roots: np.ndarray) -> int:
+    """Real roots of Σ_{k≤degree} c[k] s^k into ``roots`` (nan-padded); returns their count.
+
+    A row whose leading coefficient is small (< STIFF_TOL of its largest) is solved one
+    degree lower and then Newton-refined on the full polynomial: the closed forms lose the
+    small roots to cancellation there, while the root that goes missing lies at
+    |s| ≳ STIFF_TOL^(−1/3) ≈ 17, outside (0, 1]. Below DEGREE_DROP_TOL the leading term is
+    dropped outright.
+    """
+    ratios = np.empty(degree + 1)
+    d = degree
+    while d > 0:
+        largest = abs(c[0])
+        for i in range(1, d + 1):
+            if abs(c[i]) > largest:
+                largest = abs(c[i])
+        ratios[d] = abs(c[d]) / _max(largest, _TINY)
+        if ratios[d] >= STIFF_TOL:
+            break
+        d -= 1
+    if d == 0:
+        return 0
+    _solve(c, d, roots)
+    for level in range(d + 1, degree + 1):  # innermost first, as the recursion returns
+        if ratios[level] >= DEGREE_DROP_TOL:
+            for i in range(d):
+                roots[i] = _newton(c, level, roots[i], 2, 1e-2)
+    return d
+
+
+# -- casting beams against landmarks --------------------------------------------------------------
+@njit
+def _meets_box(x: float, y: float, dx: float, dy: float, box: np.ndarray) -> bool:
+    """Whether the segment (x, y) → (x + dx, y + dy) passes within BOX_MARGIN of ``box``
+    (x_min, x_max, y_min, y_max) (slab clipping: the segment's parameter interval inside each
+    widened slab)."""
+    t0, t1 = 0.0, 1.0
+    for axis in range(2):
+        start, delta = (x, dx) if axis == 0 else (y, dy)
+        low, high = box[2 * axis] - BOX_MARGIN, box[2 * axis + 1] + BOX_MARGIN
+        if delta == 0.0:
+            if start < low or start > high:
+                return False
+            continue
+        a, b = (low - start) / delta, (high - start) / delta
+        if a > b:
+            a, b = b, a
+        t0, t1 = _max(t0, a), _min(t1, b)
+        if t0 > t1:
+            return False
+    return True
+
+
+@njit
+def cast_scan(
+    x: float,
+    y: float,
+    theta: float,
+    angles: np.ndarray,  # (B,) beam angles in the robot frame
+    candidates: np.ndarray,  # (K,) ascending landmark indices
+    variate: np.ndarray,  # (n,)
+    order: np.ndarray,  # (n,)
+    shape: np.ndarray,  # (n, M+1)
+    lo: np.ndarray,  # (n,)
+    hi: np.ndarray,  # (n,)
+    c0s: np.ndarray,  # (n,)
+    boxes: np.ndarray,  # (n, 4) holding each curve (inf boxes: no pruning)
+    max_range: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`cast_into` into new arrays (t, landmark, slope, D, ξ*), each (B,)."""
+    n_beams = angles.size
+    t_out = np.empty(n_beams)
+    landmark = np.empty(n_beams, dtype=np.int64)
+    slope_out, denom_out, xi_out = np.empty(n_beams), np.empty(n_beams), np.empty(n_beams)
+    cast_into(
+        x, y, theta, angles, candidates, variate, order, shape, lo, hi, c0s, boxes, max_range,
+        t_out, landmark, slope_out, denom_out, xi_out,
+    )  # fmt: skip
+    return t_out, landmark, slope_out, denom_out, xi_out
+
+
+@njit
+def cast_into(
+    x: float,
+    y: float,
+    theta: float,
+    angles: np.ndarray,  # (B,) beam angles in the robot frame
+    candidates: np.ndarray,  # (K,) ascending landmark indices
+    variate: np.ndarray,  # (n,)
+    order: np.ndarray,  # (n,)
+    shape: np.ndarray,  # (n, M+1)
+    lo: np.ndarray,  # (n,)
+    hi: np.ndarray,  # (n,)
+    c0s: np.ndarray,  # (n,)
+    boxes: np.ndarray,  # (n, 4) holding each curve (inf boxes: no pruning)
+    max_range: float,
+    t_out: np.ndarray,  # (B,) out: t* (inf: no hit)
+    landmark: np.ndarray,  # (B,) out: landmark hit (−1: none)
+    slope_out: np.ndarray,  # (B,) out: B'(ξ*) (nan: no hit)
+    denom_out: np.ndarray,  # (B,) out: D = dη − B'·dξ
+    xi_out: np.ndarray,  # (B,) out: ξ*
+) -> None:
+    """Per beam the nearest admissible hit on the candidates, into the ``_out`` arrays.
+
+    Per candidate the Taylor coefficients of B at the robot, F(s) in s = t/r_max, its real
+    roots (:func:`real_roots`); a root counts when 0 < s ≤ 1 and its ξ lies in [lo, hi], the
+    first minimum in (candidate, root) order wins, then one guarded Newton polish. A beam
+    whose segment passes farther than BOX_MARGIN from a candidate's box is not solved
+    against it (it cannot hit it).
+    """
+    n_beams, n_cand = angles.size, candidates.size
+    width = shape.shape[1]
+    taylors = np.empty((n_cand, width))
+    for k in range(n_cand):
+        j = candidates[k]
+        taylor_shift(shape[j], order[j], x if variate[j] == 1 else y, taylors[k])
+    coeffs = np.empty(width)
+    best_coeffs = np.empty(width)
+    roots = np.empty(width)
+    t_out[:] = math.inf
+    landmark[:] = -1
+    slope_out[:] = math.nan
+    denom_out[:] = math.nan
+    xi_out[:] = math.nan
+    for b in range(n_beams):
+        phi = theta + angles[b]
+        cos, sin = math.cos(phi), math.sin(phi)
+        best = math.inf
+        best_k = -1
+        for k in range(n_cand):
+            j = candidates[k]
+            if not _meets_box(x, y, cos * max_range, sin * max_range, boxes[j]):
+                continue
+            if variate[j] == 1:
+                xi0, eta0, dxi, deta = x, y, cos, sin
+            else:
+                xi0, eta0, dxi, deta = y, x, sin, cos
+            m = order[j]
+            step = dxi * max_range  # F(s) = (η0 − c0) + s·r·dη − Σ_k T_k (s·r·dξ)^k
+            power = 1.0
+            for i in range(m + 1):
+                coeffs[i] = -taylors[k, i] * power
+                power *= step
+            coeffs[0] += eta0 - c0s[j]
+            coeffs[1] += deta * max_range
+            step = max_range * dxi
+            for r in range(real_roots(coeffs, m, roots)):
+                s = roots[r]
+                if s > 0.0 and s <= 1.0 and s < best:
+                    xi = xi0 + s * step
+                    if lo[j] <= xi and xi <= hi[j]:
+                        best, best_k = s, k
+                        best_coeffs[: m + 1] = coeffs[: m + 1]
+        if best_k < 0:
+            continue
+        j = candidates[best_k]
+        m = order[j]
+        s = _newton(best_coeffs, m, best, 1, POLISH_MAX)
+        xi0, dxi, deta = (x, cos, sin) if variate[j] == 1 else (y, sin, cos)
+        t = s * max_range
+        u = t * dxi
+        slope, power = 0.0, 1.0
+        for i in range(1, m + 1):
+            slope += i * taylors[best_k, i] * power
+            power *= u
+        t_out[b], landmark[b], slope_out[b] = t, j, slope
+        denom_out[b], xi_out[b] = deta - slope * dxi, xi0 + u
+
+
+@njit
+def _shape_fit_var(
+    shape: np.ndarray, m: int, t: float, fit_inverse: np.ndarray, n_fit: int, noise_var: float
+) -> float:
+    """Variance of a frozen shape's η at scaled position t (see PolySlam._beam_rows):
+    σ²·(a(t)ᵀ M⁻¹ a(t) − 1/N), a = [1, t, …, t^m], M⁻¹ = ``fit_inverse[m]``, floored at 0."""
+    order = m if shape[m] != 0.0 else 0
+    if order == 0:
+        return 0.0
+    a = np.empty(order + 1)
+    for i in range(order + 1):
+        a[i] = 1.0 if i == 0 else math.pow(t, float(i))  # Python's t ** i: libm's pow
+    inverse = fit_inverse[order]
+    quad = 0.0
+    for i in range(order + 1):
+        inner = 0.0
+        for j in range(order + 1):
+            inner += inverse[i, j] * a[j]
+        quad += a[i] * inner
+    return noise_var * _max(quad - 1.0 / n_fit, 0.0)
+
+
+@njit
+def beam_rows(
+    x: float,
+    y: float,
+    theta: float,
+    angles: np.ndarray,  # (B,) every beam's angle
+    ranges: np.ndarray,  # (B,) every beam's reading
+    beams: np.ndarray,  # (k,) int64: the beams wanted, in this order
+    reach: float,  # landmarks whose box lies farther from the robot cannot be hit
+    variate: np.ndarray,  # (n,)
+    order: np.ndarray,  # (n,)
+    shape: np.ndarray,  # (n, M+1)
+    lo: np.ndarray,  # (n,)
+    hi: np.ndarray,  # (n,)
+    c0s: np.ndarray,  # (n,)
+    boxes: np.ndarray,  # (n, 4)
+    max_range: float,
+    min_sine: float,  # sin of the smallest incidence angle used
+    range_var: float,  # σ² of the range noise
+    model_var: np.ndarray,  # (n,) fit variance beyond the noise
+    shape_follows_pose: bool,
+    pivot: np.ndarray,  # (n,)
+    xi_var: np.ndarray,  # (n,)
+    fit_half: np.ndarray,  # (n,)
+    fit_inverse: np.ndarray,  # (M+1, M+1, M+1): (AᵀA)⁻¹ of order o in [o, :o+1, :o+1]
+    n_fit: int,
+    innovation: np.ndarray,  # (≥ k,) out
+    h_pose: np.ndarray,  # (≥ k, 3) out
+    c0_index: np.ndarray,  # (≥ k,) int64 out
+    h_c0: np.ndarray,  # (≥ k,) out
+    variance: np.ndarray,  # (≥ k,) out
+) -> int:
+    """The EKF rows of the ``beams`` with a usable hit (:func:`cast_into` on the landmarks
+    within ``reach``; near-tangent hits, below ``min_sine``, are skipped), written to the first
+    rows of the outputs in beam order: innovation, h_pose, c0 state index, h_c0 = 1/D and the
+    R diagonal. Returns how many. See ``PolySlam._beam_rows`` for the model (the Jacobian of
+    SPEC §3 and the frozen shape's terms). Outputs are written, not returned: numba boxes
+    every array it returns into a new Python object (~0.6 µs each)."""
+    candidates = boxes_near(boxes, np.array([x, x, y, y]), reach)
+    n_beams = beams.size
+    angle = np.empty(n_beams)
+    for b in range(n_beams):
+        angle[b] = angles[beams[b]]
+    t, landmark = np.empty(n_beams), np.empty(n_beams, dtype=np.int64)
+    slope, denom, xi = np.empty(n_beams), np.empty(n_beams), np.empty(n_beams)
+    cast_into(
+        x, y, theta, angle, candidates, variate, order, shape, lo, hi, c0s, boxes, max_range,
+        t, landmark, slope, denom, xi,
+    )  # fmt: skip
+    k = 0
+    for b in range(n_beams):
+        j = landmark[b]
+        if j < 0:
+            continue
+        b_slope, d = slope[b], denom[b]
+        if abs(d) / math.sqrt(1.0 + b_slope * b_slope) < min_sine:
+            continue  # near-tangent: too sensitive to linearise
+        inv_d = 1.0 / d
+        slope_d = b_slope * inv_d
+        phi = theta + angle[b]
+        cos, sin = math.cos(phi), math.sin(phi)
+        v1 = variate[j] == 1
+        d_eta, d_xi = (cos, -sin) if v1 else (-sin, cos)  # d(dη)/dφ, d(dξ)/dφ
+        h_theta = -t[b] * (d_eta - b_slope * d_xi) * inv_d
+        var = range_var + model_var[j] * (inv_d * inv_d)
+        if shape_follows_pose:
+            m = order[j]
+            value, b_slope_at = horner(shape[j], m, xi[b], shape[j, 0])
+            value_c, slope_c = horner(shape[j], m, pivot[j], shape[j, 0])
+            shift = (b_slope_at - slope_c) * inv_d
+            extra = shift * shift * xi_var[j]
+            scaled = (xi[b] - pivot[j]) / fit_half[j]
+            fit_var = _shape_fit_var(shape[j], m, scaled, fit_inverse, n_fit, range_var)
+            extra += inv_d * inv_d * fit_var
+            lever = (xi[b] - pivot[j]) + b_slope_at * (value - value_c)
+            h_theta += (1.0 if v1 else -1.0) * lever * inv_d
+            var += extra
+        innovation[k] = ranges[beams[b]] - t[b]
+        if v1:
+            h_pose[k, 0], h_pose[k, 1] = slope_d, -inv_d
+        else:
+            h_pose[k, 0], h_pose[k, 1] = -inv_d, slope_d
+        h_pose[k, 2] = h_theta
+        c0_index[k] = 3 + j
+        h_c0[k] = inv_d
+        variance[k] = var
+        k += 1
+    return k
+
+
+# -- association error ----------------------------------------------------------------------------
+@njit
+def nearest_by_error(
+    xy: np.ndarray,  # (P, 2) points
+    candidates: np.ndarray,  # (K,) landmark indices
+    variate: np.ndarray,  # (n,)
+    order: np.ndarray,  # (n,)
+    shape: np.ndarray,  # (n, M+1)
+    lo: np.ndarray,  # (n,)
+    hi: np.ndarray,  # (n,)
+    c0s: np.ndarray,  # (n,)
+    squared: bool,
+    best: np.ndarray,  # (P,) int64 out: the landmark (−1 without candidates)
+    best_err: np.ndarray,  # (P,) out: its ε (inf without candidates)
+) -> None:
+    """Per point the landmark with the smallest approximation error ε over the candidates
+    (first on ties) and that ε: |η − p(ξ)| inside the extent, else the distance to the
+    nearer end point; squared with ``squared``."""
+    n_cand = candidates.size
+    for k in range(n_cand):
+        if candidates[k] < 0 or candidates[k] >= variate.size:
+            raise IndexError("nearest_by_error: a candidate does not index the landmarks")
+    ends = np.empty((n_cand, 2))
+    for k in range(n_cand):
+        j = candidates[k]
+        ends[k, 0] = horner(shape[j], order[j], lo[j], c0s[j])[0]
+        ends[k, 1] = horner(shape[j], order[j], hi[j], c0s[j])[0]
+    n_points = xy.shape[0]
+    best[:] = -1
+    best_err[:] = math.inf
+    for p in range(n_points):
+        for k in range(n_cand):
+            j = candidates[k]
+            xi, eta = (xy[p, 0], xy[p, 1]) if variate[j] == 1 else (xy[p, 1], xy[p, 0])
+            if lo[j] <= xi and xi <= hi[j]:
+                err = abs(eta - horner(shape[j], order[j], xi, c0s[j])[0])
+            else:
+                err = _min(hypot(xi - lo[j], eta - ends[k, 0]), hypot(xi - hi[j], eta - ends[k, 1]))
+            if squared:
+                err = err * err
+            if err < best_err[p]:
+                best[p], best_err[p] = j, err
+
+
+# -- landmark boxes -------------------------------------------------------------------------------
+@njit
+def boxes(
+    c0s: np.ndarray, variate: np.ndarray, lo: np.ndarray, hi: np.ndarray, eta_range: np.ndarray
+) -> np.ndarray:
+    """(n, 4) = (x_min, x_max, y_min, y_max) holding each curve: the extent on ξ and
+    c0 + the bounds of B over it (``eta_range`` (n, 2)) on η."""
+    n = c0s.size
+    out = np.empty((n, 4))
+    for i in range(n):
+        eta_lo, eta_hi = c0s[i] + eta_range[i, 0], c0s[i] + eta_range[i, 1]
+        if variate[i] == 1:
+            out[i, 0], out[i, 1], out[i, 2], out[i, 3] = lo[i], hi[i], eta_lo, eta_hi
+        else:
+            out[i, 0], out[i, 1], out[i, 2], out[i, 3] = eta_lo, eta_hi, lo[i], hi[i]
+    return out
+
+
+@njit
+def boxes_near(boxes: np.ndarray, box: np.ndarray, distance: float) -> np.ndarray:
+    """Indices (ascending) of ``boxes`` (n, 4) within ``distance`` of ``box`` (4,)."""
+    n = boxes.shape[0]
+    out = np.empty(n, dtype=np.int64)
+    count = 0
+    limit = distance * distance
+    for i in range(n):
+        gap_x = _maximum(_maximum(boxes[i, 0] - box[1], box[0] - boxes[i, 1]), 0.0)
+        gap_y = _maximum(_maximum(boxes[i, 2] - box[3], box[2] - boxes[i, 3]), 0.0)
+        if gap_x * gap_x + gap_y * gap_y <= limit:
+            out[count] = i
+            count += 1
+    return out[:count]
+
+
+# -- EKF ------------------------------------------------------------------------------------------
+@njit
+def wrap(angle: float) -> float:
+    """π − (π − angle) mod 2π with Python's float modulo (``geometry.wrap_scalar``)."""
+    return math.pi - (math.pi - angle) % (2.0 * math.pi)
+
+
+@njit
+def predict(
+    mean: np.ndarray,  # (3+n,) written in place
+    cov: np.ndarray,  # (3+n, 3+n) written in place
+    odometry: np.ndarray,  # (3,) (dx, dy, dθ) in the robot frame
+    w: np.ndarray,  # (3, 3) its noise covariance
+    first_x: float,  # position of the pose's first estimate (FEJ), nan: the standard F
+    first_y: float,
+) -> None:
+    """EKF prediction through the unicycle composition (see ``ekf.predict_inplace``): the
+    pose–landmark rows gain a and b times the heading row, the pose block is F P Fᵀ + L W Lᵀ
+    written out from its upper triangle."""
+    x, y, theta = mean[0], mean[1], mean[2]
+    dx, dy, dtheta = odometry[0], odometry[1], odometry[2]
+    c, s = math.cos(theta), math.sin(theta)
+    mean[0] = x + c * dx - s * dy
+    mean[1] = y + s * dx + c * dy
+    mean[2] = wrap(theta + dtheta)
+    if math.isnan(first_x):
+        a, b = -s * dx - c * dy, c * dx - s * dy  # F[0, 2], F[1, 2]
+    else:
+        a, b = -(mean[1] - first_y), mean[0] - first_x
+    for i in range(3, mean.size):
+        heading = cov[2, i]
+        cov[0, i] = cov[0, i] + a * heading
+        cov[1, i] = cov[1, i] + b * heading
+        cov[i, 0] = cov[0, i]
+        cov[i, 1] = cov[1, i]
+    p00, p01, p02 = cov[0, 0], cov[0, 1], cov[0, 2]
+    p11, p12, p22 = cov[1, 1], cov[1, 2], cov[2, 2]
+    # F P Fᵀ, F = I + a·e₀e₂ᵀ + b·e₁e₂ᵀ
+    f02, f12 = p02 + a * p22, p12 + b * p22
+    f00 = p00 + a * p02 + a * f02
+    f01 = p01 + a * p12 + b * f02
+    f11 = p11 + b * p12 + b * f12
+    # L W Lᵀ, L = rotation by θ on (x, y), 1 on θ
+    r00, r01 = c * w[0, 0] - s * w[1, 0], c * w[0, 1] - s * w[1, 1]  # rows of L W
+    r10, r11 = s * w[0, 0] + c * w[1, 0], s * w[0, 1] + c * w[1, 1]
+    q00, q01 = r00 * c - r01 * s, r00 * s + r01 * c
+    q11 = r10 * s + r11 * c
+    q02, q12 = c * w[0, 2] - s * w[1, 2], s * w[0, 2] + c * w[1, 2]
+    cov[0, 0], cov[0, 1], cov[0, 2] = f00 + q00, f01 + q01, f02 + q02
+    cov[1, 0], cov[1, 1], cov[1, 2] = f01 + q01, f11 + q11, f12 + q12
+    cov[2, 0], cov[2, 1], cov[2, 2] = f02 + q02, f12 + q12, p22 + w[2, 2]
+
+
+@njit
+def normalised_innovations(
+    cov: np.ndarray,  # (3+n, 3+n)
+    innovation: np.ndarray,  # (k,)
+    h_pose: np.ndarray,  # (k, 3)
+    c0_index: np.ndarray,  # (k,)
+    h_c0: np.ndarray,  # (k,)
+    r: np.ndarray,  # (k,)
+    out: np.ndarray,  # (k,) out
+) -> None:
+    """ν_i² / S_ii for rows on the pose and one c0: S_ii = h P_pp hᵀ + 2 h_c h P_pc +
+    h_c² P_cc + r_i."""
+    k = r.size
+    for i in range(k):
+        c, hc = c0_index[i], h_c0[i]
+        quad = 0.0
+        for a in range(3):
+            row = h_pose[i, 0] * cov[0, a] + h_pose[i, 1] * cov[1, a] + h_pose[i, 2] * cov[2, a]
+            quad += row * h_pose[i, a]
+        cross = h_pose[i, 0] * cov[0, c] + h_pose[i, 1] * cov[1, c] + h_pose[i, 2] * cov[2, c]
+        s = quad + (2.0 * hc * cross + hc * hc * cov[c, c] + r[i])
+        out[i] = innovation[i] * innovation[i] / s
+
+
+@njit
+def update_sparse(
+    mean: np.ndarray,  # (3+n,) written in place
+    cov: np.ndarray,  # (3+n, 3+n) symmetric, written in place
+    innovation: np.ndarray,  # (k,)
+    h_pose: np.ndarray,  # (k, 3)
+    c0_index: np.ndarray,  # (k,) state index of each row's c0
+    h_c0: np.ndarray,  # (k,)
+    r: np.ndarray,  # (k,) R diagonal
+    gate: float,  # χ²(1) quantile: rows with ν²/S_ii above it are rejected
+    accepted: np.ndarray,  # (k,) bool out: passed the gate
+    nis: np.ndarray,  # (k,) out: ν²/S_ii
+) -> int:
+    """Gated EKF update with rows on the pose and one c0 each, Joseph form, in place; returns
+    how many rows passed the gate. See ``ekf.update_sparse_inplace`` for the arrangement:
+
+    * P Hᵀ from P's rows 0–2 and c0 (P is symmetric: rows are contiguous, columns are not);
+    * K = P Hᵀ S⁻¹ by a solve with S = H P Hᵀ + R (symmetrised before R is added);
+    * P⁺ = P − (K Wᵀ + W Kᵀ) with W = P Hᵀ − ½ K S, which is the Joseph form for any gain.
+      Each entry is P_ij − Σ_l (K_il W_jl + W_il K_jl), symmetric in (i, j): the upper
+      triangle is computed and mirrored, so P⁺ is exactly symmetric, in one pass over P.
+
+    Not bit-identical to the numpy version it replaced (BLAS's fused products and the
+    Z₊Z₊ᵀ − Z₋Z₋ᵀ split of its syrk): equal to rounding, checked against it in the tests.
+    """
+    n, k = mean.size, r.size
+    pht = np.empty((k, n))  # row i: column i of P Hᵀ
+    for i in range(k):
+        c, h0, h1, h2, hc = c0_index[i], h_pose[i, 0], h_pose[i, 1], h_pose[i, 2], h_c0[i]
+        for a in range(n):
+            pht[i, a] = cov[0, a] * h0 + cov[1, a] * h1 + cov[2, a] * h2 + cov[c, a] * hc
+    accepted[:] = False
+    count = 0
+    for i in range(k):
+        c = c0_index[i]
+        s_ii = h_pose[i, 0] * pht[i, 0] + h_pose[i, 1] * pht[i, 1] + h_pose[i, 2] * pht[i, 2]
+        s_ii += h_c0[i] * pht[i, c]
+        nis[i] = innovation[i] * innovation[i] / (s_ii + r[i])
+        if nis[i] <= gate:
+            accepted[i] = True
+            count += 1
+    if count == 0:
+        return 0
+    rows = np.flatnonzero(accepted)
+    pht = pht[rows]  # (k_a, n)
+    s_mat = np.empty((count, count))  # H P Hᵀ on the accepted rows
+    for i in range(count):
+        hi_, c = rows[i], c0_index[rows[i]]
+        for j in range(count):
+            s_mat[i, j] = (
+                h_pose[hi_, 0] * pht[j, 0]
+                + h_pose[hi_, 1] * pht[j, 1]
+                + h_pose[hi_, 2] * pht[j, 2]
+                + h_c0[hi_] * pht[j, c]
+            )
+    s_sym = np.empty((count, count))
+    for i in range(count):
+        for j in range(count):
+            s_sym[i, j] = 0.5 * (s_mat[i, j] + s_mat[j, i])
+        s_sym[i, i] += r[rows[i]]
+    kt = np.ascontiguousarray(np.linalg.solve(s_sym, pht))  # (k_a, n) = (P Hᵀ S⁻¹)ᵀ
+    for a in range(n):
+        step = 0.0
+        for q in range(count):
+            step += kt[q, a] * innovation[rows[q]]
+        mean[a] += step
+    mean[2] = wrap(mean[2])
+    wt = np.empty((count, n))  # (P Hᵀ − ½ K S)ᵀ
+    for q in range(count):
+        for a in range(n):
+            ks = 0.0
+            for m in range(count):
+                ks += s_sym[q, m] * kt[m, a]
+            wt[q, a] = pht[q, a] - 0.5 * ks
+    acc = np.empty(n)  # row i of K Wᵀ + W Kᵀ from the diagonal on
+    for i in range(n):
+        m = n - i  # slices from the diagonal: loops from 0 vectorise
+        part = acc[:m]
+        part[:] = 0.0
+        for q in range(count):
+            k_i, w_i = kt[q, i], wt[q, i]
+            k_row, w_row = kt[q, i:], wt[q, i:]
+            for j in range(m):
+                part[j] += k_i * w_row[j] + w_i * k_row[j]
+        row = cov[i, i:]
+        for j in range(m):
+            row[j] -= part[j]
+    for i in range(n):  # mirror the upper triangle
+        for j in range(i):
+            cov[i, j] = cov[j, i]
+    return count
+
+
+# -- the SLAM step's two scans --------------------------------------------------------------------
+@njit
+def screen_scan(
+    mean: np.ndarray,  # (3+n,) the predicted state
+    cov: np.ndarray,  # (3+n, 3+n)
+    angles: np.ndarray,  # (B,) every beam's angle
+    ranges: np.ndarray,  # (B,) every beam's reading (inf or nan: no return)
+    outlier: np.ndarray,  # (B,) bool out: NIS above the gate, per row
+    reach: float,
+    variate: np.ndarray,
+    order: np.ndarray,
+    shape: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    boxes: np.ndarray,
+    max_range: float,
+    min_sine: float,
+    range_var: float,
+    model_var: np.ndarray,
+    shape_follows_pose: bool,
+    pivot: np.ndarray,
+    xi_var: np.ndarray,
+    fit_half: np.ndarray,
+    fit_inverse: np.ndarray,
+    n_fit: int,
+    gate: float,  # χ²(1) quantile
+) -> int:
+    """Every beam's row (:func:`beam_rows`, a missing return counting as ``max_range``) and
+    whether its NIS (:func:`normalised_innovations`) exceeds ``gate``, into the first rows of
+    ``outlier``; returns how many rows (the divergence screen of ``PolySlam``)."""
+    n_beams = angles.size
+    seen = np.empty(n_beams)
+    for b in range(n_beams):
+        seen[b] = ranges[b] if math.isfinite(ranges[b]) else max_range
+    innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))
+    c0_index, h_c0, variance = np.empty(n_beams, np.int64), np.empty(n_beams), np.empty(n_beams)
+    k = beam_rows(
+        mean[0], mean[1], mean[2], angles, seen, np.arange(n_beams), reach, variate, order,
+        shape, lo, hi, mean[3:], boxes, max_range, min_sine, range_var, model_var,
+        shape_follows_pose, pivot, xi_var, fit_half, fit_inverse, n_fit,
+        innovation, h_pose, c0_index, h_c0, variance,
+    )  # fmt: skip
+    nis = np.empty(k)
+    normalised_innovations(
+        cov, innovation[:k], h_pose[:k], c0_index[:k], h_c0[:k], variance[:k], nis
+    )
+    for i in range(k):
+        outlier[i] = nis[i] > gate
+    return k
+
+
+@njit
+def update_scan(
+    mean: np.ndarray,  # (3+n,) written in place
+    cov: np.ndarray,  # (3+n, 3+n) written in place
+    angles: np.ndarray,  # (B,) every beam's angle
+    ranges: np.ndarray,  # (B,) every beam's reading
+    beams: np.ndarray,  # (k,) int64: the beams to update with, in this order
+    reach: float,
+    variate: np.ndarray,
+    order: np.ndarray,
+    shape: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    boxes: np.ndarray,
+    max_range: float,
+    min_sine: float,
+    range_var: float,
+    model_var: np.ndarray,
+    shape_follows_pose: bool,
+    pivot: np.ndarray,
+    xi_var: np.ndarray,
+    fit_half: np.ndarray,
+    fit_inverse: np.ndarray,
+    n_fit: int,
+    gate: float,  # χ²(1) quantile
+) -> int:
+    """The rows of ``beams`` (:func:`beam_rows`) and the gated update with them
+    (:func:`update_sparse`); returns how many rows passed the gate, or −1 when no beam had a
+    usable row (then nothing ran)."""
+    n_beams = beams.size
+    innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))
+    c0_index, h_c0, variance = np.empty(n_beams, np.int64), np.empty(n_beams), np.empty(n_beams)
+    k = beam_rows(
+        mean[0], mean[1], mean[2], angles, ranges, beams, reach, variate, order, shape, lo, hi,
+        mean[3:], boxes, max_range, min_sine, range_var, model_var, shape_follows_pose, pivot,
+        xi_var, fit_half, fit_inverse, n_fit, innovation, h_pose, c0_index, h_c0, variance,
+    )  # fmt: skip
+    if k == 0:
+        return -1
+    accepted, nis = np.empty(k, np.bool_), np.empty(k)
+    return update_sparse(
+        mean, cov, innovation[:k], h_pose[:k], c0_index[:k], h_c0[:k], variance[:k], gate,
+        accepted, nis,
+    )  # fmt: skip

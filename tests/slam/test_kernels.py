@@ -1,0 +1,341 @@
+"""The compiled SLAM kernels against the readable versions they replaced (reference_floats.py).
+
+Bit for bit where the kernel does the same operations in the same order (the measurement model
+up to order 3, the rows of H and R, the association error, the prediction, the boxes, Python's
+hypot); to rounding where it cannot: companion roots of orders 4–5 (complex LAPACK instead of
+real), the NIS and the update (plain loops instead of BLAS's fused, blocked products).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from polyslam_env.apps.benchmark import make_inputs, make_slam, make_walls
+from polyslam_env.slam import ekf, kernels
+from polyslam_env.slam.association import nearest_by_error
+from polyslam_env.slam.landmarks import LandmarkTable, boxes_near
+from polyslam_env.slam.measurement import cast
+from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.robot import _fit_inverse_table
+from tests.slam import reference_floats as ref
+from tests.slam.test_ekf import assert_symmetric_psd, random_spd
+from tests.slam.test_reference import beam_sets, brute_force_range, polynomials, poses
+
+#: Every field of a hit is the very same float: the same operations in the same order, and
+#: numba calls the same libm for cos, sin, acos and cbrt as CPython.
+EXACT = 0.0
+
+
+def _table(polys: list[Polynomial], rng: np.random.Generator | None = None) -> LandmarkTable:
+    """The polynomials in a table; with ``rng``, random frozen-shape scalars."""
+    table = LandmarkTable()
+    for p in polys:
+        if rng is None:
+            table.append(p, pivot=0.5 * (p.lo + p.hi), xi_var=0.0, model_var=0.0, fit_half=1.0)
+        else:
+            table.append(
+                p,
+                pivot=float(rng.uniform(p.lo, p.hi)),
+                xi_var=float(rng.uniform(0.0, 1e-3)),
+                model_var=float(rng.uniform(0.0, 1e-3)),
+                fit_half=float(rng.uniform(0.1, 2.0)),
+            )
+    return table
+
+
+def _cast_both(
+    polys: list[Polynomial], pose: np.ndarray, beams: np.ndarray, max_range: float, boxed: bool
+) -> tuple[list[tuple[float, ...] | None], list[tuple[float, ...] | None]]:
+    table = _table(polys)
+    c0s = np.array([p.c0 for p in polys])
+    x, y, theta = pose.tolist()
+    every = list(range(len(polys)))
+    boxes = table.boxes(c0s) if boxed else None
+    got = cast(x, y, theta, beams, every, table.arrays(), c0s, max_range, boxes)
+    box_list = None if boxes is None else boxes.tolist()
+    want = ref.cast(
+        x, y, theta, beams.tolist(), every, table.rows(), c0s.tolist(), max_range, box_list
+    )
+    return [None if h is None else tuple(h) for h in got], [
+        None if h is None else tuple(h) for h in want
+    ]
+
+
+# -- measurement model ----------------------------------------------------------------------------
+@settings(max_examples=300, deadline=None)
+@given(
+    polys=st.lists(polynomials(), min_size=1, max_size=6),
+    pose=poses,
+    beams=beam_sets,
+    max_range=st.floats(0.5, 3.0),
+    boxed=st.booleans(),
+)
+def test_cast_scan__bit_identical_to_float_oracle(
+    polys: list[Polynomial], pose: np.ndarray, beams: np.ndarray, max_range: float, boxed: bool
+) -> None:
+    got, want = _cast_both(polys, pose, beams, max_range, boxed)
+    assert got == want  # tuples of floats: EXACT equality, including the landmark and variate
+
+
+@settings(max_examples=60, deadline=None)
+@given(polys=st.lists(polynomials(order=5), min_size=1, max_size=3), pose=poses)
+def test_cast_scan__orders_4_5_equal_oracle_to_rounding(
+    polys: list[Polynomial], pose: np.ndarray
+) -> None:
+    beams = np.deg2rad([90.0, 45.0, 0.0, -45.0, -90.0])
+    c0s = np.array([p.c0 for p in polys])
+    for beta in beams:  # a root on a decision edge may go either way with other rounding
+        assume(not brute_force_range(pose, pose[2] + beta, polys, c0s, 2.0)[2])
+    got, want = _cast_both(polys, pose, beams, 2.0, boxed=True)
+    for g, w in zip(got, want, strict=True):
+        assert (g is None) == (w is None)
+        if g is not None and w is not None:
+            assert g[1] == w[1] and g[5] == w[5]  # landmark, variate
+            # 1e-12: eigenvalues from zgeev instead of dgeev differ by ~1e-15 before the
+            # Newton polish; the slope and D are polynomials in t of O(1) coefficients
+            np.testing.assert_allclose(g, w, rtol=0.0, atol=1e-12)
+
+
+def test_cast_scan__edge_cases_equal_oracle() -> None:
+    walls = [
+        Polynomial(1, np.array([0.5, 0.0]), 0.0, 1.0),  # y = 0.5 on x ∈ [0, 1]
+        Polynomial(2, np.array([1.0, 0.0]), -0.5, 0.5),  # x = 1 on y ∈ [−0.5, 0.5]
+        Polynomial(1, np.array([-0.5, 0.0, 1.0]), -0.5, 0.5),  # y = −0.5 + x²: tangent at 0
+    ]
+    cases = [
+        (np.array([-1.0, 0.5, 0.0]), [0.0]),  # along the wall y = 0.5 (on its box edge)
+        (np.array([-1.0, 0.5 + 1e-3, 0.0]), [0.0]),  # along the box's widened edge
+        (np.array([0.0, 0.0, 0.0]), [-math.pi / 2]),  # straight down onto the parabola's apex
+        (np.array([-1.0, -0.5, 0.0]), [0.0]),  # grazing the parabola: a double root at x = 0
+        (np.array([1.0, -1.0, math.pi / 2]), [0.0]),  # along x = 1 (the other wall's edge)
+        (np.array([0.2, 0.1, 0.3]), np.linspace(-math.pi, math.pi, 13)),
+        (np.array([5.0, 5.0, 0.0]), [0.0, 1.0]),  # nothing in range
+    ]
+    for pose, beams in cases:
+        for boxed in (False, True):
+            got, want = _cast_both(walls, pose, np.asarray(beams, dtype=float), 2.0, boxed)
+            assert got == want, (pose, beams)
+    tangent, _ = _cast_both(walls, np.array([-1.0, -0.5, 0.0]), np.array([0.0]), 2.0, True)
+    assert tangent[0] is not None and tangent[0][1] == 2  # the grazing beam is found
+
+
+def test_cast_scan__no_landmarks_and_no_candidates() -> None:
+    empty = LandmarkTable()
+    assert cast(0.0, 0.0, 0.0, [0.0, 1.0], [], empty.arrays(), np.zeros(0), 2.0) == [None, None]
+    wall = _table([Polynomial(1, np.array([0.5, 0.0]), -1.0, 1.0)])
+    assert cast(0.0, 0.0, math.pi / 2, [0.0], [], wall.arrays(), [0.5], 2.0) == [None]
+
+
+def test_cast_scan__300_landmarks_equal_oracle() -> None:
+    rng = np.random.default_rng(11)
+    walls = make_walls(300, rng)
+    for _ in range(20):
+        pose = np.array([rng.uniform(-6, 6), rng.uniform(-6, 6), rng.uniform(-np.pi, np.pi)])
+        beams = rng.uniform(-np.pi, np.pi, 7)
+        got, want = _cast_both(walls, pose, beams, float(rng.uniform(2.0, 8.0)), True)
+        assert got == want
+
+
+# -- the rows of H and R --------------------------------------------------------------------------
+@settings(max_examples=200, deadline=None)
+@given(
+    polys=st.lists(polynomials(), min_size=1, max_size=6),
+    pose=poses,
+    beams=beam_sets,
+    seed=st.integers(0, 2**32 - 1),
+    follows=st.booleans(),
+)
+def test_beam_rows__bit_identical_to_oracle(
+    polys: list[Polynomial], pose: np.ndarray, beams: np.ndarray, seed: int, follows: bool
+) -> None:
+    rng = np.random.default_rng(seed)
+    table = _table(polys, rng)
+    c0s = np.array([p.c0 for p in polys])
+    ranges = rng.uniform(0.1, 2.0, beams.size)
+    boxes = table.boxes(c0s)
+    x, y, theta = pose.tolist()
+    model = ref.RowModel(min_sine=math.sin(math.radians(10.0)), range_sigma=0.02,
+                         shape_follows_pose=follows, eps_z=10)  # fmt: skip
+    reach = float(rng.uniform(1.0, 6.0))
+    every = ref.boxes_near(boxes, np.array([x, x, y, y]), reach)  # the landmarks within reach
+    order = rng.permutation(beams.size)  # any subset of beams, in any order
+    subset = order[: rng.integers(1, beams.size + 1)]
+    want = ref.beam_rows(
+        x, y, theta, beams[subset], ranges[subset], every.tolist(), table.rows(), c0s, 2.5,
+        boxes[every].tolist(), model,
+    )  # fmt: skip
+    width, k = table.shape.shape[1], subset.size
+    got = (np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k), np.empty(k))
+    used = kernels.beam_rows(
+        x, y, theta, beams, ranges, subset, reach, *table.arrays(), c0s, boxes, 2.5,
+        model.min_sine, model.range_sigma**2, table.model_var, follows, table.pivot,
+        table.xi_var, table.fit_half, _fit_inverse_table(model.eps_z + 1, width - 1),
+        model.eps_z + 1, *got,
+    )  # fmt: skip
+    if want is None:
+        assert used == 0
+        return
+    for g, w in zip(got, want, strict=True):
+        np.testing.assert_array_equal(g[:used], w)  # EXACT
+
+
+def test_shape_fit_var__bit_identical_to_oracle_over_many_positions() -> None:
+    # t ** i is libm's pow in CPython; the kernel must not turn it into products
+    rng = np.random.default_rng(5)
+    model = ref.RowModel(0.0, 0.02, True, 10)
+    table = _fit_inverse_table(11, 5)
+    for order in range(1, 6):
+        shape = np.concatenate([[0.0], rng.normal(size=order)])
+        for t in np.concatenate([rng.normal(0.0, 2.0, 300), [0.0, 1.0, -1.0, 1e-9]]).tolist():
+            want = ref.shape_fit_var(tuple(shape.tolist()), t, model)
+            got = kernels._shape_fit_var(shape, order, t, table, 11, model.range_sigma**2)
+            assert got == want
+
+
+# -- association error ----------------------------------------------------------------------------
+@settings(max_examples=200, deadline=None)
+@given(
+    polys=st.lists(polynomials(), min_size=1, max_size=6),
+    seed=st.integers(0, 2**32 - 1),
+    squared=st.booleans(),
+)
+def test_nearest_by_error__bit_identical_to_oracle(
+    polys: list[Polynomial], seed: int, squared: bool
+) -> None:
+    rng = np.random.default_rng(seed)
+    table = _table(polys)
+    c0s = np.array([p.c0 for p in polys])
+    xy = rng.uniform(-4.0, 4.0, (8, 2))
+    candidates = np.flatnonzero(rng.random(len(polys)) < 0.7)
+    want = ref.nearest_by_error(
+        xy.tolist(), candidates.tolist(), table.rows(), c0s.tolist(), squared
+    )
+    best, err = np.empty(8, dtype=np.int64), np.empty(8)
+    kernels.nearest_by_error(xy, candidates, *table.arrays(), c0s, squared, best, err)
+    assert list(zip(best.tolist(), err.tolist(), strict=True)) == want  # EXACT
+
+
+def test_hypot__bit_identical_to_python() -> None:
+    rng = np.random.default_rng(3)
+    values = rng.normal(size=(20000, 2)) * 10.0 ** rng.uniform(-300, 300, (20000, 1))
+    special = [0.0, -0.0, 5e-324, -5e-324, 1e-310, 1e308, math.inf, -math.inf, math.nan, 3.0]
+    values = np.concatenate([values, [[a, b] for a in special for b in special]])
+    for a, b in values.tolist():
+        got, want = kernels.hypot(a, b), math.hypot(a, b)
+        assert got == want or (math.isnan(got) and math.isnan(want)), (a, b)
+
+
+# -- EKF ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("first", [None, (0.3, -0.2)])
+@pytest.mark.parametrize("n_state", [3, 8, 40])
+def test_predict__bit_identical_to_oracle(first: tuple[float, float] | None, n_state: int) -> None:
+    rng = np.random.default_rng(n_state)
+    for _ in range(20):
+        mean, cov = rng.normal(size=n_state), random_spd(rng, n_state, 0.01)
+        mean[2] = rng.uniform(-10.0, 10.0)
+        odometry, w = rng.normal(size=3) * 0.1, random_spd(rng, 3, 1e-4)
+        want_mean, want_cov = mean.copy(), cov.copy()
+        ref.predict_inplace(want_mean, want_cov, odometry, w, first)
+        ekf.predict_inplace(mean, cov, odometry, w, first)
+        np.testing.assert_array_equal(mean, want_mean)
+        np.testing.assert_array_equal(cov, want_cov)
+
+
+Rows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _rows(rng: np.random.Generator, k: int, n_state: int) -> Rows:
+    innovation = 0.05 * rng.normal(size=k)
+    innovation[0] = 5.0  # an outlier the gate drops
+    return (
+        innovation,
+        rng.normal(size=(k, 3)),
+        rng.integers(3, n_state, size=k),  # two rows may share a landmark
+        rng.normal(size=k),
+        rng.uniform(1e-4, 1e-3, size=k),
+    )
+
+
+@pytest.mark.parametrize("n_state", [4, 33, 303])
+def test_normalised_innovations__equal_oracle_to_rounding(n_state: int) -> None:
+    rng = np.random.default_rng(n_state)
+    cov = random_spd(rng, n_state, 0.01)
+    rows = _rows(rng, 5, n_state)
+    # 1e-13 relative: S_ii summed in the same order, BLAS may fuse the 3×3 products
+    np.testing.assert_allclose(
+        ekf.normalised_innovations(cov, *rows), ref.normalised_innovations(cov, *rows), rtol=1e-13
+    )
+
+
+@pytest.mark.parametrize("n_state", [4, 33, 303])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_update_sparse__equals_numpy_oracle_to_rounding(n_state: int, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    mean, cov = rng.normal(size=n_state), random_spd(rng, n_state, 0.01)
+    rows = _rows(rng, 5, n_state)
+    want_mean, want_cov = mean.copy(), cov.copy()
+    want = ref.update_sparse_inplace(want_mean, want_cov, *rows)
+    got = ekf.update_sparse_inplace(mean, cov, *rows)
+    np.testing.assert_array_equal(got[0], want[0])
+    assert not got[0][0] and got[0][1:].any()
+    # 1e-12 relative: the same quantities in another association order (no BLAS, the
+    # direct K Wᵀ + W Kᵀ instead of the polarised Z₊Z₊ᵀ − Z₋Z₋ᵀ), S well-conditioned
+    np.testing.assert_allclose(got[1], want[1], rtol=1e-12)
+    np.testing.assert_allclose(mean, want_mean, rtol=1e-12, atol=1e-14)
+    scale = float(np.abs(want_cov).max())
+    np.testing.assert_allclose(cov, want_cov, rtol=0.0, atol=1e-12 * scale)
+    assert_symmetric_psd(cov)
+
+
+def test_slam_steps__compiled_update_tracks_numpy_update_over_a_short_horizon(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The one kernel that is not bit-identical moves a SLAM run by rounding only: 100
+    steps with 30 landmarks (every beam updates every step) stay within 1e-12 (relative to the
+    state's size) of the same run with the numpy update."""
+    rng = np.random.default_rng(0)
+    walls = make_walls(30, rng)
+    inputs = make_inputs(walls, 100, rng)
+    compiled = make_slam(walls)
+    for odometry, ranges in inputs:
+        compiled.step(odometry, ranges)
+    monkeypatch.setattr(kernels, "update_scan", ref.update_scan)
+    numpy_run = make_slam(walls)
+    for odometry, ranges in inputs:
+        numpy_run.step(odometry, ranges)
+    np.testing.assert_allclose(compiled.mean, numpy_run.mean, rtol=0.0, atol=1e-12)
+    scale = float(np.abs(numpy_run.cov).max())
+    np.testing.assert_allclose(compiled.cov, numpy_run.cov, rtol=0.0, atol=1e-12 * scale)
+
+
+# -- boxes ----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("n", [0, 1, 30, 300])
+def test_boxes__bit_identical_to_oracle(n: int) -> None:
+    rng = np.random.default_rng(n)
+    walls = make_walls(max(n, 3), rng)[:n]
+    table = _table(walls)
+    c0s = rng.normal(size=n)
+    want = ref.boxes(c0s, table.variate, table.lo, table.hi, table.eta_range)
+    got = table.boxes(c0s)
+    np.testing.assert_array_equal(got, want)
+    for _ in range(10):
+        box = (
+            np.sort(rng.uniform(-12.0, 12.0, 2)).tolist()
+            + np.sort(rng.uniform(-12, 12, 2)).tolist()
+        )
+        distance = float(rng.uniform(0.0, 5.0))
+        np.testing.assert_array_equal(
+            boxes_near(got, np.array(box), distance), ref.boxes_near(got, np.array(box), distance)
+        )
+
+
+def test_nearest_by_error__rejects_candidates_outside_the_map() -> None:
+    table = _table([Polynomial(1, np.array([0.5, 0.0]), -1.0, 1.0)])
+    with pytest.raises(IndexError, match="candidate"):
+        nearest_by_error([[0.0, 0.0]], [1], table.arrays(), [0.5])
+    assert nearest_by_error([[0.0, 0.0]], [0], table.arrays(), [0.5]) == [(0, 0.5)]
