@@ -825,6 +825,35 @@ def screen_scan(
 
 
 @njit
+def share_landmark_error(
+    c0_index: np.ndarray,  # (k,) int64: each row's c0 state index
+    variance: np.ndarray,  # (k,) each row's own R diagonal, written in place
+    range_var: float,  # σ² of the range noise, the part no two beams share
+) -> None:
+    """Make the R diagonal of one update's rows bound their joint errors.
+
+    A row's variance is σ_r² + s_i²; the s_i² part (the landmark's fit residual and frozen
+    shape) is one error seen by every beam on that landmark, so rows on one landmark are
+    correlated: σ_r² I + s sᵀ. For n rows with shared errors s_i·z, Cauchy–Schwarz gives
+    (Σ s_i x_i)² ≤ n Σ s_i² x_i², so the diagonal σ_r² + n s_i² bounds that covariance from
+    above, and the diagonal update stays conservative however many beams hit one landmark.
+    Rows on different landmarks are independent and keep their own n."""
+    k = c0_index.size
+    if k == 0:
+        return
+    top = 0
+    for i in range(k):
+        top = max(top, c0_index[i])
+    count = np.zeros(top + 1, dtype=np.int64)
+    for i in range(k):
+        count[c0_index[i]] += 1
+    for i in range(k):
+        n = count[c0_index[i]]
+        if n > 1:
+            variance[i] = range_var + n * (variance[i] - range_var)
+
+
+@njit
 def update_scan(
     mean: np.ndarray,  # (3+n,) written in place
     cov: np.ndarray,  # (3+n, 3+n) written in place
@@ -850,8 +879,9 @@ def update_scan(
     n_fit: int,
     gate: float,  # χ²(1) quantile
 ) -> int:
-    """The rows of ``beams`` (:func:`beam_rows`) and the gated update with them
-    (:func:`update_sparse`); returns how many rows passed the gate, or −1 when no beam had a
+    """The rows of ``beams`` (:func:`beam_rows`), their R made a joint bound
+    (:func:`share_landmark_error`), and the gated update with them (:func:`update_sparse`);
+    returns how many rows passed the gate, or −1 when no beam had a
     usable row (then nothing ran)."""
     n_beams = beams.size
     innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))
@@ -863,6 +893,7 @@ def update_scan(
     )  # fmt: skip
     if k == 0:
         return -1
+    share_landmark_error(c0_index[:k], variance[:k], range_var)
     accepted, nis = np.empty(k, np.bool_), np.empty(k)
     return update_sparse(
         mean, cov, innovation[:k], h_pose[:k], c0_index[:k], h_c0[:k], variance[:k], gate,

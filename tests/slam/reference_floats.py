@@ -570,10 +570,21 @@ def update_scan(
     )  # fmt: skip
     if used == 0:
         return -1
+    innovation, h_pose, c0_index, h_c0, variance = (column[:used] for column in rows)
+    variance = share_landmark_error(c0_index, variance, model[2])
     accepted, _ = update_sparse_inplace(
-        mean, cov, *(column[:used] for column in rows), gate_value=gate
+        mean, cov, innovation, h_pose, c0_index, h_c0, variance, gate_value=gate
     )
     return int(accepted.sum())
+
+
+def share_landmark_error(
+    c0_index: np.ndarray, variance: np.ndarray, range_var: float
+) -> np.ndarray:  # (k,)
+    """The R diagonal that bounds the joint errors of one update's rows: the part of each
+    row's variance beyond the range noise, shared by the n rows on its landmark, times n."""
+    n = np.bincount(c0_index)[c0_index]
+    return np.where(n > 1, range_var + n * (variance - range_var), variance)
 
 
 def normalised_innovations(

@@ -339,3 +339,27 @@ def test_nearest_by_error__rejects_candidates_outside_the_map() -> None:
     with pytest.raises(IndexError, match="candidate"):
         nearest_by_error([[0.0, 0.0]], [1], table.arrays(), [0.5])
     assert nearest_by_error([[0.0, 0.0]], [0], table.arrays(), [0.5]) == [(0, 0.5)]
+
+
+# -- R of one update: the landmark's error the beams on it share ------------------------------
+def test_share_landmark_error__matches_oracle_and_bounds_the_joint_covariance() -> None:
+    """Rows with variance σ_r² + s_i², grouped by landmark: the kernel's diagonal equals the
+    oracle's (σ_r² + n s_i² for n rows on one landmark) and bounds each group's true
+    covariance σ_r² I + s sᵀ (PSD difference, to rounding); a lone row keeps its variance."""
+    rng = np.random.default_rng(11)
+    noise = 0.02**2
+    for _ in range(50):
+        k = int(rng.integers(1, 12))
+        c0_index = rng.integers(3, 8, k).astype(np.int64)
+        shared = rng.uniform(0.0, 5e-4, k)
+        own = noise + shared
+        got = own.copy()
+        kernels.share_landmark_error(c0_index, got, noise)
+        np.testing.assert_allclose(got, ref.share_landmark_error(c0_index, own, noise), rtol=1e-15)
+        for lm in np.unique(c0_index):
+            on = c0_index == lm
+            s = np.sqrt(own[on] - noise)
+            if on.sum() == 1:
+                assert got[on][0] == own[on][0]
+            gap = np.diag(got[on]) - (noise * np.eye(on.sum()) + np.outer(s, s))
+            assert np.linalg.eigvalsh(gap).min() >= -1e-15
