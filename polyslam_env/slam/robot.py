@@ -548,7 +548,7 @@ class PolySlam:
     def _update(self, beams: list[int], ranges: np.ndarray) -> int:
         """Batched, gated update with the associated beams (their rows from
         :meth:`_beam_rows`); returns how many were used."""
-        rows = self._beam_rows(beams, ranges)
+        rows = self._beam_rows(beams, ranges, joint=True)
         if rows is None:
             return 0
         innovation, h_pose, c0_index, h_c0, variance = rows
@@ -572,7 +572,7 @@ class PolySlam:
         return used
 
     def _beam_rows(
-        self, beams: list[int], ranges: np.ndarray
+        self, beams: list[int], ranges: np.ndarray, joint: bool = False
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """The measurement rows of ``beams`` against the current map at the current mean:
         (innovation (k,), h_pose (k, 3), c0 state index (k,), h_c0 (k,), R diagonal (k,)), or
@@ -582,7 +582,9 @@ class PolySlam:
         range) gives one row of H: the pose part and 1/D on the c0 hit (SPEC §3,
         :meth:`~polyslam_env.slam.measurement.BeamHit.jacobian`). Near-tangent hits are
         skipped. R adds to the range noise the landmark's fit variance beyond the noise, and
-        with ``shape_follows_pose`` the shape's own errors (:meth:`_shape_terms`).
+        with ``shape_follows_pose`` the shape's own errors (:meth:`_shape_terms`): each beam's
+        own variance, or with ``joint`` (for one update with all the rows) a bound that holds
+        for them together (below).
         """
         if not beams or self.n_landmarks == 0:
             return None
@@ -603,13 +605,13 @@ class PolySlam:
             boxes[reach].tolist(),
         )
         range_var = self.config.range_sigma**2
-        innovation, h_pose, c0_index, h_c0, variance = [], [], [], [], []
+        innovation, h_pose, c0_index, h_c0, shared = [], [], [], [], []
         for b, hit in zip(beams, hits, strict=True):
             if hit is None or hit.incidence_sine < self._min_sine:
                 continue  # no hit, or near-tangent: too sensitive to linearise
             (h_x, h_y, h_theta), inv_d = hit.jacobian()
             row = rows[hit.landmark]
-            var = range_var + row.model_var * (inv_d * inv_d)
+            var = row.model_var * (inv_d * inv_d)
             if self.config.shape_follows_pose:
                 lever, extra = self._shape_terms(row, hit.xi, inv_d)
                 h_theta += (1.0 if hit.variate == 1 else -1.0) * lever * inv_d
@@ -618,15 +620,24 @@ class PolySlam:
             h_pose.append((h_x, h_y, h_theta))
             c0_index.append(3 + hit.landmark)
             h_c0.append(inv_d)
-            variance.append(var)
+            shared.append(var)
         if not innovation:
             return None
+        # The landmark's own error (fit, frozen shape) is shared by every beam on it: for n
+        # beams with shared errors s_i·z (one z), Cauchy–Schwarz gives (Σ s_i x_i)² ≤
+        # n Σ s_i² x_i², so R = diag(σ_r² + n s_i²) bounds the true s sᵀ + σ_r² I from above
+        # and the diagonal update stays conservative however many beams hit one landmark.
+        if joint:
+            landmark = np.array(c0_index) - 3
+            variance = range_var + np.bincount(landmark)[landmark] * np.array(shared)
+        else:
+            variance = range_var + np.array(shared)
         return (
             np.array(innovation),
             np.array(h_pose),
             np.array(c0_index),
             np.array(h_c0),
-            np.array(variance),
+            variance,
         )
 
     def _workspace(self) -> np.ndarray:

@@ -13,6 +13,8 @@ import pytest
 from polyslam_env.core.geometry import compose
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.ekf import predict, predict_inplace, start_error_cov
+from polyslam_env.slam.fitting import Fit
+from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 from tests.slam.reference import motion_jacobians, predict_dense
@@ -132,3 +134,37 @@ def test_motion_jacobian_oracle_still_matches_finite_differences() -> None:
         [fd_jacobian(lambda p, k=k: float(compose(p, u)[k]), pose) for k in range(3)]
     ).T
     np.testing.assert_allclose(F, F_fd, rtol=FD_RTOL, atol=FD_ATOL)
+
+
+def test_update_variance__bounds_the_error_beams_on_one_landmark_share() -> None:
+    """Beams on one landmark share its error (fit residual, frozen shape): with marginal
+    variances σ_r² + s_i², their true covariance is σ_r² I + s sᵀ, and the diagonal the joint
+    update uses, σ_r² + n s_i² for n beams on that landmark, must bound it (PSD difference);
+    beams on different landmarks are independent and keep their own n."""
+    beams = np.deg2rad([60.0, 30.0, 0.0, -30.0, -60.0, -90.0])
+    slam = PolySlam(SlamConfig(), beams, 3.0)
+    for wall in (
+        Polynomial(2, np.array([1.0, 0.05]), -1.5, 1.5),  # ahead, slightly slanted
+        Polynomial(1, np.array([-0.6, 0.02]), -1.5, 1.5),  # on the right
+    ):
+        gx = np.zeros((1, slam.mean.size))
+        gx[0, 1 if wall.variate == 1 else 0] = 1.0
+        # rms 3 cm against 2 cm range noise: the fit error beyond the noise is shared
+        fit = Fit(wall, wall.c0, gx, np.ones((1, 1)), np.array([[4e-4]]), 0.03, 1)
+        slam.insert_landmark(fit, merge=False)
+    ranges = np.full(len(beams), 1.0)  # innovations play no part in R
+    every = list(range(len(beams)))
+    single, joint = slam._beam_rows(every, ranges), slam._beam_rows(every, ranges, joint=True)
+    assert single is not None and joint is not None
+    for a, b in zip(single[:4], joint[:4], strict=True):
+        np.testing.assert_array_equal(a, b)  # only R differs
+    noise = slam.config.range_sigma**2
+    landmark = single[2]
+    assert len(set(landmark.tolist())) == 2  # both walls are hit
+    for lm in set(landmark.tolist()):
+        on = landmark == lm
+        s = np.sqrt(single[4][on] - noise)
+        assert np.all(s > 0)
+        np.testing.assert_allclose(joint[4][on] - noise, on.sum() * s**2, rtol=1e-12)
+        gap = np.diag(joint[4][on]) - (noise * np.eye(on.sum()) + np.outer(s, s))
+        assert np.linalg.eigvalsh(gap).min() >= -1e-15
