@@ -29,7 +29,7 @@ from polyslam_env.metrics.episode import COMMS_METRICS, RobotHistory, RobotRun, 
 from polyslam_env.scenarios.paths import builtin_paths, load_paths
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.robot import PolySlam
-from polyslam_env.world.config import WorldConfig
+from polyslam_env.world.config import WorldConfig, paper_world_config
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.maps import load_map
 from polyslam_env.world.physics import World
@@ -138,7 +138,7 @@ def simulate(
     ranges but never exchanging: their single-robot result on the identical episode
     (``SimulationResult.shadow_runs``), as in the paper's Fig 8. Shadows change nothing else.
     """
-    wcfg = world_config or WorldConfig()
+    wcfg = world_config or paper_world_config()
     scfg = slam_config or SlamConfig()
     layout = map if isinstance(map, Layout) else load_map(map)
     if num_robots is not None and num_robots > layout.num_start_poses:
