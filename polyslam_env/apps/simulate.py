@@ -27,9 +27,9 @@ from polyslam_env.core.seeding import make_rngs
 from polyslam_env.environment import stages
 from polyslam_env.metrics.episode import COMMS_METRICS, RobotHistory, RobotRun, robot_metrics
 from polyslam_env.scenarios.paths import builtin_paths, load_paths
-from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.config import SlamConfig, slam_preset
 from polyslam_env.slam.robot import PolySlam
-from polyslam_env.world.config import WorldConfig
+from polyslam_env.world.config import WorldConfig, paper_world_config
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.maps import load_map
 from polyslam_env.world.physics import World
@@ -138,8 +138,8 @@ def simulate(
     ranges but never exchanging: their single-robot result on the identical episode
     (``SimulationResult.shadow_runs``), as in the paper's Fig 8. Shadows change nothing else.
     """
-    wcfg = world_config or WorldConfig()
-    scfg = slam_config or SlamConfig()
+    wcfg = world_config or paper_world_config()
+    scfg = slam_config or slam_preset("paper")
     layout = map if isinstance(map, Layout) else load_map(map)
     if num_robots is not None and num_robots > layout.num_start_poses:
         raise MapFileError(

@@ -45,12 +45,14 @@ def run(args: argparse.Namespace) -> int:
     from polyslam_env.apps.simulate import simulate
     from polyslam_env.core.io import write_json
     from polyslam_env.render.plots import plot_runs
-    from polyslam_env.slam.config import SlamConfig
-    from polyslam_env.world.config import WorldConfig
+    from polyslam_env.slam.config import SlamConfig, slam_preset
+    from polyslam_env.world.config import WorldConfig, paper_world_config
 
     out = check_output_folder(args.out, "--out")
-    world_cfg = WorldConfig.from_yaml(args.world_config) if args.world_config else WorldConfig()
-    slam_cfg = SlamConfig.from_yaml(args.slam_config) if args.slam_config else SlamConfig()
+    world_cfg = (
+        WorldConfig.from_yaml(args.world_config) if args.world_config else paper_world_config()
+    )
+    slam_cfg = SlamConfig.from_yaml(args.slam_config) if args.slam_config else slam_preset("paper")
     with progress_bar(args.steps, "simulate", "step", args.quiet, leave=False) as bar:
         result = simulate(
             args.map,

@@ -112,6 +112,7 @@ class MapBook:
         eps_z: int = 10,
         cluster_radius: float = 0.35,
         table: LandmarkTable | None = None,
+        link: bool = False,
     ) -> None:
         if eps_m < 1 or eps_z < 1 or not cluster_radius > 0:
             raise ValueError(
@@ -121,6 +122,7 @@ class MapBook:
         self.eps_m = eps_m
         self.eps_z = eps_z
         self.cluster_radius = cluster_radius
+        self.link = link
         self.table = LandmarkTable() if table is None else table
         self.clusters: list[list[StoredPoint]] = []
 
@@ -138,6 +140,11 @@ class MapBook:
     def add_to_cluster(self, point: StoredPoint) -> list[StoredPoint] | None:
         """Put the point in the cluster with most neighbours within R (or a new cluster).
 
+        With ``link``, every other cluster with a point within R of it joins that cluster too:
+        clusters are then the connected components of "within R" (single linkage). Without
+        it (the paper's rule), a point bridging two clusters joins one, and two runs of hits
+        along one wall, each short of ε_Z, may never come together (SlamConfig.link_clusters).
+
         Returns the cluster's points, and removes the cluster, once it holds more than ε_Z.
         """
         x, y = float(point.xy[0]), float(point.xy[1])
@@ -145,6 +152,13 @@ class MapBook:
         if counts and max(counts) > 0:
             best = int(np.argmax(counts))  # ties: the oldest cluster
             self.clusters[best].append(point)
+            joined = [i for i, n in enumerate(counts) if n > 0 and i != best] if self.link else []
+            for i in joined:
+                self.clusters[best].extend(self.clusters[i])
+            for i in reversed(joined):
+                del self.clusters[i]
+                if i < best:
+                    best -= 1
         else:
             best = len(self.clusters)
             self.clusters.append([point])

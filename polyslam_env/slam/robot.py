@@ -109,7 +109,9 @@ class PolySlam:
         self.cov = np.zeros((3, 3))  # (3+n, 3+n) ditto: the true start is known exactly
         self._first_xy: tuple[float, float] | None = None  # x̂_{k|k−1}'s position (FEJ)
         self.table = LandmarkTable()  # the map: ids, shapes, extents, Q_bad, … in state order
-        self.book = MapBook(config.eps_m, config.eps_z, config.cluster_radius, self.table)
+        self.book = MapBook(
+            config.eps_m, config.eps_z, config.cluster_radius, self.table, config.link_clusters
+        )
         self.step_count = 0
         self.diverging = False
         self.divergence_f = 0.0

@@ -287,7 +287,8 @@ def test_exchange__inactive_or_one_sided_sighting_is_no_rendezvous() -> None:
 def test_exchange__other_payloads_count_bytes_without_touching_the_slam(payload: str) -> None:
     sender, receiver, p_s, p_r = _two_robot_setup()
     ex = _exchange(payload=payload)
-    ranges = np.array([1.0, np.inf, 1.5, 0.8, np.inf])
+    beams = len(WCFG.range_sensor.angles)
+    ranges = np.resize(np.array([1.0, np.inf, 1.5, 0.8, np.inf]), beams)
     for i, slam in enumerate((sender, receiver)):
         ex.record_scan(i, slam.pose, ranges, np.asarray(WCFG.range_sensor.angles))
     before = receiver.mean.copy()

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from polyslam_env import ConfigError, EnvConfig, MapFileError, parallel_env
 from polyslam_env.environment.config import resolve_config
-from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.config import SlamConfig, slam_preset
 
 
 def test_env_config__defaults_are_valid_and_match_the_brief() -> None:
@@ -80,7 +80,8 @@ def test_env_config__unknown_top_level_key_in_yaml_names_key_and_file(tmp_path: 
 
 
 def test_env_config__slam_preset_replaces_slam_and_conflicts_with_custom_slam() -> None:
-    assert EnvConfig(slam_preset="paper").slam == SlamConfig(join_pieces=False)
+    assert EnvConfig(slam_preset="paper").slam == slam_preset("paper")
+    assert slam_preset("paper") == SlamConfig(eps_z=10, join_pieces=False, link_clusters=False)
     with pytest.raises(ConfigError, match="slam_preset"):
         EnvConfig(slam=SlamConfig(rho_min=0.05), slam_preset="paper")
 

@@ -98,7 +98,13 @@ def test_package__exports_the_constructors() -> None:
 
 # -- determinism ------------------------------------------------------------------------------
 def _rollout(seed: int, steps: int) -> list[tuple[Any, ...]]:
-    env = parallel_env(map="two_rooms", num_robots=2, max_steps=steps, channel__loss_prob=0.3)
+    env = parallel_env(
+        map="two_rooms",
+        num_robots=2,
+        max_steps=steps,
+        coverage_target=None,
+        channel__loss_prob=0.3,
+    )
     obs, _ = env.reset(seed=seed)
     rng = np.random.default_rng(123)
     out: list[tuple[Any, ...]] = [({a: o.copy() for a, o in obs.items()},)]

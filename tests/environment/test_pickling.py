@@ -32,7 +32,7 @@ def _actions(env: Any, k: int) -> dict[str, np.ndarray]:
 @pytest.mark.parametrize("dumper", DUMPERS)
 def test_parallel_env__pickles_constructed_and_mid_episode(dumper: Any) -> None:
     dumps, loads = dumper
-    env = polyslam_env.parallel_env(map="two_rooms", max_steps=60)
+    env = polyslam_env.parallel_env(map="two_rooms", max_steps=60, coverage_target=None)
     fresh = loads(dumps(env))
     assert fresh.possible_agents == env.possible_agents
     env.reset(seed=11)

@@ -57,7 +57,7 @@ def test_paper__true_poses_follow_replay_paths() -> None:
     paths = load_paths("paper")
     replay = replay_paths(paths)
     env = polyslam_env.parallel_env(  # the paper's setting: robots start on the paths' starts
-        map="paper", num_robots=3, coverage_target=1.0, max_steps=120, initial_error=False
+        map="paper", num_robots=3, coverage_target=None, max_steps=120, initial_error=False
     )
     team = make_team("paper", env)
     poses = []

@@ -214,6 +214,20 @@ def test_add_to_cluster__joins_the_cluster_with_most_neighbours() -> None:
     assert [len(c) for c in book.clusters] == [1, 3]
 
 
+def test_add_to_cluster__linked_a_point_near_two_clusters_makes_them_one() -> None:
+    far = point((5.0, 0.0))
+    book = MapBook(eps_z=10, cluster_radius=0.35, link=True)
+    book.clusters = [[point((0.0, 0.0))], [far], [point((0.5, 0.0)), point((0.55, 0.0))]]
+    book.add_to_cluster(point((0.25, 0.0)))  # within R of the first and the third
+    assert [len(c) for c in book.clusters] == [1, 4]
+    assert book.clusters[0] == [far]
+    # and a linked cluster past ε_Z is handed over whole
+    book = MapBook(eps_z=4, cluster_radius=0.35, link=True)
+    book.clusters = [[point((0.0, 0.0)), point((0.1, 0.0))], [point((0.5, 0.0)), point((0.6, 0.0))]]
+    full = book.add_to_cluster(point((0.3, 0.0)))
+    assert full is not None and len(full) == 5 and book.clusters == []
+
+
 def test_mapbook__reads_ids_and_qbad_from_its_table() -> None:
     book = one_landmark_book()
     assert book.ids is book.table.ids and book.qbad is book.table.qbad
