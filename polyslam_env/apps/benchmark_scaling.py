@@ -155,21 +155,34 @@ def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str
 
 
 # -- memory -----------------------------------------------------------------------------------
-def _rss_mb() -> float | None:
-    """This process's resident set size now (MB), from /proc (None where there is none)."""
+def _proc_status_mb(field: str) -> float | None:
+    """A memory figure of this process from /proc/self/status (MB; None where there is none)."""
     try:
-        pages = int(Path("/proc/self/statm").read_text().split()[1])
-    except (OSError, ValueError, IndexError):
+        lines = Path("/proc/self/status").read_text().splitlines()
+    except OSError:
         return None
-    return pages * os.sysconf("SC_PAGE_SIZE") / 1e6
+    for line in lines:
+        if line.startswith(field + ":"):
+            return int(line.split()[1]) * 1024 / 1e6  # kB
+    return None
+
+
+def _rss_mb() -> float | None:
+    """This process's resident set size now (MB)."""
+    return _proc_status_mb("VmRSS")
 
 
 def _peak_rss_mb() -> float:
-    """This process's peak resident set size so far (MB): ``ru_maxrss`` (KiB on Linux)."""
+    """This process's peak resident set size so far (MB): VmHWM, the high-water mark of its
+    own memory; where there is no /proc, ``ru_maxrss``, which on Linux would also count the
+    parent's memory at the fork before ``spawn`` exec'd this interpreter."""
+    peak = _proc_status_mb("VmHWM")
+    if peak is not None:
+        return peak
     import resource
 
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return peak / 1e6 if sys.platform == "darwin" else peak * 1024 / 1e6  # macOS: bytes
+    maxrss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return maxrss / 1e6 if sys.platform == "darwin" else maxrss * 1024 / 1e6  # bytes / KiB
 
 
 def _memory_episodes(args: tuple[dict[str, Any], int, int, int]) -> list[dict[str, Any]]:
