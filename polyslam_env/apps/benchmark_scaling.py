@@ -127,7 +127,9 @@ def bench_workers(
 def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str, Any]]:
     """ms per env step with each team size over ``steps`` steps from a seeded reset (the cost
     grows as maps fill and robots meet, so the figure is the mean over the whole horizon, next
-    to the median step), and the ratio of each mean to the first size's."""
+    to the median step), and the ratio of each mean to the first size's. ``messages`` and
+    ``polynomials`` count what the exchange applied (in the last episode): integrating them is
+    the part of the step that grows with the number of meetings, not with the team size."""
     from polyslam_env.environment.parallel import parallel_env
 
     rows = []
@@ -139,6 +141,8 @@ def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str
             start = time.perf_counter()
             step()
             times.append(time.perf_counter() - start)
+        exchange = env.episode.exchange if env.episode is not None else None
+        history = exchange.history if exchange is not None else []
         env.close()
         rows.append(
             {
@@ -147,6 +151,8 @@ def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str
                 "mean_ms": 1e3 * float(np.mean(times)),
                 "median_ms": 1e3 * float(np.median(times)),
                 "max_ms": 1e3 * float(np.max(times)),
+                "messages": len(history),  # applied in the last episode
+                "polynomials": sum(d.n_polynomials for d in history),
             }
         )
     for r in rows:

@@ -30,7 +30,7 @@ COLUMNS = {
     ],
     "env": [("env", 20), ("steps/s", 9), ("IQR", 9), ("min–max", 17), ("× MPE", 7)],
     "team": [("robots", 9), ("steps", 6), ("mean ms", 9), ("median ms", 9), ("max ms", 9),
-             ("× first", 8)],
+             ("× first", 8), ("messages", 8), ("polys", 6)],
     "memory": [("episode", 9), ("steps", 6), ("peak MB", 9), ("RSS MB", 9)],
     "compile": [("cold s", 9), ("warm s", 9), ("compile s", 9), ("cached", 7)],
     "workers": [("processes", 9), ("steps/s each", 12), ("total", 9), ("× one", 7)],
@@ -65,7 +65,8 @@ TITLES = {
     "slam": "SLAM step per robot vs landmarks",
     "world": "world step (physics + scan + camera) vs robots",
     "env": "env steps per second (3 robots, paper map, vector obs, no rendering)",
-    "team": "env step vs team size (generator:rooms, exchange on, no coverage end)",
+    "team": "env step vs team size (generator:rooms, exchange on, no coverage end;"
+    " messages and polynomials the exchange applied)",
     "memory": "RSS of one env (3 robots, full SLAM) in a fresh process, after each episode",
     "compile": "first env reset + step in a fresh process: empty numba cache vs warm cache",
     "workers": "env steps per second with N processes, each stepping its own env (full SLAM)",
@@ -221,7 +222,8 @@ def _opt(value: float | None) -> str:
 
 def _team_row(r: dict[str, Any]) -> str:
     cells = [str(r["robots"]), str(r["steps"]), f"{r['mean_ms']:.1f}", f"{r['median_ms']:.1f}",
-             f"{r['max_ms']:.1f}", f"{r['ratio_to_first']:.1f}"]  # fmt: skip
+             f"{r['max_ms']:.1f}", f"{r['ratio_to_first']:.1f}", str(r["messages"]),
+             str(r["polynomials"])]  # fmt: skip
     return _columns("team", cells)
 
 

@@ -271,6 +271,22 @@ def _stats(median: float, low: float, high: float) -> dict[str, float]:
                 "ratio_to_mpe": None,
             },
         ),
+        (
+            "team",
+            {
+                "robots": 20,
+                "steps": 150,
+                "mean_ms": 1357.2,
+                "median_ms": 999.1,
+                "max_ms": 98765.4,
+                "ratio_to_first": 199.6,
+                "messages": 1290,
+                "polynomials": 16170,
+            },
+        ),
+        ("memory", {"episode": 5, "steps": 200, "peak_mb": 1234.5, "rss_mb": 1200.1}),
+        ("compile", {"cold_s": 12.34, "warm_s": 1.5, "compile_s": 10.84, "cached_files": 42}),
+        ("workers", {"processes": 16, "per_process": 222.2, "total": 3205.1, "ratio_to_one": 14.4}),
     ],
 )
 def test_benchmark_tables__header_and_rows_share_column_edges(
