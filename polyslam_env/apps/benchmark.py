@@ -10,7 +10,8 @@ reference measured in the same process just before or after:
 to bare pymunk (the same number of free circles, stepped ``substeps`` times); * ``env``: env steps
 per second (3 robots on the paper map, paper sensors, vector observations, no rendering) with full
 SLAM and with ``slam_enabled=False``; then the same config through the SuperSuit / SB3 vectorised
-path (:func:`polyslam_env.environment.vector.make_vec_env`, 2 envs in 2 worker processes); and
+path (:func:`polyslam_env.environment.vector.make_vec_env`, 2 envs in this process, then in 2
+worker processes: ``vec``, whose ratio of the two is issue 15's target); and
 PettingZoo MPE ``simple_spread`` (3 agents) through the same harness, when ``mpe2`` is installed
 (the ``bench`` extra).
 
@@ -50,6 +51,7 @@ from polyslam_env.world.physics import World
 __all__ = [
     "PLANS",
     "SECTIONS",
+    "TARGETS",
     "Plan",
     "Stats",
     "bench_env",
