@@ -17,14 +17,6 @@ with SuperSuit 3.11 and SB3 2.x:
   SuperSuit's ``black_death_v3`` ends the episode only when every agent is terminated *and*
   truncated (so never at ``max_steps``: the next step has no live agent and the env raises).
   :class:`FixedAgents` keeps every robot present by design instead.
-
-**Worker processes run BLAS on one thread.** With ``num_cpus`` > 0 every worker process
-inherits numpy's OpenBLAS pool (one thread per core). The SLAM caps it during its own step
-(``slam.blas_threads``), but the rest of an env step (observations, rewards, the exchange)
-still wakes every BLAS thread for small products, and with two processes on two cores those
-spinning threads take each other's cores: the 2-process path ran slower than one process
-(issue 15: 0.82×). :class:`FixedAgents` built with ``worker_blas_threads=1`` sets the cap in the
-process that first resets it, i.e. inside each worker, and leaves the parent alone.
 """
 
 from __future__ import annotations
@@ -41,7 +33,6 @@ from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices
 from supersuit.vector.multiproc_vec import ProcConcatVec, decompress_info
 from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
-from threadpoolctl import threadpool_limits
 
 from polyslam_env.environment.parallel import parallel_env
 
@@ -68,19 +59,13 @@ class FixedAgents(ParallelEnv[str, np.ndarray, np.ndarray]):
     are dropped; when the team episode ends, its slot is reported terminated too. Each slot
     thus sees a sequence of proper episodes (the dead slot's filler episode is all zeros).
 
-    ``worker_blas_threads`` > 0 caps numpy's BLAS threads to that number for the whole process
-    at the first reset (see the module docstring; :func:`make_vec_env` sets 1 for worker
-    processes). 0 leaves BLAS alone.
-
     Actions are normalised: ``a ∈ [−1, 1]²`` drives ``low + (a + 1)/2 · (high − low)`` of the
     robot's action space (PPO's Gaussian works best on a unit box). Vector observations and
     continuous actions only.
     """
 
-    def __init__(self, env: ParallelEnv[str, Any, Any], worker_blas_threads: int = 0) -> None:
+    def __init__(self, env: ParallelEnv[str, Any, Any]) -> None:
         self.env = env
-        self.worker_blas_threads = worker_blas_threads  # > 0: cap BLAS at the first reset
-        self._blas_capped = False
         self.possible_agents = list(env.possible_agents)
         self.agents: list[str] = []
         self.metadata = env.metadata
@@ -113,9 +98,6 @@ class FixedAgents(ParallelEnv[str, np.ndarray, np.ndarray]):
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
-        if self.worker_blas_threads > 0 and not self._blas_capped:
-            threadpool_limits(self.worker_blas_threads, user_api="blas")  # for the process
-            self._blas_capped = True
         obs, infos = self.env.reset(seed=seed, options=options)
         self.agents = self.possible_agents[:]
         full = {a: obs.get(a, self._zeros()) for a in self.agents}
@@ -217,16 +199,12 @@ def make_vec_env(
     """An SB3 ``VecEnv`` of ``num_envs`` copies of the env, one slot per robot (so
     ``num_envs · num_robots`` slots); ``num_cpus`` > 0 runs them in that many processes.
 
-    Worker processes run numpy's BLAS on one thread each (module docstring).
     ``seed`` is applied at the first reset (``PPO(seed=...)`` overrides it). ``monitor``
     adds SB3's ``VecMonitor`` (episode returns per slot for the logs).
     """
     if num_envs < 1:
         raise ValueError(f"num_envs: must be >= 1, got {num_envs}")
-    workers = min(num_cpus, num_envs) >= 2  # SuperSuit runs fewer in this process
-    blas = 1 if workers else 0  # workers: one BLAS thread each (module docstring)
-    team = FixedAgents(parallel_env(config, **overrides), worker_blas_threads=blas)
-    markov = ss.pettingzoo_env_to_vec_env_v1(team)
+    markov = ss.pettingzoo_env_to_vec_env_v1(FixedAgents(parallel_env(config, **overrides)))
     wrapper = ss.concat_vec_envs_v1(
         markov, num_envs, num_cpus=num_cpus, base_class="stable_baselines3"
     )

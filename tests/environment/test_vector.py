@@ -139,20 +139,3 @@ def test_sb3_subproc_vec_env__two_workers_of_the_team_env() -> None:
     venv = SubprocVecEnv([lambda: TeamEnv(**SMALL) for _ in range(2)])
     venv.seed(3)
     _run_past_one_episode_end(venv, slots=2, action_dim=4)
-
-
-def _blas_threads() -> list[int]:
-    from threadpoolctl import threadpool_info
-
-    return [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
-
-
-def test_fixed_agents__worker_blas_cap_applies_at_the_first_reset() -> None:
-    """A worker's FixedAgents caps BLAS to one thread for its process (the 2-process path
-    lost to one process while every worker's OpenBLAS pool spun on both cores)."""
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=None):  # restores this process's BLAS setting afterwards
-        env = FixedAgents(parallel_env(SMALL), worker_blas_threads=1)
-        env.reset(seed=0)
-        assert all(n == 1 for n in _blas_threads())
