@@ -31,6 +31,7 @@ import os
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -392,9 +393,12 @@ def bench_env(plan: Plan, seed: int = 0, **overrides: Any) -> dict[str, Any]:
 
 def bench_vec(plan: Plan, seed: int = 0, num_envs: int = 2, num_cpus: int = 2) -> dict[str, Any]:
     """Env steps/s through :func:`make_vec_env` with ``num_envs`` envs, in ``num_cpus`` worker
-    processes (0 or 1: all in this process).
+    processes (0 or 1: all in this process), and the CPU time per env step of this process and
+    its workers together (``cpu_ms_per_env_step``; None where /proc is missing).
 
     One vectorised step advances every env by one step, so it counts ``num_envs`` env steps.
+    On a loaded machine the rate of two processes says how many cores were free; the CPU time
+    says whether the path itself does more work per env step with workers than without.
     """
     try:
         from polyslam_env.environment.vector import make_vec_env
@@ -405,24 +409,46 @@ def bench_vec(plan: Plan, seed: int = 0, num_envs: int = 2, num_cpus: int = 2) -
         rng = np.random.default_rng(seed)
         venv.reset()
         shape = (venv.num_envs, *(venv.action_space.shape or ()))  # slots = envs · robots
-        rate = rate_samples(
-            lambda: venv.step(rng.uniform(-1.0, 1.0, shape).astype(np.float32)),
-            plan.vec_steps,
-            plan.repeats,
-            warmup=3,
-        )
+
+        def step() -> None:
+            venv.step(rng.uniform(-1.0, 1.0, shape).astype(np.float32))
+
+        for _ in range(3):
+            step()
+        pids = [os.getpid(), *(p.pid for p in getattr(venv.unwrapped, "procs", []))]
+        cpu_before = _cpu_seconds(pids)
+        rate = rate_samples(step, plan.vec_steps, plan.repeats)
+        cpu_after = _cpu_seconds(pids)
     finally:
         venv.close()
     processes = num_cpus if min(num_cpus, num_envs) >= 2 else 1
+    env_steps = plan.vec_steps * plan.repeats * num_envs
     row = {
         "installed": True,
         "num_envs": num_envs,
         "processes": min(processes, num_envs),
         "steps_per_s": rate.scaled(num_envs).to_dict(),
+        "cpu_ms_per_env_step": None
+        if cpu_before is None or cpu_after is None
+        else 1e3 * (cpu_after - cpu_before) / env_steps,
     }
     if processes > 1:
         row["machine_speedup"] = parallel_speedup(processes)
     return row
+
+
+def _cpu_seconds(pids: Iterable[int]) -> float | None:
+    """User + system CPU seconds so far of the processes ``pids`` (all their threads), from
+    /proc (None where there is none)."""
+    tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+    total = 0.0
+    for pid in pids:
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            return None
+        total += (int(fields[11]) + int(fields[12])) / tick  # utime, stime
+    return total
 
 
 def _small_numpy_work(n: int) -> float:

@@ -206,6 +206,8 @@ def _env_row(r: dict[str, Any]) -> str:
     s = r["steps_per_s"]
     ratio = r.get("ratio_to_mpe")
     row = _columns("env", [r["label"], f"{s['median']:.1f}", *_spread(s), _opt(ratio)])
+    if r.get("cpu_ms_per_env_step") is not None:  # the vectorised rows, workers included
+        row += f"   CPU {r['cpu_ms_per_env_step']:.2f} ms/env step"
     if r.get("ratio_to_one_process") is not None:
         row += f"   {r['ratio_to_one_process']:.2f}× one process"
     if "machine_speedup" in r:  # the vectorised row: what the machine allows in parallel

@@ -159,6 +159,8 @@ def test_benchmark_command__quick_json_has_every_section(
     if data["vec"]["installed"]:
         assert data["vec"]["machine_speedup"] > 0  # side by side / one after another
         assert data["vec"]["processes"] == 2 and data["vec_one_process"]["processes"] == 1
+        for row in (data["vec"], data["vec_one_process"]):  # CPU ticks: a few steps may be 0
+            assert row["cpu_ms_per_env_step"] is None or row["cpu_ms_per_env_step"] >= 0
         expected = (
             data["vec"]["steps_per_s"]["median"] / data["vec_one_process"]["steps_per_s"]["median"]
         )
