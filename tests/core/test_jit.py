@@ -76,9 +76,12 @@ def _can_drop_capabilities() -> bool:
     """Whether a child can drop them here (needs Linux and CAP_SETPCAP)."""
     if not sys.platform.startswith("linux"):
         return False
-    probe = subprocess.run(
-        ["true"], preexec_fn=_drop_file_override_capabilities, check=False, capture_output=True
-    )
+    try:
+        probe = subprocess.run(
+            ["true"], preexec_fn=_drop_file_override_capabilities, check=False, capture_output=True
+        )
+    except (OSError, subprocess.SubprocessError):  # prctl refused in the child
+        return False
     return probe.returncode == 0
 
 
