@@ -508,7 +508,7 @@ def run_benchmark(
     seed: int = 0,
     report: Report = _ignore,
     workers: Sequence[int] = (),
-    profile: bool = False,
+    profile: str | None = None,
 ) -> dict[str, Any]:
     """Run ``sections`` (see :data:`SECTIONS`); ``report(section, row)`` after every row.
 
@@ -516,11 +516,14 @@ def run_benchmark(
     rows run the same 2 envs in one process, then in 2 worker processes; the second carries
     ``ratio_to_one_process`` and ``ratio_to_env``, over full SLAM in one plain env); a ratio is
     None when either figure was not measured. ``workers`` (e.g. ``(1, 2, 4)``) adds a row of env
-    steps/s per process count; ``profile`` adds the env step's profile (section ``profile``).
+    steps/s per process count; ``profile`` adds the env step's profile (section ``profile``):
+    ``"env"`` of the 3-robot env, ``"team"`` of the largest team size's env.
     """
     wanted = set(sections)
     if any(n < 1 for n in workers):
         raise ValueError(f"workers: process counts must be >= 1, got {list(workers)}")
+    if profile not in (None, "env", "team"):
+        raise ValueError(f"profile: expected 'env' or 'team', got {profile!r}")
     unknown = wanted - set(SECTIONS)
     if unknown:
         raise ValueError(f"sections: unknown {sorted(unknown)}; choose from {SECTIONS}")
@@ -609,7 +612,7 @@ def _system_sections(
     seed: int,
     report: Report,
     workers: Sequence[int],
-    profile: bool,
+    profile: str | None,
 ) -> None:
     """The figures of :mod:`polyslam_env.apps.benchmark_scaling`, into ``out``."""
     from polyslam_env.apps import benchmark_scaling as system
@@ -627,8 +630,10 @@ def _system_sections(
     if workers:
         rows = system.bench_workers(workers, plan.env_steps, plan.repeats, seed)
         out["workers"] = [_emit(report, "workers", r) for r in rows]
-    if profile:
-        out["profile"] = _emit(report, "profile", system.profile_env(plan.profile_steps, 20, seed))
+    if profile is not None:
+        team = max(plan.team_sizes) if profile == "team" else None
+        steps = plan.profile_steps if team is None else plan.team_steps
+        out["profile"] = _emit(report, "profile", system.profile_env(steps, 20, seed, team))
 
 
 def targets(out: dict[str, Any]) -> list[dict[str, Any]]:

@@ -280,15 +280,19 @@ def bench_compile(repeats: int = 1) -> dict[str, Any]:
 
 
 # -- profile ----------------------------------------------------------------------------------
-def profile_env(steps: int, top: int = 20, seed: int = 0) -> dict[str, Any]:
+def profile_env(
+    steps: int, top: int = 20, seed: int = 0, team: int | None = None
+) -> dict[str, Any]:
     """cProfile of ``steps`` full-SLAM env steps (after a few unprofiled warm-up steps; only
     ``env.step`` and the resets at episode ends are profiled, not the drawing of actions): the
     ``top`` functions by own time (tottime) and by cumulative time (cumtime), each with its
     calls, seconds and share (%) of the profiled calls' wall time (profiler overhead included,
-    so ``step_ms`` is slower than the unprofiled step)."""
+    so ``step_ms`` is slower than the unprofiled step). The env is the benchmark's (3 robots,
+    paper map), or with ``team`` that many robots in :data:`TEAM_CONFIG` (the team rows' env)."""
     from polyslam_env.environment.parallel import parallel_env
 
-    env = parallel_env(**_env_config())
+    config = _env_config() if team is None else {**TEAM_CONFIG, "num_robots": team}
+    env = parallel_env(**config)
     rng = np.random.default_rng(seed)
     space = env.action_space(env.possible_agents[0])
     env.reset(seed=seed)
@@ -308,7 +312,15 @@ def profile_env(steps: int, top: int = 20, seed: int = 0) -> dict[str, Any]:
     stats = pstats.Stats(profiler)
     entries = [_entry(func, row, total) for func, row in stats.stats.items()]  # type: ignore[attr-defined]
     by = {key: sorted(entries, key=lambda e: -e[key])[:top] for key in ("tottime", "cumtime")}
-    return {"steps": steps, "total_s": total, "step_ms": 1e3 * total / steps, **by}
+    robots = len(env.possible_agents)
+    return {
+        "env": "paper" if team is None else str(TEAM_CONFIG["map"]),
+        "robots": robots,
+        "steps": steps,
+        "total_s": total,
+        "step_ms": 1e3 * total / steps,
+        **by,
+    }
 
 
 @contextlib.contextmanager

@@ -70,7 +70,7 @@ TITLES = {
     "memory": "RSS of one env (3 robots, full SLAM) in a fresh process, after each episode",
     "compile": "first env reset + step in a fresh process: empty numba cache vs warm cache",
     "workers": "env steps per second with N processes, each stepping its own env (full SLAM)",
-    "profile": "profile of the full-SLAM env step (3 robots, paper map)",
+    "profile": "profile of the full-SLAM env step",
 }
 
 
@@ -104,8 +104,12 @@ def register(sub: Any) -> None:
     )
     parser.add_argument(
         "--profile",
-        action="store_true",
-        help="also print the top of a cProfile of the full-SLAM env step (alone: only that)",
+        nargs="?",
+        const="env",
+        choices=("env", "team"),
+        help="also print the top of a cProfile of the full-SLAM env step: 'env' (default) the"
+        " 3-robot paper env, 'team' the 20-robot generated-map env of the team rows (alone: only"
+        " that)",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of maps and actions")
     # Hidden: a few steps per figure, only to exercise the command (tests).
@@ -119,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
 
     plan = PLANS["tiny" if args.tiny else "quick" if args.quick else "full"]
     printer = _Printer()
-    extra = bool(args.processes) or args.profile
+    extra = bool(args.processes) or args.profile is not None
     sections = args.only or ([] if extra else SECTIONS)
     results = run_benchmark(
         plan,
@@ -249,7 +253,10 @@ def _workers_row(r: dict[str, Any]) -> str:
 def _profile_table(p: dict[str, Any]) -> str:
     """The profile's two tops (own time, cumulative time), each line with its % of the
     profiled step time."""
-    lines = [f"{p['steps']} steps, {p['step_ms']:.2f} ms per step under the profiler"]
+    lines = [
+        f"{p['robots']} robots, {p['env']} map, {p['steps']} steps,"
+        f" {p['step_ms']:.2f} ms per step under the profiler"
+    ]
     for key, label in (("tottime", "own time"), ("cumtime", "cumulative time")):
         lines += [
             "",

@@ -202,6 +202,7 @@ def test_benchmark_command__workers_and_profile_alone_run_only_their_rows(
         assert r["ratio_to_one"] == pytest.approx(r["total"] / rows[0]["total"], rel=1e-9)
     profile = data["profile"]
     assert profile["steps"] == benchmark.PLANS["tiny"].profile_steps
+    assert (profile["robots"], profile["env"]) == (3, "paper")
     for key in ("tottime", "cumtime"):
         assert 0 < len(profile[key]) <= 20
         values = [e[key] for e in profile[key]]
@@ -213,6 +214,15 @@ def test_benchmark_command__workers_and_profile_alone_run_only_their_rows(
     printed = capsys.readouterr().out
     for heading in ("N processes", "top by own time (tottime)", "top by cumulative time"):
         assert heading in printed
+
+
+def test_benchmark_command__profile_team_profiles_the_largest_team(tmp_path: Path) -> None:
+    out = tmp_path / "bench.json"
+    assert main(["benchmark", "--tiny", "--profile", "team", "--json", str(out)]) == 0
+    profile = json.loads(out.read_text())["profile"]
+    tiny = benchmark.PLANS["tiny"]
+    assert profile["robots"] == max(tiny.team_sizes) and profile["env"] == "generator:rooms"
+    assert profile["steps"] == tiny.team_steps and profile["tottime"]
 
 
 @pytest.mark.parametrize("value", ["0", "1,x", "", "2,-1"])
