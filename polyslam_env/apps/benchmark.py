@@ -10,12 +10,18 @@ reference measured in the same process just before or after:
 to bare pymunk (the same number of free circles, stepped ``substeps`` times); * ``env``: env steps
 per second (3 robots on the paper map, paper sensors, vector observations, no rendering) with full
 SLAM and with ``slam_enabled=False``; then the same config through the SuperSuit / SB3 vectorised
-path (:func:`polyslam_env.environment.vector.make_vec_env`, 2 envs in 2 worker processes); and
+path (:func:`polyslam_env.environment.vector.make_vec_env`, 2 envs in this process, then in 2
+worker processes: ``vec``, whose ratio of the two is issue 15's target); and
 PettingZoo MPE ``simple_spread`` (3 agents) through the same harness, when ``mpe2`` is installed
 (the ``bench`` extra).
 
 Env runs include the resets that happen when episodes end (as in training). Actions come from
 seeded generators. The :func:`run_benchmark` result is a JSON-ready dict.
+
+The system figures (:mod:`polyslam_env.apps.benchmark_scaling`): ``team``, ms per env step
+with 3 and 20 robots on a generated map with the exchange on; ``memory``, peak RSS of one env
+over several episodes; ``compile``, the first env step in a fresh process with a cold numba
+cache against a warm one; and on request the env step's profile and multi-process scaling.
 """
 
 from __future__ import annotations
@@ -23,8 +29,9 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -45,6 +52,7 @@ from polyslam_env.world.physics import World
 __all__ = [
     "PLANS",
     "SECTIONS",
+    "TARGETS",
     "Plan",
     "Stats",
     "bench_env",
@@ -59,13 +67,19 @@ __all__ = [
 ]
 
 #: Sections of a benchmark run, in the order they run.
-SECTIONS = ("slam", "world", "reference", "env", "vec")
+SECTIONS = ("slam", "world", "reference", "env", "vec", "team", "memory", "compile")
 #: The env measured: issue 8's "3 robots, paper sensors, full SLAM, vector observations".
 ENV_CONFIG: dict[str, Any] = {"map": "paper", "num_robots": 3, "observation__mode": "vector"}
-#: Issue 8's targets on the reference machine.
-TARGET_ENV_STEPS_PER_S = 1000.0
-TARGET_RATIO_TO_MPE = 0.5
-TARGET_SLAM_US = {30: 300.0, 300: 1500.0}
+#: Issue 15's targets: (name, goal, True when the figure must be at most the goal).
+TARGETS: tuple[tuple[str, float, bool], ...] = (
+    ("full-SLAM env / MPE simple_spread", 0.5, False),
+    ("slam_enabled=False env / MPE", 1.0, False),
+    ("SLAM step µs, 30 landmarks", 60.0, True),
+    ("SLAM step µs, 300 landmarks", 200.0, True),
+    ("world step, 3 robots / pymunk", 4.0, True),
+    ("SB3 vec 2 procs / one process", 1.6, False),
+    ("step cost 20 / 3 robots", 10.0, True),
+)
 
 
 # -- the harness ----------------------------------------------------------------------------
@@ -143,19 +157,25 @@ class Plan:
     env_steps: int  # env steps per sample
     vec_steps: int  # vectorised steps per sample
     mpe_steps: int  # MPE steps per sample
+    team_steps: int = 150  # env steps per team size
+    memory_episodes: int = 5  # episodes of one env for its RSS
+    memory_steps: int = 200  # steps per such episode
+    profile_steps: int = 300  # profiled env steps (--profile)
     slam_sizes: tuple[int, ...] = (10, 30, 100, 300)
     robot_counts: tuple[int, ...] = (1, 3, 8, 16, 32)
+    team_sizes: tuple[int, ...] = (3, 20)
 
 
-#: ``quick`` runs in well under a minute, ``full`` in about 2 (on a loaded 2-core machine);
-#: ``tiny`` only exercises the code (tests).
+#: ``quick`` runs in about 2 minutes, ``full`` in about 6 (on a loaded 2-core machine; the
+#: 20-robot team takes a third of it); ``tiny`` only exercises the code (tests).
 PLANS = {
     "full": Plan(repeats=9, slam_warmup=30, slam_steps=500, world_steps=200, env_steps=400,
                  vec_steps=200, mpe_steps=2000),
     "quick": Plan(repeats=5, slam_warmup=10, slam_steps=100, world_steps=50, env_steps=100,
-                  vec_steps=50, mpe_steps=500),
+                  vec_steps=50, mpe_steps=500, team_steps=100, profile_steps=200),
     "tiny": Plan(repeats=2, slam_warmup=1, slam_steps=3, world_steps=2, env_steps=3, vec_steps=2,
-                 mpe_steps=5, slam_sizes=(10, 30), robot_counts=(1, 3)),
+                 mpe_steps=5, team_steps=2, memory_episodes=2, memory_steps=3, profile_steps=2,
+                 slam_sizes=(10, 30), robot_counts=(1, 3), team_sizes=(2, 3)),
 }  # fmt: skip
 
 
@@ -371,35 +391,64 @@ def bench_env(plan: Plan, seed: int = 0, **overrides: Any) -> dict[str, Any]:
     return {"installed": True, "steps_per_s": rate.to_dict()}
 
 
-def bench_vec(plan: Plan, seed: int = 0, num_envs: int = 2) -> dict[str, Any]:
-    """Env steps/s through :func:`make_vec_env` with ``num_envs`` envs in as many processes.
+def bench_vec(plan: Plan, seed: int = 0, num_envs: int = 2, num_cpus: int = 2) -> dict[str, Any]:
+    """Env steps/s through :func:`make_vec_env` with ``num_envs`` envs, in ``num_cpus`` worker
+    processes (0 or 1: all in this process), and the CPU time per env step of this process and
+    its workers together (``cpu_ms_per_env_step``; None where /proc is missing).
 
     One vectorised step advances every env by one step, so it counts ``num_envs`` env steps.
+    On a loaded machine the rate of two processes says how many cores were free; the CPU time
+    says whether the path itself does more work per env step with workers than without.
     """
     try:
         from polyslam_env.environment.vector import make_vec_env
     except ImportError as err:  # the rl extra (supersuit, stable-baselines3) is missing
         return {"installed": False, "error": str(err)}
-    venv = make_vec_env(None, num_envs, num_cpus=num_envs, seed=seed, monitor=False, **ENV_CONFIG)
+    venv = make_vec_env(None, num_envs, num_cpus=num_cpus, seed=seed, monitor=False, **ENV_CONFIG)
     try:
         rng = np.random.default_rng(seed)
         venv.reset()
         shape = (venv.num_envs, *(venv.action_space.shape or ()))  # slots = envs · robots
-        rate = rate_samples(
-            lambda: venv.step(rng.uniform(-1.0, 1.0, shape).astype(np.float32)),
-            plan.vec_steps,
-            plan.repeats,
-            warmup=3,
-        )
+
+        def step() -> None:
+            venv.step(rng.uniform(-1.0, 1.0, shape).astype(np.float32))
+
+        for _ in range(3):
+            step()
+        pids = [os.getpid(), *(p.pid for p in getattr(venv.unwrapped, "procs", []))]
+        cpu_before = _cpu_seconds(pids)
+        rate = rate_samples(step, plan.vec_steps, plan.repeats)
+        cpu_after = _cpu_seconds(pids)
     finally:
         venv.close()
-    return {
+    processes = num_cpus if min(num_cpus, num_envs) >= 2 else 1
+    env_steps = plan.vec_steps * plan.repeats * num_envs
+    row = {
         "installed": True,
         "num_envs": num_envs,
-        "processes": num_envs,
+        "processes": min(processes, num_envs),
         "steps_per_s": rate.scaled(num_envs).to_dict(),
-        "machine_speedup": parallel_speedup(num_envs),
+        "cpu_ms_per_env_step": None
+        if cpu_before is None or cpu_after is None
+        else 1e3 * (cpu_after - cpu_before) / env_steps,
     }
+    if processes > 1:
+        row["machine_speedup"] = parallel_speedup(processes)
+    return row
+
+
+def _cpu_seconds(pids: Iterable[int]) -> float | None:
+    """User + system CPU seconds so far of the processes ``pids`` (all their threads), from
+    /proc (None where there is none)."""
+    tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+    total = 0.0
+    for pid in pids:
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            return None
+        total += (int(fields[11]) + int(fields[12])) / tick  # utime, stime
+    return total
 
 
 def _small_numpy_work(n: int) -> float:
@@ -454,15 +503,27 @@ def _ignore(section: str, row: dict[str, Any]) -> None:
 
 
 def run_benchmark(
-    plan: Plan, sections: Iterable[str] = SECTIONS, seed: int = 0, report: Report = _ignore
+    plan: Plan,
+    sections: Iterable[str] = SECTIONS,
+    seed: int = 0,
+    report: Report = _ignore,
+    workers: Sequence[int] = (),
+    profile: str | None = None,
 ) -> dict[str, Any]:
     """Run ``sections`` (see :data:`SECTIONS`); ``report(section, row)`` after every row.
 
-    The reference (MPE) runs before the env rows, which carry ``ratio_to_mpe`` (and the
-    vectorised row also ``ratio_to_env``, over full SLAM in one process); a ratio is None when
-    either figure was not measured.
+    The reference (MPE) runs before the env rows, which carry ``ratio_to_mpe`` (the vectorised
+    rows run the same 2 envs in one process, then in 2 worker processes; the second carries
+    ``ratio_to_one_process`` and ``ratio_to_env``, over full SLAM in one plain env); a ratio is
+    None when either figure was not measured. ``workers`` (e.g. ``(1, 2, 4)``) adds a row of env
+    steps/s per process count; ``profile`` adds the env step's profile (section ``profile``):
+    ``"env"`` of the 3-robot env, ``"team"`` of the largest team size's env.
     """
     wanted = set(sections)
+    if any(n < 1 for n in workers):
+        raise ValueError(f"workers: process counts must be >= 1, got {list(workers)}")
+    if profile not in (None, "env", "team"):
+        raise ValueError(f"profile: expected 'env' or 'team', got {profile!r}")
     unknown = wanted - set(SECTIONS)
     if unknown:
         raise ValueError(f"sections: unknown {sorted(unknown)}; choose from {SECTIONS}")
@@ -488,10 +549,15 @@ def run_benchmark(
         nos["ratio_to_mpe"] = _ratio(_rate(nos), mpe)
         out["env"] = {"full_slam": _emit(report, "env", full), "no_slam": _emit(report, "env", nos)}
     if "vec" in wanted:
-        vec = {"label": "SB3 vec, 2 procs", **bench_vec(plan, seed)}
+        one = {"label": "SB3 vec, 1 proc", **bench_vec(plan, seed, num_cpus=0)}
+        one["ratio_to_mpe"] = _ratio(_rate(one), mpe)
+        out["vec_one_process"] = _emit(report, "env", one)
+        vec = {"label": "SB3 vec, 2 procs", **bench_vec(plan, seed, num_cpus=2)}
         vec["ratio_to_mpe"] = _ratio(_rate(vec), mpe)
         vec["ratio_to_env"] = _ratio(_rate(vec), _rate(out.get("env", {}).get("full_slam")))
+        vec["ratio_to_one_process"] = _ratio(_rate(vec), _rate(one))
         out["vec"] = _emit(report, "env", vec)
+    _system_sections(out, plan, wanted, seed, report, workers, profile)
     out["targets"] = targets(out)
     out["machine"]["load_after"] = _load_average()
     return out
@@ -539,21 +605,57 @@ def _ratio(a: float | None, b: float | None) -> float | None:
     return None if a is None or b is None or b <= 0 else a / b
 
 
+def _system_sections(
+    out: dict[str, Any],
+    plan: Plan,
+    wanted: set[str],
+    seed: int,
+    report: Report,
+    workers: Sequence[int],
+    profile: str | None,
+) -> None:
+    """The figures of :mod:`polyslam_env.apps.benchmark_scaling`, into ``out``."""
+    from polyslam_env.apps import benchmark_scaling as system
+
+    if "team" in wanted:
+        rows = system.bench_team(plan.team_sizes, plan.team_steps, seed)
+        out["team"] = [_emit(report, "team", r) for r in rows]
+    if "memory" in wanted:
+        mem = system.bench_memory(plan.memory_episodes, plan.memory_steps, seed)
+        out["memory"] = mem
+        for row in mem["episodes"]:
+            _emit(report, "memory", row)
+    if "compile" in wanted:
+        out["compile"] = _emit(report, "compile", system.bench_compile())
+    if workers:
+        rows = system.bench_workers(workers, plan.env_steps, plan.repeats, seed)
+        out["workers"] = [_emit(report, "workers", r) for r in rows]
+    if profile is not None:
+        team = max(plan.team_sizes) if profile == "team" else None
+        steps = plan.profile_steps if team is None else plan.team_steps
+        out["profile"] = _emit(report, "profile", system.profile_env(steps, 20, seed, team))
+
+
 def targets(out: dict[str, Any]) -> list[dict[str, Any]]:
-    """Issue 8's targets with the measured figure and whether it is met (None: not measured)."""
-    rows: list[dict[str, Any]] = []
-
-    def add(name: str, measured: float | None, target: float, at_most: bool) -> None:
-        met = None if measured is None else (measured <= target if at_most else measured >= target)
-        rows.append({"target": name, "measured": measured, "goal": target, "met": met})
-
-    full = out.get("env", {}).get("full_slam")
-    add("env steps/s, full SLAM", _rate(full), TARGET_ENV_STEPS_PER_S, at_most=False)
-    add("env / MPE simple_spread", full and full.get("ratio_to_mpe"), TARGET_RATIO_TO_MPE, False)
+    """Issue 15's targets (:data:`TARGETS`) with the measured figure and whether it is met
+    (None: not measured in this run)."""
+    env = out.get("env", {})
     by_size = {r["landmarks"]: r["step_us"]["median"] for r in out.get("slam", [])}
-    for n, goal in TARGET_SLAM_US.items():
-        add(f"SLAM step µs, {n} landmarks", by_size.get(n), goal, at_most=True)
-    exponent = out.get("world", {}).get("scaling_exponent")
-    measured = None if exponent is None or exponent != exponent else exponent
-    add("world cost exponent in robots", measured, 1.0, at_most=True)
+    world = {r["robots"]: r["ratio_to_pymunk"] for r in out.get("world", {}).get("rows", [])}
+    team = {r["robots"]: r["mean_ms"] for r in out.get("team", [])}
+    measured = [
+        (env.get("full_slam") or {}).get("ratio_to_mpe"),
+        (env.get("no_slam") or {}).get("ratio_to_mpe"),
+        by_size.get(30),
+        by_size.get(300),
+        world.get(3),
+        (out.get("vec") or {}).get("ratio_to_one_process"),
+        _ratio(team.get(20), team.get(3)),
+    ]
+    rows: list[dict[str, Any]] = []
+    for (name, goal, at_most), value in zip(TARGETS, measured, strict=True):
+        met = None if value is None else (value <= goal if at_most else value >= goal)
+        rows.append(
+            {"target": name, "measured": value, "goal": goal, "at_most": at_most, "met": met}
+        )
     return rows

@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     start = time.perf_counter()
     with progress_bar(config.runs, "reproduce", "run", args.quiet, leave=False) as bar:
-        runs = reproduce(config, workers=args.workers, progress=lambda n: bar.update(1))
+        runs = reproduce(config, workers=args.workers, progress=lambda n: bar.update(1), keep=(0,))
     elapsed = time.perf_counter() - start
     summary = summarise(runs)
     summary["elapsed_s"] = elapsed
@@ -110,7 +110,8 @@ def run(args: argparse.Namespace) -> int:
 
     write_json(out / "summary.json", summary)
     write_csv(out / "table.csv", summary)
-    figures = plot_figures(run_one(config, seed=0, keep=True), out)
+    figure_run = runs[0] if runs[0].result is not None else run_one(config, seed=0, keep=True)
+    figures = plot_figures(figure_run, out)
     print(f"wrote {out / 'summary.json'}, {out / 'table.csv'}, " + ", ".join(map(str, figures)))
     return 0
 

@@ -102,21 +102,27 @@ def test_scaling_exponent__linear_and_constant() -> None:
 
 def test_targets__met_flags_and_missing_figures() -> None:
     results = {
-        "env": {"full_slam": {"installed": True, "steps_per_s": {"median": 1200.0}}},
+        "env": {"full_slam": {"ratio_to_mpe": 0.6}, "no_slam": {"ratio_to_mpe": 0.9}},
         "slam": [
-            {"landmarks": 30, "step_us": {"median": 400.0}},
-            {"landmarks": 300, "step_us": {"median": 900.0}},
+            {"landmarks": 30, "step_us": {"median": 59.0}},
+            {"landmarks": 300, "step_us": {"median": 250.0}},
         ],
-        "world": {"scaling_exponent": 0.8},
+        "world": {"rows": [{"robots": 3, "ratio_to_pymunk": 3.5}]},
+        "team": [{"robots": 3, "mean_ms": 4.0}, {"robots": 20, "mean_ms": 44.0}],
     }
-    met = {r["target"]: r["met"] for r in targets(results)}
+    rows = targets(results)
+    assert [r["target"] for r in rows] == [name for name, _, _ in benchmark.TARGETS]
+    met = {r["target"]: r["met"] for r in rows}
     assert met == {
-        "env steps/s, full SLAM": True,
-        "env / MPE simple_spread": None,  # no reference measured
-        "SLAM step µs, 30 landmarks": False,
-        "SLAM step µs, 300 landmarks": True,
-        "world cost exponent in robots": True,
+        "full-SLAM env / MPE simple_spread": True,
+        "slam_enabled=False env / MPE": False,
+        "SLAM step µs, 30 landmarks": True,
+        "SLAM step µs, 300 landmarks": False,
+        "world step, 3 robots / pymunk": True,
+        "SB3 vec 2 procs / one process": None,  # not measured
+        "step cost 20 / 3 robots": False,  # 11×
     }
+    assert rows[-1]["measured"] == pytest.approx(11.0, rel=1e-12)
 
 
 def test_run_benchmark__rejects_unknown_section() -> None:
@@ -131,6 +137,7 @@ def test_benchmark_command__quick_json_has_every_section(
     assert main(["benchmark", "--quick", "--tiny", "--json", str(out)]) == 0
     data = json.loads(out.read_text())
     assert {"slam", "world", "env", "vec", "reference", "targets"} <= set(data)
+    assert {"vec_one_process", "team", "memory", "compile"} <= set(data)
     assert [r["landmarks"] for r in data["slam"]] == list(benchmark.PLANS["tiny"].slam_sizes)
     for row in data["slam"]:
         assert {"step_us", "reference_solve3_us", "ratio_to_solve3", "stages_us"} <= set(row)
@@ -151,12 +158,82 @@ def test_benchmark_command__quick_json_has_every_section(
     assert "ratio_to_env" in data["vec"]
     if data["vec"]["installed"]:
         assert data["vec"]["machine_speedup"] > 0  # side by side / one after another
+        assert data["vec"]["processes"] == 2 and data["vec_one_process"]["processes"] == 1
+        for row in (data["vec"], data["vec_one_process"]):  # CPU ticks: a few steps may be 0
+            assert row["cpu_ms_per_env_step"] is None or row["cpu_ms_per_env_step"] >= 0
+        expected = (
+            data["vec"]["steps_per_s"]["median"] / data["vec_one_process"]["steps_per_s"]["median"]
+        )
+        # 1e-9 relative: the ratio is computed from the same floats, JSON keeps 17 digits.
+        assert data["vec"]["ratio_to_one_process"] == pytest.approx(expected, rel=1e-9)
+    team = data["team"]
+    assert [r["robots"] for r in team] == list(benchmark.PLANS["tiny"].team_sizes)
+    assert team[0]["ratio_to_first"] == 1.0 and all(r["mean_ms"] > 0 for r in team)
+    memory = data["memory"]
+    assert [r["episode"] for r in memory["episodes"]] == [1, 2]
+    assert memory["total_steps"] == 2 * benchmark.PLANS["tiny"].memory_steps
+    assert all(r["peak_mb"] > 0 for r in memory["episodes"])
+    assert {"cold_s", "warm_s", "compile_s", "cached_files"} <= set(data["compile"])
+    assert data["compile"]["cold_s"] > 0 and data["compile"]["warm_s"] > 0
+    assert len(data["targets"]) == len(benchmark.TARGETS)
     machine = data["machine"]
     assert machine["cpus"] >= 1 and machine["numpy"] and machine["blas"]
     assert "load_before" in machine and "load_after" in machine
     printed = capsys.readouterr().out
-    for heading in ("SLAM step", "world step", "env steps per second", "target", "machine:"):
+    for heading in ("SLAM step", "world step", "env steps per second", "team size", "RSS",
+                    "numba cache", "target", "machine:"):  # fmt: skip
         assert heading in printed
+    assert "profile" not in data and "workers" not in data  # only on request
+
+
+def test_benchmark_command__workers_and_profile_alone_run_only_their_rows(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "bench.json"
+    assert main(["benchmark", "--tiny", "--workers", "1,2", "--profile", "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert not {"slam", "world", "env", "vec", "team", "memory", "compile"} & set(data)
+    rows = data["workers"]
+    assert [r["processes"] for r in rows] == [1, 2]
+    assert rows[0]["ratio_to_one"] == 1.0
+    for r in rows:
+        assert r["total"] > 0 and r["per_process"] > 0
+        # 1e-9 relative: the same floats divided, JSON keeps 17 digits.
+        assert r["ratio_to_one"] == pytest.approx(r["total"] / rows[0]["total"], rel=1e-9)
+    profile = data["profile"]
+    assert profile["steps"] == benchmark.PLANS["tiny"].profile_steps
+    assert (profile["robots"], profile["env"]) == (3, "paper")
+    for key in ("tottime", "cumtime"):
+        assert 0 < len(profile[key]) <= 20
+        values = [e[key] for e in profile[key]]
+        assert values == sorted(values, reverse=True)
+        # The base is the wall time around the profiled calls, which holds their cumtime;
+        # 1 % slack for the profiler's and perf_counter's clocks being read at other instants.
+        assert all(0.0 <= e[key + "_pct"] <= 101.0 for e in profile[key])
+    assert "parallel.py" in profile["cumtime"][0]["function"]  # the env step holds it all
+    printed = capsys.readouterr().out
+    for heading in ("N processes", "top by own time (tottime)", "top by cumulative time"):
+        assert heading in printed
+
+
+def test_benchmark_command__profile_team_profiles_the_largest_team(tmp_path: Path) -> None:
+    out = tmp_path / "bench.json"
+    assert main(["benchmark", "--tiny", "--profile", "team", "--json", str(out)]) == 0
+    profile = json.loads(out.read_text())["profile"]
+    tiny = benchmark.PLANS["tiny"]
+    assert profile["robots"] == max(tiny.team_sizes) and profile["env"] == "generator:rooms"
+    assert profile["steps"] == tiny.team_steps and profile["tottime"]
+
+
+@pytest.mark.parametrize("value", ["0", "1,x", "", "2,-1"])
+def test_benchmark_command__bad_workers_is_a_one_line_error(
+    value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["benchmark", "--tiny", "--workers", value])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "--workers" in err and repr(value) in err
 
 
 def test_benchmark_command__mpe_missing_says_not_installed(
@@ -206,6 +283,22 @@ def _stats(median: float, low: float, high: float) -> dict[str, float]:
                 "ratio_to_mpe": None,
             },
         ),
+        (
+            "team",
+            {
+                "robots": 20,
+                "steps": 150,
+                "mean_ms": 1357.2,
+                "median_ms": 999.1,
+                "max_ms": 98765.4,
+                "ratio_to_first": 199.6,
+                "messages": 1290,
+                "polynomials": 16170,
+            },
+        ),
+        ("memory", {"episode": 5, "steps": 200, "peak_mb": 1234.5, "rss_mb": 1200.1}),
+        ("compile", {"cold_s": 12.34, "warm_s": 1.5, "compile_s": 10.84, "cached_files": 42}),
+        ("workers", {"processes": 16, "per_process": 222.2, "total": 3205.1, "ratio_to_one": 14.4}),
     ],
 )
 def test_benchmark_tables__header_and_rows_share_column_edges(

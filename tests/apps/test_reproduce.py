@@ -8,7 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from polyslam_env.apps.reproduce import ReproduceConfig, default_config, reproduce, summarise
+from polyslam_env.apps.reproduce import (
+    ReproduceConfig,
+    _study_map,
+    default_config,
+    reproduce,
+    run_one,
+    summarise,
+)
 from polyslam_env.apps.simulate import simulate
 from polyslam_env.cli.main import main
 from polyslam_env.core.errors import ConfigError
@@ -50,3 +57,40 @@ def test_cli__reproduce_writes_table_summary_and_figures(tmp_path: Path) -> None
     assert "nees_paper,r1" in (tmp_path / "table.csv").read_text()
     for name in ("figs5-7_multi_robot.png", "fig8_r3_single_vs_multi.png"):
         assert (tmp_path / name).stat().st_size > 10_000
+
+
+def _without_timings(value: object) -> object:
+    """``value`` (a summary or metrics) without the wall-clock figures (``slam_time_ms*``)."""
+    if isinstance(value, dict):
+        return {
+            k: _without_timings(v) for k, v in value.items() if not k.startswith("slam_time_ms")
+        }
+    if isinstance(value, list):
+        return [_without_timings(v) for v in value]
+    return value
+
+
+def _same(a: object, b: object) -> bool:
+    """Equal key by key, NaN equal to NaN (JSON text of both, sorted keys, 17 digits)."""
+    return json.dumps(_without_timings(a), sort_keys=True) == json.dumps(
+        _without_timings(b), sort_keys=True
+    )
+
+
+def test_reproduce__summary_is_identical_with_one_or_two_workers() -> None:
+    config = default_config().replace(runs=3, steps=60)
+    one = summarise(reproduce(config, workers=1))
+    two = summarise(reproduce(config, workers=2))
+    assert _same(one, two)
+
+
+def test_run_one__the_shared_map_changes_nothing() -> None:
+    """Runs of a process share the study's map (read once); a run on a freshly read map is
+    the same run."""
+    config = default_config().replace(steps=40)
+    _study_map.cache_clear()
+    fresh = run_one(config, 5)
+    shared = run_one(config, 5)
+    assert _study_map.cache_info().hits >= 1
+    assert _same(fresh.metrics, shared.metrics) and _same(fresh.single, shared.single)
+    assert _same(fresh.messages, shared.messages)

@@ -614,3 +614,37 @@ def test_paper__polynomials_are_the_cheapest_payload(
         s = entry.sizes
         assert s["polynomials/float32"] < s["polynomials/float64"]
         assert s["polynomials/float64"] < min(s["points/float32"], s["grid/float32"])
+
+
+def test_chain_points__cached_chain_is_the_fresh_one_and_read_only() -> None:
+    from polyslam_env.comms.polyline import piecewise_linear, polyline_points
+
+    poly = Polynomial(1, np.array([0.3, 0.2, -0.4, 0.1]), -0.8, 1.1)
+    fresh = polyline_points(piecewise_linear(poly, 0.005), 0.05)
+    first = chain_points(poly, 0.005, 0.05)
+    again = chain_points(Polynomial(1, poly.coeffs.copy(), poly.lo, poly.hi), 0.005, 0.05)
+    np.testing.assert_array_equal(first, fresh)  # the same operations: exactly equal
+    assert again is first  # equal contents: the cached chain
+    assert not first.flags.writeable
+    other = chain_points(poly, 0.005, 0.04)  # another spacing: another chain
+    assert len(other) > len(first)
+
+
+def test_chain_points__cache_changes_no_exchange(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The paper episode with exchange is bit-identical whether every chain is computed anew
+    (no cache) or cached."""
+    from polyslam_env.comms import exchange
+
+    def run() -> SimulationResult:
+        exchange._CHAIN_CACHE.clear()
+        return simulate("paper", seed=3, exchange=True)
+
+    cached = run()
+    monkeypatch.setattr(exchange, "_CHAIN_CACHE_SIZE", 0)
+    fresh = run()
+    assert cached.meta["exchange"] and cached.meta["exchange"] == fresh.meta["exchange"]
+    for a, b in zip(cached.runs, fresh.runs, strict=True):
+        np.testing.assert_array_equal(a.est_poses, b.est_poses)
+        assert [p.coeffs.tobytes() for p in a.polynomials] == [
+            p.coeffs.tobytes() for p in b.polynomials
+        ]
