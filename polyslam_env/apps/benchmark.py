@@ -45,7 +45,7 @@ from polyslam_env.slam.landmarks import LandmarkTable
 from polyslam_env.slam.measurement import cast
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
-from polyslam_env.world.config import WorldConfig
+from polyslam_env.world.config import PAPER_BEAMS_DEG, WorldConfig, paper_world_config
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.physics import World
 
@@ -69,7 +69,12 @@ __all__ = [
 #: Sections of a benchmark run, in the order they run.
 SECTIONS = ("slam", "world", "reference", "env", "vec", "team", "memory", "compile")
 #: The env measured: issue 8's "3 robots, paper sensors, full SLAM, vector observations".
-ENV_CONFIG: dict[str, Any] = {"map": "paper", "num_robots": 3, "observation__mode": "vector"}
+ENV_CONFIG: dict[str, Any] = {
+    "map": "paper",
+    "num_robots": 3,
+    "observation__mode": "vector",
+    "world__range_sensor__angles_deg": PAPER_BEAMS_DEG,  # the env's default has nine beams
+}
 #: Issue 15's targets: (name, goal, True when the figure must be at most the goal).
 TARGETS: tuple[tuple[str, float, bool], ...] = (
     ("full-SLAM env / MPE simple_spread", 0.5, False),
@@ -180,7 +185,7 @@ PLANS = {
 
 
 # -- SLAM against the number of landmarks -----------------------------------------------------
-BEAM_ANGLES = np.radians([90.0, 45.0, 0.0, -45.0, -90.0])  # (5,) the default sensor
+BEAM_ANGLES = np.radians(PAPER_BEAMS_DEG)  # (5,) the paper's sensor
 MAX_RANGE, RANGE_SIGMA, ODOM_SIGMA = 2.0, 0.02, 0.001
 SHUTTLE, STEP_DX = 20, 0.01  # steps forward then as many back; m per step
 
@@ -340,7 +345,7 @@ def pymunk_stepper(n: int, config: WorldConfig) -> Callable[[], None]:
 
 def bench_world(n: int, plan: Plan, config: WorldConfig | None = None) -> dict[str, Any]:
     """One world step with ``n`` robots (µs) next to bare pymunk with as many bodies."""
-    cfg = config or WorldConfig()
+    cfg = config or paper_world_config()
     world = time_calls(world_stepper(n, cfg), plan.repeats, plan.world_steps, warmup=3)
     ref = time_calls(pymunk_stepper(n, cfg), plan.repeats, plan.world_steps, warmup=3)
     world_us, ref_us = world.scaled(1e6), ref.scaled(1e6)
