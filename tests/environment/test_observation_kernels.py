@@ -42,8 +42,9 @@ def test_vector__equals_the_oracle(mode: str) -> None:
     belief = BeliefGrid(12.0, 0.1, 2.0)
     belief.free[:] = rng.random(belief.free.shape) < 0.5
     for k in range(200):
-        ranges = rng.uniform(0.0, 3.0, 5)
-        ranges[rng.random(5) < 0.3] = np.inf
+        beams = len(config.world.range_sensor.angles_deg)
+        ranges = rng.uniform(0.0, 3.0, beams)
+        ranges[rng.random(beams) < 0.3] = np.inf
         pose = np.array([*rng.uniform(-30.0, 30.0, 2), rng.uniform(-4, 4)])  # some clipped
         detections = [
             Detection(int(j), float(rng.uniform(0, 2)), float(rng.uniform(-3, 3)))
@@ -98,7 +99,7 @@ def test_encode_team__equals_each_view_alone_and_the_oracle() -> None:
         points = pose[:2] + rng.uniform(-1.5, 1.5, (3 * k, 2))  # the first has no map
         views.append(
             RobotView(
-                ranges=rng.uniform(0.0, 3.0, 5),
+                ranges=rng.uniform(0.0, 3.0, len(config.world.range_sensor.angles_deg)),
                 pose=pose,
                 pose_std=rng.uniform(0, 2, 3),
                 map_points=points,
