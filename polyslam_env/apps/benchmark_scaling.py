@@ -280,10 +280,16 @@ def bench_compile(repeats: int = 1) -> dict[str, Any]:
 
 
 # -- profile ----------------------------------------------------------------------------------
+#: Unprofiled env steps before the profile: kernels first used later (landmark creation,
+#: merging) would otherwise be loaded from numba's cache inside it.
+PROFILE_WARMUP = 60
+
+
 def profile_env(
     steps: int, top: int = 20, seed: int = 0, team: int | None = None
 ) -> dict[str, Any]:
-    """cProfile of ``steps`` full-SLAM env steps (after a few unprofiled warm-up steps; only
+    """cProfile of ``steps`` full-SLAM env steps (after :data:`PROFILE_WARMUP` unprofiled steps,
+    enough for every kernel to be loaded from numba's cache before profiling starts; only
     ``env.step`` and the resets at episode ends are profiled, not the drawing of actions): the
     ``top`` functions by own time (tottime) and by cumulative time (cumtime), each with its
     calls, seconds and share (%) of the profiled calls' wall time (profiler overhead included,
@@ -298,15 +304,15 @@ def profile_env(
     env.reset(seed=seed)
     profiler = cProfile.Profile()
     total = 0.0  # wall seconds of the profiled calls: the base of every percentage
-    for k in range(5 + steps):
+    for k in range(PROFILE_WARMUP + steps):
         actions = {a: rng.uniform(space.low, space.high) for a in env.agents}  # type: ignore[attr-defined]
         start = time.perf_counter()
-        with _profiling(profiler) if k >= 5 else contextlib.nullcontext():
+        with _profiling(profiler) if k >= PROFILE_WARMUP else contextlib.nullcontext():
             if not env.agents:
                 env.reset()
             else:
                 env.step(actions)
-        if k >= 5:
+        if k >= PROFILE_WARMUP:
             total += time.perf_counter() - start
     env.close()
     stats = pstats.Stats(profiler)
