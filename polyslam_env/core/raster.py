@@ -63,6 +63,19 @@ def _point_cells(
 
 
 @njit
+def _beam(
+    theta: float, angle: float, r_raw: float, max_range: float, res: float
+) -> tuple[bool, float, float, float, float]:
+    """One beam of a scan: (returned, range r clipped to ``max_range`` (inf and nan → it), the
+    free length swept (r less half a cell when it returned), cos and sin of its direction)."""
+    returned = math.isfinite(r_raw)
+    r = r_raw if r_raw < max_range else max_range  # fmin: inf and nan → max_range
+    length = max(r - 0.5 * res, 0.0) if returned else r
+    phi = theta + angle
+    return returned, r, length, math.cos(phi), math.sin(phi)
+
+
+@njit
 def _scan_cells(
     poses: np.ndarray,
     angles: np.ndarray,
@@ -81,12 +94,7 @@ def _scan_cells(
     or no return for a hit); see :func:`scan_cells`."""
     for k in range(poses.shape[0]):
         for b in range(angles.shape[0]):
-            r_raw = ranges[k, b]
-            returned = math.isfinite(r_raw)
-            r = r_raw if r_raw < max_range else max_range  # fmin: inf and nan → max_range
-            length = max(r - 0.5 * res, 0.0) if returned else r
-            phi = poses[k, 2] + angles[b]
-            c, s = math.cos(phi), math.sin(phi)
+            returned, r, length, c, s = _beam(poses[k, 2], angles[b], ranges[k, b], max_range, res)
             for j in range(fractions.shape[0]):
                 t = length * fractions[j]
                 free[k, b, j] = cell_id(poses[k, 0] + t * c, poses[k, 1] + t * s, ox, oy, res, h, w)
@@ -115,12 +123,7 @@ def _mark_scans(
     for k in range(poses.shape[0]):
         own_free, own_hit = free[rows[k]], hit[rows[k]]
         for b in range(angles.shape[0]):
-            r_raw = ranges[k, b]
-            returned = math.isfinite(r_raw)
-            r = r_raw if r_raw < max_range else max_range
-            length = max(r - 0.5 * res, 0.0) if returned else r
-            phi = poses[k, 2] + angles[b]
-            c, s = math.cos(phi), math.sin(phi)
+            returned, r, length, c, s = _beam(poses[k, 2], angles[b], ranges[k, b], max_range, res)
             for j in range(fractions.shape[0]):
                 t = length * fractions[j]
                 cell = cell_id(poses[k, 0] + t * c, poses[k, 1] + t * s, ox, oy, res, h, w)
