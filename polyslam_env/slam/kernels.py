@@ -458,6 +458,7 @@ def beam_rows(
     shape_follows_pose: bool,
     pivot: np.ndarray,  # (n,)
     xi_var: np.ndarray,  # (n,)
+    turn_var: np.ndarray,  # (n,) variance of the heading change since the shape was fitted
     fit_half: np.ndarray,  # (n,)
     fit_inverse: np.ndarray,  # (M+1, M+1, M+1): (AᵀA)⁻¹ of order o in [o, :o+1, :o+1]
     n_fit: int,
@@ -511,6 +512,8 @@ def beam_rows(
             extra += inv_d * inv_d * fit_var
             lever = (xi[b] - pivot[j]) + b_slope_at * (value - value_c)
             h_theta += (1.0 if v1 else -1.0) * lever * inv_d
+            turn = lever * inv_d
+            extra += turn * turn * turn_var[j]
             var += extra
         innovation[k] = ranges[beams[b]] - t[b]
         if v1:
@@ -795,6 +798,7 @@ def screen_scan(
     shape_follows_pose: bool,
     pivot: np.ndarray,
     xi_var: np.ndarray,
+    turn_var: np.ndarray,
     fit_half: np.ndarray,
     fit_inverse: np.ndarray,
     n_fit: int,
@@ -812,7 +816,7 @@ def screen_scan(
     k = beam_rows(
         mean[0], mean[1], mean[2], angles, seen, np.arange(n_beams), reach, variate, order,
         shape, lo, hi, mean[3:], boxes, max_range, min_sine, range_var, model_var,
-        shape_follows_pose, pivot, xi_var, fit_half, fit_inverse, n_fit,
+        shape_follows_pose, pivot, xi_var, turn_var, fit_half, fit_inverse, n_fit,
         innovation, h_pose, c0_index, h_c0, variance,
     )  # fmt: skip
     nis = np.empty(k)
@@ -874,6 +878,7 @@ def update_scan(
     shape_follows_pose: bool,
     pivot: np.ndarray,
     xi_var: np.ndarray,
+    turn_var: np.ndarray,
     fit_half: np.ndarray,
     fit_inverse: np.ndarray,
     n_fit: int,
@@ -889,7 +894,8 @@ def update_scan(
     k = beam_rows(
         mean[0], mean[1], mean[2], angles, ranges, beams, reach, variate, order, shape, lo, hi,
         mean[3:], boxes, max_range, min_sine, range_var, model_var, shape_follows_pose, pivot,
-        xi_var, fit_half, fit_inverse, n_fit, innovation, h_pose, c0_index, h_c0, variance,
+        xi_var, turn_var, fit_half, fit_inverse, n_fit, innovation, h_pose, c0_index, h_c0,
+        variance,
     )  # fmt: skip
     if k == 0:
         return -1

@@ -196,11 +196,12 @@ def range_rows(
         float(max_range),
         float(min_sine),
         float(range_var),
-        np.zeros(n),
-        False,
-        np.zeros(n),
-        np.zeros(n),
-        np.ones(n),
+        np.zeros(n),  # model_var
+        False,  # shape_follows_pose
+        np.zeros(n),  # pivot
+        np.zeros(n),  # xi_var
+        np.zeros(n),  # turn_var
+        np.ones(n),  # fit_half
         np.zeros((width, width, width)),
         1,
         *rows,

@@ -102,6 +102,7 @@ class PolySlam:
         self.beam_angles = np.asarray(beam_angles, dtype=float)  # (B,)
         self._range_var = float(config.range_sigma**2)
         self._n_fit = config.eps_z + 1  # points of the cluster a landmark is born from
+        self._turn_var_per_step = float(config.odom_cov[2, 2])  # rad², see _turn_var
         self._outlier = np.empty(self.beam_angles.size, dtype=bool)  # the screen's flags
         self._min_sine = float(np.sin(np.deg2rad(config.tangent_min_deg)))
         self.max_range = float(max_range)
@@ -617,11 +618,26 @@ class PolySlam:
             self.config.shape_follows_pose,
             table.pivot,
             table.xi_var,
+            self._turn_var(),
             table.fit_half,
             _fit_inverse_table(n_fit, table.shape.shape[1] - 1),
             n_fit,
             self._gate,
         )
+
+    def _turn_var(self) -> np.ndarray:  # (n,)
+        """Per landmark, the variance of the robot's heading change since its shape was last
+        fitted: the odometry's heading variance per step times the steps since then.
+
+        ``shape_follows_pose`` takes a frozen shape's rotation to equal the current heading
+        error; it equals the heading error *when the shape was fitted*, and the two drift apart
+        by the heading noise the odometry adds in between (a random walk). Its effect on a
+        beam, ±lever·δ/D, is an error of that beam's range; its variance goes into R
+        (``kernels.beam_rows``). Without it the filter trusts walls made long ago, when it comes
+        back to them around a loop, as if its heading had not moved since.
+        """
+        age = self.step_count - np.asarray(self.table.changed_at, dtype=float)
+        return age * self._turn_var_per_step
 
     def _carry_stored_points(self, before: np.ndarray, after: np.ndarray) -> None:
         """Move cluster and Q_bad points rigidly with a pose correction.

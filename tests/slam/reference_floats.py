@@ -320,9 +320,11 @@ def beam_rows(
     max_range: float,
     boxes: Sequence[Sequence[float]],
     model: RowModel,
+    turn_var: Sequence[float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """(innovation, h_pose, c0 state index, h_c0, R diagonal) of the beams with a usable hit
-    (``boxes`` per candidate), or None."""
+    (``boxes`` per candidate), or None. ``turn_var`` (per landmark, default 0): the variance of
+    the heading change since its shape was fitted (``PolySlam._turn_var``)."""
     hits = cast(x, y, theta, list(angles), list(candidates), rows, list(c0s), max_range, boxes)
     range_var = model.range_sigma**2
     innovation, h_pose, c0_index, h_c0, variance = [], [], [], [], []
@@ -335,6 +337,8 @@ def beam_rows(
         if model.shape_follows_pose:
             lever, extra = _shape_terms(row, hit.xi, inv_d, model)
             h_theta += (1.0 if hit.variate == 1 else -1.0) * lever * inv_d
+            turn = lever * inv_d
+            extra += turn * turn * (0.0 if turn_var is None else turn_var[hit.landmark])
             var += extra
         innovation.append(float(ranges[b]) - hit.t)
         h_pose.append((h_x, h_y, h_theta))

@@ -171,16 +171,17 @@ def test_beam_rows__bit_identical_to_oracle(
     every = ref.boxes_near(boxes, np.array([x, x, y, y]), reach)  # the landmarks within reach
     order = rng.permutation(beams.size)  # any subset of beams, in any order
     subset = order[: rng.integers(1, beams.size + 1)]
+    turn_var = rng.uniform(0.0, 1e-4, len(polys))  # rad², the heading change since the fit
     want = ref.beam_rows(
         x, y, theta, beams[subset], ranges[subset], every.tolist(), table.rows(), c0s, 2.5,
-        boxes[every].tolist(), model,
+        boxes[every].tolist(), model, turn_var.tolist(),
     )  # fmt: skip
     width, k = table.shape.shape[1], subset.size
     got = (np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k), np.empty(k))
     used = kernels.beam_rows(
         x, y, theta, beams, ranges, subset, reach, *table.arrays(), c0s, boxes, 2.5,
         model.min_sine, model.range_sigma**2, table.model_var, follows, table.pivot,
-        table.xi_var, table.fit_half, _fit_inverse_table(model.eps_z + 1, width - 1),
+        table.xi_var, turn_var, table.fit_half, _fit_inverse_table(model.eps_z + 1, width - 1),
         model.eps_z + 1, *got,
     )  # fmt: skip
     if want is None:
