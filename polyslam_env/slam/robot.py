@@ -600,7 +600,9 @@ class PolySlam:
         has variance σ² a(t)ᵀM⁻¹a(t) (a = [1, t, …, t^m]); the constant part σ²/N is c0's and
         already in the state, the rest goes into R. It is small inside the fitted extent
         (~σ²·m/N) and grows fast where the curve is extrapolated. N = ε_Z + 1, the size of the
-        cluster a landmark is born from.
+        cluster a landmark is born from. And the rotation the shape is taken to share is the
+        heading error *when it was fitted*, which the current one has drifted from since: that
+        drift's variance (:meth:`_turn_var`) times (lever/D)² goes into R as well.
         """
         table, n_fit = self.table, self._n_fit
         return (

@@ -265,7 +265,7 @@ def test_choose_variate__follows_the_principal_direction(angle: float, length: f
     d = np.array([np.cos(angle), np.sin(angle)])
     wiggle = 0.001  # m, lateral
     # the wiggle tilts the points' principal direction by up to ~2·wiggle/length rad, and
-    # ||d₀| − |d₁|| ≈ √2 × the angle to the diagonal: within that, either answer is right
+    # ||d₀| − |d₁|| ≈ √2 × the angle to the diagonal: within twice that, either answer is right
     if abs(abs(d[0]) - abs(d[1])) < 2.0 * math.sqrt(2.0) * 2.0 * wiggle / length:
         return
     pts = np.array([1.0, -2.0]) + np.linspace(0, length, 9)[:, None] * d
