@@ -134,6 +134,9 @@ def simulate(
     sense → SLAM → exchange → record. ``RobotRun.hit_points`` are the true points the beams
     hit (noiseless ranges of each step's ray cast, placed with the true pose).
 
+    Without ``world_config`` / ``slam_config`` the run is the paper's: its five beams
+    (:func:`~polyslam_env.world.config.paper_world_config`) and the ``paper`` SLAM preset.
+
     ``shadow`` lists robots that get a second, lone SLAM fed the very same odometry and
     ranges but never exchanging: their single-robot result on the identical episode
     (``SimulationResult.shadow_runs``), as in the paper's Fig 8. Shadows change nothing else.

@@ -51,10 +51,10 @@ class OdometryConfig(Config):
 #: ``simulate`` and the benchmark's "paper sensors".
 PAPER_BEAMS_DEG: tuple[float, ...] = (90.0, 45.0, 0.0, -45.0, -90.0)
 #: The default: nine beams every 22.5° over the front half-plane, a sparse 180° scanner. On
-#: floors of 20 m and more the paper's five beams hit a quarter of the walls they touch fewer
-#: than six times within R = 0.35 m, too few for a landmark (ε_Z = 10); more beams than nine
-#: make the filter overconfident, because the landmark errors their ranges share are carried
-#: only within one step (README "Sensors" has both measurements).
+#: floors of 20 m and more the paper's five beams hit many of the walls they touch too few
+#: times for a landmark; more beams than nine make the filter overconfident, because the error
+#: a landmark's frozen shape gives every beam on it is bounded only within one step (README
+#: "SLAM on large floor plans").
 DEFAULT_BEAMS_DEG: tuple[float, ...] = tuple(90.0 - 22.5 * i for i in range(9))
 
 
