@@ -29,6 +29,7 @@ following.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -40,7 +41,7 @@ from policies.base import Policy, PolicyContext, PolicyError
 from policies.scripted import avoid_robots, beam_index, wall_follow_command
 from polyslam_env.core import raster
 
-__all__ = ["FrontierPolicy", "OwnMap", "grid_path"]
+__all__ = ["FrontierPolicy", "OwnMap", "Search", "grid_path"]
 
 #: 8-neighbour offsets (row, col) used for the graph edges (the other four are their reverses).
 _EDGE_OFFSETS = ((0, 1), (1, 0), (1, 1), (1, -1))
@@ -165,6 +166,25 @@ def grid_path(
     return np.asarray(dist).reshape(h, w), np.asarray(pred)
 
 
+@dataclass(frozen=True, eq=False)
+class Search:
+    """One planning search of :class:`FrontierPolicy`, on a window of its own map: arrays are
+    (H, W) over the window, cells are (row, col) in it."""
+
+    window: tuple[slice, slice]
+    start: tuple[int, int]  # the robot's cell
+    frontier: np.ndarray  # bool: reachable frontier cells, blacklisted goals removed
+    dist: np.ndarray  # m: path length from the robot (inf where unreachable)
+    pred: np.ndarray  # (H·W,) flat predecessor on the shortest path (−9999 where none)
+    gain: np.ndarray  # unknown fraction within gain_radius
+    utility: np.ndarray  # gain discounted by path length; −inf off the (preferred) frontier
+
+    def best(self) -> tuple[int, int]:
+        """The cell of best utility (the first in row-major order among ties)."""
+        r, c = np.unravel_index(int(np.argmax(self.utility)), self.utility.shape)
+        return int(r), int(c)
+
+
 class FrontierPolicy(Policy):
     """Nearest-frontier exploration with pure pursuit on the robot's own map (module doc)."""
 
@@ -234,6 +254,12 @@ class FrontierPolicy(Policy):
         detections = ctx.detections(observation)
         if self._claim(pose, detections) or self._needs_plan(pose):
             self._plan(pose)
+        return self._follow(pose, ranges, detections)
+
+    def _follow(self, pose: np.ndarray, ranges: np.ndarray, detections: np.ndarray) -> Any:
+        """The action that follows the path (the walls when there is none), kept clear of
+        mapped obstacles and of the robots the camera sees."""
+        ctx = self.context
         if self.path is None:
             v, omega, self._wall_error = wall_follow_command(
                 ranges, ctx, prev_error=self._wall_error
@@ -322,7 +348,14 @@ class FrontierPolicy(Policy):
         return bool(frontier[cell[0] - r0, cell[1] - c0])
 
     def _plan(self, pose: np.ndarray) -> None:
-        """Path to the frontier of best utility (:meth:`_select`), or None when none is left."""
+        """Path to the frontier of best utility (:meth:`_search`), or None when none is left."""
+        search = self._search(pose)
+        if search is not None:
+            self._go(search, search.best())
+
+    def _search(self, pose: np.ndarray) -> Search | None:
+        """Frontiers, path lengths and utilities around the robot (None when no frontier is
+        reachable). Clears the plan, which :meth:`_go` then sets."""
         self._since_plan = 0
         self.path, self.goal = None, None
         m = self.map
@@ -330,28 +363,35 @@ class FrontierPolicy(Policy):
         frontier, passable, cost = self._frontier_and_cost(window)
         rows, cols = m.cells(pose[None, :2])
         if len(rows) == 0:
-            return
+            return None
         start = (int(rows[0]) - window[0].start, int(cols[0]) - window[1].start)
         self._free_start(passable, m.obstacles[window], start)
         dist, pred = grid_path(passable, cost, start)
         frontier &= np.isfinite(dist)
         self._drop_blacklisted(frontier, window)
         if not frontier.any():
-            return
-        goal = self._select(frontier, dist * m.res, window)
-        width = frontier.shape[1]
-        cells = self._walk_back(pred, goal[0] * width + goal[1], start, width)
+            return None
+        dist = dist * m.res
+        gain, utility = self._utility(frontier, dist, window)
+        return Search(window, start, frontier, dist, pred, gain, utility)
+
+    def _go(self, search: Search, goal: tuple[int, int]) -> None:
+        """Plan the path of ``search`` to ``goal`` (row, col in its window)."""
+        m, window = self.map, search.window
+        width = search.frontier.shape[1]
+        cells = self._walk_back(search.pred, goal[0] * width + goal[1], search.start, width)
         self.path = np.array([m.centre(r + window[0].start, c + window[1].start) for r, c in cells])
         self.goal = (int(goal[0]) + window[0].start, int(goal[1]) + window[1].start)
 
-    def _select(
+    def _utility(
         self, frontier: np.ndarray, dist: np.ndarray, window: tuple[slice, slice]
-    ) -> tuple[int, int]:
-        """The frontier cell (row, col) of ``window`` with the best utility: the unknown area
-        within ``gain_radius`` of it (what its beams may reveal) discounted by
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The gain and the utility (H, W) of the cells of ``window``: the gain is the unknown
+        fraction of the square within ``gain_radius`` of a cell (what its beams may reveal),
+        the utility, on frontier cells only (−inf elsewhere), that gain discounted by
         ``exp(−path length / decay)``, ``dist`` (H, W) m being the path lengths. Cells at
         least ``min_goal`` away and not claimed by another robot are preferred whenever any
-        exist."""
+        exist: the others' utility is −inf then."""
         m = self.map
         known = m.free[window] | m.obstacles[window]
         size = 2 * self.gain_cells + 1
@@ -365,8 +405,7 @@ class FrontierPolicy(Policy):
             preferred &= ~self._claimed(pts, self._claims)
         if preferred.any() and not preferred.all():
             utility[rows[~preferred], cols[~preferred]] = -np.inf
-        r, c = np.unravel_index(int(np.argmax(utility)), utility.shape)
-        return int(r), int(c)
+        return gain, utility
 
     @staticmethod
     def _free_start(passable: np.ndarray, obst: np.ndarray, start: tuple[int, int]) -> None:
