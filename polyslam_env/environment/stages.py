@@ -363,8 +363,9 @@ def _map_change(
     polys = state.slams[i].polynomials()
     place = state.histories[i].true[0]  # the true start (see metrics.mapping)
     layout = state.world.layout
-    comp = metrics.completeness(polys, place, layout, tol=MAPPING_TOL, step=MAPPING_STEP)
-    error = metrics.map_error_length(polys, place, layout, step=MAPPING_STEP)
+    comp, error = metrics.completeness_and_error(
+        polys, place, layout, tol=MAPPING_TOL, step=MAPPING_STEP
+    )
     d_comp, state.completeness[i] = comp - state.completeness[i], comp
     d_error, state.map_error[i] = error - state.map_error[i], error
     return d_comp, d_error

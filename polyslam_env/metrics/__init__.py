@@ -13,6 +13,7 @@ from polyslam_env.metrics.boundary import boundary_points, boundary_samples, dis
 from polyslam_env.metrics.coverage import CoverageGrid, time_to_fraction
 from polyslam_env.metrics.mapping import (
     completeness,
+    completeness_and_error,
     completeness_seen,
     duplicates,
     has_map,
@@ -41,6 +42,7 @@ __all__ = [
     "boundary_points",
     "boundary_samples",
     "completeness",
+    "completeness_and_error",
     "completeness_seen",
     "cov_to_absolute",
     "distance_to_boundary",

@@ -281,6 +281,24 @@ def completeness(
     return _covered_fraction(np.vstack(pts) if pts else np.zeros((0, 2)), layout, tol, step)
 
 
+def completeness_and_error(
+    polys: Sequence[Polynomial],
+    start_pose: np.ndarray,
+    layout: Layout,
+    tol: float = 0.05,
+    step: float = 0.01,
+) -> tuple[float, float]:
+    """``(completeness(...), map_error_length(...))`` with the same arguments, from one
+    sampling of the map (the numbers are the same; the env's reward needs both each time a
+    map changes)."""
+    pts = map_points(polys, start_pose, step)
+    if not pts:
+        return _covered_fraction(np.zeros((0, 2)), layout, tol, step), 0.0
+    stacked = np.vstack(pts)
+    error = float(distance_to_boundary(stacked, layout).sum()) * step
+    return _covered_fraction(stacked, layout, tol, step), error
+
+
 def hit_fraction(
     hit_points_abs: np.ndarray, layout: Layout, tol: float = 0.05, step: float = 0.01
 ) -> float:

@@ -215,3 +215,16 @@ def test_env_final_metrics__short_episode_without_map_is_finite_and_flagged() ->
         assert all(math.isfinite(v) for v in m.values()), agent
         assert m["has_map"] == 0.0 and m["slam"] == 1.0  # 10 hits per landmark: none in 2 steps
         assert m["nu_mean"] == 0.0 and m["map_precision"] == 1.0
+
+
+@pytest.mark.parametrize("count", [0, 1, 7])
+def test_completeness_and_error__the_two_metrics_bit_for_bit(count: int) -> None:
+    # one sampling serves both (the env's reward): the same numbers as the two functions
+    rng = np.random.default_rng(count)
+    layout, pose = square_room(), np.array([0.05, 0.1, -0.03])
+    polys = _random_map(rng, count)
+    both = M.completeness_and_error(polys, pose, layout, tol=0.05, step=0.05)
+    assert both == (
+        M.completeness(polys, pose, layout, tol=0.05, step=0.05),
+        M.map_error_length(polys, pose, layout, step=0.05),
+    )
