@@ -22,7 +22,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -39,6 +39,7 @@ __all__ = [
     "checkpoints",
     "evaluate_coverage",
     "final_evaluation",
+    "learning_curve",
     "train",
 ]
 
@@ -102,9 +103,16 @@ class TrainConfig(Config):
     checkpoint_every: int = 10_000  # timesteps between checkpoints
     eval_episodes: int = 3  # final evaluation episodes (trained policy and random)
     torch_threads: int = 1  # torch intra-op threads (small MLPs: more threads only add overhead)
+    # what the network controls: "velocity", the (v, ω) of every step; "goals", which of the
+    # frontier planner's candidate goals to drive to every decide_every steps (policies.goals)
+    control: Literal["velocity", "goals"] = "velocity"
+    decide_every: int = 8  # steps per decision (control: goals)
+    # control: goals: every episode picks one of these maps (env.map when empty); its layout
+    # seed lies below EVAL_SEED, so evaluation seeds are layouts never trained on
+    maps: tuple[str, ...] = ()
 
     def validate(self) -> None:
-        for name in ("timesteps", "num_envs", "checkpoint_every", "torch_threads"):
+        for name in ("timesteps", "num_envs", "checkpoint_every", "torch_threads", "decide_every"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name}: must be >= 1, got {getattr(self, name)!r}")
         for name in ("num_cpus", "eval_episodes"):
@@ -120,11 +128,19 @@ class TrainConfig(Config):
                 f"env.action.mode: must be 'continuous' for PPO training, got"
                 f" {self.env.action.mode!r}"
             )
+        if self.control not in ("velocity", "goals"):
+            raise ConfigError(f"control: must be 'velocity' or 'goals', got {self.control!r}")
+        if self.maps and self.control != "goals":
+            raise ConfigError("maps: only with control: goals (velocity training uses env.map)")
 
     @property
     def slots(self) -> int:
         """Robot slots of the vectorised env (timesteps per vectorised step)."""
         return self.num_envs * self.env.num_robots
+
+    def env_configs(self) -> list[EnvConfig]:
+        """The env config of every training map (``maps``, or ``env.map`` alone)."""
+        return [self.env.replace(map=m) for m in self.maps] if self.maps else [self.env]
 
 
 # -- checkpoints -----------------------------------------------------------------------------
@@ -331,6 +347,19 @@ def _metrics_callback(num_robots: int) -> Any:
     return _EpisodeMetrics()
 
 
+def _make_venv(cfg: TrainConfig) -> Any:
+    """The SB3 vectorised env of ``cfg``: robot slots of the env itself (``control:
+    velocity``) or of the goal-choice env (``control: goals``)."""
+    from polyslam_env.environment.vector import make_vec_env, vectorise
+
+    if cfg.control == "goals":
+        from polyslam_env.apps.goal_env import GoalChoiceEnv
+
+        team = GoalChoiceEnv(cfg.env_configs(), cfg.decide_every, seed_limit=EVAL_SEED)
+        return vectorise(team, cfg.num_envs, num_cpus=cfg.num_cpus, seed=cfg.seed)
+    return make_vec_env(cfg.env, cfg.num_envs, num_cpus=cfg.num_cpus, seed=cfg.seed)
+
+
 def _make_model(cfg: TrainConfig, venv: Any, out: Path, resume: bool) -> Any:
     """A new PPO, or the newest readable checkpoint under ``out`` when resuming."""
     from stable_baselines3 import PPO
@@ -365,8 +394,6 @@ def train(
     check_run_folder(out, resume)
     import torch
 
-    from polyslam_env.environment.vector import make_vec_env
-
     torch.set_num_threads(cfg.torch_threads)
     terminated = threading.Event()
     installed, previous = False, None
@@ -376,7 +403,7 @@ def train(
         previous = signal.signal(signal.SIGTERM, lambda signum, frame: terminated.set())
         installed = True
     try:
-        venv = make_vec_env(cfg.env, cfg.num_envs, num_cpus=cfg.num_cpus, seed=cfg.seed)
+        venv = _make_venv(cfg)
         try:
             model = _make_model(cfg, venv, out, resume)
             remaining = cfg.timesteps - model.num_timesteps
@@ -442,7 +469,8 @@ def evaluate_coverage(
 
 
 def final_evaluation(cfg: TrainConfig, checkpoint: Path, timesteps: int) -> dict[str, Any]:
-    """The trained policy vs the registered ``random`` policy on the same seeded episodes."""
+    """The trained policy vs the registered ``random`` policy (and ``frontier``, whose goals
+    a ``control: goals`` network chooses among) on the same seeded episodes of ``cfg.env``."""
     start = time.perf_counter()
     report = {
         "checkpoint": str(checkpoint),
@@ -452,5 +480,44 @@ def final_evaluation(cfg: TrainConfig, checkpoint: Path, timesteps: int) -> dict
         "ppo": evaluate_coverage(cfg.env, "ppo", cfg.eval_episodes, checkpoint=checkpoint),
         "random": evaluate_coverage(cfg.env, "random", cfg.eval_episodes),
     }
+    if cfg.control == "goals":
+        report["frontier"] = evaluate_coverage(cfg.env, "frontier", cfg.eval_episodes)
     report["eval_time_s"] = time.perf_counter() - start
     return report
+
+
+#: The TensorBoard tag of the learning curve.
+CURVE_TAG = "polyslam/team_coverage"
+
+
+def learning_curve(out: str | Path) -> tuple[Path, Path] | None:
+    """Write ``OUT/learning_curve.csv`` (timesteps, team coverage at the end of the episodes
+    that ended in each logging interval) and ``OUT/learning_curve.png`` from the run's
+    TensorBoard logs (every event file under ``OUT/tb``, so a resumed run's too), with a
+    running mean over 10 intervals; None when no episode has ended yet."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    out = Path(out)
+    points: dict[int, float] = {}
+    for events in sorted((out / "tb").rglob("events.out.tfevents.*")):
+        acc = EventAccumulator(str(events), size_guidance={"scalars": 0})
+        acc.Reload()
+        if CURVE_TAG in acc.Tags().get("scalars", []):
+            points.update({int(e.step): float(e.value) for e in acc.Scalars(CURVE_TAG)})
+    if not points:
+        return None
+    steps = np.array(sorted(points))
+    values = np.array([points[s] for s in steps])
+    csv = out / "learning_curve.csv"
+    np.savetxt(
+        csv,
+        np.column_stack([steps, values]),
+        delimiter=",",
+        header="timesteps,team_coverage",
+        comments="",
+        fmt=["%d", "%.6f"],
+    )
+    from polyslam_env.render.plots import plot_learning_curve
+
+    png = plot_learning_curve(steps, values, out / "learning_curve.png")
+    return csv, png

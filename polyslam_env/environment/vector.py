@@ -39,7 +39,7 @@ from polyslam_env.environment.parallel import parallel_env
 if TYPE_CHECKING:
     from polyslam_env.environment.config import EnvConfig
 
-__all__ = ["FixedAgents", "SB3VecEnvAdapter", "make_vec_env"]
+__all__ = ["FixedAgents", "SB3VecEnvAdapter", "make_vec_env", "vectorise"]
 
 Step = tuple[
     dict[str, np.ndarray],
@@ -204,7 +204,23 @@ def make_vec_env(
     """
     if num_envs < 1:
         raise ValueError(f"num_envs: must be >= 1, got {num_envs}")
-    markov = ss.pettingzoo_env_to_vec_env_v1(FixedAgents(parallel_env(config, **overrides)))
+    team = FixedAgents(parallel_env(config, **overrides))
+    return vectorise(team, num_envs, num_cpus=num_cpus, seed=seed, monitor=monitor)
+
+
+def vectorise(
+    team: ParallelEnv[str, Any, Any],
+    num_envs: int,
+    num_cpus: int = 0,
+    seed: int | None = None,
+    monitor: bool = True,
+) -> VecEnv:
+    """An SB3 ``VecEnv`` of ``num_envs`` copies of ``team``, a parallel env whose agents never
+    leave mid-episode (:class:`FixedAgents`, or the goal-choice env of ``polyslam train``);
+    arguments as :func:`make_vec_env`."""
+    if num_envs < 1:
+        raise ValueError(f"num_envs: must be >= 1, got {num_envs}")
+    markov = ss.pettingzoo_env_to_vec_env_v1(team)
     wrapper = ss.concat_vec_envs_v1(
         markov, num_envs, num_cpus=num_cpus, base_class="stable_baselines3"
     )

@@ -89,3 +89,24 @@ def plot_runs(
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
+
+
+def plot_learning_curve(steps: np.ndarray, values: np.ndarray, path: str | Path) -> Path:
+    """Team coverage (N,) against training timesteps (N,), with a running mean over 10 points;
+    a PNG at ``path``."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    ax.plot(steps, values, ".", color="tab:blue", alpha=0.35, label="per logging interval")
+    if len(values) >= 10:
+        mean = np.convolve(values, np.ones(10) / 10, mode="valid")
+        ax.plot(steps[9:], mean, color="tab:blue", label="running mean of 10")
+    ax.set_xlabel("timesteps (robot-decisions or robot-steps)")
+    ax.set_ylabel("team coverage at episode end")
+    ax.set_ylim(0.0, 1.0)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
