@@ -5,23 +5,14 @@ from __future__ import annotations
 import weakref
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from polyslam_env.metrics.kernels import wall_distances
 from polyslam_env.world.layout import Layout
-
-# Spacing of the dense boundary samples behind the distance tree: the nearest sample is at most
-# half of it away from the true nearest boundary point, so distances err by ≤ 1 mm at worst
-# (and are exact whenever the nearest segment is among the K_REFINE nearest samples' segments).
-_TREE_SPACING = 0.002
-_K_REFINE = 4
-
+from polyslam_env.world.nearby import wall_index
 
 # -- the true boundary ----------------------------------------------------------------------
 _BoundaryCache = dict[tuple[str, float], tuple[np.ndarray, ...]]
 _CACHE: weakref.WeakKeyDictionary[Layout, _BoundaryCache] = weakref.WeakKeyDictionary()
-_TREES: weakref.WeakKeyDictionary[Layout, tuple[cKDTree | None, np.ndarray]] = (
-    weakref.WeakKeyDictionary()
-)
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -86,45 +77,14 @@ def boundary_points(layout: Layout, step: float = 0.01) -> np.ndarray:  # (M, 2)
     return boundary_samples(layout, step)[0]
 
 
-def _wall_tree(layout: Layout) -> tuple[cKDTree | None, np.ndarray]:
-    """KD-tree over dense wall samples (with ends) and each sample's segment id; cached."""
-    if layout not in _TREES:
-        if len(layout.segments) == 0:
-            _TREES[layout] = (None, np.zeros(0, dtype=int))
-        else:
-            pts, _, seg_id = _segment_samples(layout.segments, _TREE_SPACING, midpoints=False)
-            _TREES[layout] = (cKDTree(pts), seg_id)
-    return _TREES[layout]
-
-
-def _paired_segment_distance(points: np.ndarray, segs: np.ndarray) -> np.ndarray:
-    """Distance from points (…, 2) to the segment (…, 4) paired with each: shape (…)."""
-    a, b = segs[..., 0:2], segs[..., 2:4]
-    ab = b - a
-    denom = np.maximum(np.einsum("...i,...i->...", ab, ab), 1e-300)
-    t = np.clip(np.einsum("...i,...i->...", points - a, ab) / denom, 0.0, 1.0)
-    return np.asarray(np.linalg.norm(points - (a + t[..., None] * ab), axis=-1))
-
-
 def distance_to_boundary(points: np.ndarray, layout: Layout) -> np.ndarray:  # (N,)
-    """Distance from each point (N, 2) to the nearest true boundary point (walls, pillars).
-
-    Walls: a KD-tree over samples every 2 mm gives the K nearest samples; the exact
-    point-to-segment distance to their segments refines it. The result lies between the exact
-    distance and the exact distance + 1 mm, and is exact in practice. Pillars: exact |‖q−c‖ − r|.
-    """
-    q = np.asarray(points, dtype=float).reshape(-1, 2)
+    """Distance from each point (N, 2) to the nearest true boundary point (walls, pillars),
+    exact: walls by :func:`~polyslam_env.metrics.kernels.wall_distances` over the layout's
+    static wall index, pillars as |‖q−c‖ − r|."""
+    q = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 2))
     if len(layout.segments) == 0 and len(layout.pillars) == 0:
         raise ValueError(f"layout {layout.name!r} has no walls and no pillars")
-    dist = np.full(len(q), np.inf)
-    tree, seg_id = _wall_tree(layout)
-    if tree is not None and len(q):
-        k = min(_K_REFINE, tree.n)
-        d_s, idx = tree.query(q, k=k)
-        d_s, idx = d_s.reshape(len(q), k), idx.reshape(len(q), k)
-        cand = layout.segments[seg_id[idx]]  # (N, k, 4)
-        exact = _paired_segment_distance(q[:, None, :], cand).min(axis=1)
-        dist = np.minimum(exact, d_s[:, 0])
+    dist = wall_distances(q, *wall_index(layout).arrays)
     if len(layout.pillars):
         p = np.asarray(layout.pillars, dtype=float)
         dp = np.abs(np.hypot(q[:, None, 0] - p[:, 0], q[:, None, 1] - p[:, 1]) - p[:, 2])

@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 
 from polyslam_env.core.geometry import transform_points
 from polyslam_env.metrics.boundary import boundary_samples, distance_to_boundary
+from polyslam_env.metrics.kernels import covered
 from polyslam_env.metrics.pose import _check_pose
 from polyslam_env.slam.polynomial import Polynomial, polyval_rows
 from polyslam_env.world.layout import Layout
@@ -261,8 +262,8 @@ def _covered_fraction(points: np.ndarray, layout: Layout, tol: float, step: floa
     total = float(weights.sum())
     if len(pts) == 0 or total == 0.0:
         return 0.0
-    d, _ = cKDTree(pts).query(bpts, k=1, distance_upper_bound=tol)
-    return float(weights[np.isfinite(d)].sum()) / total
+    near = covered(bpts, np.ascontiguousarray(pts), float(tol))
+    return float(weights[near].sum()) / total
 
 
 def completeness(

@@ -1,0 +1,132 @@
+"""Compiled kernels of the mapping metrics the reward recomputes whenever a map changes.
+
+* :func:`wall_distances`: the exact distance of each point to the nearest wall segment, over
+  the layout's static :class:`~polyslam_env.world.nearby.WallIndex`. The grid is searched in
+  square rings of cells around the point's cell; a segment's nearest point to p lies in a cell
+  that lists it, and every cell of ring k+1 or beyond is at least k cells from p, so once the
+  best distance is ≤ k · cell after ring k, no unvisited segment can be nearer.
+* :func:`covered`: which boundary samples lie strictly within ``tol`` of some map point (the
+  completeness), with the map points bucketed in a grid of side ≥ ``tol`` so that only the
+  3 × 3 buckets around a sample are searched.
+
+Oracles: brute force over all segments and all points (``tests/metrics/test_kernels.py``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from polyslam_env.core.jit import njit
+from polyslam_env.world.kernels import _segment_distance
+
+__all__ = ["covered", "wall_distances"]
+
+#: Most buckets a side in :func:`covered`.
+_MAX_BUCKETS = 256
+
+
+@njit
+def wall_distances(
+    points: np.ndarray,
+    segments: np.ndarray,
+    origin: np.ndarray,
+    cell: float,
+    rows: int,
+    cols: int,
+    starts: np.ndarray,
+    items: np.ndarray,
+) -> np.ndarray:
+    """Distance (N,) from each point (N, 2) to the nearest segment of the index (arguments
+    in :attr:`WallIndex.arrays` order); inf when the index has no segment."""
+    n = points.shape[0]
+    out = np.full(n, np.inf)
+    if rows == 0:
+        return out
+    for i in range(n):
+        px, py = points[i, 0], points[i, 1]
+        c = math.floor((px - origin[0]) / cell)
+        r = math.floor((py - origin[1]) / cell)
+        best = np.inf
+        k = 0
+        while True:
+            for rr in range(r - k, r + k + 1):
+                if rr < 0 or rr >= rows:
+                    continue
+                on_edge = rr == r - k or rr == r + k
+                step = 1 if on_edge else 2 * k  # inner rows: only the ring's two ends
+                cc = c - k
+                while cc <= c + k:
+                    if 0 <= cc < cols:
+                        flat = rr * cols + cc
+                        for j in range(starts[flat], starts[flat + 1]):
+                            d = _segment_distance(px, py, segments, items[j])
+                            if d < best:
+                                best = d
+                    cc += step
+            if best <= k * cell:
+                break
+            if r - k <= 0 and r + k >= rows - 1 and c - k <= 0 and c + k >= cols - 1:
+                break  # every cell of the grid visited
+            k += 1
+        out[i] = best
+    return out
+
+
+@njit
+def covered(samples: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
+    """Whether each sample (M, 2) has a point (N, 2) strictly within ``tol`` (> 0):
+    dx² + dy² < tol²."""
+    m = samples.shape[0]
+    out = np.zeros(m, dtype=np.bool_)
+    n = points.shape[0]
+    if n == 0 or m == 0 or not tol > 0.0:
+        return out
+    x0, y0 = points[0, 0], points[0, 1]
+    x1, y1 = x0, y0
+    for i in range(n):
+        x0, y0 = min(x0, points[i, 0]), min(y0, points[i, 1])
+        x1, y1 = max(x1, points[i, 0]), max(y1, points[i, 1])
+    # buckets of side ≥ tol (so a sample's 3 × 3 buckets hold every point within tol), at
+    # most _MAX_BUCKETS a side
+    side = max(tol, max(x1 - x0, y1 - y0) / _MAX_BUCKETS)
+    ncols = 1
+    nrows = 1
+    keys = np.empty(n, dtype=np.int64)
+    cx = np.empty(n, dtype=np.int64)
+    cy = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        cx[i] = math.floor((points[i, 0] - x0) / side)
+        cy[i] = math.floor((points[i, 1] - y0) / side)
+        ncols = max(ncols, cx[i] + 1)
+        nrows = max(nrows, cy[i] + 1)
+    for i in range(n):
+        keys[i] = cy[i] * ncols + cx[i]
+    order = np.argsort(keys, kind="mergesort")
+    starts = np.zeros(nrows * ncols + 1, dtype=np.int64)
+    for i in range(n):
+        starts[keys[i] + 1] += 1
+    for b in range(nrows * ncols):
+        starts[b + 1] += starts[b]
+    tol2 = tol * tol
+    for s in range(m):
+        sx, sy = samples[s, 0], samples[s, 1]
+        c = math.floor((sx - x0) / side)
+        r = math.floor((sy - y0) / side)
+        found = False
+        for rr in range(max(r - 1, 0), min(r + 1, nrows - 1) + 1):
+            for cc in range(max(c - 1, 0), min(c + 1, ncols - 1) + 1):
+                b = rr * ncols + cc
+                for j in range(starts[b], starts[b + 1]):
+                    p = order[j]
+                    dx, dy = sx - points[p, 0], sy - points[p, 1]
+                    if dx * dx + dy * dy < tol2:
+                        found = True
+                        break
+                if found:
+                    break
+            if found:
+                break
+        out[s] = found
+    return out

@@ -1,0 +1,78 @@
+"""The mapping metrics' kernels against brute force: exact wall distances (the ring search
+over the wall index stops only when no unvisited segment can be nearer) and the covered
+samples of the completeness."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from polyslam_env.metrics.boundary import distance_to_boundary
+from polyslam_env.metrics.kernels import covered, wall_distances
+from polyslam_env.world.generators import make_generator
+from polyslam_env.world.layout import Layout
+from polyslam_env.world.nearby import WallIndex
+
+
+def _brute_distances(points: np.ndarray, segments: np.ndarray) -> np.ndarray:  # (N,)
+    """The oracle: min over every segment of the closed-form point–segment distance."""
+    a, b = segments[None, :, 0:2], segments[None, :, 2:4]  # (1, S, 2)
+    ab = b - a
+    p = points[:, None, :]  # (N, 1, 2)
+    t = np.clip(((p - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-300), 0.0, 1.0)
+    d = p - (a + t[..., None] * ab)
+    return np.sqrt((d * d).sum(-1)).min(axis=1)
+
+
+@pytest.mark.parametrize(("generator", "seed"), [("office_floor", 0), ("warehouse", 3)])
+@pytest.mark.parametrize("cell", [0.5, 0.13, 3.0])
+def test_wall_distances__equal_brute_force_inside_and_far_outside(
+    generator: str, seed: int, cell: float
+) -> None:
+    layout = make_generator(generator)(np.random.default_rng(seed))
+    x0, y0, x1, y1 = layout.bounds
+    rng = np.random.default_rng(seed)
+    inside = rng.uniform([x0, y0], [x1, y1], size=(400, 2))
+    # points on the walls, near corners, and far outside the index's grid
+    on = layout.segments[rng.integers(len(layout.segments), size=50)]
+    on_walls = on[:, 0:2] + rng.uniform(0, 1, (50, 1)) * (on[:, 2:4] - on[:, 0:2])
+    far = rng.uniform([x0 - 30, y0 - 30], [x1 + 30, y1 + 30], size=(100, 2))
+    corners = layout.segments[:40, 0:2] + rng.normal(0, 1e-3, (min(40, len(layout.segments)), 2))
+    points = np.ascontiguousarray(np.vstack([inside, on_walls, far, corners]))
+    index = WallIndex.build(layout.segments, cell=cell)
+    got = wall_distances(points, *index.arrays)
+    # the same closed form, only the minimum's search differs: equal to round-off of the
+    # coordinates (1e-12 of metres)
+    np.testing.assert_allclose(got, _brute_distances(points, layout.segments), rtol=0, atol=1e-12)
+
+
+def test_wall_distances__no_walls_is_inf() -> None:
+    index = WallIndex.build(np.zeros((0, 4)))
+    assert np.all(np.isinf(wall_distances(np.zeros((3, 2)), *index.arrays)))
+
+
+def test_distance_to_boundary__pillars_and_walls() -> None:
+    box = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0], [0.0, 3.0], [0.0, 0.0]])
+    layout = Layout("box", (box,), pillars=((2.0, 1.5, 0.25),))
+    q = np.array([[2.0, 1.0], [0.5, 1.5], [2.0, 2.9]])
+    np.testing.assert_allclose(distance_to_boundary(q, layout), [0.25, 0.5, 0.1], atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("tol", [0.05, 0.3])
+def test_covered__equals_brute_force(seed: int, tol: float) -> None:
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(0, 5, size=(int(rng.integers(1, 300)), 2))
+    if seed == 3:  # spread far: the bucket side grows past tol
+        points = np.vstack([points, [[400.0, -250.0]]])
+    samples = rng.uniform(-1, 6, size=(2000, 2))
+    d2 = ((samples[:, None, :] - points[None, :, :]) ** 2).sum(-1)  # (M, N)
+    expected = (d2 < tol * tol).any(axis=1)
+    assert np.array_equal(covered(samples, np.ascontiguousarray(points), tol), expected)
+
+
+def test_covered__empty_inputs_and_zero_tolerance() -> None:
+    samples = np.ones((4, 2))
+    assert not covered(samples, np.zeros((0, 2)), 0.1).any()
+    assert not covered(samples, samples.copy(), 0.0).any()
+    assert covered(np.zeros((0, 2)), samples, 0.1).shape == (0,)
