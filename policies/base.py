@@ -164,7 +164,7 @@ POLICIES: dict[str, PolicyFactory | str] = {
     "frontier": "policies.frontier:FrontierPolicy",
     "wall_follow": "policies.scripted:WallFollowPolicy",
     "random": "policies.scripted:RandomPolicy",
-    "ppo": "policies.ppo:PPOPolicy",
+    "ppo": "policies.ppo:make_ppo",
 }
 
 

@@ -1,8 +1,15 @@
 """``ppo``: a policy trained with Stable-Baselines3 PPO and parameter sharing.
 
 The same network acts for every robot, each on its own observation. Checkpoints are SB3 ``.zip``
-files written by ``polyslam train``; their action space is the unit box of
-:class:`polyslam_env.environment.vector.FixedAgents`, mapped here to the env's physical (v, ω).
+files written by ``polyslam train``, of one of two kinds, told apart by their action space:
+
+* ``control: goals`` (a ``Discrete`` action): :class:`LearnedGoalPolicy`, the frontier planner
+  of :class:`policies.goals.GoalPolicy` with the goal among its candidates picked by the
+  network every ``decide_every`` steps. The package ships one (:data:`SHIPPED`), used when no
+  checkpoint is given.
+* ``control: velocity`` (a ``Box``): :class:`PPOPolicy`, the network's (v, ω) on the unit box of
+  :class:`polyslam_env.environment.vector.FixedAgents`, mapped to the env's physical limits.
+
 torch and SB3 are imported when a checkpoint is loaded, not before.
 """
 
@@ -16,8 +23,20 @@ import numpy as np
 from gymnasium import spaces
 
 from policies.base import CheckpointError, Policy, PolicyContext
+from policies.goals import CANDIDATES, GoalPolicy, feature_size
 
-__all__ = ["CheckpointError", "PPOPolicy", "load_checkpoint"]
+__all__ = [
+    "SHIPPED",
+    "CheckpointError",
+    "LearnedGoalPolicy",
+    "PPOPolicy",
+    "load_checkpoint",
+    "make_ppo",
+]
+
+#: The learned goal-choice policy shipped with the package (README "Learned policy" says how
+#: it was trained: ``polyslam train --config configs/train_goals.yaml``).
+SHIPPED = Path(__file__).resolve().parent / "checkpoints" / "ppo_goals.zip"
 
 #: Loaded models by (resolved path, modification time): robots of a team share one network.
 _CACHE: dict[tuple[str, int], Any] = {}
@@ -41,6 +60,63 @@ def load_checkpoint(path: str | Path) -> Any:
                 f"checkpoint {str(path)!r}: cannot load ({type(err).__name__}: {err})"
             ) from None
     return _CACHE[key]
+
+
+def make_ppo(
+    context: PolicyContext, checkpoint: str | Path | None = None, deterministic: bool = True
+) -> Policy:
+    """The ``ppo`` policy of ``checkpoint`` (the shipped one when None), of the kind its
+    action space says (module doc)."""
+    if checkpoint is None:
+        if not SHIPPED.is_file():
+            raise CheckpointError(
+                f"ppo: no checkpoint given and the shipped one is missing ({SHIPPED});"
+                " pass --checkpoint FILE (one written by polyslam train)"
+            )
+        checkpoint = SHIPPED
+    model = load_checkpoint(checkpoint)
+    if isinstance(model.action_space, spaces.Discrete):
+        return LearnedGoalPolicy(context, checkpoint, deterministic)
+    return PPOPolicy(context, checkpoint, deterministic)
+
+
+make_ppo.takes_checkpoint = True  # type: ignore[attr-defined]
+
+
+class LearnedGoalPolicy(GoalPolicy):
+    """:class:`GoalPolicy` with the network of a ``control: goals`` checkpoint choosing the
+    slot (the most likely one by default; a draw with the step's ``rng`` when not
+    ``deterministic``). ``frontier`` keyword arguments go to the planner."""
+
+    def __init__(
+        self,
+        context: PolicyContext,
+        checkpoint: str | Path,
+        deterministic: bool = True,
+        decide_every: int = 8,
+        **frontier: Any,
+    ) -> None:
+        self.model = load_checkpoint(checkpoint)
+        self.deterministic = deterministic
+        shape, act = self.model.observation_space.shape, self.model.action_space
+        if shape != (feature_size(),) or getattr(act, "n", None) != CANDIDATES:
+            raise CheckpointError(
+                f"checkpoint {str(checkpoint)!r}: not a goal-choice network of this version"
+                f" (observations {shape}, actions {act}; expected ({feature_size()},) and"
+                f" Discrete({CANDIDATES}))"
+            )
+        super().__init__(context, decide_every=decide_every, **frontier)
+
+    def choose(self, features: np.ndarray, rng: np.random.Generator) -> int:
+        import torch
+
+        policy = self.model.policy
+        with torch.no_grad():
+            dist = policy.get_distribution(policy.obs_to_tensor(features[None])[0])
+            probs = dist.distribution.probs.numpy().reshape(-1).astype(float)  # (K,)
+        if self.deterministic:
+            return int(np.argmax(probs))
+        return int(rng.choice(len(probs), p=probs / probs.sum()))
 
 
 class PPOPolicy(Policy):

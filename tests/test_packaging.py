@@ -33,3 +33,9 @@ def test_pyproject__ships_maps_and_paths() -> None:
     assert {"maps/*.yaml", "paths/*.yaml"} <= set(patterns)
     assert list((ROOT / "configs" / "maps").glob("*.yaml"))
     assert list((ROOT / "configs" / "paths").glob("*.yaml"))
+
+
+def test_pyproject__ships_the_learned_policy() -> None:
+    data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert "checkpoints/*.zip" in data["package-data"]["policies"]
+    assert (ROOT / "policies" / "checkpoints" / "ppo_goals.zip").is_file()

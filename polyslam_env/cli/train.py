@@ -60,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
         TrainingTerminated,
         check_run_folder,
         final_evaluation,
+        learning_curve,
         train,
     )
     from polyslam_env.core.errors import PolyslamError
@@ -75,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
     cfg = TrainConfig.from_yaml(path, **overrides)
     out = Path(args.out)
     if args.backend == "rllib":
+        if cfg.control != "velocity":
+            raise PolyslamError(f"control: {cfg.control!r} trains with --backend sb3 only")
         return _run_rllib(args, cfg, out)
     if args.address is not None:
         raise PolyslamError("--address: only with --backend rllib")
@@ -88,6 +91,9 @@ def run(args: argparse.Namespace) -> int:
         return 143  # 128 + SIGTERM, as a shell reports a process that SIGTERM ended
     seconds = time.perf_counter() - start
     print(f"trained to {model.num_timesteps} timesteps in {seconds:.0f} s; saved {checkpoint}")
+    curve = learning_curve(out)
+    if curve is not None:
+        print(f"learning curve: {curve[1]} ({curve[0]})")
     if cfg.eval_episodes == 0:
         return 0
     report = final_evaluation(cfg, checkpoint, model.num_timesteps)
@@ -131,10 +137,13 @@ def _run_rllib(args: argparse.Namespace, cfg: Any, out: Path) -> int:
 
 
 def _print_evaluation(report: dict[str, Any], learned: str, episodes: int, path: Path) -> None:
-    """One line: the learned policy's team coverage and return next to ``random``'s."""
+    """One line: the learned policy's team coverage and return next to ``random``'s (and
+    ``frontier``'s when the report has it)."""
     ours, rnd = report[learned], report["random"]
+    frontier = report.get("frontier")
+    also = "" if frontier is None else f", frontier {100 * frontier['coverage_mean']:.1f} %"
     print(
         f"final evaluation, {episodes} episodes: team coverage"
         f" {learned} {100 * ours['coverage_mean']:.1f} %, random {100 * rnd['coverage_mean']:.1f} %"
-        f" (return {ours['return_mean']:.2f} vs {rnd['return_mean']:.2f}); wrote {path}"
+        f"{also} (return {ours['return_mean']:.2f} vs {rnd['return_mean']:.2f}); wrote {path}"
     )

@@ -255,3 +255,66 @@ def test_train__tensorboard_has_the_episode_metrics(tmp_path: Path) -> None:
     assert coverage and all(0.0 < c <= 1.0 for c in coverage)
     low = acc.Scalars("polyslam/robot_coverage_min")[-1].value
     assert low <= acc.Scalars("polyslam/robot_coverage_max")[-1].value
+
+
+def test_shipped_goals_config__loads() -> None:
+    cfg = TrainConfig.from_yaml(configs_dir() / "train_goals.yaml")
+    assert cfg.control == "goals" and len(cfg.env_configs()) == 2
+    assert {c.map for c in cfg.env_configs()} == {"generator:office_floor", "generator:warehouse"}
+
+
+@pytest.mark.parametrize(
+    ("top", "match"),
+    [({"control": "legs"}, "control"), ({"maps": ["generator:loop"]}, "maps: only with")],
+)
+def test_train_config__bad_control_and_maps_are_named(
+    tmp_path: Path, top: dict[str, Any], match: str
+) -> None:
+    with pytest.raises(ConfigError, match=match):
+        TrainConfig.from_yaml(_tiny_config(tmp_path, **top))
+
+
+def test_cli_train__goals_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # control: goals on two maps: trains, writes the learning curve, evaluates against
+    # random and frontier, and the checkpoint plays as the goal-choice ppo policy
+    path = _tiny_config(
+        tmp_path,
+        control="goals",
+        decide_every=4,
+        maps=["generator:rooms", "generator:cave"],
+        timesteps=96,
+        checkpoint_every=48,
+        env={"map": "generator:rooms", "num_robots": 2, "max_steps": 24},
+    )
+    out = tmp_path / "out"
+    assert main(["train", "--config", str(path), "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "frontier" in printed and "learning curve" in printed
+    report = json.loads((out / "final_eval.json").read_text())
+    assert {"ppo", "random", "frontier"} <= set(report)
+    assert (out / "learning_curve.png").stat().st_size > 0
+    steps, coverage = np.loadtxt(out / "learning_curve.csv", delimiter=",", skiprows=1).T
+    assert np.all(np.diff(steps) > 0) and np.all((coverage >= 0) & (coverage <= 1))
+    _, ckpt = checkpoints(out / "checkpoints")[-1]
+    env = parallel_env(map="generator:rooms", num_robots=2, max_steps=24)
+    from policies.ppo import LearnedGoalPolicy
+
+    assert isinstance(make_policy("ppo", env, "robot_0", checkpoint=ckpt), LearnedGoalPolicy)
+    # a velocity checkpoint of the same folder layout loads as the (v, ω) network
+    velocity = tmp_path / "velocity"
+    path = _tiny_config(tmp_path, timesteps=32, eval_episodes=0)
+    assert main(["train", "--config", str(path), "--out", str(velocity), "--quiet"]) == 0
+    tiny = parallel_env(TrainConfig.from_yaml(path).env)
+    ckpt = checkpoints(velocity / "checkpoints")[-1][1]
+    assert isinstance(make_policy("ppo", tiny, "robot_0", checkpoint=ckpt), PPOPolicy)
+
+
+def test_cli_train__goals_on_rllib_exits_2_with_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _tiny_config(tmp_path, control="goals")
+    args = ["train", "--backend", "rllib", "--config", str(path), "--out", str(tmp_path / "o")]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert "sb3" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "o").exists()

@@ -144,15 +144,30 @@ def test_run__empty_config_file_is_all_defaults(tmp_path: Path) -> None:
     assert main(["run", *QUICK, "--config", str(config), "--out", str(tmp_path)]) == 0
 
 
-def test_run__ppo_without_checkpoint_exits_2_with_one_line(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+def test_run__ppo_without_a_usable_checkpoint_exits_2_with_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    import policies.ppo
+
+    monkeypatch.setattr(policies.ppo, "SHIPPED", tmp_path / "gone.zip")
     assert main(["run", "--policy", "ppo", *QUICK, "--out", str(tmp_path)]) == 2
     err = _one_line_error(capsys)
-    assert "'ppo'" in err and "checkpoint" in err
+    assert "ppo" in err and "gone.zip" in err and "--checkpoint" in err
     missing = str(tmp_path / "missing.zip")
     assert main(["run", "--policy", "ppo", "--checkpoint", missing, *QUICK]) == 2
     assert "missing.zip" in _one_line_error(capsys)
+
+
+def test_run_and_evaluate__the_shipped_ppo_needs_no_checkpoint_flag(tmp_path: Path) -> None:
+    from policies.ppo import SHIPPED
+
+    assert SHIPPED.is_file()
+    large = ["--map", "generator:warehouse", "--steps", "40", "--seed", "10000"]
+    assert main(["run", "--policy", "ppo", *large, "--out", str(tmp_path)]) == 0
+    report = tmp_path / "eval.json"
+    args = ["evaluate", "--policy", "ppo", *large, "--episodes", "1", "--quiet"]
+    assert main([*args, "--json", str(report)]) == 0
+    assert json.loads(report.read_text())["summary"]["team"]["coverage"]["mean"] > 0
 
 
 def test_run__render_without_a_display_says_to_save_a_video(
