@@ -245,16 +245,21 @@ class FrontierPolicy(Policy):
 
     # -- act -------------------------------------------------------------------------------
     def act(self, observation: Any, rng: np.random.Generator) -> Any:
+        pose, ranges, detections = self._sense(observation)
+        if self._claim(pose, detections) or self._needs_plan(pose):
+            self._plan(pose)
+        return self._follow(pose, ranges, detections)
+
+    def _sense(self, observation: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Fold ``observation`` into the own map and count the step; the pose (3,), ranges
+        (B,) and detections (k, 2) it holds."""
         ctx = self.context
         pose = ctx.pose(observation)
         ranges = ctx.ranges(observation)
         self._update_map(pose, ranges, ctx.local_grid(observation))
         self._step += 1
         self._trail = [*self._trail[-7:], pose[:2].copy()]
-        detections = ctx.detections(observation)
-        if self._claim(pose, detections) or self._needs_plan(pose):
-            self._plan(pose)
-        return self._follow(pose, ranges, detections)
+        return pose, ranges, ctx.detections(observation)
 
     def _follow(self, pose: np.ndarray, ranges: np.ndarray, detections: np.ndarray) -> Any:
         """The action that follows the path (the walls when there is none), kept clear of

@@ -99,13 +99,8 @@ class GoalPolicy(FrontierPolicy):
     def observe(self, observation: Any) -> bool:
         """Fold ``observation`` into the own map; True when a decision is due (then call
         :meth:`features` and :meth:`commit` before :meth:`drive`)."""
-        ctx = self.context
-        pose = ctx.pose(observation)
-        ranges, detections = ctx.ranges(observation), ctx.detections(observation)
+        pose, ranges, detections = self._sense(observation)
         self._pose, self._ranges, self._detections = pose, ranges, detections
-        self._update_map(pose, ranges, ctx.local_grid(observation))
-        self._step += 1
-        self._trail = [*self._trail[-7:], pose[:2].copy()]
         self._remember(pose, detections)
         claimed = self._claim(pose, detections)
         if (self._step - 1) % self.decide_every == 0:
