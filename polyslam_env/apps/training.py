@@ -37,6 +37,7 @@ __all__ = [
     "TrainingTerminated",
     "check_run_folder",
     "checkpoints",
+    "episode_scalars",
     "evaluate_coverage",
     "final_evaluation",
     "learning_curve",
@@ -294,19 +295,40 @@ EPISODE_TAGS = (
 )
 
 
+def episode_scalars(team: dict[str, Any], robots: list[dict[str, Any]]) -> dict[str, float]:
+    """The ``polyslam/`` scalars of one finished team episode (tag → value, without
+    ``episodes``), from its ``infos["team"]`` and its robots' ``infos["metrics"]``:
+    coverage of the team and its robots' mean/min/max, ``nu_mean`` only over robots with a map
+    and ``completeness`` over robots with SLAM (``metrics.episode.meaningful``), and the team's
+    totals of ``bytes_sent`` and ``rendezvous``. A tag with no meaningful value is left out."""
+
+    def finite(values: list[Any]) -> list[float]:
+        return [float(v) for v in values if v is not None and math.isfinite(float(v))]
+
+    out = {"team_coverage": float(team["coverage"])}
+    coverage = finite([m.get("coverage") for m in robots])
+    if coverage:
+        out["robot_coverage_mean"] = float(np.mean(coverage))
+        out["robot_coverage_min"] = min(coverage)
+        out["robot_coverage_max"] = max(coverage)
+    for key in ("nu_mean", "completeness"):  # only robots with a map / with SLAM
+        values = finite(list(meaningful(robots, key)))
+        if values:
+            out[key] = float(np.mean(values))
+    for key in ("bytes_sent", "rendezvous"):  # team totals
+        out[key] = float(sum(finite([m.get(key) for m in robots])))
+    return out
+
+
 def _metrics_callback(num_robots: int) -> Any:
     """Logs the env's end-of-episode metrics to TensorBoard, per finished team episode.
 
     Slots ``k·R … k·R+R−1`` are env copy ``k``. A robot's ``infos["metrics"]`` arrive at its
     last step (a failed robot's earlier); the team episode has ended when all its slots are
-    done, and then ``infos["team"]`` is read from one of them. Values are averaged over the
-    episodes that ended between two log dumps (SB3's ``record_mean``); ``nu_mean`` only over
-    robots with a map and ``completeness`` over robots with SLAM (``metrics.episode.meaningful``).
+    done, and then ``infos["team"]`` is read from one of them. Values (:func:`episode_scalars`)
+    are averaged over the episodes that ended between two log dumps (SB3's ``record_mean``).
     """
     from stable_baselines3.common.callbacks import BaseCallback
-
-    def finite(values: list[Any]) -> list[float]:
-        return [float(v) for v in values if v is not None and math.isfinite(float(v))]
 
     class _EpisodeMetrics(BaseCallback):
         def _on_training_start(self) -> None:
@@ -323,26 +345,12 @@ def _metrics_callback(num_robots: int) -> Any:
                     continue
                 team = next((infos[s]["team"] for s in slots if "team" in infos[s]), None)
                 if team is not None:
-                    self._record(team, pending)
+                    self.episodes += 1
+                    for tag, value in episode_scalars(team, pending).items():
+                        self.logger.record_mean(f"polyslam/{tag}", value)
+                    self.logger.record("polyslam/episodes", self.episodes)
                 self.pending[k] = []
             return True
-
-        def _record(self, team: dict[str, Any], robots: list[dict[str, float]]) -> None:
-            self.episodes += 1
-            rec = self.logger.record_mean
-            rec("polyslam/team_coverage", float(team["coverage"]))
-            coverage = finite([m.get("coverage") for m in robots])
-            if coverage:
-                rec("polyslam/robot_coverage_mean", float(np.mean(coverage)))
-                rec("polyslam/robot_coverage_min", min(coverage))
-                rec("polyslam/robot_coverage_max", max(coverage))
-            for key in ("nu_mean", "completeness"):  # only robots with a map / with SLAM
-                values = finite(list(meaningful(robots, key)))
-                if values:
-                    rec(f"polyslam/{key}", float(np.mean(values)))
-            for key in ("bytes_sent", "rendezvous"):  # team totals
-                rec(f"polyslam/{key}", float(sum(finite([m.get(key) for m in robots]))))
-            self.logger.record("polyslam/episodes", self.episodes)
 
     return _EpisodeMetrics()
 

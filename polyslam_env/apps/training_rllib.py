@@ -13,8 +13,14 @@ passed to the workers through the job's runtime env).
 
 Checkpoints are directories ``OUT/checkpoints/rllib_<timesteps>_steps`` written by
 ``Algorithm.save_to_path`` into a temporary sibling that is then renamed (a kill mid-write
-leaves no partial ``rllib_*`` directory). ``resume`` restores the newest one. Timesteps count
-robot-steps (RLlib's agent steps), as the SB3 path does.
+leaves no partial ``rllib_*`` directory). ``resume`` restores the newest one that loads (a
+damaged newer one is skipped, and said so on stderr). On SIGTERM the current ``algo.train()``
+iteration finishes, a checkpoint is saved and
+:class:`~polyslam_env.apps.training.TrainingTerminated` is raised, as on the SB3 path.
+TensorBoard (``OUT/tb``) gets the SB3 path's ``polyslam/`` scalars per iteration, averaged over
+the episodes that ended in it (:func:`~polyslam_env.apps.training.episode_scalars`, collected
+by an RLlib callback in the env runners). Timesteps count robot-steps (RLlib's agent steps),
+as the SB3 path does.
 
 The :class:`~polyslam_env.apps.training.TrainConfig` fields RLlib uses: ``timesteps``,
 ``num_envs`` (env copies, spread over the env runners), ``num_cpus`` (env runners; 0: sample
@@ -32,6 +38,9 @@ import math
 import os
 import re
 import shutil
+import signal
+import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -40,9 +49,12 @@ from typing import Any
 import numpy as np
 
 from polyslam_env.apps.training import (
+    EPISODE_TAGS,
     EVAL_SEED,
     TrainConfig,
+    TrainingTerminated,
     checkpoints,
+    episode_scalars,
     evaluate_coverage,
 )
 from polyslam_env.core.errors import PolyslamError
@@ -66,6 +78,12 @@ ENV_NAME = "polyslam_parallel"
 #: The one RLModule (policy) every robot maps to.
 MODULE_ID = "shared"
 CHECKPOINT_PREFIX = "rllib"
+#: What a whole checkpoint directory holds (``Algorithm.save_to_path``), the network included.
+CHECKPOINT_PARTS = (
+    "rllib_checkpoint.json",
+    "algorithm_state.pkl",
+    f"learner_group/learner/rl_module/{MODULE_ID}",
+)
 _CHECKPOINT_RE = re.compile(rf"^{CHECKPOINT_PREFIX}_(\d+)_steps$")
 
 
@@ -126,6 +144,51 @@ def _map_to_shared(agent_id: Any, *args: Any, **kwargs: Any) -> str:
     return MODULE_ID
 
 
+def _callbacks() -> type:
+    """The RLlib callback that logs :func:`episode_scalars` of every finished episode: per
+    tag its sum and count (``reduce="sum"``: summed over the env runners and the episodes of
+    one iteration), read back by :func:`_log_episodes`."""
+    from ray.rllib.callbacks.callbacks import RLlibCallback
+
+    class EpisodeMetrics(RLlibCallback):
+        def on_episode_end(self, *, episode: Any, metrics_logger: Any = None, **_: Any) -> None:
+            robots, team = [], None
+            for agent_episode in episode.agent_episodes.values():
+                info = agent_episode.get_infos(-1) if len(agent_episode) else {}
+                if "metrics" in info:
+                    robots.append(info["metrics"])
+                team = team or info.get("team")
+            if team is None or metrics_logger is None:
+                return
+            for tag, value in episode_scalars(team, robots).items():
+                metrics_logger.log_value(("polyslam", tag), value, reduce="sum")
+                metrics_logger.log_value(("polyslam", f"{tag}_n"), 1, reduce="sum")
+
+    return EpisodeMetrics
+
+
+def _log_episodes(writer: Any, result: dict[str, Any], step: int, episodes: int) -> int:
+    """Write this iteration's ``polyslam/`` means to TensorBoard at ``step``; the running
+    count of episodes after it."""
+    sums = result.get("env_runners", {}).get("polyslam", {})
+
+    def count(key: str) -> int:  # an iteration that logged nothing reports NaN (or nothing)
+        value = float(sums.get(key, 0.0) or 0.0)
+        return int(value) if math.isfinite(value) else 0
+
+    ended = count("team_coverage_n")
+    if ended == 0:
+        return episodes
+    for tag in EPISODE_TAGS:
+        n = count(f"{tag}_n")
+        if tag != "episodes" and n > 0:
+            writer.add_scalar(f"polyslam/{tag}", float(sums[tag]) / n, step)
+    episodes += ended
+    writer.add_scalar("polyslam/episodes", episodes, step)
+    writer.flush()
+    return episodes
+
+
 def build_algorithm_config(cfg: TrainConfig) -> Any:
     """RLlib's ``PPOConfig`` for ``cfg`` (see the module docstring for the fields used)."""
     from ray.rllib.algorithms.ppo import PPOConfig
@@ -158,6 +221,7 @@ def build_algorithm_config(cfg: TrainConfig) -> Any:
             train_batch_size_per_learner=env_steps_per_batch,
         )
         .rl_module(model_config=DefaultModelConfig(fcnet_hiddens=list(cfg.ppo.net_arch)))
+        .callbacks(_callbacks())
         .debugging(seed=cfg.seed, log_level="ERROR")
     )
 
@@ -204,10 +268,37 @@ def _sampled(result: dict[str, Any]) -> int:
 
 
 def _train_loop(
-    algo: Any, cfg: TrainConfig, ckpt_dir: Path, progress: bool, say: Callable[[str], None]
+    algo: Any,
+    cfg: TrainConfig,
+    out: Path,
+    progress: bool,
+    say: Callable[[str], None],
+    stop: threading.Event,
 ) -> tuple[int, Path, dict[str, Any]]:
-    """``algo.train()`` until ``cfg.timesteps`` agent steps, checkpointing on the way."""
+    """``algo.train()`` until ``cfg.timesteps`` agent steps, checkpointing on the way and
+    logging to TensorBoard; after ``stop`` is set, checkpoint and raise
+    :class:`TrainingTerminated`."""
+    from torch.utils.tensorboard import SummaryWriter
+
+    ckpt_dir = out / "checkpoints"
+    writer = SummaryWriter(str(out / "tb" / f"rllib_{os.getpid()}_{time.time_ns()}"))
+    try:
+        return _iterate(algo, cfg, ckpt_dir, progress, say, stop, writer)
+    finally:
+        writer.close()
+
+
+def _iterate(
+    algo: Any,
+    cfg: TrainConfig,
+    ckpt_dir: Path,
+    progress: bool,
+    say: Callable[[str], None],
+    stop: threading.Event,
+    writer: Any,
+) -> tuple[int, Path, dict[str, Any]]:
     start = time.perf_counter()
+    episodes = 0
     agent_steps = env_steps = iterations = 0
     sample_s = 0.0  # RLlib's sampling timer (the wall time of the env runners' sample step)
     env_steps_before: int | None = None
@@ -218,6 +309,7 @@ def _train_loop(
         agent_steps = _lifetime(result, "num_agent_steps_sampled_lifetime")
         env_steps = _lifetime(result, "num_env_steps_sampled_lifetime")
         sample_s += float(result.get("timers", {}).get("env_runner_sampling_timer", 0.0))
+        episodes = _log_episodes(writer, result, agent_steps, episodes)
         if env_steps_before is None:  # a resumed run counts from its checkpoint
             env_steps_before = env_steps - _sampled(result)
         if next_ckpt is None:  # the first multiple above the steps before this iteration
@@ -232,6 +324,8 @@ def _train_loop(
             )
         if agent_steps >= cfg.timesteps:
             break
+        if stop.is_set():
+            raise TrainingTerminated(save_checkpoint(algo, ckpt_dir, agent_steps), agent_steps)
         if agent_steps >= next_ckpt:
             save_checkpoint(algo, ckpt_dir, agent_steps)
             next_ckpt = (agent_steps // cfg.checkpoint_every + 1) * cfg.checkpoint_every
@@ -264,7 +358,6 @@ def train(
     """
     import ray
     import torch
-    from ray.rllib.algorithms.algorithm import Algorithm
     from ray.tune.registry import register_env
 
     out = Path(out)
@@ -278,22 +371,55 @@ def train(
             say(f"--resume: {path} already has {steps} >= {cfg.timesteps} timesteps")
             return steps, path, {"iterations": 0, "agent_steps": steps, "env_steps": 0}
     started = not ray.is_initialized()
-    if started:
-        init_ray(address, max(1, cfg.num_cpus))
+    stop = threading.Event()
+    installed, previous = False, None
     try:
+        if started:
+            init_ray(address, max(1, cfg.num_cpus))
+        if threading.current_thread() is threading.main_thread():
+            # after ray.init, which installs a C-level SIGTERM handler of its own that exits
+            previous = signal.signal(signal.SIGTERM, lambda signum, frame: stop.set())
+            installed = True
         register_env(ENV_NAME, _make_env)
         if resume:  # the checkpoint's algorithm config is kept; the YAML's PPO part is not used
-            say(f"--resume: restoring {path} ({steps} timesteps)")
-            algo = Algorithm.from_checkpoint(str(path))
+            algo = _restore_newest(ckpt_dir, say)
         else:
             algo = build_algorithm_config(cfg).build_algo()
         try:
-            return _train_loop(algo, cfg, ckpt_dir, progress, say)
+            return _train_loop(algo, cfg, out, progress, say, stop)
         finally:
             algo.stop()
     finally:
         if started:
             ray.shutdown()
+        if installed:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _restore_newest(ckpt_dir: Path, say: Callable[[str], None]) -> Any:
+    """The algorithm of the newest checkpoint in ``ckpt_dir`` that loads; damaged newer ones
+    are skipped, and the skips reported on stderr (as the SB3 path's ``--resume``)."""
+    from ray.rllib.algorithms.algorithm import Algorithm
+
+    skipped = []
+    for steps, path in reversed(rllib_checkpoints(ckpt_dir)):
+        missing = [part for part in CHECKPOINT_PARTS if not (path / part).exists()]
+        if missing:  # RLlib restores without a missing part, silently
+            skipped.append(f"checkpoint {str(path)!r}: {missing[0]} is missing")
+            continue
+        try:
+            algo = Algorithm.from_checkpoint(str(path))
+        except Exception as err:  # RLlib raises many kinds on a damaged directory
+            skipped.append(f"checkpoint {str(path)!r}: cannot load ({type(err).__name__})")
+            continue
+        for reason in skipped:
+            print(f"--resume: skipped {reason}", file=sys.stderr)
+        say(f"--resume: restoring {path} ({steps} timesteps)")
+        return algo
+    raise PolyslamError(
+        f"--resume: no readable RLlib checkpoint in {ckpt_dir} ({len(skipped)} damaged:"
+        f" {skipped[0] if skipped else 'none'})"
+    )
 
 
 # -- evaluation ------------------------------------------------------------------------------

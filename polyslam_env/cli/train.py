@@ -109,9 +109,15 @@ def _run_rllib(args: argparse.Namespace, cfg: Any, out: Path) -> int:
     rl.require_ray()  # the one-line "needs ray" error before anything is written
     rl.check_run_folder(out, args.resume)
     write_json(out / "train_config.json", {**cfg.to_dict(), "backend": "rllib"})
-    timesteps, checkpoint, stats = rl.train(
-        cfg, out, resume=args.resume, address=args.address, progress=not args.quiet
-    )
+    from polyslam_env.apps.training import TrainingTerminated, learning_curve
+
+    try:
+        timesteps, checkpoint, stats = rl.train(
+            cfg, out, resume=args.resume, address=args.address, progress=not args.quiet
+        )
+    except TrainingTerminated as stop:
+        print(f"{stop}; continue with --resume", flush=True)
+        return 143  # 128 + SIGTERM, as on the SB3 backend
 
     def rate(seconds: float) -> float:
         return stats["env_steps"] / seconds if seconds > 0 else float("nan")
@@ -126,6 +132,9 @@ def _run_rllib(args: argparse.Namespace, cfg: Any, out: Path) -> int:
             f" sampling); saved {checkpoint}",
             flush=True,
         )
+    curve = learning_curve(out)
+    if curve is not None:
+        print(f"learning curve: {curve[1]} ({curve[0]})")
     if cfg.eval_episodes == 0:
         return 0
     report = rl.final_evaluation(cfg, checkpoint, timesteps)

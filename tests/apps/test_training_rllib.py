@@ -11,10 +11,12 @@ import fcntl
 import json
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -22,6 +24,7 @@ from typing import Any
 import pytest
 import yaml
 
+from polyslam_env.apps.training import EPISODE_TAGS
 from polyslam_env.apps.training_rllib import rllib_checkpoints
 from polyslam_env.cli.main import main
 
@@ -116,7 +119,9 @@ def test_rllib__trains_checkpoints_resumes_and_evaluates(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
-    config, out = _tiny_config(tmp_path), tmp_path / "out"
+    # 6-step episodes: every 8-step sample of an env runner ends one
+    env = {"map": "two_rooms", "num_robots": 2, "max_steps": 6, "slam_enabled": False}
+    config, out = _tiny_config(tmp_path, env=env), tmp_path / "out"
     args = ["train", "--backend", "rllib", "--config", str(config), "--out", str(out), "--quiet"]
     assert main(args) == 0
     first = rllib_checkpoints(out / "checkpoints")
@@ -141,6 +146,78 @@ def test_rllib__trains_checkpoints_resumes_and_evaluates(
     assert main([*args, "--resume", "--timesteps", str(steps[-1])]) == 0
     assert "already has" in capsys.readouterr().out
     assert [s for s, _ in rllib_checkpoints(out / "checkpoints")] == steps
+
+    # TensorBoard has the SB3 path's polyslam/ scalars, and the learning curve is drawn
+    scalars = _scalars(out / "tb")
+    expected = {f"polyslam/{tag}" for tag in EPISODE_TAGS if tag not in ("nu_mean", "completeness")}
+    assert expected <= set(scalars)  # nu_mean and completeness need SLAM, off here
+    assert all(0.0 <= v <= 1.0 for v in scalars["polyslam/team_coverage"])
+    assert scalars["polyslam/episodes"][-1] >= 1
+    assert (out / "learning_curve.png").is_file()
+
+    # a damaged newest checkpoint is skipped, said so, and the one before it resumed: one
+    # truncated mid-write (every file cut to half), then one without its network (which
+    # RLlib itself would restore silently, untrained)
+    for damage in ("truncated", "no network"):
+        found = [path for _, path in rllib_checkpoints(out / "checkpoints")]
+        if damage == "truncated":
+            for f in found[-1].rglob("*"):
+                if f.is_file():
+                    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+        else:
+            shutil.rmtree(found[-1] / "learner_group")
+        more = rllib_checkpoints(out / "checkpoints")[-1][0] + 32
+        assert main([*args, "--resume", "--timesteps", str(more)]) == 0
+        captured = capsys.readouterr()
+        assert captured.err.count("--resume: skipped") == 1, damage
+        assert found[-1].name in captured.err
+        assert f"restoring {found[-2]}" in captured.out
+
+
+def _scalars(tb: Path) -> dict[str, list[float]]:
+    """Every ``polyslam/`` scalar in the event files under ``tb``: tag → values."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    out: dict[str, list[float]] = {}
+    for events in tb.rglob("events.out.tfevents.*"):
+        acc = EventAccumulator(str(events))
+        acc.Reload()
+        for tag in acc.Tags()["scalars"]:
+            if tag.startswith("polyslam/"):
+                out.setdefault(tag, []).extend(e.value for e in acc.Scalars(tag))
+    return out
+
+
+def test_rllib__sigterm_saves_a_checkpoint_and_exits_143(ray_lock: None, tmp_path: Path) -> None:
+    # a real SIGTERM to the driver, as a scheduler sends: the iteration finishes, a
+    # checkpoint is written, exit 143; --resume continues from it
+    config = _tiny_config(tmp_path, timesteps=100_000, checkpoint_every=32, eval_episodes=0)
+    out = tmp_path / "out"
+    args = ["train", "--backend", "rllib", "--config", str(config), "--out", str(out), "--quiet"]
+    env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "polyslam_env.cli", *args],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 240
+        while not rllib_checkpoints(out / "checkpoints") and time.monotonic() < deadline:
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.5)
+        assert rllib_checkpoints(out / "checkpoints"), "no checkpoint within 240 s"
+        proc.send_signal(signal.SIGTERM)
+        stdout, stderr = proc.communicate(timeout=240)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143, stderr
+    assert "terminated (SIGTERM): saved" in stdout
+    saved = rllib_checkpoints(out / "checkpoints")[-1]
+    assert str(saved[1]) in stdout
+    resume = [*args, "--resume", "--timesteps", str(saved[0] + 16)]
+    assert main(resume) == 0
 
 
 @pytest.mark.slow
