@@ -19,13 +19,18 @@ def register(sub: Any) -> None:
         "train",
         help="train a shared PPO policy for all robots (needs the [rl] extra)",
         description="Train one PPO network that drives every robot on its own observation"
-        " (Stable-Baselines3 through SuperSuit). Writes TensorBoard logs to OUT/tb (SB3's"
+        " (Stable-Baselines3 through SuperSuit, or RLlib): its (v, ω) every step (control:"
+        " velocity, configs/train_ppo.yaml) or which of the frontier planner's candidate goals"
+        " to drive to every decide_every steps (control: goals, configs/train_goals.yaml, the"
+        " shipped policy's training). Writes TensorBoard logs to OUT/tb (the backend's"
         " scalars and, per finished episode, polyslam/team_coverage, robot_coverage_mean/min/"
-        "max, nu_mean, completeness, bytes_sent, rendezvous), checkpoints to OUT/checkpoints"
-        " (atomically: periodic, final, on Ctrl-C (exit 130) and on SIGTERM (exit 143)), and"
-        " compares the trained policy with random actions in OUT/final_eval.json. One OUT"
-        " folder holds one run: a fresh run into a folder with checkpoints is refused (exit 2);"
-        " --resume continues it from its newest readable checkpoint.",
+        "max, nu_mean, completeness, bytes_sent, rendezvous), the learning curve to"
+        " OUT/learning_curve.png and .csv, checkpoints to OUT/checkpoints (atomically:"
+        " periodic, final, on SIGTERM (exit 143) and, with SB3, on Ctrl-C (exit 130)), and"
+        " compares the trained policy with random actions (and frontier, for goals) in"
+        " OUT/final_eval.json. One OUT folder holds one run: a fresh run into a folder with"
+        " checkpoints is refused (exit 2); --resume continues it from its newest readable"
+        " checkpoint.",
     )
     parser.add_argument("--config", default=None, help="training YAML (default: train_ppo.yaml)")
     parser.add_argument("--timesteps", type=int, default=None, help="total timesteps (robot-steps)")
