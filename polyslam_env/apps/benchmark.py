@@ -522,13 +522,14 @@ def run_benchmark(
     ``ratio_to_one_process`` and ``ratio_to_env``, over full SLAM in one plain env); a ratio is
     None when either figure was not measured. ``workers`` (e.g. ``(1, 2, 4)``) adds a row of env
     steps/s per process count; ``profile`` adds the env step's profile (section ``profile``):
-    ``"env"`` of the 3-robot env, ``"team"`` of the largest team size's env.
+    ``"env"`` of the 3-robot env, ``"team"`` of the largest team size's env, ``"noslam"`` of
+    the 3-robot env with ``slam_enabled=False``.
     """
     wanted = set(sections)
     if any(n < 1 for n in workers):
         raise ValueError(f"workers: process counts must be >= 1, got {list(workers)}")
-    if profile not in (None, "env", "team"):
-        raise ValueError(f"profile: expected 'env' or 'team', got {profile!r}")
+    if profile not in (None, "env", "team", "noslam"):
+        raise ValueError(f"profile: expected 'env', 'team' or 'noslam', got {profile!r}")
     unknown = wanted - set(SECTIONS)
     if unknown:
         raise ValueError(f"sections: unknown {sorted(unknown)}; choose from {SECTIONS}")
@@ -638,7 +639,8 @@ def _system_sections(
     if profile is not None:
         team = max(plan.team_sizes) if profile == "team" else None
         steps = plan.profile_steps if team is None else plan.team_steps
-        out["profile"] = _emit(report, "profile", system.profile_env(steps, 20, seed, team))
+        row = system.profile_env(steps, 20, seed, team, slam=profile != "noslam")
+        out["profile"] = _emit(report, "profile", row)
 
 
 def targets(out: dict[str, Any]) -> list[dict[str, Any]]:

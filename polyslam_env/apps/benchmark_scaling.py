@@ -286,7 +286,7 @@ PROFILE_WARMUP = 60
 
 
 def profile_env(
-    steps: int, top: int = 20, seed: int = 0, team: int | None = None
+    steps: int, top: int = 20, seed: int = 0, team: int | None = None, slam: bool = True
 ) -> dict[str, Any]:
     """cProfile of ``steps`` full-SLAM env steps (after :data:`PROFILE_WARMUP` unprofiled steps,
     enough for every kernel to be loaded from numba's cache before profiling starts; only
@@ -294,11 +294,12 @@ def profile_env(
     ``top`` functions by own time (tottime) and by cumulative time (cumtime), each with its
     calls, seconds and share (%) of the profiled calls' wall time (profiler overhead included,
     so ``step_ms`` is slower than the unprofiled step). The env is the benchmark's (3 robots,
-    paper map), or with ``team`` that many robots in :data:`TEAM_CONFIG` (the team rows' env)."""
+    paper map), or with ``team`` that many robots in :data:`TEAM_CONFIG` (the team rows' env);
+    ``slam=False`` profiles it with ``slam_enabled=False`` (the no-SLAM row)."""
     from polyslam_env.environment.parallel import parallel_env
 
     config = _env_config() if team is None else {**TEAM_CONFIG, "num_robots": team}
-    env = parallel_env(**config)
+    env = parallel_env(**config, slam_enabled=slam)
     rng = np.random.default_rng(seed)
     space = env.action_space(env.possible_agents[0])
     env.reset(seed=seed)
@@ -321,6 +322,7 @@ def profile_env(
     robots = len(env.possible_agents)
     return {
         "env": "paper" if team is None else str(TEAM_CONFIG["map"]),
+        "slam_enabled": slam,
         "robots": robots,
         "steps": steps,
         "total_s": total,

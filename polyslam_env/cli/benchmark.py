@@ -70,7 +70,7 @@ TITLES = {
     "memory": "RSS of one env (3 robots, full SLAM) in a fresh process, after each episode",
     "compile": "first env reset + step in a fresh process: empty numba cache vs warm cache",
     "workers": "env steps per second with N processes, each stepping its own env (full SLAM)",
-    "profile": "profile of the full-SLAM env step",
+    "profile": "profile of the env step",
 }
 
 
@@ -106,10 +106,10 @@ def register(sub: Any) -> None:
         "--profile",
         nargs="?",
         const="env",
-        choices=("env", "team"),
-        help="also print the top of a cProfile of the full-SLAM env step: 'env' (default) the"
-        " 3-robot paper env, 'team' the 20-robot generated-map env of the team rows (alone: only"
-        " that)",
+        choices=("env", "team", "noslam"),
+        help="also print the top of a cProfile of the env step: 'env' (default) the full-SLAM"
+        " 3-robot paper env, 'team' the 20-robot generated-map env of the team rows, 'noslam'"
+        " the 3-robot env with slam_enabled=False (alone: only that)",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of maps and actions")
     # Hidden: a few steps per figure, only to exercise the command (tests).
@@ -254,7 +254,8 @@ def _profile_table(p: dict[str, Any]) -> str:
     """The profile's two tops (own time, cumulative time), each line with its % of the
     profiled step time."""
     lines = [
-        f"{p['robots']} robots, {p['env']} map, {p['steps']} steps,"
+        f"{p['robots']} robots, {p['env']} map,"
+        f"{'' if p.get('slam_enabled', True) else ' slam_enabled=False,'} {p['steps']} steps,"
         f" {p['step_ms']:.2f} ms per step under the profiler"
     ]
     for key, label in (("tottime", "own time"), ("cumtime", "cumulative time")):

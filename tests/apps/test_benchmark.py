@@ -316,3 +316,12 @@ def test_benchmark_tables__header_and_rows_share_column_edges(
             continue
         for text in (header, line):
             assert text[edge] != " " and text[edge + 1 : edge + 2] in (" ", ""), (text, edge)
+
+
+def test_benchmark_command__profile_noslam_profiles_the_env_without_slam(tmp_path: Path) -> None:
+    out = tmp_path / "b.json"
+    assert main(["benchmark", "--tiny", "--profile", "noslam", "--json", str(out)]) == 0
+    profile = json.loads(out.read_text())["profile"]
+    assert profile["slam_enabled"] is False and profile["env"] == "paper"
+    names = [e["function"] for e in profile["cumtime"]]
+    assert not any("slam/robot.py" in n for n in names)
