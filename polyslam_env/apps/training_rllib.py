@@ -270,33 +270,15 @@ def _sampled(result: dict[str, Any]) -> int:
 def _train_loop(
     algo: Any,
     cfg: TrainConfig,
-    out: Path,
-    progress: bool,
-    say: Callable[[str], None],
-    stop: threading.Event,
-) -> tuple[int, Path, dict[str, Any]]:
-    """``algo.train()`` until ``cfg.timesteps`` agent steps, checkpointing on the way and
-    logging to TensorBoard; after ``stop`` is set, checkpoint and raise
-    :class:`TrainingTerminated`."""
-    from torch.utils.tensorboard import SummaryWriter
-
-    ckpt_dir = out / "checkpoints"
-    writer = SummaryWriter(str(out / "tb" / f"rllib_{os.getpid()}_{time.time_ns()}"))
-    try:
-        return _iterate(algo, cfg, ckpt_dir, progress, say, stop, writer)
-    finally:
-        writer.close()
-
-
-def _iterate(
-    algo: Any,
-    cfg: TrainConfig,
     ckpt_dir: Path,
     progress: bool,
     say: Callable[[str], None],
     stop: threading.Event,
     writer: Any,
 ) -> tuple[int, Path, dict[str, Any]]:
+    """``algo.train()`` until ``cfg.timesteps`` agent steps, checkpointing on the way and
+    logging each iteration's episodes to ``writer`` (TensorBoard); after ``stop`` is set,
+    checkpoint and raise :class:`TrainingTerminated`."""
     start = time.perf_counter()
     episodes = 0
     agent_steps = env_steps = iterations = 0
@@ -359,6 +341,7 @@ def train(
     import ray
     import torch
     from ray.tune.registry import register_env
+    from torch.utils.tensorboard import SummaryWriter
 
     out = Path(out)
     ckpt_dir = out / "checkpoints"
@@ -386,7 +369,8 @@ def train(
         else:
             algo = build_algorithm_config(cfg).build_algo()
         try:
-            return _train_loop(algo, cfg, out, progress, say, stop)
+            with SummaryWriter(str(out / "tb" / f"rllib_{os.getpid()}_{time.time_ns()}")) as tb:
+                return _train_loop(algo, cfg, ckpt_dir, progress, say, stop, tb)
         finally:
             algo.stop()
     finally:

@@ -97,7 +97,8 @@ def test_goals__candidates_are_the_best_cell_of_distinct_frontier_regions(
             ]
             assert n_valid == min(CANDIDATES, len(finite))
             best = sorted((-float(search.utility[labels == k].max()), k) for k in finite)
-            # utilities: the regions' maxima, best first, relative to the best
+            # utilities: the regions' maxima, best first, relative to the best (the features
+            # are float32: rtol 1e-6 is a few float32 roundings, eps 6e-8)
             expected = [-u / -best[0][0] for u, _ in best[:n_valid]]
             np.testing.assert_allclose(slots[:n_valid, 7], expected, rtol=1e-6)
             checked += 1
