@@ -22,6 +22,9 @@ STREAMS: tuple[str, ...] = (
     "policy",
     "faults",
     "start_error",
+    "alignment",
+    "pillars",
+    "pillar_sensor",
 )
 
 

@@ -84,6 +84,7 @@ class RangeSensorConfig(Config):
 class CameraConfig(Config):
     """Detects other robots in range and field of view with line of sight."""
 
+    enabled: bool = True  # False: no detections (no rendezvous, empty camera slots)
     range: float = 1.5  # m
     fov_deg: float = 360.0  # full angle, centred on the robot axis
     sigma_d: float = 0.01  # m, distance noise
@@ -101,6 +102,37 @@ class CameraConfig(Config):
 
 
 @dataclass(frozen=True)
+class PillarSensorConfig(Config):
+    """Range and bearing to the centres of the pillars in range and line of sight, each with a
+    noisy appearance descriptor (seed 003's point sensing, seed 004's descriptors). Off by
+    default: the paper's robots have no such sensor."""
+
+    enabled: bool = False
+    max_range: float = 4.0  # m, to the pillar's centre
+    fov_deg: float = 360.0  # full angle, centred on the robot axis
+    sigma_range: float = 0.03  # m
+    sigma_bearing_deg: float = 1.0  # degrees
+    descriptor_dim: int = 8  # numbers per appearance descriptor
+    descriptor_sigma: float = 0.1  # noise per number and sighting (true descriptors ~ N(0, 1))
+
+    @property
+    def sigma_bearing(self) -> float:
+        return math.radians(self.sigma_bearing_deg)
+
+    def validate(self) -> None:
+        check_positive("pillar_sensor.max_range", self.max_range)
+        check_range("pillar_sensor.fov_deg", self.fov_deg, 1e-6, 360.0)
+        check_non_negative("pillar_sensor.sigma_range", self.sigma_range)
+        check_non_negative("pillar_sensor.sigma_bearing_deg", self.sigma_bearing_deg)
+        dim = self.descriptor_dim
+        if isinstance(dim, bool) or not isinstance(dim, int) or not 1 <= dim <= 64:
+            raise ConfigError(
+                f"pillar_sensor.descriptor_dim: must be an integer in 1..64, got {dim!r}"
+            )
+        check_non_negative("pillar_sensor.descriptor_sigma", self.descriptor_sigma)
+
+
+@dataclass(frozen=True)
 class WorldConfig(Config):
     """The simulated world: control period, physics sub-steps, robots and sensors."""
 
@@ -111,6 +143,7 @@ class WorldConfig(Config):
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
     range_sensor: RangeSensorConfig = field(default_factory=RangeSensorConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
+    pillar_sensor: PillarSensorConfig = field(default_factory=PillarSensorConfig)
 
     def validate(self) -> None:
         check_positive("dt", self.dt)

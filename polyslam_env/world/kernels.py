@@ -186,6 +186,52 @@ def camera_visible(
 
 
 @njit
+def pillar_visible(
+    poses: np.ndarray,
+    active: np.ndarray,
+    max_range: float,
+    half_fov: float,
+    limit_fov: bool,
+    segments: np.ndarray,
+    origin: np.ndarray,
+    cell: float,
+    rows: int,
+    cols: int,
+    starts: np.ndarray,
+    items: np.ndarray,
+    circles: np.ndarray,
+    mask: np.ndarray,
+    dist: np.ndarray,
+    bearing: np.ndarray,
+) -> None:
+    """Which pillar (column of ``mask`` (N, P)) each robot (row) sees, and the distance and
+    bearing (N, P) of every robot-pillar pair to the pillar's centre. Seen: the robot is
+    active, the centre within ``max_range`` and the field of view when ``limit_fov``, and no
+    wall and no other pillar (``circles`` (P, 3)) on the line from the robot's centre to the
+    pillar's surface."""
+    for o in range(poses.shape[0]):
+        ox, oy = poses[o, 0], poses[o, 1]
+        for c in range(circles.shape[0]):
+            rx, ry = circles[c, 0] - ox, circles[c, 1] - oy
+            d = math.hypot(rx, ry)
+            a = math.atan2(ry, rx)
+            turn = a - poses[o, 2]
+            dist[o, c] = d
+            bearing[o, c] = math.pi - np.mod(math.pi - turn, 2.0 * math.pi)  # (−π, π]
+            seen = active[o] and d <= max_range and d > circles[c, 2]
+            if seen and limit_fov:
+                seen = abs(bearing[o, c]) <= half_fov
+            if seen:
+                surface = d - circles[c, 2]
+                hit = first_hit(
+                    ox, oy, math.cos(a), math.sin(a), surface, segments, origin, cell, rows,
+                    cols, starts, items, circles, c,
+                )  # fmt: skip
+                seen = not hit < surface
+            mask[o, c] = seen
+
+
+@njit
 def camera_noise(
     dist: np.ndarray,
     bearing: np.ndarray,

@@ -64,6 +64,7 @@ from polyslam_env.world import kernels
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.nearby import wall_index
+from polyslam_env.world.point_sensor import PillarReading, PillarSensor
 from polyslam_env.world.sensors import Camera, Detection, RangeSensor
 
 #: Solver iterations per physics step, fixed so results do not depend on pymunk defaults; 40
@@ -106,6 +107,12 @@ class World:
         self.pillars = np.asarray(layout.pillars, dtype=float).reshape(-1, 3)  # (P, 3)
         self.skin = config.robot.v_max * config.dt / config.substeps  # m, see module doc
         self.walls = wall_index(layout)  # static index of the segments (sensors, guard)
+        #: pillar sensing (None when off); the true descriptors come from ``rngs["pillars"]``
+        self.pillar_sensor = (
+            PillarSensor(config.pillar_sensor, self.pillars, rngs["pillars"])
+            if config.pillar_sensor.enabled
+            else None
+        )
         self._walls = self.walls.arrays
         r = config.robot.radius
         self._clearance = (r + config.wall_radius - GUARD_TOLERANCE, r - GUARD_TOLERANCE)
@@ -379,6 +386,15 @@ class World:
         :meth:`scan` would return (same draws from ``rngs["sensor"]``)."""
         true = self.true_scan()
         return true, self.range_sensor.add_noise(true, self.rngs["sensor"])
+
+    def sense_pillars(self) -> list[PillarReading]:
+        """Per robot, the pillars it sees (noise from ``rngs["pillar_sensor"]``; failed robots
+        see none). Needs ``config.pillar_sensor.enabled``."""
+        if self.pillar_sensor is None:
+            raise RuntimeError("sense_pillars: the pillar sensor is off (pillar_sensor.enabled)")
+        return self.pillar_sensor.sense(
+            self._pose, self.active, self.walls, self.rngs["pillar_sensor"]
+        )
 
     def camera(self) -> list[list[Detection]]:
         """Per robot, the other robots it sees (noise from ``rngs["camera"]``)."""
