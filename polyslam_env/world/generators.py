@@ -10,7 +10,10 @@ Large floor plans (20 × 12 m and up, issue 14), axis-aligned, coordinates multi
 * :class:`OfficeFloorGenerator` — rooms off one or two long corridors, one door each;
 * :class:`WarehouseGenerator` — shelf rows (long thin closed boxes) with aisles, a cross aisle
   and free-standing pillars in an open loading area;
-* :class:`LoopGenerator` — a corridor loop around a solid block.
+* :class:`LoopGenerator` — a corridor loop around a solid block;
+* :class:`PillarHallGenerator` — a hall of round structural columns on a jittered grid, cut
+  into bays by partition walls with openings (pillars for point-landmark sensing and map
+  alignment, issues 17 and 18).
 
 Their start poses keep ``start_separation`` from each other, so a team does not start in one
 room. All draw only from the ``rng`` they are given (same generator state ⇒ bit-identical layout)
@@ -706,8 +709,100 @@ class LoopGenerator(Config):
         return [_outer(self.width, self.height), block]
 
 
+# -- pillar hall ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PillarHallGenerator(Config):
+    """A hall of round columns: partition walls across the width cut it into bays, each wall
+    with one or two openings (widths from ``opening_width``); round columns (radius from
+    ``column_radius``) stand on a grid of a spacing drawn from ``column_spacing``, each moved
+    by up to ``jitter`` in x and y, a fraction ``missing`` of the grid points left empty.
+    A column keeps ``clearance`` from every wall and from every other column's surface, so
+    every passage is at least that wide.
+    """
+
+    width: float = 20.0  # m
+    height: float = 12.0  # m
+    partitions: tuple[int, int] = (2, 3)  # partition walls across the width
+    opening_width: Range = (1.2, 2.0)  # m
+    column_spacing: Range = (2.0, 2.8)  # m
+    column_radius: Range = (0.12, 0.2)  # m
+    jitter: float = 0.4  # m
+    missing: float = 0.15  # fraction of grid points without a column
+    clearance: float = 0.9  # m
+    start_separation: float = 4.0  # m
+    num_start_poses: int = 3
+    robot_radius: float = 0.065  # m
+    margin: float = 0.05  # m
+    max_tries: int = 20
+    name: str = "pillar_hall"
+
+    def validate(self) -> None:
+        for key in ("width", "height", "robot_radius", "margin", "clearance"):
+            check_positive(key, getattr(self, key))
+        check_range("start_separation", self.start_separation, 0.0, 1e3)
+        check_range("jitter", self.jitter, 0.0, 10.0)
+        check_range("missing", self.missing, 0.0, 1.0)
+        _check_span("partitions", self.partitions, 0, 16)
+        _check_span("opening_width", self.opening_width, 2 * (self.robot_radius + self.margin),
+                    self.height / 2)  # fmt: skip
+        _check_span("column_spacing", self.column_spacing, _SNAP, max(self.width, self.height))
+        _check_span("column_radius", self.column_radius, _SNAP, 1.0)
+        bay = self.width / (self.partitions[1] + 1)
+        if bay < 2 * self.clearance:
+            raise ConfigError(
+                f"width: {self.partitions[1]} partitions leave bays of {bay:g} m, less than"
+                f" twice the clearance {self.clearance:g} m; got {self.width!r}"
+            )
+        _check_common(self.num_start_poses, self.max_tries, self.name)
+
+    def __call__(self, rng: np.random.Generator) -> Layout:
+        return _generate(self, self._draw, rng, self.start_separation, self._columns)
+
+    def _draw(self, rng: np.random.Generator) -> Walls:
+        count = int(rng.integers(self.partitions[0], self.partitions[1] + 1))
+        bay = self.width / (count + 1)
+        walls: Walls = [_outer(self.width, self.height)]
+        for k in range(1, count + 1):
+            x = _draw_snapped(rng, (k * bay - 0.25 * bay, k * bay + 0.25 * bay))
+            doors = 1 + int(rng.random() < 0.5)
+            gaps: list[tuple[float, float]] = []
+            band = self.height / doors
+            for d in range(doors):
+                w = _draw_snapped(rng, self.opening_width)
+                y = _draw_snapped(rng, (d * band + 0.1 * band, (d + 1) * band - 0.1 * band - w))
+                gaps.append((y, round(y + w, 9)))
+            walls += _line_with_gaps(x, 0.0, self.height, gaps, vertical=True)
+        return walls
+
+    def _columns(self, rng: np.random.Generator, walls: Walls) -> np.ndarray:
+        """Columns (P, 3) x, y, r on the jittered grid, each keeping ``clearance`` from the
+        walls and from the columns placed before it."""
+        spacing = float(rng.uniform(*self.column_spacing))
+        segs = np.vstack([np.hstack([w[:-1], w[1:]]) for w in walls])  # (S, 4)
+        xs = np.arange(spacing / 2, self.width, spacing)
+        ys = np.arange(spacing / 2, self.height, spacing)
+        placed: list[tuple[float, float, float]] = []
+        for x, y in itertools.product(xs, ys):
+            jit = rng.uniform(-self.jitter, self.jitter, size=2)
+            radius = float(rng.uniform(*self.column_radius))
+            if rng.random() < self.missing:
+                continue
+            c = np.array([x, y]) + jit
+            if point_segment_distance(c, segs).min() - radius < self.clearance:
+                continue
+            if any(math.dist(c, q[:2]) - radius - q[2] < self.clearance for q in placed):
+                continue
+            placed.append((float(c[0]), float(c[1]), radius))
+        return np.array(placed).reshape(-1, 3)
+
+
 AnyGenerator = (
-    RoomsGenerator | CaveGenerator | OfficeFloorGenerator | WarehouseGenerator | LoopGenerator
+    RoomsGenerator
+    | CaveGenerator
+    | OfficeFloorGenerator
+    | WarehouseGenerator
+    | LoopGenerator
+    | PillarHallGenerator
 )
 
 
@@ -724,11 +819,15 @@ def _generate(
     draw: Callable[[np.random.Generator], Walls],
     rng: np.random.Generator,
     separation: float = 0.0,
+    columns: Callable[[np.random.Generator, Walls], np.ndarray] | None = None,
 ) -> Layout:
-    """Draw walls, check them and place start poses at least ``separation`` (m) apart (and
-    never closer than ``2·robot_radius + margin``); redraw on failure (bounded)."""
+    """Draw walls (then round pillars with ``columns``, given the walls), check them and place
+    start poses at least ``separation`` (m) apart (and never closer than ``2·robot_radius +
+    margin``); redraw on failure (bounded)."""
     for _ in range(gen.max_tries):
-        layout = Layout(name=gen.name, walls=tuple(draw(rng)))
+        walls = draw(rng)
+        pillars = np.zeros((0, 3)) if columns is None else columns(rng, walls)
+        layout = Layout(name=gen.name, walls=tuple(walls), pillars=pillars)
         if not is_enclosed(layout):
             continue
         grid = _connected_for_robot(layout, gen.robot_radius, gen.margin)
@@ -737,7 +836,9 @@ def _generate(
         poses = _start_poses(layout, grid, gen, rng, separation)
         if poses is None:
             continue
-        data = layout_to_dict(Layout(name=gen.name, walls=layout.walls, start_poses=poses))
+        data = layout_to_dict(
+            Layout(name=gen.name, walls=layout.walls, pillars=pillars, start_poses=poses)
+        )
         source = f"<{gen.name} generator>"
         return layout_from_dict(data, source=source, robot_radius=gen.robot_radius)
     raise GenerationError(
@@ -805,6 +906,7 @@ GENERATORS: dict[str, type[AnyGenerator]] = {
     "office_floor": OfficeFloorGenerator,
     "warehouse": WarehouseGenerator,
     "loop": LoopGenerator,
+    "pillar_hall": PillarHallGenerator,
 }
 
 

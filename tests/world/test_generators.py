@@ -186,7 +186,8 @@ def test_make_generator__passes_parameters() -> None:
 
 def test_make_generator__unknown_name_lists_valid_names() -> None:
     with pytest.raises(
-        ValueError, match=r"'maze'.*valid names: cave, loop, office_floor, rooms, warehouse"
+        ValueError,
+        match=r"'maze'.*valid names: cave, loop, office_floor, pillar_hall, rooms, warehouse",
     ):
         make_generator("maze")
 

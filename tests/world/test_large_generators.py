@@ -1,4 +1,4 @@
-"""Large floor plans (issue 14): office floors, warehouses, loops.
+"""Large floor plans (issue 14): office floors, warehouses, loops; the pillar hall (issue 18).
 
 The generic guarantees (enclosed, connected for the robot, seeded) are checked as for the small
 generators; the passage widths each generator promises are checked on the free-space raster:
@@ -20,6 +20,7 @@ from polyslam_env.core.errors import ConfigError
 from polyslam_env.world.generators import (
     LoopGenerator,
     OfficeFloorGenerator,
+    PillarHallGenerator,
     WarehouseGenerator,
     is_enclosed,
     make_generator,
@@ -29,8 +30,13 @@ from polyslam_env.world.layout import Layout
 from polyslam_env.world.maps import layout_from_dict, layout_to_dict
 
 SEEDS = range(8)
-NAMES = ("office_floor", "warehouse", "loop")
-SIZES = {"office_floor": (24.0, 14.0), "warehouse": (20.0, 12.0), "loop": (16.0, 10.0)}
+NAMES = ("office_floor", "warehouse", "loop", "pillar_hall")
+SIZES = {
+    "office_floor": (24.0, 14.0),
+    "warehouse": (20.0, 12.0),
+    "loop": (16.0, 10.0),
+    "pillar_hall": (20.0, 12.0),
+}
 #: Check raster (m): neither of the generators' own check rasters (2 and 3 cm).
 RESOLUTION = 0.025
 
@@ -45,7 +51,8 @@ def _components(layout: Layout, inflate: float) -> int:
 
 
 def _fingerprint(layout: Layout) -> bytes:
-    return b"|".join([*(w.tobytes() for w in layout.walls), layout.start_poses.tobytes()])
+    parts = [*(w.tobytes() for w in layout.walls), layout.pillars.tobytes()]
+    return b"|".join([*parts, layout.start_poses.tobytes()])
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -60,7 +67,9 @@ def test_large_generator__size_as_asked_and_enclosed(name: str) -> None:
 @pytest.mark.parametrize("name", NAMES)
 def test_large_generator__starts_connected_apart_and_clear(name: str) -> None:
     gen = make_generator(name)
-    assert isinstance(gen, OfficeFloorGenerator | WarehouseGenerator | LoopGenerator)
+    assert isinstance(
+        gen, OfficeFloorGenerator | WarehouseGenerator | LoopGenerator | PillarHallGenerator
+    )
     for seed, layout in zip(SEEDS, _layouts(name), strict=True):
         grid = free_space_grid(layout, RESOLUTION, inflate=gen.robot_radius)
         _, count = label_components(grid)
@@ -78,6 +87,37 @@ def test_large_generator__seeded(name: str) -> None:
     assert _fingerprint(again) == _fingerprint(_layouts(name)[3])
     walls = {b"|".join(w.tobytes() for w in lay.walls) for lay in _layouts(name)}
     assert len(walls) == len(SEEDS)
+
+
+def test_pillar_hall__columns_keep_the_clearance_and_bays_are_open() -> None:
+    """Columns of the drawn radii keep ``clearance`` from every wall and every other column
+    (brute force over all pairs), so a robot passes everywhere at that width; partition walls
+    cut the hall (at least two vertical walls inside the outer one)."""
+    gen = PillarHallGenerator()
+    for seed, layout in enumerate(_layouts("pillar_hall")):
+        cols = layout.pillars
+        assert len(cols) >= 8, seed
+        lo, hi = gen.column_radius
+        assert ((cols[:, 2] >= lo) & (cols[:, 2] <= hi)).all(), seed
+        centres = cols[:, :2]
+        wall_gap = layout_wall_gaps(layout, centres) - cols[:, 2]
+        assert wall_gap.min() >= gen.clearance - 1e-9, seed
+        for a, b in itertools.combinations(range(len(cols)), 2):
+            gap = np.hypot(*(centres[a] - centres[b])) - cols[a, 2] - cols[b, 2]
+            assert gap >= gen.clearance - 1e-9, (seed, a, b)
+        assert _components(layout, gen.clearance / 2 - RESOLUTION) == 1, seed
+        inner = [w for w in layout.walls[1:] if np.ptp(w[:, 0]) == 0.0]
+        assert len({float(w[0, 0]) for w in inner}) >= gen.partitions[0], seed
+
+
+def layout_wall_gaps(layout: Layout, points: np.ndarray) -> np.ndarray:
+    """Distance (P,) from each point to the nearest wall segment (brute force)."""
+    segs = layout.segments
+    a, b = segs[:, :2], segs[:, 2:]
+    ab = b - a
+    t = np.clip(np.einsum("psk,sk->ps", points[:, None, :] - a, ab) / (ab * ab).sum(1), 0, 1)
+    nearest = a + t[..., None] * ab
+    return np.linalg.norm(points[:, None, :] - nearest, axis=-1).min(axis=1)
 
 
 def test_office_floor__doors_between_min_and_max_width() -> None:
@@ -128,6 +168,9 @@ def test_loop__ring_around_a_solid_block() -> None:
         ("loop", {"corridor_width": [1.6, 1.2]}, "corridor_width"),
         ("loop", {"width": 4.0, "height": 4.0}, "width"),
         ("loop", {"start_separation": -1.0}, "start_separation"),
+        ("pillar_hall", {"missing": 1.5}, "missing"),
+        ("pillar_hall", {"column_radius": [0.3, 0.1]}, "column_radius"),
+        ("pillar_hall", {"partitions": [2, 12]}, "width"),
     ],
 )
 def test_large_generator__bad_value_names_field(
