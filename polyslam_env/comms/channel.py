@@ -40,13 +40,14 @@ deterministic given its generator.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
 from polyslam_env.core.config import Config, check_positive, check_range
 from polyslam_env.core.errors import ConfigError
+from polyslam_env.slam.alignment import ALIGNERS, AlignConfig
 
 _UNLIMITED = 2**62  # bytes per step when there is no cap
 
@@ -74,6 +75,22 @@ class ChannelConfig(Config):
     # Refine the camera's frame transform on the walls both maps hold before fusing received
     # walls (comms/alignment.py); False: the paper's camera-only transform.
     align_maps: bool = True
+    # How robots meet and find the transform between their frames:
+    # "rendezvous" (the paper): a mutual camera sighting within ``range``; the camera's range
+    #   and bearings give the transform.
+    # "alignment" (seed 004): two robots within radio ``range`` of each other, seen or not; a
+    #   message also carries the sender's feature map (pillars: positions and descriptors,
+    #   from the pillar sensor), and the receiver finds the transform by aligning it with its
+    #   own (``aligner``, thresholds ``alignment``) before fusing; a declined alignment fuses
+    #   nothing. A pair in range meets again every ``meeting_interval`` steps.
+    mode: Literal["rendezvous", "alignment"] = "rendezvous"
+    aligner: str = "ransac"
+    # Fewest supports of an accepted alignment: 6 correspondences leave 2·6 − 3 = 9 degrees of
+    # freedom for the covariance the refinement estimates from its residuals; the aligners'
+    # own chance test (a wrong transform's supports at probability 1e-6) raises it on dense
+    # maps.
+    alignment: AlignConfig = field(default_factory=lambda: AlignConfig(min_support=6))
+    feature_min_sightings: int = 3  # a pillar seen fewer times is not sent or matched
 
     def validate(self) -> None:
         check_positive("range", self.range)
@@ -85,7 +102,13 @@ class ChannelConfig(Config):
         check_range("loss_prob", self.loss_prob, 0.0, 1.0)
         if self.max_age is not None and self.max_age < 0:
             raise ConfigError(f"max_age: must be >= 0 or null, got {self.max_age!r}")
-        for name in ("meeting_gap", "meeting_interval"):
+        if self.mode not in ("rendezvous", "alignment"):
+            raise ConfigError(f"mode: must be 'rendezvous' or 'alignment', got {self.mode!r}")
+        if self.aligner not in ALIGNERS:
+            raise ConfigError(
+                f"aligner: must be one of {', '.join(ALIGNERS)}, got {self.aligner!r}"
+            )
+        for name in ("meeting_gap", "meeting_interval", "feature_min_sightings"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ConfigError(f"{name}: must be an integer >= 0 (steps), got {value!r}")

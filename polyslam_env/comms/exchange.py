@@ -111,6 +111,8 @@ from polyslam_env.comms.relative_pose import (
     relative_pose_covariance,
 )
 from polyslam_env.core.geometry import compose, compose_with_jacobians, inverse, rotation
+from polyslam_env.slam.alignment import Alignment, FeatureMap, align
+from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
 from polyslam_env.slam.landmarks import boxes_near
 from polyslam_env.slam.merging import find_merge
@@ -187,6 +189,16 @@ class ExchangeStep:
 
 
 @dataclass(frozen=True, eq=False)
+class AlignmentAttempt:
+    """One alignment of a received feature map with the receiver's (alignment mode)."""
+
+    step: int  # delivery step
+    sender: int
+    receiver: int
+    result: Alignment  # its transform maps the sender's frame into the receiver's
+
+
+@dataclass(frozen=True, eq=False)
 class _Sighting:
     """What a robot measured of another at a rendezvous, and its own pose estimate then."""
 
@@ -196,18 +208,35 @@ class _Sighting:
 
 
 # -- wire frame ----------------------------------------------------------------------------------
-def frame_message(message: bytes, pose_var: np.ndarray) -> bytes:
-    """Message bytes followed by the exchange trailer (pose variances, CRC-32)."""
+_FEATURE_HEAD = struct.Struct("<HB")  # features n, descriptor length d
+
+
+def frame_message(
+    message: bytes, pose_var: np.ndarray, features: FeatureMap | None = None
+) -> bytes:
+    """Message bytes followed by the exchange trailer: the sender's feature map when given
+    (alignment mode: n rows of position and descriptor in the message's float width, then
+    n as uint16 and the descriptor length d as uint8), the pose variances and a CRC-32."""
     width = message[3]  # the message header's float width
     var = np.asarray(pose_var, dtype=float).reshape(3)
     if not np.all(np.isfinite(var) & (var >= 0)):
         raise ValueError(f"pose variances must be finite and >= 0, got {var}")
-    body = message + var.astype(_FLOAT[width]).tobytes()
+    body = message
+    if features is not None:
+        n, d = features.descriptors.shape
+        if n >= 2**16 or d >= 2**8:
+            raise ValueError(f"feature map too large for the frame: {n} features of {d} numbers")
+        block = np.hstack([features.positions, features.descriptors]).astype(_FLOAT[width])
+        body += block.tobytes() + _FEATURE_HEAD.pack(n, d)
+    body += var.astype(_FLOAT[width]).tobytes()
     return body + _TRAILER_CRC.pack(zlib.crc32(body))
 
 
-def unframe_message(data: bytes) -> tuple[Message, np.ndarray]:
-    """Inverse of :func:`frame_message`: the decoded message and the pose variances (3,)."""
+def unframe_message(
+    data: bytes, with_features: bool = False
+) -> tuple[Message, np.ndarray, FeatureMap | None]:
+    """Inverse of :func:`frame_message`: the decoded message, the pose variances (3,) and the
+    feature map (None unless ``with_features``)."""
     if len(data) < 4 or data[3] not in _FLOAT:
         raise ValueError("truncated or corrupt exchange frame")
     width = data[3]
@@ -217,7 +246,25 @@ def unframe_message(data: bytes) -> tuple[Message, np.ndarray]:
     if len(data) <= size or zlib.crc32(body) != crc:
         raise ValueError("corrupt exchange frame: trailer CRC-32 mismatch")
     var = np.frombuffer(body[-3 * width :], dtype=_FLOAT[width]).astype(float)
-    return decode(body[: -3 * width]), var
+    body = body[: -3 * width]
+    features = None
+    if with_features:
+        body, features = _split_features(body, width)
+    return decode(body), var, features
+
+
+def _split_features(body: bytes, width: int) -> tuple[bytes, FeatureMap]:
+    """The message bytes and the feature block that ends ``body`` (read from its end)."""
+    if len(body) < _FEATURE_HEAD.size:
+        raise ValueError("corrupt exchange frame: no feature block")
+    n, d = _FEATURE_HEAD.unpack(body[-_FEATURE_HEAD.size :])
+    size = n * (2 + d) * width
+    end = len(body) - _FEATURE_HEAD.size
+    if size > end:
+        raise ValueError("corrupt exchange frame: feature block longer than the frame")
+    block = np.frombuffer(body[end - size : end], dtype=_FLOAT[width]).astype(float)
+    block = block.reshape(n, 2 + d)
+    return body[: end - size], FeatureMap(block[:, :2], block[:, 2:])
 
 
 # -- received polynomial → points in the receiver's frame ----------------------------------------
@@ -234,8 +281,10 @@ def received_point_set(
     """Points on a received polynomial mapped into the receiver's frame, with derivatives.
 
     ``transform`` (3,) is T_{l0,j0}; ``d_transform_state`` (3, 3) its Jacobian w.r.t. the
-    receiver's pose, ``d_transform_noise`` (3, 6) w.r.t. [relative pose | sender's pose] whose
-    covariance is ``noise_cov`` (6, 6). The point set's noise is [sender's c0 ; those 6].
+    receiver's pose, ``d_transform_noise`` (3, K) w.r.t. the noise it depends on, whose
+    covariance is ``noise_cov`` (K, K): at a rendezvous [relative pose | sender's pose] (K = 6),
+    after an alignment the transform's own error (K = 3). The point set's noise is
+    [sender's c0 ; those K].
     """
     poly = record.polynomial
     q = chain_points(poly, chord_tol, spacing)  # (N, 2) sender frame
@@ -251,7 +300,7 @@ def received_point_set(
             dp_dt @ d_transform_noise,
         ],
         axis=2,
-    )  # (N, 2, 7)
+    )  # (N, 2, 1 + K)
     return PointSet(
         xy=xy,
         d_state=d_state,
@@ -400,6 +449,7 @@ class RendezvousExchange:
         grid_resolution: float = 0.05,
         max_range: float = 2.0,
         compare_payloads: bool = False,
+        align_rng: np.random.Generator | None = None,
     ) -> None:
         if num_robots < 1:
             raise ValueError(f"num_robots must be >= 1, got {num_robots}")
@@ -413,6 +463,10 @@ class RendezvousExchange:
         self.compare_payloads = compare_payloads
         self.payload_log: list[PayloadSizes] = []
         self.history: list[DeliveredMessage] = []  # every applied message, in order
+        self.alignments: list[AlignmentAttempt] = []  # alignment mode: every attempt, in order
+        if config.mode == "alignment" and align_rng is None:
+            raise ValueError("alignment mode needs align_rng (RANSAC's and ICP's draws)")
+        self._align_rng = align_rng
         self.scan_logs = [ScanLog(max_range) for _ in range(num_robots)]
         self._last_meeting: dict[tuple[int, int], int] = {}  # (s, r) → s's SLAM step
         self._last_log: dict[tuple[int, int], int] = {}  # (s, r) → s's scan-log length
@@ -449,8 +503,14 @@ class RendezvousExchange:
         slams: Sequence[PolySlam],
         detections: Sequence[Sequence[DetectionLike]],
         active: np.ndarray,
+        *,
+        in_range: Sequence[tuple[int, int]] = (),
+        features: Sequence[FeatureBook] = (),
     ) -> ExchangeStep:
-        """Detect rendezvous, send, deliver and apply; see the module docstring."""
+        """Detect rendezvous, send, deliver and apply; see the module docstring.
+
+        Alignment mode reads ``in_range`` (pairs i < j within radio range, from the world)
+        instead of the camera's ``detections``, and every robot's ``features``."""
         if len(slams) != self.num_robots or len(detections) != self.num_robots:
             raise ValueError(
                 f"expected {self.num_robots} robots, got {len(slams)} SLAMs and"
@@ -460,11 +520,20 @@ class RendezvousExchange:
         dropped = self._drop_failed(k, active)
         for r, slam in enumerate(slams):
             self._carry_sources(r, slam)
-        sightings = _mutual_sightings(detections, active, self.config.range)
+        aligning = self.config.mode == "alignment"
+        if aligning and len(features) != self.num_robots:
+            raise ValueError(f"alignment mode needs {self.num_robots} feature books")
+        sightings: dict[tuple[int, int], tuple[DetectionLike, DetectionLike] | None]
+        if aligning:
+            sightings = {(i, j): None for i, j in sorted(in_range) if active[i] and active[j]}
+        else:
+            sightings = dict(_mutual_sightings(detections, active, self.config.range))
         new = tuple(pair for pair in sightings if self._is_meeting(k, pair))
-        sent = [out for pair in new for out in self._meet(k, pair, sightings[pair], slams)]
+        sent = [
+            out for pair in new for out in self._meet(k, pair, sightings[pair], slams, features)
+        ]
         linked: Callable[[int, int], bool] = lambda s, r: (min(s, r), max(s, r)) in sightings  # noqa: E731
-        delivered = [self._apply(d, slams) for d in self.channel.deliver(k, linked)]
+        delivered = [self._apply(d, slams, features) for d in self.channel.deliver(k, linked)]
         self.history += delivered
         expired = self.channel.last_expired
         for e in expired:
@@ -480,11 +549,14 @@ class RendezvousExchange:
         )
 
     def _is_meeting(self, k: int, pair: tuple[int, int]) -> bool:
-        """Whether the pair's mutual sighting at step k starts a meeting (ChannelConfig's
-        ``meeting_gap`` and ``meeting_interval``)."""
+        """Whether the pair's mutual sighting (alignment mode: being in radio range) at step k
+        starts a meeting (ChannelConfig's ``meeting_gap`` and ``meeting_interval``; in
+        alignment mode a pair that stays in range meets again every ``meeting_interval``)."""
         last = self._last_seen.get(pair)
         if last is None:
             return True
+        if self.config.mode == "alignment" and k - last == 1:
+            return k - self._last_start[pair] >= max(self.config.meeting_interval, 1)
         out_of_sight = k - last - 1  # steps between the last sighting and this one
         if out_of_sight < max(self.config.meeting_gap, 1):
             return False  # the same sighting goes on (or flickered)
@@ -520,27 +592,36 @@ class RendezvousExchange:
             "polynomials_sent": self._polys_sent[i],
             "polynomials_received": self._polys_received[i],
             "received_points_dropped": self.dropped_points[i],
-        }
+            "alignments_attempted": sum(a.receiver == i for a in self.alignments),
+            "alignments_accepted": sum(a.receiver == i and a.result.accepted
+                                       for a in self.alignments),
+        }  # fmt: skip
 
     # -- sending -----------------------------------------------------------------------------------
     def _meet(
         self,
         k: int,
         pair: tuple[int, int],
-        views: tuple[DetectionLike, DetectionLike],
+        views: tuple[DetectionLike, DetectionLike] | None,
         slams: Sequence[PolySlam],
+        features: Sequence[FeatureBook],
     ) -> list[tuple[int, int, int]]:
-        """A new rendezvous: store both sightings, queue one message each way."""
+        """A new rendezvous: store both sightings (none in alignment mode), queue one message
+        each way."""
         i, j = pair
-        view_of = {(i, j): views[0], (j, i): views[1]}  # (observer, target) → detection
         for robot in pair:
             self._rendezvous[robot] += 1
-        for s, r in ((i, j), (j, i)):
-            d = view_of[(r, s)]
-            self._sightings[(r, s, k)] = _Sighting(slams[r].pose, d.distance, d.bearing)
+        bearing = {(i, j): 0.0, (j, i): 0.0}  # (observer, target) → bearing; 0: not measured
+        if views is not None:
+            view_of = {(i, j): views[0], (j, i): views[1]}  # (observer, target) → detection
+            for s, r in ((i, j), (j, i)):
+                d = view_of[(r, s)]
+                self._sightings[(r, s, k)] = _Sighting(slams[r].pose, d.distance, d.bearing)
+                bearing[(s, r)] = view_of[(s, r)].bearing
         out = []
         for s, r in ((i, j), (j, i)):
-            payload, ids = self._build(k, s, r, view_of[(s, r)].bearing, slams[s])
+            own = features[s].feature_map(self.config.feature_min_sightings) if features else None
+            payload, ids = self._build(k, s, r, bearing[(s, r)], slams[s], own)
             msg_id = self.channel.send(s, r, payload, k)
             self._sent_ids[msg_id] = (s, r, ids)
             self._polys_sent[s] += len(ids)
@@ -556,9 +637,16 @@ class RendezvousExchange:
         )
 
     def _build(
-        self, k: int, s: int, r: int, bearing: float, slam: PolySlam
+        self,
+        k: int,
+        s: int,
+        r: int,
+        bearing: float,
+        slam: PolySlam,
+        features: FeatureMap | None = None,
     ) -> tuple[bytes, tuple[int, ...]]:
-        """Wire bytes of s's message to r, and the landmark ids it carries."""
+        """Wire bytes of s's message to r (with s's ``features`` in alignment mode), and the
+        landmark ids it carries."""
         ids = self._landmarks_to_send(s, r, slam)
         seq = self._seq.get((s, r), 0)
         self._seq[(s, r)] = seq + 1
@@ -577,7 +665,7 @@ class RendezvousExchange:
         if self.compare_payloads:
             self._log_sizes(k, s, r, variants, pose_var, len(records))
         message = variants[kind]
-        return frame_message(encode(message, precision), pose_var), ids
+        return frame_message(encode(message, precision), pose_var, features), ids
 
     def _variants(
         self,
@@ -619,21 +707,34 @@ class RendezvousExchange:
         self.payload_log.append(PayloadSizes(s, r, k, n_polys, len(points.points), shape, sizes))
 
     # -- receiving ---------------------------------------------------------------------------------
-    def _apply(self, delivered: Delivered, slams: Sequence[PolySlam]) -> DeliveredMessage:
+    def _apply(
+        self, delivered: Delivered, slams: Sequence[PolySlam], features: Sequence[FeatureBook]
+    ) -> DeliveredMessage:
         """Integrate one delivered message at its receiver (exactly once)."""
         if delivered.msg_id in self._applied:
             raise RuntimeError(f"message {delivered.msg_id} delivered twice")
         self._applied.add(delivered.msg_id)
         s, r = delivered.sender, delivered.receiver
-        self._sent_ids.pop(delivered.msg_id, None)
-        sighting = self._sightings.pop((r, s, delivered.sent_step))
-        message, pose_var = unframe_message(delivered.payload)
+        sent_ids = self._sent_ids.pop(delivered.msg_id, None)
+        aligning = self.config.mode == "alignment"
+        message, pose_var, theirs = unframe_message(delivered.payload, aligning)
         received: list[Polynomial] = []
         ids: list[int] = []
         n_records = 0
         if isinstance(message, PolynomialMessage):
             n_records = len(message.records)
-            received, ids = self._integrate(slams[r], message, pose_var, sighting, s)
+            if aligning:
+                assert theirs is not None
+                mine = features[r].feature_map(self.config.feature_min_sightings)
+                transform = self._aligned_transform(delivered, mine, theirs)
+                if transform is None and sent_ids is not None:
+                    # nothing fused: send these landmarks again at the pair's next meeting
+                    self._resend.setdefault((s, r), set()).update(sent_ids[2])
+            else:
+                sighting = self._sightings.pop((r, s, delivered.sent_step))
+                transform = self._transform(slams[r].pose, sighting, message.header, pose_var)
+            if transform is not None:
+                received, ids = self._integrate(slams[r], message, transform, s)
             self._polys_received[r] += n_records
         return DeliveredMessage(
             delivered.msg_id,
@@ -662,22 +763,36 @@ class RendezvousExchange:
         )
         return (*out, scipy.linalg.block_diag(rel_cov, np.diag(pose_var)))
 
+    def _aligned_transform(
+        self, delivered: Delivered, mine: FeatureMap, theirs: FeatureMap
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """Alignment mode: the sender's frame in the receiver's from their feature maps, as
+        :meth:`_transform` gives it (T, ∂T/∂receiver pose = 0: the frames' transform does not
+        depend on where the receiver is now, ∂T/∂noise = I, the aligner's covariance), or None
+        when the aligner declines. Every attempt is logged in :attr:`alignments`."""
+        assert self._align_rng is not None
+        result = align(self.config.aligner, mine, theirs, self._align_rng, self.config.alignment)
+        self.alignments.append(
+            AlignmentAttempt(delivered.delivered_step, delivered.sender, delivered.receiver, result)
+        )
+        if result.transform is None or result.covariance is None:
+            return None
+        return result.transform, np.zeros((3, 3)), np.eye(3), result.covariance
+
     def _integrate(
         self,
         slam: PolySlam,
         message: PolynomialMessage,
-        pose_var: np.ndarray,
-        sighting: _Sighting,
+        transform: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
         sender: int,
     ) -> tuple[list[Polynomial], list[int]]:
-        """Refit every record in the receiver's frame and fuse it (see "Fusion" in the module
-        docstring); returns the refits (before any trimming or merge) and the ids now holding
-        what was inserted."""
+        """Refit every record in the receiver's frame with ``transform`` (T, ∂T/∂receiver
+        pose, ∂T/∂noise, noise covariance) and fuse it (see "Fusion" in the module docstring);
+        returns the refits (before any trimming or merge) and the ids now holding what was
+        inserted."""
         r = message.header.receiver
         self._carry_sources(r, slam)
-        t, d_state, d_noise, noise_cov = self._transform(
-            slam.pose, sighting, message.header, pose_var
-        )
+        t, d_state, d_noise, noise_cov = transform
         cov_t = d_noise @ noise_cov @ d_noise.T
         if self.config.align_maps and message.records:
             t, cov_t = self._align(slam, message, t, cov_t, sender)

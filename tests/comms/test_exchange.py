@@ -28,6 +28,7 @@ from polyslam_env.comms.messages import Header, PolynomialMessage, PolynomialRec
 from polyslam_env.comms.relative_pose import frame_transform, relative_pose, wrap_angle
 from polyslam_env.core.geometry import compose, inverse, rotation, transform_points
 from polyslam_env.core.seeding import make_rngs
+from polyslam_env.slam.alignment import FeatureMap
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import PointSet, fit_polynomial
 from polyslam_env.slam.polynomial import Polynomial
@@ -114,13 +115,39 @@ def test_frame_message__round_trips_and_rejects_corruption() -> None:
         raw = encode(msg, precision)  # type: ignore[arg-type]
         data = frame_message(raw, var)
         assert len(data) == len(raw) + 3 * width + 4
-        out, var_out = unframe_message(data)
+        out, var_out, none = unframe_message(data)
         assert isinstance(out, PolynomialMessage) and out.records[0].landmark_id == 5
+        assert none is None
         np.testing.assert_allclose(var_out, var, rtol=1e-6)  # float32 round-off
         bad = bytearray(data)
         bad[-6] ^= 0xFF
         with pytest.raises(ValueError):
             unframe_message(bytes(bad))
+
+
+def test_frame_message__carries_a_feature_map_counted_in_its_bytes() -> None:
+    poly = Polynomial(1, [0.5, 0.1, -0.2, 0.03], -1.0, 2.0)
+    msg = PolynomialMessage(
+        Header(1, 2, 7, np.array([0.1, -0.2, 0.3]), 0.0), (PolynomialRecord(5, poly, 1e-3),)
+    )
+    rng = np.random.default_rng(3)
+    features = FeatureMap(rng.normal(size=(7, 2)), rng.normal(size=(7, 8)))
+    var = np.array([1e-4, 2e-4, 3e-5])
+    for precision, width in (("float32", 4), ("float64", 8)):
+        raw = encode(msg, precision)  # type: ignore[arg-type]
+        data = frame_message(raw, var, features)
+        # 7 rows of 2 + 8 numbers, then n (uint16) and d (uint8)
+        assert len(data) == len(raw) + 7 * 10 * width + 3 + 3 * width + 4
+        out, var_out, got = unframe_message(data, with_features=True)
+        assert isinstance(out, PolynomialMessage) and out.records[0].landmark_id == 5
+        assert got is not None
+        tol = 1e-6 if width == 4 else 0.0  # float32 round-off
+        np.testing.assert_allclose(got.positions, features.positions, rtol=tol, atol=tol)
+        np.testing.assert_allclose(got.descriptors, features.descriptors, rtol=tol, atol=tol)
+        np.testing.assert_allclose(var_out, var, rtol=1e-6)
+    empty = frame_message(encode(msg), var, FeatureMap(np.zeros((0, 2)), np.zeros((0, 8))))
+    got = unframe_message(empty, with_features=True)[2]
+    assert got is not None and len(got) == 0
 
 
 # -- geometry and Jacobians ----------------------------------------------------------------------

@@ -1,0 +1,112 @@
+"""The exchange's alignment mode (issue 18): robots that never see each other merge maps after
+aligning their pillar maps."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from policies import make_team
+from polyslam_env.apps.rollout import run_episode
+from polyslam_env.comms.channel import ChannelConfig
+from polyslam_env.comms.exchange import RendezvousExchange
+from polyslam_env.core.errors import ConfigError
+from polyslam_env.core.geometry import compose
+from polyslam_env.environment.config import EnvConfig
+from polyslam_env.environment.parallel import parallel_env
+from polyslam_env.environment.stages import is_wrong_alignment
+from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.features import FeatureBook
+from polyslam_env.slam.robot import PolySlam
+
+CONFIG = Path(__file__).resolve().parents[2] / "configs" / "alignment.yaml"
+
+
+def _config(**changes: Any) -> dict[str, Any]:
+    data: dict[str, Any] = yaml.safe_load(CONFIG.read_text())
+    data.update(changes)
+    return data
+
+
+def test_is_wrong_alignment__0_2_m_or_3_degrees_off() -> None:
+    truth = np.array([1.0, -2.0, 0.7])
+    assert not is_wrong_alignment(compose(truth, np.array([0.19, 0.0, 0.0])), truth)
+    assert is_wrong_alignment(compose(truth, np.array([0.0, 0.21, 0.0])), truth)
+    assert not is_wrong_alignment(compose(truth, np.array([0.0, 0.0, np.radians(2.9)])), truth)
+    assert is_wrong_alignment(compose(truth, np.array([0.0, 0.0, np.radians(-3.1)])), truth)
+    assert not is_wrong_alignment(None, truth)  # a declined alignment merges nothing
+
+
+def test_alignment_mode__frontier_team_merges_maps_without_seeing_each_other() -> None:
+    """Camera off: no detection ever; the robots still receive walls, only through accepted
+    alignments, and every accepted alignment is within 0.2 m and 3° of the true transform."""
+    env = parallel_env(EnvConfig.from_dict(_config(max_steps=250)))
+    state_seen: list[int] = []
+    result = run_episode(
+        env,
+        make_team("frontier", env),
+        seed=0,
+        on_step=lambda e: state_seen.append(sum(map(len, e.episode.sensing.detections))),
+    )
+    assert sum(state_seen) == 0
+    robots = result.robots.values()
+    assert sum(m["alignments_accepted"] for m in robots) > 0
+    assert sum(m["alignments_wrong"] for m in robots) == 0
+    exchange = env.episode.exchange
+    assert exchange is not None
+    received = [d for d in exchange.history if d.received]
+    assert received, "no message fused anything"
+    accepted = {(a.step, a.sender, a.receiver) for a in exchange.alignments if a.result.accepted}
+    assert all((d.delivered_step, d.sender, d.receiver) in accepted for d in received)
+
+
+def test_alignment_mode__declined_alignments_fuse_nothing() -> None:
+    """With a support no map can reach every alignment declines: the maps are bit-identical to
+    the same episode without any exchange, and the declined landmarks wait to be sent again."""
+    channel = _config()["channel"] | {"alignment": {"min_support": 10_000}}
+    maps = []
+    for changes in ({"channel": channel}, {"channel": None}):
+        env = parallel_env(EnvConfig.from_dict(_config(max_steps=150, **changes)))
+        run_episode(env, make_team("frontier", env), seed=1)
+        maps.append([s.polynomials() for s in env.episode.slams])
+        if env.episode.exchange is not None:
+            attempts = env.episode.exchange.alignments
+            assert attempts and not any(a.result.accepted for a in attempts)
+            assert env.episode.exchange._resend
+    for with_exchange, without in zip(*maps, strict=True):
+        assert len(with_exchange) == len(without)
+        for a, b in zip(with_exchange, without, strict=True):
+            assert np.array_equal(a.coeffs, b.coeffs) and (a.lo, a.hi) == (b.lo, b.hi)
+
+
+def test_alignment_mode__a_pair_in_range_meets_once_per_interval() -> None:
+    """Two robots that stay within radio range meet at their first step in range and again
+    every ``meeting_interval`` steps; out of range for a while, they meet as soon as the
+    interval allows."""
+    cfg = ChannelConfig(mode="alignment", range=5.0, meeting_interval=20)
+    ex = RendezvousExchange(
+        cfg, 2, np.random.default_rng(0), 0.01, 0.02, align_rng=np.random.default_rng(1)
+    )
+    slams = [PolySlam(SlamConfig(), np.zeros(1), 2.0) for _ in range(2)]
+    books = [FeatureBook(8), FeatureBook(8)]
+    active = np.ones(2, bool)
+    starts = []
+    for k in range(1, 101):
+        in_range = [(0, 1)] if k <= 50 or k >= 60 else []
+        step = ex.step(k, slams, [[], []], active, in_range=in_range, features=books)
+        starts += [k for _ in step.new_rendezvous]
+    assert starts == [1, 21, 41, 61, 81]
+    assert ex.counters(0)["rendezvous"] == 5
+
+
+def test_alignment_mode__needs_the_pillar_sensor() -> None:
+    data = _config()
+    data["world"]["pillar_sensor"]["enabled"] = False
+    with pytest.raises(ConfigError, match="pillar_sensor.enabled"):
+        EnvConfig.from_dict(data)
+    with pytest.raises(ConfigError, match="aligner"):
+        ChannelConfig(mode="alignment", aligner="magic")
