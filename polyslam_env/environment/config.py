@@ -294,6 +294,12 @@ class EnvConfig(Config):
         if self.coverage_target is not None:
             check_range("coverage_target", self.coverage_target, 0.0, 1.0)
         check_positive("coverage_resolution", self.coverage_resolution)
+        if self.channel is not None and self.channel.mode == "alignment":
+            if not self.world.pillar_sensor.enabled:
+                raise ConfigError(
+                    "channel.mode: 'alignment' aligns pillar maps; it needs"
+                    " world.pillar_sensor.enabled: true"
+                )
         self._validate_faults()
 
     @property

@@ -311,6 +311,7 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         events = stages.inject_faults(state, self._faults)
         state.sensing = stages.sense(state.world)
         slam_infos = stages.slam(state, result.odometry)
+        stages.map_features(state)
         exchanged = stages.exchange(state)
         robot_estimates = estimates(state)
         stages.record_histories(state, result, slam_infos, robot_estimates)

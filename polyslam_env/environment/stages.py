@@ -4,9 +4,9 @@ Each stage is a function of what it reads (the :class:`EpisodeState` and the out
 stages) that returns what it produces; a stage that changes the state says so in its first
 line. In the order ``PolySlamParallelEnv.step`` runs them:
 
-    simulate → sense → slam → exchange → record → observe → sweep_coverage → map_bookkeeping
-    → (reward terms, combine: :mod:`~polyslam_env.environment.rewards`) → fail_robots → done
-    → infos
+    simulate → sense → slam → map_features → exchange → record → observe → sweep_coverage
+    → map_bookkeeping → (reward terms, combine: :mod:`~polyslam_env.environment.rewards`)
+    → fail_robots → done → infos
 
 :func:`~polyslam_env.apps.simulate.simulate` runs the team without the RL env through the same
 cores — :func:`simulate`, :func:`sense`, :func:`run_slam`, :func:`exchange_maps` and
@@ -26,8 +26,8 @@ import numpy as np
 
 from polyslam_env import metrics
 from polyslam_env.comms.channel import ChannelConfig
-from polyslam_env.comms.exchange import ExchangeStep, RendezvousExchange
-from polyslam_env.core.geometry import beam_endpoints
+from polyslam_env.comms.exchange import AlignmentAttempt, ExchangeStep, RendezvousExchange
+from polyslam_env.core.geometry import beam_endpoints, between, wrap_remainder
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.faults import FaultEvent, FaultPlan, kidnap, perturb_starts
 from polyslam_env.environment.observations import (
@@ -41,6 +41,7 @@ from polyslam_env.environment.rewards import MAPPING_STEP, MAPPING_TOL, MapChang
 from polyslam_env.environment.state import EpisodeState, Sensing, estimate
 from polyslam_env.metrics.episode import RobotHistory, final_robot_metrics, team_metrics
 from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.robot import PolySlam, SlamStepInfo
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.grid import FreeGrid
@@ -97,6 +98,12 @@ def new_episode(
     slams = (
         [PolySlam(config.slam, angles, max_range) for _ in range(n)] if config.slam_enabled else []
     )
+    pillar_sensor = wc.pillar_sensor
+    features = (
+        [FeatureBook(pillar_sensor.descriptor_dim) for _ in range(n)]
+        if config.slam_enabled and pillar_sensor.enabled
+        else []
+    )
     state = EpisodeState(
         rngs=rngs,
         world=world,
@@ -106,7 +113,8 @@ def new_episode(
         slams=slams,
         exchange=None
         if config.channel is None or not config.slam_enabled
-        else make_exchange(config.channel, n, rngs["channel"], wc, config.slam),
+        else make_exchange(config.channel, n, rngs["channel"], wc, config.slam, rngs["alignment"]),
+        features=features,
         beliefs=belief_grids(oc, layout.bounds, max_range, n),
         samplers=[MapSampler(0.5 * oc.grid_resolution) for _ in range(n)],
         histories=[],  # filled below: a history starts from the robot's estimate
@@ -137,9 +145,11 @@ def make_exchange(
     rng: np.random.Generator,
     world: WorldConfig,
     slam: SlamConfig,
+    align_rng: np.random.Generator | None = None,
 ) -> RendezvousExchange:
     """The rendezvous exchange of a team (env and ``simulate``): ``rng`` is the channel's
-    stream; the camera's noise and the SLAM's order settings come from the configs."""
+    stream, ``align_rng`` the aligners' (alignment mode); the camera's noise and the SLAM's
+    order settings come from the configs."""
     return RendezvousExchange(
         channel,
         num_robots,
@@ -149,6 +159,7 @@ def make_exchange(
         slam.order,
         slam.auto_order,
         max_range=world.range_sensor.max_range,
+        align_rng=align_rng,
     )
 
 
@@ -160,12 +171,15 @@ def simulate(world: World, commands: np.ndarray, slip: np.ndarray | None = None)
 
 
 def sense(world: World, camera: bool = True) -> Sensing:
-    """Every robot's ranges, noisy and noiseless from one ray cast (stream ``sensor``), and its
-    camera detections (stream ``camera``; failed robots see none). ``camera=False`` skips the
-    camera (and its draws) and reports no detections."""
+    """Every robot's ranges, noisy and noiseless from one ray cast (stream ``sensor``), its
+    camera detections (stream ``camera``; failed robots see none) and, with the pillar sensor
+    on, its pillar readings (stream ``pillar_sensor``). ``camera=False`` or a camera switched
+    off in the world's config skips the camera (and its draws) and reports no detections."""
     true_ranges, ranges = world.scan_with_truth()
-    detections = world.camera() if camera else [[] for _ in range(world.num_robots)]
-    return Sensing(ranges, true_ranges, detections)
+    on = camera and world.config.camera.enabled
+    detections = world.camera() if on else [[] for _ in range(world.num_robots)]
+    pillars = tuple(world.sense_pillars()) if world.config.pillar_sensor.enabled else ()
+    return Sensing(ranges, true_ranges, detections, pillars)
 
 
 def run_slam(
@@ -190,13 +204,26 @@ def exchange_maps(
     active: np.ndarray,
     sensing: Sensing,
     angles: np.ndarray,
+    poses: np.ndarray | None = None,
+    features: Sequence[FeatureBook] = (),
 ) -> ExchangeStep:
-    """One rendezvous exchange step (changes the exchange and the receivers' SLAMs) after the
-    SLAM step ``step``: log the active robots' scans, then detect, send, deliver and apply."""
+    """One exchange step (changes the exchange and the receivers' SLAMs) after the SLAM step
+    ``step``: log the active robots' scans, then detect, send, deliver and apply. Alignment
+    mode needs the true ``poses`` (N, 3) (the radio's range is physics) and the robots'
+    ``features``."""
     for i, s in enumerate(slams):
         if active[i]:
             exchange.record_scan(i, s.pose, sensing.ranges[i], angles)
-    return exchange.step(step, slams, sensing.detections, active)
+    in_range: list[tuple[int, int]] = []
+    if exchange.config.mode == "alignment":
+        if poses is None:
+            raise ValueError("alignment mode needs the robots' true poses for the radio range")
+        d = np.hypot(*(poses[:, None, :2] - poses[None, :, :2]).transpose(2, 0, 1))  # (N, N)
+        i_idx, j_idx = np.nonzero(np.triu(d <= exchange.config.range, k=1))
+        in_range = list(zip(i_idx.tolist(), j_idx.tolist(), strict=True))
+    return exchange.step(
+        step, slams, sensing.detections, active, in_range=in_range, features=features
+    )
 
 
 def record(
@@ -244,6 +271,16 @@ def slam(state: EpisodeState, odometry: np.ndarray) -> list[SlamStepInfo | None]
     return run_slam(state.slams, robots, world.active, odometry, state.sensing.ranges)
 
 
+def map_features(state: EpisodeState) -> None:
+    """The feature stage (changes the feature books): every active robot places the pillars
+    it sees with its SLAM's pose estimate (:class:`~polyslam_env.slam.features.FeatureBook`);
+    nothing with the pillar sensor off."""
+    for i, book in enumerate(state.features):
+        if state.world.active[i]:
+            reading = state.sensing.pillars[i]
+            book.add(state.slams[i].pose, reading.ids, reading.z, reading.descriptors)
+
+
 def exchange(state: EpisodeState) -> ExchangeStep | None:
     """The exchange stage (changes links, last rendezvous, exchange, SLAMs): the mutual
     sightings for rendering, then :func:`exchange_maps` if the exchange is on."""
@@ -257,6 +294,8 @@ def exchange(state: EpisodeState) -> ExchangeStep | None:
         state.world.active,
         state.sensing,
         state.angles,
+        state.world.poses,
+        state.features,
     )
     for i, j in out.new_rendezvous:
         state.last_rendezvous[i] = state.last_rendezvous[j] = state.step_count
@@ -457,7 +496,13 @@ def infos(
 
 
 def _final_metrics(state: EpisodeState, i: int) -> dict[str, float]:
-    counters = state.exchange.counters(i) if state.exchange is not None else {}
+    counters: dict[str, float] = {}
+    if state.exchange is not None:
+        counters.update(state.exchange.counters(i))
+        counters["alignments_wrong"] = sum(
+            a.receiver == i and is_wrong_alignment(a.result.transform, _true_transform(state, a))
+            for a in state.exchange.alignments
+        )
     return final_robot_metrics(
         state.histories[i],
         state.slams[i].polynomials() if state.slams else None,
@@ -465,6 +510,32 @@ def _final_metrics(state: EpisodeState, i: int) -> dict[str, float]:
         state.coverage.robot_coverage(i),
         counters,
     )
+
+
+#: An accepted alignment more than this far from the true transform between the two robots'
+#: frames is wrong (issue 18's definition): 0.2 m in position or 3° in heading.
+WRONG_ALIGNMENT_M = 0.2
+WRONG_ALIGNMENT_DEG = 3.0
+
+
+def is_wrong_alignment(transform: np.ndarray | None, truth: np.ndarray) -> bool:
+    """Whether an accepted ``transform`` (3,) is more than 0.2 m or 3° off ``truth`` (3,);
+    False for a declined one (None)."""
+    if transform is None:
+        return False
+    err = between(truth, transform, wrap_remainder)
+    return bool(
+        np.hypot(err[0], err[1]) > WRONG_ALIGNMENT_M
+        or abs(err[2]) > np.radians(WRONG_ALIGNMENT_DEG)
+    )
+
+
+def _true_transform(state: EpisodeState, attempt: AlignmentAttempt) -> np.ndarray:
+    """The true transform (3,) of the sender's map frame into the receiver's: each SLAM's
+    frame is its robot's true start (``RobotHistory.true[0]``)."""
+    receiver = state.histories[attempt.receiver].true[0]
+    sender = state.histories[attempt.sender].true[0]
+    return between(receiver, sender, wrap_remainder)
 
 
 def _mutual_pairs(detections: list[list[Detection]]) -> list[tuple[int, int]]:

@@ -12,6 +12,7 @@ believes of its own pose (read-only).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,9 +21,13 @@ from polyslam_env.comms.exchange import RendezvousExchange
 from polyslam_env.core.geometry import between, wrap_remainder
 from polyslam_env.environment.observations import BeliefGrid, MapSampler
 from polyslam_env.metrics.episode import RobotHistory
+from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.physics import World
 from polyslam_env.world.sensors import Detection
+
+if TYPE_CHECKING:
+    from polyslam_env.world.point_sensor import PillarReading
 
 __all__ = ["EpisodeState", "Sensing", "estimate", "estimates"]
 
@@ -38,6 +43,7 @@ class Sensing:
     ranges: np.ndarray  # (N, B) noisy, inf = no return
     true_ranges: np.ndarray  # (N, B) noiseless, inf = no return
     detections: list[list[Detection]]  # per robot, the robots its camera sees
+    pillars: tuple[PillarReading, ...] = ()  # per robot, with the pillar sensor on
 
 
 @dataclass
@@ -51,6 +57,7 @@ class EpisodeState:
     angles: np.ndarray  # (B,) beam angles β_i
     slams: list[PolySlam]  # one per robot, or empty with slam_enabled=False
     exchange: RendezvousExchange | None  # rendezvous map exchange (None: off or no SLAM)
+    features: list[FeatureBook]  # per robot: its pillar map (empty list: pillar sensor off)
     beliefs: list[BeliefGrid]  # per robot: cells its beams swept / hit, own frame
     samplers: list[MapSampler]  # per robot: its polynomials as points, cached
     histories: list[RobotHistory]  # per robot: what the end-of-episode metrics need

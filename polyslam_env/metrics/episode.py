@@ -59,6 +59,9 @@ ROBOT_METRIC_KEYS: tuple[str, ...] = (
     "bytes_sent",
     "bytes_received",
     "rendezvous",
+    "alignments_attempted",
+    "alignments_accepted",
+    "alignments_wrong",
     "slam_time_ms",
     "collisions",
     "path_length",
@@ -257,7 +260,14 @@ def final_robot_metrics(
     out["coverage"] = float(coverage)
     out["collisions"] = float(history.collisions)
     out["path_length"] = history.path_length
-    for key in ("bytes_sent", "bytes_received", "rendezvous"):
+    for key in (
+        "bytes_sent",
+        "bytes_received",
+        "rendezvous",
+        "alignments_attempted",
+        "alignments_accepted",
+        "alignments_wrong",
+    ):
         out[key] = float(counters.get(key, 0.0))
     return out
 
