@@ -620,7 +620,8 @@ class RendezvousExchange:
                 bearing[(s, r)] = view_of[(s, r)].bearing
         out = []
         for s, r in ((i, j), (j, i)):
-            own = features[s].feature_map(self.config.feature_min_sightings) if features else None
+            aligning = features and self.config.mode == "alignment"
+            own = features[s].feature_map(self.config.feature_min_sightings) if aligning else None
             payload, ids = self._build(k, s, r, bearing[(s, r)], slams[s], own)
             msg_id = self.channel.send(s, r, payload, k)
             self._sent_ids[msg_id] = (s, r, ids)

@@ -110,3 +110,17 @@ def test_alignment_mode__needs_the_pillar_sensor() -> None:
         EnvConfig.from_dict(data)
     with pytest.raises(ConfigError, match="aligner"):
         ChannelConfig(mode="alignment", aligner="magic")
+
+
+def test_rendezvous_mode__with_the_pillar_sensor_on_sends_no_features() -> None:
+    """The pillar sensor on but the default mode: messages at camera rendezvous carry no
+    feature block (it would be sent for nothing and the receiver would not read it) and decode
+    as rendezvous messages."""
+    data = _config(max_steps=250, channel={"range": 3.0})
+    data["world"]["camera"]["enabled"] = True
+    env = parallel_env(EnvConfig.from_dict(data))
+    run_episode(env, make_team("frontier", env), seed=0)
+    exchange = env.episode.exchange
+    assert exchange is not None
+    assert any(d.received for d in exchange.history), "no rendezvous message was fused"
+    assert not exchange.alignments
