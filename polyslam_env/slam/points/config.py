@@ -6,6 +6,10 @@ R = [0.008 m, 0.005 m, 0.001 rad], consensus step ε = 0.1, control noise σ_V =
 car's control period and wheelbase are the seed's unstated simulator values (Bailey's FastSLAM
 simulator, which the seed's model and noise figures match: 0.025 s, 4 m).
 
+``motion`` picks the motion model: ``car`` (the seed's, above) or ``odometry`` (the RL env's
+differential drives: the measured increment in the robot frame with per-period noise
+``odom_sigma_xy``, ``odom_sigma_theta_deg``, as the polynomial EKF assumes).
+
 The three per-robot algorithms differ only in two switches, so one class runs all of them:
 ``em_move`` (EM-FastSLAM's move before resampling) and ``consensus_step`` ε (MBLCC's
 landmark consensus; 0 means no consensus). :func:`algorithm_config` sets them by name.
@@ -21,6 +25,8 @@ from polyslam_env.core.errors import ConfigError
 
 #: The per-robot algorithms and their switches (em_move, consensus on).
 ALGORITHMS: tuple[str, ...] = ("fastslam2", "em_fastslam", "mblcc")
+#: The motion models (see :mod:`polyslam_env.slam.points.models`).
+MOTION_MODELS: tuple[str, ...] = ("car", "odometry")
 
 
 @dataclass(frozen=True)
@@ -38,6 +44,9 @@ class PointSlamConfig(Config):
     sigma_b_deg: float = 2.0  # bearing noise σ_θ
     dt: float = 0.025  # s, control period
     wheelbase: float = 4.0  # m, D of eq. 14
+    motion: str = "car"  # "car" (eq. 14, controls (V, G)) or "odometry" (dx, dy, dθ)
+    odom_sigma_xy: float = 0.001  # m per period, odometry noise (motion: odometry)
+    odom_sigma_theta_deg: float = 0.01  # degrees per period, ditto
 
     def validate(self) -> None:
         if self.particles < 1:
@@ -52,11 +61,21 @@ class PointSlamConfig(Config):
         check_positive("sigma_b_deg", self.sigma_b_deg)
         check_positive("dt", self.dt)
         check_positive("wheelbase", self.wheelbase)
+        if self.motion not in MOTION_MODELS:
+            raise ConfigError(
+                f"motion: must be one of {', '.join(MOTION_MODELS)}; got {self.motion!r}"
+            )
+        check_non_negative("odom_sigma_xy", self.odom_sigma_xy)
+        check_non_negative("odom_sigma_theta_deg", self.odom_sigma_theta_deg)
 
     @property
-    def control_sigmas(self) -> tuple[float, float]:
-        """(σ_V in m/s, σ_G in rad)."""
-        return self.sigma_v, math.radians(self.sigma_g_deg)
+    def control_sigmas(self) -> tuple[float, ...]:
+        """The control noise: (σ_V in m/s, σ_G in rad) for the car, (σ_x, σ_y in m, σ_θ in
+        rad) per period for odometry."""
+        if self.motion == "car":
+            return self.sigma_v, math.radians(self.sigma_g_deg)
+        sxy = self.odom_sigma_xy
+        return sxy, sxy, math.radians(self.odom_sigma_theta_deg)
 
     @property
     def measurement_sigmas(self) -> tuple[float, float]:

@@ -8,7 +8,8 @@ One sensor sweep (:func:`sweep`) follows the seed's steps in order:
 3. weight by eq. 3 (likelihood × motion prior / proposal), normalise;
 4. EM-FastSLAM only: the attraction-repulsion move (``em``), then eq. 3 again at the moved
    poses;
-5. resample (systematic) when N_eff < 0.75 N;
+5. take the pose estimate (weighted mean and covariance), then resample (systematic) when
+   N_eff < 0.75 N;
 6. update the landmark EKFs from the final poses (eqs. 9–13), MBLCC adding ε Σ_n (μ^n − μ)
    towards the other robots' best-particle estimates, and start EKFs for new landmarks.
 
@@ -22,6 +23,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from polyslam_env.slam.points import models
 from polyslam_env.slam.points import particles as pt
 from polyslam_env.slam.points.config import PointSlamConfig
 from polyslam_env.slam.points.em import em_move
@@ -40,19 +42,17 @@ def sweep(
     config: PointSlamConfig,
     rng: np.random.Generator,
     neighbours: Neighbours | None = None,
-) -> tuple[np.ndarray, int]:
+) -> tuple[np.ndarray, int, tuple[np.ndarray, np.ndarray]]:
     """One FastSLAM step of robot ``active`` on particles whose other pose blocks (robots
-    sharing the map) are resampled along. Returns the new log weights and the index of the
-    particle that had the largest weight before resampling (after it)."""
+    sharing the map) are resampled along. Returns the new log weights, the index of the
+    particle that had the largest weight before resampling (after it), and the robot's pose
+    estimate (mean (3,), cov (3, 3)) from the weighted particles before resampling: the same
+    mean in expectation, without the resampling's noise, and a spread that resampling a few
+    particles down to copies of one would zero."""
     block = blocks[active]
     noise = np.diag(np.square(config.measurement_sigmas))
-    pt.predict(
-        block,
-        np.asarray(controls, float).reshape(-1, 2),
-        config.control_sigmas,
-        config.dt,
-        config.wheelbase,
-    )
+    width = models.control_width(config)
+    pt.predict(block, np.asarray(controls, float).reshape(-1, width), config)
     known = np.array([int(i) in landmarks.slots for i in meas.ids], dtype=bool)
     slots = landmarks.slots_of(meas.ids[known])
     z_known = meas.z[known]
@@ -69,6 +69,7 @@ def sweep(
             inc = pt.log_weight(x, prior, prop, lm_means, lm_covs, z_known, noise)
             weights = pt.normalise(log_w + inc)
     block.poses, block.covs = x, np.zeros_like(block.covs)
+    estimate = pt.pose_estimate(x, weights)  # before resampling, which only adds noise
 
     best = int(np.argmax(weights))
     n = len(weights)
@@ -93,7 +94,7 @@ def sweep(
         landmarks.means[:, slots], landmarks.covs[:, slots] = means, covs
     if not known.all():
         landmarks.add(meas.ids[~known], *pt.init_landmarks(block.poses, meas.z[~known], noise))
-    return weights, best
+    return weights, best, estimate
 
 
 def gather_neighbours(ids: np.ndarray, messages: Sequence[LandmarkMessage]) -> Neighbours:
@@ -131,6 +132,7 @@ class PointFastSlam:
         self.poses = pt.PoseBlock.at(initial_pose, n)
         self.map = pt.LandmarkBlock(n)
         self.log_weights = np.full(n, -np.log(n))
+        self._estimate = pt.pose_estimate(self.poses.poses, self.log_weights)
         self._best = 0
         self._last_ids = np.zeros(0, dtype=np.int64)
         self._inbox: list[LandmarkMessage] = []
@@ -142,7 +144,7 @@ class PointFastSlam:
                 np.array([i for i in measurements.ids if int(i) in self.map.slots], np.int64),
                 self._inbox,
             )
-        self.log_weights, self._best = sweep(
+        self.log_weights, self._best, self._estimate = sweep(
             [self.poses],
             0,
             self.map,
@@ -157,7 +159,7 @@ class PointFastSlam:
         self._inbox = []
 
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
-        return pt.pose_estimate(self.poses.poses, self.log_weights)
+        return self._estimate[0].copy(), self._estimate[1].copy()
 
     def landmarks(self) -> LandmarkMap:
         means, covs = pt.map_estimate(self.map, self.log_weights)

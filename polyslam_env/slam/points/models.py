@@ -5,6 +5,12 @@ measured speed V and steering angle G over a period dt, wheelbase D,
 
     x' = x + V dt cos(φ + G),   y' = y + V dt sin(φ + G),   φ' = φ + V dt sin(G) / D.
 
+In the RL env the robots are differential drives that report odometry, so the filters there
+use the odometry model instead (:func:`move_odometry`): the pose composed with the measured
+increment u = (dx, dy, dθ) in the robot frame, as the polynomial EKF predicts (SPEC §3).
+:func:`motion` picks the model a :class:`~polyslam_env.slam.points.config.PointSlamConfig`
+names and returns its noise covariance with it.
+
 Measurements are range and bearing to a point landmark (eq. 15). These are the estimator's own
 copies of the models; the world's ground truth (``world.kinematic``, ``world.point_sensor``)
 has its own, and a test checks that the two agree.
@@ -14,7 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from polyslam_env.core.geometry import wrap_angle
+from polyslam_env.core.geometry import compose, wrap_angle
+from polyslam_env.slam.points.config import PointSlamConfig
 
 
 def move(
@@ -41,6 +48,46 @@ def move(
     jac_ctrl[..., 2, 0] = dt * np.sin(steer) / wheelbase
     jac_ctrl[..., 2, 1] = step * np.cos(steer) / wheelbase
     return out, jac_pose, jac_ctrl
+
+
+def move_odometry(
+    poses: np.ndarray, odometry: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Poses (..., 3) composed with the odometry increment (3,) (dx, dy, dθ in the robot
+    frame); also ∂/∂pose (..., 3, 3) and ∂/∂u (..., 3, 3)."""
+    dx, dy = float(odometry[0]), float(odometry[1])
+    c, s = np.cos(poses[..., 2]), np.sin(poses[..., 2])
+    out = compose(poses, np.asarray(odometry, dtype=float))
+    shape = poses.shape[:-1]
+    jac_pose = np.zeros((*shape, 3, 3))
+    jac_pose[..., 0, 0] = jac_pose[..., 1, 1] = jac_pose[..., 2, 2] = 1.0
+    jac_pose[..., 0, 2] = -s * dx - c * dy
+    jac_pose[..., 1, 2] = c * dx - s * dy
+    jac_u = np.zeros((*shape, 3, 3))
+    jac_u[..., 0, 0] = jac_u[..., 1, 1] = c
+    jac_u[..., 0, 1] = -s
+    jac_u[..., 1, 0] = s
+    jac_u[..., 2, 2] = 1.0
+    return out, jac_pose, jac_u
+
+
+def control_width(config: PointSlamConfig) -> int:
+    """Numbers per control: 2 for the car (V, G), 3 for odometry (dx, dy, dθ)."""
+    return 2 if config.motion == "car" else 3
+
+
+def motion(
+    poses: np.ndarray, control: np.ndarray, config: PointSlamConfig
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One period of ``config.motion``: poses (..., 3) after it, ∂/∂pose (..., 3, 3),
+    ∂/∂control (..., 3, c) and the control noise covariance (c, c)."""
+    if config.motion == "car":
+        out, jac_pose, jac_ctrl = move(
+            poses, float(control[0]), float(control[1]), config.dt, config.wheelbase
+        )
+    else:
+        out, jac_pose, jac_ctrl = move_odometry(poses, control)
+    return out, jac_pose, jac_ctrl, np.diag(np.square(config.control_sigmas))
 
 
 def observe(poses: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -14,6 +14,7 @@ import numpy as np
 
 from polyslam_env.core.geometry import wrap_angle
 from polyslam_env.slam.points import models
+from polyslam_env.slam.points.config import PointSlamConfig
 
 #: Added to pose covariances only where a Gaussian *density* of a pose is evaluated, so a
 #: zero-noise motion model (a point mass) gives a finite log ratio; 1e-12 m² is far below any
@@ -76,13 +77,10 @@ class LandmarkBlock:
 
 
 # -- prediction and the FastSLAM 2.0 proposal -----------------------------------------------
-def predict(
-    block: PoseBlock, controls: np.ndarray, sigmas: tuple[float, float], dt: float, base: float
-) -> None:
-    """Push every particle's pose Gaussian through the car model for each control (V, G)."""
-    q = np.diag(np.square(sigmas))
-    for speed, steer in controls:
-        block.poses, jac_pose, jac_ctrl = models.move(block.poses, speed, steer, dt, base)
+def predict(block: PoseBlock, controls: np.ndarray, config: PointSlamConfig) -> None:
+    """Push every particle's pose Gaussian through ``config.motion`` for each control row."""
+    for control in controls:
+        block.poses, jac_pose, jac_ctrl, q = models.motion(block.poses, control, config)
         block.covs = jac_pose @ block.covs @ jac_pose.swapaxes(
             -1, -2
         ) + jac_ctrl @ q @ jac_ctrl.swapaxes(-1, -2)

@@ -65,8 +65,6 @@ class PointSeif:
         self.config = config
         self.max_active = max_active
         self.robot_id = robot_id
-        sv, sg = config.control_sigmas
-        self._W = np.diag([sv * sv, sg * sg])  # (2, 2) control noise (V, G)
         sr, sb = config.measurement_sigmas
         self._Q_inv = np.diag([1.0 / (sr * sr), 1.0 / (sb * sb)])  # (2, 2)
         self.mu = np.asarray(initial_pose, dtype=float).copy()  # (3 + 2n,)
@@ -81,8 +79,9 @@ class PointSeif:
     def step(self, controls: np.ndarray, measurements: PointMeasurements) -> None:
         """One sweep: a motion update per control period, the sweep's measurements,
         sparsification, mean recovery."""
-        for speed, steer in np.asarray(controls, dtype=float).reshape(-1, 2):
-            self._motion(float(speed), float(steer))
+        width = models.control_width(self.config)
+        for control in np.asarray(controls, dtype=float).reshape(-1, width):
+            self._motion(control)
         self._measure(measurements)
         self._sparsify()
         self._recover()
@@ -128,11 +127,9 @@ class PointSeif:
         return h_m, h_m @ self.mu[3:]
 
     # -- the updates ------------------------------------------------------------------------------
-    def _motion(self, speed: float, steer: float) -> None:
-        cfg = self.config
-        pose = self.mu[:3]
-        new_pose, F, G = models.move(pose, speed, steer, cfg.dt, cfg.wheelbase)
-        U = G @ self._W @ G.T  # (3, 3) control noise on the pose
+    def _motion(self, control: np.ndarray) -> None:
+        new_pose, F, G, W = models.motion(self.mu[:3], control, self.config)
+        U = G @ W @ G.T  # (3, 3) control noise on the pose
         idx = np.concatenate([np.arange(3), self._linked_indices()])  # pose + active coords
         F_inv = np.linalg.inv(F)
         H = self.H
@@ -142,8 +139,8 @@ class PointSeif:
         pose_block = F_inv.T @ H[:3, :3] @ F_inv
         H[:3, :3] = 0.5 * (pose_block + pose_block.T)
         # H' = H₀ − H₀ S (U⁻¹ + Sᵀ H₀ S)⁻¹ Sᵀ H₀ on the rows linked to the pose, with
-        # (U⁻¹ + A)⁻¹ = U (I + A U)⁻¹: U = L W Lᵀ has rank 2 (two controls move three
-        # pose coordinates), so it has no inverse
+        # (U⁻¹ + A)⁻¹ = U (I + A U)⁻¹: the car's U = L W Lᵀ has rank 2 (two controls move
+        # three pose coordinates), so it has no inverse
         h0s = H[np.ix_(idx, np.arange(3))]  # (k, 3)
         mid = U @ np.linalg.inv(np.eye(3) + H[:3, :3] @ U)
         correction = h0s @ mid @ h0s.T

@@ -34,13 +34,14 @@ class SharedMapFastSlam:
         self.poses = [pt.PoseBlock.at(p, n) for p in np.asarray(initial_poses, float)]
         self.map = pt.LandmarkBlock(n)
         self.log_weights = np.full(n, -np.log(n))
+        self.estimates = [pt.pose_estimate(b.poses, self.log_weights) for b in self.poses]
 
     def robot(self, index: int) -> SharedMapRobot:
         return SharedMapRobot(self, index)
 
     def step_robot(self, index: int, controls: np.ndarray, meas: PointMeasurements) -> None:
         """Robot ``index``'s controls and sweep into the joint filter."""
-        self.log_weights, _ = sweep(
+        self.log_weights, _, self.estimates[index] = sweep(
             self.poses, index, self.map, self.log_weights, controls, meas, self.config, self._rng
         )
 
@@ -56,7 +57,8 @@ class SharedMapRobot:
         self.team.step_robot(self.robot_id, controls, measurements)
 
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
-        return pt.pose_estimate(self.team.poses[self.robot_id].poses, self.team.log_weights)
+        mean, cov = self.team.estimates[self.robot_id]
+        return mean.copy(), cov.copy()
 
     def landmarks(self) -> LandmarkMap:
         means, covs = pt.map_estimate(self.team.map, self.team.log_weights)

@@ -70,3 +70,34 @@ def test_filter_models__agree_with_the_worlds_ground_truth() -> None:
     landmarks = rng.uniform(-30, 30, size=(40, 2))
     ids, z = sense_points(pose, landmarks, 30.0, (0.2, 0.03), None)
     np.testing.assert_allclose(models.observe(pose, landmarks[ids])[0], z, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_move_odometry_jacobians__match_finite_differences(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    pose = rng.uniform([-10, -10, -3], [10, 10, 3])
+    u = rng.uniform([-0.05, -0.01, -0.1], [0.3, 0.01, 0.1])
+    _, jp, ju = models.move_odometry(pose, u)
+    np.testing.assert_allclose(
+        jp, fd_matrix(lambda p: models.move_odometry(p, u)[0], pose), rtol=FD_RTOL, atol=FD_ATOL
+    )
+    np.testing.assert_allclose(
+        ju, fd_matrix(lambda v: models.move_odometry(pose, v)[0], u), rtol=FD_RTOL, atol=FD_ATOL
+    )
+
+
+def test_move_odometry__is_the_unicycle_composition_of_every_pose() -> None:
+    """Batched poses move exactly as each alone, and as the pose composition the polynomial
+    EKF predicts with (``core.geometry.compose``)."""
+    from polyslam_env.core.geometry import compose
+
+    rng = np.random.default_rng(7)
+    poses = rng.uniform([-5, -5, -3], [5, 5, 3], (6, 3))
+    u = np.array([0.2, -0.01, 0.05])
+    batch, jp, ju = models.move_odometry(poses, u)
+    for k, pose in enumerate(poses):
+        alone, jp1, ju1 = models.move_odometry(pose, u)
+        np.testing.assert_array_equal(batch[k], alone)
+        np.testing.assert_array_equal(jp[k], jp1)
+        np.testing.assert_array_equal(ju[k], ju1)
+        np.testing.assert_array_equal(alone, compose(pose, u))
