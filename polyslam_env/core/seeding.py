@@ -25,6 +25,7 @@ STREAMS: tuple[str, ...] = (
     "alignment",
     "pillars",
     "pillar_sensor",
+    "particles",
 )
 
 

@@ -294,6 +294,7 @@ class EnvConfig(Config):
         if self.coverage_target is not None:
             check_range("coverage_target", self.coverage_target, 0.0, 1.0)
         check_positive("coverage_resolution", self.coverage_resolution)
+        self._validate_backend()
         if self.channel is not None and self.channel.mode == "alignment":
             if not self.world.pillar_sensor.enabled:
                 raise ConfigError(
@@ -307,6 +308,34 @@ class EnvConfig(Config):
         """``faults``, every entry a :class:`FaultConfig` (pairs are turned into them on
         construction; this property only narrows the type)."""
         return tuple(f for f in self.faults if isinstance(f, FaultConfig))
+
+    def _validate_backend(self) -> None:
+        """A point back-end needs the pillar sensor; MBLCC needs the channel (its consensus),
+        known starts and the default mode. fastslam2, em_fastslam and seif exchange nothing
+        in the env: the channel stays unused (bytes 0)."""
+        backend = self.slam.backend
+        if backend == "polynomial" or not self.slam_enabled:
+            return
+        if not self.world.pillar_sensor.enabled:
+            raise ConfigError(
+                f"slam.backend: {backend!r} maps pillars; it needs world.pillar_sensor.enabled:"
+                " true (and a map with pillars)"
+            )
+        if backend == "mblcc" and self.channel is None:
+            raise ConfigError(
+                "slam.backend: 'mblcc' corrects landmarks with the others' estimates over the"
+                " channel; set channel (or use em_fastslam, the same filter without consensus)"
+            )
+        if backend == "mblcc" and self.initial_error:
+            raise ConfigError(
+                "slam.backend: 'mblcc' assumes known start poses (seed 003): its consensus maps"
+                " the others' landmarks through the nominal starts; set initial_error: false"
+            )
+        if backend == "mblcc" and self.channel is not None and self.channel.mode != "rendezvous":
+            raise ConfigError(
+                f"channel.mode: {self.channel.mode!r} merges polynomial maps; slam.backend"
+                " 'mblcc' sends its consensus messages in the default mode 'rendezvous'"
+            )
 
     def _validate_faults(self) -> None:
         """Robot and step ranges, one ``fail`` per robot and nothing after it, slip windows of

@@ -27,6 +27,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 
 from polyslam_env import metrics
 from polyslam_env.core.errors import ConfigError, MapFileError
+from polyslam_env.core.geometry import transform_points
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.environment import stages
 from polyslam_env.environment.config import EnvConfig, resolve_config
@@ -36,6 +37,7 @@ from polyslam_env.environment.observations import ObservationEncoder
 from polyslam_env.environment.rewards import REWARD_TERMS, combine, reward_terms
 from polyslam_env.environment.state import EpisodeState, estimate, estimates
 from polyslam_env.render.state import RenderState
+from polyslam_env.slam.backends import PointSlamRobot
 from polyslam_env.world.generators import LayoutGenerator, make_generator
 from polyslam_env.world.grid import FreeGrid, free_space_grid
 from polyslam_env.world.layout import Layout
@@ -395,6 +397,19 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
             self._renderer_layout = layout
         return self._renderer.render(self.render_state())
 
+    @staticmethod
+    def _map_for_render(state: EpisodeState, i: int, start: np.ndarray) -> list[np.ndarray]:
+        """Robot i's map as absolute polylines: its polynomials, or (point back-ends) a small
+        square (0.1 m) around each landmark estimate; placed by its true ``start``."""
+        if not state.slams:
+            return []
+        slam = state.slams[i]
+        if isinstance(slam, PointSlamRobot):
+            square = 0.05 * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1], [-1, -1]])  # (5, 2)
+            centres = transform_points(slam.landmarks().means, start)  # (M, 2)
+            return [c + square for c in centres]
+        return metrics.map_points(slam.polynomials(), start, 0.02)
+
     def render_state(self) -> RenderState:
         """A snapshot of the episode for the renderer (ground truth and estimates, absolute).
 
@@ -420,10 +435,7 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         cov_abs = np.array(
             [metrics.cov_to_absolute(cov[i : i + 1], starts[i])[0] for i in range(n)]
         )
-        maps = [
-            metrics.map_points(state.slams[i].polynomials(), starts[i], 0.02) if state.slams else []
-            for i in range(n)
-        ]
+        maps = [self._map_for_render(state, i, starts[i]) for i in range(n)]
         grid = state.coverage
         return RenderState(
             true_poses=state.world.poses,

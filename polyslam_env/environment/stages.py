@@ -26,6 +26,7 @@ import numpy as np
 
 from polyslam_env import metrics
 from polyslam_env.comms.channel import ChannelConfig
+from polyslam_env.comms.consensus import ConsensusExchange
 from polyslam_env.comms.exchange import AlignmentAttempt, ExchangeStep, RendezvousExchange
 from polyslam_env.core.geometry import beam_endpoints, between, wrap_remainder
 from polyslam_env.environment.config import EnvConfig
@@ -40,6 +41,7 @@ from polyslam_env.environment.observations import (
 from polyslam_env.environment.rewards import MAPPING_STEP, MAPPING_TOL, MapChanges
 from polyslam_env.environment.state import EpisodeState, Sensing, estimate
 from polyslam_env.metrics.episode import RobotHistory, final_robot_metrics, team_metrics
+from polyslam_env.slam.backends import PointSlamRobot, SlamRobot, make_point_slam
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.robot import PolySlam, SlamStepInfo
@@ -47,6 +49,7 @@ from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.grid import FreeGrid
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.physics import StepResult, World
+from polyslam_env.world.point_sensor import PillarReading
 from polyslam_env.world.sensors import Detection
 
 __all__ = [
@@ -95,13 +98,18 @@ def new_episode(
         perturb_starts(world, config.slam.p0, rngs["start_error"])
     angles = np.asarray(wc.range_sensor.angles)  # (B,)
     max_range = wc.range_sensor.max_range
-    slams = (
-        [PolySlam(config.slam, angles, max_range) for _ in range(n)] if config.slam_enabled else []
-    )
     pillar_sensor = wc.pillar_sensor
+    slams: list[SlamRobot] = []
+    if config.slam_enabled and config.slam.backend == "polynomial":
+        slams = [PolySlam(config.slam, angles, max_range) for _ in range(n)]
+    elif config.slam_enabled:
+        rng = rngs["particles"]
+        sigmas = (pillar_sensor.sigma_range, pillar_sensor.sigma_bearing_deg)
+        slams = [make_point_slam(config.slam, sigmas, rng, i) for i in range(n)]
+    polynomial = config.slam_enabled and config.slam.backend == "polynomial"
     features = (
         [FeatureBook(pillar_sensor.descriptor_dim) for _ in range(n)]
-        if config.slam_enabled and pillar_sensor.enabled
+        if polynomial and pillar_sensor.enabled
         else []
     )
     state = EpisodeState(
@@ -112,8 +120,11 @@ def new_episode(
         angles=angles,
         slams=slams,
         exchange=None
-        if config.channel is None or not config.slam_enabled
+        if config.channel is None or not polynomial
         else make_exchange(config.channel, n, rngs["channel"], wc, config.slam, rngs["alignment"]),
+        consensus=ConsensusExchange(config.channel, start_poses, rngs["channel"])
+        if config.channel is not None and config.slam_enabled and config.slam.backend == "mblcc"
+        else None,
         features=features,
         beliefs=belief_grids(oc, layout.bounds, max_range, n),
         samplers=[MapSampler(0.5 * oc.grid_resolution) for _ in range(n)],
@@ -183,18 +194,25 @@ def sense(world: World, camera: bool = True) -> Sensing:
 
 
 def run_slam(
-    slams: Sequence[PolySlam],
+    slams: Sequence[SlamRobot],
     robots: Sequence[int],
     active: np.ndarray,
     odometry: np.ndarray,
     ranges: np.ndarray,
+    pillars: Sequence[PillarReading] = (),
 ) -> list[SlamStepInfo | None]:
     """One step (changes the SLAMs) of every SLAM whose robot is active: ``slams[j]`` runs on
-    world robot ``robots[j]``'s odometry (N, 3) and ranges (N, B); None for failed robots."""
-    return [
-        slam.step(odometry[i], ranges[i]) if active[i] else None
-        for slam, i in zip(slams, robots, strict=True)
-    ]
+    world robot ``robots[j]``'s odometry (N, 3) and its ranges (N, B) (polynomial EKF) or its
+    pillar readings ``pillars`` (point back-ends); None for failed robots."""
+    out: list[SlamStepInfo | None] = []
+    for slam, i in zip(slams, robots, strict=True):
+        if not active[i]:
+            out.append(None)
+        elif isinstance(slam, PointSlamRobot):
+            out.append(slam.step(odometry[i], pillars[i].ids, pillars[i].z))
+        else:
+            out.append(slam.step(odometry[i], ranges[i]))
+    return out
 
 
 def exchange_maps(
@@ -268,7 +286,8 @@ def slam(state: EpisodeState, odometry: np.ndarray) -> list[SlamStepInfo | None]
     if not state.slams:
         return [None] * world.num_robots
     robots = range(len(state.slams))
-    return run_slam(state.slams, robots, world.active, odometry, state.sensing.ranges)
+    sensing = state.sensing
+    return run_slam(state.slams, robots, world.active, odometry, sensing.ranges, sensing.pillars)
 
 
 def map_features(state: EpisodeState) -> None:
@@ -285,12 +304,15 @@ def exchange(state: EpisodeState) -> ExchangeStep | None:
     """The exchange stage (changes links, last rendezvous, exchange, SLAMs): the mutual
     sightings for rendering, then :func:`exchange_maps` if the exchange is on."""
     state.links = _mutual_pairs(state.sensing.detections)
+    if state.consensus is not None:
+        points = [s for s in state.slams if isinstance(s, PointSlamRobot)]
+        state.consensus.step(state.step_count, points, state.world.active, state.world.poses)
     if state.exchange is None:
         return None
     out = exchange_maps(
         state.exchange,
         state.step_count,
-        state.slams,
+        [s for s in state.slams if isinstance(s, PolySlam)],  # all of them: see new_episode
         state.world.active,
         state.sensing,
         state.angles,
@@ -346,13 +368,23 @@ def _view(state: EpisodeState, i: int, pose: np.ndarray, pose_std: np.ndarray) -
         ranges=state.sensing.ranges[i],
         pose=pose,
         pose_std=pose_std,
-        map_points=state.samplers[i].points(state.slams[i]) if state.slams else _NO_POINTS,
+        map_points=_map_points(state, i),
         belief=state.beliefs[i],
         detections=state.sensing.detections[i],
         steps_since_rendezvous=None if last is None else state.step_count - last,
         rendezvous=count,
         step=state.step_count,
     )
+
+
+def _map_points(state: EpisodeState, i: int) -> np.ndarray:  # (M, 2)
+    """Robot i's map as points in its frame: its polynomials sampled, or its landmarks."""
+    if not state.slams:
+        return _NO_POINTS
+    slam = state.slams[i]
+    if isinstance(slam, PointSlamRobot):
+        return slam.landmarks().means
+    return state.samplers[i].points(slam)
 
 
 def sweep_coverage(state: EpisodeState) -> np.ndarray:  # (N,) m²
@@ -503,12 +535,20 @@ def _final_metrics(state: EpisodeState, i: int) -> dict[str, float]:
             a.receiver == i and is_wrong_alignment(a.result.transform, _true_transform(state, a))
             for a in state.exchange.alignments
         )
+    if state.consensus is not None:
+        counters.update(state.consensus.counters(i))
+    slam = state.slams[i] if state.slams else None
+    landmarks = None
+    if isinstance(slam, PointSlamRobot):
+        lm = slam.landmarks()
+        landmarks = (lm.ids, lm.means)
     return final_robot_metrics(
         state.histories[i],
-        state.slams[i].polynomials() if state.slams else None,
+        slam.polynomials() if slam is not None else None,
         state.world.layout,
         state.coverage.robot_coverage(i),
         counters,
+        landmarks,
     )
 
 

@@ -17,12 +17,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from polyslam_env import metrics
+from polyslam_env.comms.consensus import ConsensusExchange
 from polyslam_env.comms.exchange import RendezvousExchange
 from polyslam_env.core.geometry import between, wrap_remainder
 from polyslam_env.environment.observations import BeliefGrid, MapSampler
 from polyslam_env.metrics.episode import RobotHistory
+from polyslam_env.slam.backends import SlamRobot
 from polyslam_env.slam.features import FeatureBook
-from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.physics import World
 from polyslam_env.world.sensors import Detection
 
@@ -55,8 +56,9 @@ class EpisodeState:
     coverage: metrics.CoverageGrid  # team coverage of the free cells (ground truth)
     start_poses: np.ndarray  # (N, 3) each robot's frame in the absolute frame
     angles: np.ndarray  # (B,) beam angles β_i
-    slams: list[PolySlam]  # one per robot, or empty with slam_enabled=False
-    exchange: RendezvousExchange | None  # rendezvous map exchange (None: off or no SLAM)
+    slams: list[SlamRobot]  # one per robot (slam.backend), or empty with slam_enabled=False
+    exchange: RendezvousExchange | None  # polynomial map exchange (None: off, no SLAM, points)
+    consensus: ConsensusExchange | None  # MBLCC's landmark consensus (slam.backend: mblcc)
     features: list[FeatureBook]  # per robot: its pillar map (empty list: pillar sensor off)
     beliefs: list[BeliefGrid]  # per robot: cells its beams swept / hit, own frame
     samplers: list[MapSampler]  # per robot: its polynomials as points, cached

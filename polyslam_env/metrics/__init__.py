@@ -1,11 +1,12 @@
 """Evaluation metrics (SPEC §5), each computed against ground truth the robots never see.
 
-It owns: ``pose`` (frames, NEES in both forms, the χ² band), ``boundary`` (the true boundary
-and distances to it), ``mapping`` (ν in both forms, completeness, hit fraction, precision,
-completeness over the seen boundary, duplicates), ``coverage`` (the team coverage grid, time
-to a coverage fraction) and ``episode`` (per-robot histories and the end-of-episode metrics of
-the env and of ``simulate``). numpy/scipy, ``core``, the SLAM's polynomials and the world's
-layouts only: no pymunk, no PettingZoo. The SLAM wall time τ is measured by its caller.
+It owns: ``pose`` (frames, position and landmark errors, NEES in both forms, the χ² band),
+``boundary`` (the true boundary and distances to it), ``mapping`` (ν in both forms,
+completeness, hit fraction, precision, completeness over the seen boundary, duplicates),
+``coverage`` (the team coverage grid, time to a coverage fraction) and ``episode`` (per-robot
+histories and the end-of-episode metrics of the env and of ``simulate``). numpy/scipy,
+``core``, the SLAM's polynomials and the world's layouts only: no pymunk, no PettingZoo. The
+SLAM wall time τ is measured by its caller.
 """
 
 from polyslam_env.core.geometry import wrap_angle
@@ -29,12 +30,14 @@ from polyslam_env.metrics.mapping import (
 )
 from polyslam_env.metrics.pose import (
     cov_to_absolute,
+    landmark_distances,
     nees,
     nees_band,
     nees_paper,
     nees_paper_series,
     nees_series,
     pose_to_absolute,
+    position_error,
 )
 
 __all__ = [
@@ -49,6 +52,7 @@ __all__ = [
     "duplicates",
     "has_map",
     "hit_fraction",
+    "landmark_distances",
     "map_distances",
     "map_error_length",
     "map_points",
@@ -61,6 +65,7 @@ __all__ = [
     "nu",
     "nu_mean",
     "pose_to_absolute",
+    "position_error",
     "sample_arclength_batch",
     "seen_boundary",
     "time_to_fraction",

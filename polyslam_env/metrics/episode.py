@@ -54,6 +54,9 @@ ROBOT_METRIC_KEYS: tuple[str, ...] = (
     "map_precision",
     "duplicates",
     "has_map",
+    "pose_error",
+    "landmark_error",
+    "has_landmarks",
     "slam",
     "coverage",
     "bytes_sent",
@@ -77,7 +80,16 @@ MAP_METRIC_KEYS: tuple[str, ...] = (
     "duplicates",
     "has_map",
 )
-_SLAM_KEYS = ("nees", "nees_rel", "nees_paper", *MAP_METRIC_KEYS, "slam_time_ms")
+_SLAM_KEYS = (
+    "nees",
+    "nees_rel",
+    "nees_paper",
+    *MAP_METRIC_KEYS,
+    "pose_error",
+    "landmark_error",
+    "has_landmarks",
+    "slam_time_ms",
+)
 
 
 @dataclass
@@ -243,20 +255,35 @@ def final_robot_metrics(
     layout: Layout,
     coverage: float,
     counters: Mapping[str, float],
+    landmarks: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> dict[str, float]:
     """``infos[agent]["metrics"]``: every key of :data:`ROBOT_METRIC_KEYS`, a finite float.
 
     ``slam`` is 1.0 with SLAM. ``polys`` None (no SLAM: the robot knows its true pose and
     builds no map) gives ``slam`` 0.0 and, for the SLAM metrics, the values of a robot with an
     empty map and no estimation error: nees, nees_paper, ν, nu_mean, nu_mean_abs, duplicates,
-    completeness, completeness_seen and slam_time_ms 0.0, map_precision 1.0, has_map 0.0.
+    completeness, completeness_seen, pose_error and slam_time_ms 0.0, map_precision 1.0,
+    has_map 0.0. A point back-end has no polynomials (``polys`` empty: has_map 0.0) and gives
+    its pillar map ``landmarks`` = (ids (M,), means (M, 2) in its frame): ``landmark_error`` is
+    the mean distance (m) of the estimates, placed by the true start, to the true pillar
+    centres, with ``has_landmarks`` 1.0 (0.0 and landmark_error 0.0 without landmarks).
+    ``pose_error`` is the mean position error (m) over the episode, placed by the true start.
     """
     out = dict.fromkeys(ROBOT_METRIC_KEYS, 0.0)
     out["map_precision"] = 1.0
     if polys is not None:
-        paper = robot_metrics(history.run(polys), layout)
-        out.update({k: float(paper[k]) for k in _SLAM_KEYS})
+        run = history.run(polys)
+        paper = robot_metrics(run, layout)
+        out.update({k: float(paper[k]) for k in _SLAM_KEYS if k in paper})
         out["slam"] = 1.0
+        out["pose_error"] = metrics.position_error(run.true_poses, run.est_poses, run.true_poses[0])
+    if landmarks is not None and len(landmarks[0]):
+        ids, means = landmarks
+        truth = layout.pillars[np.asarray(ids, dtype=int), :2]
+        out["landmark_error"] = float(
+            np.mean(metrics.landmark_distances(means, history.true[0], truth))
+        )
+        out["has_landmarks"] = 1.0
     out["coverage"] = float(coverage)
     out["collisions"] = float(history.collisions)
     out["path_length"] = history.path_length
@@ -275,15 +302,20 @@ def final_robot_metrics(
 #: Metrics whose value only means something for a robot with a map (else the stated empty-map
 #: value, which must not enter an average of map errors).
 NEEDS_MAP = frozenset({"nu", "nu_mean", "nu_mean_abs", "map_precision", "duplicates"})
+#: Metrics that only mean something for a robot with a pillar map (``has_landmarks`` 1).
+NEEDS_LANDMARKS = frozenset({"landmark_error"})
 
 
 def meaningful(robots: Iterable[Mapping[str, float]], key: str) -> list[float]:
     """``key``'s values over the robots (``infos[agent]["metrics"]`` dicts) for which it is
-    meaningful: :data:`NEEDS_MAP` keys from robots with ``has_map`` 1, the other SLAM metrics
+    meaningful: :data:`NEEDS_MAP` keys from robots with ``has_map`` 1, :data:`NEEDS_LANDMARKS`
+    keys from robots with ``has_landmarks`` 1, the other SLAM metrics
     from robots with ``slam`` 1, any other key from every robot (absent or None skipped)."""
     out = []
     for m in robots:
         if key in NEEDS_MAP and m.get("has_map", 1.0) != 1.0:
+            continue
+        if key in NEEDS_LANDMARKS and m.get("has_landmarks", 0.0) != 1.0:
             continue
         if key in _SLAM_KEYS and m.get("slam", 1.0) != 1.0:
             continue

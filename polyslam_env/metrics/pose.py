@@ -1,4 +1,5 @@
-"""Estimates against the truth: frames, NEES (both forms) and its χ² band (SPEC §5).
+"""Estimates against the truth: frames, position and landmark errors, NEES (both forms) and
+its χ² band (SPEC §5).
 
 Each robot estimates in its own start frame R_{j,0}. Its true start pose x_{j,0} = (x0, y0, θ0)
 in the absolute frame is known here (never to the robot), so estimates are mapped to the
@@ -11,7 +12,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import chi2
 
-from polyslam_env.core.geometry import compose, transform_covariance, wrap_angle
+from polyslam_env.core.geometry import (
+    compose,
+    transform_covariance,
+    transform_points,
+    wrap_angle,
+)
 
 
 def _check_pose(start_pose: np.ndarray) -> np.ndarray:  # (3,)
@@ -37,6 +43,26 @@ def cov_to_absolute(covs: np.ndarray, start_pose: np.ndarray) -> np.ndarray:  # 
     if c.ndim != 3 or c.shape[1:] != (3, 3):
         raise ValueError(f"covs must have shape (K, 3, 3), got {c.shape}")
     return transform_covariance(c, x0)
+
+
+def position_error(true_poses: np.ndarray, est_poses: np.ndarray, start_pose: np.ndarray) -> float:
+    """Mean position error ‖p̂ − p‖ (m) over the steps: estimates (K, 3) in the frame
+    ``start_pose`` (3,) against the true poses (K, 3); 0.0 for no steps."""
+    if len(est_poses) == 0:
+        return 0.0
+    est = pose_to_absolute(est_poses, start_pose)
+    d = np.asarray(true_poses, dtype=float)[:, :2] - est[:, :2]
+    return float(np.mean(np.hypot(d[:, 0], d[:, 1])))
+
+
+def landmark_distances(
+    means: np.ndarray, frame: np.ndarray, truth: np.ndarray
+) -> np.ndarray:  # (M,)
+    """Distance (m) of each landmark estimate ``means`` (M, 2), given in the frame ``frame``
+    (3,), to its true position ``truth`` (M, 2) (absolute)."""
+    est = transform_points(np.asarray(means, dtype=float).reshape(-1, 2), frame)
+    d = est - np.asarray(truth, dtype=float).reshape(-1, 2)
+    return np.hypot(d[:, 0], d[:, 1])
 
 
 # -- NEES -----------------------------------------------------------------------------------

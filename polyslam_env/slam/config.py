@@ -4,12 +4,45 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from polyslam_env.core.config import Config, check_non_negative, check_positive, check_range
+from polyslam_env.core.config import (
+    Config,
+    check_choice,
+    check_non_negative,
+    check_positive,
+    check_range,
+)
 from polyslam_env.core.errors import ConfigError
+
+#: The SLAM back-ends the env runs (``slam.backend``): the polynomial EKF of the core paper,
+#: or a point-landmark filter over the pillars (``polyslam_env.slam.backends``).
+BACKENDS: tuple[str, ...] = ("polynomial", "fastslam2", "em_fastslam", "mblcc", "seif")
+
+
+@dataclass(frozen=True)
+class PointBackendConfig(Config):
+    """The settings of the point-landmark back-ends in the env (seed 003's values). Their
+    motion noise is ``slam.odom_sigma_*`` and their measurement noise the pillar sensor's
+    (``world.pillar_sensor``), the same sources the polynomial EKF uses for its own."""
+
+    particles: int = 10  # N (fastslam2, em_fastslam, mblcc)
+    resample_fraction: float = 0.75  # resample when N_eff < fraction · N
+    em_mobility: tuple[float, float, float] = (0.008, 0.005, 0.001)  # R: m, m, rad
+    consensus_step: float = 0.1  # ε of MBLCC's eq. 12
+    max_active: int = 20  # SEIF: landmarks linked to the pose at most
+
+    def validate(self) -> None:
+        if isinstance(self.particles, bool) or self.particles < 1:
+            raise ConfigError(f"slam.points.particles: must be >= 1, got {self.particles!r}")
+        check_range("slam.points.resample_fraction", self.resample_fraction, 0.0, 1.0)
+        for i, r in enumerate(self.em_mobility):
+            check_non_negative(f"slam.points.em_mobility[{i}]", r)
+        check_range("slam.points.consensus_step", self.consensus_step, 0.0, 1.0)
+        if isinstance(self.max_active, bool) or self.max_active < 1:
+            raise ConfigError(f"slam.points.max_active: must be >= 1, got {self.max_active!r}")
 
 
 @dataclass(frozen=True)
@@ -39,6 +72,8 @@ class SlamConfig(Config):
     join_pieces: bool = True  # join end-to-end pieces of one wall (merging.py; paper: False)
     link_clusters: bool = True  # clusters joined by a point near both (association; paper: False)
     blas_threads: int = 1  # BLAS threads during a step (polyslam_env/core/blas.py); 0: leave as is
+    backend: str = "polynomial"  # one of BACKENDS; the point ones map the pillars
+    points: PointBackendConfig = field(default_factory=PointBackendConfig)
 
     def validate(self) -> None:
         if not 1 <= self.order <= 5:
@@ -76,6 +111,7 @@ class SlamConfig(Config):
         check_range("slam.gate_prob", self.gate_prob, 0.5, 1.0)
         check_range("slam.tangent_min_deg", self.tangent_min_deg, 0.0, 89.0)
         check_non_negative("slam.blas_threads", self.blas_threads)
+        check_choice("slam.backend", self.backend, BACKENDS)
 
     @property
     def p0(self) -> np.ndarray:  # (3, 3)

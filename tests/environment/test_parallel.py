@@ -17,6 +17,7 @@ from polyslam_env.environment.parallel import REWARD_TERMS, PolySlamParallelEnv,
 from polyslam_env.metrics.episode import ROBOT_METRIC_KEYS
 from polyslam_env.render.state import RenderState
 
+_PILLARS = {"map": "generator:pillar_hall", "num_robots": 3, "world__pillar_sensor__enabled": True}
 VARIANTS = [
     pytest.param({"map": "two_rooms", "num_robots": 1}, id="two_rooms-1-vector-continuous"),
     pytest.param(
@@ -31,6 +32,26 @@ VARIANTS = [
         {"map": "generator:cave", "num_robots": 1, "observation__mode": "grid"},
         id="cave-1-grid-continuous",
     ),
+    # slam.backend: the point back-ends over the pillars (issues 17, 18)
+    *(
+        pytest.param(
+            {**_PILLARS, "slam__backend": backend, **extra},
+            id=f"pillar_hall-3-{backend}",
+        )
+        for backend, extra in (
+            ("fastslam2", {}),
+            ("em_fastslam", {}),
+            ("seif", {}),
+            ("mblcc", {"initial_error": False, "channel__range": 25.0}),
+        )
+    ),
+    # the map exchange with the pillar sensor on: by alignment, camera off (issue 18), and at
+    # camera rendezvous (whose messages then carry no features)
+    pytest.param(
+        {**_PILLARS, "world__camera__enabled": False, "channel__mode": "alignment"},
+        id="pillar_hall-3-alignment",
+    ),
+    pytest.param({**_PILLARS, "channel__range": 3.0}, id="pillar_hall-3-rendezvous"),
 ]
 
 

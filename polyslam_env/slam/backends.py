@@ -1,0 +1,170 @@
+"""The SLAM back-ends the env runs, selected by ``slam.backend`` (:data:`BACKENDS`).
+
+``polynomial`` is the core paper's polynomial-landmark EKF (:class:`~polyslam_env.slam.robot.
+PolySlam`), which maps walls from the range beams. The others map the pillars, from the pillar
+sensor's range–bearing readings with known identities, with the filters of
+:mod:`polyslam_env.slam.points`:
+
+* ``fastslam2``, ``em_fastslam``, ``mblcc``: seed 003's particle filters (MBLCC adds the
+  Kalman-consensus correction from the other robots' landmark estimates, which travel over the
+  channel: :mod:`polyslam_env.comms.consensus`);
+* ``seif``: seed 001's sparse extended information filter.
+
+In the env they use the odometry motion model (:func:`~polyslam_env.slam.points.models.
+move_odometry`) with the noise the polynomial EKF assumes (``slam.odom_sigma_*``) and the
+pillar sensor's noise. Like the polynomial EKF they are **anchored at the true start**: the
+filter starts exactly at its frame origin and estimates relative to where the robot really
+started, and the unobservable start error e₀ ~ N(0, P0) is added to the reported covariance as
+J P0 Jᵀ (:func:`~polyslam_env.slam.ekf.start_error_cov`). Sampling P0 into the particles
+instead would not survive: resampling keeps the descendants of a few initial particles, so the
+spread of a direction nothing observes collapses and the filter turns overconfident.
+
+:class:`PointSlamRobot` gives them the members the env reads of a
+:class:`~polyslam_env.slam.robot.PolySlam` (``pose``, ``pose_cov``, ``pose_cov_relative``,
+``diverging``, ``polynomials()``, ``step``), so the stages, observations, rewards and metrics
+treat every back-end alike; a point back-end has no polynomial map (``polynomials()`` is
+empty, so the wall-map metrics report ``has_map`` 0 and the map reward terms stay 0) and
+reports its landmarks (:meth:`PointSlamRobot.landmarks`) for the landmark metrics instead.
+fastslam2, em_fastslam and seif exchange nothing in the env (the channel stays unused).
+
+With 10 particles the FastSLAM filters are overconfident (NEES far above 3 over an episode):
+the particle spread after each sweep reflects one sweep's proposal, not the error the poses
+share with the landmarks, the known inconsistency of FastSLAM with few particles (Bailey,
+Nieto & Nebot 2006). SEIF is consistent (tests/environment/test_backends.py).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from polyslam_env.slam.config import BACKENDS, SlamConfig
+from polyslam_env.slam.ekf import start_error_cov
+from polyslam_env.slam.points.config import PointSlamConfig, algorithm_config
+from polyslam_env.slam.points.fastslam import PointFastSlam
+from polyslam_env.slam.points.interface import (
+    LandmarkMap,
+    LandmarkMessage,
+    PointMeasurements,
+    PointSlamBackend,
+)
+from polyslam_env.slam.points.seif import PointSeif
+from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.robot import PolySlam, SlamStepInfo
+
+__all__ = [
+    "BACKENDS",
+    "POINT_BACKENDS",
+    "PointSlamRobot",
+    "SlamRobot",
+    "make_point_slam",
+    "point_slam_config",
+]
+
+#: The back-ends that map pillars (they need ``world.pillar_sensor.enabled``).
+POINT_BACKENDS: tuple[str, ...] = tuple(b for b in BACKENDS if b != "polynomial")
+
+
+def point_slam_config(
+    slam: SlamConfig, sigma_range: float, sigma_bearing_deg: float
+) -> PointSlamConfig:
+    """The full filter settings of ``slam.backend`` (a point back-end) in the env: its
+    algorithm switches, ``slam.points``, odometry motion with ``slam.odom_sigma_*`` and the
+    pillar sensor's measurement noise (``sigma_range`` m, ``sigma_bearing_deg``)."""
+    pts = slam.points
+    base = PointSlamConfig(
+        particles=pts.particles,
+        resample_fraction=pts.resample_fraction,
+        em_mobility=pts.em_mobility,
+        consensus_step=pts.consensus_step if slam.backend == "mblcc" else 0.0,
+        sigma_r=sigma_range,
+        sigma_b_deg=sigma_bearing_deg,
+        motion="odometry",
+        odom_sigma_xy=slam.odom_sigma_xy,
+        odom_sigma_theta_deg=slam.odom_sigma_theta_deg,
+    )
+    if slam.backend == "seif":
+        return base
+    # algorithm_config's mblcc would lift ε = 0 to the seed's 0.1; here ε is what was set
+    return algorithm_config(slam.backend, base).replace(consensus_step=base.consensus_step)
+
+
+class PointSlamRobot:
+    """One robot's point-landmark back-end with the members the env reads of a
+    :class:`~polyslam_env.slam.robot.PolySlam`.
+
+    ``pose_cov_relative`` is the back-end's own covariance (relative to the true start),
+    ``pose_cov`` that plus J P0 Jᵀ for the start error ``p0`` (3, 3). These filters have no
+    divergence test: ``diverging`` stays False.
+    """
+
+    def __init__(self, backend: PointSlamBackend, p0: np.ndarray) -> None:
+        self.backend = backend
+        self.p0 = np.asarray(p0, dtype=float)
+        self.diverging = False
+        self.steps = 0
+        self._read_pose()
+
+    @property
+    def pose_cov(self) -> np.ndarray:  # (3, 3)
+        return self.pose_cov_relative + start_error_cov(self.pose, self.p0)
+
+    def _read_pose(self) -> None:
+        self.pose, self.pose_cov_relative = self.backend.pose()
+
+    def step(self, odometry: np.ndarray, ids: np.ndarray, z: np.ndarray) -> SlamStepInfo:
+        """One control period: the odometry increment (3,) and the sweep's pillar readings,
+        ids (m,) and (range, bearing) z (m, 2)."""
+        start = time.perf_counter()
+        before = len(self.backend.landmarks().ids)
+        self.backend.step(np.asarray(odometry, dtype=float)[None], PointMeasurements(ids, z))
+        self._read_pose()
+        self.steps += 1
+        n = len(self.backend.landmarks().ids)
+        return SlamStepInfo(
+            step=self.steps,
+            time_s=time.perf_counter() - start,
+            n_landmarks=n,
+            beams_used=len(ids),
+            created=n - before,
+            refit=0,
+            merged=0,
+            rho=0.0,
+            sigma=0.0,
+            divergence_f=0.0,
+            diverging=False,
+        )
+
+    def polynomials(self) -> list[Polynomial]:
+        """No polynomial map: the wall-map metrics see an empty map."""
+        return []
+
+    def landmarks(self) -> LandmarkMap:
+        return self.backend.landmarks()
+
+    def export_message(self) -> LandmarkMessage:
+        return self.backend.export_message()
+
+    def import_messages(self, messages: list[LandmarkMessage]) -> None:
+        self.backend.import_messages(messages)
+
+
+#: A robot's SLAM in the env, whichever the back-end.
+SlamRobot = PolySlam | PointSlamRobot
+
+
+def make_point_slam(
+    slam: SlamConfig, sensor_sigmas: tuple[float, float], rng: np.random.Generator, robot_id: int
+) -> PointSlamRobot:
+    """Robot ``robot_id``'s point back-end (``slam.backend``), anchored at its frame origin
+    with start error P0, for a pillar sensor of noise ``sensor_sigmas`` (m, degrees); the
+    particle filters draw from ``rng``."""
+    config = point_slam_config(slam, *sensor_sigmas)
+    origin = np.zeros(3)
+    backend: PointSlamBackend
+    if slam.backend == "seif":
+        backend = PointSeif(config, origin, slam.points.max_active, robot_id=robot_id)
+    else:
+        backend = PointFastSlam(config, origin, rng, robot_id=robot_id)
+    return PointSlamRobot(backend, slam.p0)

@@ -1,0 +1,204 @@
+"""``slam.backend``: the point-landmark back-ends in the env (issues 17 and 18).
+
+The polynomial EKF is tested everywhere else; here the env runs FastSLAM 2.0, EM-FastSLAM,
+MBLCC and SEIF over the pillars of ``generator:pillar_hall``: configuration errors, the
+consensus messages (wire format, frames, bytes), ε = 0 against the independent filter, the
+landmark metrics, the observations, and SEIF's consistency over whole seeded episodes.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from polyslam_env.comms.channel import ChannelConfig
+from polyslam_env.comms.consensus import ConsensusExchange, decode, encode
+from polyslam_env.core.errors import ConfigError
+from polyslam_env.core.geometry import between, compose, transform_points, wrap_remainder
+from polyslam_env.environment import stages
+from polyslam_env.environment.config import EnvConfig
+from polyslam_env.environment.parallel import PolySlamParallelEnv
+from polyslam_env.metrics.episode import RobotHistory, final_robot_metrics, meaningful
+from polyslam_env.slam.backends import PointSlamRobot
+from polyslam_env.slam.points.interface import LandmarkMessage
+from polyslam_env.world.layout import Layout
+
+PILLARS: dict[str, Any] = {
+    "map": "generator:pillar_hall",
+    "num_robots": 3,
+    "coverage_target": None,
+    "world": {"pillar_sensor": {"enabled": True}},
+}
+
+
+def point_config(backend: str, **overrides: Any) -> EnvConfig:
+    data: dict[str, Any] = {**PILLARS, "slam": {"backend": backend}}
+    if backend == "mblcc":
+        # a radio across the hall, so that robots that start apart exchange at all
+        data.update(channel={"range": 25.0}, initial_error=False)
+    data.update(overrides)
+    return EnvConfig.from_dict(data)
+
+
+def run(config: EnvConfig, seed: int, steps: int) -> tuple[PolySlamParallelEnv, dict[str, Any]]:
+    """``steps`` steps of seeded random driving (forward, any turn); the env and the last
+    infos."""
+    env = PolySlamParallelEnv(config.replace(max_steps=steps))
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    infos: dict[str, Any] = {}
+    while env.agents:
+        actions = {
+            a: rng.uniform([0.2, -1.0], [1.0, 1.0]) * env.action_space(a).high  # type: ignore[attr-defined]
+            for a in env.agents
+        }
+        infos = env.step(actions)[4]
+    return env, infos
+
+
+# -- configuration ------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("data", "needle"),
+    [
+        ({"slam": {"backend": "seif"}}, "world.pillar_sensor.enabled"),
+        (
+            {**PILLARS, "slam": {"backend": "mblcc"}, "initial_error": False, "channel": None},
+            "set channel",
+        ),
+        (
+            {**PILLARS, "slam": {"backend": "mblcc"}, "channel": {"range": 5.0}},
+            "initial_error: false",
+        ),
+        (
+            {
+                **PILLARS,
+                "slam": {"backend": "mblcc"},
+                "initial_error": False,
+                "channel": {"mode": "alignment"},
+            },
+            "channel.mode",
+        ),
+        ({**PILLARS, "slam": {"backend": "fastslam"}}, "slam.backend: must be one of"),
+        ({**PILLARS, "slam": {"backend": "seif", "points": {"max_active": 0}}}, "max_active"),
+    ],
+)
+def test_config__rejects_what_a_point_backend_cannot_run(data: dict[str, Any], needle: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        EnvConfig.from_dict(data)
+    assert needle in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+# -- the consensus messages --------------------------------------------------------------------
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_consensus_wire_format__round_trips(precision: str) -> None:
+    rng = np.random.default_rng(0)
+    msg = LandmarkMessage(2, np.array([4, 17, 3], np.int64), rng.uniform(-9, 9, (3, 2)))
+    payload = encode(msg, precision)
+    width = 4 if precision == "float32" else 8
+    assert len(payload) == 4 + 3 * 4 + 3 * 2 * width
+    back = decode(payload, 2, precision)
+    np.testing.assert_array_equal(back.ids, msg.ids)
+    tol = 1e-6 * 9 if precision == "float32" else 0.0  # float32 keeps ~7 significant digits
+    np.testing.assert_allclose(back.means, msg.means, rtol=0, atol=tol)
+
+
+def test_consensus__maps_estimates_into_the_receivers_frame() -> None:
+    """A landmark the sender places exactly (in its own frame) arrives where the receiver's
+    frame has it: brute force through the absolute frame."""
+    rng = np.random.default_rng(1)
+    starts = rng.uniform([-5, -5, -3], [5, 5, 3], (3, 3))
+    truth = rng.uniform(-8, 8, (4, 2))  # absolute
+    own = transform_points(truth, between(starts[0], np.zeros(3), wrap_remainder))  # in 0's frame
+    ex = ConsensusExchange(ChannelConfig(), starts, np.random.default_rng(0))
+    out = ex._into_frame(LandmarkMessage(0, np.arange(4), own), receiver=2)
+    want = transform_points(truth, compose(np.zeros(3), between(starts[2], np.zeros(3))))
+    np.testing.assert_allclose(out.means, want, atol=1e-12)
+
+
+def test_mblcc_with_zero_step__equals_em_fastslam_and_counts_its_bytes() -> None:
+    """ε = 0 makes eq. 12's term exactly zero: the same poses and maps as EM-FastSLAM, step
+    for step, while the messages still travel (and are counted)."""
+    seed, steps = 1, 150  # seed 1: robots that see common pillars within the episode
+    zero = {"backend": "mblcc", "points": {"consensus_step": 0.0}}
+    mblcc, _ = run(point_config("mblcc", slam=zero), seed, steps)
+    em, _ = run(point_config("em_fastslam", initial_error=False), seed, steps)
+    for a, b in zip(mblcc.episode.histories, em.episode.histories, strict=True):
+        np.testing.assert_array_equal(np.array(a.est), np.array(b.est))
+    assert mblcc.episode.consensus is not None
+    sent = [mblcc.episode.consensus.counters(i)["bytes_sent"] for i in range(3)]
+    assert sum(sent) > 0
+
+
+def test_mblcc__consensus_changes_the_estimates() -> None:
+    """With ε = 0.1 the received estimates do act (else the exchange would be decoration)."""
+    seed, steps = 1, 150  # seed 1: robots that see common pillars within the episode
+    mblcc, _ = run(point_config("mblcc"), seed, steps)
+    em, _ = run(point_config("em_fastslam", initial_error=False), seed, steps)
+    diffs = [
+        np.abs(np.array(a.est) - np.array(b.est)).max()
+        for a, b in zip(mblcc.episode.histories, em.episode.histories, strict=True)
+    ]
+    assert max(diffs) > 0.0
+
+
+# -- metrics and observations -------------------------------------------------------------------
+def test_landmark_error__is_zero_for_the_true_pillars_and_gated_by_its_flag() -> None:
+    pillars = np.array([[1.0, 2.0, 0.1], [3.0, -1.0, 0.1], [-2.0, 0.5, 0.1]])
+    box = np.array([[-5.0, -5.0], [5.0, -5.0], [5.0, 5.0], [-5.0, 5.0], [-5.0, -5.0]])
+    layout = Layout("box", (box,), pillars, np.array([[0.5, 0.5, 0.3]]))
+    start = np.array([0.5, 0.5, 0.3])
+    history = RobotHistory(start, np.zeros(3), np.eye(3) * 1e-4)
+    ids = np.array([2, 0])
+    own = transform_points(pillars[ids, :2], between(start, np.zeros(3), wrap_remainder))
+    perfect = final_robot_metrics(history, [], layout, 0.0, {}, (ids, own))
+    assert perfect["landmark_error"] == pytest.approx(0.0, abs=1e-12)
+    assert perfect["has_landmarks"] == 1.0 and perfect["has_map"] == 0.0
+    shifted = final_robot_metrics(history, [], layout, 0.0, {}, (ids, own + np.array([0.03, 0.04])))
+    assert shifted["landmark_error"] == pytest.approx(0.05, abs=1e-12)
+    polynomial = final_robot_metrics(history, [], layout, 0.0, {})
+    assert polynomial["has_landmarks"] == 0.0
+    assert meaningful([perfect, polynomial], "landmark_error") == [perfect["landmark_error"]]
+
+
+@pytest.mark.parametrize("backend", ["fastslam2", "seif"])
+def test_point_backend__observes_its_landmarks_and_reports_landmark_metrics(backend: str) -> None:
+    env, infos = run(point_config(backend), seed=0, steps=60)
+    slam = env.episode.slams[0]
+    assert isinstance(slam, PointSlamRobot)
+    lm = slam.landmarks()
+    assert len(lm.ids) > 0
+    np.testing.assert_array_equal(stages._map_points(env.episode, 0), lm.means)
+    m = infos["robot_0"]["metrics"]
+    assert m["has_landmarks"] == 1.0 and m["has_map"] == 0.0 and m["slam"] == 1.0
+    # a pillar sensor with σ_r = 3 cm and 1° places pillars within a few cm; 0.5 m would
+    # mean landmarks in the wrong frame or under the wrong ids
+    assert 0.0 < m["landmark_error"] < 0.5
+
+
+#: SEIF's consistency: NEES of the filter's own pose covariance (relative to the true start) at
+#: the end of each episode, over 20 seeded episodes × 3 robots.
+NEES_RUNS = 20
+
+
+def test_seif__is_consistent_at_the_end_of_whole_episodes() -> None:
+    """At the last step of each of 20 seeded 150-step episodes, every robot's pose error
+    (relative to its true start) against ``pose_cov_relative``: the mean of the 60 NEES values
+    must lie in the two-sided 95 % χ² band of a consistent filter, χ²(3·60)/60. SEIF's
+    sparsification is an approximation, but with ``max_active`` = 20 ≥ the pillars one sweep
+    sees here it drops no links a sweep makes."""
+    values = []
+    for seed in range(NEES_RUNS):
+        env, _ = run(point_config("seif"), seed=seed, steps=150)
+        for i, slam in enumerate(env.episode.slams):
+            history = env.episode.histories[i]
+            truth = between(history.true[0], history.true[-1], wrap_remainder)
+            err = truth - slam.pose
+            err[2] = wrap_remainder(err[2])
+            values.append(float(err @ np.linalg.solve(slam.pose_cov_relative, err)))
+    n = len(values)
+    lo, hi = chi2.ppf([0.025, 0.975], 3 * n) / n
+    assert lo <= np.mean(values) <= hi, (np.mean(values), lo, hi)
