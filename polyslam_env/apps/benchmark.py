@@ -13,7 +13,8 @@ SLAM and with ``slam_enabled=False``; then the same config through the SuperSuit
 path (:func:`polyslam_env.environment.vector.make_vec_env`, 2 envs in this process, then in 2
 worker processes: ``vec``, whose ratio of the two is issue 15's target); and
 PettingZoo MPE ``simple_spread`` (3 agents) through the same harness, when ``mpe2`` is installed
-(the ``bench`` extra).
+(the ``bench`` extra); * ``backends``: env steps/s of every ``slam.backend`` on the pillar
+hall (3 robots, pillar sensor on), next to the same env without SLAM.
 
 Env runs include the resets that happen when episodes end (as in training). Actions come from
 seeded generators. The :func:`run_benchmark` result is a JSON-ready dict.
@@ -67,7 +68,17 @@ __all__ = [
 ]
 
 #: Sections of a benchmark run, in the order they run.
-SECTIONS = ("slam", "world", "reference", "env", "vec", "team", "memory", "compile")
+SECTIONS = (
+    "slam",
+    "world",
+    "reference",
+    "env",
+    "vec",
+    "backends",
+    "team",
+    "memory",
+    "compile",
+)
 #: The env measured: issue 8's "3 robots, paper sensors, full SLAM, vector observations".
 ENV_CONFIG: dict[str, Any] = {
     "map": "paper",
@@ -396,6 +407,33 @@ def bench_env(plan: Plan, seed: int = 0, **overrides: Any) -> dict[str, Any]:
     return {"installed": True, "steps_per_s": rate.to_dict()}
 
 
+#: The env of the back-end rows: 3 robots on the pillar hall with the pillar sensor on.
+BACKEND_ENV: dict[str, Any] = {
+    **ENV_CONFIG,
+    "map": "generator:pillar_hall",
+    "world__pillar_sensor__enabled": True,
+}
+
+
+def bench_backends(plan: Plan, seed: int = 0) -> list[dict[str, Any]]:
+    """Env steps/s of every ``slam.backend`` on :data:`BACKEND_ENV` (the polynomial EKF with
+    its map exchange, the point back-ends as the env runs them: MBLCC with its consensus over a
+    25 m radio and known starts), each with ``ratio_to_no_slam``, its rate over the same env
+    with ``slam_enabled=False`` timed first in the same run."""
+    from polyslam_env.slam.config import BACKENDS
+
+    reference = bench_env(plan, seed, **BACKEND_ENV, slam_enabled=False)
+    rows = [{"backend": "none (slam_enabled=False)", **reference, "ratio_to_no_slam": 1.0}]
+    for backend in BACKENDS:
+        extra: dict[str, Any] = {"slam__backend": backend}
+        if backend == "mblcc":
+            extra.update(initial_error=False, channel__range=25.0)
+        row = {"backend": backend, **bench_env(plan, seed, **BACKEND_ENV, **extra)}
+        row["ratio_to_no_slam"] = _ratio(_rate(row), _rate(reference))
+        rows.append(row)
+    return rows
+
+
 def bench_vec(plan: Plan, seed: int = 0, num_envs: int = 2, num_cpus: int = 2) -> dict[str, Any]:
     """Env steps/s through :func:`make_vec_env` with ``num_envs`` envs, in ``num_cpus`` worker
     processes (0 or 1: all in this process), and the CPU time per env step of this process and
@@ -563,6 +601,8 @@ def run_benchmark(
         vec["ratio_to_env"] = _ratio(_rate(vec), _rate(out.get("env", {}).get("full_slam")))
         vec["ratio_to_one_process"] = _ratio(_rate(vec), _rate(one))
         out["vec"] = _emit(report, "env", vec)
+    if "backends" in wanted:
+        out["backends"] = [_emit(report, "backends", r) for r in bench_backends(plan, seed)]
     _system_sections(out, plan, wanted, seed, report, workers, profile)
     out["targets"] = targets(out)
     out["machine"]["load_after"] = _load_average()

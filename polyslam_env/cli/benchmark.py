@@ -29,6 +29,8 @@ COLUMNS = {
         ("× pymunk", 8),
     ],
     "env": [("env", 20), ("steps/s", 9), ("IQR", 9), ("min–max", 17), ("× MPE", 7)],
+    "backends": [("slam.backend", 25), ("steps/s", 9), ("IQR", 9), ("min–max", 17),
+                 ("× no SLAM", 9)],
     "team": [("robots", 9), ("steps", 6), ("mean ms", 9), ("median ms", 9), ("max ms", 9),
              ("× first", 8), ("messages", 8), ("polys", 6)],
     "memory": [("episode", 9), ("steps", 6), ("peak MB", 9), ("RSS MB", 9)],
@@ -40,6 +42,7 @@ TAILS = {
     "slam": "  stages (median µs)",
     "world": "",
     "env": "",
+    "backends": "",
     "team": "",
     "memory": "",
     "compile": "",
@@ -52,7 +55,7 @@ def _columns(section: str, cells: list[str]) -> str:
     rest right rather than being cut)."""
     out = []
     for k, (cell, (_, width)) in enumerate(zip(cells, COLUMNS[section], strict=True)):
-        left = section == "env" and k == 0
+        left = section in ("env", "backends") and k == 0
         out.append(f"{cell:<{width}}" if left else f"{cell:>{width}}")
     return " ".join(out)
 
@@ -65,6 +68,8 @@ TITLES = {
     "slam": "SLAM step per robot vs landmarks",
     "world": "world step (physics + scan + camera) vs robots",
     "env": "env steps per second (3 robots, paper map, vector obs, no rendering)",
+    "backends": "env steps per second per slam.backend (3 robots, generator:pillar_hall, pillar"
+    " sensor on, vector obs)",
     "team": "env step vs team size (generator:rooms, exchange on, no coverage end;"
     " messages and polynomials the exchange applied)",
     "memory": "RSS of one env (3 robots, full SLAM) in a fresh process, after each episode",
@@ -90,8 +95,19 @@ def register(sub: Any) -> None:
         "--only",
         nargs="+",
         metavar="SECTION",
-        choices=("slam", "world", "env", "vec", "reference", "team", "memory", "compile"),
-        help="run only these sections: slam world env vec reference team memory compile"
+        choices=(
+            "slam",
+            "world",
+            "env",
+            "vec",
+            "backends",
+            "reference",
+            "team",
+            "memory",
+            "compile",
+        ),
+        help="run only these sections: slam world env vec backends reference team memory"
+        " compile"
         " (default: all)",
     )
     parser.add_argument(
@@ -222,6 +238,12 @@ def _env_row(r: dict[str, Any]) -> str:
     return row
 
 
+def _backends_row(r: dict[str, Any]) -> str:
+    s = r["steps_per_s"]
+    cells = [r["backend"], f"{s['median']:.1f}", *_spread(s), _opt(r["ratio_to_no_slam"])]
+    return _columns("backends", cells)
+
+
 def _opt(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.2f}"
 
@@ -275,6 +297,7 @@ FORMATTERS = {
     "slam": _slam_row,
     "world": _world_row,
     "env": _env_row,
+    "backends": _backends_row,
     "team": _team_row,
     "memory": _memory_row,
     "compile": _compile_row,

@@ -325,3 +325,20 @@ def test_benchmark_command__profile_noslam_profiles_the_env_without_slam(tmp_pat
     assert profile["slam_enabled"] is False and profile["env"] == "paper"
     names = [e["function"] for e in profile["cumtime"]]
     assert not any("slam/robot.py" in n for n in names)
+
+
+def test_benchmark_command__backends_rows_time_every_backend_against_no_slam(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """One row per ``slam.backend`` after the no-SLAM reference, each with its ratio to it."""
+    from polyslam_env.slam.config import BACKENDS
+
+    out = tmp_path / "backends.json"
+    assert main(["benchmark", "--tiny", "--only", "backends", "--json", str(out)]) == 0
+    rows = json.loads(out.read_text())["backends"]
+    assert [r["backend"] for r in rows] == ["none (slam_enabled=False)", *BACKENDS]
+    reference = rows[0]["steps_per_s"]["median"]
+    for r in rows[1:]:
+        assert r["ratio_to_no_slam"] == pytest.approx(r["steps_per_s"]["median"] / reference)
+    printed = capsys.readouterr().out
+    assert all(b in printed for b in BACKENDS)
