@@ -39,6 +39,7 @@ import time
 
 import numpy as np
 
+from polyslam_env.core.blas import blas_threads
 from polyslam_env.slam.config import BACKENDS, SlamConfig
 from polyslam_env.slam.ekf import start_error_cov
 from polyslam_env.slam.points.config import PointSlamConfig, algorithm_config
@@ -99,11 +100,13 @@ class PointSlamRobot:
     divergence test: ``diverging`` stays False.
     """
 
-    def __init__(self, backend: PointSlamBackend, p0: np.ndarray) -> None:
+    def __init__(self, backend: PointSlamBackend, p0: np.ndarray, blas: int = 1) -> None:
         self.backend = backend
         self.p0 = np.asarray(p0, dtype=float)
+        self.blas = blas  # BLAS threads during a step, as ``slam.blas_threads``
         self.diverging = False
         self.steps = 0
+        self._seen: set[int] = set()  # landmark ids the back-end holds
         self._read_pose()
 
     @property
@@ -117,17 +120,18 @@ class PointSlamRobot:
         """One control period: the odometry increment (3,) and the sweep's pillar readings,
         ids (m,) and (range, bearing) z (m, 2)."""
         start = time.perf_counter()
-        before = len(self.backend.landmarks().ids)
-        self.backend.step(np.asarray(odometry, dtype=float)[None], PointMeasurements(ids, z))
-        self._read_pose()
+        with blas_threads(self.blas):
+            self.backend.step(np.asarray(odometry, dtype=float)[None], PointMeasurements(ids, z))
+            self._read_pose()
         self.steps += 1
-        n = len(self.backend.landmarks().ids)
+        before = len(self._seen)
+        self._seen.update(int(i) for i in ids)  # known association: a new id is a new landmark
         return SlamStepInfo(
             step=self.steps,
             time_s=time.perf_counter() - start,
-            n_landmarks=n,
+            n_landmarks=len(self._seen),
             beams_used=len(ids),
-            created=n - before,
+            created=len(self._seen) - before,
             refit=0,
             merged=0,
             rho=0.0,
@@ -167,4 +171,4 @@ def make_point_slam(
         backend = PointSeif(config, origin, slam.points.max_active, robot_id=robot_id)
     else:
         backend = PointFastSlam(config, origin, rng, robot_id=robot_id)
-    return PointSlamRobot(backend, slam.p0)
+    return PointSlamRobot(backend, slam.p0, slam.blas_threads)

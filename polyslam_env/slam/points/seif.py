@@ -74,6 +74,7 @@ class PointSeif:
         self.ids: list[int] = []  # landmark ids in state order
         self._slot: dict[int, int] = {}  # id → state index of its x
         self.active: list[int] = []  # state indices of active landmarks, oldest first
+        self._factor: tuple[np.ndarray, bool] | None = None  # Cholesky factor of H, or None
 
     # -- the interface ---------------------------------------------------------------------------
     def step(self, controls: np.ndarray, measurements: PointMeasurements) -> None:
@@ -84,11 +85,15 @@ class PointSeif:
             self._motion(control)
         self._measure(measurements)
         self._sparsify()
+        self._factor = None  # H changed
         self._recover()
 
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
-        cov = self.covariance()
-        return self.mu[:3].copy(), cov[:3, :3]
+        """The pose and its marginal covariance, three columns of H⁻¹ (O(n²) with the
+        factor of the last mean recovery)."""
+        cols = scipy.linalg.cho_solve(self._cholesky(), np.eye(len(self.mu), 3))
+        cov = np.asarray(cols[:3])
+        return self.mu[:3].copy(), 0.5 * (cov + cov.T)
 
     def landmarks(self) -> LandmarkMap:
         cov = self.covariance()
@@ -233,5 +238,8 @@ class PointSeif:
         self.mu[2] = float(wrap_angle(self.mu[2]))
 
     def _cholesky(self) -> tuple[np.ndarray, bool]:
-        out: tuple[np.ndarray, bool] = scipy.linalg.cho_factor(self.H)
-        return out
+        """The Cholesky factor of H, computed once per change of H."""
+        if self._factor is None:
+            self._factor = scipy.linalg.cho_factor(self.H)
+        factor: tuple[np.ndarray, bool] = self._factor
+        return factor
