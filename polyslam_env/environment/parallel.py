@@ -57,9 +57,10 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
 
     ## Description
     ``N`` differential-drive robots (pymunk physics) carry range beams and a 360° camera. Every
-    robot runs its own polynomial-landmark EKF SLAM in its own start frame; when two robots
-    see each other (rendezvous) they exchange the polynomials extracted since their last
-    meeting over a lossy channel whose bytes are counted. Agents are ``robot_0 … robot_{N−1}``.
+    robot runs its own polynomial-landmark EKF SLAM (or another ``slam.backend``) in its own
+    start frame; when two robots see each other (rendezvous; or, in ``channel.mode``
+    ``alignment``, are within radio range) they exchange the polynomials extracted since their
+    last meeting over a lossy channel whose bytes are counted. Agents are ``robot_0 … robot_{N−1}``.
 
     ## Action Space
     ``continuous``: ``Box([v_lo, −ω_max], [v_max, ω_max], float32)`` with ``v_lo = −v_max``
@@ -112,11 +113,20 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     step's ``faults`` and the divergence flag (``diverging``, ``diverged_at``). At an agent's
     last step ``infos[agent]`` also holds ``"metrics"`` (per robot: nees, nees_rel, nees_paper, nu,
     nu_mean, nu_mean_abs, completeness, completeness_seen, map_precision, duplicates, has_map,
-    slam, coverage, bytes_sent, bytes_received, rendezvous, slam_time_ms (wall time, not
-    reproducible), collisions, path_length; never NaN: a robot without a map has has_map 0 and
-    the values stated in :mod:`polyslam_env.metrics.mapping`, without SLAM slam 0; map metrics
-    place the map by the robot's true start, nu_mean_abs by its nominal frame) and ``"team"``
-    (coverage, steps_to_50, steps_to_90, overlap).
+    pose_error, landmark_error, has_landmarks, slam, coverage, bytes_sent, bytes_received,
+    rendezvous, alignments_attempted, alignments_accepted, alignments_wrong, slam_time_ms
+    (wall time, not reproducible), collisions, path_length; never NaN: a robot without a map
+    has has_map 0 and the values stated in :mod:`polyslam_env.metrics.mapping`, one without a
+    pillar map has_landmarks 0, without SLAM slam 0; map metrics place the map by the robot's
+    true start, nu_mean_abs by its nominal frame) and ``"team"`` (coverage, steps_to_50,
+    steps_to_90, overlap).
+
+    ## SLAM back-ends
+    ``slam.backend``: ``polynomial`` (the default, above) or a point-landmark filter over the
+    pillars (``fastslam2``, ``em_fastslam``, ``mblcc``, ``seif``; needs
+    ``world.pillar_sensor.enabled``): the same stages, observations (its map points are its
+    landmark estimates) and rewards (no wall map: ``mapping`` and ``map_error`` stay 0); see
+    :mod:`polyslam_env.slam.backends`.
 
     ## Arguments
     ``parallel_env(config=None, render_mode=None, **overrides)``: ``config`` an
