@@ -143,6 +143,11 @@ def simulate(
     """
     wcfg = world_config or paper_world_config()
     scfg = slam_config or slam_preset("paper")
+    if scfg.backend != "polynomial":
+        raise ConfigError(
+            f"slam.backend: simulate runs the polynomial EKF along scripted paths; {scfg.backend!r}"
+            " runs in the env (polyslam run / evaluate with a config) and in polyslam reproduce"
+        )
     layout = map if isinstance(map, Layout) else load_map(map)
     if num_robots is not None and num_robots > layout.num_start_poses:
         raise MapFileError(

@@ -52,6 +52,17 @@ def test_simulate__bad_config_file_names_file_and_key(
     assert "slam.yaml" in err and "rho_mn" in err
 
 
+def test_simulate__point_backend_is_a_one_line_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """simulate runs the polynomial EKF only: another back-end is refused, not ignored."""
+    cfg = tmp_path / "slam.yaml"
+    cfg.write_text("backend: seif\n")
+    assert main(["simulate", "--slam-config", str(cfg), "--steps", "2", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "slam.backend" in err and "'seif'" in err and len(err.splitlines()) == 1
+
+
 def test_main__rejects_non_positive_counts() -> None:
     with pytest.raises(SystemExit) as exc:
         main(["simulate", "--steps", "0"])
