@@ -296,6 +296,11 @@ class EnvConfig(Config):
         check_positive("coverage_resolution", self.coverage_resolution)
         self._validate_backend()
         if self.channel is not None and self.channel.mode == "alignment":
+            if self.world.pillar_sensor.enabled and not self.world.pillar_sensor.identities:
+                raise ConfigError(
+                    "channel.mode: 'alignment' builds its pillar maps by pillar identity; it"
+                    " needs world.pillar_sensor.identities: true"
+                )
             if not self.world.pillar_sensor.enabled:
                 raise ConfigError(
                     "channel.mode: 'alignment' aligns pillar maps; it needs"
@@ -325,6 +330,11 @@ class EnvConfig(Config):
             raise ConfigError(
                 "slam.backend: 'mblcc' corrects landmarks with the others' estimates over the"
                 " channel; set channel (or use em_fastslam, the same filter without consensus)"
+            )
+        if backend == "mblcc" and not self.world.pillar_sensor.identities:
+            raise ConfigError(
+                "slam.backend: 'mblcc' pairs its landmarks with the others' by pillar identity;"
+                " it needs world.pillar_sensor.identities: true"
             )
         if backend == "mblcc" and self.initial_error:
             raise ConfigError(

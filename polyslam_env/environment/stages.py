@@ -105,7 +105,8 @@ def new_episode(
     elif config.slam_enabled:
         rng = rngs["particles"]
         sigmas = (pillar_sensor.sigma_range, pillar_sensor.sigma_bearing_deg)
-        slams = [make_point_slam(config.slam, sigmas, rng, i) for i in range(n)]
+        ids = pillar_sensor.identities
+        slams = [make_point_slam(config.slam, sigmas, rng, i, ids) for i in range(n)]
     polynomial = config.slam_enabled and config.slam.backend == "polynomial"
     features = (
         [FeatureBook(pillar_sensor.descriptor_dim) for _ in range(n)]
@@ -541,7 +542,7 @@ def _final_metrics(state: EpisodeState, i: int) -> dict[str, float]:
     landmarks = None
     if isinstance(slam, PointSlamRobot):
         lm = slam.landmarks()
-        landmarks = (lm.ids, lm.means)
+        landmarks = (None if slam.anonymous else lm.ids, lm.means)
     return final_robot_metrics(
         state.histories[i],
         slam.polynomials() if slam is not None else None,

@@ -31,6 +31,7 @@ from polyslam_env.metrics.mapping import (
 from polyslam_env.metrics.pose import (
     cov_to_absolute,
     landmark_distances,
+    nearest_points,
     nees,
     nees_band,
     nees_paper,
@@ -57,6 +58,7 @@ __all__ = [
     "map_error_length",
     "map_points",
     "map_precision",
+    "nearest_points",
     "nees",
     "nees_band",
     "nees_paper",

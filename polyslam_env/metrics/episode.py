@@ -255,7 +255,7 @@ def final_robot_metrics(
     layout: Layout,
     coverage: float,
     counters: Mapping[str, float],
-    landmarks: tuple[np.ndarray, np.ndarray] | None = None,
+    landmarks: tuple[np.ndarray | None, np.ndarray] | None = None,
 ) -> dict[str, float]:
     """``infos[agent]["metrics"]``: every key of :data:`ROBOT_METRIC_KEYS`, a finite float.
 
@@ -265,8 +265,9 @@ def final_robot_metrics(
     completeness, completeness_seen, pose_error and slam_time_ms 0.0, map_precision 1.0,
     has_map 0.0. A point back-end has no polynomials (``polys`` empty: has_map 0.0) and gives
     its pillar map ``landmarks`` = (ids (M,), means (M, 2) in its frame): ``landmark_error`` is
-    the mean distance (m) of the estimates, placed by the true start, to the true pillar
-    centres, with ``has_landmarks`` 1.0 (0.0 and landmark_error 0.0 without landmarks).
+    the mean distance (m) of the estimates, placed by the true start, to the true centres of
+    the pillars they name (ids None, anonymous readings: to the nearest true centre), with
+    ``has_landmarks`` 1.0 (0.0 and landmark_error 0.0 without landmarks).
     ``pose_error`` is the mean position error (m) over the episode, placed by the true start.
     """
     out = dict.fromkeys(ROBOT_METRIC_KEYS, 0.0)
@@ -277,9 +278,13 @@ def final_robot_metrics(
         out.update({k: float(paper[k]) for k in _SLAM_KEYS if k in paper})
         out["slam"] = 1.0
         out["pose_error"] = metrics.position_error(run.true_poses, run.est_poses, run.true_poses[0])
-    if landmarks is not None and len(landmarks[0]):
+    if landmarks is not None and len(landmarks[1]):
         ids, means = landmarks
-        truth = layout.pillars[np.asarray(ids, dtype=int), :2]
+        centres = layout.pillars[:, :2]
+        if ids is None:
+            truth = centres[metrics.nearest_points(means, history.true[0], centres)]
+        else:
+            truth = centres[np.asarray(ids, dtype=int)]
         out["landmark_error"] = float(
             np.mean(metrics.landmark_distances(means, history.true[0], truth))
         )

@@ -65,6 +65,14 @@ def landmark_distances(
     return np.hypot(d[:, 0], d[:, 1])
 
 
+def nearest_points(means: np.ndarray, frame: np.ndarray, truth: np.ndarray) -> np.ndarray:  # (M,)
+    """For each estimate ``means`` (M, 2) in the frame ``frame`` (3,), the index of the nearest
+    of the true points ``truth`` (P, 2) (absolute)."""
+    est = transform_points(np.asarray(means, dtype=float).reshape(-1, 2), frame)
+    d = est[:, None, :] - np.asarray(truth, dtype=float)[None, :, :]
+    return np.argmin(np.hypot(d[..., 0], d[..., 1]), axis=1)
+
+
 # -- NEES -----------------------------------------------------------------------------------
 def _pose_errors(
     true_poses: np.ndarray, est_poses: np.ndarray, est_covs: np.ndarray, start_pose: np.ndarray

@@ -42,6 +42,8 @@ import numpy as np
 from polyslam_env.core.blas import blas_threads
 from polyslam_env.slam.config import BACKENDS, SlamConfig
 from polyslam_env.slam.ekf import start_error_cov
+from polyslam_env.slam.points import models
+from polyslam_env.slam.points.association import associate
 from polyslam_env.slam.points.config import PointSlamConfig, algorithm_config
 from polyslam_env.slam.points.fastslam import PointFastSlam
 from polyslam_env.slam.points.interface import (
@@ -100,10 +102,21 @@ class PointSlamRobot:
     divergence test: ``diverging`` stays False.
     """
 
-    def __init__(self, backend: PointSlamBackend, p0: np.ndarray, blas: int = 1) -> None:
+    def __init__(
+        self,
+        backend: PointSlamBackend,
+        config: PointSlamConfig,
+        p0: np.ndarray,
+        blas: int = 1,
+        gates: tuple[float, float] | None = None,
+    ) -> None:
         self.backend = backend
+        self.config = config  # the back-end's settings
         self.p0 = np.asarray(p0, dtype=float)
         self.blas = blas  # BLAS threads during a step, as ``slam.blas_threads``
+        #: χ²(2) thresholds (join, new) for anonymous readings; None: readings carry ids
+        self.gates = gates
+        self._next_id = 0  # the next own landmark id (anonymous readings)
         self.diverging = False
         self.steps = 0
         self._seen: set[int] = set()  # landmark ids the back-end holds
@@ -116,12 +129,20 @@ class PointSlamRobot:
     def _read_pose(self) -> None:
         self.pose, self.pose_cov_relative = self.backend.pose()
 
+    @property
+    def anonymous(self) -> bool:
+        """Whether the readings' ids are ignored and the robot associates them itself."""
+        return self.gates is not None
+
     def step(self, odometry: np.ndarray, ids: np.ndarray, z: np.ndarray) -> SlamStepInfo:
         """One control period: the odometry increment (3,) and the sweep's pillar readings,
-        ids (m,) and (range, bearing) z (m, 2)."""
+        ids (m,) (ignored when :attr:`anonymous`) and (range, bearing) z (m, 2)."""
         start = time.perf_counter()
+        u = np.asarray(odometry, dtype=float)
         with blas_threads(self.blas):
-            self.backend.step(np.asarray(odometry, dtype=float)[None], PointMeasurements(ids, z))
+            if self.gates is not None:
+                ids, z = self._associate(u, z)
+            self.backend.step(u[None], PointMeasurements(ids, z))
             self._read_pose()
         self.steps += 1
         before = len(self._seen)
@@ -139,6 +160,26 @@ class PointSlamRobot:
             divergence_f=0.0,
             diverging=False,
         )
+
+    def _associate(self, odometry: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Own ids for anonymous readings z (m, 2) (:func:`~polyslam_env.slam.points.
+        association.associate` from the pose predicted by ``odometry``): the readings kept, in
+        their order, with the id of their landmark or a new one."""
+        config = self.config
+        pose, jac_pose, jac_u, q = models.motion(self.pose, odometry, config)
+        pose_cov = jac_pose @ self.pose_cov_relative @ jac_pose.T + jac_u @ q @ jac_u.T
+        lm = self.backend.landmarks()
+        noise = np.diag(np.square(config.measurement_sigmas))
+        gate, new = self.gates if self.gates is not None else (np.inf, np.inf)
+        found = associate(pose, pose_cov, lm.means, lm.covs, z, noise, gate, new)
+        ids = np.full(len(z), -1, dtype=np.int64)
+        known = found.slots >= 0
+        ids[known] = lm.ids[found.slots[known]]
+        for j in np.flatnonzero(found.new):
+            ids[j] = self._next_id
+            self._next_id += 1
+        keep = ids >= 0
+        return ids[keep], z[keep]
 
     def polynomials(self) -> list[Polynomial]:
         """No polynomial map: the wall-map metrics see an empty map."""
@@ -159,11 +200,16 @@ SlamRobot = PolySlam | PointSlamRobot
 
 
 def make_point_slam(
-    slam: SlamConfig, sensor_sigmas: tuple[float, float], rng: np.random.Generator, robot_id: int
+    slam: SlamConfig,
+    sensor_sigmas: tuple[float, float],
+    rng: np.random.Generator,
+    robot_id: int,
+    identities: bool = True,
 ) -> PointSlamRobot:
     """Robot ``robot_id``'s point back-end (``slam.backend``), anchored at its frame origin
-    with start error P0, for a pillar sensor of noise ``sensor_sigmas`` (m, degrees); the
-    particle filters draw from ``rng``."""
+    with start error P0, for a pillar sensor of noise ``sensor_sigmas`` (m, degrees) whose
+    readings carry the pillars' ``identities`` (else the robot associates them); the particle
+    filters draw from ``rng``."""
     config = point_slam_config(slam, *sensor_sigmas)
     origin = np.zeros(3)
     backend: PointSlamBackend
@@ -171,4 +217,5 @@ def make_point_slam(
         backend = PointSeif(config, origin, slam.points.max_active, robot_id=robot_id)
     else:
         backend = PointFastSlam(config, origin, rng, robot_id=robot_id)
-    return PointSlamRobot(backend, slam.p0, slam.blas_threads)
+    gates = None if identities else slam.points.gates
+    return PointSlamRobot(backend, config, slam.p0, slam.blas_threads, gates)

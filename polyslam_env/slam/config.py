@@ -33,6 +33,11 @@ class PointBackendConfig(Config):
     em_mobility: tuple[float, float, float] = (0.008, 0.005, 0.001)  # R: m, m, rad
     consensus_step: float = 0.1  # ε of MBLCC's eq. 12
     max_active: int = 20  # SEIF: landmarks linked to the pose at most
+    # Anonymous readings (world.pillar_sensor.identities: false): a reading joins the nearest
+    # landmark whose χ²(2) distance is within this quantile, starts a new landmark when every
+    # landmark is beyond ``new_landmark_prob``'s, and is dropped in between.
+    gate_prob: float = 0.99
+    new_landmark_prob: float = 0.9999
 
     def validate(self) -> None:
         if isinstance(self.particles, bool) or self.particles < 1:
@@ -43,6 +48,20 @@ class PointBackendConfig(Config):
         check_range("slam.points.consensus_step", self.consensus_step, 0.0, 1.0)
         if isinstance(self.max_active, bool) or self.max_active < 1:
             raise ConfigError(f"slam.points.max_active: must be >= 1, got {self.max_active!r}")
+        for name in ("gate_prob", "new_landmark_prob"):
+            p = getattr(self, name)
+            if not (math.isfinite(p) and 0.5 <= p < 1.0):
+                raise ConfigError(f"slam.points.{name}: must be in [0.5, 1), got {p!r}")
+        if self.new_landmark_prob < self.gate_prob:
+            raise ConfigError(
+                f"slam.points.new_landmark_prob: must be >= gate_prob ({self.gate_prob}),"
+                f" got {self.new_landmark_prob}"
+            )
+
+    @property
+    def gates(self) -> tuple[float, float]:
+        """The χ²(2) thresholds on d² of (gate_prob, new_landmark_prob): −2 ln(1 − p)."""
+        return -2.0 * math.log1p(-self.gate_prob), -2.0 * math.log1p(-self.new_landmark_prob)
 
 
 @dataclass(frozen=True)

@@ -114,6 +114,10 @@ class PillarSensorConfig(Config):
     sigma_bearing_deg: float = 1.0  # degrees
     descriptor_dim: int = 8  # numbers per appearance descriptor
     descriptor_sigma: float = 0.1  # noise per number and sighting (true descriptors ~ N(0, 1))
+    # Each reading names its pillar (the seeds' known association). False: the SLAM gets
+    # anonymous readings and associates them itself (slam/points/association.py); the ids
+    # then serve the metrics only.
+    identities: bool = True
 
     @property
     def sigma_bearing(self) -> float:

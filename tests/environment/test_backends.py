@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from polyslam_env import metrics
 from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.comms.consensus import ConsensusExchange, decode, encode
 from polyslam_env.core.errors import ConfigError
@@ -83,6 +84,27 @@ def run(config: EnvConfig, seed: int, steps: int) -> tuple[PolySlamParallelEnv, 
         ),
         ({**PILLARS, "slam": {"backend": "fastslam"}}, "slam.backend: must be one of"),
         ({**PILLARS, "slam": {"backend": "seif", "points": {"max_active": 0}}}, "max_active"),
+        (
+            {
+                **PILLARS,
+                "world": {"pillar_sensor": {"enabled": True, "identities": False}},
+                "slam": {"backend": "mblcc"},
+                "initial_error": False,
+            },
+            "identities: true",
+        ),
+        (
+            {
+                **PILLARS,
+                "world": {"pillar_sensor": {"enabled": True, "identities": False}},
+                "channel": {"mode": "alignment"},
+            },
+            "identities: true",
+        ),
+        (
+            {**PILLARS, "slam": {"backend": "seif", "points": {"gate_prob": 1.0}}},
+            "gate_prob",
+        ),
     ],
 )
 def test_config__rejects_what_a_point_backend_cannot_run(data: dict[str, Any], needle: str) -> None:
@@ -202,3 +224,30 @@ def test_seif__is_consistent_at_the_end_of_whole_episodes() -> None:
     n = len(values)
     lo, hi = chi2.ppf([0.025, 0.975], 3 * n) / n
     assert lo <= np.mean(values) <= hi, (np.mean(values), lo, hi)
+
+
+ANONYMOUS = {"pillar_sensor": {"enabled": True, "identities": False}}
+
+
+@pytest.mark.parametrize("backend", ["fastslam2", "seif"])
+def test_anonymous_readings__one_landmark_per_pillar_and_no_wrong_pairing(backend: str) -> None:
+    """Without identities the robots associate by χ² gating. Pillars stand ≥ 2 m apart and
+    the sensor's σ is 3 cm / 1°, so a wrong pairing would put a landmark metres from every
+    pillar and a duplicate would put two on one: every landmark lies within 0.1 m (over 3σ of
+    a landmark's error here) of its nearest true pillar, no two share one, and they are
+    pillars the same episode with identities maps."""
+    for seed in range(3):
+        named, _ = run(point_config(backend), seed, 200)
+        env, infos = run(point_config(backend, world=ANONYMOUS), seed, 200)
+        centres = env.episode.world.pillars[:, :2]
+        for i, slam in enumerate(env.episode.slams):
+            assert isinstance(slam, PointSlamRobot) and slam.anonymous
+            start = env.episode.histories[i].true[0]
+            means = slam.landmarks().means
+            nearest = metrics.nearest_points(means, start, centres)
+            d = metrics.landmark_distances(means, start, centres[nearest])
+            assert d.max() < 0.1, (seed, i, d.max())
+            assert len(set(nearest.tolist())) == len(nearest), (seed, i, "duplicate")
+            assert set(nearest.tolist()) <= set(named.episode.slams[i].landmarks().ids.tolist())
+            m = infos[f"robot_{i}"]["metrics"]
+            assert m["landmark_error"] == pytest.approx(float(d.mean()))

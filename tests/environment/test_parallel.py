@@ -36,13 +36,14 @@ VARIANTS = [
     *(
         pytest.param(
             {**_PILLARS, "slam__backend": backend, **extra},
-            id=f"pillar_hall-3-{backend}",
+            id=f"pillar_hall-3-{name}",
         )
-        for backend, extra in (
-            ("fastslam2", {}),
-            ("em_fastslam", {}),
-            ("seif", {}),
-            ("mblcc", {"initial_error": False, "channel__range": 25.0}),
+        for name, backend, extra in (
+            ("fastslam2", "fastslam2", {}),
+            ("em_fastslam", "em_fastslam", {}),
+            ("seif", "seif", {}),
+            ("seif-anonymous", "seif", {"world__pillar_sensor__identities": False}),
+            ("mblcc", "mblcc", {"initial_error": False, "channel__range": 25.0}),
         )
     ),
     # the map exchange with the pillar sensor on: by alignment, camera off (issue 18), and at
