@@ -40,6 +40,15 @@ __all__ = [
     "team_metrics",
 ]
 
+#: The exchange's counters among the end-of-episode metrics (0 without an exchange).
+COUNTER_KEYS: tuple[str, ...] = (
+    "bytes_sent",
+    "bytes_received",
+    "rendezvous",
+    "alignments_attempted",
+    "alignments_accepted",
+    "alignments_wrong",
+)
 #: Keys of ``infos[agent]["metrics"]`` (all finite floats, never NaN; see
 #: :func:`final_robot_metrics` for the values without a map or without SLAM).
 ROBOT_METRIC_KEYS: tuple[str, ...] = (
@@ -59,12 +68,7 @@ ROBOT_METRIC_KEYS: tuple[str, ...] = (
     "has_landmarks",
     "slam",
     "coverage",
-    "bytes_sent",
-    "bytes_received",
-    "rendezvous",
-    "alignments_attempted",
-    "alignments_accepted",
-    "alignments_wrong",
+    *COUNTER_KEYS,
     "slam_time_ms",
     "collisions",
     "path_length",
@@ -292,14 +296,7 @@ def final_robot_metrics(
     out["coverage"] = float(coverage)
     out["collisions"] = float(history.collisions)
     out["path_length"] = history.path_length
-    for key in (
-        "bytes_sent",
-        "bytes_received",
-        "rendezvous",
-        "alignments_attempted",
-        "alignments_accepted",
-        "alignments_wrong",
-    ):
+    for key in COUNTER_KEYS:
         out[key] = float(counters.get(key, 0.0))
     return out
 

@@ -141,6 +141,47 @@ def beam_ranges(
 
 
 @njit
+def in_view(
+    ox: float,
+    oy: float,
+    heading: float,
+    d: float,
+    a: float,
+    eligible: bool,
+    reach: float,
+    half_fov: float,
+    limit_fov: bool,
+    clear: float,
+    segments: np.ndarray,
+    origin: np.ndarray,
+    cell: float,
+    rows: int,
+    cols: int,
+    starts: np.ndarray,
+    items: np.ndarray,
+    circles: np.ndarray,
+    exclude: int,
+) -> tuple[float, bool]:
+    """The bearing, wrapped to (−π, π], of a target at distance ``d`` and absolute direction
+    ``a`` from an observer at (``ox``, ``oy``) heading ``heading``, and whether it is seen:
+    ``eligible``, within ``reach``, within the field of view when ``limit_fov``, and no wall
+    and no circle (but circle ``exclude``, −1: none) on the first ``clear`` metres of the line
+    of sight. The camera's and the pillar sensor's visibility test."""
+    turn = a - heading
+    bearing = math.pi - np.mod(math.pi - turn, 2.0 * math.pi)
+    seen = eligible and d <= reach
+    if seen and limit_fov:
+        seen = abs(bearing) <= half_fov
+    if seen:
+        hit = first_hit(
+            ox, oy, math.cos(a), math.sin(a), clear, segments, origin, cell, rows, cols,
+            starts, items, circles, exclude,
+        )  # fmt: skip
+        seen = not hit < clear
+    return bearing, seen
+
+
+@njit
 def camera_visible(
     poses: np.ndarray,
     active: np.ndarray,
@@ -169,20 +210,13 @@ def camera_visible(
     n = poses.shape[0]
     for o in range(n):
         for g in range(n):
-            dist[o, g] = math.hypot(rel[o, g, 0], rel[o, g, 1])
-            turn = direction[o, g] - poses[o, 2]
-            bearing[o, g] = math.pi - np.mod(math.pi - turn, 2.0 * math.pi)  # wrap to (−π, π]
-            seen = active[o] and active[g] and o != g and dist[o, g] <= cam_range
-            if seen and limit_fov:
-                seen = abs(bearing[o, g]) <= half_fov
-            if seen:
-                a = direction[o, g]
-                hit = first_hit(
-                    poses[o, 0], poses[o, 1], math.cos(a), math.sin(a), dist[o, g], segments,
-                    origin, cell, rows, cols, starts, items, circles, -1,
-                )  # fmt: skip
-                seen = not hit < dist[o, g]
-            mask[o, g] = seen
+            d = math.hypot(rel[o, g, 0], rel[o, g, 1])
+            dist[o, g] = d
+            bearing[o, g], mask[o, g] = in_view(
+                poses[o, 0], poses[o, 1], poses[o, 2], d, direction[o, g],
+                active[o] and active[g] and o != g, cam_range, half_fov, limit_fov, d,
+                segments, origin, cell, rows, cols, starts, items, circles, -1,
+            )  # fmt: skip
 
 
 @njit
@@ -214,21 +248,13 @@ def pillar_visible(
         for c in range(circles.shape[0]):
             rx, ry = circles[c, 0] - ox, circles[c, 1] - oy
             d = math.hypot(rx, ry)
-            a = math.atan2(ry, rx)
-            turn = a - poses[o, 2]
+            r = circles[c, 2]
             dist[o, c] = d
-            bearing[o, c] = math.pi - np.mod(math.pi - turn, 2.0 * math.pi)  # (−π, π]
-            seen = active[o] and d <= max_range and d > circles[c, 2]
-            if seen and limit_fov:
-                seen = abs(bearing[o, c]) <= half_fov
-            if seen:
-                surface = d - circles[c, 2]
-                hit = first_hit(
-                    ox, oy, math.cos(a), math.sin(a), surface, segments, origin, cell, rows,
-                    cols, starts, items, circles, c,
-                )  # fmt: skip
-                seen = not hit < surface
-            mask[o, c] = seen
+            bearing[o, c], mask[o, c] = in_view(
+                ox, oy, poses[o, 2], d, math.atan2(ry, rx), active[o] and d > r, max_range,
+                half_fov, limit_fov, d - r, segments, origin, cell, rows, cols, starts, items,
+                circles, c,
+            )  # fmt: skip
 
 
 @njit
