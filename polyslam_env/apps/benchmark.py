@@ -418,8 +418,9 @@ BACKEND_ENV: dict[str, Any] = {
 def bench_backends(plan: Plan, seed: int = 0) -> list[dict[str, Any]]:
     """Env steps/s of every ``slam.backend`` on :data:`BACKEND_ENV` (the polynomial EKF with
     its map exchange, the point back-ends as the env runs them: MBLCC with its consensus over a
-    25 m radio and known starts), each with ``ratio_to_no_slam``, its rate over the same env
-    with ``slam_enabled=False`` timed first in the same run."""
+    25 m radio and known starts, the shared-map filter with known starts), each with
+    ``ratio_to_no_slam``, its rate over the same env with ``slam_enabled=False`` timed first in
+    the same run."""
     from polyslam_env.slam.config import BACKENDS
 
     reference = bench_env(plan, seed, **BACKEND_ENV, slam_enabled=False)
@@ -428,6 +429,8 @@ def bench_backends(plan: Plan, seed: int = 0) -> list[dict[str, Any]]:
         extra: dict[str, Any] = {"slam__backend": backend}
         if backend == "mblcc":
             extra.update(initial_error=False, channel__range=25.0)
+        if backend == "multirobot_known_start":
+            extra.update(initial_error=False)
         row = {"backend": backend, **bench_env(plan, seed, **BACKEND_ENV, **extra)}
         row["ratio_to_no_slam"] = _ratio(_rate(row), _rate(reference))
         rows.append(row)

@@ -316,8 +316,9 @@ class EnvConfig(Config):
 
     def _validate_backend(self) -> None:
         """A point back-end needs the pillar sensor; MBLCC needs the channel (its consensus),
-        known starts and the default mode. fastslam2, em_fastslam and seif exchange nothing
-        in the env: the channel stays unused (bytes 0)."""
+        known starts and the default mode; multirobot_known_start known starts. fastslam2,
+        em_fastslam, seif and the centralised multirobot_known_start exchange nothing in the
+        env: the channel stays unused (bytes 0)."""
         backend = self.slam.backend
         if backend == "polynomial" or not self.slam_enabled:
             return
@@ -331,15 +332,16 @@ class EnvConfig(Config):
                 "slam.backend: 'mblcc' corrects landmarks with the others' estimates over the"
                 " channel; set channel (or use em_fastslam, the same filter without consensus)"
             )
-        if backend == "mblcc" and not self.world.pillar_sensor.identities:
+        team = backend in ("mblcc", "multirobot_known_start")
+        if team and not self.world.pillar_sensor.identities:
             raise ConfigError(
-                "slam.backend: 'mblcc' pairs its landmarks with the others' by pillar identity;"
+                f"slam.backend: {backend!r} pairs the robots' landmarks by pillar identity;"
                 " it needs world.pillar_sensor.identities: true"
             )
-        if backend == "mblcc" and self.initial_error:
+        if team and self.initial_error:
             raise ConfigError(
-                "slam.backend: 'mblcc' assumes known start poses (seed 003): its consensus maps"
-                " the others' landmarks through the nominal starts; set initial_error: false"
+                f"slam.backend: {backend!r} assumes known start poses (seed 003): it maps the"
+                " robots' landmarks through the nominal starts; set initial_error: false"
             )
         if backend == "mblcc" and self.channel is not None and self.channel.mode != "rendezvous":
             raise ConfigError(

@@ -41,7 +41,7 @@ from polyslam_env.environment.observations import (
 from polyslam_env.environment.rewards import MAPPING_STEP, MAPPING_TOL, MapChanges
 from polyslam_env.environment.state import EpisodeState, Sensing, estimate
 from polyslam_env.metrics.episode import RobotHistory, final_robot_metrics, team_metrics
-from polyslam_env.slam.backends import PointSlamRobot, SlamRobot, make_point_slam
+from polyslam_env.slam.backends import PointSlamRobot, SlamRobot, make_point_slams
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.robot import PolySlam, SlamStepInfo
@@ -106,7 +106,7 @@ def new_episode(
         rng = rngs["particles"]
         sigmas = (pillar_sensor.sigma_range, pillar_sensor.sigma_bearing_deg)
         ids = pillar_sensor.identities
-        slams = [make_point_slam(config.slam, sigmas, rng, i, ids) for i in range(n)]
+        slams = list(make_point_slams(config.slam, sigmas, rng, start_poses, ids))
     polynomial = config.slam_enabled and config.slam.backend == "polynomial"
     features = (
         [FeatureBook(pillar_sensor.descriptor_dim) for _ in range(n)]

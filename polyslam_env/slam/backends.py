@@ -8,6 +8,10 @@ sensor's range–bearing readings with known identities, with the filters of
 * ``fastslam2``, ``em_fastslam``, ``mblcc``: seed 003's particle filters (MBLCC adds the
   Kalman-consensus correction from the other robots' landmark estimates, which travel over the
   channel: :mod:`polyslam_env.comms.consensus`);
+* ``multirobot_known_start``: seed 003's comparison, one particle filter over the whole
+  team's poses with one shared map (:mod:`polyslam_env.slam.points.shared_map`); centralised
+  (every robot's data reach it at once, no message is modelled), a privileged baseline that
+  needs known starts;
 * ``seif``: seed 001's sparse extended information filter.
 
 In the env they use the odometry motion model (:func:`~polyslam_env.slam.points.models.
@@ -40,6 +44,13 @@ import time
 import numpy as np
 
 from polyslam_env.core.blas import blas_threads
+from polyslam_env.core.geometry import (
+    compose,
+    inverse,
+    rotation,
+    transform_covariance,
+    transform_points,
+)
 from polyslam_env.slam.config import BACKENDS, SlamConfig
 from polyslam_env.slam.ekf import start_error_cov
 from polyslam_env.slam.points import models
@@ -53,6 +64,7 @@ from polyslam_env.slam.points.interface import (
     PointSlamBackend,
 )
 from polyslam_env.slam.points.seif import PointSeif
+from polyslam_env.slam.points.shared_map import SharedMapFastSlam
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam, SlamStepInfo
 
@@ -62,6 +74,7 @@ __all__ = [
     "PointSlamRobot",
     "SlamRobot",
     "make_point_slam",
+    "make_point_slams",
     "point_slam_config",
 ]
 
@@ -87,7 +100,7 @@ def point_slam_config(
         odom_sigma_xy=slam.odom_sigma_xy,
         odom_sigma_theta_deg=slam.odom_sigma_theta_deg,
     )
-    if slam.backend == "seif":
+    if slam.backend in ("seif", "multirobot_known_start"):
         return base
     # algorithm_config's mblcc would lift ε = 0 to the seed's 0.1; here ε is what was set
     return algorithm_config(slam.backend, base).replace(consensus_step=base.consensus_step)
@@ -109,8 +122,12 @@ class PointSlamRobot:
         p0: np.ndarray,
         blas: int = 1,
         gates: tuple[float, float] | None = None,
+        frame: np.ndarray | None = None,
     ) -> None:
         self.backend = backend
+        #: this robot's frame in the back-end's (None: the same); a shared filter works in one
+        #: frame for the team and the robot reports in its own
+        self._to_own = None if frame is None else inverse(np.asarray(frame, dtype=float))
         self.config = config  # the back-end's settings
         self.p0 = np.asarray(p0, dtype=float)
         self.blas = blas  # BLAS threads during a step, as ``slam.blas_threads``
@@ -127,7 +144,13 @@ class PointSlamRobot:
         return self.pose_cov_relative + start_error_cov(self.pose, self.p0)
 
     def _read_pose(self) -> None:
-        self.pose, self.pose_cov_relative = self.backend.pose()
+        pose, cov = self.backend.pose()
+        if self._to_own is not None:
+            # before its first step the robot is at its frame origin, exactly (the transform
+            # from the shared frame would leave rounding there)
+            pose = compose(self._to_own, pose) if self.steps else np.zeros(3)
+            cov = transform_covariance(cov, self._to_own)
+        self.pose, self.pose_cov_relative = pose, cov
 
     @property
     def anonymous(self) -> bool:
@@ -186,7 +209,12 @@ class PointSlamRobot:
         return []
 
     def landmarks(self) -> LandmarkMap:
-        return self.backend.landmarks()
+        """The back-end's landmark map, in this robot's frame."""
+        lm = self.backend.landmarks()
+        if self._to_own is None:
+            return lm
+        rot = rotation(float(self._to_own[2]))
+        return LandmarkMap(lm.ids, transform_points(lm.means, self._to_own), rot @ lm.covs @ rot.T)
 
     def export_message(self) -> LandmarkMessage:
         return self.backend.export_message()
@@ -219,3 +247,27 @@ def make_point_slam(
         backend = PointFastSlam(config, origin, rng, robot_id=robot_id)
     gates = None if identities else slam.points.gates
     return PointSlamRobot(backend, config, slam.p0, slam.blas_threads, gates)
+
+
+def make_point_slams(
+    slam: SlamConfig,
+    sensor_sigmas: tuple[float, float],
+    rng: np.random.Generator,
+    starts: np.ndarray,
+    identities: bool = True,
+) -> list[PointSlamRobot]:
+    """The team's point back-ends (:func:`make_point_slam` each), or for
+    ``multirobot_known_start`` one shared filter in the world frame started at the robots'
+    known ``starts`` (N, 3), each robot reporting in its own frame."""
+    if slam.backend != "multirobot_known_start":
+        return [
+            make_point_slam(slam, sensor_sigmas, rng, i, identities) for i in range(len(starts))
+        ]
+    if not identities:
+        raise ValueError("multirobot_known_start pairs the robots' readings by pillar identity")
+    config = point_slam_config(slam, *sensor_sigmas)
+    team = SharedMapFastSlam(config, np.asarray(starts, dtype=float), rng)
+    return [
+        PointSlamRobot(team.robot(i), config, slam.p0, slam.blas_threads, frame=start)
+        for i, start in enumerate(np.asarray(starts, dtype=float))
+    ]

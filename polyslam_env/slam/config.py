@@ -19,7 +19,14 @@ from polyslam_env.core.errors import ConfigError
 
 #: The SLAM back-ends the env runs (``slam.backend``): the polynomial EKF of the core paper,
 #: or a point-landmark filter over the pillars (``polyslam_env.slam.backends``).
-BACKENDS: tuple[str, ...] = ("polynomial", "fastslam2", "em_fastslam", "mblcc", "seif")
+BACKENDS: tuple[str, ...] = (
+    "polynomial",
+    "fastslam2",
+    "em_fastslam",
+    "mblcc",
+    "multirobot_known_start",
+    "seif",
+)
 
 
 @dataclass(frozen=True)

@@ -40,6 +40,8 @@ def point_config(backend: str, **overrides: Any) -> EnvConfig:
     if backend == "mblcc":
         # a radio across the hall, so that robots that start apart exchange at all
         data.update(channel={"range": 25.0}, initial_error=False)
+    if backend == "multirobot_known_start":
+        data.update(initial_error=False)
     data.update(overrides)
     return EnvConfig.from_dict(data)
 
@@ -73,6 +75,7 @@ def run(config: EnvConfig, seed: int, steps: int) -> tuple[PolySlamParallelEnv, 
             {**PILLARS, "slam": {"backend": "mblcc"}, "channel": {"range": 5.0}},
             "initial_error: false",
         ),
+        ({**PILLARS, "slam": {"backend": "multirobot_known_start"}}, "initial_error: false"),
         (
             {
                 **PILLARS,
@@ -186,7 +189,7 @@ def test_landmark_error__is_zero_for_the_true_pillars_and_gated_by_its_flag() ->
     assert meaningful([perfect, polynomial], "landmark_error") == [perfect["landmark_error"]]
 
 
-@pytest.mark.parametrize("backend", ["fastslam2", "seif"])
+@pytest.mark.parametrize("backend", ["fastslam2", "seif", "multirobot_known_start"])
 def test_point_backend__observes_its_landmarks_and_reports_landmark_metrics(backend: str) -> None:
     env, infos = run(point_config(backend), seed=0, steps=60)
     slam = env.episode.slams[0]
@@ -199,6 +202,8 @@ def test_point_backend__observes_its_landmarks_and_reports_landmark_metrics(back
     # a pillar sensor with σ_r = 3 cm and 1° places pillars within a few cm; 0.5 m would
     # mean landmarks in the wrong frame or under the wrong ids
     assert 0.0 < m["landmark_error"] < 0.5
+    # the same for the pose: its estimate is in the robot's own frame
+    assert m["pose_error"] < 0.5
 
 
 #: SEIF's consistency: NEES of the filter's own pose covariance (relative to the true start) at
@@ -251,3 +256,16 @@ def test_anonymous_readings__one_landmark_per_pillar_and_no_wrong_pairing(backen
             assert set(nearest.tolist()) <= set(named.episode.slams[i].landmarks().ids.tolist())
             m = infos[f"robot_{i}"]["metrics"]
             assert m["landmark_error"] == pytest.approx(float(d.mean()))
+
+
+def test_multirobot_known_start__one_shared_map_seen_from_each_robots_frame() -> None:
+    """The joint filter holds one map: each robot reports it in its own frame, so the same
+    landmark placed by each robot's true start lands on the same point."""
+    env, _ = run(point_config("multirobot_known_start"), seed=1, steps=100)
+    maps = [s.landmarks() for s in env.episode.slams]
+    ids = maps[0].ids
+    assert len(ids) > 0 and all(np.array_equal(m.ids, ids) for m in maps)
+    starts = [h.true[0] for h in env.episode.histories]
+    placed = [transform_points(m.means, start) for m, start in zip(maps, starts, strict=True)]
+    for other in placed[1:]:
+        np.testing.assert_allclose(other, placed[0], atol=1e-9)

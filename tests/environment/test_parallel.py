@@ -44,6 +44,7 @@ VARIANTS = [
             ("seif", "seif", {}),
             ("seif-anonymous", "seif", {"world__pillar_sensor__identities": False}),
             ("mblcc", "mblcc", {"initial_error": False, "channel__range": 25.0}),
+            ("shared", "multirobot_known_start", {"initial_error": False}),
         )
     ),
     # the map exchange with the pillar sensor on: by alignment, camera off (issue 18), and at
