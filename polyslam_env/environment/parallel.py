@@ -409,13 +409,14 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
 
     @staticmethod
     def _map_for_render(state: EpisodeState, i: int, start: np.ndarray) -> list[np.ndarray]:
-        """Robot i's map as absolute polylines: its polynomials, or (point back-ends) a small
-        square (0.1 m) around each landmark estimate; placed by its true ``start``."""
+        """Robot i's map as absolute polylines: its polynomials, or (point back-ends) a square
+        of 0.6 m around each landmark estimate, wide enough to show around the pillar it
+        marks; placed by its true ``start``."""
         if not state.slams:
             return []
         slam = state.slams[i]
         if isinstance(slam, PointSlamRobot):
-            square = 0.05 * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1], [-1, -1]])  # (5, 2)
+            square = 0.3 * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1], [-1, -1]])  # (5, 2)
             centres = transform_points(slam.landmarks().means, start)  # (M, 2)
             return [c + square for c in centres]
         return metrics.map_points(slam.polynomials(), start, 0.02)
