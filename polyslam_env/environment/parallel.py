@@ -123,10 +123,10 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
 
     ## SLAM back-ends
     ``slam.backend``: ``polynomial`` (the default, above) or a point-landmark filter over the
-    pillars (``fastslam2``, ``em_fastslam``, ``mblcc``, ``seif``; needs
-    ``world.pillar_sensor.enabled``): the same stages, observations (its map points are its
-    landmark estimates) and rewards (no wall map: ``mapping`` and ``map_error`` stay 0); see
-    :mod:`polyslam_env.slam.backends`.
+    pillars (``fastslam2``, ``em_fastslam``, ``mblcc``, ``multirobot_known_start``,
+    ``seif``; needs ``world.pillar_sensor.enabled``): the same stages, observations (its map
+    points are its landmark estimates) and rewards (no wall map: ``mapping`` and ``map_error``
+    stay 0); see :mod:`polyslam_env.slam.backends`.
 
     ## Arguments
     ``parallel_env(config=None, render_mode=None, **overrides)``: ``config`` an
