@@ -269,3 +269,24 @@ def test_multirobot_known_start__one_shared_map_seen_from_each_robots_frame() ->
     placed = [transform_points(m.means, start) for m, start in zip(maps, starts, strict=True)]
     for other in placed[1:]:
         np.testing.assert_allclose(other, placed[0], atol=1e-9)
+
+
+def test_consensus__travels_only_within_range_and_is_lost_like_any_message() -> None:
+    """A 0.1 m radio links no pair (robots are ≥ 2 radii apart): nothing is sent. A channel
+    that loses every attempt sends bytes (counted) but delivers nothing, so the filters equal
+    EM-FastSLAM's step for step; undelivered messages expire the next step instead of piling
+    up."""
+    seed, steps = 1, 80
+    em, _ = run(point_config("em_fastslam", initial_error=False), seed, steps)
+    short, _ = run(point_config("mblcc", channel={"range": 0.1}), seed, steps)
+    assert short.episode.consensus is not None
+    assert short.episode.consensus.channel.totals().messages_sent == 0
+    lossy, _ = run(point_config("mblcc", channel={"range": 25.0, "loss_prob": 1.0}), seed, steps)
+    consensus = lossy.episode.consensus
+    assert consensus is not None
+    totals = consensus.channel.totals()
+    assert totals.bytes_sent > 0 and totals.messages_delivered == 0
+    assert totals.messages_expired > 0
+    assert consensus.channel.pending() <= 3 * 2  # at most the last step's, one per pair
+    for a, b in zip(lossy.episode.histories, em.episode.histories, strict=True):
+        np.testing.assert_array_equal(np.array(a.est), np.array(b.est))
