@@ -166,8 +166,8 @@ class PointSlamRobot:
             if self.gates is not None:
                 ids, z = self._associate(u, z)
             self.backend.step(u[None], PointMeasurements(ids, z))
+            self.steps += 1
             self._read_pose()
-        self.steps += 1
         before = len(self._seen)
         self._seen.update(int(i) for i in ids)  # known association: a new id is a new landmark
         return SlamStepInfo(

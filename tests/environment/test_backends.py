@@ -269,6 +269,14 @@ def test_multirobot_known_start__one_shared_map_seen_from_each_robots_frame() ->
     placed = [transform_points(m.means, start) for m, start in zip(maps, starts, strict=True)]
     for other in placed[1:]:
         np.testing.assert_allclose(other, placed[0], atol=1e-9)
+    # and each robot's pose is the team filter's estimate of it seen from its own frame, from
+    # the first step on
+    for steps in (1, 100):
+        env, _ = run(point_config("multirobot_known_start"), seed=1, steps=steps)
+        for slam, start in zip(env.episode.slams, env.episode.start_poses, strict=True):
+            assert isinstance(slam, PointSlamRobot)
+            shared = slam.backend.pose()[0]
+            np.testing.assert_allclose(compose(start, slam.pose), shared, atol=1e-9)
 
 
 def test_consensus__travels_only_within_range_and_is_lost_like_any_message() -> None:
