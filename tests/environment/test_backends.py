@@ -298,3 +298,18 @@ def test_consensus__travels_only_within_range_and_is_lost_like_any_message() -> 
     assert consensus.channel.pending() <= 3 * 2  # at most the last step's, one per pair
     for a, b in zip(lossy.episode.histories, em.episode.histories, strict=True):
         np.testing.assert_array_equal(np.array(a.est), np.array(b.est))
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["alignment", "alignment_none", "alignment_rendezvous", "pillar_backends"],
+)
+def test_shipped_env_configs__load_and_reset(name: str) -> None:
+    """The env configs of the pillar hall README names load, validate and start an episode
+    (``paper.yaml`` is the reproduction's config, tested with it)."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "configs" / f"{name}.yaml"
+    env = PolySlamParallelEnv(EnvConfig.from_yaml(path).replace(max_steps=2))
+    env.reset(seed=0)
+    env.close()
