@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from polyslam_env import metrics
 from polyslam_env.apps.jobs import run_jobs
 from polyslam_env.core.blas import blas_threads
 from polyslam_env.core.config import Config
@@ -150,7 +151,7 @@ def run_algorithm(
         lm = backend.landmarks()
         where = {int(j): s for s, j in enumerate(lm.ids)}
         est = lm.means[[where[int(j)] for j in seen]]
-        d = np.hypot(*(est - episode.landmarks[seen]).T)
+        d = metrics.landmark_distances(est, np.zeros(3), episode.landmarks[seen])  # one frame
         out.append(
             {
                 "pose_error": float(np.mean(errors[i])),

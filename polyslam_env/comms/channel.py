@@ -168,6 +168,14 @@ class _Queued:
     attempts: int = 0
 
 
+def in_radio_range(positions: np.ndarray, radius: float) -> np.ndarray:  # (N, N) bool
+    """Which robots are within ``radius`` of each other, from their true ``positions`` (N, ≥2)
+    (the radio's range is physics); the diagonal is True."""
+    xy = np.asarray(positions, dtype=float)[:, :2]
+    d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+    return np.asarray(d <= radius)
+
+
 class Channel:
     """Message queue between robots with loss, bandwidth cap and expiry; see module docstring."""
 

@@ -28,7 +28,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from polyslam_env.comms.channel import Channel, ChannelConfig
+from polyslam_env.comms.channel import Channel, ChannelConfig, in_radio_range
 from polyslam_env.core.geometry import compose, inverse, transform_points
 from polyslam_env.slam.backends import PointSlamRobot
 from polyslam_env.slam.points.interface import LandmarkMessage
@@ -74,8 +74,8 @@ class ConsensusExchange:
         """After SLAM step ``step``: send every active robot's message to the active robots in
         range of its true ``positions`` (N, 2), deliver, and hand each receiver what reached it
         (changes the SLAMs' inboxes). Returns the number of messages delivered."""
-        d = np.hypot(*(positions[:, None, :2] - positions[None, :, :2]).transpose(2, 0, 1))
-        linked = active[:, None] & active[None, :] & (d <= self.config.range)
+        near = in_radio_range(positions, self.config.range)
+        linked = active[:, None] & active[None, :] & near
         for s in range(self.num_robots):
             if not active[s]:
                 continue

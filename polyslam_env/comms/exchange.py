@@ -619,8 +619,8 @@ class RendezvousExchange:
                 self._sightings[(r, s, k)] = _Sighting(slams[r].pose, d.distance, d.bearing)
                 bearing[(s, r)] = view_of[(s, r)].bearing
         out = []
+        aligning = self.config.mode == "alignment"  # step() checked there is a book per robot
         for s, r in ((i, j), (j, i)):
-            aligning = features and self.config.mode == "alignment"
             own = features[s].feature_map(self.config.feature_min_sightings) if aligning else None
             payload, ids = self._build(k, s, r, bearing[(s, r)], slams[s], own)
             msg_id = self.channel.send(s, r, payload, k)

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from polyslam_env import metrics
-from polyslam_env.comms.channel import ChannelConfig
+from polyslam_env.comms.channel import ChannelConfig, in_radio_range
 from polyslam_env.comms.consensus import ConsensusExchange
 from polyslam_env.comms.exchange import AlignmentAttempt, ExchangeStep, RendezvousExchange
 from polyslam_env.core.geometry import beam_endpoints, between, wrap_remainder
@@ -108,11 +108,8 @@ def new_episode(
         ids = pillar_sensor.identities
         slams = list(make_point_slams(config.slam, sigmas, rng, start_poses, ids))
     polynomial = config.slam_enabled and config.slam.backend == "polynomial"
-    features = (
-        [FeatureBook(pillar_sensor.descriptor_dim) for _ in range(n)]
-        if polynomial and pillar_sensor.enabled
-        else []
-    )
+    aligning = polynomial and config.channel is not None and config.channel.mode == "alignment"
+    features = [FeatureBook(pillar_sensor.descriptor_dim) for _ in range(n)] if aligning else []
     state = EpisodeState(
         rngs=rngs,
         world=world,
@@ -237,8 +234,8 @@ def exchange_maps(
     if exchange.config.mode == "alignment":
         if poses is None:
             raise ValueError("alignment mode needs the robots' true poses for the radio range")
-        d = np.hypot(*(poses[:, None, :2] - poses[None, :, :2]).transpose(2, 0, 1))  # (N, N)
-        i_idx, j_idx = np.nonzero(np.triu(d <= exchange.config.range, k=1))
+        near = in_radio_range(poses, exchange.config.range)  # (N, N)
+        i_idx, j_idx = np.nonzero(np.triu(near, k=1))
         in_range = list(zip(i_idx.tolist(), j_idx.tolist(), strict=True))
     return exchange.step(
         step, slams, sensing.detections, active, in_range=in_range, features=features
@@ -294,7 +291,7 @@ def slam(state: EpisodeState, odometry: np.ndarray) -> list[SlamStepInfo | None]
 def map_features(state: EpisodeState) -> None:
     """The feature stage (changes the feature books): every active robot places the pillars
     it sees with its SLAM's pose estimate (:class:`~polyslam_env.slam.features.FeatureBook`);
-    nothing with the pillar sensor off."""
+    nothing outside the exchange's alignment mode, the books' only reader."""
     for i, book in enumerate(state.features):
         if state.world.active[i]:
             reading = state.sensing.pillars[i]

@@ -59,7 +59,7 @@ class EpisodeState:
     slams: list[SlamRobot]  # one per robot (slam.backend), or empty with slam_enabled=False
     exchange: RendezvousExchange | None  # polynomial map exchange (None: off, no SLAM, points)
     consensus: ConsensusExchange | None  # MBLCC's landmark consensus (slam.backend: mblcc)
-    features: list[FeatureBook]  # per robot: its pillar map (empty list: pillar sensor off)
+    features: list[FeatureBook]  # per robot: its pillar map (empty list: not alignment mode)
     beliefs: list[BeliefGrid]  # per robot: cells its beams swept / hit, own frame
     samplers: list[MapSampler]  # per robot: its polynomials as points, cached
     histories: list[RobotHistory]  # per robot: what the end-of-episode metrics need

@@ -164,7 +164,7 @@ class PointSlamRobot:
         u = np.asarray(odometry, dtype=float)
         with blas_threads(self.blas):
             if self.gates is not None:
-                ids, z = self._associate(u, z)
+                ids, z = self._associate(u, z, *self.gates)
             self.backend.step(u[None], PointMeasurements(ids, z))
             self.steps += 1
             self._read_pose()
@@ -184,16 +184,18 @@ class PointSlamRobot:
             diverging=False,
         )
 
-    def _associate(self, odometry: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _associate(
+        self, odometry: np.ndarray, z: np.ndarray, gate: float, new: float
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Own ids for anonymous readings z (m, 2) (:func:`~polyslam_env.slam.points.
-        association.associate` from the pose predicted by ``odometry``): the readings kept, in
-        their order, with the id of their landmark or a new one."""
+        association.associate` with the χ² thresholds ``gate`` and ``new``, from the pose
+        predicted by ``odometry``): the readings kept, in their order, with the id of their
+        landmark or a new one."""
         config = self.config
         pose, jac_pose, jac_u, q = models.motion(self.pose, odometry, config)
         pose_cov = jac_pose @ self.pose_cov_relative @ jac_pose.T + jac_u @ q @ jac_u.T
         lm = self.backend.landmarks()
         noise = np.diag(np.square(config.measurement_sigmas))
-        gate, new = self.gates if self.gates is not None else (np.inf, np.inf)
         found = associate(pose, pose_cov, lm.means, lm.covs, z, noise, gate, new)
         ids = np.full(len(z), -1, dtype=np.int64)
         known = found.slots >= 0
