@@ -901,7 +901,7 @@ class RendezvousExchange:
         seen = self._ids_seen[r]
         gone = [lid for lid in seen - now if lid in sources]
         table = slam.table
-        boxes = table.boxes(slam.mean[3:])  # (n, 4)
+        boxes = table.boxes(slam.c0s)  # (n, 4)
         if gone:
             old = [(sources.pop(g), self._boxes_seen[r][g]) for g in gone]
             reach = slam.config.gamma_max
@@ -982,7 +982,7 @@ def uncovered_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> list[
 def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
     """Ids of the landmarks PolySlam's merge test (:func:`find_merge`) pairs with ``poly``."""
     cfg = slam.config
-    c0s = slam.mean[3:]
+    c0s = slam.c0s
     xy = poly.equally_spaced(_BOX_SAMPLES)
     box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
     out = []

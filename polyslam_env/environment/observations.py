@@ -173,7 +173,7 @@ class MapSampler:
     def _rebuild(self, slam: PolySlam) -> None:
         """Resample the landmarks whose shape changed; keep the others' points."""
         ids = list(slam.book.ids)
-        c0s = slam.mean[3:]
+        c0s = slam.c0s
         per_id: dict[int, tuple[Polynomial, float, np.ndarray]] = {}
         for lid, c0 in zip(ids, c0s, strict=True):
             shape = slam.shapes[lid]
@@ -197,7 +197,7 @@ class MapSampler:
             self._rebuild(slam)
         out = self._points.copy()
         if len(out):
-            shift = (slam.mean[3:] - self._c0)[self._owner]  # (M,)
+            shift = (slam.c0s - self._c0)[self._owner]  # (M,)
             out[np.arange(len(out)), self._axis] += shift
         return out
 

@@ -27,6 +27,8 @@ BACKENDS: tuple[str, ...] = (
     "multirobot_known_start",
     "seif",
 )
+#: What turns a landmark's frozen shape (``SlamConfig.shape_rotation``).
+SHAPE_ROTATIONS: tuple[str, ...] = ("heading", "considered")
 
 
 @dataclass(frozen=True)
@@ -95,6 +97,11 @@ class SlamConfig(Config):
     tangent_min_deg: float = 10.0  # beams hitting closer to tangent than this are skipped
     squared_error: bool = False  # the paper's squared end-point distance in association
     shape_follows_pose: bool = True  # shapes move with the pose error in ∂h/∂pose (robot.py)
+    # What turns a landmark's frozen shape (with shape_follows_pose; robot.py):
+    # "heading": the robot's current heading error (no state of its own);
+    # "considered": its own state, the heading error it was fitted with plus the fit's own
+    #   slope error, carried with its correlations but never estimated (Schmidt–Kalman).
+    shape_rotation: str = "considered"
     join_pieces: bool = True  # join end-to-end pieces of one wall (merging.py; paper: False)
     link_clusters: bool = True  # clusters joined by a point near both (association; paper: False)
     blas_threads: int = 1  # BLAS threads during a step (polyslam_env/core/blas.py); 0: leave as is
@@ -138,6 +145,12 @@ class SlamConfig(Config):
         check_range("slam.tangent_min_deg", self.tangent_min_deg, 0.0, 89.0)
         check_non_negative("slam.blas_threads", self.blas_threads)
         check_choice("slam.backend", self.backend, BACKENDS)
+        check_choice("slam.shape_rotation", self.shape_rotation, SHAPE_ROTATIONS)
+
+    @property
+    def rotation_states(self) -> bool:
+        """Whether each landmark's shape rotation is a state (``shape_rotation``)."""
+        return self.shape_follows_pose and self.shape_rotation != "heading"
 
     @property
     def p0(self) -> np.ndarray:  # (3, 3)
@@ -155,7 +168,7 @@ class SlamConfig(Config):
 #: ε_Z is 15, not 10, because linked clusters grow fast and a shape fitted to more points
 #: carries a smaller frozen error (README "SLAM on large floor plans" has the measurements).
 PRESETS: dict[str, SlamConfig] = {
-    "paper": SlamConfig(eps_z=10, join_pieces=False, link_clusters=False)
+    "paper": SlamConfig(eps_z=10, join_pieces=False, link_clusters=False, shape_rotation="heading")
 }
 
 

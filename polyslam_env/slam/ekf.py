@@ -119,6 +119,9 @@ def update_sparse_inplace(
     h_c0: np.ndarray,
     r: np.ndarray,
     gate_prob: float = 0.99,
+    alpha_index: np.ndarray | None = None,
+    h_alpha: np.ndarray | None = None,
+    consider_from: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Gated, batched EKF update with range rows that touch the pose and one c0 each, in place.
 
@@ -133,6 +136,10 @@ def update_sparse_inplace(
     literally), expanded as P⁺ = P − (K Wᵀ + W Kᵀ) with W = P Hᵀ − ½ K S, in one compiled pass
     over P that keeps it exactly symmetric (:func:`~polyslam_env.slam.kernels.update_sparse`).
     K comes from a solve with S (SPEC §3: ``solve``, not ``inv``).
+
+    Optionally row i also touches a landmark's shape rotation: ``h_alpha[i]`` on state index
+    ``alpha_index[i]`` (−1: none); and the state entries from ``consider_from`` on are
+    considered, not estimated (Schmidt–Kalman: zero gain, cross-covariances updated).
     """
     n, k = mean.size, np.size(r)
     if mean.dtype != np.float64 or cov.dtype != np.float64 or cov.shape != (n, n):
@@ -148,10 +155,27 @@ def update_sparse_inplace(
         )
     if k and (idx.min() < 3 or idx.max() >= n):
         raise ValueError(f"update: c0 indices must lie in [3, {n}), got {idx.tolist()}")
+    ai, ha = _alpha_rows(alpha_index, h_alpha, k, n)
     accepted, nis = np.empty(k, dtype=bool), np.empty(k)
     gate = chi2_1dof_quantile(gate_prob)
-    kernels.update_sparse(mean, cov, nu, hp, idx, hc, rv, gate, accepted, nis)
+    consider = n if consider_from is None else int(consider_from)
+    kernels.update_sparse(mean, cov, nu, hp, idx, hc, ai, ha, rv, gate, consider, accepted, nis)
     return accepted, nis
+
+
+def _alpha_rows(
+    alpha_index: np.ndarray | None, h_alpha: np.ndarray | None, k: int, n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rows' shape-rotation columns, checked: (k,) int64 indices (−1: none), (k,) values."""
+    if alpha_index is None:
+        return np.full(k, -1, dtype=np.int64), np.zeros(k)
+    ai = np.ascontiguousarray(alpha_index, dtype=np.int64).reshape(-1)
+    ha = np.ascontiguousarray(h_alpha, dtype=float).reshape(-1)
+    if ai.size != k or ha.size != k:
+        raise ValueError(f"update: {ai.size}/{ha.size} rotation columns for {k} rows")
+    if k and (ai.max() >= n or ((ai >= 0) & (ai < 3)).any()):
+        raise ValueError(f"update: rotation indices must lie in [3, {n}) or be -1")
+    return ai, ha
 
 
 # -- augmentation and removal --------------------------------------------------------------------
@@ -265,17 +289,24 @@ def normalised_innovations(
     c0_index: np.ndarray,
     h_c0: np.ndarray,
     r: np.ndarray,
+    alpha_index: np.ndarray | None = None,
+    h_alpha: np.ndarray | None = None,
 ) -> np.ndarray:  # (k,)
     """ν_i² / S_ii for range rows that touch the pose and one c0 each (the rows of
     :func:`update_sparse_inplace`): S_ii = h P_pp hᵀ + 2 h_c h P_pc + h_c² P_cc + r_i with
-    h = ``h_pose[i]`` (3,), h_c = ``h_c0[i]``, c = ``c0_index[i]``; cov (3+n, 3+n)."""
-    out = np.empty(np.size(r))
+    h = ``h_pose[i]`` (3,), h_c = ``h_c0[i]``, c = ``c0_index[i]``; cov (3+n, 3+n); plus the
+    shape-rotation terms of rows with ``alpha_index[i]`` ≥ 0."""
+    k = np.size(r)
+    out = np.empty(k)
+    ai, ha = _alpha_rows(alpha_index, h_alpha, k, cov.shape[0])
     kernels.normalised_innovations(
         cov,
         np.ascontiguousarray(innovation, dtype=float),
         np.ascontiguousarray(h_pose, dtype=float).reshape(-1, 3),
         np.ascontiguousarray(c0_index, dtype=np.int64),
         np.ascontiguousarray(h_c0, dtype=float),
+        ai,
+        ha,
         np.ascontiguousarray(r, dtype=float),
         out,
     )

@@ -415,10 +415,18 @@ def cast_into(
 
 @njit
 def _shape_fit_var(
-    shape: np.ndarray, m: int, t: float, fit_inverse: np.ndarray, n_fit: int, noise_var: float
+    shape: np.ndarray,
+    m: int,
+    t: float,
+    fit_inverse: np.ndarray,
+    n_fit: int,
+    noise_var: float,
+    drop_slope: bool,
 ) -> float:
     """Variance of a frozen shape's η at scaled position t (see PolySlam._beam_rows):
-    σ²·(a(t)ᵀ M⁻¹ a(t) − 1/N), a = [1, t, …, t^m], M⁻¹ = ``fit_inverse[m]``, floored at 0."""
+    σ²·(a(t)ᵀ M⁻¹ a(t) − 1/N), a = [1, t, …, t^m], M⁻¹ = ``fit_inverse[m]``, floored at 0.
+    ``drop_slope``: without the slope's own part σ²·t²·M⁻¹[1, 1] (the shape's rotation is a
+    state then, ``SlamConfig.shape_states``)."""
     order = m if shape[m] != 0.0 else 0
     if order == 0:
         return 0.0
@@ -432,7 +440,10 @@ def _shape_fit_var(
         for j in range(order + 1):
             inner += inverse[i, j] * a[j]
         quad += a[i] * inner
-    return noise_var * _max(quad - 1.0 / n_fit, 0.0)
+    quad -= 1.0 / n_fit
+    if drop_slope:
+        quad -= t * t * inverse[1, 1]
+    return noise_var * _max(quad, 0.0)
 
 
 @njit
@@ -462,16 +473,20 @@ def beam_rows(
     fit_half: np.ndarray,  # (n,)
     fit_inverse: np.ndarray,  # (M+1, M+1, M+1): (AᵀA)⁻¹ of order o in [o, :o+1, :o+1]
     n_fit: int,
+    alpha_base: int,  # state index of landmark 0's shape rotation; −1: not in the state
     innovation: np.ndarray,  # (≥ k,) out
     h_pose: np.ndarray,  # (≥ k, 3) out
     c0_index: np.ndarray,  # (≥ k,) int64 out
     h_c0: np.ndarray,  # (≥ k,) out
+    alpha_index: np.ndarray,  # (≥ k,) int64 out: the rotation's state index, −1: none
+    h_alpha: np.ndarray,  # (≥ k,) out
     variance: np.ndarray,  # (≥ k,) out
 ) -> int:
     """The EKF rows of the ``beams`` with a usable hit (:func:`cast_into` on the landmarks
     within ``reach``; near-tangent hits, below ``min_sine``, are skipped), written to the first
-    rows of the outputs in beam order: innovation, h_pose, c0 state index, h_c0 = 1/D and the
-    R diagonal. Returns how many. See ``PolySlam._beam_rows`` for the model (the Jacobian of
+    rows of the outputs in beam order: innovation, h_pose, c0 state index, h_c0 = 1/D, the
+    shape rotation's state index and Jacobian (with ``alpha_base`` ≥ 0) and the R diagonal.
+    Returns how many. See ``PolySlam._beam_rows`` for the model (the Jacobian of
     SPEC §3 and the frozen shape's terms). Outputs are written, not returned: numba boxes
     every array it returns into a new Python object (~0.6 µs each)."""
     candidates = boxes_near(boxes, np.array([x, x, y, y]), reach)
@@ -501,6 +516,7 @@ def beam_rows(
         d_eta, d_xi = (cos, -sin) if v1 else (-sin, cos)  # d(dη)/dφ, d(dξ)/dφ
         h_theta = -t[b] * (d_eta - b_slope * d_xi) * inv_d
         var = range_var + model_var[j] * (inv_d * inv_d)
+        h_rot = 0.0
         if shape_follows_pose:
             m = order[j]
             value, b_slope_at = horner(shape[j], m, xi[b], shape[j, 0])
@@ -508,12 +524,16 @@ def beam_rows(
             shift = (b_slope_at - slope_c) * inv_d
             extra = shift * shift * xi_var[j]
             scaled = (xi[b] - pivot[j]) / fit_half[j]
-            fit_var = _shape_fit_var(shape[j], m, scaled, fit_inverse, n_fit, range_var)
+            in_state = alpha_base >= 0
+            fit_var = _shape_fit_var(shape[j], m, scaled, fit_inverse, n_fit, range_var, in_state)
             extra += inv_d * inv_d * fit_var
             lever = (xi[b] - pivot[j]) + b_slope_at * (value - value_c)
-            h_theta += (1.0 if v1 else -1.0) * lever * inv_d
-            turn = lever * inv_d
-            extra += turn * turn * turn_var[j]
+            turn = (1.0 if v1 else -1.0) * lever * inv_d
+            if in_state:  # the rotation is its own state: ∂h/∂α
+                h_rot = turn
+            else:  # the rotation is taken to be the current heading error
+                h_theta += turn
+                extra += turn * turn * turn_var[j]
             var += extra
         innovation[k] = ranges[beams[b]] - t[b]
         if v1:
@@ -523,6 +543,8 @@ def beam_rows(
         h_pose[k, 2] = h_theta
         c0_index[k] = 3 + j
         h_c0[k] = inv_d
+        alpha_index[k] = alpha_base + j if h_rot != 0.0 else -1
+        h_alpha[k] = h_rot
         variance[k] = var
         k += 1
     return k
@@ -666,11 +688,14 @@ def normalised_innovations(
     h_pose: np.ndarray,  # (k, 3)
     c0_index: np.ndarray,  # (k,)
     h_c0: np.ndarray,  # (k,)
+    alpha_index: np.ndarray,  # (k,) −1: the row has no rotation term
+    h_alpha: np.ndarray,  # (k,)
     r: np.ndarray,  # (k,)
     out: np.ndarray,  # (k,) out
 ) -> None:
-    """ν_i² / S_ii for rows on the pose and one c0: S_ii = h P_pp hᵀ + 2 h_c h P_pc +
-    h_c² P_cc + r_i."""
+    """ν_i² / S_ii for rows on the pose, one c0 and at most one shape rotation α:
+    S_ii = h P_pp hᵀ + 2 h_c h P_pc + h_c² P_cc (+ 2 h_α h P_pα + 2 h_c h_α P_cα + h_α² P_αα)
+    + r_i."""
     k = r.size
     for i in range(k):
         c, hc = c0_index[i], h_c0[i]
@@ -680,6 +705,11 @@ def normalised_innovations(
             quad += row * h_pose[i, a]
         cross = h_pose[i, 0] * cov[0, c] + h_pose[i, 1] * cov[1, c] + h_pose[i, 2] * cov[2, c]
         s = quad + (2.0 * hc * cross + hc * hc * cov[c, c] + r[i])
+        g = alpha_index[i]
+        if g >= 0:
+            ha = h_alpha[i]
+            cross_a = h_pose[i, 0] * cov[0, g] + h_pose[i, 1] * cov[1, g] + h_pose[i, 2] * cov[2, g]
+            s += ha * (2.0 * cross_a + 2.0 * hc * cov[c, g] + ha * cov[g, g])
         out[i] = innovation[i] * innovation[i] / s
 
 
@@ -691,8 +721,11 @@ def update_sparse(
     h_pose: np.ndarray,  # (k, 3)
     c0_index: np.ndarray,  # (k,) state index of each row's c0
     h_c0: np.ndarray,  # (k,)
+    alpha_index: np.ndarray,  # (k,) state index of each row's shape rotation, −1: none
+    h_alpha: np.ndarray,  # (k,)
     r: np.ndarray,  # (k,) R diagonal
     gate: float,  # χ²(1) quantile: rows with ν²/S_ii above it are rejected
+    consider_from: int,  # state entries from this index on get no gain (Schmidt); n: none
     accepted: np.ndarray,  # (k,) bool out: passed the gate
     nis: np.ndarray,  # (k,) out: ν²/S_ii
 ) -> int:
@@ -704,6 +737,10 @@ def update_sparse(
     * P⁺ = P − (K Wᵀ + W Kᵀ) with W = P Hᵀ − ½ K S, which is the Joseph form for any gain.
       Each entry is P_ij − Σ_l (K_il W_jl + W_il K_jl), symmetric in (i, j): the upper
       triangle is computed and mirrored, so P⁺ is exactly symmetric, in one pass over P.
+    * The entries from ``consider_from`` on are *considered* (Schmidt–Kalman): their rows of K
+      are zero, so their estimates and their own covariance stay, while their
+      cross-covariances with the rest follow the update; the Joseph form keeps P⁺ right for
+      that gain.
 
     Not bit-identical to the numpy version it replaced (BLAS's fused products and the
     Z₊Z₊ᵀ − Z₋Z₋ᵀ split of its syrk): equal to rounding, checked against it in the tests.
@@ -714,12 +751,19 @@ def update_sparse(
         c, h0, h1, h2, hc = c0_index[i], h_pose[i, 0], h_pose[i, 1], h_pose[i, 2], h_c0[i]
         for a in range(n):
             pht[i, a] = cov[0, a] * h0 + cov[1, a] * h1 + cov[2, a] * h2 + cov[c, a] * hc
+        g = alpha_index[i]
+        if g >= 0:
+            ha = h_alpha[i]
+            for a in range(n):
+                pht[i, a] += cov[g, a] * ha
     accepted[:] = False
     count = 0
     for i in range(k):
         c = c0_index[i]
         s_ii = h_pose[i, 0] * pht[i, 0] + h_pose[i, 1] * pht[i, 1] + h_pose[i, 2] * pht[i, 2]
         s_ii += h_c0[i] * pht[i, c]
+        if alpha_index[i] >= 0:
+            s_ii += h_alpha[i] * pht[i, alpha_index[i]]
         nis[i] = innovation[i] * innovation[i] / (s_ii + r[i])
         if nis[i] <= gate:
             accepted[i] = True
@@ -730,7 +774,7 @@ def update_sparse(
     pht = pht[rows]  # (k_a, n)
     s_mat = np.empty((count, count))  # H P Hᵀ on the accepted rows
     for i in range(count):
-        hi_, c = rows[i], c0_index[rows[i]]
+        hi_, c, g = rows[i], c0_index[rows[i]], alpha_index[rows[i]]
         for j in range(count):
             s_mat[i, j] = (
                 h_pose[hi_, 0] * pht[j, 0]
@@ -738,12 +782,17 @@ def update_sparse(
                 + h_pose[hi_, 2] * pht[j, 2]
                 + h_c0[hi_] * pht[j, c]
             )
+            if g >= 0:
+                s_mat[i, j] += h_alpha[hi_] * pht[j, g]
     s_sym = np.empty((count, count))
     for i in range(count):
         for j in range(count):
             s_sym[i, j] = 0.5 * (s_mat[i, j] + s_mat[j, i])
         s_sym[i, i] += r[rows[i]]
     kt = np.ascontiguousarray(np.linalg.solve(s_sym, pht))  # (k_a, n) = (P Hᵀ S⁻¹)ᵀ
+    for q in range(count):  # considered entries: no gain
+        for a in range(consider_from, n):
+            kt[q, a] = 0.0
     for a in range(n):
         step = 0.0
         for q in range(count):
@@ -803,6 +852,9 @@ def screen_scan(
     fit_inverse: np.ndarray,
     n_fit: int,
     gate: float,  # χ²(1) quantile
+    n_lm: int,  # landmarks: c0s at 3 … 3 + n_lm − 1
+    alpha_base: int,  # their shape rotations from this index (−1: none in the state)
+    consider_from: int,  # unused here (update_scan's)
 ) -> int:
     """Every beam's row (:func:`beam_rows`, a missing return counting as ``max_range``) and
     whether its NIS (:func:`normalised_innovations`) exceeds ``gate``, into the first rows of
@@ -813,16 +865,18 @@ def screen_scan(
         seen[b] = ranges[b] if math.isfinite(ranges[b]) else max_range
     innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))
     c0_index, h_c0, variance = np.empty(n_beams, np.int64), np.empty(n_beams), np.empty(n_beams)
+    alpha_index, h_alpha = np.empty(n_beams, np.int64), np.empty(n_beams)
     k = beam_rows(
         mean[0], mean[1], mean[2], angles, seen, np.arange(n_beams), reach, variate, order,
-        shape, lo, hi, mean[3:], boxes, max_range, min_sine, range_var, model_var,
-        shape_follows_pose, pivot, xi_var, turn_var, fit_half, fit_inverse, n_fit,
-        innovation, h_pose, c0_index, h_c0, variance,
+        shape, lo, hi, mean[3 : 3 + n_lm], boxes, max_range, min_sine, range_var, model_var,
+        shape_follows_pose, pivot, xi_var, turn_var, fit_half, fit_inverse, n_fit, alpha_base,
+        innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance,
     )  # fmt: skip
     nis = np.empty(k)
     normalised_innovations(
-        cov, innovation[:k], h_pose[:k], c0_index[:k], h_c0[:k], variance[:k], nis
-    )
+        cov, innovation[:k], h_pose[:k], c0_index[:k], h_c0[:k], alpha_index[:k], h_alpha[:k],
+        variance[:k], nis,
+    )  # fmt: skip
     for i in range(k):
         outlier[i] = nis[i] > gate
     return k
@@ -883,6 +937,9 @@ def update_scan(
     fit_inverse: np.ndarray,
     n_fit: int,
     gate: float,  # χ²(1) quantile
+    n_lm: int,  # landmarks: c0s at 3 … 3 + n_lm − 1
+    alpha_base: int,  # their shape rotations from this index (−1: none in the state)
+    consider_from: int,  # entries from here on are considered, not estimated (Schmidt)
 ) -> int:
     """The rows of ``beams`` (:func:`beam_rows`), their R made a joint bound
     (:func:`share_landmark_error`), and the gated update with them (:func:`update_sparse`);
@@ -891,17 +948,18 @@ def update_scan(
     n_beams = beams.size
     innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))
     c0_index, h_c0, variance = np.empty(n_beams, np.int64), np.empty(n_beams), np.empty(n_beams)
+    alpha_index, h_alpha = np.empty(n_beams, np.int64), np.empty(n_beams)
     k = beam_rows(
         mean[0], mean[1], mean[2], angles, ranges, beams, reach, variate, order, shape, lo, hi,
-        mean[3:], boxes, max_range, min_sine, range_var, model_var, shape_follows_pose, pivot,
-        xi_var, turn_var, fit_half, fit_inverse, n_fit, innovation, h_pose, c0_index, h_c0,
-        variance,
+        mean[3 : 3 + n_lm], boxes, max_range, min_sine, range_var, model_var,
+        shape_follows_pose, pivot, xi_var, turn_var, fit_half, fit_inverse, n_fit, alpha_base,
+        innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance,
     )  # fmt: skip
     if k == 0:
         return -1
     share_landmark_error(c0_index[:k], variance[:k], range_var)
     accepted, nis = np.empty(k, np.bool_), np.empty(k)
     return update_sparse(
-        mean, cov, innovation[:k], h_pose[:k], c0_index[:k], h_c0[:k], variance[:k], gate,
-        accepted, nis,
+        mean, cov, innovation[:k], h_pose[:k], c0_index[:k], h_c0[:k], alpha_index[:k],
+        h_alpha[:k], variance[:k], gate, consider_from, accepted, nis,
     )  # fmt: skip

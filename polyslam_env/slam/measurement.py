@@ -204,6 +204,13 @@ def range_rows(
         np.ones(n),  # fit_half
         np.zeros((width, width, width)),
         1,
-        *rows,
+        -1,  # alpha_base: no shape rotation in the state
+        rows.innovation,
+        rows.h_pose,
+        rows.c0_index,
+        rows.h_c0,
+        np.empty(k, dtype=np.int64),  # alpha_index (all −1)
+        np.empty(k),  # h_alpha (all 0)
+        rows.variance,
     )
     return Rows(*(column[:used] for column in rows))

@@ -72,9 +72,11 @@ class SlamStepInfo:
 class PolySlam:
     """Polynomial-landmark EKF SLAM of one robot (paper §3.1, §3.3).
 
-    The state is ``mean = [x¹, x², θ, c0_1 … c0_n]`` with covariance ``cov``; everything
-    else about landmark ``i`` (stable id ``landmark_ids[i]``: shape, extent, Q_bad, …) is
-    row i of :attr:`table`, the map's one record. ``mean`` and ``cov`` are working arrays
+    The state is ``mean = [x¹, x², θ, c0_1 … c0_n, α_1 … α_n]`` with covariance ``cov``
+    (the α, each landmark's shape rotation, only with ``shape_rotation="considered"``, the
+    default; :attr:`c0s` is the c0 block); everything else about landmark ``i`` (stable id
+    ``landmark_ids[i]``: shape, extent, Q_bad, …) is row i of :attr:`table`, the map's one
+    record. ``mean`` and ``cov`` are working arrays
     (the prediction and the update write into them): copy to keep them.
 
     **Anchored at the true start.** The robot's frame is its nominal start pose, but where it
@@ -86,6 +88,16 @@ class PolySlam:
     implies). :attr:`pose_cov` adds e₀'s share back for the pose as an estimate in the
     robot's frame; :attr:`pose_cov_relative` is the filter's own. The propagation uses
     first-estimates Jacobians (:func:`~polyslam_env.slam.ekf.predict_inplace`).
+
+    **Shape rotations as considered states.** A shape is frozen when it is fitted, turned from
+    the true wall by the heading error of that moment (and its slope's fit error). Taking that
+    turn to be the *current* heading error (``shape_rotation="heading"``, the paper preset's)
+    lets a wall seen again long after it was made correct nothing of the heading, and the
+    same frozen error, repeated step after step, made the filter overconfident on loops.
+    Each landmark therefore carries its turn α as a state: cloned from the heading when the
+    shape is fitted (:meth:`_add_rotation`), never estimated (Schmidt–Kalman: zero gain, so
+    the stored shape stays the estimate), its correlations updated by every beam on it
+    (``kernels.update_sparse``).
 
     Set :attr:`profile` to a dict to collect per-stage wall times (s) of every step under
     the keys ``predict``, ``association``, ``map`` (extents, refits, new landmarks,
@@ -159,9 +171,14 @@ class PolySlam:
         one is in the state); a new object whenever the landmark changes."""
         return self.table.shapes
 
+    @property
+    def c0s(self) -> np.ndarray:  # (n,)
+        """Every landmark's c0, in state order (a view of the mean)."""
+        return self.mean[3 : 3 + len(self.table)]
+
     def polynomials(self) -> list[Polynomial]:
         """The map: every landmark with its current c0, in state order."""
-        return self.table.polynomials(self.mean[3:])
+        return self.table.polynomials(self.c0s)
 
     def c0_variance(self, landmark_id: int) -> float:
         k = self.table.state_index(landmark_id)
@@ -195,7 +212,7 @@ class PolySlam:
         assoc = self.book.associate(
             points,
             self.table.packed(),
-            self.mean[3:],
+            self.c0s,
             rho,
             sigma,
             cfg.squared_error,
@@ -251,7 +268,7 @@ class PolySlam:
         """Bounding boxes (n, 4) of the landmarks at the current c0s, cached by the table until
         the map or the state changes (the association and an update without map change share
         them)."""
-        return self.table.boxes(self.mean[3:], self._state_version)
+        return self.table.boxes(self.c0s, self._state_version)
 
     def _predict(self, odometry: np.ndarray) -> None:
         """EKF prediction into the working arrays (the mean is small: a fresh copy)."""
@@ -346,15 +363,26 @@ class PolySlam:
         return [lid for lid, at in zip(table.ids, table.changed_at, strict=True) if at > step]
 
     # -- landmark generation (paper eq. 4–5) ------------------------------------------------------
-    def _augment(self, fit: Fit, side: int = 0, evidence: tuple[float, float] | None = None) -> int:
+    def _augment(
+        self,
+        fit: Fit,
+        side: int = 0,
+        evidence: tuple[float, float] | None = None,
+        rotation: Sequence[tuple[int, float]] = (),
+    ) -> int:
         """Append a fitted landmark to the state; returns its new id. ``side``: the face its
         beams saw (+1 from +η, −1 from −η, 0 unknown; see :mod:`~polyslam_env.slam.merging`);
         ``evidence``: the ξ-interval of its supporting hits (default: the fit's extent, i.e.
         its points' — a received landmark keeps the sender's evidence so); the extent is cut
-        to it ± ``landmarks.EXTENT_MARGIN``."""
+        to it ± ``landmarks.EXTENT_MARGIN``. With rotation states the shape's turn α goes in
+        too (:meth:`_add_rotation`), a weighted mean of the turns of the landmarks in
+        ``rotation`` ((index, weight) pairs) and of the current heading."""
+        n = len(self.table)
         self.mean, self.cov = ekf.augment(self.mean, self.cov, fit.c0, fit.Gx, fit.Gy, fit.V)
         evidence = (fit.poly.lo, fit.poly.hi) if evidence is None else evidence
         poly = clip_to_evidence(fit.poly, evidence)
+        if self.config.rotation_states:
+            self._add_rotation(n, poly, rotation)
         return self.table.append(
             poly,
             pivot=0.5 * (poly.lo + poly.hi),  # ξ of the centroid of its fit points
@@ -366,9 +394,53 @@ class PolySlam:
             evidence=evidence,
         )
 
+    def _add_rotation(
+        self, n: int, poly: Polynomial, rotation: Sequence[tuple[int, float]]
+    ) -> None:
+        """The new landmark's shape turn α into the state, after its c0 was appended at index
+        3 + 2n and before its table row is: [pose, c0_1 … c0_n, α_1 … α_n, c0_new] becomes
+        [pose, c0_1 … c0_new, α_1 … α_new].
+
+        α is the angle by which the true wall is turned from the stored shape about its
+        centroid. A shape fitted now, to points placed with the current pose estimate, is
+        turned by the current heading error plus its slope's fit error: its row is a copy of
+        the heading's, with the fit's variance (:meth:`_rotation_fit_var`) added (a clone, as
+        in Roumeliotis & Burdick's stochastic cloning). A shape fitted over older landmarks'
+        points (a merge, a refit) takes their turns with the weights in ``rotation``, and the
+        rest, 1 − Σ w, from the current heading with that share of the fit variance. α is
+        then *considered*, not estimated (no gain: the stored shape stays the estimate), and
+        its correlations carry how a wall made long ago ties the current heading to the
+        heading of its time.
+        """
+        size = self.mean.size  # 3 + 2n + 1: the new c0 is last
+        gx = np.zeros(size)
+        rest = 1.0
+        for row, weight in rotation:
+            gx[3 + n + row] += weight
+            rest -= weight
+        gx[2] += rest
+        var = rest * rest * self._rotation_fit_var(poly)
+        mean, cov = ekf.augment(self.mean, self.cov, 0.0, gx, np.ones(1), np.array([[var]]))
+        order = np.r_[0 : 3 + n, size - 1, 3 + n : size - 1, size]
+        self.mean, self.cov = mean[order], cov[np.ix_(order, order)]
+
+    def _rotation_fit_var(self, poly: Polynomial) -> float:
+        """Variance of a fitted shape's turn from its slope's fit error: the slope's
+        σ²·M⁻¹[1, 1]/h² (N = ε_Z + 1 equally spaced points over the half-extent h, order ≥ 1:
+        the kernels' frozen-shape model) over (1 + b'²)², the slope-to-angle factor at the
+        centroid."""
+        order = max(len(np.trim_zeros(np.asarray(poly.coeffs[1:], dtype=float), "b")), 1)
+        inverse = _fit_inverse_table(self._n_fit, self.config.order)[order]
+        half = max(0.5 * (poly.hi - poly.lo), 0.05)
+        slope = float(poly.slope(0.5 * (poly.lo + poly.hi)))
+        return float(self._range_var * inverse[1, 1] / (half * half) / (1.0 + slope * slope) ** 2)
+
     def _remove(self, landmark_id: int) -> None:
         idx = self.table.index_of(landmark_id)
-        self.mean, self.cov = ekf.remove(self.mean, self.cov, 3 + idx)
+        drop = [3 + idx]
+        if self.config.rotation_states:
+            drop.append(3 + len(self.table) + idx)
+        self.mean, self.cov = ekf.remove(self.mean, self.cov, drop)
         self.table.remove(idx)
 
     def _replace(
@@ -377,9 +449,10 @@ class PolySlam:
         fit: Fit,
         side: int = 0,
         evidence: tuple[float, float] | None = None,
+        rotation: Sequence[tuple[int, float]] = (),
     ) -> int:
         """Add the fit (its G_x may touch the old c0s) and then drop the old landmarks."""
-        new_id = self._augment(fit, side, evidence)
+        new_id = self._augment(fit, side, evidence, rotation)
         for lid in old_ids:
             self._remove(lid)
         return new_id
@@ -409,7 +482,8 @@ class PolySlam:
             evidence_on(self._evidence(state_index - 3), poly, fit.poly),
             (float(xi_bad.min()), float(xi_bad.max())),
         )
-        new_id = self._replace([landmark_id], fit, side, evidence)
+        rotation = [(state_index - 3, _length_weight(poly.hi - poly.lo, float(np.ptp(xi_bad))))]
+        new_id = self._replace([landmark_id], fit, side, evidence, rotation)
         self._merge_into_map(new_id)
         return 1
 
@@ -465,7 +539,7 @@ class PolySlam:
         if landmark_id not in self.table:
             return None
         idx = self.table.index_of(landmark_id)
-        c0s = self.mean[3:]
+        c0s = self.c0s
         cfg = self.config
         reach = cfg.gamma_max * (1.0 + 1e-9) + 1e-12  # ≥ γ_M despite rounding
         near = self.table.near(self._box(idx), c0s, reach)
@@ -511,7 +585,8 @@ class PolySlam:
             evidence_on(self._evidence(idx), poly, fit.poly),
             evidence_on(self._evidence(j), other, fit.poly),
         )
-        return self._replace([landmark_id, other_id], fit, side, evidence)
+        w = _length_weight(poly.hi - poly.lo, other.hi - other.lo)
+        return self._replace([landmark_id, other_id], fit, side, evidence, [(idx, w), (j, 1 - w)])
 
     def _evidence(self, index: int) -> tuple[float, float]:
         """ξ-interval (on its own axis) of the hits supporting landmark ``index``."""
@@ -532,7 +607,7 @@ class PolySlam:
 
     def _box(self, index: int) -> np.ndarray:
         """(4,) bounding box (x_min, x_max, y_min, y_max) of landmark ``index``."""
-        return self.table.boxes(self.mean[3:])[index]
+        return self.table.boxes(self.c0s)[index]
 
     def _fit(self, points: PointSet) -> Fit | None:
         fit = fit_polynomial(
@@ -603,6 +678,12 @@ class PolySlam:
         cluster a landmark is born from. And the rotation the shape is taken to share is the
         heading error *when it was fitted*, which the current one has drifted from since: that
         drift's variance (:meth:`_turn_var`) times (lever/D)² goes into R as well.
+
+        With rotation states (``shape_rotation="considered"``) the rotation is instead the
+        landmark's own α: ±lever/D goes to ∂h/∂α, and neither the heading drift nor the
+        slope's part of the fit variance (σ²·t²·M⁻¹[1, 1], which α's variance holds) enters R.
+        The last three arguments are the landmark count, α_1's state index (−1: none) and
+        the first considered state index (the α block, or the state size: none).
         """
         table, n_fit = self.table, self._n_fit
         return (
@@ -625,6 +706,10 @@ class PolySlam:
             _fit_inverse_table(n_fit, table.shape.shape[1] - 1),
             n_fit,
             self._gate,
+            len(table),
+            3 + len(table) if self.config.rotation_states else -1,  # α_1's state index
+            # the considered entries (Schmidt): the rotations, or none
+            3 + len(table) if self.config.rotation_states else self.mean.size,
         )
 
     def _turn_var(self) -> np.ndarray:  # (n,)
@@ -678,6 +763,13 @@ def _fit_inverse_table(n_points: int, max_order: int) -> np.ndarray:
             a = np.linspace(-1.0, 1.0, n_points)[:, None] ** np.arange(order + 1)
             table[order, : order + 1, : order + 1] = np.linalg.inv(a.T @ a)
     return table
+
+
+def _length_weight(first: float, second: float) -> float:
+    """Weight of the first of two fitted pieces in the turn of one shape fitted over both: a
+    slope's precision grows as N·L² for N points over a length L, and N with L: as L³."""
+    a, b = max(first, 1e-6) ** 3, max(second, 1e-6) ** 3
+    return a / (a + b)
 
 
 def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> list[StoredPoint]:

@@ -306,6 +306,9 @@ class RowModel(NamedTuple):
     range_sigma: float
     shape_follows_pose: bool
     eps_z: int
+    # state index of landmark 0's shape rotation (SlamConfig.shape_rotation "considered");
+    # −1: the rotation is the current heading error
+    alpha_base: int = -1
 
 
 def beam_rows(
@@ -321,29 +324,40 @@ def beam_rows(
     boxes: Sequence[Sequence[float]],
     model: RowModel,
     turn_var: Sequence[float] | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """(innovation, h_pose, c0 state index, h_c0, R diagonal) of the beams with a usable hit
-    (``boxes`` per candidate), or None. ``turn_var`` (per landmark, default 0): the variance of
-    the heading change since its shape was fitted (``PolySlam._turn_var``)."""
+) -> tuple[np.ndarray, ...] | None:
+    """(innovation, h_pose, c0 state index, h_c0, rotation state index, h_α, R diagonal) of
+    the beams with a usable hit (``boxes`` per candidate), or None. ``turn_var`` (per
+    landmark, default 0): the variance of the heading change since its shape was fitted
+    (``PolySlam._turn_var``). With ``model.alpha_base`` ≥ 0 the shape's rotation is its own
+    state: the lever term goes to h_α instead of h_θ, and neither the heading drift nor the
+    slope's fit variance enters R."""
     hits = cast(x, y, theta, list(angles), list(candidates), rows, list(c0s), max_range, boxes)
     range_var = model.range_sigma**2
+    in_state = model.alpha_base >= 0
     innovation, h_pose, c0_index, h_c0, variance = [], [], [], [], []
+    alpha_index, h_alpha = [], []
     for b, hit in enumerate(hits):
         if hit is None or hit.incidence_sine < model.min_sine:
             continue  # no hit, or near-tangent: too sensitive to linearise
         (h_x, h_y, h_theta), inv_d = hit.jacobian()
         row = rows[hit.landmark]
         var = range_var + row.model_var * (inv_d * inv_d)
+        h_rot = 0.0
         if model.shape_follows_pose:
             lever, extra = _shape_terms(row, hit.xi, inv_d, model)
-            h_theta += (1.0 if hit.variate == 1 else -1.0) * lever * inv_d
-            turn = lever * inv_d
-            extra += turn * turn * (0.0 if turn_var is None else turn_var[hit.landmark])
+            turn = (1.0 if hit.variate == 1 else -1.0) * lever * inv_d
+            if in_state:
+                h_rot = turn
+            else:
+                h_theta += turn
+                extra += turn * turn * (0.0 if turn_var is None else turn_var[hit.landmark])
             var += extra
         innovation.append(float(ranges[b]) - hit.t)
         h_pose.append((h_x, h_y, h_theta))
         c0_index.append(3 + hit.landmark)
         h_c0.append(inv_d)
+        alpha_index.append(model.alpha_base + hit.landmark if h_rot != 0.0 else -1)
+        h_alpha.append(h_rot)
         variance.append(var)
     if not innovation:
         return None
@@ -352,6 +366,8 @@ def beam_rows(
         np.array(h_pose),
         np.array(c0_index),
         np.array(h_c0),
+        np.array(alpha_index),
+        np.array(h_alpha),
         np.array(variance),
     )
 
@@ -374,10 +390,14 @@ def shape_fit_var(shape: tuple[float, ...], t: float, model: RowModel) -> float:
         return 0.0
     n_fit = model.eps_z + 1
     a = [t**i for i in range(order + 1)]
+    inverse = uniform_fit_inverse(n_fit, order)
     quad = 0.0
-    for a_i, row in zip(a, uniform_fit_inverse(n_fit, order), strict=True):
+    for a_i, row in zip(a, inverse, strict=True):
         quad += a_i * sum(m_ij * a_j for m_ij, a_j in zip(row, a, strict=True))
-    return float(model.range_sigma**2 * max(quad - 1.0 / n_fit, 0.0))
+    quad -= 1.0 / n_fit
+    if model.alpha_base >= 0:  # the slope's own error is the rotation state's
+        quad -= t * t * inverse[1][1]
+    return float(model.range_sigma**2 * max(quad, 0.0))
 
 
 @functools.lru_cache(maxsize=16)
@@ -463,6 +483,9 @@ def update_sparse_inplace(
     gate_prob: float = 0.99,
     work: np.ndarray | None = None,
     gate_value: float | None = None,
+    alpha_index: np.ndarray | None = None,
+    h_alpha: np.ndarray | None = None,
+    consider_from: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Gated, batched EKF update with range rows that touch the pose and one c0 each, in place.
 
@@ -487,12 +510,23 @@ def update_sparse_inplace(
       symmetric syrk, so P⁺ stays exactly symmetric with no (3+n)² transpose pass: O(n²k).
 
     K comes from a solve with S (SPEC §3: ``solve``, not ``inv``).
+
+    Rows with ``alpha_index[i]`` ≥ 0 also touch that state with ``h_alpha[i]``; the entries
+    from ``consider_from`` on get no gain (Schmidt–Kalman; the expanded Joseph form holds
+    for any gain).
     """
     k = r.size
-    cols = np.array([0, 1, 2, *c0_index.tolist()])  # (3+k,) the state columns H touches
-    H = np.zeros((k, 3 + k))  # H on ``cols``: row i is h_pose[i], then h_c0[i] at 3+i
+    alphas = [] if alpha_index is None else [int(a) for a in alpha_index if a >= 0]
+    cols = np.array([0, 1, 2, *c0_index.tolist(), *alphas])  # the state columns H touches
+    H = np.zeros((k, 3 + k + len(alphas)))  # row i: h_pose[i], h_c0[i] at 3+i, h_α after
     H[:, :3] = h_pose
-    H.flat[3 :: k + 4] = h_c0
+    H.flat[3 : k * (3 + k + len(alphas)) : 3 + k + len(alphas) + 1] = h_c0
+    if alpha_index is not None and h_alpha is not None:
+        col = 3 + k
+        for i, a in enumerate(alpha_index.tolist()):
+            if a >= 0:
+                H[i, col] = h_alpha[i]
+                col += 1
     PHt = cov[:, cols] @ H.T  # (3+n, k)
     S = H @ PHt[cols]  # (k, k) = H P Hᵀ
     gate = chi2_1dof_quantile(gate_prob) if gate_value is None else gate_value
@@ -510,6 +544,8 @@ def update_sparse_inplace(
     S = _symmetrise(S)
     S.flat[:: r.size + 1] += r  # + R
     K = np.linalg.solve(S, PHt.T).T  # (3+n, k_a) = P Hᵀ S⁻¹
+    if consider_from is not None:
+        K[consider_from:] = 0.0
     mean += K @ innovation
     mean[2] = wrap_scalar(float(mean[2]))
     W = PHt - 0.5 * (K @ S)
@@ -537,16 +573,20 @@ def update_sparse(
     h_pose: np.ndarray,
     c0_index: np.ndarray,
     h_c0: np.ndarray,
+    alpha_index: np.ndarray,
+    h_alpha: np.ndarray,
     r: np.ndarray,
     gate: float,
+    consider_from: int,
     accepted: np.ndarray,
     nis: np.ndarray,
 ) -> int:
     """:func:`update_sparse_inplace` with the signature of ``kernels.update_sparse`` (the χ²
     quantile given, outputs written), to stand in for it."""
     ok, values = update_sparse_inplace(
-        mean, cov, innovation, h_pose, c0_index, h_c0, r, gate_value=gate
-    )
+        mean, cov, innovation, h_pose, c0_index, h_c0, r, gate_value=gate,
+        alpha_index=alpha_index, h_alpha=h_alpha, consider_from=consider_from,
+    )  # fmt: skip
     accepted[:], nis[:] = ok, values
     return int(ok.sum())
 
@@ -560,25 +600,32 @@ def update_scan(
     *args: Any,
 ) -> int:
     """``kernels.update_scan`` with the numpy update (:func:`update_sparse_inplace`) in place
-    of the compiled one, to stand in for it (``args``: reach … n_fit, gate)."""
+    of the compiled one, to stand in for it (``args``: reach … n_fit, gate, n_lm, alpha_base,
+    consider_from)."""
     from polyslam_env.slam import kernels
 
-    *map_args, gate = args
+    *map_args, gate, n_lm, alpha_base, consider_from = args
     reach, variate, order, shape, lo, hi, boxes, *model = map_args
     k = beams.size
-    rows = (np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k), np.empty(k))
+    rows = (
+        np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k),
+        np.empty(k, dtype=np.int64), np.empty(k), np.empty(k),
+    )  # fmt: skip
     x, y, theta = float(mean[0]), float(mean[1]), float(mean[2])
     used = kernels.beam_rows(
-        x, y, theta, angles, ranges, beams, reach, variate, order, shape, lo, hi, mean[3:],
-        boxes, *model, *rows,
+        x, y, theta, angles, ranges, beams, reach, variate, order, shape, lo, hi,
+        mean[3 : 3 + n_lm], boxes, *model, alpha_base, *rows,
     )  # fmt: skip
     if used == 0:
         return -1
-    innovation, h_pose, c0_index, h_c0, variance = (column[:used] for column in rows)
+    innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance = (
+        column[:used] for column in rows
+    )
     variance = share_landmark_error(c0_index, variance, model[2])
     accepted, _ = update_sparse_inplace(
-        mean, cov, innovation, h_pose, c0_index, h_c0, variance, gate_value=gate
-    )
+        mean, cov, innovation, h_pose, c0_index, h_c0, variance, gate_value=gate,
+        alpha_index=alpha_index, h_alpha=h_alpha, consider_from=consider_from,
+    )  # fmt: skip
     return int(accepted.sum())
 
 
@@ -598,15 +645,25 @@ def normalised_innovations(
     c0_index: np.ndarray,
     h_c0: np.ndarray,
     r: np.ndarray,
+    alpha_index: np.ndarray | None = None,
+    h_alpha: np.ndarray | None = None,
 ) -> np.ndarray:  # (k,)
     """ν_i² / S_ii for range rows that touch the pose and one c0 each (the rows of
     :func:`update_sparse_inplace`): S_ii = h P_pp hᵀ + 2 h_c h P_pc + h_c² P_cc + r_i with
-    h = ``h_pose[i]`` (3,), h_c = ``h_c0[i]``, c = ``c0_index[i]``; cov (3+n, 3+n)."""
+    h = ``h_pose[i]`` (3,), h_c = ``h_c0[i]``, c = ``c0_index[i]``; cov (3+n, 3+n); rows with
+    a rotation state add its terms (the full row h_i P h_iᵀ, written out densely)."""
     P_pp = cov[:3, :3]  # (3, 3)
     P_pc = cov[:3, c0_index]  # (3, k)
     P_cc = cov[c0_index, c0_index]  # (k,)
     s = ((h_pose @ P_pp) * h_pose).sum(axis=1)  # h P_pp hᵀ per row (k rows ≈ 5: no einsum)
     s += 2.0 * h_c0 * (h_pose * P_pc.T).sum(axis=1) + h_c0 * h_c0 * P_cc + r
+    if alpha_index is not None and h_alpha is not None:
+        for i, a in enumerate(np.asarray(alpha_index).tolist()):
+            if a < 0:
+                continue
+            h = np.zeros(cov.shape[0])
+            h[:3], h[c0_index[i]], h[a] = h_pose[i], h_c0[i], h_alpha[i]
+            s[i] = h @ cov @ h + r[i]
     return np.asarray(innovation * innovation / s)
 
 

@@ -140,6 +140,49 @@ def test_update_sparse_inplace__equals_dense_update(n_state: int, seed: int) -> 
     assert_symmetric_psd(new_cov)
 
 
+@pytest.mark.parametrize("n_lm", [1, 6, 30])
+def test_update_sparse_inplace__considered_states__equal_the_textbook_schmidt_filter(
+    n_lm: int,
+) -> None:
+    """State [pose, c0 × n, α × n], rows on the pose, a c0 and its α; the α block considered.
+    The textbook Schmidt–Kalman update: K = P Hᵀ S⁻¹ with the considered rows of K set to zero,
+    then the Joseph form (I − KH) P (I − KH)ᵀ + K R Kᵀ, literally, with dense H. Then: the
+    considered means and their own block never move, their cross-covariances do, and the
+    result is a valid (symmetric PSD) covariance."""
+    rng = np.random.default_rng(n_lm)
+    k, n_state = 4, 3 + 2 * n_lm
+    mean, cov = rng.normal(size=n_state), random_spd(rng, n_state, 0.01)
+    h_pose, h_c0, h_alpha = rng.normal(size=(k, 3)), rng.normal(size=k), rng.normal(size=k)
+    c0_index = rng.integers(3, 3 + n_lm, size=k)
+    alpha_index = c0_index + n_lm
+    r = rng.uniform(1e-4, 1e-3, size=k)
+    H = np.zeros((k, n_state))
+    H[:, :3] = h_pose
+    H[np.arange(k), c0_index] = h_c0
+    H[np.arange(k), alpha_index] += h_alpha
+    innovation = 0.05 * rng.normal(size=k)
+    S = H @ cov @ H.T + np.diag(r)
+    K = np.linalg.solve(S, H @ cov).T
+    K[3 + n_lm :] = 0.0  # considered: no gain
+    IKH = np.eye(n_state) - K @ H
+    expected_cov = IKH @ cov @ IKH.T + K @ np.diag(r) @ K.T
+    expected_mean = mean + K @ innovation
+    expected_mean[2] = wrap_angle(expected_mean[2])
+    new_mean, new_cov = mean.copy(), cov.copy()
+    accepted, _ = update_sparse_inplace(
+        new_mean, new_cov, innovation, h_pose, c0_index, h_c0, r, gate_prob=1.0,
+        alpha_index=alpha_index, h_alpha=h_alpha, consider_from=3 + n_lm,
+    )  # fmt: skip
+    assert accepted.all()
+    np.testing.assert_allclose(new_mean, expected_mean, rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(new_cov, expected_cov, rtol=1e-10, atol=1e-14)
+    block = slice(3 + n_lm, n_state)
+    np.testing.assert_array_equal(new_mean[block], mean[block])
+    np.testing.assert_array_equal(new_cov[block, block], cov[block, block])
+    assert not np.allclose(new_cov[:3, block], cov[:3, block])
+    assert_symmetric_psd(new_cov)
+
+
 def test_update_sparse_inplace__stays_exactly_symmetric_over_many_updates() -> None:
     rng = np.random.default_rng(7)
     n_state = 40

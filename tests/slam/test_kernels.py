@@ -155,9 +155,15 @@ def test_cast_scan__300_landmarks_equal_oracle() -> None:
     beams=beam_sets,
     seed=st.integers(0, 2**32 - 1),
     follows=st.booleans(),
+    rotation_states=st.booleans(),
 )
 def test_beam_rows__bit_identical_to_oracle(
-    polys: list[Polynomial], pose: np.ndarray, beams: np.ndarray, seed: int, follows: bool
+    polys: list[Polynomial],
+    pose: np.ndarray,
+    beams: np.ndarray,
+    seed: int,
+    follows: bool,
+    rotation_states: bool,
 ) -> None:
     rng = np.random.default_rng(seed)
     table = _table(polys, rng)
@@ -165,8 +171,9 @@ def test_beam_rows__bit_identical_to_oracle(
     ranges = rng.uniform(0.1, 2.0, beams.size)
     boxes = table.boxes(c0s)
     x, y, theta = pose.tolist()
+    alpha_base = 3 + len(polys) if rotation_states else -1
     model = ref.RowModel(min_sine=math.sin(math.radians(10.0)), range_sigma=0.02,
-                         shape_follows_pose=follows, eps_z=10)  # fmt: skip
+                         shape_follows_pose=follows, eps_z=10, alpha_base=alpha_base)  # fmt: skip
     reach = float(rng.uniform(1.0, 6.0))
     every = ref.boxes_near(boxes, np.array([x, x, y, y]), reach)  # the landmarks within reach
     order = rng.permutation(beams.size)  # any subset of beams, in any order
@@ -177,12 +184,15 @@ def test_beam_rows__bit_identical_to_oracle(
         boxes[every].tolist(), model, turn_var.tolist(),
     )  # fmt: skip
     width, k = table.shape.shape[1], subset.size
-    got = (np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k), np.empty(k))
+    got = (
+        np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k),
+        np.empty(k, dtype=np.int64), np.empty(k), np.empty(k),
+    )  # fmt: skip
     used = kernels.beam_rows(
         x, y, theta, beams, ranges, subset, reach, *table.arrays(), c0s, boxes, 2.5,
         model.min_sine, model.range_sigma**2, table.model_var, follows, table.pivot,
         table.xi_var, turn_var, table.fit_half, _fit_inverse_table(model.eps_z + 1, width - 1),
-        model.eps_z + 1, *got,
+        model.eps_z + 1, alpha_base, *got,
     )  # fmt: skip
     if want is None:
         assert used == 0
@@ -194,14 +204,17 @@ def test_beam_rows__bit_identical_to_oracle(
 def test_shape_fit_var__bit_identical_to_oracle_over_many_positions() -> None:
     # t ** i is libm's pow in CPython; the kernel must not turn it into products
     rng = np.random.default_rng(5)
-    model = ref.RowModel(0.0, 0.02, True, 10)
     table = _fit_inverse_table(11, 5)
-    for order in range(1, 6):
-        shape = np.concatenate([[0.0], rng.normal(size=order)])
-        for t in np.concatenate([rng.normal(0.0, 2.0, 300), [0.0, 1.0, -1.0, 1e-9]]).tolist():
-            want = ref.shape_fit_var(tuple(shape.tolist()), t, model)
-            got = kernels._shape_fit_var(shape, order, t, table, 11, model.range_sigma**2)
-            assert got == want
+    for alpha_base in (-1, 7):  # the slope's part kept, or left to the rotation state
+        model = ref.RowModel(0.0, 0.02, True, 10, alpha_base)
+        for order in range(1, 6):
+            shape = np.concatenate([[0.0], rng.normal(size=order)])
+            for t in np.concatenate([rng.normal(0.0, 2.0, 300), [0.0, 1.0, -1.0, 1e-9]]):
+                want = ref.shape_fit_var(tuple(shape.tolist()), float(t), model)
+                got = kernels._shape_fit_var(
+                    shape, order, float(t), table, 11, model.range_sigma**2, alpha_base >= 0
+                )
+                assert got == want
 
 
 # -- association error ----------------------------------------------------------------------------
@@ -297,6 +310,51 @@ def test_update_sparse__equals_numpy_oracle_to_rounding(n_state: int, seed: int)
     scale = float(np.abs(want_cov).max())
     np.testing.assert_allclose(cov, want_cov, rtol=0.0, atol=1e-12 * scale)
     assert_symmetric_psd(cov)
+
+
+def _rotation_rows(rng: np.random.Generator, k: int, n_lm: int) -> tuple[np.ndarray, ...]:
+    """Rows on a state [pose, c0 × n_lm, α × n_lm]: each row's α is its landmark's, or none
+    (−1, a row whose shape term vanished)."""
+    innovation, h_pose, c0_index, h_c0, r = _rows(rng, k, 3 + n_lm)
+    alpha_index = c0_index + n_lm
+    alpha_index[rng.random(k) < 0.3] = -1
+    h_alpha = np.where(alpha_index >= 0, rng.normal(size=k), 0.0)
+    return innovation, h_pose, c0_index, h_c0, r, alpha_index, h_alpha
+
+
+@pytest.mark.parametrize("n_lm", [1, 15, 150])
+@pytest.mark.parametrize("considered", [False, True])
+def test_update_sparse__with_rotation_states__equals_numpy_oracle(
+    n_lm: int, considered: bool
+) -> None:
+    """Rows that also touch a shape rotation, estimated or considered (Schmidt: the entries
+    from 3 + n_lm on get no gain): the compiled update equals the numpy oracle to rounding,
+    and a considered block keeps its mean and its own covariance exactly."""
+    rng = np.random.default_rng(n_lm)
+    n_state = 3 + 2 * n_lm
+    mean, cov = rng.normal(size=n_state), random_spd(rng, n_state, 0.01)
+    *rows, alpha_index, h_alpha = _rotation_rows(rng, 5, n_lm)
+    consider = 3 + n_lm if considered else None
+    want_mean, want_cov = mean.copy(), cov.copy()
+    kw = {"alpha_index": alpha_index, "h_alpha": h_alpha, "consider_from": consider}
+    want = ref.update_sparse_inplace(want_mean, want_cov, *rows, **kw)
+    got_mean, got_cov = mean.copy(), cov.copy()
+    got = ekf.update_sparse_inplace(got_mean, got_cov, *rows, **kw)
+    np.testing.assert_array_equal(got[0], want[0])
+    assert got[0][1:].any()
+    np.testing.assert_allclose(got[1], want[1], rtol=1e-12)
+    np.testing.assert_allclose(got_mean, want_mean, rtol=1e-12, atol=1e-14)
+    scale = float(np.abs(want_cov).max())
+    np.testing.assert_allclose(got_cov, want_cov, rtol=0.0, atol=1e-12 * scale)
+    assert_symmetric_psd(got_cov)
+    nis = ekf.normalised_innovations(cov, *rows, alpha_index=alpha_index, h_alpha=h_alpha)
+    np.testing.assert_allclose(nis, ref.normalised_innovations(cov, *rows, alpha_index, h_alpha),
+                               rtol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(nis, got[1], rtol=1e-12)  # the screen's NIS is the update's
+    if considered:
+        block = slice(3 + n_lm, n_state)
+        np.testing.assert_array_equal(got_mean[block], mean[block])
+        np.testing.assert_array_equal(got_cov[block, block], cov[block, block])
 
 
 def test_slam_steps__compiled_update_tracks_numpy_update_over_a_short_horizon(

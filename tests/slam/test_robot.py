@@ -35,7 +35,9 @@ def test_step__covariance_symmetric_psd_and_state_consistent_over_long_run() -> 
         info = slam.step(result.odometry[0], scans[0])
         created += info.created
         _assert_symmetric_psd(slam.cov)
-        assert slam.mean.shape == (3 + slam.n_landmarks,)
+        # pose, one c0 per landmark, one shape rotation per landmark (at rest: 0)
+        assert slam.mean.shape == (3 + 2 * slam.n_landmarks,)
+        assert not slam.mean[3 + slam.n_landmarks :].any()
         assert len(slam.shapes) == slam.n_landmarks == len(slam.landmark_ids)
     assert created >= 5  # the run did build a map: the checks above covered augmentations
 
