@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import Any
 
 import numpy as np
 import scipy.stats
@@ -33,10 +34,17 @@ def _nees(err: np.ndarray, cov: np.ndarray) -> float:
 
 
 def episode(
-    seed: int, map_name: str, steps: int, robots: int, initial_error: bool, exchange: bool
+    seed: int,
+    map_name: str,
+    steps: int,
+    robots: int,
+    initial_error: bool,
+    exchange: bool,
+    shape_rotation: str = "considered",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-step NEES (steps, robots) in the frame and relative to the true start."""
-    kw = {} if exchange else {"channel": None}
+    kw: dict[str, Any] = {} if exchange else {"channel": None}
+    kw["slam"] = {"shape_rotation": shape_rotation}
     env = parallel_env(
         map=map_name,
         num_robots=robots,
@@ -74,11 +82,25 @@ def main() -> None:
     ap.add_argument("--robots", type=int, default=1)
     ap.add_argument("--initial-error", action="store_true")
     ap.add_argument("--exchange", action="store_true", help="map exchange on (runs correlate)")
+    ap.add_argument(
+        "--shape-rotation",
+        choices=("considered", "heading"),
+        default="considered",
+        help="slam.shape_rotation (heading: the rotation is the current heading error)",
+    )
     args = ap.parse_args()
     start = time.perf_counter()
     finals_f, finals_r, means_f, means_r = [], [], [], []
     for seed in range(args.runs):
-        f, r = episode(seed, args.map, args.steps, args.robots, args.initial_error, args.exchange)
+        f, r = episode(
+            seed,
+            args.map,
+            args.steps,
+            args.robots,
+            args.initial_error,
+            args.exchange,
+            args.shape_rotation,
+        )
         finals_f += f[-1].tolist()
         finals_r += r[-1].tolist()
         means_f += f.mean(axis=0).tolist()

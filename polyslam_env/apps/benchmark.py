@@ -232,9 +232,9 @@ def make_walls(n: int, rng: np.random.Generator) -> list[Polynomial]:
     return walls
 
 
-def make_slam(walls: list[Polynomial]) -> PolySlam:
+def make_slam(walls: list[Polynomial], config: SlamConfig | None = None) -> PolySlam:
     """A PolySlam at the origin whose map holds ``walls`` (inserted without merging)."""
-    slam = PolySlam(SlamConfig(), BEAM_ANGLES, MAX_RANGE)
+    slam = PolySlam(config or SlamConfig(), BEAM_ANGLES, MAX_RANGE)
     for wall in walls:
         gx = np.zeros((1, slam.mean.size))  # (1, 3+n)
         gx[0, 1 if wall.variate == 1 else 0] = 1.0  # c0 moves with the pose's η
@@ -274,10 +274,12 @@ def make_inputs(
 
 
 def bench_slam(n: int, plan: Plan, seed: int = 0) -> dict[str, Any]:
-    """One SLAM step with ``n`` landmarks (µs), a 3×3 solve for reference, stage medians."""
+    """One SLAM step with ``n`` landmarks (µs), a 3×3 solve for reference, stage medians, and
+    the same steps with ``shape_rotation="heading"`` (no rotation states: half the state)."""
     rng = np.random.default_rng(seed)
     walls = make_walls(n, rng)
-    inputs = iter(make_inputs(walls, plan.slam_warmup + 2 * plan.slam_steps, rng))
+    all_inputs = make_inputs(walls, plan.slam_warmup + 2 * plan.slam_steps, rng)
+    inputs = iter(all_inputs)
     slam = make_slam(walls)
     beams = []
 
@@ -285,6 +287,11 @@ def bench_slam(n: int, plan: Plan, seed: int = 0) -> dict[str, Any]:
         beams.append(slam.step(*next(inputs)).beams_used)
 
     step_us = time_calls(step, plan.slam_steps, warmup=plan.slam_warmup).scaled(1e6)
+    heading = make_slam(walls, SlamConfig(shape_rotation="heading"))
+    heading_inputs = iter(all_inputs)
+    heading_us = time_calls(
+        lambda: heading.step(*next(heading_inputs)), plan.slam_steps, warmup=plan.slam_warmup
+    ).scaled(1e6)
     a, b = rng.normal(size=(3, 3)) + 3 * np.eye(3), rng.normal(size=3)
     solve_us = time_calls(lambda: np.linalg.solve(a, b), max(plan.repeats, 5), number=200)
     solve_us = solve_us.scaled(1e6)
@@ -293,6 +300,7 @@ def bench_slam(n: int, plan: Plan, seed: int = 0) -> dict[str, Any]:
         "step_us": step_us.to_dict(),
         "reference_solve3_us": solve_us.to_dict(),
         "ratio_to_solve3": step_us.median / solve_us.median,
+        "heading_step_us": heading_us.to_dict(),
         "beams_used_per_step": float(np.mean(beams[plan.slam_warmup :])),
         "stages_us": slam_stages(slam, [next(inputs) for _ in range(plan.slam_steps)]),
     }

@@ -18,6 +18,7 @@ COLUMNS = {
         ("solve3 µs", 9),
         ("× solve3", 8),
         ("beams", 5),
+        ("heading µs", 10),
     ],
     "world": [
         ("robots", 9),
@@ -203,6 +204,7 @@ def _slam_row(r: dict[str, Any]) -> str:
         f"{r['reference_solve3_us']['median']:.2f}",
         f"{r['ratio_to_solve3']:.1f}",
         f"{r['beams_used_per_step']:.2f}",
+        f"{r['heading_step_us']['median']:.1f}",
     ]
     return _columns("slam", cells) + f"  {stages}"
 

@@ -261,6 +261,7 @@ def _stats(median: float, low: float, high: float) -> dict[str, float]:
                 "reference_solve3_us": _stats(4.5, 4.0, 5.0),
                 "ratio_to_solve3": 274.3,
                 "beams_used_per_step": 5.0,
+                "heading_step_us": _stats(1234.5, 980.1, 23456.7),
                 "stages_us": {"predict": 40.0},
             },
         ),

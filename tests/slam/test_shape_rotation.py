@@ -150,3 +150,30 @@ def test_shape_rotation__bad_value_names_the_field() -> None:
 
     with pytest.raises(ConfigError, match="slam.shape_rotation"):
         SlamConfig(shape_rotation="estimated")
+
+
+def test_merged_landmark__its_rotation_is_the_length_weighted_mean_of_the_parts() -> None:
+    """Two pieces of one straight wall end to end merge into one landmark whose turn is
+    w·α_a + (1 − w)·α_b with w = L_a³/(L_a³ + L_b³): its covariance row is that combination of
+    the parts' rows (taken before the merge), and the layout stays [pose, c0 × n, α × n]."""
+    rng = np.random.default_rng(3)
+    slam = PolySlam(SlamConfig(), np.linspace(-1.5, 1.5, 9), 4.0)
+    slam.mean = np.zeros(3)
+    slam.cov = random_spd(rng, 3, 1e-4)
+    a = Polynomial(1, np.array([1.0, 0.0]), 0.0, 2.0)  # 2 m
+    b = Polynomial(1, np.array([1.0, 0.0]), 2.1, 3.1)  # 1 m, 10 cm gap: one wall
+    slam.insert_landmark(_fit(a, 3), merge=False)
+    slam.insert_landmark(_fit(b, slam.mean.size), merge=False)
+    # the parts' turns: made correlated with the pose and each other, as a run would
+    slam.cov[3:, 3:] += 1e-6 * np.eye(4)
+    assert_symmetric_psd(slam.cov)
+    rows = slam.cov[[5, 6]].copy()  # α_a, α_b over [pose, c0_a, c0_b, α_a, α_b]
+    own = slam.cov[np.ix_([5, 6], [5, 6])].copy()
+    merged = slam._merge_once(slam.landmark_ids[1])
+    assert merged is not None and slam.n_landmarks == 1
+    w_a = 2.0**3 / (2.0**3 + 1.0**3)  # the 2 m piece weighs 8/9, the 1 m one 1/9
+    weights = np.array([w_a, 1.0 - w_a])  # over (α_a, α_b)
+    assert slam.mean.shape == (5,)  # [pose, c0, α]
+    np.testing.assert_allclose(slam.cov[4, :3], weights @ rows[:, :3], rtol=1e-9, atol=1e-15)
+    assert slam.cov[4, 4] == pytest.approx(weights @ own @ weights, rel=1e-9)
+    assert_symmetric_psd(slam.cov)
