@@ -798,6 +798,9 @@ class RendezvousExchange:
         if self.config.align_maps and message.records:
             t, cov_t = self._align(slam, message, t, cov_t, sender)
         limit = slam.config.rho_min / RECEIVED_SIGMAS
+        # a received wall is turned from the truth by the transform's turn (its part through
+        # the receiver's pose, and the rest's variance), not by the receiver's heading alone
+        turn = (np.asarray(d_state, dtype=float)[2, :3].copy(), float(cov_t[2, 2]))
         received: list[Polynomial] = []
         ids: list[int] = []
         for record in message.records:
@@ -813,7 +816,7 @@ class RendezvousExchange:
                     _subset(pts, rows), self.order, self.auto_order, self.refit_tol
                 ):
                     received.append(fit.poly)
-                    ids += self._fuse(slam, piece, fit, sender, r, 0)
+                    ids += self._fuse(slam, piece, fit, sender, r, 0, turn)
         self._carry_sources(r, slam)
         return received, ids
 
@@ -842,9 +845,17 @@ class RendezvousExchange:
         return refine_transform(t, cov_t, chains, anchors, slam.config.range_sigma)
 
     def _fuse(
-        self, slam: PolySlam, points: PointSet, fit: Fit, sender: int, r: int, depth: int
+        self,
+        slam: PolySlam,
+        points: PointSet,
+        fit: Fit,
+        sender: int,
+        r: int,
+        depth: int,
+        turn: tuple[np.ndarray, float] | None = None,
     ) -> list[int]:
         """Fuse one received piece into receiver r's map; returns the ids that hold it.
+        ``turn``: the transform's turn (:meth:`PolySlam.insert_landmark`).
 
         Rule 1 (keep the better): where a landmark of the same wall (PolySlam's merge test)
         has a normal-offset variance no larger than the piece's, the piece's points it covers
@@ -873,7 +884,7 @@ class RendezvousExchange:
                 for piece, sub in refit_pieces(
                     _subset(points, rows), self.order, self.auto_order, self.refit_tol
                 )
-                for lid in self._fuse(slam, piece, sub, sender, r, depth + 1)
+                for lid in self._fuse(slam, piece, sub, sender, r, depth + 1, turn)
             ]
         sources = self._sources[r]
         for lid in walls:
@@ -882,7 +893,7 @@ class RendezvousExchange:
                 sources.pop(lid)
                 self.superseded[r] += 1
         before = set(slam.table.ids)
-        lid = slam.insert_landmark(_on_state(fit, slam.mean.size))
+        lid = slam.insert_landmark(_on_state(fit, slam.mean.size), turn=turn)
         merged = before - set(slam.table.ids)
         sources[lid] = frozenset({sender}.union(*(sources.pop(g, ()) for g in merged)))
         if not merged:  # a pure copy of the sender's landmark: never echo it back

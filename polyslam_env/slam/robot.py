@@ -340,13 +340,18 @@ class PolySlam:
         return sum(self._screen) >= self._screen_alarm
 
     # -- public landmark insertion (map exchange) -----------------------------------------------
-    def insert_landmark(self, fit: Fit, merge: bool = True) -> int:
+    def insert_landmark(
+        self, fit: Fit, merge: bool = True, turn: tuple[np.ndarray, float] | None = None
+    ) -> int:
         """Add a landmark from an external fit (e.g. a received polynomial refitted in this
         robot's frame); ``fit.Gx``/``fit.Gy``/``fit.V`` must describe its c0's dependence on
-        this robot's state and on the inputs' noise. Runs the merge check unless ``merge`` is
-        False. Returns the id of the landmark that holds it afterwards (after a merge, the
-        merged landmark's id)."""
-        lid = self._augment(fit)
+        this robot's state and on the inputs' noise. With rotation states, ``turn`` =
+        (∂α/∂pose (3,), variance of the rest) says what turns its shape when that is not the
+        current heading (a received wall: the frame transform's turn); the shape's own fit
+        variance is added to it. Runs the merge check unless ``merge`` is False. Returns the
+        id of the landmark that holds it afterwards (after a merge, the merged landmark's
+        id)."""
+        lid = self._augment(fit, turn=turn)
         if merge and self._merge_into_map(lid):
             return self.table.ids[-1]
         return lid
@@ -369,6 +374,7 @@ class PolySlam:
         side: int = 0,
         evidence: tuple[float, float] | None = None,
         rotation: Sequence[tuple[int, float]] = (),
+        turn: tuple[np.ndarray, float] | None = None,
     ) -> int:
         """Append a fitted landmark to the state; returns its new id. ``side``: the face its
         beams saw (+1 from +η, −1 from −η, 0 unknown; see :mod:`~polyslam_env.slam.merging`);
@@ -376,13 +382,14 @@ class PolySlam:
         its points' — a received landmark keeps the sender's evidence so); the extent is cut
         to it ± ``landmarks.EXTENT_MARGIN``. With rotation states the shape's turn α goes in
         too (:meth:`_add_rotation`), a weighted mean of the turns of the landmarks in
-        ``rotation`` ((index, weight) pairs) and of the current heading."""
+        ``rotation`` ((index, weight) pairs) and of the current heading (or of ``turn``, see
+        :meth:`insert_landmark`)."""
         n = len(self.table)
         self.mean, self.cov = ekf.augment(self.mean, self.cov, fit.c0, fit.Gx, fit.Gy, fit.V)
         evidence = (fit.poly.lo, fit.poly.hi) if evidence is None else evidence
         poly = clip_to_evidence(fit.poly, evidence)
         if self.config.rotation_states:
-            self._add_rotation(n, poly, rotation)
+            self._add_rotation(n, poly, rotation, turn)
         return self.table.append(
             poly,
             pivot=0.5 * (poly.lo + poly.hi),  # ξ of the centroid of its fit points
@@ -395,7 +402,11 @@ class PolySlam:
         )
 
     def _add_rotation(
-        self, n: int, poly: Polynomial, rotation: Sequence[tuple[int, float]]
+        self,
+        n: int,
+        poly: Polynomial,
+        rotation: Sequence[tuple[int, float]],
+        turn: tuple[np.ndarray, float] | None = None,
     ) -> None:
         """The new landmark's shape turn α into the state, after its c0 was appended at index
         3 + 2n and before its table row is: [pose, c0_1 … c0_n, α_1 … α_n, c0_new] becomes
@@ -418,8 +429,13 @@ class PolySlam:
         for row, weight in rotation:
             gx[3 + n + row] += weight
             rest -= weight
-        gx[2] += rest
-        var = rest * rest * self._rotation_fit_var(poly)
+        var = self._rotation_fit_var(poly)
+        if turn is None:
+            gx[2] += rest
+        else:  # e.g. a received wall: the frame transform's turn
+            gx[:3] += rest * np.asarray(turn[0], dtype=float)
+            var += turn[1]
+        var *= rest * rest
         mean, cov = ekf.augment(self.mean, self.cov, 0.0, gx, np.ones(1), np.array([[var]]))
         order = np.r_[0 : 3 + n, size - 1, 3 + n : size - 1, size]
         self.mean, self.cov = mean[order], cov[np.ix_(order, order)]

@@ -177,3 +177,20 @@ def test_merged_landmark__its_rotation_is_the_length_weighted_mean_of_the_parts(
     np.testing.assert_allclose(slam.cov[4, :3], weights @ rows[:, :3], rtol=1e-9, atol=1e-15)
     assert slam.cov[4, 4] == pytest.approx(weights @ own @ weights, rel=1e-9)
     assert_symmetric_psd(slam.cov)
+
+
+def test_received_landmark__its_rotation_is_the_given_turn_not_the_heading() -> None:
+    """A received wall is turned by the frame transform: ``insert_landmark(..., turn=(g, v))``
+    gives α the row g·P[:3] (its dependence on the receiver's pose) and the variance
+    g P g + v plus the shape's fit variance, instead of the heading's clone."""
+    rng = np.random.default_rng(4)
+    slam = PolySlam(SlamConfig(), np.linspace(-1.5, 1.5, 9), 4.0)
+    slam.mean = rng.normal(size=3)
+    slam.cov = random_spd(rng, 3, 0.01)
+    g, v = np.array([0.1, -0.2, 1.0]), 3e-4
+    poly = WALLS[0]
+    slam.insert_landmark(_fit(poly, 3), merge=False, turn=(g, v))
+    np.testing.assert_allclose(slam.cov[4, :3], g @ slam.cov[:3, :3], rtol=1e-12)
+    fit_var = slam._rotation_fit_var(poly)
+    assert slam.cov[4, 4] == pytest.approx(g @ slam.cov[:3, :3] @ g + v + fit_var, rel=1e-12)
+    assert_symmetric_psd(slam.cov)
