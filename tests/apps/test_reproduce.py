@@ -19,6 +19,7 @@ from polyslam_env.apps.reproduce import (
 from polyslam_env.apps.simulate import simulate
 from polyslam_env.cli.main import main
 from polyslam_env.core.errors import ConfigError
+from polyslam_env.slam.config import slam_preset
 
 
 def test_default_config__holds_the_papers_parameters() -> None:
@@ -26,6 +27,9 @@ def test_default_config__holds_the_papers_parameters() -> None:
     assert (cfg.num_robots, cfg.steps, cfg.runs, cfg.map) == (3, 200, 100, "paper")
     assert cfg.world.odometry.sigma_xy == 0.001 and cfg.world.range_sensor.sigma == 0.02
     assert cfg.slam.p0_sigma == (0.05, 0.05, 0.0175) and cfg.slam.k_divergence == 150
+    # the shipped file is the paper's algorithm: the same filter as the `paper` preset, so a
+    # new default of ours cannot slip into the reproduction
+    assert cfg.slam == slam_preset("paper")
     with pytest.raises(ConfigError, match="num_robots"):
         ReproduceConfig(num_robots=2)
 
