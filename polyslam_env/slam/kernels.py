@@ -426,7 +426,7 @@ def _shape_fit_var(
     """Variance of a frozen shape's η at scaled position t (see PolySlam._beam_rows):
     σ²·(a(t)ᵀ M⁻¹ a(t) − 1/N), a = [1, t, …, t^m], M⁻¹ = ``fit_inverse[m]``, floored at 0.
     ``drop_slope``: without the slope's own part σ²·t²·M⁻¹[1, 1] (the shape's rotation is a
-    state then, ``SlamConfig.shape_states``)."""
+    state then, ``SlamConfig.shape_rotation = "considered"``)."""
     order = m if shape[m] != 0.0 else 0
     if order == 0:
         return 0.0
