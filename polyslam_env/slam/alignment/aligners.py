@@ -23,13 +23,24 @@ covariance from the residuals. An aligner **declines** (returns an :class:`Align
 ``transform`` None and the reason) when fewer than ``min_support`` correspondences support
 it: a wrong merge is worse than none.
 
+**Oriented features** (corners of wall maps, :mod:`polyslam_env.slam.corners`) carry a heading
+that turns with the map, and descriptors that tell kinds of corner apart rather than
+individuals. For them every descriptor-compatible pair is a candidate, one candidate is a whole
+hypothesis, supports must agree in heading too, and RANSAC tries every hypothesis: it ranks them
+by the caller's ``score`` (the exchange's: metres of wall laid on wall), lets the caller
+``veto`` some (the radio's range, free space), and declines when a distinct transform comes
+close to the best (``ambiguity_ratio``) — buildings repeat, and a transform shifted by one
+period of a shelf row matches as many corners as the true one.
+
 Where the seed's printed formulas are off we use the geometric meaning: its constraint (1)
 compares *squared* distances against th1 = 0.8 m; we compare the distances themselves.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,6 +68,11 @@ __all__ = [
 ]
 
 
+#: The caller's veto over a transform (3,): the reason to refuse it, or "" to let it stand.
+Veto = Callable[[np.ndarray], str]
+#: The caller's score of a transform (3,): higher is better supported (see :func:`ransac`).
+Score = Callable[[np.ndarray], float]
+
 #: Probability that a wrong transform collects the supports an accepted one needs (see
 #: :func:`chance_supports`).
 CHANCE_P = 1e-6
@@ -74,11 +90,24 @@ class AlignConfig(Config):
     icp_max_iterations: int = 50  # ICP stops here if the correspondences still change
     imp_icp_starts: int = 3  # initial estimates of the improved ICP
     outlier_sigmas: float = 3.0  # refine drops residuals beyond this many robust std devs
+    # Oriented features only (corners): a support's heading is within this of its match's.
+    heading_threshold_deg: float = 10.0
+    # Oriented features only: RANSAC tries every candidate, so it knows the runner-up; it
+    # declines unless the best transform has ``ambiguity_ratio`` times the supports of every
+    # distinct one. Buildings repeat (shelf rows, rooms along a corridor): a transform shifted
+    # by one period matches nearly as many corners as the true one, and only a clear margin
+    # says which is true. 1.5: the best must beat any rival by half again its supports.
+    ambiguity_ratio: float = 1.5
 
     def validate(self) -> None:
         for name in ("descriptor_threshold", "geometric_threshold", "support_threshold"):
             check_positive(f"alignment.{name}", getattr(self, name))
         check_positive("alignment.outlier_sigmas", self.outlier_sigmas)
+        check_positive("alignment.heading_threshold_deg", self.heading_threshold_deg)
+        if not self.ambiguity_ratio >= 1.0:
+            raise ConfigError(
+                f"alignment.ambiguity_ratio: must be >= 1, got {self.ambiguity_ratio!r}"
+            )
         for name in ("iterations", "icp_max_iterations", "imp_icp_starts"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"alignment.{name}: must be >= 1, got {getattr(self, name)!r}")
@@ -91,10 +120,13 @@ class AlignConfig(Config):
 
 @dataclass(frozen=True)
 class FeatureMap:
-    """Landmarks of one robot's map: positions (n, 2) in its frame, descriptors (n, d)."""
+    """Landmarks of one robot's map: positions (n, 2) in its frame, descriptors (n, d), and
+    for oriented features (corners, :mod:`polyslam_env.slam.corners`) headings (n,) in rad
+    that turn with the map (None: points, such as pillars)."""
 
     positions: np.ndarray
     descriptors: np.ndarray
+    headings: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         pos = np.asarray(self.positions, dtype=float).reshape(-1, 2)
@@ -104,6 +136,15 @@ class FeatureMap:
             raise ValueError(f"{len(pos)} positions but {len(desc)} descriptors")
         object.__setattr__(self, "positions", pos)
         object.__setattr__(self, "descriptors", desc)
+        if self.headings is not None:
+            head = np.asarray(self.headings, dtype=float).reshape(-1)
+            if len(head) != len(pos):
+                raise ValueError(f"{len(pos)} positions but {len(head)} headings")
+            object.__setattr__(self, "headings", head)
+
+    @property
+    def oriented(self) -> bool:
+        return self.headings is not None
 
     def __len__(self) -> int:
         return len(self.positions)
@@ -129,9 +170,17 @@ class Alignment:
 # -- building blocks -------------------------------------------------------------------------------
 def candidate_matches(a: FeatureMap, b: FeatureMap, threshold: float) -> np.ndarray:
     """Pairs (k, 2) of indices (i in A, j in B): for each B landmark its nearest A landmark by
-    descriptor distance, kept when that distance is below ``threshold`` (seed step a)."""
+    descriptor distance, kept when that distance is below ``threshold`` (seed step a).
+
+    Oriented features (corners) have descriptors that tell kinds apart, not individuals (most
+    corners of a building open at 90°): there every pair within ``threshold`` is a candidate,
+    in order of B's index then A's."""
     if len(a) == 0 or len(b) == 0:
         return np.zeros((0, 2), dtype=int)
+    if a.oriented and b.oriented:
+        near = cKDTree(a.descriptors).query_ball_point(b.descriptors, r=threshold)
+        pairs = [(i, j) for j, found in enumerate(near) for i in sorted(found)]
+        return np.array(pairs, dtype=int).reshape(-1, 2)
     dist, nearest = cKDTree(a.descriptors).query(b.descriptors)
     keep = np.flatnonzero(dist < threshold)
     return np.column_stack([nearest[keep], keep]).astype(int)
@@ -164,14 +213,23 @@ def _apply(transform: np.ndarray, points: np.ndarray) -> np.ndarray:  # (k, 2)
 
 
 def _supports(
-    transform: np.ndarray, tree_a: cKDTree, b: np.ndarray, threshold: float
+    transform: np.ndarray, tree_a: cKDTree, a: FeatureMap, b: FeatureMap, cfg: AlignConfig
 ) -> np.ndarray:
-    """Nearest-neighbour correspondences (k, 2) (i in A, j in B) within ``threshold`` of B's
-    landmarks moved by ``transform``; an A landmark supports at most one (the nearest) B one."""
+    """Nearest-neighbour correspondences (k, 2) (i in A, j in B) within th2 of B's landmarks
+    moved by ``transform``; an A landmark supports at most one (the nearest) B one. Oriented
+    features also need their headings, B's turned by θ, within ``heading_threshold_deg``."""
     if len(b) == 0:
         return np.zeros((0, 2), dtype=int)
-    dist, nearest = tree_a.query(_apply(transform, b), distance_upper_bound=threshold)
-    ok = np.flatnonzero(np.isfinite(dist))
+    dist, nearest = tree_a.query(
+        _apply(transform, b.positions), distance_upper_bound=cfg.support_threshold
+    )
+    found = np.isfinite(dist)
+    if a.oriented and b.oriented:
+        assert a.headings is not None and b.headings is not None
+        diff = b.headings + transform[2] - a.headings[np.where(found, nearest, 0)]
+        turn = np.abs(np.arctan2(np.sin(diff), np.cos(diff)))
+        found &= turn <= math.radians(cfg.heading_threshold_deg)
+    ok = np.flatnonzero(found)
     order = ok[np.argsort(dist[ok], kind="stable")]
     _, first = np.unique(nearest[order], return_index=True)
     keep = np.sort(order[first])
@@ -193,6 +251,8 @@ def chance_supports(a: FeatureMap, b: FeatureMap, cfg: AlignConfig) -> int:
     th2 = cfg.support_threshold
     area = float(np.prod(np.maximum(span, 2.0 * th2)))
     p = min(1.0, len(a) * math.pi * th2 * th2 / area)
+    if a.oriented and b.oriented:  # and its heading, uniform under a wrong transform
+        p *= min(1.0, math.radians(cfg.heading_threshold_deg) / math.pi)
     return int(scipy.stats.binom.ppf(1.0 - CHANCE_P, len(b), p)) + 1
 
 
@@ -204,8 +264,11 @@ def _geometric_ok(pa: np.ndarray, pb: np.ndarray, threshold: float) -> bool:
 def _random_hypothesis(
     a: FeatureMap, b: FeatureMap, matches: np.ndarray, cfg: AlignConfig, rng: np.random.Generator
 ) -> np.ndarray | None:
-    """One transform from two random candidates that pass the geometric test (seed step b);
-    None if ``cfg.iterations`` draws find no such pair."""
+    """One transform from two random candidates that pass the geometric test (seed step b),
+    or from one random candidate of oriented features; None if ``cfg.iterations`` draws find
+    no such pair."""
+    if a.oriented and b.oriented:
+        return _oriented_hypothesis(a, b, matches[int(rng.integers(len(matches)))])
     for _ in range(cfg.iterations):
         k, m = rng.choice(len(matches), size=2, replace=False)
         (ia, jb), (ia2, jb2) = matches[k], matches[m]
@@ -214,6 +277,105 @@ def _random_hypothesis(
         if ia != ia2 and jb != jb2 and _geometric_ok(pa, pb, cfg.geometric_threshold):
             return transform_from_pairs(pa, pb)
     return None
+
+
+def _distinct(first: np.ndarray, second: np.ndarray, b: FeatureMap, cfg: AlignConfig) -> bool:
+    """Whether two transforms differ: the second turns more than the heading threshold from
+    the first, or moves some landmark of B more than th2 from where the first puts it."""
+    turn = abs(wrap_scalar(float(second[2] - first[2])))
+    if turn > math.radians(cfg.heading_threshold_deg):
+        return True
+    shift = np.hypot(*(_apply(second, b.positions) - _apply(first, b.positions)).T)
+    return bool(shift.max() > cfg.support_threshold)
+
+
+def _ransac_oriented(
+    a: FeatureMap,
+    b: FeatureMap,
+    matches: np.ndarray,
+    tree: cKDTree,
+    cfg: AlignConfig,
+    veto: Veto | None,
+    score: Score | None,
+) -> Alignment:
+    """RANSAC over oriented features: one candidate is a hypothesis, so every one is tried.
+
+    Hypotheses that put B's centroid in the same th2 cell with θ in the same heading bin are
+    one (the first kept). Each is valued by ``score`` (the caller's richer evidence, such as
+    the length of wall both maps agree on), or by its supports when None. In decreasing value
+    a hypothesis that ``veto`` refuses (the radio's range, free space) is dropped; the first
+    one left is the best, and the next one left that is :func:`_distinct` from it its rival.
+    The aligner declines when the rival's value is more than 1 / ``ambiguity_ratio`` of the
+    best's (see :class:`AlignConfig`); the best then goes through :func:`refine` and its
+    support tests like any aligner's answer.
+
+    Why a score: in a building that repeats, the true transform may share only one or two of
+    the corners both maps found while a transform shifted by one period shares more, yet the
+    true one lays metres more wall on wall.
+    """
+    hypotheses = np.array([_oriented_hypothesis(a, b, m) for m in matches])  # (k, 3)
+    centre = b.positions.mean(axis=0)
+    placed = hypotheses[:, :2] + np.stack(
+        [np.cos(hypotheses[:, 2]) * centre[0] - np.sin(hypotheses[:, 2]) * centre[1],
+         np.sin(hypotheses[:, 2]) * centre[0] + np.cos(hypotheses[:, 2]) * centre[1]], axis=1
+    )  # fmt: skip
+    bins = np.column_stack(
+        [
+            np.floor(placed / cfg.support_threshold),
+            np.floor(hypotheses[:, 2] / math.radians(cfg.heading_threshold_deg)),
+        ]
+    ).astype(np.int64)
+    _, first = np.unique(bins, axis=0, return_index=True)
+    groups = np.sort(first)
+    if score is not None:
+        values = np.array([score(hypotheses[g]) for g in groups])
+    else:
+        values = np.array([len(_supports(hypotheses[g], tree, a, b, cfg)) for g in groups], float)
+    best = -1
+    rival = 0.0
+    first_reason = ""
+    for k in np.argsort(-values, kind="stable"):
+        if best >= 0 and values[k] * cfg.ambiguity_ratio <= values[best]:
+            break
+        if best >= 0 and not _distinct(hypotheses[groups[best]], hypotheses[groups[k]], b, cfg):
+            continue  # the best again, from another bin
+        reason = veto(hypotheses[groups[k]]) if veto is not None else ""
+        if reason:
+            first_reason = first_reason or reason
+            continue
+        if best < 0:
+            best = int(k)
+        else:
+            rival = float(values[k])
+            break
+    if best < 0:
+        return Alignment(
+            "ransac", None, None, 0, len(matches), first_reason or "no hypothesis", None
+        )
+    transform = hypotheses[groups[best]]
+    supports = len(_supports(transform, tree, a, b, cfg))
+    if rival > 0:
+        return Alignment(
+            "ransac",
+            None,
+            None,
+            supports,
+            len(matches),
+            f"ambiguous: a distinct transform scores {rival:.3g} against the best's"
+            f" {values[best]:.3g} (ambiguity_ratio {cfg.ambiguity_ratio:g})",
+            transform,
+        )
+    return _answer("ransac", a, b, transform, matches, cfg)
+
+
+def _oriented_hypothesis(a: FeatureMap, b: FeatureMap, match: np.ndarray) -> np.ndarray:
+    """The transform (3,) that lays oriented feature j of B onto feature i of A: θ from their
+    headings, t from their positions."""
+    assert a.headings is not None and b.headings is not None
+    i, j = int(match[0]), int(match[1])
+    theta = wrap_scalar(float(a.headings[i] - b.headings[j]))
+    t = a.positions[i] - rotation(theta) @ b.positions[j]
+    return np.array([t[0], t[1], theta])
 
 
 def refine(
@@ -230,14 +392,14 @@ def refine(
     the residuals' Jacobian w.r.t. (t_x, t_y, θ) at the solution.
     """
     tree = cKDTree(a.positions)
-    pairs = _supports(transform, tree, b.positions, cfg.support_threshold)
+    pairs = _supports(transform, tree, a, b, cfg)
     for _ in range(cfg.icp_max_iterations):
         if len(pairs) < 3:
             break
         transform = rigid_fit(a.positions[pairs[:, 0]], b.positions[pairs[:, 1]])
         res = a.positions[pairs[:, 0]] - _apply(transform, b.positions[pairs[:, 1]])  # (k, 2)
         limit = cfg.outlier_sigmas * 1.4826 * float(np.median(np.abs(res))) + 1e-9
-        near = _supports(transform, tree, b.positions, cfg.support_threshold)
+        near = _supports(transform, tree, a, b, cfg)
         res = a.positions[near[:, 0]] - _apply(transform, b.positions[near[:, 1]])
         new_pairs = near[np.all(np.abs(res) <= limit, axis=1)]
         if np.array_equal(new_pairs, pairs):
@@ -317,15 +479,24 @@ def _too_few(method: str, matches: np.ndarray, cfg: AlignConfig) -> Alignment | 
 
 # -- the four aligners -----------------------------------------------------------------------------
 def ransac(
-    a: FeatureMap, b: FeatureMap, rng: np.random.Generator, cfg: AlignConfig | None = None
+    a: FeatureMap,
+    b: FeatureMap,
+    rng: np.random.Generator,
+    cfg: AlignConfig | None = None,
+    veto: Veto | None = None,
+    score: Score | None = None,
 ) -> Alignment:
-    """RANSAC over descriptor matches (seed §5.1), then :func:`refine`."""
+    """RANSAC over descriptor matches (seed §5.1), then :func:`refine`. Over oriented
+    features every candidate is a hypothesis, ranked by ``score``; ``veto`` may refuse some,
+    and an ambiguous answer is declined (:func:`_ransac_oriented`)."""
     cfg = cfg or AlignConfig()
     matches = candidate_matches(a, b, cfg.descriptor_threshold)
     if (declined := _too_few("ransac", matches, cfg)) is not None:
         return declined
     tree = cKDTree(a.positions)
     best, best_support = None, -1
+    if a.oriented and b.oriented:
+        return _ransac_oriented(a, b, matches, tree, cfg, veto, score)
     for _ in range(cfg.iterations):
         k, m = rng.choice(len(matches), size=2, replace=False)
         (ia, jb), (ia2, jb2) = matches[k], matches[m]
@@ -333,7 +504,7 @@ def ransac(
         if ia == ia2 or jb == jb2 or not _geometric_ok(pa, pb, cfg.geometric_threshold):
             continue
         hypothesis = transform_from_pairs(pa, pb)
-        support = len(_supports(hypothesis, tree, b.positions, cfg.support_threshold))
+        support = len(_supports(hypothesis, tree, a, b, cfg))
         if support > best_support:
             best, best_support = hypothesis, support
     return _answer("ransac", a, b, best, matches, cfg)
@@ -366,7 +537,7 @@ def _icp_from(a: FeatureMap, b: FeatureMap, start: np.ndarray, cfg: AlignConfig)
     tree = cKDTree(a.positions)
     transform, pairs = start, None
     for _ in range(cfg.icp_max_iterations):
-        new = _supports(transform, tree, b.positions, cfg.support_threshold)
+        new = _supports(transform, tree, a, b, cfg)
         if len(new) < 2 or (pairs is not None and np.array_equal(new, pairs)):
             break
         pairs = new
@@ -402,7 +573,7 @@ def imp_icp(
         if start is None:
             continue
         result = _icp_from(a, b, start, cfg)
-        support = len(_supports(result, tree, b.positions, cfg.support_threshold))
+        support = len(_supports(result, tree, a, b, cfg))
         if support > best_support:
             best, best_support = result, support
     return _answer("imp_icp", a, b, best, matches, cfg)
@@ -417,12 +588,23 @@ def align(
     b: FeatureMap,
     rng: np.random.Generator,
     cfg: AlignConfig | None = None,
+    veto: Veto | None = None,
+    score: Score | None = None,
 ) -> Alignment:
-    """Run the aligner named ``method`` (one of :data:`ALIGNERS`)."""
+    """Run the aligner named ``method`` (one of :data:`ALIGNERS`). ``veto(transform)``: the
+    caller's other evidence, a reason to refuse a transform or ""; RANSAC over oriented
+    features consults it for every hypothesis that could win, and every aligner's answer is
+    put to it (a refused answer is declined with that reason). ``score(transform)``: how
+    RANSAC over oriented features ranks its hypotheses (default: their supports)."""
     try:
         aligner = ALIGNERS[method]
     except KeyError:
         raise ConfigError(
             f"alignment method: unknown {method!r} (known: {', '.join(ALIGNERS)})"
         ) from None
-    return aligner(a, b, rng, cfg)
+    result = ransac(a, b, rng, cfg, veto, score) if aligner is ransac else aligner(a, b, rng, cfg)
+    if veto is not None and result.transform is not None:
+        reason = veto(result.transform)
+        if reason:
+            return dataclasses.replace(result, transform=None, covariance=None, reason=reason)
+    return result

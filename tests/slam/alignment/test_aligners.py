@@ -195,3 +195,78 @@ def test_team__unconnected_map_gets_no_pose() -> None:
     sol = solve_team(3, pairs)
     assert sol.connected.tolist() == [True, True, False]
     np.testing.assert_allclose(sol.relative(0, 1), [1.0, 0.0, 0.1], atol=1e-12)
+
+
+# -- oriented features (corners) -----------------------------------------------------------------
+def _corner_world(rng: np.random.Generator, n: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """Corners (n, 2) over a 20 × 12 m floor with headings (n,): every one opens at 90° and is
+    concave, so their descriptors tell nothing apart."""
+    return rng.uniform([0, 0], [20, 12], size=(n, 2)), rng.uniform(-np.pi, np.pi, size=n)
+
+
+def _corners_seen(
+    world: tuple[np.ndarray, np.ndarray], frame: np.ndarray, keep: np.ndarray
+) -> FeatureMap:
+    pos, head = world
+    local = between(frame, np.column_stack([pos[keep], head[keep]]), wrap_remainder)
+    return FeatureMap(local[:, :2], np.tile([np.pi / 2, 1.0], (len(keep), 1)), local[:, 2])
+
+
+def test_ransac_on_corners__one_match_is_a_hypothesis__exact_without_noise() -> None:
+    """Corners carry a heading: one match fixes the transform, and RANSAC tries them all. With
+    30 of 40 corners in common and no noise it returns the transform to rounding, with every
+    common corner supporting it."""
+    rng = np.random.default_rng(10)
+    world = _corner_world(rng)
+    for _ in range(5):
+        frame_a, frame_b, truth = _random_frames(rng)
+        a = _corners_seen(world, frame_a, np.arange(0, 35))
+        b = _corners_seen(world, frame_b, np.arange(5, 40))
+        result = align("ransac", a, b, rng, AlignConfig(min_support=6))
+        assert result.accepted, result.reason
+        np.testing.assert_allclose(_pose_error(result.transform, truth), 0.0, atol=1e-9)
+        assert result.inliers == 30
+
+
+def test_ransac_on_corners__a_repeating_lattice_is_ambiguous_until_evidence_decides() -> None:
+    """Corners on a 1.5 m lattice (shelf ends): B sees a window well inside A, so shifting it
+    by one period matches as many corners as the truth. RANSAC declines as ambiguous. A
+    ``score`` that knows better (the caller's wall agreement) makes it choose the truth, and a
+    ``veto`` that refuses the truth leaves only its shifted rivals: still ambiguous."""
+    xs, ys = np.meshgrid(np.arange(8) * 1.5, np.arange(6) * 1.5)
+    lattice = np.column_stack([xs.ravel(), ys.ravel()])
+    world = (lattice, np.full(len(lattice), 0.3))
+    rng = np.random.default_rng(11)
+    frame_a, frame_b, truth = _random_frames(rng)
+    inner = np.flatnonzero((lattice[:, 0] > 2) & (lattice[:, 0] < 9) & (lattice[:, 1] > 2))
+    a = _corners_seen(world, frame_a, np.arange(len(lattice)))
+    b = _corners_seen(world, frame_b, inner)
+    cfg = AlignConfig(min_support=6)
+    result = align("ransac", a, b, rng, cfg)
+    assert not result.accepted and result.reason.startswith("ambiguous"), result.reason
+
+    def close_to_truth(t: np.ndarray) -> float:
+        return 10.0 if np.abs(_pose_error(t, truth)).max() < 1e-6 else 1.0
+
+    chosen = align("ransac", a, b, rng, cfg, score=close_to_truth)
+    assert chosen.accepted, chosen.reason
+    np.testing.assert_allclose(_pose_error(chosen.transform, truth), 0.0, atol=1e-9)
+
+    def refuse_truth(t: np.ndarray) -> str:
+        return "vetoed" if np.abs(_pose_error(t, truth)).max() < 1e-6 else ""
+
+    vetoed = align("ransac", a, b, rng, cfg, veto=refuse_truth)
+    assert not vetoed.accepted and vetoed.reason.startswith("ambiguous")
+    assert vetoed.transform is None
+    everything = align("ransac", a, b, rng, cfg, veto=lambda t: "no radio")
+    assert not everything.accepted and everything.reason == "no radio"
+
+
+def test_ransac_on_corners__unrelated_buildings__decline() -> None:
+    """Corners of two different random floors (nothing in common): declined every time."""
+    rng = np.random.default_rng(12)
+    for _ in range(10):
+        frame_a, frame_b, _ = _random_frames(rng)
+        a = _corners_seen(_corner_world(rng), frame_a, np.arange(40))
+        b = _corners_seen(_corner_world(rng), frame_b, np.arange(40))
+        assert not align("ransac", a, b, rng, AlignConfig(min_support=6)).accepted
