@@ -1,0 +1,63 @@
+"""The free space that vetoes wrong alignments (comms/free_space.py): cells crossed by beams,
+short of each return by the margin, away from the robot's own walls; it grows with the robot."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from polyslam_env.comms.free_space import FreeSpace
+
+ANGLES = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+
+
+def _ring(radius: float, n: int = 720, centre: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    phi = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([np.cos(phi), np.sin(phi)]) * radius + np.asarray(centre)
+
+
+def test_free_space__crossed_cells_not_the_margin_nor_beyond_the_return() -> None:
+    """A robot at the origin inside a round room of radius 3 m: points at 1 and 2 m are in free
+    space; points at 2.85 m (within the 0.3 m margin of the wall), on the wall and beyond it are
+    not; beams without return (inf) free their whole max range (3600 of them: at 7.5 m they
+    are 1.3 cm apart, so every cell on the ring is crossed)."""
+    space = FreeSpace(0.1, 0.3, 8.0)
+    space.add(np.zeros(3), np.full(len(ANGLES), 3.0), ANGLES)
+    nothing = np.zeros((0, 2))
+    assert space.conflict(_ring(1.0), nothing) == 1.0
+    assert space.conflict(_ring(2.0), nothing) == 1.0
+    for radius in (2.85, 3.0, 3.5, 20.0):
+        assert space.conflict(_ring(radius), nothing) == 0.0, radius
+    open_space = FreeSpace(0.1, 0.3, 8.0)
+    dense = np.linspace(-np.pi, np.pi, 3600, endpoint=False)
+    open_space.add(np.zeros(3), np.full(len(dense), np.inf), dense)
+    assert open_space.conflict(_ring(7.5), nothing) == 1.0
+
+
+def test_free_space__points_near_own_walls_are_not_conflicts() -> None:
+    """A grazing beam crosses cells its own wall runs through: a received point within the
+    margin of one of the robot's walls is not a conflict, one further away is."""
+    space = FreeSpace(0.1, 0.3, 8.0)
+    space.add(np.zeros(3), np.full(len(ANGLES), 3.0), ANGLES)
+    own = _ring(1.0, 2000)
+    assert space.conflict(_ring(1.0) * 1.01, own) == 0.0
+    assert space.conflict(_ring(1.5), own) == 1.0
+    half = np.vstack([_ring(1.0, 100) * 1.02, _ring(1.6, 100)])
+    assert space.conflict(half, own) == pytest.approx(0.5)
+
+
+def test_free_space__grows_to_every_side_and_keeps_what_it_had() -> None:
+    """Scans from far apart poses (all four directions of growth): every earlier room stays
+    free, and the grid only grows."""
+    space = FreeSpace(0.1, 0.3, 8.0)
+    centres = [(0.0, 0.0), (30.0, 0.0), (-25.0, 12.0), (5.0, -40.0)]
+    shapes = []
+    for k, centre in enumerate(centres):
+        space.add(np.array([*centre, 0.3 * k]), np.full(len(ANGLES), 2.0), ANGLES)
+        shapes.append(space.cells.shape)
+        for earlier in centres[: k + 1]:
+            assert space.conflict(_ring(1.0, centre=earlier), np.zeros((0, 2))) == 1.0
+    assert all(a[0] <= b[0] and a[1] <= b[1] for a, b in itertools.pairwise(shapes))
+    assert space.conflict(_ring(1.0, centre=(100.0, 100.0)), np.zeros((0, 2))) == 0.0
