@@ -48,6 +48,7 @@ import numpy as np
 from polyslam_env.core.config import Config, check_positive, check_range
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.slam.alignment import ALIGNERS, AlignConfig
+from polyslam_env.slam.corners import CornerConfig
 
 _UNLIMITED = 2**62  # bytes per step when there is no cap
 
@@ -79,11 +80,30 @@ class ChannelConfig(Config):
     # "rendezvous" (the paper): a mutual camera sighting within ``range``; the camera's range
     #   and bearings give the transform.
     # "alignment" (seed 004): two robots within radio ``range`` of each other, seen or not; a
-    #   message also carries the sender's feature map (pillars: positions and descriptors,
-    #   from the pillar sensor), and the receiver finds the transform by aligning it with its
-    #   own (``aligner``, thresholds ``alignment``) before fusing; a declined alignment fuses
-    #   nothing. A pair in range meets again every ``meeting_interval`` steps.
+    #   message also carries the sender's feature map (``features``), and the receiver finds
+    #   the transform by aligning it with its own (``aligner``, thresholds ``alignment``)
+    #   before fusing; a declined alignment fuses nothing. A pair in range meets again every
+    #   ``meeting_interval`` steps.
     mode: Literal["rendezvous", "alignment"] = "rendezvous"
+    # Alignment mode's features: "pillars" (positions and appearance descriptors from the
+    # pillar sensor, slam/features.py) or "walls" (the corners of the polynomial map, with
+    # their headings and local shape, slam/corners.py: no extra sensor).
+    features: Literal["pillars", "walls"] = "pillars"
+    corners: CornerConfig = field(default_factory=CornerConfig)
+    # The radio says the two robots were within ``range`` when the message left: an alignment
+    # that puts the sender's position then further than range + range_margin from the
+    # receiver's is refused (m; the margin holds the two pose estimates' drift and the motion
+    # between sending and delivery).
+    range_margin: float = 1.0
+    # An alignment that lays more than this fraction of the received walls in the receiver's
+    # free space (cells its beams crossed) is refused: correctly aligned, a wall lies in free
+    # space only where the sender's map is grossly wrong (> 0.3 m off), and the maps'
+    # map_precision (length within 5 cm of a true wall) is ≥ 0.95 on average.
+    max_conflict: float = 0.05
+    # features: walls: the best corner hypothesis must lay at least this much of the sent
+    # walls (m) within 0.1 m of the receiver's own: about two sides of a room, walls in two
+    # directions, so that the transform is fixed in all three coordinates.
+    min_agreement: float = 5.0
     aligner: str = "ransac"
     # Fewest supports of an accepted alignment: 6 correspondences leave 2·6 − 3 = 9 degrees of
     # freedom for the covariance the refinement estimates from its residuals; the aligners'
@@ -104,6 +124,12 @@ class ChannelConfig(Config):
             raise ConfigError(f"max_age: must be >= 0 or null, got {self.max_age!r}")
         if self.mode not in ("rendezvous", "alignment"):
             raise ConfigError(f"mode: must be 'rendezvous' or 'alignment', got {self.mode!r}")
+        if self.features not in ("pillars", "walls"):
+            raise ConfigError(f"features: must be 'pillars' or 'walls', got {self.features!r}")
+        check_range("max_conflict", self.max_conflict, 0.0, 1.0)
+        check_positive("min_agreement", self.min_agreement)
+        if self.range_margin < 0:
+            raise ConfigError(f"range_margin: must be >= 0 (m), got {self.range_margin!r}")
         if self.aligner not in ALIGNERS:
             raise ConfigError(
                 f"aligner: must be one of {', '.join(ALIGNERS)}, got {self.aligner!r}"

@@ -82,6 +82,8 @@ for every message built, the size every payload kind and precision would have ha
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import struct
 import zlib
 from collections.abc import Callable, Sequence
@@ -90,9 +92,11 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import scipy.linalg
+from scipy.spatial import cKDTree
 
 from polyslam_env.comms.alignment import frame_points, refine_transform
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
+from polyslam_env.comms.free_space import FreeSpace
 from polyslam_env.comms.messages import (
     GridMessage,
     Header,
@@ -112,6 +116,7 @@ from polyslam_env.comms.relative_pose import (
 )
 from polyslam_env.core.geometry import compose, compose_with_jacobians, inverse, rotation
 from polyslam_env.slam.alignment import Alignment, FeatureMap, align
+from polyslam_env.slam.corners import wall_corners
 from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
 from polyslam_env.slam.landmarks import boxes_near
@@ -122,6 +127,14 @@ if TYPE_CHECKING:
     from polyslam_env.slam.robot import PolySlam
 
 _TRAILER_CRC = struct.Struct("<I")
+# Alignment mode's free space (comms/free_space.py): cells of 0.1 m, a received wall sampled at
+# the same spacing; beams count as free up to 0.3 m before their return, the aligners' support
+# threshold th2 (walls aligned within it of the receiver's own are not contradictions).
+FREE_RESOLUTION = 0.1
+FREE_MARGIN = 0.3
+# A sent wall point agrees with the receiver's map within 0.1 m of one of its walls: two maps'
+# errors of up to 5 cm each (the map_precision tolerance), wall samples 5 cm apart.
+AGREE_DISTANCE = 0.1
 _FLOAT: dict[int, np.dtype[np.floating]] = {4: np.dtype("<f4"), 8: np.dtype("<f8")}
 PAYLOAD_KINDS = ("polynomials", "points", "grid")
 PRECISIONS = ("float32", "float64")
@@ -208,15 +221,18 @@ class _Sighting:
 
 
 # -- wire frame ----------------------------------------------------------------------------------
-_FEATURE_HEAD = struct.Struct("<HB")  # features n, descriptor length d
+_FEATURE_HEAD = struct.Struct("<HB")  # features n, descriptor length d (| _ORIENTED)
+_ORIENTED = 0x80  # flag in the descriptor-length byte: rows carry a heading
 
 
 def frame_message(
     message: bytes, pose_var: np.ndarray, features: FeatureMap | None = None
 ) -> bytes:
     """Message bytes followed by the exchange trailer: the sender's feature map when given
-    (alignment mode: n rows of position and descriptor in the message's float width, then
-    n as uint16 and the descriptor length d as uint8), the pose variances and a CRC-32."""
+    (alignment mode: n rows of position, heading if the features are oriented, and
+    descriptor in the message's float width, then n as uint16 and a uint8 holding the
+    descriptor length d with bit 7 set for oriented features), the pose variances and a
+    CRC-32."""
     width = message[3]  # the message header's float width
     var = np.asarray(pose_var, dtype=float).reshape(3)
     if not np.all(np.isfinite(var) & (var >= 0)):
@@ -224,9 +240,13 @@ def frame_message(
     body = message
     if features is not None:
         n, d = features.descriptors.shape
-        if n >= 2**16 or d >= 2**8:
+        if n >= 2**16 or d >= _ORIENTED:
             raise ValueError(f"feature map too large for the frame: {n} features of {d} numbers")
-        block = np.hstack([features.positions, features.descriptors]).astype(_FLOAT[width])
+        columns = [features.positions, features.descriptors]
+        if features.headings is not None:
+            columns.insert(1, features.headings[:, None])
+            d |= _ORIENTED
+        block = np.hstack(columns).astype(_FLOAT[width])
         body += block.tobytes() + _FEATURE_HEAD.pack(n, d)
     body += var.astype(_FLOAT[width]).tobytes()
     return body + _TRAILER_CRC.pack(zlib.crc32(body))
@@ -257,14 +277,18 @@ def _split_features(body: bytes, width: int) -> tuple[bytes, FeatureMap]:
     """The message bytes and the feature block that ends ``body`` (read from its end)."""
     if len(body) < _FEATURE_HEAD.size:
         raise ValueError("corrupt exchange frame: no feature block")
-    n, d = _FEATURE_HEAD.unpack(body[-_FEATURE_HEAD.size :])
-    size = n * (2 + d) * width
+    n, flagged = _FEATURE_HEAD.unpack(body[-_FEATURE_HEAD.size :])
+    oriented = bool(flagged & _ORIENTED)
+    d = flagged & ~_ORIENTED
+    lead = 3 if oriented else 2  # position (and heading) before the descriptor
+    size = n * (lead + d) * width
     end = len(body) - _FEATURE_HEAD.size
     if size > end:
         raise ValueError("corrupt exchange frame: feature block longer than the frame")
     block = np.frombuffer(body[end - size : end], dtype=_FLOAT[width]).astype(float)
-    block = block.reshape(n, 2 + d)
-    return body[: end - size], FeatureMap(block[:, :2], block[:, 2:])
+    block = block.reshape(n, lead + d)
+    headings = block[:, 2] if oriented else None
+    return body[: end - size], FeatureMap(block[:, :2], block[:, lead:], headings)
 
 
 # -- received polynomial → points in the receiver's frame ----------------------------------------
@@ -468,6 +492,15 @@ class RendezvousExchange:
             raise ValueError("alignment mode needs align_rng (RANSAC's and ICP's draws)")
         self._align_rng = align_rng
         self.scan_logs = [ScanLog(max_range) for _ in range(num_robots)]
+        # alignment mode: where each robot's beams have been, to veto wrong alignments
+        # alignment mode: every wall a receiver has been sent by each sender (newest version
+        # per landmark id, sender frame), fused or not: what the free-space test checks
+        self._heard: dict[tuple[int, int], dict[int, Polynomial]] = {}
+        self.free_space = (
+            [FreeSpace(FREE_RESOLUTION, FREE_MARGIN, max_range) for _ in range(num_robots)]
+            if config.mode == "alignment"
+            else []
+        )
         self._last_meeting: dict[tuple[int, int], int] = {}  # (s, r) → s's SLAM step
         self._last_log: dict[tuple[int, int], int] = {}  # (s, r) → s's scan-log length
         self._known: list[dict[int, set[int]]] = [{} for _ in range(num_robots)]
@@ -493,9 +526,12 @@ class RendezvousExchange:
     def record_scan(
         self, i: int, pose_est: np.ndarray, ranges: np.ndarray, beam_angles: np.ndarray
     ) -> None:
-        """Log robot i's scan (placed with its pose estimate) for the points/grid payloads."""
+        """Log robot i's scan (placed with its pose estimate) for the points/grid payloads,
+        and in alignment mode mark the free space it crossed."""
         if self.config.payload != "polynomials" or self.compare_payloads:
             self.scan_logs[i].record(pose_est, ranges, beam_angles)
+        if self.free_space:
+            self.free_space[i].add(pose_est, ranges, beam_angles)
 
     def step(
         self,
@@ -521,8 +557,9 @@ class RendezvousExchange:
         for r, slam in enumerate(slams):
             self._carry_sources(r, slam)
         aligning = self.config.mode == "alignment"
-        if aligning and len(features) != self.num_robots:
-            raise ValueError(f"alignment mode needs {self.num_robots} feature books")
+        pillars = aligning and self.config.features == "pillars"
+        if pillars and len(features) != self.num_robots:
+            raise ValueError(f"alignment mode on pillars needs {self.num_robots} feature books")
         sightings: dict[tuple[int, int], tuple[DetectionLike, DetectionLike] | None]
         if aligning:
             sightings = {(i, j): None for i, j in sorted(in_range) if active[i] and active[j]}
@@ -606,8 +643,8 @@ class RendezvousExchange:
         slams: Sequence[PolySlam],
         features: Sequence[FeatureBook],
     ) -> list[tuple[int, int, int]]:
-        """A new rendezvous: store both sightings (none in alignment mode), queue one message
-        each way."""
+        """A new rendezvous: store both sightings (alignment mode: the receivers' poses, for
+        the radio-range test), queue one message each way."""
         i, j = pair
         for robot in pair:
             self._rendezvous[robot] += 1
@@ -619,9 +656,12 @@ class RendezvousExchange:
                 self._sightings[(r, s, k)] = _Sighting(slams[r].pose, d.distance, d.bearing)
                 bearing[(s, r)] = view_of[(s, r)].bearing
         out = []
-        aligning = self.config.mode == "alignment"  # step() checked there is a book per robot
+        aligning = self.config.mode == "alignment"
         for s, r in ((i, j), (j, i)):
-            own = features[s].feature_map(self.config.feature_min_sightings) if aligning else None
+            own = None
+            if aligning:
+                self._sightings[(r, s, k)] = _Sighting(slams[r].pose, math.nan, math.nan)
+                own = self._feature_map(s, slams, features)
             payload, ids = self._build(k, s, r, bearing[(s, r)], slams[s], own)
             msg_id = self.channel.send(s, r, payload, k)
             self._sent_ids[msg_id] = (s, r, ids)
@@ -724,15 +764,19 @@ class RendezvousExchange:
         n_records = 0
         if isinstance(message, PolynomialMessage):
             n_records = len(message.records)
+            sighting = self._sightings.pop((r, s, delivered.sent_step))
             if aligning:
                 assert theirs is not None
-                mine = features[r].feature_map(self.config.feature_min_sightings)
-                transform = self._aligned_transform(delivered, mine, theirs)
+                mine = self._feature_map(r, slams, features)
+                near = (message.header.pose[:2], sighting.pose[:2])
+                heard = self._heard.setdefault((s, r), {})
+                heard.update((rec.landmark_id, rec.polynomial) for rec in message.records)
+                walls = list(heard.values())
+                transform = self._aligned_transform(delivered, mine, theirs, near, walls, slams[r])
                 if transform is None and sent_ids is not None:
                     # nothing fused: send these landmarks again at the pair's next meeting
                     self._resend.setdefault((s, r), set()).update(sent_ids[2])
             else:
-                sighting = self._sightings.pop((r, s, delivered.sent_step))
                 transform = self._transform(slams[r].pose, sighting, message.header, pose_var)
             if transform is not None:
                 received, ids = self._integrate(slams[r], message, transform, s)
@@ -764,15 +808,76 @@ class RendezvousExchange:
         )
         return (*out, scipy.linalg.block_diag(rel_cov, np.diag(pose_var)))
 
+    def _feature_map(
+        self, robot: int, slams: Sequence[PolySlam], features: Sequence[FeatureBook]
+    ) -> FeatureMap:
+        """Robot's features for alignment: its pillar map, or its walls' corners."""
+        if self.config.features == "walls":
+            slam = slams[robot]
+            return wall_corners(slam.polynomials(), slam.table.side.tolist(), self.config.corners)
+        return features[robot].feature_map(self.config.feature_min_sightings)
+
     def _aligned_transform(
-        self, delivered: Delivered, mine: FeatureMap, theirs: FeatureMap
+        self,
+        delivered: Delivered,
+        mine: FeatureMap,
+        theirs: FeatureMap,
+        near: tuple[np.ndarray, np.ndarray],
+        walls: Sequence[Polynomial],
+        receiver: PolySlam,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """Alignment mode: the sender's frame in the receiver's from their feature maps, as
         :meth:`_transform` gives it (T, ∂T/∂receiver pose = 0: the frames' transform does not
         depend on where the receiver is now, ∂T/∂noise = I, the aligner's covariance), or None
-        when the aligner declines. Every attempt is logged in :attr:`alignments`."""
+        when the aligner declines. ``near``: the sender's and the receiver's estimated
+        positions when the message left (each in its own frame); a transform that puts them
+        further apart than the radio's range (+ ``range_margin``) is refused, and so is one
+        that lays more than ``max_conflict`` of the ``walls`` the sender has sent it (sender
+        frame; this message's and earlier ones') in the receiver's free space, away from its
+        own walls (:class:`~polyslam_env.comms.free_space.FreeSpace`); a refused
+        attempt is logged as declined. Every attempt is logged in :attr:`alignments`."""
         assert self._align_rng is not None
-        result = align(self.config.aligner, mine, theirs, self._align_rng, self.config.alignment)
+        free_space = self.free_space[delivered.receiver]
+        own_walls = receiver.polynomials()
+        sampled = [w.sample_arclength(FREE_RESOLUTION) for w in walls]
+        points = np.concatenate(sampled) if sampled else np.zeros((0, 2))
+        own = [p.sample_arclength(0.5 * FREE_RESOLUTION) for p in own_walls]
+        own_points = np.concatenate(own) if own else np.zeros((0, 2))
+        own_tree = cKDTree(own_points) if len(own_points) else None
+        limit = self.config.range + self.config.range_margin
+
+        def score(t: np.ndarray) -> float:
+            """Length (m) of the sent walls that ``t`` lays on the receiver's own."""
+            if own_tree is None or len(points) == 0:
+                return 0.0
+            moved = points @ rotation(float(t[2])).T + t[:2]
+            dist, _ = own_tree.query(moved, distance_upper_bound=AGREE_DISTANCE)
+            return float(np.isfinite(dist).sum()) * FREE_RESOLUTION
+
+        def veto(t: np.ndarray) -> str:
+            turn = rotation(float(t[2]))
+            apart = float(np.hypot(*(turn @ near[0] + t[:2] - near[1])))
+            if apart > limit:
+                return f"puts the robots {apart:.1f} m apart, beyond the radio's {limit:.1f} m"
+            conflict = free_space.conflict(points @ turn.T + t[:2], own_points)
+            if conflict > self.config.max_conflict:
+                return (
+                    f"lays {conflict:.0%} of the received walls in the receiver's free space"
+                    f" (max_conflict {self.config.max_conflict:.0%})"
+                )
+            return ""
+
+        cfg = self.config.alignment
+        walls_score = score if self.config.features == "walls" else None
+        result = align(self.config.aligner, mine, theirs, self._align_rng, cfg, veto, walls_score)
+        if result.transform is not None and self.config.features == "walls":
+            agreement = score(result.transform)
+            if agreement < self.config.min_agreement:
+                reason = (
+                    f"the walls agree over {agreement:.1f} m < min_agreement"
+                    f" {self.config.min_agreement:g} m"
+                )
+                result = dataclasses.replace(result, transform=None, covariance=None, reason=reason)
         self.alignments.append(
             AlignmentAttempt(delivered.delivered_step, delivered.sender, delivered.receiver, result)
         )

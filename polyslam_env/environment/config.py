@@ -295,7 +295,11 @@ class EnvConfig(Config):
             check_range("coverage_target", self.coverage_target, 0.0, 1.0)
         check_positive("coverage_resolution", self.coverage_resolution)
         self._validate_backend()
-        if self.channel is not None and self.channel.mode == "alignment":
+        if (
+            self.channel is not None
+            and self.channel.mode == "alignment"
+            and self.channel.features == "pillars"
+        ):
             if self.world.pillar_sensor.enabled and not self.world.pillar_sensor.identities:
                 raise ConfigError(
                     "channel.mode: 'alignment' builds its pillar maps by pillar identity; it"
@@ -303,8 +307,9 @@ class EnvConfig(Config):
                 )
             if not self.world.pillar_sensor.enabled:
                 raise ConfigError(
-                    "channel.mode: 'alignment' aligns pillar maps; it needs"
-                    " world.pillar_sensor.enabled: true"
+                    "channel.mode: 'alignment' with channel.features: 'pillars' aligns pillar"
+                    " maps; it needs world.pillar_sensor.enabled: true (or channel.features:"
+                    " 'walls', the corners of the wall map)"
                 )
         self._validate_faults()
 

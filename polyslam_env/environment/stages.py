@@ -108,8 +108,12 @@ def new_episode(
         ids = pillar_sensor.identities
         slams = list(make_point_slams(config.slam, sigmas, rng, start_poses, ids))
     polynomial = config.slam_enabled and config.slam.backend == "polynomial"
-    aligning = polynomial and config.channel is not None and config.channel.mode == "alignment"
-    features = [FeatureBook(pillar_sensor.descriptor_dim) for _ in range(n)] if aligning else []
+    channel = config.channel
+    on_pillars = (
+        channel is not None and channel.mode == "alignment" and channel.features == "pillars"
+    )
+    pillar_books = polynomial and on_pillars
+    features = [FeatureBook(pillar_sensor.descriptor_dim) for _ in range(n)] if pillar_books else []
     state = EpisodeState(
         rngs=rngs,
         world=world,

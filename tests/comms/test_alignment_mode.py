@@ -124,3 +124,72 @@ def test_rendezvous_mode__with_the_pillar_sensor_on_sends_no_features() -> None:
     assert exchange is not None
     assert any(d.received for d in exchange.history), "no rendezvous message was fused"
     assert not exchange.alignments
+
+
+WALLS_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "alignment_walls.yaml"
+
+
+def _walls_config(**changes: Any) -> dict[str, Any]:
+    data: dict[str, Any] = yaml.safe_load(WALLS_CONFIG.read_text())
+    data.update(changes)
+    return data
+
+
+def test_alignment_mode_on_walls__warehouse_team_merges_by_corners_without_pillars() -> None:
+    """``channel.features: walls`` on a warehouse (shelf rows: a building that repeats), camera
+    and pillar sensor off: robots merge by aligning the corners of their wall maps. Some
+    alignment is accepted within 250 steps (seed 0), none is wrong, the fused messages are
+    exactly those with an accepted alignment, and a robot that fused walls knows more of the
+    boundary than the same robot in the same episode without the exchange."""
+    config = _walls_config(map="generator:warehouse", max_steps=250)
+    assert not EnvConfig.from_dict(config).world.pillar_sensor.enabled
+    env = parallel_env(EnvConfig.from_dict(config))
+    result = run_episode(env, make_team("frontier", env), seed=0)
+    alone = parallel_env(EnvConfig.from_dict(config | {"channel": None}))
+    baseline = run_episode(alone, make_team("frontier", alone), seed=0)
+    exchange = env.episode.exchange
+    assert exchange is not None
+    accepted = {(a.step, a.sender, a.receiver) for a in exchange.alignments if a.result.accepted}
+    assert accepted
+    assert sum(m["alignments_wrong"] for m in result.robots.values()) == 0
+    received = [d for d in exchange.history if d.received]
+    assert received and all((d.delivered_step, d.sender, d.receiver) in accepted for d in received)
+    for receiver in {d.receiver for d in received}:
+        agent = f"robot_{receiver}"
+        with_walls = result.robots[agent]["completeness_seen"]
+        assert with_walls > baseline.robots[agent]["completeness_seen"]
+
+
+def test_alignment_mode_on_walls__a_shifted_building_is_vetoed_or_ambiguous() -> None:
+    """Every attempt on the warehouse that is declined after the aligner found a transform
+    names why: the radio's range, the receiver's free space, too little wall agreement, or a
+    rival transform (the shelf period); a wrong transform (more than 0.2 m or 3° off) is
+    never accepted, while some wrong hypotheses were on the table."""
+    config = _walls_config(map="generator:warehouse", max_steps=400)
+    env = parallel_env(EnvConfig.from_dict(config))
+    run_episode(env, make_team("frontier", env), seed=1)
+    state = env.episode
+    assert state.exchange is not None
+    from polyslam_env.environment.stages import _true_transform
+
+    reasons = ("radio", "free space", "agree over", "ambiguous", "supports <", "descriptor")
+    wrong_raw = 0
+    for attempt in state.exchange.alignments:
+        result = attempt.result
+        truth = _true_transform(state, attempt)
+        assert not is_wrong_alignment(result.transform, truth)
+        if not result.accepted:
+            assert any(word in result.reason for word in reasons), result.reason
+            wrong_raw += result.raw is not None and is_wrong_alignment(result.raw, truth)
+    assert wrong_raw > 0
+
+
+def test_alignment_mode_on_walls__needs_no_pillar_sensor_and_checks_its_fields() -> None:
+    data = _walls_config()
+    assert EnvConfig.from_dict(data).channel.features == "walls"
+    with pytest.raises(ConfigError, match="features"):
+        ChannelConfig(mode="alignment", features="doors")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="max_conflict"):
+        ChannelConfig(mode="alignment", max_conflict=1.5)
+    with pytest.raises(ConfigError, match="min_agreement"):
+        ChannelConfig(mode="alignment", min_agreement=0.0)

@@ -150,6 +150,31 @@ def test_frame_message__carries_a_feature_map_counted_in_its_bytes() -> None:
     assert got is not None and len(got) == 0
 
 
+def test_frame_message__oriented_features_carry_their_headings() -> None:
+    """Corners (slam/corners.py): rows of position, heading and a 2-number descriptor, the
+    descriptor-length byte flagged; unflagged frames still read as points (no headings)."""
+    poly = Polynomial(1, [0.5, 0.1], -1.0, 2.0)
+    msg = PolynomialMessage(
+        Header(1, 2, 7, np.array([0.1, -0.2, 0.3]), 0.0), (PolynomialRecord(5, poly, 1e-3),)
+    )
+    rng = np.random.default_rng(4)
+    corners = FeatureMap(rng.normal(size=(5, 2)), rng.normal(size=(5, 2)), rng.normal(size=5))
+    var = np.array([1e-4, 2e-4, 3e-5])
+    raw = encode(msg, "float64")
+    data = frame_message(raw, var, corners)
+    assert len(data) == len(raw) + 5 * (2 + 1 + 2) * 8 + 3 + 3 * 8 + 4
+    got = unframe_message(data, with_features=True)[2]
+    assert got is not None and got.headings is not None
+    np.testing.assert_array_equal(got.positions, corners.positions)
+    np.testing.assert_array_equal(got.headings, corners.headings)
+    np.testing.assert_array_equal(got.descriptors, corners.descriptors)
+    points = FeatureMap(corners.positions, corners.descriptors)
+    again = unframe_message(frame_message(raw, var, points), with_features=True)[2]
+    assert again is not None and again.headings is None
+    with pytest.raises(ValueError, match="too large"):
+        frame_message(raw, var, FeatureMap(np.zeros((1, 2)), np.zeros((1, 128))))
+
+
 # -- geometry and Jacobians ----------------------------------------------------------------------
 def test_map_transform_jacobians__match_finite_differences() -> None:
     rng = np.random.default_rng(0)
