@@ -45,7 +45,15 @@ from polyslam_env.slam.alignment.aligners import (
     rigid_fit,
 )
 
-__all__ = ["Fusion", "FusionConfig", "InformationMap", "find_fusion", "fuse"]
+__all__ = [
+    "Fusion",
+    "FusionConfig",
+    "InformationMap",
+    "find_fusion",
+    "fuse",
+    "fuse_with_transform",
+    "transform_covariance",
+]
 
 
 @dataclass(frozen=True)
@@ -89,6 +97,9 @@ class Fusion:
     transform: np.ndarray  # (3,) B's frame in A's
     pairs: np.ndarray  # (k, 2) (index in A, index in B)
     score: float  # Σ (gain − d²/2)
+    # (3, 3) the transform's uncertainty, carried into B's landmarks by :func:`fuse`; None:
+    # the transform is taken as exact (the seed's fusion)
+    covariance: np.ndarray | None = None
 
 
 def _triangles(means: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -191,6 +202,44 @@ def find_fusion(
     return Fusion(t, pairs, score)
 
 
+def transform_covariance(a: InformationMap, b: InformationMap, fusion: Fusion) -> np.ndarray:
+    """(3, 3) covariance of the transform fitted to ``fusion.pairs``: the weighted least
+    squares information Σ Jᵀ (Σ_A,i + R Σ_B,j Rᵀ)⁻¹ J over the pairs (J = ∂(R b_j + t)/∂T),
+    inverted; the pairs' errors taken as independent."""
+    t = fusion.transform
+    R = rotation(float(t[2]))
+    a_covs, b_covs = a.covariances(), b.covariances()
+    info = np.zeros((3, 3))
+    for i, j in fusion.pairs:
+        jac = np.zeros((2, 3))
+        jac[:, :2] = np.eye(2)
+        rb = R @ b.means[j]
+        jac[:, 2] = [-rb[1], rb[0]]
+        w = np.linalg.inv(a_covs[i] + R @ b_covs[j] @ R.T)
+        info += jac.T @ w @ jac
+    cov = np.linalg.inv(info)
+    return np.asarray(0.5 * (cov + cov.T))
+
+
+def fuse_with_transform(
+    a: InformationMap,
+    b: InformationMap,
+    transform: np.ndarray,
+    transform_cov: np.ndarray | None = None,
+    cfg: FusionConfig | None = None,
+) -> InformationMap:
+    """B fused into A under a known ``transform`` (B's frame in A's) with uncertainty
+    ``transform_cov`` (None: exact): the correspondences found again by the gated one-to-one
+    pairing of :func:`find_fusion`, then :func:`fuse`."""
+    cfg = cfg or FusionConfig()
+    if len(a) == 0:
+        return fuse(a, b, Fusion(transform, np.zeros((0, 2), dtype=int), 0.0, transform_cov))
+    pairs, score = _pairs(
+        a.means, a.covariances(), b.means, b.covariances(), transform, cfg, cKDTree(a.means)
+    )
+    return fuse(a, b, Fusion(transform, pairs, score, transform_cov))
+
+
 def fuse(a: InformationMap, b: InformationMap, fusion: Fusion) -> InformationMap:
     """One map in A's frame: B rotated in, the corresponding pairs collapsed (module step 4)."""
     R = rotation(float(fusion.transform[2]))
@@ -198,6 +247,16 @@ def fuse(a: InformationMap, b: InformationMap, fusion: Fusion) -> InformationMap
     rot = np.kron(np.eye(nb), R)  # (2nb, 2nb) block-diagonal rotation
     h_b = rot @ b.information @ rot.T
     means_b = _apply(fusion.transform, b.means)
+    if fusion.covariance is not None and nb:
+        # B's joint covariance in A's frame plus the transform's: Σ' = R Σ Rᵀ + J Σ_T Jᵀ,
+        # J (2nb, 3) = ∂(R b + t)/∂T, then back to information
+        jac = np.zeros((2 * nb, 3))
+        jac[0::2, 0] = jac[1::2, 1] = 1.0
+        rb = means_b - fusion.transform[:2]
+        jac[0::2, 2] = -rb[:, 1]
+        jac[1::2, 2] = rb[:, 0]
+        cov_b = np.linalg.inv(h_b) + jac @ fusion.covariance @ jac.T
+        h_b = np.linalg.inv(0.5 * (cov_b + cov_b.T))
     na = len(a)
     merged_into = {int(j): int(i) for i, j in fusion.pairs}
     keep_b = [j for j in range(nb) if j not in merged_into]
