@@ -321,9 +321,11 @@ class EnvConfig(Config):
 
     def _validate_backend(self) -> None:
         """A point back-end needs the pillar sensor; MBLCC needs the channel (its consensus),
-        known starts and the default mode; multirobot_known_start known starts. fastslam2,
-        em_fastslam, seif and the centralised multirobot_known_start exchange nothing in the
-        env: the channel stays unused (bytes 0)."""
+        known starts and the default mode; multirobot_known_start known starts. seif with
+        ``channel.mode: alignment`` fuses maps between robots (comms/seif_exchange.py);
+        fastslam2, em_fastslam, seif in the default mode and the centralised
+        multirobot_known_start exchange nothing in the env: the channel stays unused (bytes
+        0)."""
         backend = self.slam.backend
         if backend == "polynomial" or not self.slam_enabled:
             return

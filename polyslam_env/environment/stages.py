@@ -28,6 +28,7 @@ from polyslam_env import metrics
 from polyslam_env.comms.channel import ChannelConfig, in_radio_range
 from polyslam_env.comms.consensus import ConsensusExchange
 from polyslam_env.comms.exchange import AlignmentAttempt, ExchangeStep, RendezvousExchange
+from polyslam_env.comms.seif_exchange import SeifMapExchange
 from polyslam_env.core.geometry import beam_endpoints, between, wrap_remainder
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.faults import FaultEvent, FaultPlan, kidnap, perturb_starts
@@ -126,6 +127,12 @@ def new_episode(
         else make_exchange(config.channel, n, rngs["channel"], wc, config.slam, rngs["alignment"]),
         consensus=ConsensusExchange(config.channel, start_poses, rngs["channel"])
         if config.channel is not None and config.slam_enabled and config.slam.backend == "mblcc"
+        else None,
+        seif_exchange=SeifMapExchange(channel, n, rngs["channel"], rngs["alignment"])
+        if channel is not None
+        and channel.mode == "alignment"
+        and config.slam_enabled
+        and config.slam.backend == "seif"
         else None,
         features=features,
         beliefs=belief_grids(oc, layout.bounds, max_range, n),
@@ -309,6 +316,9 @@ def exchange(state: EpisodeState) -> ExchangeStep | None:
     if state.consensus is not None:
         points = [s for s in state.slams if isinstance(s, PointSlamRobot)]
         state.consensus.step(state.step_count, points, state.world.active, state.world.poses)
+    if state.seif_exchange is not None:
+        points = [s for s in state.slams if isinstance(s, PointSlamRobot)]
+        state.seif_exchange.step(state.step_count, points, state.world.active, state.world.poses)
     if state.exchange is None:
         return None
     out = exchange_maps(
@@ -539,6 +549,12 @@ def _final_metrics(state: EpisodeState, i: int) -> dict[str, float]:
         )
     if state.consensus is not None:
         counters.update(state.consensus.counters(i))
+    if state.seif_exchange is not None:
+        counters.update(state.seif_exchange.counters(i))
+        counters["alignments_wrong"] = sum(
+            a.receiver == i and is_wrong_alignment(a.result.transform, _true_transform(state, a))
+            for a in state.seif_exchange.alignments
+        )
     slam = state.slams[i] if state.slams else None
     landmarks = None
     if isinstance(slam, PointSlamRobot):

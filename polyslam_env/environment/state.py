@@ -19,6 +19,7 @@ import numpy as np
 from polyslam_env import metrics
 from polyslam_env.comms.consensus import ConsensusExchange
 from polyslam_env.comms.exchange import RendezvousExchange
+from polyslam_env.comms.seif_exchange import SeifMapExchange
 from polyslam_env.core.geometry import between, wrap_remainder
 from polyslam_env.environment.observations import BeliefGrid, MapSampler
 from polyslam_env.metrics.episode import RobotHistory
@@ -59,6 +60,8 @@ class EpisodeState:
     slams: list[SlamRobot]  # one per robot (slam.backend), or empty with slam_enabled=False
     exchange: RendezvousExchange | None  # polynomial map exchange (None: off, no SLAM, points)
     consensus: ConsensusExchange | None  # MBLCC's landmark consensus (slam.backend: mblcc)
+    # SEIF map fusion between robots (slam.backend: seif, channel.mode: alignment)
+    seif_exchange: SeifMapExchange | None
     features: list[FeatureBook]  # per robot: its pillar map (empty list: not alignment mode)
     beliefs: list[BeliefGrid]  # per robot: cells its beams swept / hit, own frame
     samplers: list[MapSampler]  # per robot: its polynomials as points, cached

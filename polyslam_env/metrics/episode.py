@@ -271,7 +271,8 @@ def final_robot_metrics(
     its pillar map ``landmarks`` = (ids (M,), means (M, 2) in its frame): ``landmark_error`` is
     the mean distance (m) of the estimates, placed by the true start, to the true centres of
     the pillars they name (ids None, anonymous readings: to the nearest true centre), with
-    ``has_landmarks`` 1.0 (0.0 and landmark_error 0.0 without landmarks).
+    ``has_landmarks`` 1.0 and ``landmarks`` their number (0.0 and landmark_error 0.0 without
+    landmarks).
     ``pose_error`` is the mean position error (m) over the episode, placed by the true start.
     """
     out = dict.fromkeys(ROBOT_METRIC_KEYS, 0.0)
@@ -293,6 +294,7 @@ def final_robot_metrics(
             np.mean(metrics.landmark_distances(means, history.true[0], truth))
         )
         out["has_landmarks"] = 1.0
+        out["landmarks"] = float(len(means))
     out["coverage"] = float(coverage)
     out["collisions"] = float(history.collisions)
     out["path_length"] = history.path_length

@@ -64,6 +64,7 @@ from polyslam_env.slam.points.interface import (
     PointSlamBackend,
 )
 from polyslam_env.slam.points.seif import PointSeif
+from polyslam_env.slam.points.seif_fusion import InformationMap, fuse_with_transform
 from polyslam_env.slam.points.shared_map import SharedMapFastSlam
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam, SlamStepInfo
@@ -137,6 +138,11 @@ class PointSlamRobot:
         self.diverging = False
         self.steps = 0
         self._seen: set[int] = set()  # landmark ids the back-end holds
+        #: SEIF map fusion (comms/seif_exchange.py): per sender, its own map as received
+        #: (its frame), the accepted transform of that frame into this robot's and the
+        #: transform's covariance
+        self.fusion_sources: dict[int, tuple[InformationMap, np.ndarray, np.ndarray]] = {}
+        self._fused: tuple[object, LandmarkMap] | None = None  # (step and sources, fused map)
         self._read_pose()
 
     @property
@@ -210,8 +216,27 @@ class PointSlamRobot:
         """No polynomial map: the wall-map metrics see an empty map."""
         return []
 
+    def information_map(self) -> InformationMap:
+        """A SEIF robot's own map in information form, the pose eliminated (seed 001's unit
+        of fusion): means (n, 2), information (2n, 2n), pillar ids (evaluation only)."""
+        if not isinstance(self.backend, PointSeif):
+            raise TypeError("only a SEIF robot has a map in information form")
+        info, _ = self.backend.landmark_information()
+        means = self.backend.mu[3:].reshape(-1, 2).copy()
+        return InformationMap(means, info, np.array(self.backend.ids, dtype=np.int64))
+
     def landmarks(self) -> LandmarkMap:
-        """The back-end's landmark map, in this robot's frame."""
+        """The back-end's landmark map, in this robot's frame; with SEIF fusion sources, its
+        own map with every source fused in (senders in order)."""
+        if self.fusion_sources:
+            sources = sorted(self.fusion_sources.items())
+            key = (self.steps, tuple((s, id(m)) for s, (m, _, _) in sources))
+            if self._fused is None or self._fused[0] != key:
+                fused = self.information_map()
+                for _, (theirs, transform, cov) in sources:
+                    fused = fuse_with_transform(fused, theirs, transform, cov)
+                self._fused = (key, LandmarkMap(fused.ids, fused.means, fused.covariances()))
+            return self._fused[1]
         lm = self.backend.landmarks()
         if self._to_own is None:
             return lm
