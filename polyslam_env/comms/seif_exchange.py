@@ -12,11 +12,12 @@ triangle hypotheses, likelihood gain against a penalty per collapsed landmark, c
 if it accepts, keeps the sender's map with its transform as a **source**.
 
 A robot's map (:meth:`PointSlamRobot.landmarks`) is then its own SEIF map with its sources
-fused in (:func:`~polyslam_env.slam.points.seif_fusion.fuse`, correspondences found again
-against the current maps). Nothing received ever enters the robot's filter, and what a robot
-sends is only its own filter's map: no information can come back to where it started, so
-repeated meetings never count the same observation twice (a newer map of a sender replaces the
-older one). The robot's pose estimate is its own filter's.
+fused in (:func:`~polyslam_env.slam.points.seif_fusion.fuse_with_transform`: correspondences
+found again against the current maps, the transform re-estimated jointly with the landmarks and
+marginalised, so that the fused map stays consistent). Nothing received ever enters the
+robot's filter, and what a robot sends is only its own filter's map: no information can come
+back to where it started, so repeated meetings never count the same observation twice (a newer
+map of a sender replaces the older one). The robot's pose estimate is its own filter's.
 
 Wire format: uint32 n, then n (x, y) means and the upper triangle (row by row) of the 2n × 2n
 information matrix, in the channel's ``precision``. The landmarks' pillar ids ride outside the

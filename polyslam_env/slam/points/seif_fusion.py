@@ -51,6 +51,7 @@ __all__ = [
     "InformationMap",
     "find_fusion",
     "fuse",
+    "fuse_jointly",
     "fuse_with_transform",
     "transform_covariance",
 ]
@@ -228,16 +229,74 @@ def fuse_with_transform(
     transform_cov: np.ndarray | None = None,
     cfg: FusionConfig | None = None,
 ) -> InformationMap:
-    """B fused into A under a known ``transform`` (B's frame in A's) with uncertainty
-    ``transform_cov`` (None: exact): the correspondences found again by the gated one-to-one
-    pairing of :func:`find_fusion`, then :func:`fuse`."""
+    """B fused into A near a known ``transform`` (B's frame in A's): the correspondences
+    found again by the gated one-to-one pairing of :func:`find_fusion`, then
+    :func:`fuse_jointly` (the transform re-estimated with the landmarks and marginalised);
+    with fewer than 3 pairs, :func:`fuse` with ``transform_cov`` (None: exact)."""
     cfg = cfg or FusionConfig()
     if len(a) == 0:
         return fuse(a, b, Fusion(transform, np.zeros((0, 2), dtype=int), 0.0, transform_cov))
     pairs, score = _pairs(
         a.means, a.covariances(), b.means, b.covariances(), transform, cfg, cKDTree(a.means)
     )
-    return fuse(a, b, Fusion(transform, pairs, score, transform_cov))
+    return fuse_jointly(a, b, Fusion(transform, pairs, score, transform_cov))
+
+
+def fuse_jointly(
+    a: InformationMap, b: InformationMap, fusion: Fusion, iterations: int = 3
+) -> InformationMap:
+    """B fused into A with the transform estimated **jointly** with the landmarks, then
+    marginalised: the consistent form of :func:`fuse` when the transform was fitted to the
+    very pairs being fused (``fuse`` takes it as exact; with a covariance it still ignores
+    that the pairs fixed it).
+
+    Unknowns x = (A's landmarks, B's unpaired landmarks, T). A's map is a prior on its
+    landmarks (information H_A); B's map is a measurement of its landmarks in its own frame,
+    b_j = R(θ)ᵀ (m_k − t) with information H_B, k the A landmark it is paired with or its own
+    new one. Gauss–Newton from ``fusion.transform`` (``iterations`` relinearisations), then
+    T is eliminated (Schur complement) from the information. A and B must be independent
+    (each robot's own map). Fewer than 3 pairs cannot fix T: :func:`fuse` with the fusion's
+    covariance instead."""
+    pairs = np.asarray(fusion.pairs, dtype=int).reshape(-1, 2)
+    if len(pairs) < 3:
+        return fuse(a, b, fusion)
+    na, nb = len(a), len(b)
+    slot_of = {int(j): int(i) for i, j in pairs}
+    keep_b = [j for j in range(nb) if j not in slot_of]
+    for n, j in enumerate(keep_b):
+        slot_of[j] = na + n
+    nf = na + len(keep_b)
+    dim = 2 * nf + 3
+    x = np.concatenate(
+        [a.means.ravel(), _apply(fusion.transform, b.means[keep_b]).ravel(), fusion.transform]
+    )
+    H = np.zeros((dim, dim))
+    for _ in range(iterations):
+        theta = float(x[-1])
+        c, s = math.cos(theta), math.sin(theta)
+        rt = np.array([[c, s], [-s, c]])  # R(θ)ᵀ
+        drt = np.array([[-s, c], [-c, -s]])  # ∂R(θ)ᵀ/∂θ
+        J = np.zeros((2 * nb, dim))
+        h = np.zeros(2 * nb)
+        t = x[2 * nf : 2 * nf + 2]
+        for j in range(nb):
+            k = slot_of[j]
+            d = x[2 * k : 2 * k + 2] - t
+            h[2 * j : 2 * j + 2] = rt @ d
+            J[2 * j : 2 * j + 2, 2 * k : 2 * k + 2] = rt
+            J[2 * j : 2 * j + 2, 2 * nf : 2 * nf + 2] = -rt
+            J[2 * j : 2 * j + 2, 2 * nf + 2] = drt @ d
+        H = np.zeros((dim, dim))
+        g = np.zeros(dim)
+        H[: 2 * na, : 2 * na] = a.information
+        g[: 2 * na] = a.information @ a.means.ravel()
+        H += J.T @ b.information @ J
+        g += J.T @ b.information @ (b.means.ravel() - h + J @ x)
+        x = np.linalg.solve(H, g)
+    h_mm, h_mt, h_tt = H[: 2 * nf, : 2 * nf], H[: 2 * nf, 2 * nf :], H[2 * nf :, 2 * nf :]
+    h_m = h_mm - h_mt @ np.linalg.solve(h_tt, h_mt.T)
+    ids = np.concatenate([a.ids, b.ids[keep_b]])
+    return InformationMap(x[: 2 * nf].reshape(-1, 2), 0.5 * (h_m + h_m.T), ids)
 
 
 def fuse(a: InformationMap, b: InformationMap, fusion: Fusion) -> InformationMap:
