@@ -492,10 +492,10 @@ class RendezvousExchange:
             raise ValueError("alignment mode needs align_rng (RANSAC's and ICP's draws)")
         self._align_rng = align_rng
         self.scan_logs = [ScanLog(max_range) for _ in range(num_robots)]
-        # alignment mode: where each robot's beams have been, to veto wrong alignments
         # alignment mode: every wall a receiver has been sent by each sender (newest version
         # per landmark id, sender frame), fused or not: what the free-space test checks
         self._heard: dict[tuple[int, int], dict[int, Polynomial]] = {}
+        # alignment mode: where each robot's beams have been, to veto wrong alignments
         self.free_space = (
             [FreeSpace(FREE_RESOLUTION, FREE_MARGIN, max_range) for _ in range(num_robots)]
             if config.mode == "alignment"
@@ -859,7 +859,7 @@ class RendezvousExchange:
             apart = float(np.hypot(*(turn @ near[0] + t[:2] - near[1])))
             if apart > limit:
                 return f"puts the robots {apart:.1f} m apart, beyond the radio's {limit:.1f} m"
-            conflict = free_space.conflict(points @ turn.T + t[:2], own_points)
+            conflict = free_space.conflict(points @ turn.T + t[:2], own_tree)
             if conflict > self.config.max_conflict:
                 return (
                     f"lays {conflict:.0%} of the received walls in the receiver's free space"

@@ -57,11 +57,11 @@ class FreeSpace:
         rows, cols = self._index(points)
         self.cells[rows, cols] = True
 
-    def conflict(self, points: np.ndarray, own_walls: np.ndarray) -> float:
+    def conflict(self, points: np.ndarray, own_walls: cKDTree | None) -> float:
         """Fraction of ``points`` (P, 2) (samples of the received walls, equally spaced along
         them, in this robot's frame) that lie in cells its beams crossed and further than
-        ``margin`` from every point of ``own_walls`` (W, 2) (samples of its own walls, spaced
-        well below ``margin``); 0 for no points."""
+        ``margin`` from every point of ``own_walls`` (a tree of samples of its own walls,
+        spaced well below ``margin``; None: no walls); 0 for no points."""
         pts = np.asarray(points, dtype=float).reshape(-1, 2)
         if len(pts) == 0 or self.cells.size == 0:
             return 0.0
@@ -70,9 +70,8 @@ class FreeSpace:
         inside = (rows >= 0) & (rows < rows_n) & (cols >= 0) & (cols < cols_n)
         free = np.zeros(len(pts), dtype=bool)
         free[inside] = self.cells[rows[inside], cols[inside]]
-        own = np.asarray(own_walls, dtype=float).reshape(-1, 2)
-        if free.any() and len(own):
-            dist, _ = cKDTree(own).query(pts[free], distance_upper_bound=self.margin)
+        if free.any() and own_walls is not None:
+            dist, _ = own_walls.query(pts[free], distance_upper_bound=self.margin)
             free[np.flatnonzero(free)[np.isfinite(dist)]] = False
         return float(free.mean())
 

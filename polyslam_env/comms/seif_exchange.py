@@ -134,7 +134,7 @@ class SeifMapExchange:
         else:
             result = Alignment("seif_fusion", found.transform, None, len(found.pairs), len(theirs))
             cov = transform_covariance(mine, theirs, found)
-            robot.fusion_sources[sender] = (theirs, found.transform, cov)
+            robot.add_fusion_source(sender, theirs, found.transform, cov)
         self.alignments.append(AlignmentAttempt(step, sender, receiver, result))
 
     def counters(self, robot: int) -> dict[str, float]:

@@ -142,7 +142,8 @@ class PointSlamRobot:
         #: (its frame), the accepted transform of that frame into this robot's and the
         #: transform's covariance
         self.fusion_sources: dict[int, tuple[InformationMap, np.ndarray, np.ndarray]] = {}
-        self._fused: tuple[object, LandmarkMap] | None = None  # (step and sources, fused map)
+        self._sources_version = 0  # bumped by every change of the sources
+        self._fused: tuple[tuple[int, int], LandmarkMap] | None = None  # (step, version), map
         self._read_pose()
 
     @property
@@ -216,6 +217,14 @@ class PointSlamRobot:
         """No polynomial map: the wall-map metrics see an empty map."""
         return []
 
+    def add_fusion_source(
+        self, sender: int, theirs: InformationMap, transform: np.ndarray, cov: np.ndarray
+    ) -> None:
+        """Keep ``sender``'s own map (its frame) with the accepted ``transform`` of that frame
+        into this robot's and the transform's covariance, replacing any older one."""
+        self.fusion_sources[sender] = (theirs, transform, cov)
+        self._sources_version += 1
+
     def information_map(self) -> InformationMap:
         """A SEIF robot's own map in information form, the pose eliminated (seed 001's unit
         of fusion): means (n, 2), information (2n, 2n), pillar ids (evaluation only)."""
@@ -229,11 +238,10 @@ class PointSlamRobot:
         """The back-end's landmark map, in this robot's frame; with SEIF fusion sources, its
         own map with every source fused in (senders in order)."""
         if self.fusion_sources:
-            sources = sorted(self.fusion_sources.items())
-            key = (self.steps, tuple((s, id(m)) for s, (m, _, _) in sources))
+            key = (self.steps, self._sources_version)
             if self._fused is None or self._fused[0] != key:
                 fused = self.information_map()
-                for _, (theirs, transform, cov) in sources:
+                for _, (theirs, transform, cov) in sorted(self.fusion_sources.items()):
                     fused = fuse_with_transform(fused, theirs, transform, cov)
                 self._fused = (key, LandmarkMap(fused.ids, fused.means, fused.covariances()))
             return self._fused[1]

@@ -39,7 +39,7 @@ import numpy as np
 from polyslam_env.core.config import Config, check_positive
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.slam.alignment import FeatureMap
-from polyslam_env.slam.merging import face_normal
+from polyslam_env.slam.merging import face_normal, unit_tangent
 from polyslam_env.slam.polynomial import Polynomial
 
 __all__ = ["CORNER_DESCRIPTOR_DIM", "CornerConfig", "wall_corners"]
@@ -71,13 +71,6 @@ class CornerConfig(Config):
             )
 
 
-def _unit_tangent(poly: Polynomial, xi: float) -> np.ndarray:
-    """(2,) unit tangent in the direction of growing ξ."""
-    slope = float(poly.slope(xi))
-    t = np.array([1.0, slope]) if poly.variate == 1 else np.array([slope, 1.0])
-    return np.asarray(t / math.hypot(t[0], t[1]))
-
-
 def _cross(a: np.ndarray, b: np.ndarray) -> float:
     return float(a[0] * b[1] - a[1] * b[0])
 
@@ -92,7 +85,7 @@ def _meet(
     s = 0.0
     for _ in range(_NEWTON_STEPS):
         q = wall.points_at(np.array([xi]))[0]
-        t = _unit_tangent(wall, xi)
+        t = unit_tangent(wall, xi)
         den = _cross(direction, t)
         if abs(den) < 1e-9:
             return None
@@ -125,7 +118,7 @@ def wall_corners(
     for k, wall, side in walls:
         for xi_end, outward in ((wall.lo, -1.0), (wall.hi, 1.0)):
             end = wall.points_at(np.array([xi_end]))[0]
-            u = outward * _unit_tangent(wall, xi_end)  # leaves the wall at this end
+            u = outward * unit_tangent(wall, xi_end)  # leaves the wall at this end
             for m, other, other_side in walls:
                 lo_box, hi_box = boxes[m]
                 if m == k or np.any(end < lo_box) or np.any(end > hi_box):
@@ -137,7 +130,7 @@ def wall_corners(
                 s, xi = hit
                 if abs(s) > cfg.reach or not other.lo - cfg.reach <= xi <= other.hi + cfg.reach:
                     continue
-                t_other = _unit_tangent(other, float(np.clip(xi, other.lo, other.hi)))
+                t_other = unit_tangent(other, float(np.clip(xi, other.lo, other.hi)))
                 if abs(_cross(u, t_other)) < sin_min:
                     continue  # nearly parallel: the same wall in pieces
                 arm = -u  # into this wall's body

@@ -92,8 +92,8 @@ def merge_gamma(poly: Polynomial, other: Polynomial, a: float, b: float) -> tupl
         inside = np.arange(_SAMPLES)
     pick = inside[np.unique(np.linspace(0, len(inside) - 1, m + 1).round().astype(int))]
     gamma_o = _rms(_errors(samples[pick], poly))
-    t_p = _tangent(poly, 0.5 * (a + b))
-    t_o = _tangent(other, float(xi_o[inside[len(inside) // 2]]))
+    t_p = unit_tangent(poly, 0.5 * (a + b))
+    t_o = unit_tangent(other, float(xi_o[inside[len(inside) // 2]]))
     angle = float(np.arccos(min(abs(float(t_p @ t_o)), 1.0)))
     return max(gamma_p, gamma_o), angle
 
@@ -108,7 +108,7 @@ def _rms(values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(values**2)))
 
 
-def _tangent(poly: Polynomial, xi: float) -> np.ndarray:
+def unit_tangent(poly: Polynomial, xi: float) -> np.ndarray:
     """(2,) unit tangent of the curve at ξ, in (x¹, x²)."""
     slope = float(poly.slope(xi))
     t = np.array([1.0, slope]) if poly.variate == 1 else np.array([slope, 1.0])
@@ -215,8 +215,8 @@ def join_gamma(poly: Polynomial, other: Polynomial, max_gap: float) -> float | N
     i, k = np.unravel_index(int(np.argmin(gaps)), gaps.shape)
     if gaps[i, k] > max_gap:
         return None
-    t_p = _tangent(poly, poly.lo if i == 0 else poly.hi)
-    t_o = _tangent(other, other.lo if k == 0 else other.hi)
+    t_p = unit_tangent(poly, poly.lo if i == 0 else poly.hi)
+    t_o = unit_tangent(other, other.lo if k == 0 else other.hi)
     if np.degrees(np.arccos(min(abs(float(t_p @ t_o)), 1.0))) > JOIN_ANGLE_DEG:
         return None
     delta = ends_o[k] - ends_p[i]
@@ -230,7 +230,7 @@ def _cross(a: np.ndarray, b: np.ndarray) -> float:
 
 def face_normal(poly: Polynomial, xi: float, side: int) -> np.ndarray:
     """(2,) unit normal at ξ pointing to the side the face was seen from (side ±1)."""
-    t = _tangent(poly, xi)
+    t = unit_tangent(poly, xi)
     # +90° turns the tangent (1, B') to +η for variate 1; −90° turns (B', 1) to +η (= +x¹)
     plus_eta = np.array([-t[1], t[0]]) if poly.variate == 1 else np.array([t[1], -t[0]])
     return np.asarray(side * plus_eta)

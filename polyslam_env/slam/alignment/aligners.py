@@ -49,7 +49,7 @@ from scipy.spatial import cKDTree
 
 from polyslam_env.core.config import Config, check_positive
 from polyslam_env.core.errors import ConfigError
-from polyslam_env.core.geometry import rotation, wrap_scalar
+from polyslam_env.core.geometry import rotation, wrap_angle, wrap_scalar
 
 __all__ = [
     "ALIGNERS",
@@ -227,8 +227,7 @@ def _supports(
     if a.oriented and b.oriented:
         assert a.headings is not None and b.headings is not None
         diff = b.headings + transform[2] - a.headings[np.where(found, nearest, 0)]
-        turn = np.abs(np.arctan2(np.sin(diff), np.cos(diff)))
-        found &= turn <= math.radians(cfg.heading_threshold_deg)
+        found &= np.abs(wrap_angle(diff)) <= math.radians(cfg.heading_threshold_deg)
     ok = np.flatnonzero(found)
     order = ok[np.argsort(dist[ok], kind="stable")]
     _, first = np.unique(nearest[order], return_index=True)
@@ -315,10 +314,10 @@ def _ransac_oriented(
     """
     hypotheses = np.array([_oriented_hypothesis(a, b, m) for m in matches])  # (k, 3)
     centre = b.positions.mean(axis=0)
-    placed = hypotheses[:, :2] + np.stack(
-        [np.cos(hypotheses[:, 2]) * centre[0] - np.sin(hypotheses[:, 2]) * centre[1],
-         np.sin(hypotheses[:, 2]) * centre[0] + np.cos(hypotheses[:, 2]) * centre[1]], axis=1
-    )  # fmt: skip
+    cos, sin = np.cos(hypotheses[:, 2]), np.sin(hypotheses[:, 2])
+    placed = hypotheses[:, :2] + np.column_stack(
+        [cos * centre[0] - sin * centre[1], sin * centre[0] + cos * centre[1]]
+    )  # (k, 2): where each hypothesis puts B's centroid
     bins = np.column_stack(
         [
             np.floor(placed / cfg.support_threshold),
@@ -494,9 +493,9 @@ def ransac(
     if (declined := _too_few("ransac", matches, cfg)) is not None:
         return declined
     tree = cKDTree(a.positions)
-    best, best_support = None, -1
     if a.oriented and b.oriented:
         return _ransac_oriented(a, b, matches, tree, cfg, veto, score)
+    best, best_support = None, -1
     for _ in range(cfg.iterations):
         k, m = rng.choice(len(matches), size=2, replace=False)
         (ia, jb), (ia2, jb2) = matches[k], matches[m]
