@@ -273,13 +273,15 @@ def qbad_refit_points(
     eps_m: int,
     anchor_pose: np.ndarray,
     n_state: int,
+    turn: tuple[int, float] | None = None,
 ) -> PointSet:
     """Q_bad ∪ R: the stored bad points plus ε_M equally spaced points on p* (full extent).
 
     ``poly`` must carry the current c0; the fit's G_x then has entries on the pose (through
-    the stored points) and on the old c0 (through R).
+    the stored points) and on the old c0 (through R), and on p*'s turn α with ``turn`` =
+    (α's state index, pivot ξ) (:func:`~polyslam_env.slam.fitting.polynomial_points`).
     """
-    on_poly = polynomial_points(poly, c0_index, c0_var, eps_m, poly.lo, poly.hi, n_state)
+    on_poly = polynomial_points(poly, c0_index, c0_var, eps_m, poly.lo, poly.hi, n_state, turn)
     return concat(stored_points(qbad, anchor_pose, n_state), on_poly)
 
 

@@ -248,11 +248,15 @@ def polynomial_points(
     lo: float,
     hi: float,
     n_state: int,
+    turn: tuple[int, float] | None = None,
 ) -> PointSet:
     """``n`` points equally spaced in ξ ∈ [lo, hi] on ``poly``; its c0 is state ``c0_index``.
 
     ``poly`` must carry the current state value of c0. ∂η/∂c0 = 1 (η = x² for variate 1, x¹
-    for variate 2); there is no measurement noise; every point weighs 1/var(c0).
+    for variate 2); there is no measurement noise; every point weighs 1/var(c0). ``turn`` =
+    (state index of the shape's turn α, pivot ξ_c): the true wall is the shape turned by α
+    about its point at ξ_c, so ∂π/∂α = J(π − π_c) (a landmark's considered rotation state,
+    see :class:`~polyslam_env.slam.robot.PolySlam`).
     """
     if not 3 <= c0_index < n_state:
         raise ValueError(
@@ -263,6 +267,12 @@ def polynomial_points(
     xy = poly.equally_spaced(n, lo, hi)  # (n, 2)
     d_state = np.zeros((n, 2, n_state))
     d_state[:, 1 if poly.variate == 1 else 0, c0_index] = 1.0
+    if turn is not None:
+        turn_index, pivot = turn
+        if not 3 <= turn_index < n_state or turn_index == c0_index:
+            raise ValueError(f"turn index must be another state index, got {turn_index}")
+        centre = poly.points_at(np.array([pivot]))[0]  # (2,)
+        d_state[:, :, turn_index] = (xy - centre) @ J_ROT.T
     return PointSet(
         xy=xy,
         d_state=d_state,
@@ -456,3 +466,10 @@ def _c0_gradient(
     d_eta = w * q_a
     d_xi = w * (q_da * resid - q_a * slope)
     return np.stack([d_xi, d_eta], axis=-1)
+
+
+def centroid_xi(points: PointSet, variate: int) -> float:
+    """ξ of the points' weighted centroid: where a shape-fixed fit's c0 measures the offset
+    (its ∂c0/∂η_i are w_i/Σw, so a turn α of the points about ξ_p moves c0 by (ξ̄ − ξ_p)·α)."""
+    xi, _ = _split(points.xy, variate)
+    return float(points.weights @ xi / points.weights.sum())

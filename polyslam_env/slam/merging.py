@@ -252,13 +252,20 @@ def merge_points(
     c0_var_b: float,
     eps_m: int,
     n_state: int,
+    turn_a: tuple[int, float] | None = None,
+    turn_b: tuple[int, float] | None = None,
 ) -> PointSet:
     """ε_M equally spaced points on each polynomial (whole extents), for the merged LMS fit.
 
     Both polynomials must carry their current c0; each set weighs 1/var(c0) of its own
-    landmark, so the fit's G_x has entries on both c0s.
+    landmark, so the fit's G_x has entries on both c0s, and on their turns α with ``turn_a``,
+    ``turn_b`` = (α's state index, pivot ξ) (:func:`~polyslam_env.slam.fitting.polynomial_points`).
     """
     return concat(
-        polynomial_points(poly_a, c0_index_a, c0_var_a, eps_m, poly_a.lo, poly_a.hi, n_state),
-        polynomial_points(poly_b, c0_index_b, c0_var_b, eps_m, poly_b.lo, poly_b.hi, n_state),
+        polynomial_points(
+            poly_a, c0_index_a, c0_var_a, eps_m, poly_a.lo, poly_a.hi, n_state, turn_a
+        ),
+        polynomial_points(
+            poly_b, c0_index_b, c0_var_b, eps_m, poly_b.lo, poly_b.hi, n_state, turn_b
+        ),
     )

@@ -23,7 +23,14 @@ from polyslam_env.core.blas import blas_threads
 from polyslam_env.slam import ekf, kernels
 from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
 from polyslam_env.slam.config import SlamConfig
-from polyslam_env.slam.fitting import Fit, PointSet, StoredPoint, fit_polynomial, store_beams
+from polyslam_env.slam.fitting import (
+    Fit,
+    PointSet,
+    StoredPoint,
+    centroid_xi,
+    fit_polynomial,
+    store_beams,
+)
 from polyslam_env.slam.landmarks import (
     LandmarkTable,
     ShapesView,
@@ -375,6 +382,7 @@ class PolySlam:
         evidence: tuple[float, float] | None = None,
         rotation: Sequence[tuple[int, float]] = (),
         turn: tuple[np.ndarray, float] | None = None,
+        points: PointSet | None = None,
     ) -> int:
         """Append a fitted landmark to the state; returns its new id. ``side``: the face its
         beams saw (+1 from +η, −1 from −η, 0 unknown; see :mod:`~polyslam_env.slam.merging`);
@@ -383,7 +391,24 @@ class PolySlam:
         to it ± ``landmarks.EXTENT_MARGIN``. With rotation states the shape's turn α goes in
         too (:meth:`_add_rotation`), a weighted mean of the turns of the landmarks in
         ``rotation`` ((index, weight) pairs) and of the current heading (or of ``turn``, see
-        :meth:`insert_landmark`)."""
+        :meth:`insert_landmark`).
+
+        The shape turns about its **pivot**, the point where its c0 measures the offset. A
+        merge or refit fits points sampled on older landmarks, each set weighted 1/var(c0);
+        its shape-fixed c0 is their weighted mean offset (∂c0/∂η_i = w_i/Σw), so with rotation
+        states the pivot is the ξ of their weighted centroid (``points``: the point set the
+        fit was made on). With the middle of the extent instead, a piece joined to a much more
+        certain one put c0's offset and α's turn about different points: the turn then moved
+        the wall where the model said it stayed, an error no state held (README "SLAM on
+        large floor plans" has the measured effect). A landmark made from a cluster of hits
+        (``points`` None) keeps the middle of its extent: its hits weigh 1/‖P_{k|k−1}‖ of
+        their steps while the stored-point model hangs them all on the current pose, and
+        their weighted centroid as pivot made the single-robot NEES rise in development runs
+        (``scripts/nees_episodes.py``). The paper's filter (no rotation states) keeps the
+        middle of the extent everywhere."""
+        pivot = None
+        if points is not None and self.config.rotation_states:
+            pivot = centroid_xi(points, fit.poly.variate)
         n = len(self.table)
         self.mean, self.cov = ekf.augment(self.mean, self.cov, fit.c0, fit.Gx, fit.Gy, fit.V)
         evidence = (fit.poly.lo, fit.poly.hi) if evidence is None else evidence
@@ -392,7 +417,7 @@ class PolySlam:
             self._add_rotation(n, poly, rotation, turn)
         return self.table.append(
             poly,
-            pivot=0.5 * (poly.lo + poly.hi),  # ξ of the centroid of its fit points
+            pivot=0.5 * (poly.lo + poly.hi) if pivot is None else pivot,
             xi_var=float(self.cov[0, 0] if poly.variate == 1 else self.cov[1, 1]),
             model_var=max(fit.rms**2 - self.config.range_sigma**2, 0.0),
             fit_half=max(0.5 * (poly.hi - poly.lo), 0.05),
@@ -466,9 +491,11 @@ class PolySlam:
         side: int = 0,
         evidence: tuple[float, float] | None = None,
         rotation: Sequence[tuple[int, float]] = (),
+        points: PointSet | None = None,
     ) -> int:
-        """Add the fit (its G_x may touch the old c0s) and then drop the old landmarks."""
-        new_id = self._augment(fit, side, evidence, rotation)
+        """Add the fit (its G_x may touch the old c0s; ``points``: what it was fitted on) and
+        then drop the old landmarks."""
+        new_id = self._augment(fit, side, evidence, rotation, points=points)
         for lid in old_ids:
             self._remove(lid)
         return new_id
@@ -487,6 +514,7 @@ class PolySlam:
             self.config.eps_m,
             self.mean[:3],
             self.mean.size,
+            self._turn_of(state_index - 3),
         )
         fit = self._fit(pts)
         if fit is None or fit.rms > self._max_fit_rms(rho):
@@ -499,7 +527,7 @@ class PolySlam:
             (float(xi_bad.min()), float(xi_bad.max())),
         )
         rotation = [(state_index - 3, _length_weight(poly.hi - poly.lo, float(np.ptp(xi_bad))))]
-        new_id = self._replace([landmark_id], fit, side, evidence, rotation)
+        new_id = self._replace([landmark_id], fit, side, evidence, rotation, pts)
         self._merge_into_map(new_id)
         return 1
 
@@ -587,12 +615,25 @@ class PolySlam:
             float(self.cov[3 + j, 3 + j]),
             cfg.eps_m,
             self.mean.size,
+            self._turn_of(idx),
+            self._turn_of(j),
         )
         fit = self._fit(pts)
         if fit is None:
             return None
-        if choice.joined and fit.rms > JOIN_RMS * cfg.range_sigma:
-            return None  # one polynomial does not explain both pieces: not one wall
+        # one polynomial must explain both pieces, else they are not one wall: a join within
+        # JOIN_RMS σ and, with join_pieces (off in the paper preset), an overlap merge within
+        # the acceptance RMS of any new landmark (the paper's γ < γ_M = 0.35 m alone paired
+        # two faces of a shelf 0.33 m apart that a robot had received without their sides,
+        # and their merged cubic ran 1.5 m off the map)
+        if choice.joined:
+            limit = JOIN_RMS * cfg.range_sigma
+        elif cfg.join_pieces:
+            limit = self._max_fit_rms(cfg.rho_max)
+        else:
+            limit = np.inf
+        if fit.rms > limit:
+            return None
         side = _combine_sides(
             self._side_in(int(sides[idx]), poly, fit.poly),
             self._side_in(int(sides[j]), other, fit.poly),
@@ -602,7 +643,16 @@ class PolySlam:
             evidence_on(self._evidence(j), other, fit.poly),
         )
         w = _length_weight(poly.hi - poly.lo, other.hi - other.lo)
-        return self._replace([landmark_id, other_id], fit, side, evidence, [(idx, w), (j, 1 - w)])
+        rotation = [(idx, w), (j, 1 - w)]
+        return self._replace([landmark_id, other_id], fit, side, evidence, rotation, pts)
+
+    def _turn_of(self, index: int) -> tuple[int, float] | None:
+        """(state index of landmark ``index``'s turn α, its pivot ξ), None without rotation
+        states: points sampled on its shape move with α (``fitting.polynomial_points``), so
+        a fit over them (a refit's R, a merge) has its c0's dependence on α in G_x."""
+        if not self.config.rotation_states:
+            return None
+        return 3 + len(self.table) + index, float(self.table.pivot[index])
 
     def _evidence(self, index: int) -> tuple[float, float]:
         """ξ-interval (on its own axis) of the hits supporting landmark ``index``."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from polyslam_env.slam.fitting import (
     PointSet,
     StoredPoint,
     beam_points,
+    centroid_xi,
     choose_variate,
     concat,
     fit_polynomial,
@@ -176,6 +178,57 @@ def test_fit_polynomial__jacobians_from_stored_cluster_points_match_finite_diffe
         fit.Gy[0], fd_jacobian(c0_of_noise, np.zeros(len(stored))), rtol=FD_RTOL, atol=FD_ATOL
     )
     np.testing.assert_allclose(np.diag(fit.V), SIGMA_R**2)
+
+
+def turned_points(
+    poly: Polynomial, c0: float, turn: float, pivot: float, n: int
+) -> np.ndarray:  # (n, 2)
+    """``polynomial_points``' positions for the state values (c0, turn): the shape with that
+    c0, turned by ``turn`` about its point at ``pivot``."""
+    moved = poly.with_c0(c0)
+    xy = moved.equally_spaced(n, poly.lo, poly.hi)
+    centre = moved.points_at(np.array([pivot]))[0]
+    c, s = math.cos(turn), math.sin(turn)
+    return centre + (xy - centre) @ np.array([[c, -s], [s, c]]).T
+
+
+def test_polynomial_points__turn_column_is_the_rotation_about_the_pivot() -> None:
+    for variate in (1, 2):
+        poly = Polynomial(variate, np.array([0.5, 0.2, 0.1, -0.03]), -1.0, 2.0)
+        ps = polynomial_points(poly, 4, 1e-4, 5, -1.0, 2.0, 7, turn=(6, 0.3))
+        for j in range(5):
+            for c in range(2):
+                fd = fd_jacobian(
+                    lambda a, p=poly, j=j, c=c: float(turned_points(p, 0.5, a[0], 0.3, 5)[j, c]),
+                    np.zeros(1),
+                )
+                assert ps.d_state[j, c, 6] == pytest.approx(fd[0], rel=FD_RTOL, abs=FD_ATOL)
+        with pytest.raises(ValueError, match="turn index"):
+            polynomial_points(poly, 4, 1e-4, 5, -1.0, 2.0, 7, turn=(4, 0.3))
+
+
+@pytest.mark.parametrize("variate", [1, 2])
+def test_centroid_xi__is_the_point_a_fitted_wall_turns_about(variate: int) -> None:
+    # a weighted LS line passes through the points' weighted centroid, so points turned about
+    # it give a line turned about it: the fitted wall's offset there does not move, and that
+    # is where a shape-fixed c0 measures it. About any other point (the middle of the extent,
+    # with the weights bunched at one end) the offset at the centroid moves with the turn
+    poly = Polynomial(variate, np.array([0.4, 0.3]), -1.0, 3.0)
+    weights = np.r_[np.full(6, 100.0), np.full(4, 1.0)]  # a certain piece and a vague one
+    xy = poly.equally_spaced(10, poly.lo, poly.hi)
+    pivot = centroid_xi(plain(xy, weights), variate)
+    assert pivot < 0.5 * (poly.lo + poly.hi) - 0.5
+
+    def offset_after_turn(about: float) -> Callable[[np.ndarray], float]:
+        def offset(a: np.ndarray) -> float:
+            turned = turned_points(poly, poly.c0, float(a[0]), about, 10)
+            return float(fit_polynomial(plain(turned, weights), 1, variate).poly.value(pivot))
+
+        return offset
+
+    assert fd_jacobian(offset_after_turn(pivot), np.zeros(1))[0] == pytest.approx(0, abs=FD_ATOL)
+    mid = 0.5 * (poly.lo + poly.hi)
+    assert abs(fd_jacobian(offset_after_turn(mid), np.zeros(1))[0]) > 0.5
 
 
 def test_fit_polynomial__translating_the_pose_shifts_c0_like_the_wall() -> None:

@@ -179,6 +179,26 @@ def test_merged_landmark__its_rotation_is_the_length_weighted_mean_of_the_parts(
     assert_symmetric_psd(slam.cov)
 
 
+def test_merged_landmark__turns_about_the_weighted_centroid_of_its_points() -> None:
+    """A merge fits ε_M points on each piece weighted 1/var(c0): its c0 is their weighted
+    mean offset, so its pivot (what α turns it about, ``kernels.beam_rows``' lever) is their
+    weighted centroid, here pulled towards the certain piece, not the middle of the extent."""
+    slam = PolySlam(SlamConfig(), np.linspace(-1.5, 1.5, 9), 4.0)
+    slam.mean = np.zeros(3)
+    slam.cov = np.diag([1e-4, 1e-4, 1e-5])
+    a = Polynomial(1, np.array([1.0, 0.0]), 0.0, 2.0)
+    b = Polynomial(1, np.array([1.0, 0.0]), 2.1, 3.1)
+    slam.insert_landmark(_fit(a, 3), merge=False)
+    slam.insert_landmark(_fit(b, slam.mean.size), merge=False)
+    slam.cov[3, 3] += 1e-6  # a: certain
+    slam.cov[4, 4] += 1e-3  # b: vague
+    w_a, w_b = 1.0 / slam.cov[3, 3], 1.0 / slam.cov[4, 4]
+    assert slam._merge_once(slam.landmark_ids[1]) is not None and slam.n_landmarks == 1
+    expected = (w_a * 1.0 + w_b * 2.6) / (w_a + w_b)  # each piece's points centre on its middle
+    assert slam.table.pivot[0] == pytest.approx(expected, rel=1e-9)
+    assert slam.table.pivot[0] < 0.5 * (0.0 + 3.1) - 0.3
+
+
 def test_received_landmark__its_rotation_is_the_given_turn_not_the_heading() -> None:
     """A received wall is turned by the frame transform: ``insert_landmark(..., turn=(g, v))``
     gives α the row g·P[:3] (its dependence on the receiver's pose) and the variance
