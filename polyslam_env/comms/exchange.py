@@ -17,11 +17,12 @@ Once per control step, after every robot's SLAM step, :meth:`RendezvousExchange.
 5. applies every delivered message exactly once at its receiver: relative pose from the
    receiver's range and bearing of the sender (taken at the step the message was sent) and
    the sender's bearing from the header; ``T_{l0,j0} = T_{j,j0} T_{l,j} T_{l,l0}⁻¹``, refined
-   on the walls the receiver already holds (``align_maps``; :mod:`.alignment`: the mean only,
-   the camera's covariance is kept); each polynomial → piecewise-linear chain (chord error
-   ≤ ``chord_tol``, 5 mm) → points every ``spacing`` (5 cm) along it → into the receiver's
-   frame → weighted LMS refit within ``refit_tol`` (2.5 mm) of those points, halving the chain
-   where one polynomial cannot follow it (:func:`refit_received`) → fused by the rules below.
+   on the walls the receiver already holds (``align_maps``; :mod:`.alignment`: the mean and
+   its posterior covariance, which decides which received points are kept); each polynomial
+   → piecewise-linear chain (chord error ≤ ``chord_tol``, 5 mm) → points every ``spacing``
+   (5 cm) along it → into the receiver's frame → weighted LMS refit within ``refit_tol``
+   (2.5 mm) of those points, halving the chain where one polynomial cannot follow it
+   (:func:`refit_received`) → fused by the rules below.
    Each received landmark thus lies within 7.5 mm of the sender's curve mapped through the
    estimated transform.
 
@@ -936,18 +937,27 @@ class RendezvousExchange:
         """The transform refined on the receiver's walls and its covariance
         (:func:`refine_transform`): anchors
         are its landmarks holding no data of this sender (an earlier copy would pull T back
-        to that meeting's error); one (chain, wall) pair weighs as one offset of the range
-        noise σ."""
+        to that meeting's error); one (chain, wall) pair weighs as one offset whose variance
+        is the range noise's plus both landmarks' normal variances (the sender's from its
+        record, the receiver's from its state: :func:`normal_variance`)."""
         sources = self._sources[message.header.receiver]
         anchors = [
-            poly
+            (poly, normal_variance(poly, slam.c0_variance(lid)))
             for lid, poly in zip(slam.table.ids, slam.polynomials(), strict=True)
             if sender not in sources.get(lid, ())
         ]
         chains = [
             chain_points(rec.polynomial, self.chord_tol, self.spacing) for rec in message.records
         ]
-        return refine_transform(t, cov_t, chains, anchors, slam.config.range_sigma)
+        return refine_transform(
+            t,
+            cov_t,
+            chains,
+            [poly for poly, _ in anchors],
+            slam.config.range_sigma,
+            chain_var=[normal_variance(rec.polynomial, rec.c0_var) for rec in message.records],
+            wall_var=[var for _, var in anchors],
+        )
 
     def _fuse(
         self,

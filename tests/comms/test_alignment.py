@@ -74,3 +74,60 @@ def test_align_transform__without_shared_walls_keeps_the_camera_transform() -> N
     np.testing.assert_array_equal(align_transform(t0, COV_T, [], WALLS, 0.02), t0)
     singular = np.zeros((3, 3))  # an exact camera: nothing to refine
     np.testing.assert_array_equal(align_transform(t0, singular, _chains(WALLS), WALLS, 0.02), t0)
+
+
+def _shifted(wall: Polynomial, offset: float) -> Polynomial:
+    """The wall moved by ``offset`` along η (its normal, for these nearly flat walls)."""
+    return wall.with_c0(wall.c0 + offset)
+
+
+def _refined_nees(rng: np.random.Generator, map_sd: float, trials: int, tell: bool) -> float:
+    """Mean NEES of ``refine_transform``'s (transform, covariance) over seeded trials in which
+    each map holds every wall off by an independent N(0, map_sd²) along its normal and the
+    camera's t0 is drawn from its covariance; ``tell``: the maps' variances are passed."""
+    nees = []
+    var = map_sd * map_sd
+    for _ in range(trials):
+        t0 = T_TRUE + rng.multivariate_normal(np.zeros(3), COV_T)
+        sent = [_shifted(w, rng.normal(0.0, map_sd)) for w in WALLS]
+        held = [_shifted(w, rng.normal(0.0, map_sd)) for w in WALLS]
+        extra = {"chain_var": [var] * 3, "wall_var": [var] * 3} if tell else {}
+        t, cov = alignment.refine_transform(t0, COV_T, _chains(sent), held, 0.002, **extra)
+        e = t - T_TRUE
+        nees.append(float(e @ np.linalg.solve(cov, e)))
+    return float(np.mean(nees))
+
+
+def test_refine_transform__covariance_holds_the_maps_own_errors() -> None:
+    """With both maps 2 cm off at every wall (their drift from their robots' true starts)
+    and a 2 mm range noise, the posterior that weighs each pair by the range noise alone is
+    overconfident; with each map's variance of each wall in the pair's variance, the mean
+    NEES of 300 trials is at most the upper end of the 99 % band of a mean of 300 χ²(3)
+    values, 3 + 2.576·√(6/300) = 3.36. (Below it is allowed: the a-posteriori variance
+    factor only ever inflates the covariance.)"""
+    rng = np.random.default_rng(11)
+    upper = 3.0 + 2.576 * np.sqrt(6.0 / 300)
+    assert _refined_nees(rng, 0.02, 300, tell=True) <= upper
+    assert _refined_nees(rng, 0.02, 300, tell=False) > 3 * upper
+
+
+def test_refine_transform__variance_factor_inflates_for_residuals_beyond_the_model() -> None:
+    """Pairs whose residuals at the solution exceed their stated variances (maps 2 cm off,
+    stated as exact) get the posterior scaled by their mean normalised square, never by less
+    than 1: the same inputs with the variances stated give a posterior no larger."""
+    rng = np.random.default_rng(12)
+    sent = [_shifted(w, rng.normal(0.0, 0.02)) for w in WALLS]
+    held = [_shifted(w, rng.normal(0.0, 0.02)) for w in WALLS]
+    t0 = T_TRUE + np.array([0.01, -0.01, 0.005])
+    _, blind = alignment.refine_transform(t0, COV_T, _chains(sent), held, 0.002)
+    var = [0.02**2] * 3
+    _, told = alignment.refine_transform(
+        t0, COV_T, _chains(sent), held, 0.002, chain_var=var, wall_var=var
+    )
+    assert np.trace(blind) > 0
+    _, exact = alignment.refine_transform(t0, COV_T, _chains(WALLS), WALLS, 0.002)
+    # exact walls: residuals within the range noise, factor 1; the posterior is the plain one
+    assert np.trace(blind) > 10 * np.trace(exact)
+    assert np.all(np.linalg.eigvalsh(told - exact) > -1e-15)
+    with pytest.raises(ValueError, match="one variance per chain"):
+        alignment.refine_transform(t0, COV_T, _chains(sent), held, 0.002, chain_var=[1.0])
