@@ -75,9 +75,9 @@ def refine_transform(
     the receiver's ``walls`` (with their current c0). One (chain k, wall w) pair's offset has
     variance σ² + ``chain_var[k]`` + ``wall_var[w]`` (m²): ``sigma`` of the range noise, and
     each map's own error of that wall along its normal (both maps drift from their robots'
-    true starts; with pairs weighed by the range noise alone the posterior came out 10–30
-    times too confident on the warehouse, ``polyslam fidelity``); the variances default to
-    zero. Returns the transform and its posterior covariance (Σ_T⁻¹ + Jᵀ W J)⁻¹ at the
+    true starts; weighed by the range noise alone, the posterior is overconfident:
+    ``tests/comms/test_alignment.py``); the variances default to zero.
+    Returns the transform and its posterior covariance (Σ_T⁻¹ + Jᵀ W J)⁻¹ at the
     solution; ``(t0, cov_t)`` when nothing matches, Σ_T is singular, or the correction fails
     the χ²₃ 99 % test."""
     t0 = np.asarray(t0, dtype=float)

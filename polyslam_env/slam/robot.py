@@ -394,13 +394,14 @@ class PolySlam:
         :meth:`insert_landmark`).
 
         The shape turns about its **pivot**, the point where its c0 measures the offset. A
-        merge or refit fits points sampled on older landmarks, each set weighted 1/var(c0);
-        its shape-fixed c0 is their weighted mean offset (∂c0/∂η_i = w_i/Σw), so with rotation
-        states the pivot is the ξ of their weighted centroid (``points``: the point set the
-        fit was made on). With the middle of the extent instead, a piece joined to a much more
-        certain one put c0's offset and α's turn about different points: the turn then moved
-        the wall where the model said it stayed, an error no state held (README "SLAM on
-        large floor plans" has the measured effect). A landmark made from a cluster of hits
+        merge fits points sampled on its two landmarks, each set weighted 1/var(c0) (a refit,
+        those of the old landmark and its Q_bad hits); its shape-fixed c0 is their weighted
+        mean offset (∂c0/∂η_i = w_i/Σw), so with rotation states the pivot is the ξ of their
+        weighted centroid (``points``: the point set the fit was made on). With the middle of
+        the extent instead, a piece joined to a much more certain one put c0's offset and α's
+        turn about different points: the turn then moved the wall where the model said it
+        stayed, an error no state held (README "SLAM on large floor plans" has the measured
+        effect). A landmark made from a cluster of hits
         (``points`` None) keeps the middle of its extent: its hits weigh 1/‖P_{k|k−1}‖ of
         their steps while the stored-point model hangs them all on the current pose, and
         their weighted centroid as pivot made the single-robot NEES rise in development runs
