@@ -8,6 +8,13 @@ Each beam point π is compared with every map polynomial by the approximation er
 * ε > σ_k — the point joins the cluster with most points within radius R (or a new one);
   when a cluster holds more than ε_Z points it becomes a new polynomial (:func:`fit_cluster`).
 
+Not in the paper (``SlamConfig.join_pieces``): a point with ε > ρ_k that lies past p*'s end by
+at most :data:`GAP_SPLIT` and on p*'s curve continued there (the caller's ``extends`` test) is
+the same wall seen a little further on: it stretches p*'s extent to itself instead of waiting
+in a cluster. A wall whose hits are sparse (a beam sweeping
+it at range, 0.3 m apart at full speed) then grows hit by hit, as it would with denser hits
+through the paper's case 1; a gap wider than :data:`GAP_SPLIT` (a doorway) is never crossed.
+
 :class:`MapBook` keeps the clusters and fills the Q_bad sets of the landmark table; it never
 touches the EKF. :meth:`MapBook.associate` returns what to do (:class:`AssociationResult`), and the
 caller builds the point sets (:func:`qbad_refit_points`, :func:`fit_cluster`), fits them and
@@ -17,7 +24,7 @@ augments / removes state entries and the landmark table's rows.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -94,6 +101,7 @@ class AssociationResult:
     good: dict[int, int] = field(default_factory=dict)  # beam → index into the polys given
     good_ids: dict[int, int] = field(default_factory=dict)  # beam → landmark id
     errors: dict[int, float] = field(default_factory=dict)  # beam → best ε (inf if no map)
+    extended: dict[int, int] = field(default_factory=dict)  # beam → index it continues
     refits: list[RefitRequest] = field(default_factory=list)
     new_landmarks: list[NewLandmarkRequest] = field(default_factory=list)
 
@@ -186,6 +194,7 @@ class MapBook:
         squared: bool = False,
         candidates: np.ndarray | None = None,
         rows: ShapeArrays | Sequence[ShapeRow] | None = None,
+        extends: Callable[[StoredPoint, int], bool] | None = None,
     ) -> AssociationResult:
         """Classify this step's beam points against the map as it stood at the step's start.
 
@@ -200,7 +209,9 @@ class MapBook:
         points' box will do): then every point is classified exactly as against the whole
         map; only ``errors`` reads inf for a point no candidate is near. ``rows``, the same
         polynomials as the kernels take them (e.g. ``LandmarkTable.arrays()``), saves packing
-        ``polys`` again.
+        ``polys`` again. ``extends(point, i)``, when given, says whether a point that is not
+        good for its nearest polynomial i continues it past its end (module docstring); such
+        a point goes to ``extended`` instead of Q_bad or a cluster.
         """
         if len(polys) != len(self.ids) or len(c0s) != len(self.ids):
             raise ValueError(f"{len(polys)} polys / {len(c0s)} c0s for {len(self.ids)} landmarks")
@@ -217,6 +228,8 @@ class MapBook:
             if eps <= rho:
                 result.good[point.beam] = best
                 result.good_ids[point.beam] = self.ids[best]
+            elif extends is not None and best >= 0 and extends(point, best):
+                result.extended[point.beam] = best
             elif eps <= sigma:
                 self._add_bad(self.ids[best], point, result)
             else:

@@ -21,7 +21,13 @@ import numpy as np
 
 from polyslam_env.core.blas import blas_threads
 from polyslam_env.slam import ekf, kernels
-from polyslam_env.slam.association import MapBook, fit_cluster, qbad_refit_points
+from polyslam_env.slam.association import (
+    GAP_SPLIT,
+    AssociationResult,
+    MapBook,
+    fit_cluster,
+    qbad_refit_points,
+)
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import (
     Fit,
@@ -225,11 +231,12 @@ class PolySlam:
             cfg.squared_error,
             candidates=self._association_candidates(points, sigma),
             rows=self.table.arrays(),
+            extends=self._continues_past_end if cfg.join_pieces else None,
         )
         if self.profile is not None:
             lap = self._lap("association", lap)
 
-        self._extend_extents(points, assoc.good)
+        self._extend_extents(points, assoc)
         refit = sum(self._refit(r.landmark_id, r.points, rho) for r in assoc.refits)
         created = merged = 0
         for request in assoc.new_landmarks:
@@ -262,12 +269,15 @@ class PolySlam:
 
     def _association_candidates(self, points: Sequence[StoredPoint], sigma: float) -> np.ndarray:
         """Landmarks whose box lies within σ_k (in metres) of this step's points' box: the
-        only ones a point can be good or bad for (see MapBook.associate)."""
+        only ones a point can be good or bad for (see MapBook.associate); with
+        ``join_pieces``, within GAP_SPLIT when that is wider (a point may continue one)."""
         if not points:
             return np.zeros(0, dtype=int)
         xs, ys = zip(*(p.xy.tolist() for p in points), strict=True)
         box = np.array([min(xs), max(xs), min(ys), max(ys)])
         reach = math.sqrt(sigma) if self.config.squared_error else sigma  # ε² ≤ σ_k there
+        if self.config.join_pieces:
+            reach = max(reach, GAP_SPLIT)
         reach = reach * (1.0 + 1e-9) + 1e-12  # ≥ the threshold despite rounding
         return boxes_near(self._boxes(), box, reach)
 
@@ -290,31 +300,66 @@ class PolySlam:
         self.profile.setdefault(stage, []).append(now - since)
         return now
 
-    def _extend_extents(self, points: Sequence[StoredPoint], good: dict[int, int]) -> None:
-        """Stretch a landmark's extent over good points just beyond its end.
+    def _extend_extents(self, points: Sequence[StoredPoint], assoc: AssociationResult) -> None:
+        """Stretch a landmark's extent over the points just beyond its end that its curve,
+        continued there, explains (:meth:`_continued_xi`).
 
-        A point within ρ_k of an end point belongs to the same wall (paper §3.1, case 1), but
-        a beam past the extent has no admissible intersection and cannot update c0. The
-        extent grows to the point's ξ only when the extrapolated curve itself explains the
-        point (|η − p(ξ)| ≤ 2σ of the range noise); otherwise the extrapolation would be
-        trusted where it bends away from a curved wall, and the point is left to Q_bad and a
-        refit, as in the paper. ``good`` maps beams to landmark indices (state index − 3).
+        A good point (ε ≤ ρ_k of an end point) belongs to the same wall (paper §3.1, case 1),
+        but a beam past the extent has no admissible intersection and cannot update c0; the
+        extent grows to it only when the extrapolated curve itself explains it, otherwise the
+        extrapolation would be trusted where it bends away from a curved wall, and the point
+        is left to Q_bad and a refit, as in the paper. An ``extended`` point (ε > ρ_k, up to
+        GAP_SPLIT past the end: the association's ``extends`` test) stretches the extent the
+        same way; its beam, which meets the curve at the very end of the new extent, is not
+        used in this step's update.
         """
-        limit = 2.0 * self.config.range_sigma
         table = self.table
         for point in points:
-            idx = good.get(point.beam)
+            idx = assoc.good.get(point.beam, assoc.extended.get(point.beam))
             if idx is None:
                 continue
-            v1 = table.variate[idx] == 1
-            xi, eta = (point.xy[0], point.xy[1]) if v1 else (point.xy[1], point.xy[0])
-            if table.lo[idx] <= xi <= table.hi[idx]:
-                continue
-            poly = table.polys[idx]
-            c0 = self.mean[3 + idx]
-            if abs(eta - c0 - float(poly.with_c0(0.0).value(xi))) > limit:
-                continue
-            table.extend_to_hit(idx, xi)
+            xi = self._continued_xi(point, idx)
+            if xi is not None:
+                table.extend_to_hit(idx, xi)
+
+    def _continued_xi(self, point: StoredPoint, idx: int) -> float | None:
+        """ξ of ``point`` when it lies past landmark ``idx``'s extent and the curve continued
+        there explains it (|η − p(ξ)| ≤ 2σ of the range noise); None otherwise."""
+        table = self.table
+        v1 = table.variate[idx] == 1
+        xi, eta = (point.xy[0], point.xy[1]) if v1 else (point.xy[1], point.xy[0])
+        if table.lo[idx] <= xi <= table.hi[idx]:
+            return None
+        curve = float(table.polys[idx].with_c0(0.0).value(xi)) + self.mean[3 + idx]
+        return float(xi) if abs(eta - curve) <= 2.0 * self.config.range_sigma else None
+
+    def _continues_past_end(self, point: StoredPoint, idx: int) -> bool:
+        """The association's ``extends`` test (``join_pieces``): ``point`` lies at most
+        GAP_SPLIT past landmark ``idx``'s end, on its continued curve, where that curve is
+        known to within the range noise relative to the robot: lever² · var(turn) ≤ σ²,
+        the lever being the distance from the shape's pivot and the turn its rotation
+        relative to the robot's heading (:meth:`_relative_turn_var`). A shape fitted on a
+        short stretch is not stretched far on its frozen slope; a cluster, a join or a refit
+        brings its next piece instead."""
+        xi = self._continued_xi(point, idx)
+        if xi is None:
+            return False
+        table = self.table
+        if min(abs(xi - table.lo[idx]), abs(xi - table.hi[idx])) > GAP_SPLIT:
+            return False
+        lever = xi - float(table.pivot[idx])
+        return lever * lever * self._relative_turn_var(idx) <= self._range_var
+
+    def _relative_turn_var(self, idx: int) -> float:
+        """Variance of landmark ``idx``'s shape rotation relative to the robot's heading:
+        var(α − θ) from the state with rotation states; otherwise the kernels' frozen-shape
+        model (the fit's slope error and the heading's random walk since the fit)."""
+        if self.config.rotation_states:
+            a = 3 + len(self.table) + idx
+            cov = self.cov
+            return float(cov[a, a] + cov[2, 2] - 2.0 * cov[a, 2])
+        poly = self.table.polys[idx]
+        return self._rotation_fit_var(poly) + float(self._turn_var()[idx])
 
     def _screen_innovations(self, ranges: np.ndarray) -> None:
         """Hook of :meth:`_is_diverging`, run right after the prediction: the NIS of every beam
