@@ -371,9 +371,9 @@ def fit_cluster(
 
 #: m, widest gap between neighbouring points (along the wall) that one landmark may span. The
 #: smallest doorway a robot can pass is its diameter 0.13 m; consecutive hits of one beam
-#: along a wall are ≤ 0.1 m apart at the robots' speeds (≤ 0.1 m per step) and two beams
-#: interleave, so 0.3 m — well above the point spacing, below any real door (≥ 0.6 m in the
-#: generators) plus the robot's own clearance — separates a gap from sparse sampling.
+#: along a wall it drives past are at most v_max·T = 0.3 m apart (the default speed limit and
+#: period) and the beams' hits interleave, so 0.3 m — the widest sampling gap, half the
+#: narrowest door of the generators (0.6 m) — separates a gap from sparse sampling.
 GAP_SPLIT = 0.3
 
 
