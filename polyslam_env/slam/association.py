@@ -8,7 +8,7 @@ Each beam point π is compared with every map polynomial by the approximation er
 * ε > σ_k — the point joins the cluster with most points within radius R (or a new one);
   when a cluster holds more than ε_Z points it becomes a new polynomial (:func:`fit_cluster`).
 
-Not in the paper (``SlamConfig.join_pieces``): a point with ε > ρ_k that lies past p*'s end by
+Not in the paper (``SlamConfig.stretch_ends``): a point with ε > ρ_k that lies past p*'s end by
 at most :data:`GAP_SPLIT` and on p*'s curve continued there (the caller's ``extends`` test) is
 the same wall seen a little further on: it stretches p*'s extent to itself instead of waiting
 in a cluster. A wall whose hits are sparse (a beam sweeping

@@ -102,7 +102,8 @@ class SlamConfig(Config):
     # "considered": its own state, the heading error it was fitted with plus the fit's own
     #   slope error, carried with its correlations but never estimated (Schmidt–Kalman).
     shape_rotation: str = "considered"
-    join_pieces: bool = True  # join pieces of one wall, stretch ends to hits (paper: False)
+    join_pieces: bool = True  # join end-to-end pieces of one wall (merging.py; paper: False)
+    stretch_ends: bool = True  # a hit just past an end stretches it (association; paper: False)
     link_clusters: bool = True  # clusters joined by a point near both (association; paper: False)
     blas_threads: int = 1  # BLAS threads during a step (polyslam_env/core/blas.py); 0: leave as is
     backend: str = "polynomial"  # one of BACKENDS; the point ones map the pillars
@@ -162,14 +163,20 @@ class SlamConfig(Config):
         return np.diag([self.odom_sigma_xy**2, self.odom_sigma_xy**2, s_th**2])
 
 
-#: ``paper``: the paper's algorithm and §4 values. Our defaults differ in three places:
-#: end-to-end pieces of one wall are joined and a hit just past a wall's end on its continued
-#: curve stretches it (``join_pieces``: merging.py, association.py); a point near two clusters joins
+#: ``paper``: the paper's algorithm and §4 values. Our defaults differ in four places:
+#: end-to-end pieces of one wall are joined (``join_pieces``); a hit just past a wall's end on
+#: its continued curve stretches it (``stretch_ends``); a point near two clusters joins
 #: them (``link_clusters``), so the sparse hits of beams sweeping a wall come together; and
 #: ε_Z is 15, not 10, because linked clusters grow fast and a shape fitted to more points
 #: carries a smaller frozen error (README "SLAM on large floor plans" has the measurements).
 PRESETS: dict[str, SlamConfig] = {
-    "paper": SlamConfig(eps_z=10, join_pieces=False, link_clusters=False, shape_rotation="heading")
+    "paper": SlamConfig(
+        eps_z=10,
+        join_pieces=False,
+        stretch_ends=False,
+        link_clusters=False,
+        shape_rotation="heading",
+    )
 }
 
 

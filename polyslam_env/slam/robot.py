@@ -231,7 +231,7 @@ class PolySlam:
             cfg.squared_error,
             candidates=self._association_candidates(points, sigma),
             rows=self.table.arrays(),
-            extends=self._continues_past_end if cfg.join_pieces else None,
+            extends=self._continues_past_end if cfg.stretch_ends else None,
         )
         if self.profile is not None:
             lap = self._lap("association", lap)
@@ -270,13 +270,13 @@ class PolySlam:
     def _association_candidates(self, points: Sequence[StoredPoint], sigma: float) -> np.ndarray:
         """Landmarks whose box lies within σ_k (in metres) of this step's points' box: the
         only ones a point can be good or bad for (see MapBook.associate); with
-        ``join_pieces``, within GAP_SPLIT when that is wider (a point may continue one)."""
+        ``stretch_ends``, within GAP_SPLIT when that is wider (a point may continue one)."""
         if not points:
             return np.zeros(0, dtype=int)
         xs, ys = zip(*(p.xy.tolist() for p in points), strict=True)
         box = np.array([min(xs), max(xs), min(ys), max(ys)])
         reach = math.sqrt(sigma) if self.config.squared_error else sigma  # ε² ≤ σ_k there
-        if self.config.join_pieces:
+        if self.config.stretch_ends:
             reach = max(reach, GAP_SPLIT)
         reach = reach * (1.0 + 1e-9) + 1e-12  # ≥ the threshold despite rounding
         return boxes_near(self._boxes(), box, reach)
@@ -334,7 +334,7 @@ class PolySlam:
         return float(xi) if abs(eta - curve) <= 2.0 * self.config.range_sigma else None
 
     def _continues_past_end(self, point: StoredPoint, idx: int) -> bool:
-        """The association's ``extends`` test (``join_pieces``): ``point`` lies at most
+        """The association's ``extends`` test (``stretch_ends``): ``point`` lies at most
         GAP_SPLIT past landmark ``idx``'s end, on its continued curve, where that curve is
         known to within the range noise relative to the robot: lever² · var(turn) ≤ σ²,
         the lever being the distance from the shape's pivot and the turn its rotation

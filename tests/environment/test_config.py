@@ -82,7 +82,11 @@ def test_env_config__unknown_top_level_key_in_yaml_names_key_and_file(tmp_path: 
 def test_env_config__slam_preset_replaces_slam_and_conflicts_with_custom_slam() -> None:
     assert EnvConfig(slam_preset="paper").slam == slam_preset("paper")
     assert slam_preset("paper") == SlamConfig(
-        eps_z=10, join_pieces=False, link_clusters=False, shape_rotation="heading"
+        eps_z=10,
+        join_pieces=False,
+        stretch_ends=False,
+        link_clusters=False,
+        shape_rotation="heading",
     )
     with pytest.raises(ConfigError, match="slam_preset"):
         EnvConfig(slam=SlamConfig(rho_min=0.05), slam_preset="paper")

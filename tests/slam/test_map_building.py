@@ -204,12 +204,12 @@ def test_insert_landmark__keeps_the_senders_extent_as_its_evidence() -> None:
         ((0.2, 0.4), (0.8, 0.8), False),  # 0.4 m past the end: wider than GAP_SPLIT, a door
     ],
 )
-def test_hit_past_an_end__on_the_continued_wall_stretches_it_with_join_pieces_only(
+def test_hit_past_an_end__on_the_continued_wall_stretches_it_with_stretch_ends_only(
     wall: tuple[float, float], hit: tuple[float, float], stretched: bool
 ) -> None:
     """A landmark y = 0.8 on ``wall`` (ξ-interval) and one beam hit at ``hit``, beyond ρ_k and
     σ_k of its end (0.08 and 0.1 m at zero uncertainty): the paper files it in a cluster; with
-    ``join_pieces`` a hit within GAP_SPLIT past the end and within 2σ of the continued curve
+    ``stretch_ends`` a hit within GAP_SPLIT past the end and within 2σ of the continued curve
     (whose turn is known to within the range noise there: lever 0.4 m × σ_α 0.041 rad = 1.6 cm
     for a 0.4 m shape fitted on ε_Z + 1 points) stretches the extent and its evidence to the
     hit, anything else is filed as in the paper. Either way no beam updates c0 (the hit is
@@ -217,14 +217,14 @@ def test_hit_past_an_end__on_the_continued_wall_stretches_it_with_join_pieces_on
     assert math.hypot(hit[0] - wall[1], hit[1] - 0.8) > SlamConfig().sigma_min
     angles = np.radians([45.0])
     ranges = np.array([math.hypot(*hit)])  # the 45° beam from the origin ends at the hit
-    for cfg, join in ((SlamConfig(), True), (SlamConfig(join_pieces=False), False)):
+    for cfg, join in ((SlamConfig(), True), (SlamConfig(stretch_ends=False), False)):
         slam = PolySlam(cfg, angles, MAX_RANGE)
         poly = Polynomial(1, np.array([0.8, 0.0, 0.0, 0.0]), *wall)
         fit = Fit(poly, 0.8, np.zeros((1, 3)), np.ones((1, 1)), np.eye(1) * 1e-4, 0.01, 1)
         slam.insert_landmark(fit)
         info = slam.step(np.zeros(3), ranges)
         expect = stretched and join
-        assert slam.table.polys[0].hi == (hit[0] if expect else wall[1]), (cfg.join_pieces, hit)
+        assert slam.table.polys[0].hi == (hit[0] if expect else wall[1]), (cfg.stretch_ends, hit)
         assert slam.table.evidence[0][1] == (hit[0] if expect else wall[1])
         assert info.beams_used == 0
         assert len(slam.book.clusters) == int(not expect)
