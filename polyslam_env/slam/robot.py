@@ -304,14 +304,21 @@ class PolySlam:
         """Stretch a landmark's extent over the points just beyond its end that its curve,
         continued there, explains (:meth:`_continued_xi`).
 
-        A good point (ε ≤ ρ_k of an end point) belongs to the same wall (paper §3.1, case 1),
-        but a beam past the extent has no admissible intersection and cannot update c0; the
-        extent grows to it only when the extrapolated curve itself explains it, otherwise the
-        extrapolation would be trusted where it bends away from a curved wall, and the point
-        is left to Q_bad and a refit, as in the paper. An ``extended`` point (ε > ρ_k, up to
-        GAP_SPLIT past the end: the association's ``extends`` test) stretches the extent the
-        same way; its beam, which meets the curve at the very end of the new extent, is not
-        used in this step's update.
+        A good point (ε ≤ ρ_k of an end point) belongs to the same wall (paper §3.1, case 1);
+        the extent grows to it only when the extrapolated curve itself explains it, otherwise
+        the extrapolation would be trusted where it bends away from a curved wall. An
+        ``extended`` point (ε > ρ_k, up to GAP_SPLIT past the end: the association's
+        ``extends`` test) stretches the extent the same way; its beam, which meets the curve
+        at the very end of the new extent, is not used in this step's update.
+
+        With ``stretch_ends``, a good point past the extent that the curve does not explain
+        does not update c0 either. The paper takes its beam to have no admissible intersection
+        there, but a beam that comes in obliquely past the end can cross the curve inside
+        the extent and stop short of it: on a shelf's side face, a few centimetres from the
+        corner of the face the landmark is. Its innovation is then the distance between the
+        two faces along the beam (13 cm in the warehouse episode where this was found), and
+        with a few centimetres of pose uncertainty the χ² gate let it through: one beam moved
+        the pose by 4 cm and 0.24°.
         """
         table = self.table
         for point in points:
@@ -321,15 +328,23 @@ class PolySlam:
             xi = self._continued_xi(point, idx)
             if xi is not None:
                 table.extend_to_hit(idx, xi)
+            elif self.config.stretch_ends and not self._within_extent(point, idx):
+                assoc.good_ids.pop(point.beam, None)  # its hit is not on the landmark
+
+    def _within_extent(self, point: StoredPoint, idx: int) -> bool:
+        """Whether ``point``'s ξ lies on landmark ``idx``'s extent."""
+        table = self.table
+        xi = point.xy[0] if table.variate[idx] == 1 else point.xy[1]
+        return bool(table.lo[idx] <= xi <= table.hi[idx])
 
     def _continued_xi(self, point: StoredPoint, idx: int) -> float | None:
         """ξ of ``point`` when it lies past landmark ``idx``'s extent and the curve continued
         there explains it (|η − p(ξ)| ≤ 2σ of the range noise); None otherwise."""
+        if self._within_extent(point, idx):
+            return None
         table = self.table
         v1 = table.variate[idx] == 1
         xi, eta = (point.xy[0], point.xy[1]) if v1 else (point.xy[1], point.xy[0])
-        if table.lo[idx] <= xi <= table.hi[idx]:
-            return None
         curve = float(table.polys[idx].with_c0(0.0).value(xi)) + self.mean[3 + idx]
         return float(xi) if abs(eta - curve) <= 2.0 * self.config.range_sigma else None
 

@@ -228,3 +228,34 @@ def test_hit_past_an_end__on_the_continued_wall_stretches_it_with_stretch_ends_o
         assert slam.table.evidence[0][1] == (hit[0] if expect else wall[1])
         assert info.beams_used == 0
         assert len(slam.book.clusters) == int(not expect)
+
+
+def test_hit_past_an_end__off_the_curve_does_not_update_through_the_extent() -> None:
+    """A landmark y = 0.8, x ∈ [0.2, 0.6]; the robot at (1, 0.2) with a few cm of pose
+    uncertainty looks at (0.58, 0.8), on the extent, and its beam stops at (0.62, 0.743), 6 cm
+    from the end point (good: ε ≤ ρ_k) but 5.7 cm off the line and past the extent, as on a
+    shelf's side face near the corner of the face the landmark is. The ray crosses the line
+    inside the extent, so the paper's filter updates with a 7 cm innovation the gate lets
+    through and moves the pose by several cm; with ``stretch_ends`` the beam is not used."""
+    moved = {}
+    for stretch in (True, False):
+        cfg = SlamConfig(odom_sigma_xy=0.03, odom_sigma_theta_deg=0.3, stretch_ends=stretch)
+        slam = PolySlam(cfg, np.array([0.0]), MAX_RANGE)
+        poly = Polynomial(1, np.array([0.8, 0.0, 0.0, 0.0]), 0.2, 0.6)
+        slam.insert_landmark(
+            Fit(poly, 0.8, np.zeros((1, 3)), np.ones((1, 1)), np.eye(1) * 1e-4, 0.01, 1)
+        )
+        none = np.array([np.inf])
+        slam.step(np.array([0.0, 0.0, math.atan2(0.2, 1.0)]), none)
+        slam.step(np.array([math.hypot(1.0, 0.2), 0.0, 0.0]), none)  # now at (1, 0.2)
+        heading = math.atan2(0.8 - 0.2, 0.58 - 1.0)
+        slam.step(np.array([0.0, 0.0, heading - slam.pose[2]]), none)
+        before = slam.pose
+        assert np.allclose(before, [1.0, 0.2, heading])
+        direction = np.array([0.58 - 1.0, 0.8 - 0.2]) / math.hypot(0.42, 0.6)
+        hit = before[:2] + (0.62 - 1.0) / direction[0] * direction
+        assert abs(hit[1] - 0.8) > 2 * RANGE_SIGMA and math.hypot(*(hit - [0.6, 0.8])) < 0.08
+        info = slam.step(np.zeros(3), np.array([math.hypot(*(hit - before[:2]))]))
+        moved[stretch] = (info.beams_used, float(np.linalg.norm(slam.pose[:2] - before[:2])))
+    assert moved[True] == (0, 0.0)
+    assert moved[False][0] == 1 and moved[False][1] > 0.02  # the paper's filter is pulled
