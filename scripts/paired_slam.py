@@ -23,7 +23,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import sys
 import time
@@ -38,6 +37,7 @@ from polyslam_env.apps.fidelity import FidelityConfig, episode_config
 from polyslam_env.apps.jobs import run_jobs
 from polyslam_env.apps.rollout import run_episode
 from polyslam_env.cli.common import progress_bar
+from polyslam_env.core.errors import ConfigError
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import parallel_env
 
@@ -81,29 +81,17 @@ class _Replay:
         return action
 
 
-def overrides(pairs: list[str]) -> dict[str, Any]:
-    """``["slam.eps_z=10", ...]`` → nested dict; a one-line error on a malformed pair."""
-    out: dict[str, Any] = {}
+def setting(base: dict[str, Any], pairs: list[str]) -> dict[str, Any]:
+    """The env config ``base`` with ``["slam.eps_z=10", ...]`` applied (dotted keys reach
+    nested fields through ``Config.replace``, values are YAML), validated; a one-line error
+    on a malformed pair, a ``ConfigError`` on an unknown field or a bad value."""
+    overrides: dict[str, Any] = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
         if not sep or not key:
             sys.exit(f"paired_slam: expected KEY=VALUE (e.g. slam.eps_z=10), got {pair!r}")
-        node = out
-        *parents, leaf = key.split(".")
-        for part in parents:
-            node = node.setdefault(part, {})
-        node[leaf] = yaml.safe_load(value)
-    return out
-
-
-def _merged(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
-    out = copy.deepcopy(base)
-    for key, value in extra.items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = _merged(out[key], value)
-        else:
-            out[key] = value
-    return out
+        overrides[key.replace(".", "__")] = yaml.safe_load(value)
+    return EnvConfig.from_dict(base).replace(**overrides).to_dict()
 
 
 def _final_true_poses(env: Any) -> np.ndarray:  # (N, 3)
@@ -163,11 +151,10 @@ def main() -> None:
         sys.exit(f"paired_slam: --seeds must be >= 2, got {args.seeds}")
     base = episode_config(FidelityConfig(), args.map, args.exchange == "on")
     configs = []
-    for name, extra in (("a", args.a), ("b", args.b)):
-        config = _merged(base, overrides(extra))
+    for name, pairs in (("a", args.a), ("b", args.b)):
         try:
-            configs.append(EnvConfig.from_dict(config).to_dict())
-        except Exception as exc:  # a bad override: say which, in one line
+            configs.append(setting(base, pairs))
+        except ConfigError as exc:  # a bad override: say which, in one line
             sys.exit(f"paired_slam: --{name}: {exc}")
     seeds = range(args.seed, args.seed + args.seeds)
     jobs = [(configs[0], configs[1], seed) for seed in seeds]

@@ -9,6 +9,7 @@ from types import ModuleType
 import pytest
 
 from polyslam_env.apps.fidelity import FidelityConfig, episode_config
+from polyslam_env.core.errors import ConfigError
 
 
 def _script() -> ModuleType:
@@ -20,14 +21,22 @@ def _script() -> ModuleType:
     return module
 
 
-def test_overrides__nested_yaml_values_and_a_one_line_error() -> None:
+def test_setting__nested_yaml_values_and_a_one_line_error() -> None:
     script = _script()
-    got = script.overrides(["slam.eps_z=10", "slam.stretch_ends=false", "channel.range=2.5"])
-    assert got == {"slam": {"eps_z": 10, "stretch_ends": False}, "channel": {"range": 2.5}}
-    base = {"slam": {"eps_z": 15, "order": 3}, "max_steps": 600}
-    assert script._merged(base, got)["slam"] == {"eps_z": 10, "order": 3, "stretch_ends": False}
+    base = episode_config(FidelityConfig(), "loop", True)
+    got = script.setting(base, ["slam.eps_z=10", "slam.stretch_ends=false", "channel.range=2.5"])
+    assert (got["slam"]["eps_z"], got["slam"]["stretch_ends"], got["channel"]["range"]) == (
+        10,
+        False,
+        2.5,
+    )
+    # the other fields are the base's
+    assert got["slam"]["order"] == base["slam"]["order"]
+    assert got["max_steps"] == base["max_steps"]
     with pytest.raises(SystemExit, match="KEY=VALUE"):
-        script.overrides(["slam.eps_z"])
+        script.setting(base, ["slam.eps_z"])
+    with pytest.raises(ConfigError, match="stretch_end"):
+        script.setting(base, ["slam.stretch_end=false"])
 
 
 def test_pair__the_same_setting_replayed_gives_the_same_metrics() -> None:
@@ -38,5 +47,5 @@ def test_pair__the_same_setting_replayed_gives_the_same_metrics() -> None:
     config["max_steps"] = 40
     out = script.pair((config, config, 3))
     assert out["a"] == out["b"]
-    config_b = script._merged(config, script.overrides(["slam.stretch_ends=false"]))
+    config_b = script.setting(config, ["slam.stretch_ends=false"])
     assert script.pair((config, config_b, 3))["a"] == out["a"]  # A is unchanged by B

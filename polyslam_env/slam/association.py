@@ -11,9 +11,9 @@ Each beam point π is compared with every map polynomial by the approximation er
 Not in the paper (``SlamConfig.stretch_ends``): a point with ε > ρ_k that lies past p*'s end by
 at most :data:`GAP_SPLIT` and on p*'s curve continued there (the caller's ``extends`` test) is
 the same wall seen a little further on: it stretches p*'s extent to itself instead of waiting
-in a cluster. A wall whose hits are sparse (a beam sweeping
-it at range, 0.3 m apart at full speed) then grows hit by hit, as it would with denser hits
-through the paper's case 1; a gap wider than :data:`GAP_SPLIT` (a doorway) is never crossed.
+in a cluster. A wall whose hits are sparse (a beam sweeping it at range, 0.3 m apart at full
+speed) then grows hit by hit, as it would with denser hits through the paper's case 1; a gap
+wider than :data:`GAP_SPLIT` (a doorway) is never crossed.
 
 :class:`MapBook` keeps the clusters and fills the Q_bad sets of the landmark table; it never
 touches the EKF. :meth:`MapBook.associate` returns what to do (:class:`AssociationResult`), and the

@@ -323,12 +323,12 @@ class PolySlam:
         table = self.table
         for point in points:
             idx = assoc.good.get(point.beam, assoc.extended.get(point.beam))
-            if idx is None:
+            if idx is None or self._within_extent(point, idx):
                 continue
             xi = self._continued_xi(point, idx)
             if xi is not None:
                 table.extend_to_hit(idx, xi)
-            elif self.config.stretch_ends and not self._within_extent(point, idx):
+            elif self.config.stretch_ends:
                 assoc.good_ids.pop(point.beam, None)  # its hit is not on the landmark
 
     def _within_extent(self, point: StoredPoint, idx: int) -> bool:
@@ -370,7 +370,7 @@ class PolySlam:
         var(α − θ) from the state with rotation states; otherwise the kernels' frozen-shape
         model (the fit's slope error and the heading's random walk since the fit)."""
         if self.config.rotation_states:
-            a = 3 + len(self.table) + idx
+            a = self._turn_index(idx)
             cov = self.cov
             return float(cov[a, a] + cov[2, 2] - 2.0 * cov[a, 2])
         poly = self.table.polys[idx]
@@ -541,7 +541,7 @@ class PolySlam:
         idx = self.table.index_of(landmark_id)
         drop = [3 + idx]
         if self.config.rotation_states:
-            drop.append(3 + len(self.table) + idx)
+            drop.append(self._turn_index(idx))
         self.mean, self.cov = ekf.remove(self.mean, self.cov, drop)
         self.table.remove(idx)
 
@@ -713,7 +713,11 @@ class PolySlam:
         a fit over them (a refit's R, a merge) has its c0's dependence on α in G_x."""
         if not self.config.rotation_states:
             return None
-        return 3 + len(self.table) + index, float(self.table.pivot[index])
+        return self._turn_index(index), float(self.table.pivot[index])
+
+    def _turn_index(self, index: int) -> int:
+        """State index of landmark ``index``'s turn α (rotation states follow the n c0s)."""
+        return 3 + len(self.table) + index
 
     def _evidence(self, index: int) -> tuple[float, float]:
         """ξ-interval (on its own axis) of the hits supporting landmark ``index``."""
