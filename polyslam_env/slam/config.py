@@ -104,6 +104,9 @@ class SlamConfig(Config):
     shape_rotation: str = "considered"
     join_pieces: bool = True  # join end-to-end pieces of one wall (merging.py; paper: False)
     stretch_ends: bool = True  # a hit just past an end stretches it (association; paper: False)
+    # beams whose hit lies within this many σ (of its place along the curve) of a landmark's
+    # end are not used in the update: they may pass the end (kernels.ends_in_doubt; paper: 0)
+    end_sigma: float = 2.0
     link_clusters: bool = True  # clusters joined by a point near both (association; paper: False)
     blas_threads: int = 1  # BLAS threads during a step (polyslam_env/core/blas.py); 0: leave as is
     backend: str = "polynomial"  # one of BACKENDS; the point ones map the pillars
@@ -138,6 +141,7 @@ class SlamConfig(Config):
                     f" polynomial, got {getattr(self, name)}"
                 )
         check_non_negative("slam.merge_min_overlap", self.merge_min_overlap)
+        check_non_negative("slam.end_sigma", self.end_sigma)
         check_non_negative("slam.odom_sigma_xy", self.odom_sigma_xy)
         check_non_negative("slam.odom_sigma_theta_deg", self.odom_sigma_theta_deg)
         for i, s in enumerate(self.p0_sigma):
@@ -174,6 +178,7 @@ PRESETS: dict[str, SlamConfig] = {
         eps_z=10,
         join_pieces=False,
         stretch_ends=False,
+        end_sigma=0.0,
         link_clusters=False,
         shape_rotation="heading",
     )

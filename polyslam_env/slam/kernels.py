@@ -481,11 +481,16 @@ def beam_rows(
     alpha_index: np.ndarray,  # (≥ k,) int64 out: the rotation's state index, −1: none
     h_alpha: np.ndarray,  # (≥ k,) out
     variance: np.ndarray,  # (≥ k,) out
+    end_room: np.ndarray,  # (≥ k,) out: how far inside its landmark's extent the hit lies (ξ)
+    xi_grad: np.ndarray,  # (≥ k, 4) out: ∂ξ*/∂(x, y, θ) at fixed range, and dξ/dt
 ) -> int:
     """The EKF rows of the ``beams`` with a usable hit (:func:`cast_into` on the landmarks
     within ``reach``; near-tangent hits, below ``min_sine``, are skipped), written to the first
     rows of the outputs in beam order: innovation, h_pose, c0 state index, h_c0 = 1/D, the
-    shape rotation's state index and Jacobian (with ``alpha_base`` ≥ 0) and the R diagonal.
+    shape rotation's state index and Jacobian (with ``alpha_base`` ≥ 0) and the R diagonal;
+    and, for :func:`ends_in_doubt`, the hit's distance from the nearer end of its landmark's
+    extent and the parts of ∂ξ*/∂state that are not through the range (ξ* = ξ_robot + t·dξ:
+    ∂ξ*/∂state = ``xi_grad[:3]`` on the pose + ``xi_grad[3]``·∂t/∂state).
     Returns how many. See ``PolySlam._beam_rows`` for the model (the Jacobian of
     SPEC §3 and the frozen shape's terms). Outputs are written, not returned: numba boxes
     every array it returns into a new Python object (~0.6 µs each)."""
@@ -546,8 +551,61 @@ def beam_rows(
         alpha_index[k] = alpha_base + j if h_rot != 0.0 else -1
         h_alpha[k] = h_rot
         variance[k] = var
+        end_room[k] = _min(xi[b] - lo[j], hi[j] - xi[b])
+        xi_grad[k, 0], xi_grad[k, 1] = (1.0, 0.0) if v1 else (0.0, 1.0)
+        xi_grad[k, 2] = t[b] * d_xi
+        xi_grad[k, 3] = cos if v1 else sin
         k += 1
     return k
+
+
+@njit
+def ends_in_doubt(
+    cov: np.ndarray,  # (3+n, 3+n)
+    h_pose: np.ndarray,  # (k, 3)
+    c0_index: np.ndarray,  # (k,)
+    h_c0: np.ndarray,  # (k,)
+    alpha_index: np.ndarray,  # (k,) −1: none
+    h_alpha: np.ndarray,  # (k,)
+    end_room: np.ndarray,  # (k,) from beam_rows
+    xi_grad: np.ndarray,  # (k, 4) from beam_rows
+    end_sigma: float,
+    keep: np.ndarray,  # (k,) bool out
+) -> int:
+    """Which rows hit their landmark safely inside its extent: ``keep[i]`` when the hit's
+    distance from the nearer end is at least ``end_sigma`` standard deviations of the hit's
+    position along the curve, ξ*; returns how many are kept.
+
+    A beam whose predicted intersection may lie past the end (within the state's uncertainty)
+    may in truth pass the wall's end and stop on whatever lies beyond: a corner's other face,
+    a shelf behind. Its range then measures something the landmark does not model, and at the
+    grazing incidence such beams come in with, S is large enough for the χ² gate to let a
+    10 cm innovation through (found on a warehouse shelf's corner: one beam moved the pose by
+    2 cm and the NEES from 6 to 41). σ²_ξ = J P Jᵀ with J = ∂ξ*/∂state, ξ* = ξ_robot + t·dξ:
+    J = ``xi_grad[:3]`` on the pose + dξ·(h_pose, h_c0, h_α)."""
+    kept = 0
+    for i in range(end_room.size):
+        u = xi_grad[i, 3]
+        idx = np.empty(5, dtype=np.int64)
+        jac = np.empty(5)
+        for a in range(3):
+            idx[a] = a
+            jac[a] = xi_grad[i, a] + u * h_pose[i, a]
+        idx[3], jac[3] = c0_index[i], u * h_c0[i]
+        m = 4
+        if alpha_index[i] >= 0:
+            idx[4], jac[4] = alpha_index[i], u * h_alpha[i]
+            m = 5
+        var = 0.0
+        for a in range(m):
+            inner = 0.0
+            for b in range(m):
+                inner += cov[idx[a], idx[b]] * jac[b]
+            var += jac[a] * inner
+        keep[i] = end_room[i] >= end_sigma * math.sqrt(_max(var, 0.0))
+        if keep[i]:
+            kept += 1
+    return kept
 
 
 # -- association error ----------------------------------------------------------------------------
@@ -855,6 +913,7 @@ def screen_scan(
     n_lm: int,  # landmarks: c0s at 3 … 3 + n_lm − 1
     alpha_base: int,  # their shape rotations from this index (−1: none in the state)
     consider_from: int,  # unused here (update_scan's)
+    end_sigma: float,  # unused here: every row counts (update_scan's)
 ) -> int:
     """Every beam's row (:func:`beam_rows`, a missing return counting as ``max_range``) and
     whether its NIS (:func:`normalised_innovations`) exceeds ``gate``, into the first rows of
@@ -866,11 +925,12 @@ def screen_scan(
     innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))
     c0_index, h_c0, variance = np.empty(n_beams, np.int64), np.empty(n_beams), np.empty(n_beams)
     alpha_index, h_alpha = np.empty(n_beams, np.int64), np.empty(n_beams)
+    end_room, xi_grad = np.empty(n_beams), np.empty((n_beams, 4))
     k = beam_rows(
         mean[0], mean[1], mean[2], angles, seen, np.arange(n_beams), reach, variate, order,
         shape, lo, hi, mean[3 : 3 + n_lm], boxes, max_range, min_sine, range_var, model_var,
         shape_follows_pose, pivot, xi_var, turn_var, fit_half, fit_inverse, n_fit, alpha_base,
-        innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance,
+        innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance, end_room, xi_grad,
     )  # fmt: skip
     nis = np.empty(k)
     normalised_innovations(
@@ -940,21 +1000,38 @@ def update_scan(
     n_lm: int,  # landmarks: c0s at 3 … 3 + n_lm − 1
     alpha_base: int,  # their shape rotations from this index (−1: none in the state)
     consider_from: int,  # entries from here on are considered, not estimated (Schmidt)
+    end_sigma: float,  # rows within this many σ of their landmark's end are dropped; 0: none
 ) -> int:
-    """The rows of ``beams`` (:func:`beam_rows`), their R made a joint bound
-    (:func:`share_landmark_error`), and the gated update with them (:func:`update_sparse`);
-    returns how many rows passed the gate, or −1 when no beam had a
+    """The rows of ``beams`` (:func:`beam_rows`) but those whose hit may lie past their
+    landmark's end (:func:`ends_in_doubt`, with ``end_sigma`` > 0), their R made a joint
+    bound (:func:`share_landmark_error`), and the gated update with them
+    (:func:`update_sparse`); returns how many rows passed the gate, or −1 when no beam had a
     usable row (then nothing ran)."""
     n_beams = beams.size
     innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))
     c0_index, h_c0, variance = np.empty(n_beams, np.int64), np.empty(n_beams), np.empty(n_beams)
     alpha_index, h_alpha = np.empty(n_beams, np.int64), np.empty(n_beams)
+    end_room, xi_grad = np.empty(n_beams), np.empty((n_beams, 4))
     k = beam_rows(
         mean[0], mean[1], mean[2], angles, ranges, beams, reach, variate, order, shape, lo, hi,
         mean[3 : 3 + n_lm], boxes, max_range, min_sine, range_var, model_var,
         shape_follows_pose, pivot, xi_var, turn_var, fit_half, fit_inverse, n_fit, alpha_base,
-        innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance,
+        innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance, end_room, xi_grad,
     )  # fmt: skip
+    if k > 0 and end_sigma > 0.0:
+        keep = np.empty(k, np.bool_)
+        ends_in_doubt(
+            cov, h_pose[:k], c0_index[:k], h_c0[:k], alpha_index[:k], h_alpha[:k],
+            end_room[:k], xi_grad[:k], end_sigma, keep,
+        )  # fmt: skip
+        w = 0
+        for i in range(k):  # compact the kept rows, in order
+            if keep[i]:
+                innovation[w], h_pose[w], c0_index[w] = innovation[i], h_pose[i], c0_index[i]
+                h_c0[w], alpha_index[w], h_alpha[w] = h_c0[i], alpha_index[i], h_alpha[i]
+                variance[w] = variance[i]
+                w += 1
+        k = w
     if k == 0:
         return -1
     share_landmark_error(c0_index[:k], variance[:k], range_var)

@@ -212,5 +212,7 @@ def range_rows(
         np.empty(k, dtype=np.int64),  # alpha_index (all −1)
         np.empty(k),  # h_alpha (all 0)
         rows.variance,
+        np.empty(k),  # end_room (unused)
+        np.empty((k, 4)),  # xi_grad (unused)
     )
     return Rows(*(column[:used] for column in rows))

@@ -813,8 +813,10 @@ class PolySlam:
         With rotation states (``shape_rotation="considered"``) the rotation is instead the
         landmark's own α: ±lever/D goes to ∂h/∂α, and neither the heading drift nor the
         slope's part of the fit variance (σ²·t²·M⁻¹[1, 1], which α's variance holds) enters R.
-        The last three arguments are the landmark count, α_1's state index (−1: none) and
-        the first considered state index (the α block, or the state size: none).
+        The last four arguments are the landmark count, α_1's state index (−1: none),
+        the first considered state index (the α block, or the state size: none) and
+        ``end_sigma``: the update leaves out beams whose hit may lie past their landmark's
+        end (``kernels.ends_in_doubt``).
         """
         table, n_fit = self.table, self._n_fit
         return (
@@ -841,6 +843,7 @@ class PolySlam:
             3 + len(table) if self.config.rotation_states else -1,  # α_1's state index
             # the considered entries (Schmidt): the rotations, or none
             3 + len(table) if self.config.rotation_states else self.mean.size,
+            self.config.end_sigma,
         )
 
     def _turn_var(self) -> np.ndarray:  # (n,)

@@ -85,6 +85,7 @@ def test_env_config__slam_preset_replaces_slam_and_conflicts_with_custom_slam() 
         eps_z=10,
         join_pieces=False,
         stretch_ends=False,
+        end_sigma=0.0,
         link_clusters=False,
         shape_rotation="heading",
     )

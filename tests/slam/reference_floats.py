@@ -105,6 +105,14 @@ class BeamHit(NamedTuple):
         h_theta = -self.t * (d_eta - self.slope * d_xi) * inv_d
         return ((slope_d, -inv_d, h_theta) if v1 else (-inv_d, slope_d, h_theta)), inv_d
 
+    def xi_gradient(self) -> tuple[float, float, float, float]:
+        """ξ* = ξ_robot + t*·dξ: (∂ξ*/∂x¹, ∂ξ*/∂x², ∂ξ*/∂θ) at fixed t*, and dξ (the factor
+        of ∂t*/∂state in ∂ξ*/∂state)."""
+        cos, sin = math.cos(self.phi), math.sin(self.phi)
+        if self.variate == 1:
+            return 1.0, 0.0, -self.t * sin, cos
+        return 0.0, 1.0, self.t * cos, sin
+
 
 def cast(
     x: float,
@@ -335,7 +343,7 @@ def beam_rows(
     range_var = model.range_sigma**2
     in_state = model.alpha_base >= 0
     innovation, h_pose, c0_index, h_c0, variance = [], [], [], [], []
-    alpha_index, h_alpha = [], []
+    alpha_index, h_alpha, end_room, xi_grad = [], [], [], []
     for b, hit in enumerate(hits):
         if hit is None or hit.incidence_sine < model.min_sine:
             continue  # no hit, or near-tangent: too sensitive to linearise
@@ -359,6 +367,8 @@ def beam_rows(
         alpha_index.append(model.alpha_base + hit.landmark if h_rot != 0.0 else -1)
         h_alpha.append(h_rot)
         variance.append(var)
+        end_room.append(min(hit.xi - row.lo, row.hi - hit.xi))
+        xi_grad.append(hit.xi_gradient())
     if not innovation:
         return None
     return (
@@ -369,6 +379,8 @@ def beam_rows(
         np.array(alpha_index),
         np.array(h_alpha),
         np.array(variance),
+        np.array(end_room),
+        np.array(xi_grad),
     )
 
 
@@ -600,16 +612,16 @@ def update_scan(
     *args: Any,
 ) -> int:
     """``kernels.update_scan`` with the numpy update (:func:`update_sparse_inplace`) in place
-    of the compiled one, to stand in for it (``args``: reach … n_fit, gate, n_lm, alpha_base,
-    consider_from)."""
+    of the compiled one and :func:`xi_variances` for ``kernels.ends_in_doubt``, to stand in
+    for it (``args``: reach … n_fit, gate, n_lm, alpha_base, consider_from, end_sigma)."""
     from polyslam_env.slam import kernels
 
-    *map_args, gate, n_lm, alpha_base, consider_from = args
+    *map_args, gate, n_lm, alpha_base, consider_from, end_sigma = args
     reach, variate, order, shape, lo, hi, boxes, *model = map_args
     k = beams.size
     rows = (
         np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k),
-        np.empty(k, dtype=np.int64), np.empty(k), np.empty(k),
+        np.empty(k, dtype=np.int64), np.empty(k), np.empty(k), np.empty(k), np.empty((k, 4)),
     )  # fmt: skip
     x, y, theta = float(mean[0]), float(mean[1]), float(mean[2])
     used = kernels.beam_rows(
@@ -618,15 +630,44 @@ def update_scan(
     )  # fmt: skip
     if used == 0:
         return -1
-    innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance = (
+    innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance, room, grad = (
         column[:used] for column in rows
     )
+    if end_sigma > 0.0:
+        keep = room >= end_sigma * np.sqrt(
+            xi_variances(cov, h_pose, c0_index, h_c0, alpha_index, h_alpha, grad)
+        )
+        if not keep.any():
+            return -1
+        innovation, h_pose, c0_index = innovation[keep], h_pose[keep], c0_index[keep]
+        h_c0, alpha_index, h_alpha = h_c0[keep], alpha_index[keep], h_alpha[keep]
+        variance = variance[keep]
     variance = share_landmark_error(c0_index, variance, model[2])
     accepted, _ = update_sparse_inplace(
         mean, cov, innovation, h_pose, c0_index, h_c0, variance, gate_value=gate,
         alpha_index=alpha_index, h_alpha=h_alpha, consider_from=consider_from,
     )  # fmt: skip
     return int(accepted.sum())
+
+
+def xi_variances(
+    cov: np.ndarray,
+    h_pose: np.ndarray,
+    c0_index: np.ndarray,
+    h_c0: np.ndarray,
+    alpha_index: np.ndarray,
+    h_alpha: np.ndarray,
+    xi_grad: np.ndarray,
+) -> np.ndarray:  # (k,)
+    """Var(ξ*) of each row's hit, J P Jᵀ with the dense row J = ∂ξ*/∂state: ``xi_grad[:3]``
+    on the pose plus dξ = ``xi_grad[3]`` times the row of H (``kernels.ends_in_doubt``)."""
+    k, n = c0_index.size, cov.shape[0]
+    jac = np.zeros((k, n))
+    jac[:, :3] = xi_grad[:, :3] + xi_grad[:, 3:] * h_pose
+    jac[np.arange(k), c0_index] += xi_grad[:, 3] * h_c0
+    rot = alpha_index >= 0
+    jac[np.flatnonzero(rot), alpha_index[rot]] += xi_grad[rot, 3] * h_alpha[rot]
+    return np.einsum("ka,ab,kb->k", jac, cov, jac)
 
 
 def share_landmark_error(

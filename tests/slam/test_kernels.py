@@ -186,7 +186,7 @@ def test_beam_rows__bit_identical_to_oracle(
     width, k = table.shape.shape[1], subset.size
     got = (
         np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k),
-        np.empty(k, dtype=np.int64), np.empty(k), np.empty(k),
+        np.empty(k, dtype=np.int64), np.empty(k), np.empty(k), np.empty(k), np.empty((k, 4)),
     )  # fmt: skip
     used = kernels.beam_rows(
         x, y, theta, beams, ranges, subset, reach, *table.arrays(), c0s, boxes, 2.5,
@@ -428,3 +428,86 @@ def test_share_landmark_error__matches_oracle_and_bounds_the_joint_covariance() 
                 assert got[on][0] == own[on][0]
             gap = np.diag(got[on]) - (noise * np.eye(on.sum()) + np.outer(s, s))
             assert np.linalg.eigvalsh(gap).min() >= -1e-15
+
+
+# -- beams whose hit may pass a landmark's end -----------------------------------------------------
+def _rows_of(
+    table: LandmarkTable,
+    c0s: np.ndarray,
+    pose: np.ndarray,
+    angles: np.ndarray,
+    alpha_base: int,
+    follows: bool = True,
+) -> tuple[int, tuple[np.ndarray, ...]]:
+    """Every beam's row on ``table`` (kernels.beam_rows, zero readings)."""
+    k = angles.size
+    rows = (
+        np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k),
+        np.empty(k, dtype=np.int64), np.empty(k), np.empty(k), np.empty(k), np.empty((k, 4)),
+    )  # fmt: skip
+    used = kernels.beam_rows(
+        *pose.tolist(), angles, np.zeros(k), np.arange(k), math.inf, *table.arrays(), c0s,
+        table.boxes(c0s), 10.0, math.sin(math.radians(10.0)), 4e-4, table.model_var, follows,
+        table.pivot, table.xi_var, np.zeros(len(table)), table.fit_half,
+        _fit_inverse_table(16, table.shape.shape[1] - 1), 16, alpha_base, *rows,
+    )  # fmt: skip
+    return used, rows
+
+
+@settings(max_examples=100, deadline=None)
+@given(polys=st.lists(polynomials(), min_size=1, max_size=4), pose=poses, beams=beam_sets,
+       seed=st.integers(0, 2**32 - 1), rotation_states=st.booleans())  # fmt: skip
+def test_ends_in_doubt__equals_dense_oracle(
+    polys: list[Polynomial], pose: np.ndarray, beams: np.ndarray, seed: int, rotation_states: bool
+) -> None:
+    """σ_ξ of each row's hit from the kernel's sparse J P Jᵀ equals the oracle's dense one (to
+    rounding: keep differs from the oracle's only within 1e-9 of the threshold)."""
+    rng = np.random.default_rng(seed)
+    table = _table(polys, rng)
+    c0s = np.array([p.c0 for p in polys])
+    n = len(polys)
+    alpha_base = 3 + n if rotation_states else -1
+    used, rows = _rows_of(table, c0s, pose, beams, alpha_base)
+    assume(used > 0)
+    _, h_pose, c0_index, h_c0, alpha_index, h_alpha, _, room, grad = (r[:used] for r in rows)
+    cov = random_spd(rng, 3 + 2 * n, 1e-3)
+    var = ref.xi_variances(cov, h_pose, c0_index, h_c0, alpha_index, h_alpha, grad)
+    for end_sigma in (0.5, 2.0):
+        keep = np.empty(used, np.bool_)
+        kept = kernels.ends_in_doubt(
+            cov, h_pose, c0_index, h_c0, alpha_index, h_alpha, room, grad, end_sigma, keep
+        )
+        want = room >= end_sigma * np.sqrt(var)
+        near = np.abs(room - end_sigma * np.sqrt(var)) <= 1e-9
+        assert np.array_equal(keep[~near], want[~near]) and kept == keep.sum()
+
+
+@pytest.mark.parametrize("variate", [1, 2])
+def test_beam_rows__xi_gradient_equals_finite_differences(variate: int) -> None:
+    """∂ξ*/∂(x, y, θ, c0) = xi_grad[:3] + dξ·h (the rows ``ends_in_doubt`` builds J from)
+    equals the central difference of the hit's ξ* (the oracle's brute cast) with the pose or
+    c0 moved by ±1e-6: truncation O(ε²·ξ''') and rounding O(1e-16/ε) ≈ 1e-10, below 1e-6."""
+    poly = Polynomial(variate, np.array([0.9, 0.15, -0.2, 0.05]), -1.5, 1.5)
+    table = _table([poly])
+    c0 = np.array([poly.c0])
+    pose = np.array([0.1, -0.2, 0.3]) if variate == 1 else np.array([-0.2, 0.1, 1.6])
+    angles = np.linspace(-0.9, 0.9, 7) + (math.pi / 2 - pose[2] if variate == 1 else -pose[2])
+    used, rows = _rows_of(table, c0, pose, angles, -1, follows=False)  # the geometry alone
+    assert used >= 4, "the pose must see the curve with several beams"
+    _, h_pose, _, h_c0, _, _, _, _, grad = (r[:used] for r in rows)
+
+    def xis(p: np.ndarray, c: float) -> list[float]:
+        hits = ref.cast(*p.tolist(), angles.tolist(), [0], table.rows(), [c], 10.0)
+        return [h.xi for h in hits if h is not None]
+
+    eps = 1e-6
+    analytic = np.column_stack([grad[:, :3] + grad[:, 3:] * h_pose, grad[:, 3] * h_c0])
+    for a in range(4):
+        step = np.zeros(3)
+        if a < 3:
+            step[a] = eps
+        dc = eps if a == 3 else 0.0
+        plus, minus = xis(pose + step, c0[0] + dc), xis(pose - step, c0[0] - dc)
+        assert len(plus) == len(minus) == used
+        numeric = (np.array(plus) - np.array(minus)) / (2 * eps)
+        np.testing.assert_allclose(analytic[:, a], numeric, rtol=1e-6, atol=1e-6)

@@ -239,7 +239,9 @@ def test_hit_past_an_end__off_the_curve_does_not_update_through_the_extent() -> 
     through and moves the pose by several cm; with ``stretch_ends`` the beam is not used."""
     moved = {}
     for stretch in (True, False):
-        cfg = SlamConfig(odom_sigma_xy=0.03, odom_sigma_theta_deg=0.3, stretch_ends=stretch)
+        cfg = SlamConfig(
+            odom_sigma_xy=0.03, odom_sigma_theta_deg=0.3, stretch_ends=stretch, end_sigma=0.0
+        )  # the beam's hit is 2 cm from the end: end_sigma would leave it out as well
         slam = PolySlam(cfg, np.array([0.0]), MAX_RANGE)
         poly = Polynomial(1, np.array([0.8, 0.0, 0.0, 0.0]), 0.2, 0.6)
         slam.insert_landmark(
@@ -259,3 +261,31 @@ def test_hit_past_an_end__off_the_curve_does_not_update_through_the_extent() -> 
         moved[stretch] = (info.beams_used, float(np.linalg.norm(slam.pose[:2] - before[:2])))
     assert moved[True] == (0, 0.0)
     assert moved[False][0] == 1 and moved[False][1] > 0.02  # the paper's filter is pulled
+
+
+def test_beam_whose_hit_may_pass_the_end__is_left_out_with_end_sigma() -> None:
+    """A landmark y = 0.8, x ∈ [0.2, 0.6]; the robot at (1, 0.2) with several cm of pose
+    uncertainty. A beam aimed 2 cm inside the end, at (0.58, 0.8), may just as well pass the
+    end (σ of its hit along the wall is several cm): with ``end_sigma`` = 2 it is not used,
+    with 0 (the paper) it is. A beam aimed at the middle, (0.4, 0.8), is used by both. The
+    readings are the true ranges to the wall, so nothing else tells the two apart."""
+    used = {}
+    for end_sigma in (2.0, 0.0):
+        for target in (0.58, 0.4):
+            cfg = SlamConfig(odom_sigma_xy=0.03, odom_sigma_theta_deg=0.3, end_sigma=end_sigma)
+            slam = PolySlam(cfg, np.array([0.0]), MAX_RANGE)
+            poly = Polynomial(1, np.array([0.8, 0.0, 0.0, 0.0]), 0.2, 0.6)
+            slam.insert_landmark(
+                Fit(poly, 0.8, np.zeros((1, 3)), np.ones((1, 1)), np.eye(1) * 1e-4, 0.01, 1)
+            )
+            none = np.array([np.inf])
+            slam.step(np.array([0.0, 0.0, math.atan2(0.2, 1.0)]), none)
+            slam.step(np.array([math.hypot(1.0, 0.2), 0.0, 0.0]), none)  # now at (1, 0.2)
+            heading = math.atan2(0.8 - 0.2, target - 1.0)
+            slam.step(np.array([0.0, 0.0, heading - slam.pose[2]]), none)
+            assert np.allclose(slam.pose, [1.0, 0.2, heading])
+            sd_along = math.sqrt(slam.pose_cov_relative[0, 0])
+            assert 0.02 < 2.0 * sd_along  # the pose's own share of σ_ξ already puts 2 cm in doubt
+            info = slam.step(np.zeros(3), np.array([math.hypot(target - 1.0, 0.6)]))
+            used[end_sigma, target] = info.beams_used
+    assert used == {(2.0, 0.58): 0, (2.0, 0.4): 1, (0.0, 0.58): 1, (0.0, 0.4): 1}

@@ -72,7 +72,7 @@ def test_range_jacobian_in_the_shape_rotation__matches_finite_differences(wall: 
     for beam in range(angles.size):  # one beam per call: its row is then known to be its own
         rows = (
             np.empty(1), np.empty((1, 3)), np.empty(1, dtype=np.int64), np.empty(1),
-            np.empty(1, dtype=np.int64), np.empty(1), np.empty(1),
+            np.empty(1, dtype=np.int64), np.empty(1), np.empty(1), np.empty(1), np.empty((1, 4)),
         )  # fmt: skip
         used = kernels.beam_rows(
             x, y, theta, angles, np.zeros(angles.size), np.array([beam]), math.inf,
@@ -82,7 +82,7 @@ def test_range_jacobian_in_the_shape_rotation__matches_finite_differences(wall: 
         )  # fmt: skip
         if not used:
             continue
-        innovation, _, _, _, alpha_index, h_alpha, _ = rows
+        innovation, _, _, _, alpha_index, h_alpha, *_ = rows
         h = -float(innovation[0])  # the reading was 0
         phi = theta + float(angles[beam])
         xi0 = _xi_of(poly, origin + h * np.array([math.cos(phi), math.sin(phi)]))
