@@ -239,21 +239,9 @@ def test_hit_past_an_end__off_the_curve_does_not_update_through_the_extent() -> 
     through and moves the pose by several cm; with ``stretch_ends`` the beam is not used."""
     moved = {}
     for stretch in (True, False):
-        cfg = SlamConfig(
-            odom_sigma_xy=0.03, odom_sigma_theta_deg=0.3, stretch_ends=stretch, end_sigma=0.0
-        )  # the beam's hit is 2 cm from the end: end_sigma would leave it out as well
-        slam = PolySlam(cfg, np.array([0.0]), MAX_RANGE)
-        poly = Polynomial(1, np.array([0.8, 0.0, 0.0, 0.0]), 0.2, 0.6)
-        slam.insert_landmark(
-            Fit(poly, 0.8, np.zeros((1, 3)), np.ones((1, 1)), np.eye(1) * 1e-4, 0.01, 1)
-        )
-        none = np.array([np.inf])
-        slam.step(np.array([0.0, 0.0, math.atan2(0.2, 1.0)]), none)
-        slam.step(np.array([math.hypot(1.0, 0.2), 0.0, 0.0]), none)  # now at (1, 0.2)
-        heading = math.atan2(0.8 - 0.2, 0.58 - 1.0)
-        slam.step(np.array([0.0, 0.0, heading - slam.pose[2]]), none)
+        # the beam's hit is 2 cm from the end: end_sigma would leave it out as well
+        slam = _looking_at_a_wall_end(0.58, stretch_ends=stretch, end_sigma=0.0)
         before = slam.pose
-        assert np.allclose(before, [1.0, 0.2, heading])
         direction = np.array([0.58 - 1.0, 0.8 - 0.2]) / math.hypot(0.42, 0.6)
         hit = before[:2] + (0.62 - 1.0) / direction[0] * direction
         assert abs(hit[1] - 0.8) > 2 * RANGE_SIGMA and math.hypot(*(hit - [0.6, 0.8])) < 0.08
@@ -272,20 +260,28 @@ def test_beam_whose_hit_may_pass_the_end__is_left_out_with_end_sigma() -> None:
     used = {}
     for end_sigma in (2.0, 0.0):
         for target in (0.58, 0.4):
-            cfg = SlamConfig(odom_sigma_xy=0.03, odom_sigma_theta_deg=0.3, end_sigma=end_sigma)
-            slam = PolySlam(cfg, np.array([0.0]), MAX_RANGE)
-            poly = Polynomial(1, np.array([0.8, 0.0, 0.0, 0.0]), 0.2, 0.6)
-            slam.insert_landmark(
-                Fit(poly, 0.8, np.zeros((1, 3)), np.ones((1, 1)), np.eye(1) * 1e-4, 0.01, 1)
-            )
-            none = np.array([np.inf])
-            slam.step(np.array([0.0, 0.0, math.atan2(0.2, 1.0)]), none)
-            slam.step(np.array([math.hypot(1.0, 0.2), 0.0, 0.0]), none)  # now at (1, 0.2)
-            heading = math.atan2(0.8 - 0.2, target - 1.0)
-            slam.step(np.array([0.0, 0.0, heading - slam.pose[2]]), none)
-            assert np.allclose(slam.pose, [1.0, 0.2, heading])
+            slam = _looking_at_a_wall_end(target, end_sigma=end_sigma)
             sd_along = math.sqrt(slam.pose_cov_relative[0, 0])
             assert 0.02 < 2.0 * sd_along  # the pose's own share of σ_ξ already puts 2 cm in doubt
             info = slam.step(np.zeros(3), np.array([math.hypot(target - 1.0, 0.6)]))
             used[end_sigma, target] = info.beams_used
     assert used == {(2.0, 0.58): 0, (2.0, 0.4): 1, (0.0, 0.58): 1, (0.0, 0.4): 1}
+
+
+def _looking_at_a_wall_end(target: float, **config: object) -> PolySlam:
+    """A PolySlam (one beam, straight ahead; odometry noise 3 cm and 0.3° per step) with one
+    landmark y = 0.8, x ∈ [0.2, 0.6], driven without returns to (1, 0.2) and turned to look at
+    (``target``, 0.8): its pose is exact there, and uncertain by several centimetres."""
+    cfg = SlamConfig(odom_sigma_xy=0.03, odom_sigma_theta_deg=0.3, **config)  # type: ignore[arg-type]
+    slam = PolySlam(cfg, np.array([0.0]), MAX_RANGE)
+    poly = Polynomial(1, np.array([0.8, 0.0, 0.0, 0.0]), 0.2, 0.6)
+    slam.insert_landmark(
+        Fit(poly, 0.8, np.zeros((1, 3)), np.ones((1, 1)), np.eye(1) * 1e-4, 0.01, 1)
+    )
+    none = np.array([np.inf])
+    slam.step(np.array([0.0, 0.0, math.atan2(0.2, 1.0)]), none)
+    slam.step(np.array([math.hypot(1.0, 0.2), 0.0, 0.0]), none)  # now at (1, 0.2)
+    heading = math.atan2(0.8 - 0.2, target - 1.0)
+    slam.step(np.array([0.0, 0.0, heading - slam.pose[2]]), none)
+    assert np.allclose(slam.pose, [1.0, 0.2, heading])
+    return slam
