@@ -167,9 +167,10 @@ class SlamConfig(Config):
         return np.diag([self.odom_sigma_xy**2, self.odom_sigma_xy**2, s_th**2])
 
 
-#: ``paper``: the paper's algorithm and §4 values. Our defaults differ in four places:
+#: ``paper``: the paper's algorithm and §4 values. Our defaults differ in these places:
 #: end-to-end pieces of one wall are joined (``join_pieces``); a hit just past a wall's end on
-#: its continued curve stretches it (``stretch_ends``); a point near two clusters joins
+#: its continued curve stretches it (``stretch_ends``); a beam whose hit may lie past a wall's
+#: end is left out of the update (``end_sigma``); a point near two clusters joins
 #: them (``link_clusters``), so the sparse hits of beams sweeping a wall come together; and
 #: ε_Z is 15, not 10, because linked clusters grow fast and a shape fitted to more points
 #: carries a smaller frozen error (README "SLAM on large floor plans" has the measurements).
