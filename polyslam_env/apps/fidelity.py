@@ -39,6 +39,7 @@ __all__ = [
     "checks_from_table",
     "episode_config",
     "markdown",
+    "misses",
     "run_fidelity",
     "summarise",
 ]
@@ -70,6 +71,18 @@ TARGETS: dict[str, float] = {
 }
 #: The two settings of each seed: the exchange on, then off.
 SETTINGS = ("exchange_on", "exchange_off")
+#: The checks that every robot (or every seed's team) must pass: the metric, whether the
+#: target is a floor (True) or a ceiling (False), and the target. :func:`misses` lists who
+#: misses each.
+PER_ROBOT_CHECKS: dict[str, tuple[str, bool, float]] = {
+    "every_robot_has_map": ("has_map", True, 1.0),
+    "nu_mean_le_0.05": ("nu_mean", False, TARGETS["nu_mean_max"]),
+    "map_precision_ge_0.9": ("map_precision", True, TARGETS["map_precision_min"]),
+    "completeness_seen_ge_0.8": ("completeness_seen", True, TARGETS["completeness_seen_min"]),
+    "nees_le_6": ("nees", False, TARGETS["nees_max"]),
+    "duplicates_le_0.05": ("duplicates", False, TARGETS["duplicates_max"]),
+    "coverage_ge_0.85": ("coverage", True, TARGETS["coverage_min"]),
+}
 
 
 @dataclass(frozen=True)
@@ -190,9 +203,29 @@ def checks_from_table(table: Mapping[str, Mapping[str, Mapping[str, float]]]) ->
     }
 
 
+def misses(results: Sequence[EpisodeResult]) -> dict[str, list[dict[str, Any]]]:
+    """Who misses each of :data:`PER_ROBOT_CHECKS` in one setting's episodes: per check, the
+    ``{"seed", "robot", "value"}`` of every robot (``robot`` "team" for the coverage) beyond
+    the target, worst first; checks nobody misses are left out."""
+    out: dict[str, list[dict[str, Any]]] = {}
+    for check, (key, floor, target) in PER_ROBOT_CHECKS.items():
+        found = []
+        for r in results:
+            values = {"team": r.team[key]} if key == "coverage" else {
+                agent: m[key] for agent, m in r.robots.items()
+            }  # fmt: skip
+            for who, value in values.items():
+                if (value < target) if floor else (value > target):
+                    found.append({"seed": r.seed, "robot": who, "value": float(value)})
+        if found:
+            out[check] = sorted(found, key=lambda f: f["value"], reverse=not floor)
+    return out
+
+
 def summarise(grouped: Mapping[str, Mapping[str, Sequence[EpisodeResult]]]) -> dict[str, Any]:
     """``table[map][setting][metric]`` (mean/min/max), ``checks[map][name]`` (bool),
-    ``passed`` (all checks of all maps) and the episodes (``episodes[map][setting]``)."""
+    ``passed`` (all checks of all maps), ``misses[map][setting][check]`` (who misses a
+    per-robot target, :func:`misses`) and the episodes (``episodes[map][setting]``)."""
     table = {
         name: {setting: setting_table(results) for setting, results in by_setting.items()}
         for name, by_setting in grouped.items()
@@ -203,6 +236,10 @@ def summarise(grouped: Mapping[str, Mapping[str, Sequence[EpisodeResult]]]) -> d
         "table": table,
         "checks": checks,
         "passed": all(ok for c in checks.values() for ok in c.values()),
+        "misses": {
+            name: {setting: misses(results) for setting, results in by_setting.items()}
+            for name, by_setting in grouped.items()
+        },
         "episodes": {
             name: {s: [r.to_dict() for r in rs] for s, rs in by_setting.items()}
             for name, by_setting in grouped.items()
@@ -233,7 +270,19 @@ def markdown(summary: Mapping[str, Any]) -> str:
             "checks: " + ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in checks.items())
         )
         lines.append("")
+        for setting in SETTINGS:
+            for check, found in summary.get("misses", {}).get(name, {}).get(setting, {}).items():
+                shown = ", ".join(
+                    f"seed {f['seed']} {f['robot']} {f['value']:.3g}" for f in found[:MISSES_SHOWN]
+                )
+                more = f" and {len(found) - MISSES_SHOWN} more" if len(found) > MISSES_SHOWN else ""
+                lines.append(f"- {setting.replace('_', ' ')}, {check} missed by {shown}{more}")
+        lines.append("")
     return "\n".join(lines)
+
+
+#: How many of a check's misses the markdown names (worst first; summary.json has them all).
+MISSES_SHOWN = 6
 
 
 def _cell(s: Mapping[str, float]) -> str:

@@ -14,8 +14,12 @@ from polyslam_env.apps.fidelity import (
     FidelityConfig,
     checks_from_table,
     episode_config,
+    markdown,
+    misses,
     run_fidelity,
+    summarise,
 )
+from polyslam_env.apps.rollout import EpisodeResult
 from polyslam_env.cli.main import main
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.environment.config import EnvConfig
@@ -123,3 +127,37 @@ def test_fidelity_cli__writes_summary_and_table(
     table = (tmp_path / "table.md").read_text()
     assert "### loop" in table and "| nu_mean |" in table
     assert "### loop" in capsys.readouterr().out
+
+
+def _result(seed: int, coverage: float, **robots: dict[str, float]) -> EpisodeResult:
+    """An episode whose robots pass every target but what ``robots`` overrides."""
+    passing = dict.fromkeys(ROBOT_KEYS, 0.0) | {
+        "has_map": 1.0, "nu_mean": 0.01, "map_precision": 0.99, "completeness_seen": 0.9,
+        "nees": 3.0,
+    }  # fmt: skip
+    full = {agent: passing | m for agent, m in robots.items()}
+    return EpisodeResult(seed, 10, full, {"coverage": coverage})
+
+
+def test_misses__names_every_robot_beyond_a_target_worst_first() -> None:
+    """Floors and ceilings on their right side, equality passes (the checks use ≥ / ≤), the
+    team's coverage per seed; the markdown names them under the map's checks."""
+    results = [
+        _result(0, 0.90, robot_0={"map_precision": 0.7}, robot_1={"nees": 6.0}),
+        _result(1, 0.84, robot_0={"map_precision": 0.85, "nees": 9.5}, robot_1={}),
+    ]
+    got = misses(results)
+    assert got == {
+        "map_precision_ge_0.9": [
+            {"seed": 0, "robot": "robot_0", "value": 0.7},
+            {"seed": 1, "robot": "robot_0", "value": 0.85},
+        ],
+        "nees_le_6": [{"seed": 1, "robot": "robot_0", "value": 9.5}],
+        "coverage_ge_0.85": [{"seed": 1, "robot": "team", "value": 0.84}],
+    }
+    text = markdown(summarise({"loop": {"exchange_on": results, "exchange_off": results[:1]}}))
+    assert (
+        "- exchange on, map_precision_ge_0.9 missed by seed 0 robot_0 0.7, seed 1 robot_0 0.85"
+        in text
+    )
+    assert "- exchange off, map_precision_ge_0.9 missed by seed 0 robot_0 0.7\n" in text
