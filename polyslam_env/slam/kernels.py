@@ -584,10 +584,10 @@ def ends_in_doubt(
     2 cm and the NEES from 6 to 41). σ²_ξ = J P Jᵀ with J = ∂ξ*/∂state, ξ* = ξ_robot + t·dξ:
     J = ``xi_grad[:3]`` on the pose + dξ·(h_pose, h_c0, h_α)."""
     kept = 0
+    idx = np.empty(5, dtype=np.int64)  # the row's state entries: pose, c0, α
+    jac = np.empty(5)
     for i in range(end_room.size):
         u = xi_grad[i, 3]
-        idx = np.empty(5, dtype=np.int64)
-        jac = np.empty(5)
         for a in range(3):
             idx[a] = a
             jac[a] = xi_grad[i, a] + u * h_pose[i, a]

@@ -305,9 +305,10 @@ def _ransac_oriented(
     is first refitted on its supports (:func:`refine`): one corner's heading is a few degrees
     off, which moves walls 10 m away by more than the score's few centimetres, so the true
     transform, taken from a single corner, could score below a transform shifted by one
-    shelf period (a warehouse: 67 m of wall against the true transform's 99 m). In decreasing value
-    a hypothesis that ``veto`` refuses (the radio's range, free space) is dropped; the first
-    one left is the best, and the next one left that is :func:`_distinct` from it its rival.
+    shelf period (a warehouse: 67 m of wall against the true transform's 99 m). In
+    decreasing value a hypothesis that ``veto`` refuses (the radio's range, free space) is
+    dropped; the first one left is the best, and the next one left that is :func:`_distinct`
+    from it its rival.
     The aligner declines when the rival's value is more than 1 / ``ambiguity_ratio`` of the
     best's (see :class:`AlignConfig`); the best then goes through :func:`refine` and its
     support tests like any aligner's answer.
