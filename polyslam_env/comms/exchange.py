@@ -828,15 +828,25 @@ class RendezvousExchange:
         receiver: PolySlam,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """Alignment mode: the sender's frame in the receiver's from their feature maps, as
-        :meth:`_transform` gives it (T, ∂T/∂receiver pose = 0: the frames' transform does not
-        depend on where the receiver is now, ∂T/∂noise = I, the aligner's covariance), or None
-        when the aligner declines. ``near``: the sender's and the receiver's estimated
-        positions when the message left (each in its own frame); a transform that puts them
-        further apart than the radio's range (+ ``range_margin``) is refused, and so is one
-        that lays more than ``max_conflict`` of the ``walls`` the sender has sent it (sender
-        frame; this message's and earlier ones') in the receiver's free space, away from its
-        own walls (:class:`~polyslam_env.comms.free_space.FreeSpace`); a refused
-        attempt is logged as declined. Every attempt is logged in :attr:`alignments`."""
+        :meth:`_transform` gives it (T, ∂T/∂receiver pose, ∂T/∂noise = I, the aligner's
+        covariance), or None when the aligner declines.
+
+        T places the sender's walls on the receiver's *map* (the features within radio range,
+        placed with its recent pose estimates), so they share that map's error, which is the
+        receiver's pose error, not an error of their own: T is taken as x̂ ⊕ (x̂⁻¹ ⊕ T) with the
+        second factor fixed, and ∂T/∂x̂ its compounding Jacobian, as at a rendezvous. With
+        ∂T/∂x̂ = 0 the fused walls were independent of the pose, and a robot seeing them again
+        took them for an absolute reference: `nees_rel` 5.2 with the exchange against 2.7
+        without it on the pillar hall, 4.3 against 3.1 on the warehouse's walls; tied to the
+        pose, 2.6 and 2.9 (README "Merging maps by alignment").
+
+        ``near``: the sender's and the receiver's estimated positions when the message left
+        (each in its own frame); a transform that puts them further apart than the radio's
+        range (+ ``range_margin``) is refused, and so is one that lays more than
+        ``max_conflict`` of the ``walls`` the sender has sent it (sender frame; this message's
+        and earlier ones') in the receiver's free space, away from its own walls
+        (:class:`~polyslam_env.comms.free_space.FreeSpace`); a refused attempt is logged as
+        declined. Every attempt is logged in :attr:`alignments`."""
         assert self._align_rng is not None
         free_space = self.free_space[delivered.receiver]
         own_walls = receiver.polynomials()
@@ -884,7 +894,9 @@ class RendezvousExchange:
         )
         if result.transform is None or result.covariance is None:
             return None
-        return result.transform, np.zeros((3, 3)), np.eye(3), result.covariance
+        pose = receiver.pose
+        _, d_pose, _ = compose_with_jacobians(pose, compose(inverse(pose), result.transform))
+        return result.transform, d_pose, np.eye(3), result.covariance
 
     def _integrate(
         self,

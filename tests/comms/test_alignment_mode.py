@@ -195,3 +195,34 @@ def test_alignment_mode_on_walls__needs_no_pillar_sensor_and_checks_its_fields()
         ChannelConfig(mode="alignment", max_conflict=1.5)
     with pytest.raises(ConfigError, match="min_agreement"):
         ChannelConfig(mode="alignment", min_agreement=0.0)
+
+
+def test_alignment_mode__fused_walls_move_with_the_receivers_pose(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An aligned transform places the sender's walls on the receiver's map, whose error is the
+    receiver's pose error: each received piece's c0 depends on the receiver's pose as a rigid
+    motion with it would move it. For a line η = c0 + b·ξ moved by (δξ, δη): ∂c0/∂η = 1 and
+    ∂c0/∂ξ = −b, exactly (a shape-fixed fit of points all moved alike; rounding only). With
+    ∂T/∂pose = 0 both were 0, and a robot seeing such a wall again took it for an absolute
+    reference (README "Merging maps by alignment": `nees_rel` 5.2 against 2.7 without the
+    exchange)."""
+    fits: list[Any] = []
+    insert = PolySlam.insert_landmark
+
+    def record(self: PolySlam, fit: Any, *args: Any, **kwargs: Any) -> int:
+        fits.append(fit)
+        return insert(self, fit, *args, **kwargs)
+
+    monkeypatch.setattr(PolySlam, "insert_landmark", record)
+    env = parallel_env(EnvConfig.from_dict(_config(max_steps=250)))
+    result = run_episode(env, make_team("frontier", env), seed=0)
+    assert sum(m["alignments_accepted"] for m in result.robots.values()) > 0
+    lines = [f for f in fits if f.order == 1]
+    assert lines, "some received piece must be a line"
+    for fit in lines:
+        b = float(fit.poly.coeffs[1])
+        d_xi, d_eta = (fit.Gx[0, 0], fit.Gx[0, 1]) if fit.poly.variate == 1 else (
+            fit.Gx[0, 1], fit.Gx[0, 0]
+        )  # fmt: skip
+        assert d_eta == pytest.approx(1.0, abs=1e-9) and d_xi == pytest.approx(-b, abs=1e-9)
