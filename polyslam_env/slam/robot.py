@@ -338,10 +338,9 @@ class PolySlam:
         return bool(table.lo[idx] <= xi <= table.hi[idx])
 
     def _continued_xi(self, point: StoredPoint, idx: int) -> float | None:
-        """ξ of ``point`` when it lies past landmark ``idx``'s extent and the curve continued
-        there explains it (|η − p(ξ)| ≤ 2σ of the range noise); None otherwise."""
-        if self._within_extent(point, idx):
-            return None
+        """ξ of ``point``, which lies past landmark ``idx``'s extent (the caller's test), when
+        the curve continued there explains it (|η − p(ξ)| ≤ 2σ of the range noise); None
+        otherwise."""
         table = self.table
         v1 = table.variate[idx] == 1
         xi, eta = (point.xy[0], point.xy[1]) if v1 else (point.xy[1], point.xy[0])
@@ -356,6 +355,8 @@ class PolySlam:
         relative to the robot's heading (:meth:`_relative_turn_var`). A shape fitted on a
         short stretch is not stretched far on its frozen slope; a cluster, a join or a refit
         brings its next piece instead."""
+        if self._within_extent(point, idx):
+            return False
         xi = self._continued_xi(point, idx)
         if xi is None:
             return False
