@@ -196,6 +196,30 @@ def test_insert_landmark__keeps_the_senders_extent_as_its_evidence() -> None:
     assert (slam.table.polys[i].lo, slam.table.polys[i].hi) == (1.0, 2.5)
 
 
+def test_merge__a_join_that_fails_does_not_hide_an_overlap_with_the_same_wall() -> None:
+    """Landmarks A: y = 0.80 on x ∈ [0, 3], and B: starting at (3.15, 0.84) level with it,
+    then bending away (y = 0.84 + 0.4 (x − 3.15)²). A new piece N: y = 0.83 on [0.1, 2.95]
+    overlaps A (γ 3 cm) and meets B end to end (offset 1 cm, the smaller γ), but no one
+    polynomial follows N and B's bend, so that join is refused; N must then merge with A,
+    its own stretch of wall. Trying only the best partner left N beside A (found on a
+    warehouse: a received wall 2.4 cm beside the robot's own over 6 m, 8 % duplicates)."""
+    slam = PolySlam(SlamConfig(), np.radians([90.0]), MAX_RANGE)
+
+    def fit_of(coeffs: list[float], lo: float, hi: float) -> Fit:
+        poly = Polynomial(1, np.array(coeffs), lo, hi)
+        gx = np.zeros((1, slam.mean.size))
+        return Fit(poly, coeffs[0], gx, np.ones((1, 1)), np.eye(1) * 1e-4, 0.01, 1)
+
+    a = slam.insert_landmark(fit_of([0.80, 0.0, 0.0, 0.0], 0.0, 3.0), merge=False)
+    curv = 0.4
+    bend = [0.84 + curv * 3.15**2, -2.0 * curv * 3.15, curv, 0.0]
+    b = slam.insert_landmark(fit_of(bend, 3.15, 5.0), merge=False)
+    merged_id = slam.insert_landmark(fit_of([0.83, 0.0, 0.0, 0.0], 0.1, 2.95))
+    assert slam.landmark_ids == [b, merged_id] and a != merged_id  # N and A are one now
+    merged = slam.table.polys[slam.table.index_of(merged_id)]
+    assert (merged.lo, merged.hi) == pytest.approx((0.0, 3.0), abs=0.05)
+
+
 @pytest.mark.parametrize(
     ("wall", "hit", "stretched"),
     [
