@@ -107,6 +107,9 @@ class SlamConfig(Config):
     # beams whose hit lies within this many σ (of its place along the curve) of a landmark's
     # end are not used in the update: they may pass the end (kernels.ends_in_doubt; paper: 0)
     end_sigma: float = 2.0
+    # beams in the update are at least this far apart in angle (degrees; 0: every beam; the
+    # others feed only the map: robot.update_beam_mask; paper: 0)
+    update_spacing_deg: float = 22.5
     link_clusters: bool = True  # clusters joined by a point near both (association; paper: False)
     blas_threads: int = 1  # BLAS threads during a step (polyslam_env/core/blas.py); 0: leave as is
     backend: str = "polynomial"  # one of BACKENDS; the point ones map the pillars
@@ -142,6 +145,7 @@ class SlamConfig(Config):
                 )
         check_non_negative("slam.merge_min_overlap", self.merge_min_overlap)
         check_non_negative("slam.end_sigma", self.end_sigma)
+        check_range("slam.update_spacing_deg", self.update_spacing_deg, 0.0, 360.0)
         check_non_negative("slam.odom_sigma_xy", self.odom_sigma_xy)
         check_non_negative("slam.odom_sigma_theta_deg", self.odom_sigma_theta_deg)
         for i, s in enumerate(self.p0_sigma):
@@ -170,7 +174,8 @@ class SlamConfig(Config):
 #: ``paper``: the paper's algorithm and §4 values. Our defaults differ in these places:
 #: end-to-end pieces of one wall are joined (``join_pieces``); a hit just past a wall's end on
 #: its continued curve stretches it (``stretch_ends``); a beam whose hit may lie past a wall's
-#: end is left out of the update (``end_sigma``); a point near two clusters joins
+#: end is left out of the update (``end_sigma``); only beams 22.5° apart enter the update
+#: (``update_spacing_deg``; the paper's five are 45° apart); a point near two clusters joins
 #: them (``link_clusters``), so the sparse hits of beams sweeping a wall come together; and
 #: ε_Z is 15, not 10, because linked clusters grow fast and a shape fitted to more points
 #: carries a smaller frozen error (README "SLAM on large floor plans" has the measurements).
@@ -180,6 +185,7 @@ PRESETS: dict[str, SlamConfig] = {
         join_pieces=False,
         stretch_ends=False,
         end_sigma=0.0,
+        update_spacing_deg=0.0,
         link_clusters=False,
         shape_rotation="heading",
     )

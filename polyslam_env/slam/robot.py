@@ -125,6 +125,7 @@ class PolySlam:
     ) -> None:
         self.config = config
         self.beam_angles = np.asarray(beam_angles, dtype=float)  # (B,)
+        self._update_beams = update_beam_mask(self.beam_angles, config.update_spacing_deg)
         self._range_var = float(config.range_sigma**2)
         self._n_fit = config.eps_z + 1  # points of the cluster a landmark is born from
         self._turn_var_per_step = float(config.odom_cov[2, 2])  # rad², see _turn_var
@@ -247,7 +248,9 @@ class PolySlam:
         if self.profile is not None:
             lap = self._lap("map", lap)
 
-        good_beams = sorted(b for b, lid in assoc.good_ids.items() if lid in self.table)
+        good_beams = sorted(
+            b for b, lid in assoc.good_ids.items() if lid in self.table and self._update_beams[b]
+        )
         used = self._update(good_beams, np.asarray(ranges, dtype=float))
         self.divergence_f = f
         self.diverging = self._is_diverging()
@@ -902,6 +905,19 @@ class PolySlam:
             qbad[lid] = moved[start : start + len(pts)] if pts else []
             start += len(pts)
         table.qbad = qbad
+
+
+def update_beam_mask(angles: np.ndarray, spacing_deg: float) -> np.ndarray:
+    """Which beams (B,) bool enter the EKF update: in order of angle, each beam at least
+    ``spacing_deg`` from the last one kept, starting from the first (all when 0)."""
+    keep = np.zeros(len(angles), dtype=bool)
+    last = -np.inf
+    tol = 1e-9
+    for i in np.argsort(angles, kind="stable"):
+        if np.rad2deg(angles[i] - last) >= spacing_deg - tol:
+            keep[i] = True
+            last = angles[i]
+    return keep
 
 
 @functools.lru_cache(maxsize=16)

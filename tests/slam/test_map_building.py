@@ -8,12 +8,13 @@ import math
 import numpy as np
 import pytest
 
+from polyslam_env.slam import kernels
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit
 from polyslam_env.slam.landmarks import EXTENT_MARGIN
 from polyslam_env.slam.merging import JOIN_GAP
 from polyslam_env.slam.polynomial import Polynomial
-from polyslam_env.slam.robot import PolySlam
+from polyslam_env.slam.robot import PolySlam, update_beam_mask
 
 BEAMS_DEG = (90.0, 45.0, 0.0, -45.0, -90.0)
 MAX_RANGE = 2.0
@@ -309,3 +310,53 @@ def _looking_at_a_wall_end(target: float, **config: object) -> PolySlam:
     slam.step(np.array([0.0, 0.0, heading - slam.pose[2]]), none)
     assert np.allclose(slam.pose, [1.0, 0.2, heading])
     return slam
+
+
+def test_update_beam_mask__keeps_beams_at_least_the_spacing_apart() -> None:
+    deg = np.radians
+    seventeen = deg([90.0 - 11.25 * i for i in range(17)])
+    assert update_beam_mask(seventeen, 22.5).tolist() == [i % 2 == 0 for i in range(17)]
+    assert update_beam_mask(seventeen, 0.0).all()
+    assert update_beam_mask(deg(BEAMS_DEG), 22.5).all()  # the paper's five are 45° apart
+    assert update_beam_mask(deg(BEAMS_DEG), 90.0).tolist() == [True, False, True, False, True]
+    shuffled = deg([0.0, 90.0, -45.0, 45.0, -90.0, 22.5])  # in order of angle, not of index
+    assert update_beam_mask(shuffled, 45.0).tolist() == [True, True, True, True, True, False]
+    assert update_beam_mask(deg([10.0]), 360.0).tolist() == [True]
+
+
+def test_update_spacing__beams_between_map_the_wall_but_do_not_update(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Three beams 11.25° apart along a wall on the left: with ``update_spacing_deg`` 22.5 the
+    middle one never enters the update (the update kernel is never handed it), with 0 it
+    does; its hits still build the map either way: the wall's landmark is born at the same
+    step, and earlier than with the two outer beams alone."""
+    chosen: list[set[int]] = []
+    update_scan = kernels.update_scan
+
+    def recording(*args: object) -> int:
+        chosen.append({int(b) for b in args[4]})  # type: ignore[attr-defined]
+        return update_scan(*args)
+
+    monkeypatch.setattr(kernels, "update_scan", recording)
+
+    def run(beams: tuple[float, ...], spacing: float) -> tuple[int, set[int]]:
+        chosen.clear()
+        cfg = SlamConfig(update_spacing_deg=spacing)
+        rng = np.random.default_rng(3)
+        angles = np.radians(beams)
+        slam = PolySlam(cfg, angles, MAX_RANGE)
+        pose, born = np.zeros(3), -1
+        for k, (dist, turn) in enumerate(straight(3.0)):
+            pose = pose + np.array([dist * math.cos(pose[2]), dist * math.sin(pose[2]), turn])
+            ranges = cast(pose, ONE_WALL, angles) + rng.normal(0.0, RANGE_SIGMA, len(angles))
+            slam.step(np.array([dist, 0.0, turn]), ranges)
+            if born < 0 and slam.n_landmarks:
+                born = k
+        return born, set().union(*chosen)
+
+    born_spaced, used_spaced = run((90.0, 78.75, 67.5), 22.5)
+    born_all, used_all = run((90.0, 78.75, 67.5), 0.0)
+    born_outer, _ = run((90.0, 67.5), 0.0)
+    assert used_spaced == {0, 2} and used_all == {0, 1, 2}
+    assert 0 <= born_spaced == born_all < born_outer
