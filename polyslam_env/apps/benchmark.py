@@ -84,7 +84,7 @@ ENV_CONFIG: dict[str, Any] = {
     "map": "paper",
     "num_robots": 3,
     "observation__mode": "vector",
-    "world__range_sensor__angles_deg": PAPER_BEAMS_DEG,  # the env's default has nine beams
+    "world__range_sensor__angles_deg": PAPER_BEAMS_DEG,  # the env's default has seventeen beams
 }
 #: Issue 15's targets: (name, goal, True when the figure must be at most the goal).
 TARGETS: tuple[tuple[str, float, bool], ...] = (

@@ -50,12 +50,13 @@ class OdometryConfig(Config):
 #: The paper's five distance sensors (degrees from the robot axis), kept by ``configs/paper.yaml``,
 #: ``simulate`` and the benchmark's "paper sensors".
 PAPER_BEAMS_DEG: tuple[float, ...] = (90.0, 45.0, 0.0, -45.0, -90.0)
-#: The default: nine beams every 22.5° over the front half-plane, a sparse 180° scanner. On
-#: floors of 20 m and more the paper's five beams hit many of the walls they touch too few
-#: times for a landmark; more beams than nine make the filter overconfident, because the error
-#: a landmark's frozen shape gives every beam on it is bounded only within one step (README
-#: "SLAM on large floor plans").
-DEFAULT_BEAMS_DEG: tuple[float, ...] = tuple(90.0 - 22.5 * i for i in range(9))
+#: The default: seventeen beams every 11.25° over the front half-plane, a sparse 180° scanner.
+#: On floors of 20 m and more the paper's five beams hit many of the walls they touch too few
+#: times for a landmark, and with nine a robot passing a room maps too little of what it sees.
+#: The EKF update uses every other beam (``slam.update_spacing_deg``): with all seventeen the
+#: error a landmark's shape gives every beam on it, repeated step after step, makes the filter
+#: overconfident (README "SLAM on large floor plans").
+DEFAULT_BEAMS_DEG: tuple[float, ...] = tuple(90.0 - 11.25 * i for i in range(17))
 
 
 @dataclass(frozen=True)

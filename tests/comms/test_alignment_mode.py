@@ -119,7 +119,7 @@ def test_rendezvous_mode__with_the_pillar_sensor_on_sends_no_features() -> None:
     data = _config(max_steps=250, channel={"range": 3.0})
     data["world"]["camera"]["enabled"] = True
     env = parallel_env(EnvConfig.from_dict(data))
-    run_episode(env, make_team("frontier", env), seed=0)
+    run_episode(env, make_team("frontier", env), seed=2)  # a seed whose robots meet
     exchange = env.episode.exchange
     assert exchange is not None
     assert any(d.received for d in exchange.history), "no rendezvous message was fused"

@@ -94,13 +94,17 @@ def test_frontier__team_covers_80_percent_of_a_generated_map_within_a_stated_bud
     # about half its range (×2), a 0.3 m step re-marks most cells of the forward beams (×2),
     # every room is a dead end entered and left by its door (×2), turning to a new goal
     # costs steps without travel (×1.5), and the robots do not share their maps, so each
-    # sweeps space a teammate has already covered until they meet (×2).
+    # sweeps space a teammate has already covered until they meet (×2). The bound counts
+    # every beam's cells as its own, which holds for beams 22.5° apart (neighbours share cells
+    # only within 0.25 m): the robots get that nine-beam sensor. With the default's 11.25°
+    # neighbours share cells out to 0.5 m, so a scan marks far fewer than 17 beams' worth.
     env = polyslam_env.parallel_env(
         map="generator:rooms",
         map_params={"width": 10, "height": 6},
         num_robots=3,
         max_steps=1000,
         coverage_target=0.8,
+        world__range_sensor__angles_deg=[90.0 - 22.5 * i for i in range(9)],
     )
     team = make_team("frontier", env)
     obs, _ = env.reset(seed=seed)
