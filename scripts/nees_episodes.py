@@ -11,19 +11,26 @@ Usage::
 
     python scripts/nees_episodes.py --map generator:office_floor --runs 20 --steps 400 \\
         --robots 1 --initial-error
+
+``--set slam.update_spacing_deg=0 ...`` overrides env config fields (as ``paired_slam.py``'s
+``--a``).
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from typing import Any
 
 import numpy as np
 import scipy.stats
+from paired_slam import setting  # scripts/ is on the path when a script runs
 
 from policies.base import make_team
+from polyslam_env.core.errors import ConfigError
 from polyslam_env.core.geometry import between, wrap_remainder
+from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import parallel_env
 
 
@@ -33,26 +40,35 @@ def _nees(err: np.ndarray, cov: np.ndarray) -> float:
     return float(err @ np.linalg.solve(cov, err))
 
 
-def episode(
-    seed: int,
+def env_config(
     map_name: str,
     steps: int,
     robots: int,
     initial_error: bool,
     exchange: bool,
     shape_rotation: str = "considered",
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per-step NEES (steps, robots) in the frame and relative to the true start."""
+    overrides: tuple[str, ...] = (),
+) -> dict[str, Any]:
+    """The env config of the runs; ``overrides``: ``KEY=VALUE`` fields
+    (``paired_slam.setting``: a ``ConfigError`` names a bad one)."""
     kw: dict[str, Any] = {} if exchange else {"channel": None}
-    kw["slam"] = {"shape_rotation": shape_rotation}
-    env = parallel_env(
-        map=map_name,
-        num_robots=robots,
-        max_steps=steps,
-        coverage_target=None,
-        initial_error=initial_error,
-        **kw,
-    )
+    base = EnvConfig.from_dict(
+        {
+            "map": map_name,
+            "num_robots": robots,
+            "max_steps": steps,
+            "coverage_target": None,
+            "initial_error": initial_error,
+            "slam": {"shape_rotation": shape_rotation},
+            **kw,
+        }
+    ).to_dict()
+    return setting(base, list(overrides))
+
+
+def episode(seed: int, config: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+    """Per-step NEES (steps, robots) in the frame and relative to the true start."""
+    env = parallel_env(EnvConfig.from_dict(config))
     team = make_team("frontier", env)
     obs, _ = env.reset(seed=seed)
     team.reset(seed)
@@ -88,19 +104,26 @@ def main() -> None:
         default="considered",
         help="slam.shape_rotation (heading: the rotation is the current heading error)",
     )
+    ap.add_argument(
+        "--set", nargs="*", default=[], help="KEY=VALUE env config overrides (slam.eps_z=10)"
+    )
     args = ap.parse_args()
     start = time.perf_counter()
     finals_f, finals_r, means_f, means_r = [], [], [], []
-    for seed in range(args.runs):
-        f, r = episode(
-            seed,
+    try:
+        config = env_config(
             args.map,
             args.steps,
             args.robots,
             args.initial_error,
             args.exchange,
             args.shape_rotation,
+            tuple(args.set),
         )
+    except ConfigError as exc:  # a bad override: say which, in one line
+        sys.exit(f"nees_episodes: --set: {exc}")
+    for seed in range(args.runs):
+        f, r = episode(seed, config)
         finals_f += f[-1].tolist()
         finals_r += r[-1].tolist()
         means_f += f.mean(axis=0).tolist()
