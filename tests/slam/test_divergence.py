@@ -59,9 +59,10 @@ def test_outlier_count_threshold__never_when_even_all_outliers_is_too_likely() -
 
 def test_divergence__screen_sees_a_wall_that_moved() -> None:
     """A robot that has mapped a wall 1 m ahead, then finds it at 1.5 m without having moved
-    (as after a kidnap): the screen's outliers raise the flag within a window of beams."""
+    (as after a kidnap): the screen's outliers raise the flag within a window of beams. The
+    five beams are 10° apart, so every one is screened only with ``update_spacing_deg`` 0."""
     angles = np.radians([-20.0, -10.0, 0.0, 10.0, 20.0])
-    slam = PolySlam(SlamConfig(), angles, 2.0)
+    slam = PolySlam(SlamConfig(update_spacing_deg=0.0), angles, 2.0)
     rng = np.random.default_rng(0)
     wall = 1.0 / np.cos(angles)  # a wall x = 1 m, seen from the origin facing +x
     still = np.zeros(3)
@@ -70,6 +71,26 @@ def test_divergence__screen_sees_a_wall_that_moved() -> None:
     assert slam.n_landmarks >= 1 and not slam.diverging
     flags = [slam.step(still, wall + 0.5 + rng.normal(0.0, 0.02, 5)).diverging for _ in range(3)]
     assert flags[-1]
+
+
+def test_divergence__screen_tests_only_the_beams_the_update_uses() -> None:
+    """Two beams 11.25° apart facing a mapped wall that then moves 0.5 m away: every beam is an
+    outlier from then on. With ``update_spacing_deg`` 22.5 only one of them is screened, so the
+    alarm's count (7 of the last 10 screened beams) is reached at the 7th step; with 0 both
+    are, and it is reached at the 4th (⌈7 / 2⌉)."""
+    angles = np.radians([-5.625, 5.625])
+    wall = 1.0 / np.cos(angles)
+    for spacing, first in ((22.5, 7), (0.0, 4)):
+        slam = PolySlam(SlamConfig(update_spacing_deg=spacing), angles, 2.0)
+        rng = np.random.default_rng(0)
+        for _ in range(20):  # map it
+            slam.step(np.zeros(3), wall + rng.normal(0.0, 0.02, 2))
+        assert slam.n_landmarks >= 1 and not slam.diverging
+        flags = [
+            slam.step(np.zeros(3), wall + 0.5 + rng.normal(0.0, 0.02, 2)).diverging
+            for _ in range(first)
+        ]
+        assert flags == [False] * (first - 1) + [True], spacing
 
 
 def _rate(delays: list[int | None]) -> float:
