@@ -31,6 +31,7 @@ import numpy as np
 
 from polyslam_env.slam import kernels
 from polyslam_env.slam.fitting import (
+    MAX_SLOPE,
     Fit,
     PointSet,
     StoredPoint,
@@ -339,7 +340,8 @@ def fit_cluster(
     3b. the wall's points are ordered along its principal direction and cut at every gap
        wider than ``max_gap`` (default :data:`GAP_SPLIT`: a doorway or an occlusion, which a
        polynomial must not bridge); the run with most points is fitted (ties: the first);
-    4. the fit is accepted with ≥ order + 2 points and rms ≤ ``max_rms`` (the caller's ρ_k);
+    4. the fit is accepted with ≥ order + 2 points, rms ≤ ``max_rms`` (the caller's ρ_k) and
+       no tangent steeper than :data:`~polyslam_env.slam.fitting.MAX_SLOPE` on its extent;
        otherwise no landmark and every point is left over. ``shape_fixed`` is passed to
        :func:`~polyslam_env.slam.fitting.fit_polynomial`, and so are ``auto_order`` and
        ``min_noise_var``.
@@ -364,7 +366,7 @@ def fit_cluster(
             auto_order,
             min_noise_var,
         )
-        if fit.rms <= max_rms:
+        if fit.rms <= max_rms and fit.poly.max_slope() <= MAX_SLOPE:
             return ClusterFit(fit, used, [p for p, m in zip(pts, mask, strict=True) if not m])
     return ClusterFit(None, [], pts)
 

@@ -307,6 +307,15 @@ def concat(*pointsets: PointSet) -> PointSet:
 
 
 # -- fitting --------------------------------------------------------------------------------
+#: Steepest tangent |dη/dξ| a landmark's shape may have anywhere on its extent: tan 75°. The
+#: variate is the points' principal direction (:func:`choose_variate`), so a wall's mean
+#: tangent lies within 45° of its ξ axis, and a corner is split before it is fitted; a shape
+#: turning further than 75° from the axis is a fit curving away between tight groups of
+#: points. Found on a merge of two short arcs of one round pillar: a parabola 0.34 m long on
+#: ξ whose curve ran 9 m across the hall and back (slope 116 at its ends).
+MAX_SLOPE = float(np.tan(np.radians(75.0)))
+
+
 def choose_variate(xy: np.ndarray, weights: np.ndarray | None = None) -> int:
     """1 if the weighted principal direction is closer to x¹ (|dx| ≥ |dy|), else 2."""
     pts = np.asarray(xy, dtype=float)

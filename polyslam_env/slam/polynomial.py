@@ -58,6 +58,16 @@ class Polynomial:
         """B'(ξ) = dη/dξ."""
         return polyval(xi, self.coeffs, derivative=1)
 
+    def max_slope(self) -> float:
+        """max |dη/dξ| over the extent [lo, hi]: at an end or where the slope turns (p'' = 0;
+        a cubic's slope is a quadratic, so that is exact)."""
+        xi = [self.lo, self.hi]
+        if len(self.coeffs) > 3 and self.coeffs[3] != 0.0:
+            turn = -self.coeffs[2] / (3.0 * self.coeffs[3])
+            if self.lo < turn < self.hi:
+                xi.append(turn)
+        return float(np.max(np.abs(self.slope(np.array(xi)))))
+
     def to_xy(self, xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
         """(ξ, η) pairs to (x¹, x²) points, shape (…, 2)."""
         if self.variate == 1:

@@ -30,6 +30,7 @@ from polyslam_env.slam.association import (
 )
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import (
+    MAX_SLOPE,
     Fit,
     PointSet,
     StoredPoint,
@@ -780,6 +781,8 @@ class PolySlam:
         if not (
             np.isfinite(fit.c0) and np.all(np.isfinite(fit.Gx)) and np.all(np.isfinite(fit.Gy))
         ):
+            return None
+        if fit.poly.max_slope() > MAX_SLOPE:  # curves away between its points: not one wall
             return None
         return fit
 

@@ -206,3 +206,38 @@ def test_merge_points__merged_c0_variance_does_not_double_count_shared_informati
     assert merged_var == pytest.approx(s2, rel=1e-9)
     independent = np.diag([0.0, 0.0, 0.0, s2, s2])
     assert float((fit.Gx @ independent @ fit.Gx.T)[0, 0]) == pytest.approx(s2 / 2, rel=1e-9)
+
+
+def test_max_slope__exact_against_dense_sampling() -> None:
+    """The steepest |dη/dξ| on the extent (ends, or where a cubic's slope turns) against the
+    maximum over 20,001 samples: equal up to the sampling step's effect (the slope's second
+    derivative × half a step, here below 1e-3)."""
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        coeffs = rng.normal(0.0, [1.0, 1.0, 2.0, 3.0])
+        lo = float(rng.uniform(-2.0, 1.0))
+        poly = Polynomial(1, coeffs, lo, lo + float(rng.uniform(0.1, 2.0)))
+        dense = np.abs(poly.slope(np.linspace(poly.lo, poly.hi, 20001))).max()
+        assert poly.max_slope() == pytest.approx(dense, abs=1e-3)
+        assert poly.max_slope() >= dense - 1e-12
+
+
+def test_fit__a_shape_curving_away_between_its_points_is_refused() -> None:
+    """Two tight groups of points (5 mm) 0.34 m apart on a steep parabola η = 100 (ξ − 0.17)² (the
+    merge traced on a pillar hall: its curve ran 9 m across the hall between them): the fit
+    reproduces it exactly (rms 0), but its slope at the ends is 34 > tan 75°, so PolySlam
+    refuses it; the same groups on a gentle parabola (slope 0.34) are accepted."""
+    from polyslam_env.slam.config import SlamConfig
+    from polyslam_env.slam.fitting import MAX_SLOPE
+    from polyslam_env.slam.robot import PolySlam
+
+    slam = PolySlam(SlamConfig(), np.radians([0.0]), 2.0)
+    xi = np.concatenate([np.linspace(0.0, 0.005, 5), np.linspace(0.335, 0.34, 5)])
+    for curvature, accepted in ((100.0, False), (1.0, True)):
+        xy = np.column_stack([xi, curvature * (xi - 0.17) ** 2])
+        n = len(xy)
+        ps = PointSet(xy, np.zeros((n, 2, 3)), np.zeros((n, 2, 0)), np.zeros((0, 0)), np.ones(n))
+        fit = slam._fit(ps)
+        assert (fit is not None) == accepted, curvature
+        steep = fit_polynomial(ps, 3, 1).poly.max_slope()
+        assert (steep <= MAX_SLOPE) == accepted
