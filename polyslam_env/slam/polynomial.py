@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.polynomial import polynomial as P
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,14 +60,13 @@ class Polynomial:
         return polyval(xi, self.coeffs, derivative=1)
 
     def max_slope(self) -> float:
-        """max |dη/dξ| over the extent [lo, hi]: at an end or where the slope turns (p'' = 0;
-        a cubic's slope is a quadratic, so that is exact)."""
-        xi = [self.lo, self.hi]
-        if len(self.coeffs) > 3 and self.coeffs[3] != 0.0:
-            turn = -self.coeffs[2] / (3.0 * self.coeffs[3])
-            if self.lo < turn < self.hi:
-                xi.append(turn)
-        return float(np.max(np.abs(self.slope(np.array(xi)))))
+        """max |dη/dξ| over the extent [lo, hi], exactly: at an end or where the slope turns
+        (a real root of p'' inside the extent), for any order."""
+        curvature = P.polytrim(P.polyder(self.coeffs, 2))
+        turns = P.polyroots(curvature) if len(curvature) > 1 else np.zeros(0)
+        real = turns.real[np.abs(turns.imag) <= 1e-9 * np.maximum(1.0, np.abs(turns.real))]
+        inside = real[(real > self.lo) & (real < self.hi)]
+        return float(np.max(np.abs(self.slope(np.concatenate([[self.lo, self.hi], inside])))))
 
     def to_xy(self, xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
         """(ξ, η) pairs to (x¹, x²) points, shape (…, 2)."""
