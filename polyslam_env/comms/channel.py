@@ -96,9 +96,10 @@ class ChannelConfig(Config):
     # between sending and delivery).
     range_margin: float = 1.0
     # An alignment that lays more than this fraction of the received walls in the receiver's
-    # free space (cells its beams crossed) is refused: correctly aligned, a wall lies in free
-    # space only where the sender's map is grossly wrong (> 0.3 m off), and the maps'
-    # map_precision (length within 5 cm of a true wall) is ≥ 0.95 on average.
+    # free space (cells its beams crossed), or of the receiver's walls in the sender's (sent
+    # with its walls), is refused: correctly aligned, a wall lies in the other's free space
+    # only where a map is grossly wrong (> 0.3 m off), and the maps' map_precision (length
+    # within 5 cm of a true wall) is ≥ 0.95 on average.
     max_conflict: float = 0.05
     # features: walls: the best corner hypothesis must lay at least this much of the sent
     # walls (m) within 0.1 m of the receiver's own: about two sides of a room, walls in two

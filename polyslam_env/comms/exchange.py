@@ -51,6 +51,8 @@ an exchange trailer: the sender's pose variances σ²_x, σ²_y, σ²_θ (3 floa
 width F) and a CRC-32 of everything before it (4 bytes), i.e. 3F + 4 bytes more. The
 sender's pose covariance is not in the message header but the receiver needs it: the
 transform depends on the sender's pose estimate. The trailer is counted in every byte figure.
+In alignment mode the trailer starts with the sender's feature map and the changes of its free
+space since what the receiver holds (:func:`frame_message`, ``comms/free_space.py``).
 
 **Noise model of a received polynomial.** The refit's points depend on the receiver's state
 only through its pose (d_state: the first three columns of the transform's (3, 9) Jacobian),
@@ -97,7 +99,7 @@ from scipy.spatial import cKDTree
 
 from polyslam_env.comms.alignment import frame_points, refine_transform
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
-from polyslam_env.comms.free_space import FreeSpace
+from polyslam_env.comms.free_space import FreeCells, FreeSpace
 from polyslam_env.comms.messages import (
     GridMessage,
     Header,
@@ -224,20 +226,31 @@ class _Sighting:
 # -- wire frame ----------------------------------------------------------------------------------
 _FEATURE_HEAD = struct.Struct("<HB")  # features n, descriptor length d (| _ORIENTED)
 _ORIENTED = 0x80  # flag in the descriptor-length byte: rows carry a heading
+# free-space block: corner's lattice index (col, row), rows, cols, deflated length
+_FREE_HEAD = struct.Struct("<iiHHI")
+NO_FREE_CELLS: FreeCells = ((0, 0), np.zeros((0, 0), dtype=bool))
 
 
 def frame_message(
-    message: bytes, pose_var: np.ndarray, features: FeatureMap | None = None
+    message: bytes,
+    pose_var: np.ndarray,
+    features: FeatureMap | None = None,
+    free: FreeCells | None = None,
 ) -> bytes:
     """Message bytes followed by the exchange trailer: the sender's feature map when given
     (alignment mode: n rows of position, heading if the features are oriented, and
     descriptor in the message's float width, then n as uint16 and a uint8 holding the
-    descriptor length d with bit 7 set for oriented features), the pose variances and a
-    CRC-32."""
+    descriptor length d with bit 7 set for oriented features) and after it the changes of its
+    free space (``free``, none when not given; :meth:`FreeSpace.changes`: the block's bits row
+    by row, packed 8 to a byte and deflated (zlib), then the corner's lattice index (col, row)
+    as int32, the block's rows and columns as uint16 and the deflated length as uint32), the
+    pose variances and a CRC-32."""
     width = message[3]  # the message header's float width
     var = np.asarray(pose_var, dtype=float).reshape(3)
     if not np.all(np.isfinite(var) & (var >= 0)):
         raise ValueError(f"pose variances must be finite and >= 0, got {var}")
+    if free is not None and features is None:
+        raise ValueError("a free-space block goes with a feature map (alignment mode)")
     body = message
     if features is not None:
         n, d = features.descriptors.shape
@@ -249,15 +262,22 @@ def frame_message(
             d |= _ORIENTED
         block = np.hstack(columns).astype(_FLOAT[width])
         body += block.tobytes() + _FEATURE_HEAD.pack(n, d)
+        (col, row), cells = free if free is not None else NO_FREE_CELLS
+        rows, cols = cells.shape
+        if max(rows, cols) >= 2**16:
+            raise ValueError(f"free-space block too large for the frame: {rows} × {cols} cells")
+        packed = zlib.compress(np.packbits(cells.astype(bool), axis=None).tobytes(), 9)
+        body += packed + _FREE_HEAD.pack(col, row, rows, cols, len(packed))
     body += var.astype(_FLOAT[width]).tobytes()
     return body + _TRAILER_CRC.pack(zlib.crc32(body))
 
 
 def unframe_message(
     data: bytes, with_features: bool = False
-) -> tuple[Message, np.ndarray, FeatureMap | None]:
-    """Inverse of :func:`frame_message`: the decoded message, the pose variances (3,) and the
-    feature map (None unless ``with_features``)."""
+) -> tuple[Message, np.ndarray, FeatureMap | None, FreeCells | None]:
+    """Inverse of :func:`frame_message`: the decoded message, the pose variances (3,), the
+    feature map and the free-space block (both None unless ``with_features``: alignment
+    mode's frames carry both)."""
     if len(data) < 4 or data[3] not in _FLOAT:
         raise ValueError("truncated or corrupt exchange frame")
     width = data[3]
@@ -268,10 +288,29 @@ def unframe_message(
         raise ValueError("corrupt exchange frame: trailer CRC-32 mismatch")
     var = np.frombuffer(body[-3 * width :], dtype=_FLOAT[width]).astype(float)
     body = body[: -3 * width]
-    features = None
+    features = free = None
     if with_features:
+        body, free = _split_free(body)
         body, features = _split_features(body, width)
-    return decode(body), var, features
+    return decode(body), var, features, free
+
+
+def _split_free(body: bytes) -> tuple[bytes, FreeCells]:
+    """The bytes before the free-space block that ends ``body``, and the block."""
+    if len(body) < _FREE_HEAD.size:
+        raise ValueError("corrupt exchange frame: no free-space block")
+    col, row, rows, cols, size = _FREE_HEAD.unpack(body[-_FREE_HEAD.size :])
+    end = len(body) - _FREE_HEAD.size
+    if size > end:
+        raise ValueError("corrupt exchange frame: free-space block longer than the frame")
+    try:
+        packed = np.frombuffer(zlib.decompress(body[end - size : end]), dtype=np.uint8)
+    except zlib.error as err:
+        raise ValueError(f"corrupt exchange frame: free-space block ({err})") from None
+    if 8 * len(packed) < rows * cols:
+        raise ValueError("corrupt exchange frame: free-space block shorter than its shape")
+    cells = np.unpackbits(packed, count=rows * cols).astype(bool).reshape(rows, cols)
+    return body[: end - size], ((col, row), cells)
 
 
 def _split_features(body: bytes, width: int) -> tuple[bytes, FeatureMap]:
@@ -502,6 +541,12 @@ class RendezvousExchange:
             if config.mode == "alignment"
             else []
         )
+        # alignment mode: each sender's free space as its receiver holds it (sender frame),
+        # kept by the receiver (heard) and by the sender (sent, to send only changes)
+        self._heard_free: dict[tuple[int, int], FreeSpace] = {}
+        self._sent_free: dict[tuple[int, int], FreeSpace] = {}
+        self._free_changes: dict[int, FreeCells] = {}  # msg → the changes it carries
+        self._max_range = float(max_range)
         self._last_meeting: dict[tuple[int, int], int] = {}  # (s, r) → s's SLAM step
         self._last_log: dict[tuple[int, int], int] = {}  # (s, r) → s's scan-log length
         self._known: list[dict[int, set[int]]] = [{} for _ in range(num_robots)]
@@ -577,6 +622,8 @@ class RendezvousExchange:
         for e in expired:
             s, r, ids = self._sent_ids.pop(e.msg_id)
             self._resend.setdefault((s, r), set()).update(ids)
+            if e.msg_id in self._free_changes:  # undone: they go again at the next meeting
+                self._sent_free[(s, r)].toggle(*self._free_changes.pop(e.msg_id))
             self._sightings.pop((r, s, e.sent_step), None)
         for pair in sightings:
             self._last_seen[pair] = k
@@ -663,9 +710,11 @@ class RendezvousExchange:
             if aligning:
                 self._sightings[(r, s, k)] = _Sighting(slams[r].pose, math.nan, math.nan)
                 own = self._feature_map(s, slams, features)
-            payload, ids = self._build(k, s, r, bearing[(s, r)], slams[s], own)
+            payload, ids, changes = self._build(k, s, r, bearing[(s, r)], slams[s], own)
             msg_id = self.channel.send(s, r, payload, k)
             self._sent_ids[msg_id] = (s, r, ids)
+            if changes is not None:
+                self._free_changes[msg_id] = changes
             self._polys_sent[s] += len(ids)
             out.append((s, r, len(payload)))
         return out
@@ -686,9 +735,10 @@ class RendezvousExchange:
         bearing: float,
         slam: PolySlam,
         features: FeatureMap | None = None,
-    ) -> tuple[bytes, tuple[int, ...]]:
-        """Wire bytes of s's message to r (with s's ``features`` in alignment mode), and the
-        landmark ids it carries."""
+    ) -> tuple[bytes, tuple[int, ...], FreeCells | None]:
+        """Wire bytes of s's message to r (with s's ``features`` and the changes of its free
+        space since what r holds in alignment mode), the landmark ids it carries and those
+        changes (None without features)."""
         ids = self._landmarks_to_send(s, r, slam)
         seq = self._seq.get((s, r), 0)
         self._seq[(s, r)] = seq + 1
@@ -707,7 +757,19 @@ class RendezvousExchange:
         if self.compare_payloads:
             self._log_sizes(k, s, r, variants, pose_var, len(records))
         message = variants[kind]
-        return frame_message(encode(message, precision), pose_var, features), ids
+        changes = None
+        if features is not None:
+            sent = self._sent_free.setdefault((s, r), self._new_free_space())
+            walls = [p.sample_arclength(0.5 * FREE_RESOLUTION) for p in polys]
+            points = np.concatenate(walls) if walls else np.zeros((0, 2))
+            clear = self.free_space[s].clear_of(points)  # s knows its whole map
+            changes = sent.changes(clear)
+            sent.toggle(*changes)
+        framed = frame_message(encode(message, precision), pose_var, features, changes)
+        return framed, ids, changes
+
+    def _new_free_space(self) -> FreeSpace:
+        return FreeSpace(FREE_RESOLUTION, FREE_MARGIN, self._max_range)
 
     def _variants(
         self,
@@ -759,7 +821,10 @@ class RendezvousExchange:
         s, r = delivered.sender, delivered.receiver
         sent_ids = self._sent_ids.pop(delivered.msg_id, None)
         aligning = self.config.mode == "alignment"
-        message, pose_var, theirs = unframe_message(delivered.payload, aligning)
+        self._free_changes.pop(delivered.msg_id, None)
+        message, pose_var, theirs, changes = unframe_message(delivered.payload, aligning)
+        if changes is not None:
+            self._heard_free.setdefault((s, r), self._new_free_space()).toggle(*changes)
         received: list[Polynomial] = []
         ids: list[int] = []
         n_records = 0
@@ -845,8 +910,10 @@ class RendezvousExchange:
         range (+ ``range_margin``) is refused, and so is one that lays more than
         ``max_conflict`` of the ``walls`` the sender has sent it (sender frame; this message's
         and earlier ones') in the receiver's free space, away from its own walls
-        (:class:`~polyslam_env.comms.free_space.FreeSpace`); a refused attempt is logged as
-        declined. Every attempt is logged in :attr:`alignments`."""
+        (:class:`~polyslam_env.comms.free_space.FreeSpace`), or that lays more than that of the
+        receiver's own walls in the sender's free space (as the sender's messages have carried
+        it: cells clear of the sender's walls); a refused attempt is logged as declined. Every
+        attempt is logged in :attr:`alignments`."""
         assert self._align_rng is not None
         free_space = self.free_space[delivered.receiver]
         own_walls = receiver.polynomials()
@@ -855,6 +922,8 @@ class RendezvousExchange:
         own = [p.sample_arclength(0.5 * FREE_RESOLUTION) for p in own_walls]
         own_points = np.concatenate(own) if own else np.zeros((0, 2))
         own_tree = cKDTree(own_points) if len(own_points) else None
+        # the other way: the receiver's walls in the sender's free space (clear of its walls)
+        their_free = self._heard_free.get((delivered.sender, delivered.receiver))
         limit = self.config.range + self.config.range_margin
 
         def score(t: np.ndarray) -> float:
@@ -876,6 +945,15 @@ class RendezvousExchange:
                     f"lays {conflict:.0%} of the received walls in the receiver's free space"
                     f" (max_conflict {self.config.max_conflict:.0%})"
                 )
+            if their_free is not None:
+                back = inverse(t)
+                moved = own_points @ rotation(float(back[2])).T + back[:2]
+                conflict = their_free.conflict(moved, None)
+                if conflict > self.config.max_conflict:
+                    return (
+                        f"lays {conflict:.0%} of the receiver's walls in the sender's free space"
+                        f" (max_conflict {self.config.max_conflict:.0%})"
+                    )
             return ""
 
         cfg = self.config.alignment

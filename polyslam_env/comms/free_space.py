@@ -13,6 +13,17 @@ observations, unless it lies within ``margin`` of one of the receiver's own wall
 grazes a wall crosses cells the wall runs through long before its return, so cells along the
 robot's own walls are marked free too. :meth:`FreeSpace.conflict` is the fraction of a received
 map's length that contradicts.
+
+The test runs both ways: the receiver's walls moved into the sender's frame must not lie in the
+*sender's* free space either. Two robots whose maps share little (an office floor's repeating
+rooms, each robot having seen its own few) can agree on a shift by one period, and the
+receiver's own free space holds too little of the shifted map to refuse it; the sender's does.
+So a robot sends its free space with its walls: the cells its beams crossed whose centres lie
+further than ``margin`` from every wall of its current map (:meth:`FreeSpace.clear_of`; it
+knows its whole map, including walls it received from that receiver and never sends back).
+That set changes both ways as the map grows, so a message carries only the cells that changed
+since what the receiver holds (:meth:`FreeSpace.changes`, a bitmap of their bounding box), and
+the receiver flips them in its copy (:meth:`FreeSpace.toggle`).
 """
 
 from __future__ import annotations
@@ -22,7 +33,11 @@ from scipy.spatial import cKDTree
 
 from polyslam_env.core.geometry import beam_endpoints
 
-__all__ = ["FreeSpace"]
+__all__ = ["FreeCells", "FreeSpace"]
+
+#: A block of cells: the lattice index (col, row) of its lower-left cell, and the cells
+#: (rows, cols) bool.
+FreeCells = tuple[tuple[int, int], np.ndarray]
 
 
 class FreeSpace:
@@ -37,7 +52,7 @@ class FreeSpace:
         self.resolution = float(resolution)
         self.margin = float(margin)
         self.max_range = float(max_range)
-        self.origin = np.zeros(2)  # (x, y) of cell [0, 0]'s corner
+        self.origin = np.zeros(2)  # (x, y) of cell [0, 0]'s corner, a multiple of resolution
         self.cells = np.zeros((0, 0), dtype=bool)  # [row (y), col (x)]
 
     def add(self, pose: np.ndarray, ranges: np.ndarray, beam_angles: np.ndarray) -> None:
@@ -56,6 +71,61 @@ class FreeSpace:
         self._grow(points.min(axis=0), points.max(axis=0))
         rows, cols = self._index(points)
         self.cells[rows, cols] = True
+
+    def clear_of(self, walls: np.ndarray) -> FreeCells:
+        """The crossed cells whose centres lie further than ``margin`` from every point of
+        ``walls`` (P, 2) (samples of the robot's map, spaced well below ``margin``), over the
+        whole grid: (lattice index (col, row) of cell [0, 0], bool (rows, cols)). Lattice:
+        cells of ``resolution`` with a corner at (0, 0)."""
+        clear = self.cells.copy()
+        rows, cols = np.nonzero(clear)
+        pts = np.asarray(walls, dtype=float).reshape(-1, 2)
+        if len(rows) and len(pts):
+            centres = self.origin + (np.column_stack([cols, rows]) + 0.5) * self.resolution
+            dist, _ = cKDTree(pts).query(centres, distance_upper_bound=self.margin)
+            clear[rows[np.isfinite(dist)], cols[np.isfinite(dist)]] = False
+        return self._lattice_corner(), clear
+
+    def changes(self, current: FreeCells) -> FreeCells:
+        """The cells where ``current`` (a block as :meth:`clear_of` gives it; cells outside it
+        are not free) and this grid differ, over their bounding box: what :meth:`toggle`
+        needs to turn this grid into ``current``; an empty block for none."""
+        blocks = [current, (self._lattice_corner(), self.cells)]
+        blocks = [(corner, cells) for corner, cells in blocks if cells.size]
+        if not blocks:
+            return (0, 0), np.zeros((0, 0), dtype=bool)
+        lo = np.min([corner for corner, _ in blocks], axis=0)  # (col, row)
+        hi = np.max([np.add(corner, cells.shape[::-1]) for corner, cells in blocks], axis=0)
+        diff = np.zeros((int(hi[1] - lo[1]), int(hi[0] - lo[0])), dtype=bool)
+        for (col, row), cells in blocks:
+            r0, c0 = row - int(lo[1]), col - int(lo[0])
+            diff[r0 : r0 + cells.shape[0], c0 : c0 + cells.shape[1]] ^= cells
+        rows, cols = np.nonzero(diff)
+        if len(rows) == 0:
+            return (0, 0), np.zeros((0, 0), dtype=bool)
+        r_lo, c_lo = int(rows.min()), int(cols.min())
+        block = diff[r_lo : int(rows.max()) + 1, c_lo : int(cols.max()) + 1]
+        return (int(lo[0]) + c_lo, int(lo[1]) + r_lo), block
+
+    def toggle(self, corner: tuple[int, int], block: np.ndarray) -> None:
+        """Flip the cells of ``block`` (rows, cols) bool whose lower-left cell has lattice
+        index ``corner`` (col, row), as :meth:`changes` gives them."""
+        block = np.asarray(block, dtype=bool)
+        if not block.any():
+            return
+        res = self.resolution
+        lo = np.asarray(corner, dtype=float) * res
+        hi = lo + res * (np.array(block.shape[::-1], dtype=float) - 1)
+        self._grow(lo + 0.5 * res, hi + 0.5 * res)
+        col, row = self._lattice_corner()
+        r0, c0 = corner[1] - row, corner[0] - col
+        window = self.cells[r0 : r0 + block.shape[0], c0 : c0 + block.shape[1]]
+        window ^= block
+
+    def _lattice_corner(self) -> tuple[int, int]:
+        """Lattice index (col, row) of cell [0, 0]."""
+        col, row = np.rint(self.origin / self.resolution).astype(np.int64)
+        return int(col), int(row)
 
     def conflict(self, points: np.ndarray, own_walls: cKDTree | None) -> float:
         """Fraction of ``points`` (P, 2) (samples of the received walls, equally spaced along

@@ -186,6 +186,24 @@ def test_alignment_mode_on_walls__a_shifted_building_is_vetoed_or_ambiguous() ->
     assert wrong_raw > 0
 
 
+def test_alignment_mode_on_walls__the_senders_free_space_refuses_a_shift_by_one_room() -> None:
+    """An office floor's rooms repeat. In seed 0, robot 0 had seen too little of the rooms robot
+    2 sent to refuse a shift by one room (9 m, then 6 m; 8 and 6 corners agreed, and 36–39 m of
+    wall against the true transform's 0.2–6.6 m): both were accepted at steps 210 and 230 when
+    only the receiver's free space was tested (and 5 accepted by robot 0 within 400 steps, 2 of
+    them wrong). The sender's free space, sent with its walls, holds what the receiver's walls
+    would cut through: within 400 steps no accepted alignment is wrong, and walls are still
+    fused (6 accepted)."""
+    config = _walls_config(max_steps=400)
+    assert config["map"] == "generator:office_floor"
+    env = parallel_env(EnvConfig.from_dict(config))
+    result = run_episode(env, make_team("frontier", env), seed=0)
+    assert sum(m["alignments_wrong"] for m in result.robots.values()) == 0
+    assert sum(m["alignments_accepted"] for m in result.robots.values()) > 0
+    exchange = env.episode.exchange
+    assert exchange is not None and any(d.received for d in exchange.history)
+
+
 def test_alignment_mode_on_walls__needs_no_pillar_sensor_and_checks_its_fields() -> None:
     data = _walls_config()
     assert EnvConfig.from_dict(data).channel.features == "walls"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +37,9 @@ from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.config import WorldConfig
 
 WCFG = WorldConfig()
+# An alignment-mode frame's empty free-space block: deflated nothing, then its 16-byte head
+# (corner col and row int32, rows and cols uint16, deflated length uint32).
+NO_FREE = len(zlib.compress(b"", 9)) + 16
 
 
 @dataclass(frozen=True)
@@ -115,9 +119,9 @@ def test_frame_message__round_trips_and_rejects_corruption() -> None:
         raw = encode(msg, precision)  # type: ignore[arg-type]
         data = frame_message(raw, var)
         assert len(data) == len(raw) + 3 * width + 4
-        out, var_out, none = unframe_message(data)
+        out, var_out, none, no_free = unframe_message(data)
         assert isinstance(out, PolynomialMessage) and out.records[0].landmark_id == 5
-        assert none is None
+        assert none is None and no_free is None
         np.testing.assert_allclose(var_out, var, rtol=1e-6)  # float32 round-off
         bad = bytearray(data)
         bad[-6] ^= 0xFF
@@ -136,11 +140,11 @@ def test_frame_message__carries_a_feature_map_counted_in_its_bytes() -> None:
     for precision, width in (("float32", 4), ("float64", 8)):
         raw = encode(msg, precision)  # type: ignore[arg-type]
         data = frame_message(raw, var, features)
-        # 7 rows of 2 + 8 numbers, then n (uint16) and d (uint8)
-        assert len(data) == len(raw) + 7 * 10 * width + 3 + 3 * width + 4
-        out, var_out, got = unframe_message(data, with_features=True)
+        # 7 rows of 2 + 8 numbers, then n (uint16) and d (uint8), and an empty free block
+        assert len(data) == len(raw) + 7 * 10 * width + 3 + NO_FREE + 3 * width + 4
+        out, var_out, got, free = unframe_message(data, with_features=True)
         assert isinstance(out, PolynomialMessage) and out.records[0].landmark_id == 5
-        assert got is not None
+        assert got is not None and free is not None and free[1].size == 0
         tol = 1e-6 if width == 4 else 0.0  # float32 round-off
         np.testing.assert_allclose(got.positions, features.positions, rtol=tol, atol=tol)
         np.testing.assert_allclose(got.descriptors, features.descriptors, rtol=tol, atol=tol)
@@ -162,7 +166,7 @@ def test_frame_message__oriented_features_carry_their_headings() -> None:
     var = np.array([1e-4, 2e-4, 3e-5])
     raw = encode(msg, "float64")
     data = frame_message(raw, var, corners)
-    assert len(data) == len(raw) + 5 * (2 + 1 + 2) * 8 + 3 + 3 * 8 + 4
+    assert len(data) == len(raw) + 5 * (2 + 1 + 2) * 8 + 3 + NO_FREE + 3 * 8 + 4
     got = unframe_message(data, with_features=True)[2]
     assert got is not None and got.headings is not None
     np.testing.assert_array_equal(got.positions, corners.positions)
@@ -173,6 +177,30 @@ def test_frame_message__oriented_features_carry_their_headings() -> None:
     assert again is not None and again.headings is None
     with pytest.raises(ValueError, match="too large"):
         frame_message(raw, var, FeatureMap(np.zeros((1, 2)), np.zeros((1, 128))))
+
+
+def test_frame_message__carries_a_free_space_block_counted_in_its_bytes() -> None:
+    """Alignment mode's free cells (FreeSpace.new_cells) go deflated after the features and
+    come back cell for cell with their lattice corner (negative indices too); a corrupt block
+    is a ValueError, not a wrong grid."""
+    msg = PolynomialMessage(Header(1, 2, 7, np.zeros(3), 0.0), ())
+    raw, var = encode(msg, "float32"), np.array([1e-4, 2e-4, 3e-5])
+    corners = FeatureMap(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
+    cells = np.random.default_rng(5).random((37, 91)) < 0.3
+    data = frame_message(raw, var, corners, ((-120, 45), cells))
+    packed = zlib.compress(np.packbits(cells, axis=None).tobytes(), 9)
+    assert len(data) == len(raw) + 3 + len(packed) + 16 + 3 * 4 + 4
+    got = unframe_message(data, with_features=True)[3]
+    assert got is not None
+    assert got[0] == (-120, 45)
+    np.testing.assert_array_equal(got[1], cells)
+    head = len(data) - 4 - 3 * 4 - 16  # where the block's head starts
+    bad = bytearray(data)
+    bad[head - 2] ^= 0xFF  # inside the deflated bytes
+    body = bytes(bad[:-4])
+    bad[-4:] = zlib.crc32(body).to_bytes(4, "little")  # a valid CRC over the corrupt block
+    with pytest.raises(ValueError, match="free-space block"):
+        unframe_message(bytes(bad), with_features=True)
 
 
 # -- geometry and Jacobians ----------------------------------------------------------------------

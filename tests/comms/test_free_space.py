@@ -62,3 +62,60 @@ def test_free_space__grows_to_every_side_and_keeps_what_it_had() -> None:
             assert space.conflict(_ring(1.0, centre=earlier), None) == 1.0
     assert all(a[0] <= b[0] and a[1] <= b[1] for a, b in itertools.pairwise(shapes))
     assert space.conflict(_ring(1.0, centre=(100.0, 100.0)), None) == 0.0
+
+
+def test_free_space__clear_of_walls_drops_the_cells_near_them() -> None:
+    """clear_of keeps a crossed cell exactly when its centre is further than the margin from
+    every wall point (brute force over all cells)."""
+    space = FreeSpace(0.1, 0.3, 8.0)
+    space.add(np.zeros(3), np.full(len(ANGLES), 3.0), ANGLES)
+    walls = _ring(1.2, 400, centre=(0.5, -0.4))
+    corner, clear = space.clear_of(walls)
+    rows, cols = np.indices(space.cells.shape)
+    centres = (np.stack([cols, rows], axis=-1) + np.asarray(corner) + 0.5) * 0.1  # (R, C, 2)
+    near = np.hypot(*(centres[:, :, None, :] - walls[None, None]).transpose(3, 0, 1, 2))
+    expected = space.cells & (near.min(axis=2) > 0.3)
+    np.testing.assert_array_equal(clear, expected)
+    assert 0 < clear.sum() < space.cells.sum()
+
+
+def test_free_space__sent_as_changes_rebuilds_the_senders_clear_cells() -> None:
+    """What a sender's messages carry (the changes between its cells clear of its walls and
+    what the receiver holds) rebuilds the sender's clear cells in the receiver's copy, cell for
+    cell, while cells appear (new scans) and vanish (walls mapped later); a message without a
+    change carries nothing, and undoing a lost message's changes keeps both copies equal."""
+    sender, sent, heard = (FreeSpace(0.1, 0.3, 8.0) for _ in range(3))
+    rng = np.random.default_rng(11)
+    walls = np.zeros((0, 2))
+    before: set[tuple[int, int]] = set()
+    vanished = 0
+    for k in range(8):
+        pose = np.array([*rng.uniform(-20.0, 20.0, 2), rng.uniform(-np.pi, np.pi)])
+        sender.add(pose, rng.uniform(0.5, 4.0, len(ANGLES)), ANGLES)
+        walls = np.vstack([walls, _ring(0.8, 200, centre=tuple(rng.uniform(-20.0, 20.0, 2)))])
+        clear = sender.clear_of(walls)
+        vanished += len(before - _clear_cells(clear))
+        before = _clear_cells(clear)
+        changes = sent.changes(clear)
+        assert changes[1].any()
+        sent.toggle(*changes)
+        if k == 3:  # lost: the sender undoes it, and the next message carries it again
+            sent.toggle(*changes)
+            continue
+        heard.toggle(*changes)
+        assert _lattice_cells(heard) == _lattice_cells(sent) == _clear_cells(clear)
+    assert not sent.changes(sender.clear_of(walls))[1].any()
+    assert vanished > 0
+
+
+def _clear_cells(block: tuple[tuple[int, int], np.ndarray]) -> set[tuple[int, int]]:
+    (col, row), cells = block
+    rows, cols = np.nonzero(cells)
+    return set(zip((cols + col).tolist(), (rows + row).tolist(), strict=True))
+
+
+def _lattice_cells(space: FreeSpace) -> set[tuple[int, int]]:
+    """The free cells as lattice indices (col, row): cells of the resolution, a corner at 0."""
+    corner = np.rint(space.origin / space.resolution).astype(int)  # (col, row) of cell [0, 0]
+    rows, cols = np.nonzero(space.cells)
+    return set(zip((cols + corner[0]).tolist(), (rows + corner[1]).tolist(), strict=True))
