@@ -1,6 +1,7 @@
 """Honest uncertainty over whole episodes on a large generated map (issue 14).
 
-A frontier robot explores a generated office floor, or a warehouse, for a whole episode with
+A frontier robot explores a generated office floor, a warehouse or a pillar hall for a whole
+episode with
 ``initial_error`` on: its true start is drawn from P0 around its frame origin. Over 20 seeded
 runs the standard pose NEES *at the last step* must lie in the two-sided 95 % band of the mean
 of 20 χ²(3) variables, χ²(60)/20, both for the pose in the robot's frame (error includes the
@@ -24,23 +25,29 @@ from polyslam_env.environment.parallel import parallel_env
 from polyslam_env.slam.ekf import start_error_cov
 
 RUNS = 20
-STEPS = 300
-#: rooms off a corridor; shelf rows, whose many short faces and corners are where beams
-#: pass a wall's end (slam.end_sigma: the lone warehouse robot was above the band without it)
-MAPS = ("generator:office_floor", "generator:warehouse")
+#: (map, steps): rooms off a corridor; shelf rows, whose many short faces and corners are where
+#: beams pass a wall's end (slam.end_sigma: the lone warehouse robot was above the band without
+#: it); round pillars, short strongly curved landmarks whose beams may miss them within the
+#: state's uncertainty while the linearised end test keeps them (kernels.steady_beams: without
+#: it the final relative NEES was 3.44 after 300 steps, in the band, and 5.25 after 600)
+EPISODES = (
+    ("generator:office_floor", 300),
+    ("generator:warehouse", 300),
+    ("generator:pillar_hall", 600),
+)
 
 
 def _nees(err: np.ndarray, cov: np.ndarray) -> float:
     return float(err @ np.linalg.solve(cov, err))
 
 
-def _run(map_name: str, seed: int) -> tuple[float, float, float]:
+def _run(map_name: str, steps: int, seed: int) -> tuple[float, float, float]:
     """One episode: (final NEES in the frame, final NEES relative to the true start, the
     smallest eigenvalue of P − J P0 Jᵀ over the episode relative to ‖P‖)."""
     env = parallel_env(
         map=map_name,
         num_robots=1,
-        max_steps=STEPS,
+        max_steps=steps,
         coverage_target=None,
         channel=None,
         initial_error=True,
@@ -67,11 +74,11 @@ def _run(map_name: str, seed: int) -> tuple[float, float, float]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("map_name", MAPS)
+@pytest.mark.parametrize(("map_name", "steps"), EPISODES)
 def test_nees__whole_episodes_with_initial_error_on_a_large_map__inside_the_95_band(
-    map_name: str,
+    map_name: str, steps: int
 ) -> None:
-    results = np.array([_run(map_name, seed) for seed in range(RUNS)])  # (RUNS, 3)
+    results = np.array([_run(map_name, steps, seed) for seed in range(RUNS)])  # (RUNS, 3)
     lo, hi = scipy.stats.chi2.ppf([0.025, 0.975], 3 * RUNS) / RUNS
     frame, relative = results[:, 0].mean(), results[:, 1].mean()
     assert lo <= frame <= hi, f"final NEES in the frame {frame:.2f} outside [{lo:.2f}, {hi:.2f}]"

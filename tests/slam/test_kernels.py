@@ -482,6 +482,51 @@ def test_ends_in_doubt__equals_dense_oracle(
         assert np.array_equal(keep[~near], want[~near]) and kept == keep.sum()
 
 
+@settings(max_examples=100, deadline=None)
+@given(polys=st.lists(polynomials(), min_size=1, max_size=4), pose=poses, beams=beam_sets,
+       seed=st.integers(0, 2**32 - 1), scale=st.sampled_from([1e-5, 1e-3, 1e-1]))  # fmt: skip
+def test_steady_beams__equals_sigma_point_oracle(
+    polys: list[Polynomial], pose: np.ndarray, beams: np.ndarray, seed: int, scale: float
+) -> None:
+    """A beam is dropped exactly when it hits landmark j at the mean (above the tangent limit)
+    and the float oracle's cast from one of the 8 sigma points, the mean ± 2 times a column of
+    the Cholesky factor of P over (x, y, θ, c0_j), does not hit j above that limit."""
+    rng = np.random.default_rng(seed)
+    table = _table(polys)
+    c0s = np.array([p.c0 for p in polys])
+    n, max_range, min_sine, spread = len(polys), 10.0, math.sin(math.radians(10.0)), 2.0
+    cov = random_spd(rng, 3 + n, scale)
+    mean = np.concatenate([pose, c0s])
+    keep = np.empty(beams.size, np.bool_)
+    kept = kernels.steady_beams(
+        mean, cov, beams, np.arange(beams.size), math.inf, *table.arrays(), table.boxes(c0s),
+        max_range, min_sine, n, spread, keep,
+    )  # fmt: skip
+    every, rows = list(range(n)), table.rows()
+
+    def usable_hit(x: float, y: float, theta: float, angle: float, c0: np.ndarray) -> int:
+        """The landmark the beam hits above the tangent limit, −1 for none."""
+        hit = ref.cast(x, y, theta, [angle], every, rows, c0.tolist(), max_range)[0]
+        if hit is None or abs(hit.denom) / math.hypot(1.0, hit.slope) < min_sine:
+            return -1
+        return hit.landmark
+
+    for b, angle in enumerate(beams.tolist()):
+        j = usable_hit(*pose.tolist(), angle, c0s)
+        want = True
+        if j >= 0:
+            index = [0, 1, 2, 3 + j]
+            factor = np.linalg.cholesky(cov[np.ix_(index, index)])
+            for sign, column in itertools.product((spread, -spread), range(4)):
+                d = sign * factor[:, column]
+                c0 = c0s.copy()
+                c0[j] += d[3]
+                if usable_hit(*(pose + d[:3]).tolist(), angle, c0) != j:
+                    want = False
+        assert keep[b] == want, (b, j)
+    assert kept == keep.sum()
+
+
 @pytest.mark.parametrize("variate", [1, 2])
 def test_beam_rows__xi_gradient_equals_finite_differences(variate: int) -> None:
     """∂ξ*/∂(x, y, θ, c0) = xi_grad[:3] + dξ·h (the rows ``ends_in_doubt`` builds J from)
