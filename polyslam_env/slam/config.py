@@ -105,7 +105,9 @@ class SlamConfig(Config):
     join_pieces: bool = True  # join end-to-end pieces of one wall (merging.py; paper: False)
     stretch_ends: bool = True  # a hit just past an end stretches it (association; paper: False)
     # beams whose hit lies within this many σ (of its place along the curve) of a landmark's
-    # end are not used in the update: they may pass the end (kernels.ends_in_doubt; paper: 0)
+    # end are not used in the update: they may pass the end (kernels.ends_in_doubt); nor are
+    # beams that, cast from the sigma points at this many σ of the pose and the landmark's c0,
+    # miss it (kernels.steady_beams: short curved landmarks, round pillars); paper: 0
     end_sigma: float = 2.0
     # beams in the update are at least this far apart in angle (degrees; 0: every beam; the
     # others feed only the map: robot.update_beam_mask; paper: 0)
