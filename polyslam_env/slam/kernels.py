@@ -612,7 +612,9 @@ def steady_beams(
     landmark at the mean but, cast from one of the 8 sigma points (the mean ± ``spread``
     times each column of the Cholesky factor of that 4 × 4 covariance), misses it (past an
     end, hits another landmark first, or meets it below ``min_sine``); returns how many are
-    kept. Beams with no usable hit at the mean are kept (beam_rows skips them anyway).
+    kept. Beams with no usable hit at the mean are kept (beam_rows skips them anyway). The
+    shape's rotation, when it is a state, stays at its mean: its effect on where the beam
+    meets the curve is the lever of a turn about the fit's centre, small on a short arc.
 
     :func:`ends_in_doubt` asks the same of a linearisation of the hit's place along the curve.
     On a short, strongly curved landmark (a round pillar's arc: 0.3 m of a circle of radius
