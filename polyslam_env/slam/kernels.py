@@ -643,6 +643,7 @@ def steady_beams(
     slope1, denom1, xi1 = np.empty(1), np.empty(1), np.empty(1)
     joint, factor = np.empty((4, 4)), np.empty((4, 4))
     index = np.empty(4, dtype=np.int64)
+    moved = boxes.copy()  # a sigma point's c0 moves its landmark's curve, and its box, along η
     kept = 0
     for b in range(n_beams):
         keep[b] = True
@@ -660,13 +661,18 @@ def steady_beams(
                     xs = x + sign * factor[0, a]
                     ys = y + sign * factor[1, a]
                     ths = theta + sign * factor[2, a]
-                    c0s[j] = mean[3 + j] + sign * factor[3, a]
+                    shift = sign * factor[3, a]
+                    c0s[j] = mean[3 + j] + shift
+                    eta = 2 if variate[j] == 1 else 0  # the box's (min, max) columns of η
+                    moved[j, eta] = boxes[j, eta] + shift
+                    moved[j, eta + 1] = boxes[j, eta + 1] + shift
                     cast_into(
-                        xs, ys, ths, one, boxes_near(boxes, np.array([xs, xs, ys, ys]), reach),
-                        variate, order, shape, lo, hi, c0s, boxes, max_range,
+                        xs, ys, ths, one, boxes_near(moved, np.array([xs, xs, ys, ys]), reach),
+                        variate, order, shape, lo, hi, c0s, moved, max_range,
                         t1, landmark1, slope1, denom1, xi1,
                     )  # fmt: skip
                     c0s[j] = mean[3 + j]
+                    moved[j, eta], moved[j, eta + 1] = boxes[j, eta], boxes[j, eta + 1]
                     if landmark1[0] != j or _grazing(slope1[0], denom1[0], min_sine):
                         keep[b] = False
                         break
