@@ -667,12 +667,13 @@ class PolySlam:
         near = self.table.near(self._box(idx), c0s, reach)
         near = near[near != idx]
         poly = self._polynomial(idx)
+        partners = [self._polynomial(int(j)) for j in near]
         sides = self.table.side
         while len(near):
             choice = choose_merge(
                 poly,
                 float(c0s[idx]),
-                [self._polynomial(int(j)) for j in near],
+                partners,
                 c0s[near],
                 cfg.gamma_max,
                 cfg.merge_min_overlap,
@@ -682,20 +683,25 @@ class PolySlam:
             )
             if choice is None:
                 return None
-            merged = self._merge_pair(landmark_id, idx, int(near[choice.partner]), choice.joined)
+            j = int(near[choice.partner])
+            merged = self._merge_pair(
+                landmark_id, idx, poly, j, partners[choice.partner], choice.joined
+            )
             if merged is not None:
                 return merged
             near = np.delete(near, choice.partner)
+            del partners[choice.partner]
         return None
 
-    def _merge_pair(self, landmark_id: int, idx: int, j: int, joined: bool) -> int | None:
-        """Merge landmark ``landmark_id`` (index ``idx``) with the one at index ``j`` when one
-        polynomial explains both; the merged id, or None."""
+    def _merge_pair(
+        self, landmark_id: int, idx: int, poly: Polynomial, j: int, other: Polynomial, joined: bool
+    ) -> int | None:
+        """Merge landmark ``landmark_id`` (index ``idx``, shape ``poly``) with the one at index
+        ``j`` (shape ``other``) when one polynomial explains both; the merged id, or None (the
+        state unchanged)."""
         cfg = self.config
         sides = self.table.side
-        poly = self._polynomial(idx)
         other_id = self.table.ids[j]
-        other = self._polynomial(j)
         pts = merge_points(
             poly,
             3 + idx,
