@@ -310,8 +310,9 @@ class FrontierPolicy(Policy):
     # -- planning --------------------------------------------------------------------------
     def _frontier_and_cost(
         self, window: tuple[slice, slice]
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Frontier cells, passable cells and cell costs (H, W) inside ``window``."""
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Frontier cells, passable cells, cell costs and clearances (m) (H, W) inside
+        ``window``."""
         m = self.map
         obst = m.obstacles[window]
         free = m.free[window] & ~obst
@@ -325,7 +326,7 @@ class FrontierPolicy(Policy):
         frontier = passable & ndimage.binary_dilation(unknown, structure=np.ones((3, 3)))
         soft = 3.0 * self.inflate
         cost = 1.0 + 4.0 * np.clip((soft - clearance) / soft, 0.0, 1.0)
-        return frontier, passable, cost
+        return frontier, passable, cost, clearance
 
     def _needs_plan(self, pose: np.ndarray) -> bool:
         self._since_plan += 1
@@ -349,7 +350,7 @@ class FrontierPolicy(Policy):
         half = 2 * self.close_cells + 4 + math.ceil(self.inflate / m.res)
         r0, c0 = max(cell[0] - half, 0), max(cell[1] - half, 0)
         window = (slice(r0, min(cell[0] + half + 1, m.n)), slice(c0, min(cell[1] + half + 1, m.n)))
-        frontier, _, _ = self._frontier_and_cost(window)
+        frontier = self._frontier_and_cost(window)[0]
         return bool(frontier[cell[0] - r0, cell[1] - c0])
 
     def _plan(self, pose: np.ndarray) -> None:
@@ -365,12 +366,12 @@ class FrontierPolicy(Policy):
         self.path, self.goal = None, None
         m = self.map
         window = m.bbox(pose, 4)
-        frontier, passable, cost = self._frontier_and_cost(window)
+        frontier, passable, cost, clearance = self._frontier_and_cost(window)
         rows, cols = m.cells(pose[None, :2])
         if len(rows) == 0:
             return None
         start = (int(rows[0]) - window[0].start, int(cols[0]) - window[1].start)
-        self._free_start(passable, m.obstacles[window], start)
+        self._free_start(passable, clearance, start, self.inflate / m.res + 1.0)
         dist, pred = grid_path(passable, cost, start)
         frontier &= np.isfinite(dist)
         self._drop_blacklisted(frontier, window)
@@ -413,11 +414,20 @@ class FrontierPolicy(Policy):
         return gain, utility
 
     @staticmethod
-    def _free_start(passable: np.ndarray, obst: np.ndarray, start: tuple[int, int]) -> None:
-        """Let the robot leave its cell even when it is inside the inflated zone."""
+    def _free_start(
+        passable: np.ndarray, clearance: np.ndarray, start: tuple[int, int], reach: float
+    ) -> None:
+        """Let the robot leave the inflated zone when it is inside it (pushed there by a turn,
+        a teammate or its own pose correction): within ``reach`` cells of its cell, every cell
+        at least as clear of the obstacles as its own becomes passable. It can then back out of
+        a corner the way it came, but never squeeze closer to an obstacle than it already is
+        (the soft cost near obstacles still steers it outwards)."""
         r, c = start
-        near = (slice(max(r - 1, 0), r + 2), slice(max(c - 1, 0), c + 2))
-        passable[near] |= ~obst[near]
+        k = math.ceil(reach)
+        near = (slice(max(r - k, 0), r + k + 1), slice(max(c - k, 0), c + k + 1))
+        rows, cols = np.ogrid[near]
+        disc = (rows - r) ** 2 + (cols - c) ** 2 <= reach * reach
+        passable[near] |= disc & (clearance[near] >= clearance[r, c]) & (clearance[near] > 0)
         passable[r, c] = True
 
     def _drop_blacklisted(self, frontier: np.ndarray, window: tuple[slice, slice]) -> None:

@@ -7,10 +7,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 import polyslam_env
 from policies import make_policy, make_team
-from policies.frontier import FrontierPolicy
+from policies.frontier import FrontierPolicy, grid_path
 
 LARGE = {"width": 24, "height": 14, "min_room_size": 1.5, "max_room_size": 5}
 
@@ -84,16 +85,29 @@ def test_frontier__frontiers_on_a_seen_robots_side_are_claimed() -> None:
     assert not policy._claims  # claims expire
 
 
-#: Seed 0 since the SLAM update leaves out beams that may miss their landmark (the team's paths
-#: changed): robot 0 ends up with walls 0.1–0.2 m ahead in a corner at step 97, and for ~35
-#: steps turns left and right in place while its plan alternates between a goal and none (its
-#: cell lies deep in the inflated zone, and ``_free_start`` frees only the 8 cells around it).
-#: The team reaches 80 % at step 247 against the budget's 171. A policy defect, not fixed yet:
-#: strict, so the test says when it is.
-CORNER_TRAP = pytest.mark.xfail(strict=True, reason="frontier robot trapped in a corner")
+def test_free_start__leads_out_of_a_corner_without_nearing_the_walls() -> None:
+    """A robot pushed deep into a corner (one cell from two walls, the zone inflated by 0.35
+    m around them) gets a path out of the zone; the cells freed for it are never closer to a
+    wall than its own. (Freeing only its 8 neighbours, whose clearance is at most 0.2 m, left
+    it no way out: a robot was trapped for ~35 steps, turning in place while its plan
+    alternated between a goal and none.)"""
+    res, inflate = 0.1, 0.35
+    obst = np.zeros((30, 30), dtype=bool)
+    obst[0, :] = obst[:, 0] = True  # the corner's two walls
+    clearance = ndimage.distance_transform_edt(~obst) * res
+    passable = clearance > inflate
+    start = (1, 1)  # 0.1 m from both walls
+    assert not passable[start]
+    before = passable.copy()
+    FrontierPolicy._free_start(passable, clearance, start, inflate / res + 1.0)
+    dist, _ = grid_path(passable, np.ones_like(clearance), start)
+    assert np.isfinite(dist[before]).all()  # every cell clear of the zone is reachable
+    freed = passable & ~before
+    assert np.all(clearance[freed] >= clearance[start])
+    assert not passable[obst].any()
 
 
-@pytest.mark.parametrize("seed", [pytest.param(0, marks=CORNER_TRAP), 1, 2])
+@pytest.mark.parametrize("seed", [0, 1, 2])
 def test_frontier__team_covers_80_percent_of_a_generated_map_within_a_stated_budget(
     seed: int,
 ) -> None:
