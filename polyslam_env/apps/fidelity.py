@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from polyslam_env.apps.jobs import run_jobs
 from polyslam_env.apps.rollout import EpisodeResult, evaluate_episode
@@ -40,6 +41,7 @@ __all__ = [
     "episode_config",
     "markdown",
     "misses",
+    "nees_excess",
     "run_fidelity",
     "summarise",
 ]
@@ -55,6 +57,7 @@ ROBOT_KEYS = (
     "duplicates",
     "nees",
     "nees_rel",
+    "start_nees",
     "has_map",
     "rendezvous",
 )
@@ -275,8 +278,31 @@ def markdown(summary: Mapping[str, Any]) -> str:
                 )
                 more = f" and {len(found) - MISSES_SHOWN} more" if len(found) > MISSES_SHOWN else ""
                 lines.append(f"- {setting.replace('_', ' ')}, {check} missed by {shown}{more}")
+        for setting in SETTINGS:
+            episodes = summary.get("episodes", {}).get(name, {}).get(setting, [])
+            if episodes:
+                lines.append(f"- {setting.replace('_', ' ')}: {nees_excess(episodes)}")
         lines.append("")
     return "\n".join(lines)
+
+
+def nees_excess(episodes: Sequence[Mapping[str, Any]]) -> str:
+    """How many robots of ``episodes`` (``EpisodeResult.to_dict()``) have a mean ``nees``
+    above :data:`TARGETS` ``nees_max``, against the count a consistent filter gives: each
+    robot's unobservable start draw e₀ᵀP0⁻¹e₀ ~ χ²(3) (``start_nees``) stays in its NEES for
+    the whole episode, so about P(χ²(3) > 6) = 11 % of robots exceed 6 from it alone; the
+    binomial 95 % interval of that count, and the start draws of the robots above."""
+    target = TARGETS["nees_max"]
+    robots = [m for e in episodes for m in e["robots"].values()]
+    above = sorted((m for m in robots if m["nees"] > target), key=lambda m: -m["nees"])
+    p = float(stats.chi2.sf(target, 3))
+    lo, hi = stats.binom.interval(0.95, len(robots), p)
+    draws = ", ".join(f"{m['start_nees']:.1f}" for m in above)
+    return (
+        f"`nees` above {target:g} for {len(above)} of {len(robots)} robots; from the start"
+        f" draws alone a consistent filter gives {p * len(robots):.1f} (95 %: {lo:.0f}–{hi:.0f})"
+        + (f"; their start draws e₀ᵀP0⁻¹e₀: {draws}" if above else "")
+    )
 
 
 #: How many of a check's misses the markdown names (worst first; summary.json has them all).

@@ -111,9 +111,10 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
     others go on. Kinds ``kidnap`` and ``slip`` (see ``FaultConfig``) move the true pose unseen
     by odometry, or make the odometry over-report the motion; ``infos[agent]`` holds the
     step's ``faults`` and the divergence flag (``diverging``, ``diverged_at``). At an agent's
-    last step ``infos[agent]`` also holds ``"metrics"`` (per robot: nees, nees_rel, nees_paper, nu,
-    nu_mean, nu_mean_abs, completeness, completeness_seen, map_precision, duplicates, has_map,
-    pose_error, landmark_error, has_landmarks, slam, coverage, bytes_sent, bytes_received,
+    last step ``infos[agent]`` also holds ``"metrics"`` (per robot: nees, nees_rel, start_nees,
+    nees_paper, nu, nu_mean, nu_mean_abs, completeness, completeness_seen, map_precision,
+    duplicates, has_map, pose_error, landmark_error, has_landmarks, slam, coverage, bytes_sent,
+    bytes_received,
     rendezvous, alignments_attempted, alignments_accepted, alignments_wrong, slam_time_ms
     (wall time, not reproducible), collisions, path_length; never NaN: a robot without a map
     has has_map 0 and the values stated in :mod:`polyslam_env.metrics.mapping`, one without a

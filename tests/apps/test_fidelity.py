@@ -16,6 +16,7 @@ from polyslam_env.apps.fidelity import (
     episode_config,
     markdown,
     misses,
+    nees_excess,
     run_fidelity,
     summarise,
 )
@@ -161,3 +162,18 @@ def test_misses__names_every_robot_beyond_a_target_worst_first() -> None:
         in text
     )
     assert "- exchange off, map_precision_ge_0.9 missed by seed 0 robot_0 0.7\n" in text
+
+
+def test_nees_excess__counts_robots_above_the_target_against_the_start_draws_binomial() -> None:
+    """Robots above the NEES target (equality passes) with their start draws, and the count a
+    consistent filter gives from the start draws alone: n · P(χ²(3) > 6) and its binomial
+    95 % interval (n = 4 here: 4 · 0.112 = 0.4, interval 0–2)."""
+    results = [
+        _result(0, 0.9, robot_0={"nees": 9.5, "start_nees": 8.75}, robot_1={"nees": 6.0}),
+        _result(1, 0.9, robot_0={}, robot_1={"nees": 7.0, "start_nees": 6.5}),
+    ]
+    text = nees_excess([r.to_dict() for r in results])
+    assert text.startswith("`nees` above 6 for 2 of 4 robots")
+    assert "gives 0.4 (95 %: 0–2)" in text
+    assert text.endswith("their start draws e₀ᵀP0⁻¹e₀: 8.8, 6.5")  # worst NEES first
+    assert "for 0 of 4 robots" in nees_excess([_result(0, 0.9, a={}, b={}).to_dict()] * 2)
