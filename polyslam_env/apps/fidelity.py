@@ -20,16 +20,19 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy import stats
 
+from policies.base import make_team
 from polyslam_env.apps.jobs import run_jobs
-from polyslam_env.apps.rollout import EpisodeResult, evaluate_episode
+from polyslam_env.apps.rollout import EpisodeResult, evaluate_episode, run_episode
 from polyslam_env.core.config import Config, check_range
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.environment.config import GENERATOR_PREFIX, EnvConfig
+from polyslam_env.environment.parallel import parallel_env
 from polyslam_env.world.generators import GENERATORS
 
 __all__ = [
@@ -42,8 +45,10 @@ __all__ = [
     "markdown",
     "misses",
     "nees_excess",
+    "picture",
     "run_fidelity",
     "summarise",
+    "worst_robots",
 ]
 
 DEFAULT_MAPS = ("office_floor", "warehouse", "loop")
@@ -171,6 +176,51 @@ def run_fidelity(
     }
     summary["elapsed_s"] = time.perf_counter() - start
     return summary
+
+
+def worst_robots(summary: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """Per map and setting, the robot of lowest ``map_precision`` over its seeds:
+    ``{"map", "setting", "seed", "robot", "value"}`` (the first in seed order among ties)."""
+    out = []
+    for name, by_setting in summary["episodes"].items():
+        for setting, episodes in by_setting.items():
+            seed, robot, value = min(
+                ((e["seed"], agent, m["map_precision"]) for e in episodes
+                 for agent, m in e["robots"].items()),
+                key=lambda t: t[2],
+            )  # fmt: skip
+            out.append(
+                {"map": name, "setting": setting, "seed": seed, "robot": robot, "value": value}
+            )
+    return out
+
+
+def picture(config: FidelityConfig, worst: Mapping[str, Any], path: str | Path) -> float:
+    """Run ``worst``'s episode again (same seed, same episode) and draw that robot's map with
+    the stretches farther than 5 cm from a true wall marked (:func:`plot_map_errors`); returns
+    its ``map_precision`` in this run, which equals ``worst["value"]``."""
+    from polyslam_env.render.plots import plot_map_errors  # matplotlib: only when drawing
+
+    fields = episode_config(config, worst["map"], worst["setting"] == "exchange_on")
+    env = parallel_env(EnvConfig.from_dict(fields))
+    try:
+        result = run_episode(env, make_team(config.policy, env), worst["seed"])
+        state = env.episode
+        assert state is not None
+        i = env.possible_agents.index(worst["robot"])
+        run = state.histories[i].run(state.slams[i].polynomials())
+        value = float(result.robots[worst["robot"]]["map_precision"])
+    finally:
+        env.close()
+    setting = worst["setting"].replace("_", " ")
+    plot_map_errors(
+        state.world.layout,
+        run,
+        path,
+        f"{worst['map']}, {setting}: seed {worst['seed']} {worst['robot']}, the lowest"
+        f" map_precision ({value:.3f}); orange: farther than 5 cm from a true wall",
+    )
+    return value
 
 
 def _spread(values: Sequence[float]) -> dict[str, float]:

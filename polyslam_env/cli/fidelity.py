@@ -14,7 +14,8 @@ def register(sub: Any) -> None:
         " frontier team with initial error (where the env supports it) for --steps steps,"
         " with the map exchange on and off on the same seeds; print a table per map (per"
         " robot nu_mean, map_precision, completeness_seen, duplicates, NEES; team coverage)"
-        " with the issue's targets checked; write OUT/summary.json and OUT/table.md.",
+        " with the issue's targets checked; write OUT/summary.json and OUT/table.md, and per"
+        " map and setting a picture of the map of the robot of lowest map_precision.",
     )
     parser.add_argument(
         "--maps",
@@ -27,6 +28,13 @@ def register(sub: Any) -> None:
     parser.add_argument("--steps", type=int, default=600, help="steps per episode (default: 600)")
     parser.add_argument("--workers", type=int, default=1, help="processes (default: 1)")
     parser.add_argument("--out", default="out/fidelity", help="output folder (out/fidelity)")
+    parser.add_argument(
+        "--no-pictures",
+        action="store_true",
+        help="skip OUT/worst_MAP_SETTING.png: per map and setting, the robot of lowest"
+        " map_precision, its episode run again and its map drawn with the stretches farther"
+        " than 5 cm from a true wall marked (one more episode each)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
@@ -34,7 +42,14 @@ def register(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from polyslam_env.apps.fidelity import SETTINGS, FidelityConfig, markdown, run_fidelity
+    from polyslam_env.apps.fidelity import (
+        SETTINGS,
+        FidelityConfig,
+        markdown,
+        picture,
+        run_fidelity,
+        worst_robots,
+    )
     from polyslam_env.cli.common import check_output_folder, progress_bar
     from polyslam_env.core.io import write_atomic, write_json
 
@@ -55,4 +70,14 @@ def run(args: argparse.Namespace) -> int:
     json_path = write_json(Path(out) / "summary.json", summary)
     md_path = write_atomic(Path(out) / "table.md", text + "\n")
     print(f"wrote {json_path}, {md_path}")
+    if not args.no_pictures:
+        worst = worst_robots(summary)
+        with progress_bar(len(worst), "pictures", "ep", args.quiet) as bar:
+            for entry in worst:
+                path = Path(out) / f"worst_{entry['map']}_{entry['setting']}.png"
+                picture(config, entry, path)
+                bar.update(1)
+        print(
+            f"wrote {len(worst)} pictures of the robot of lowest map_precision: {out}/worst_*.png"
+        )
     return 0

@@ -8,12 +8,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from polyslam_env import metrics
 from polyslam_env.core.geometry import transform_points
 from polyslam_env.world.layout import Layout
+
+if TYPE_CHECKING:
+    from polyslam_env.metrics.episode import RobotRun
 
 
 def _pyplot():  # type: ignore[no-untyped-def]
@@ -87,6 +91,47 @@ def plot_runs(
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def plot_map_errors(
+    layout: Layout,
+    run: RobotRun,
+    path: str | Path,
+    title: str,
+    tol: float = 0.05,
+) -> Path:
+    """One robot's map over the true walls, placed by its true start as the map metrics place
+    it: the stretches farther than ``tol`` from a true wall (what ``map_precision`` counts as
+    wrong) orange, the rest green; its true path coloured by step (where it was when it mapped
+    a stretch) and its estimated path dashed. Saves a PNG and returns its path."""
+    plt = _pyplot()
+    x0, y0, x1, y1 = layout.bounds
+    width = 10.0
+    fig, ax = plt.subplots(figsize=(width, width * (y1 - y0 + 0.6) / (x1 - x0 + 0.6) + 0.9))
+    draw_layout(ax, layout)
+    start = run.true_poses[0]
+    points = metrics.map_points(run.polynomials, start)
+    for pts in points:
+        off = metrics.distance_to_boundary(pts, layout) > tol
+        good = np.where(off[:, None], np.nan, pts)
+        bad = np.where(off[:, None], pts, np.nan)
+        ax.plot(good[:, 0], good[:, 1], color="tab:green", lw=2.2, zorder=3)
+        ax.plot(bad[:, 0], bad[:, 1], color="tab:orange", lw=3.0, zorder=4)
+    steps = np.arange(len(run.true_poses))
+    dots = ax.scatter(
+        run.true_poses[:, 0], run.true_poses[:, 1], c=steps, s=3, cmap="viridis", zorder=2
+    )
+    est = metrics.pose_to_absolute(run.est_poses, start)
+    ax.plot(est[:, 0], est[:, 1], "--", color="0.4", lw=0.6, zorder=2)
+    fig.colorbar(dots, ax=ax, label="step (true path)", shrink=0.8)
+    ax.set_title(title, fontsize=9)
+    ax.tick_params(labelsize=7)
+    fig.tight_layout()
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
     plt.close(fig)
     return out
 

@@ -17,8 +17,10 @@ from polyslam_env.apps.fidelity import (
     markdown,
     misses,
     nees_excess,
+    picture,
     run_fidelity,
     summarise,
+    worst_robots,
 )
 from polyslam_env.apps.rollout import EpisodeResult
 from polyslam_env.cli.main import main
@@ -128,6 +130,12 @@ def test_fidelity_cli__writes_summary_and_table(
     table = (tmp_path / "table.md").read_text()
     assert "### loop" in table and "| nu_mean |" in table
     assert "### loop" in capsys.readouterr().out
+    assert {p.name for p in tmp_path.glob("worst_*.png")} == {
+        "worst_loop_exchange_on.png",
+        "worst_loop_exchange_off.png",
+    }
+    assert main([*args, "--out", str(tmp_path / "bare"), "--quiet", "--no-pictures"]) == 0
+    assert not list((tmp_path / "bare").glob("*.png"))
 
 
 def _result(seed: int, coverage: float, **robots: dict[str, float]) -> EpisodeResult:
@@ -177,3 +185,25 @@ def test_nees_excess__counts_robots_above_the_target_against_the_start_draws_bin
     assert "gives 0.4 (95 %: 0–2)" in text
     assert text.endswith("their start draws e₀ᵀP0⁻¹e₀: 8.8, 6.5")  # worst NEES first
     assert "for 0 of 4 robots" in nees_excess([_result(0, 0.9, a={}, b={}).to_dict()] * 2)
+
+
+def test_worst_robots__lowest_map_precision_per_map_and_setting() -> None:
+    on = [
+        _result(0, 0.9, robot_0={"map_precision": 0.95}, robot_1={"map_precision": 0.8}),
+        _result(1, 0.9, robot_0={"map_precision": 0.8}, robot_1={}),
+    ]
+    off = [_result(0, 0.9, robot_0={}, robot_1={"map_precision": 0.97})]
+    summary = summarise({"loop": {"exchange_on": on, "exchange_off": off}})
+    assert worst_robots(summary) == [
+        {"map": "loop", "setting": "exchange_on", "seed": 0, "robot": "robot_1", "value": 0.8},
+        {"map": "loop", "setting": "exchange_off", "seed": 0, "robot": "robot_1", "value": 0.97},
+    ]
+
+
+def test_picture__replays_the_worst_robots_episode(summary: dict, tmp_path: Path) -> None:
+    """The picture's episode is the summary's (same seed, same episode, bit for bit): its
+    map_precision is the summary's value exactly; the PNG is written."""
+    for worst in worst_robots(summary):
+        path = tmp_path / f"{worst['setting']}.png"
+        assert picture(TINY, worst, path) == worst["value"]
+        assert path.stat().st_size > 0
