@@ -30,6 +30,16 @@ def _pyplot():  # type: ignore[no-untyped-def]
     return plt
 
 
+def _save(plt, fig, path: str | Path, dpi: int) -> Path:  # type: ignore[no-untyped-def]
+    """Lay out ``fig``, write it as a PNG at ``path`` (folders made) and close it."""
+    fig.tight_layout()
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=dpi)
+    plt.close(fig)
+    return out
+
+
 def draw_layout(ax, layout: Layout) -> None:  # type: ignore[no-untyped-def]
     """True walls (red) and pillars."""
     for wall in layout.walls:
@@ -87,12 +97,7 @@ def plot_runs(
         "green: mapped polynomials · red: true walls · blue: true path · dashed red: estimate",
         fontsize=9,
     )
-    fig.tight_layout()
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return _save(plt, fig, path, 110)
 
 
 def plot_map_errors(
@@ -128,12 +133,7 @@ def plot_map_errors(
     fig.colorbar(dots, ax=ax, label="step (true path)", shrink=0.8)
     ax.set_title(title, fontsize=9)
     ax.tick_params(labelsize=7)
-    fig.tight_layout()
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
-    return out
+    return _save(plt, fig, path, 100)
 
 
 def plot_learning_curve(steps: np.ndarray, values: np.ndarray, path: str | Path) -> Path:
@@ -150,8 +150,4 @@ def plot_learning_curve(steps: np.ndarray, values: np.ndarray, path: str | Path)
     ax.set_ylim(0.0, 1.0)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path, 100)
