@@ -243,7 +243,10 @@ def init_ray(address: str | None, num_cpus: int) -> None:
     runtime_env = {"env_vars": {"PYTHONPATH": path}}
     address = address or os.environ.get("RAY_ADDRESS") or None
     if address:
-        ray.init(address=address, runtime_env=runtime_env, log_to_driver=False)
+        try:
+            ray.init(address=address, runtime_env=runtime_env, log_to_driver=False)
+        except ConnectionError as err:
+            raise PolyslamError(_join_error(address, err)) from err
     else:
         ray.init(
             address="local",  # a new instance even if `ray start` runs on this machine
@@ -253,6 +256,23 @@ def init_ray(address: str | None, num_cpus: int) -> None:
             runtime_env=runtime_env,
             configure_logging=False,
         )
+
+
+def _join_error(address: str, err: BaseException) -> str:
+    """One line on why joining the cluster at ``address`` failed. Ray's own message spans
+    tracebacks; a cluster that asks for a token is named with the fix: ``ray start`` turns
+    token authentication on when the head has a token (``~/.ray/auth_token``), while a
+    driver given an explicit address never turns it on by itself (Ray's rule, so that a token
+    is not sent to any address one types)."""
+    text = " ".join(str(e) for e in (err, err.__cause__, err.__context__) if e is not None)
+    if "InvalidAuthToken" in text or "AuthenticationError" in text:
+        return (
+            f"--address {address}: the Ray cluster asks for token authentication; set"
+            " RAY_AUTH_MODE=token and give its token (~/.ray/auth_token, RAY_AUTH_TOKEN or"
+            " RAY_AUTH_TOKEN_PATH), or start the cluster with RAY_AUTH_MODE=disabled"
+        )
+    first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+    return f"--address {address}: could not join the Ray cluster: {first}"
 
 
 def _lifetime(result: dict[str, Any], key: str) -> int:

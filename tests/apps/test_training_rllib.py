@@ -25,7 +25,7 @@ import pytest
 import yaml
 
 from polyslam_env.apps.training import EPISODE_TAGS
-from polyslam_env.apps.training_rllib import rllib_checkpoints
+from polyslam_env.apps.training_rllib import _join_error, rllib_checkpoints
 from polyslam_env.cli.main import main
 
 NEEDS_RAY = "needs the [ray] extra: pip install 'polyslam[ray]'"
@@ -79,6 +79,14 @@ def _ray_cli() -> str:
 def ray_head(ray_lock: None, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
     """A separate Ray head node (`ray start --head`) on a free port; always stopped."""
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    # Ray ≥ 2.5x: `ray start` turns token authentication on when ~/.ray/auth_token exists
+    # (any earlier local ray.init() writes one), and a driver given an explicit address does
+    # not, unless RAY_AUTH_MODE says so (the mismatch's one-line error:
+    # test_join_error__names_the_token_fix). The head inherits this process's mode: the one
+    # an earlier local ray.init() here set (token, kept: this process's Ray caches it), else
+    # none for both.
+    if os.environ.get("RAY_AUTH_MODE") is None:
+        monkeypatch.setenv("RAY_AUTH_MODE", "disabled")
     ray, port = _ray_cli(), _free_port()
     try:
         subprocess.run(
@@ -232,3 +240,21 @@ def test_rllib__joins_a_cluster_with_address(
     assert "iteration 1:" in text and "iteration 2:" not in text  # 1 iteration: 32 timesteps
     assert rllib_checkpoints(out / "checkpoints")
     assert os.environ.get("RAY_ADDRESS") is None
+
+
+def test_join_error__names_the_token_fix() -> None:
+    """Joining a cluster that asks for a token without one gives one line naming the fix;
+    other failures give Ray's first line. (Ray's ConnectionError, with the authentication
+    failure as its cause, as ray.init raises it.)"""
+    try:
+        try:
+            raise RuntimeError("RPC error: InvalidAuthToken: Authentication token is missing")
+        except RuntimeError as cause:
+            raise ConnectionError("Failed to connect to Ray cluster at 10.0.0.1:6379") from cause
+    except ConnectionError as err:
+        text = _join_error("10.0.0.1:6379", err)
+    assert "\n" not in text and "RAY_AUTH_MODE=token" in text and "10.0.0.1:6379" in text
+    other = _join_error("h:1", ConnectionError("Could not find any running Ray instance.\nmore"))
+    assert other == (
+        "--address h:1: could not join the Ray cluster: Could not find any running Ray instance."
+    )
