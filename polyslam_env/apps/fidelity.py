@@ -13,6 +13,9 @@ at their frame origins, which the summary records).
 robots × seeds of each per-robot metric in :data:`ROBOT_KEYS`, and over seeds of the team
 coverage — and named boolean ``checks`` per map, each computed from the table alone
 (:func:`checks_from_table`) against :data:`TARGETS`, the issue's "done when" targets.
+:func:`markdown` adds who misses each target and, per setting, the robots above the NEES target
+against what their start draws alone give (:func:`nees_excess`); :func:`picture` runs the
+episode of a setting's lowest ``map_precision`` (:func:`worst_robots`) again and draws it.
 """
 
 from __future__ import annotations
