@@ -655,6 +655,7 @@ def steady_beams(
                     joint[r, c] = cov[index[r], index[c]]
             if _cholesky4(joint, factor):
                 one[0] = angle[b]
+                eta = 2 if variate[j] == 1 else 0  # the box's (min, max) columns of η
                 for column in range(8):
                     sign = spread if column < 4 else -spread
                     a = column % 4
@@ -663,7 +664,6 @@ def steady_beams(
                     ths = theta + sign * factor[2, a]
                     shift = sign * factor[3, a]
                     c0s[j] = mean[3 + j] + shift
-                    eta = 2 if variate[j] == 1 else 0  # the box's (min, max) columns of η
                     moved[j, eta] = boxes[j, eta] + shift
                     moved[j, eta + 1] = boxes[j, eta + 1] + shift
                     cast_into(
