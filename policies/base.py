@@ -69,6 +69,8 @@ class PolicyContext:
     grid_size: int  # G of the local G × G map
     grid_resolution: float  # m per local map cell
     pose_scale: float  # m; the observed position is pose / pose_scale
+    pose_std_scale: tuple[float, float, float]  # the observed pose std is std / this, in [0, 1]
+    p0_sigma: tuple[float, float, float] | None  # the start prior's std (None: no SLAM)
     map_size: tuple[float, float]  # m, width and height of the map's bounding box
     beam_angles: np.ndarray  # (B,) rad, in the robot frame
     max_range: float  # m
@@ -113,6 +115,33 @@ class PolicyContext:
         """The robot's pose estimate (x, y, θ) in its own start frame."""
         x, y, c, s = self.vector(observation)[self.vector_layout["pose"]]
         return np.array([x * self.pose_scale, y * self.pose_scale, math.atan2(s, c)])
+
+    def pose_std(self, observation: Any) -> np.ndarray:  # (3,)
+        """Standard deviations (m, m, rad) of the pose estimate as the observation reports
+        them: the covariance in the robot's frame, which holds the start prior's share J P0 Jᵀ
+        (:meth:`relative_pose_std` takes it out). A value at its cap is clipped (see
+        ``pose_std_scale``)."""
+        return self.vector(observation)[self.vector_layout["pose_std"]] * np.asarray(
+            self.pose_std_scale
+        )
+
+    def relative_pose_std(self, observation: Any) -> np.ndarray | None:  # (3,)
+        """Standard deviations (m, m, rad) of the pose relative to where the robot really
+        started, the filter's own uncertainty P_S: the observed variances less the start
+        prior's share, diag(J P0 Jᵀ) = (σx0² + y²σθ0², σy0² + x²σθ0², σθ0²) at the estimated
+        (x, y) (P0 diagonal). It grows while the robot maps new ground and shrinks when it sees
+        a well-known place again; the share of P0 does not (nothing the robot senses can tell
+        where it started). None without SLAM or when an observed deviation is clipped."""
+        if self.p0_sigma is None:
+            return None
+        scaled = self.vector(observation)[self.vector_layout["pose_std"]]
+        if np.any(scaled >= 1.0):
+            return None
+        var = np.square(scaled * np.asarray(self.pose_std_scale))
+        x, y, _ = self.pose(observation)
+        sx, sy, st = self.p0_sigma
+        share = np.array([sx * sx + y * y * st * st, sy * sy + x * x * st * st, st * st])
+        return np.sqrt(np.maximum(var - share, 0.0))
 
     def detections(self, observation: Any) -> np.ndarray:  # (k, 2) distance m, bearing rad
         """The other robots the camera sees, nearest first, as (distance, bearing)."""
@@ -162,6 +191,7 @@ PolicyFactory = Callable[..., Policy]
 POLICIES: dict[str, PolicyFactory | str] = {
     "paper": "policies.scripted:PaperPolicy",
     "frontier": "policies.frontier:FrontierPolicy",
+    "frontier_closing": "policies.frontier:frontier_closing",
     "wall_follow": "policies.scripted:WallFollowPolicy",
     "random": "policies.scripted:RandomPolicy",
     "ppo": "policies.ppo:make_ppo",

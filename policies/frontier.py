@@ -19,6 +19,17 @@ the whole map from any start, as the env's belief grid does. It then
    stalls, a robot is seen near the goal, or every ``replan_every`` steps; a goal it could not
    reach is blacklisted for a while.
 
+**Active loop closing** (``close_loops``, off by default; the policy ``frontier_closing`` turns
+it on; after Stachniss, Hähnel & Burgard's active loop closing, on the EKF's own numbers):
+the policy keeps the places where the robot's pose was well known relative to its map (its
+filter's own position σ, :meth:`~policies.base.PolicyContext.relative_pose_std`, below
+``anchor_below``). When that σ grows past ``close_above`` while it maps new ground, it drives
+back to the nearest such place by path (no farther than ``close_reach``), re-observes the walls
+it mapped there, and returns to exploring once the σ is below ``close_below`` (or the place
+is reached; it then rests ``close_rest`` steps). The EKF's correlations carry the correction
+to the walls mapped on the way out. It corrects position drift, not heading drift: README
+"SLAM on large floor plans" has the measurements.
+
 Team coordination uses only what a robot sees: when its camera detects another robot, the
 frontiers nearer to where that robot was seen than to where this one stood (within
 ``claim_radius``, for ``claim_steps`` steps) are left to it, so two robots that meet split the
@@ -41,7 +52,7 @@ from policies.base import Policy, PolicyContext, PolicyError
 from policies.scripted import avoid_robots, beam_index, wall_follow_command
 from polyslam_env.core import raster
 
-__all__ = ["FrontierPolicy", "OwnMap", "Search", "grid_path"]
+__all__ = ["FrontierPolicy", "OwnMap", "Search", "frontier_closing", "grid_path"]
 
 #: 8-neighbour offsets (row, col) used for the graph edges (the other four are their reverses).
 _EDGE_OFFSETS = ((0, 1), (1, 0), (1, 1), (1, -1))
@@ -202,6 +213,12 @@ class FrontierPolicy(Policy):
         decay: float = 8.0,
         claim_radius: float = 8.0,
         claim_steps: int = 150,
+        close_loops: bool = False,
+        close_above: float = 0.035,
+        close_below: float = 0.02,
+        anchor_below: float = 0.012,
+        close_rest: int = 40,
+        close_reach: float = math.inf,
     ) -> None:
         super().__init__(context)
         if map_size is None:  # the map seen from any start, as the env's belief grid
@@ -215,6 +232,10 @@ class FrontierPolicy(Policy):
             ("decay", decay),
             ("claim_radius", claim_radius),
             ("claim_steps", claim_steps),
+            ("close_above", close_above),
+            ("close_below", close_below),
+            ("anchor_below", anchor_below),
+            ("close_reach", close_reach),
         ):
             if not value > 0:
                 raise PolicyError(f"frontier: {name} must be > 0, got {value!r}")
@@ -228,6 +249,17 @@ class FrontierPolicy(Policy):
         self.gain_cells = max(1, round(gain_radius / resolution))
         self.decay = float(decay)
         self.claim_radius, self.claim_steps = float(claim_radius), int(claim_steps)
+        if not anchor_below <= close_below <= close_above:
+            raise PolicyError(
+                "frontier: need anchor_below <= close_below <= close_above, got"
+                f" {anchor_below}, {close_below}, {close_above}"
+            )
+        if close_rest < 0:
+            raise PolicyError(f"frontier: close_rest must be >= 0, got {close_rest!r}")
+        self.close_loops = bool(close_loops) and context.p0_sigma is not None
+        self.close_above, self.close_below = float(close_above), float(close_below)
+        self.anchor_below, self.close_rest = float(anchor_below), int(close_rest)
+        self.close_reach = float(close_reach)
         self.reset()
 
     def reset(self, seed: int | None = None) -> None:
@@ -242,13 +274,82 @@ class FrontierPolicy(Policy):
         #: (other robot's position, own position, step it expires) in the own frame, from
         #: camera sightings: frontiers nearer the other robot are left to it (module doc)
         self._claims: list[tuple[np.ndarray, np.ndarray, int]] = []
+        #: own-map cells where the pose was well known (active loop closing, module doc)
+        self._anchors = np.zeros((self.map.n, self.map.n), dtype=bool)
+        self._closing = False
+        self._resume: tuple[int, int] | None = None  # the frontier goal a closing left
+        self._rest_until = 0  # no new loop closing before this step
+        self.closings = 0  # loop closings started this episode (for reports)
 
     # -- act -------------------------------------------------------------------------------
     def act(self, observation: Any, rng: np.random.Generator) -> Any:
         pose, ranges, detections = self._sense(observation)
-        if self._claim(pose, detections) or self._needs_plan(pose):
+        claimed = self._claim(pose, detections)
+        if self.close_loops and self._closing_now(pose, observation):
+            if self._needs_anchor_plan(pose):
+                self._plan_anchor(pose)
+        elif claimed or self._needs_plan(pose):
             self._plan(pose)
         return self._follow(pose, ranges, detections)
+
+    # -- active loop closing ---------------------------------------------------------------
+    def _closing_now(self, pose: np.ndarray, observation: Any) -> bool:
+        """Record an anchor, start or end a loop closing (module doc); whether one is on."""
+        std = self.context.relative_pose_std(observation)
+        if std is None:
+            return self._closing
+        sigma = float(np.hypot(std[0], std[1]))  # m
+        if sigma < self.anchor_below:
+            self._anchors[self.map.cells(pose[None, :2])] = True
+        if self._closing and sigma < self.close_below:
+            self._stop_closing()
+        elif (
+            not self._closing
+            and sigma > self.close_above
+            and self._step >= self._rest_until
+            and self._anchors.any()
+        ):
+            self._resume = self.goal
+            self._closing, self.path, self.goal = True, None, None
+            self.closings += 1
+        return self._closing
+
+    def _stop_closing(self) -> None:
+        self._closing, self.path, self.goal = False, None, None
+        self._rest_until = self._step + self.close_rest
+
+    def _needs_anchor_plan(self, pose: np.ndarray) -> bool:
+        """Whether to plan the way to an anchor again (as :meth:`_needs_plan`, without the
+        frontier test); reaching the anchor ends the loop closing."""
+        self._since_plan += 1
+        if self.path is None or self.goal is None or self._since_plan >= self.replan_every:
+            return True
+        if np.hypot(*(self.path[-1] - pose[:2])) < 0.25:
+            self._stop_closing()  # there, and still uncertain: explore again
+            return False
+        if len(self._trail) >= 8 and np.hypot(*(self._trail[-1] - self._trail[0])) < 0.1:
+            return True
+        rows, cols = self.map.cells(self.path)
+        return bool(np.any(self.map.obstacles[rows, cols]))
+
+    def _plan_anchor(self, pose: np.ndarray) -> None:
+        """Path to the anchor nearest by path at least ``min_goal`` away; none reachable ends
+        the loop closing (the frontier plan then takes over)."""
+        paths = self._paths(pose)
+        if paths is None:
+            self._stop_closing()
+            return
+        window, start, _, dist, pred = paths
+        dist = dist * self.map.res
+        candidate = self._anchors[window] & (dist >= self.min_goal) & (dist <= self.close_reach)
+        if not candidate.any():
+            self._stop_closing()
+            self._plan(pose)
+            return
+        # a search whose goals are the anchors, the nearest one best
+        utility = np.where(candidate, -dist, -np.inf)
+        search = Search(window, start, candidate, dist, pred, np.zeros_like(dist), utility)
+        self._go(search, search.best())
 
     def _sense(self, observation: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Fold ``observation`` into the own map and count the step; the pose (3,), ranges
@@ -354,14 +455,42 @@ class FrontierPolicy(Policy):
         return bool(frontier[cell[0] - r0, cell[1] - c0])
 
     def _plan(self, pose: np.ndarray) -> None:
-        """Path to the frontier of best utility (:meth:`_search`), or None when none is left."""
+        """Path to the frontier of best utility (:meth:`_search`), or None when none is left;
+        after a loop closing, to the frontier it left if that still is one."""
         search = self._search(pose)
-        if search is not None:
-            self._go(search, search.best())
+        resume, self._resume = self._resume, None
+        if search is None:
+            return
+        goal = search.best()
+        if resume is not None:
+            r, c = resume[0] - search.window[0].start, resume[1] - search.window[1].start
+            h, w = search.utility.shape
+            if 0 <= r < h and 0 <= c < w and np.isfinite(search.utility[r, c]):
+                goal = (r, c)
+        self._go(search, goal)
 
     def _search(self, pose: np.ndarray) -> Search | None:
         """Frontiers, path lengths and utilities around the robot (None when no frontier is
         reachable). Clears the plan, which :meth:`_go` then sets."""
+        paths = self._paths(pose)
+        if paths is None:
+            return None
+        window, start, frontier, dist, pred = paths
+        m = self.map
+        frontier &= np.isfinite(dist)
+        self._drop_blacklisted(frontier, window)
+        if not frontier.any():
+            return None
+        dist = dist * m.res
+        gain, utility = self._utility(frontier, dist, window)
+        return Search(window, start, frontier, dist, pred, gain, utility)
+
+    def _paths(
+        self, pose: np.ndarray
+    ) -> tuple[tuple[slice, slice], tuple[int, int], np.ndarray, np.ndarray, np.ndarray] | None:
+        """Clear the plan and find the cheapest paths from the robot over the known window:
+        (window, the robot's cell, frontier cells, path lengths in cells (inf where
+        unreachable), flat predecessors), or None when the robot is off its own map."""
         self._since_plan = 0
         self.path, self.goal = None, None
         m = self.map
@@ -373,13 +502,7 @@ class FrontierPolicy(Policy):
         start = (int(rows[0]) - window[0].start, int(cols[0]) - window[1].start)
         self._free_start(passable, clearance, start, self.inflate / m.res + 1.0)
         dist, pred = grid_path(passable, cost, start)
-        frontier &= np.isfinite(dist)
-        self._drop_blacklisted(frontier, window)
-        if not frontier.any():
-            return None
-        dist = dist * m.res
-        gain, utility = self._utility(frontier, dist, window)
-        return Search(window, start, frontier, dist, pred, gain, utility)
+        return window, start, frontier, dist, pred
 
     def _go(self, search: Search, goal: tuple[int, int]) -> None:
         """Plan the path of ``search`` to ``goal`` (row, col in its window)."""
@@ -507,3 +630,9 @@ class FrontierPolicy(Policy):
                 if side < ctx.robot_radius + 0.2:
                     cap = min(cap, max(ahead, 0.0) / ctx.dt)
         return cap
+
+
+def frontier_closing(context: PolicyContext, **kwargs: Any) -> FrontierPolicy:
+    """The policy ``frontier_closing``: :class:`FrontierPolicy` with active loop closing on
+    (module doc); keyword arguments as for :class:`FrontierPolicy`."""
+    return FrontierPolicy(context, **{"close_loops": True, **kwargs})

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from polyslam_env.environment.config import EnvConfig
-from polyslam_env.environment.observations import ObservationEncoder
+from polyslam_env.environment.observations import STD_CAPS, ObservationEncoder
 from polyslam_env.world.maps import resolve_map_path
 
 
@@ -27,6 +27,10 @@ def public_facts(config: EnvConfig, map_size: tuple[float, float]) -> dict[str, 
     can check it without loading the map. ``map_size`` is (width, height) m of the map's
     bounding box (a floor plan's dimensions; not where the robot starts in it); ``pose_scale``
     the scale in force (:meth:`~polyslam_env.environment.config.ObservationConfig.position_scale`).
+    ``pose_std_scale`` is what the observed pose standard deviations are divided by (then
+    clipped to [0, 1]); ``p0_sigma`` the standard deviations of the start-error prior P0 that
+    the reported pose covariance holds (J P0 Jᵀ, see ``slam.ekf.start_error_cov``), or None
+    without SLAM (the observed deviations are then 0).
     """
     rc, wc, oc = config.world.robot, config.world, config.observation
     map_file: Path | None = None
@@ -43,6 +47,8 @@ def public_facts(config: EnvConfig, map_size: tuple[float, float]) -> dict[str, 
         "grid_size": oc.grid_size,
         "grid_resolution": oc.grid_resolution,
         "pose_scale": oc.position_scale(map_size, wc.range_sensor.max_range),
+        "pose_std_scale": tuple(float(c) for c in STD_CAPS),
+        "p0_sigma": tuple(float(s) for s in config.slam.p0_sigma) if config.slam_enabled else None,
         "map_size": (float(map_size[0]), float(map_size[1])),
         "beam_angles": np.deg2rad(np.asarray(wc.range_sensor.angles_deg, dtype=float)),
         "max_range": wc.range_sensor.max_range,

@@ -143,3 +143,111 @@ def test_frontier__team_covers_80_percent_of_a_generated_map_within_a_stated_bud
     while env.agents and state.step_count < budget:
         obs, *_ = env.step(team.act(obs, rng))
     assert state.coverage.coverage >= 0.8, (state.step_count, budget)
+
+
+# -- active loop closing (frontier_closing) -------------------------------------------------
+def test_relative_pose_std__is_the_filters_own_covariance_read_from_the_observation() -> None:
+    """The observation's pose deviations less the start prior's share J P0 Jᵀ give back the
+    filter's P_S (``pose_cov_relative``) to float32 precision of the observed deviations;
+    without SLAM there is none."""
+    env = polyslam_env.parallel_env(map="generator:warehouse", num_robots=2, initial_error=True)
+    ctx = make_policy("frontier", env, "robot_1").context
+    observations, _ = _rollout(env, seed=3, steps=120)
+    obs, _, _, _, _ = env.step(
+        make_team("frontier", env).act(observations[-1], np.random.default_rng(0))
+    )
+    got = ctx.relative_pose_std(obs["robot_1"])
+    want = np.sqrt(np.diag(env.unwrapped.episode.slams[1].pose_cov_relative))
+    assert got is not None and want[0] > 1e-3  # grown from 0 at the start
+    # float32 deviations: relative error 6e-8 of σ², against the P0 share of up to (0.3 m)²
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-6)
+    bare = polyslam_env.parallel_env(map="generator:warehouse", num_robots=2, slam_enabled=False)
+    obs, _ = bare.reset(seed=3)
+    assert (
+        make_policy("frontier", bare, "robot_0").context.relative_pose_std(obs["robot_0"]) is None
+    )
+
+
+def _open_room_policy(**kwargs: Any) -> FrontierPolicy:
+    """A frontier_closing policy whose own map is one empty 6 × 6 m room around the origin."""
+    env = polyslam_env.parallel_env(map="generator:warehouse", num_robots=1)
+    policy = make_policy("frontier_closing", env, "robot_0", **kwargs)
+    assert isinstance(policy, FrontierPolicy) and policy.close_loops
+    m = policy.map
+    rows, cols = m.cells(np.array([[-3.0, -3.0], [3.0, 3.0]]))
+    m.free[rows[0] : rows[1] + 1, cols[0] : cols[1] + 1] = True
+    m.occ[rows[0] - 1, cols[0] - 1 : cols[1] + 2] = True
+    m.occ[rows[1] + 1, cols[0] - 1 : cols[1] + 2] = True
+    m.occ[rows[0] - 1 : rows[1] + 2, cols[0] - 1] = True
+    m.occ[rows[0] - 1 : rows[1] + 2, cols[1] + 1] = True
+    return policy
+
+
+def _anchor(policy: FrontierPolicy, x: float, y: float) -> tuple[int, int]:
+    rows, cols = policy.map.cells(np.array([[x, y]]))
+    policy._anchors[rows[0], cols[0]] = True
+    return int(rows[0]), int(cols[0])
+
+
+def test_plan_anchor__goes_to_the_nearest_anchor_by_path_within_reach() -> None:
+    """Of the anchors, the one nearest by path and at least ``min_goal`` away is the goal
+    (the one under the robot is not); one farther than ``close_reach`` is never chosen, and
+    with none in reach the loop closing ends."""
+    policy = _open_room_policy(close_reach=4.0)
+    pose = np.array([-2.0, 0.0, 0.0])
+    _anchor(policy, -2.0, 0.1)  # under the robot: nearer than min_goal
+    far = _anchor(policy, 2.5, 0.0)  # 4.5 m: beyond reach
+    near = _anchor(policy, -2.0, 2.0)  # 2 m
+    _anchor(policy, 0.0, -2.5)  # ~3.2 m
+    policy._closing = True
+    policy._plan_anchor(pose)
+    assert policy._closing and policy.goal == near and policy.path is not None
+    assert np.hypot(*(policy.path[-1] - pose[:2])) == pytest.approx(2.0, abs=0.1)
+    policy._anchors[:] = False
+    policy._anchors[far] = True
+    policy._plan_anchor(pose)
+    assert not policy._closing and policy.goal != far  # out of reach: back to exploring
+
+
+def test_closing__starts_above_close_above_and_ends_below_close_below() -> None:
+    """The loop closing's switch on the filter's own position σ (√(σx² + σy²) of P_S):
+    anchors where σ < ``anchor_below``, a closing once σ > ``close_above`` (and an anchor
+    exists), its end once σ < ``close_below``, then ``close_rest`` steps without one."""
+    policy = _open_room_policy(close_above=0.03, close_below=0.02, anchor_below=0.01, close_rest=5)
+    pose = np.array([0.0, 0.0, 0.0])
+    state = {"std": np.array([0.005, 0.005, 0.001])}
+    policy.context = _with_std(policy.context, state)
+
+    def sigma(s: float) -> bool:
+        state["std"] = np.array([s, 0.0, 0.001])
+        policy._step += 1
+        return policy._closing_now(pose, None)
+
+    assert not sigma(0.005) and policy._anchors.sum() == 1  # anchored here
+    assert not sigma(0.029)  # below close_above
+    assert sigma(0.031) and policy.closings == 1
+    assert sigma(0.021)  # still above close_below
+    assert not sigma(0.019)  # done: rest for 5 steps
+    assert not any(sigma(0.04) for _ in range(4))
+    assert sigma(0.04) and policy.closings == 2
+
+
+def _with_std(context: Any, state: dict) -> Any:
+    """``context`` whose relative_pose_std returns ``state["std"]``."""
+
+    class Fixed(type(context)):  # type: ignore[misc]
+        def relative_pose_std(self, observation: Any) -> np.ndarray:
+            return state["std"]
+
+    fixed = object.__new__(Fixed)
+    fixed.__dict__.update(context.__dict__)
+    return fixed
+
+
+def test_frontier_closing__bad_thresholds_are_named() -> None:
+    env = polyslam_env.parallel_env(map="generator:warehouse", num_robots=1)
+    with pytest.raises(ValueError, match="anchor_below <= close_below <= close_above"):
+        make_policy("frontier_closing", env, "robot_0", close_below=0.05)
+    with pytest.raises(ValueError, match="close_reach must be > 0"):
+        make_policy("frontier_closing", env, "robot_0", close_reach=0.0)
+    assert not make_policy("frontier", env, "robot_0").close_loops  # off by default
