@@ -16,7 +16,9 @@ from polyslam_env.apps.fidelity import (
     episode_config,
     markdown,
     misses,
+    nees_checks,
     nees_excess,
+    nees_means_text,
     picture,
     run_fidelity,
     summarise,
@@ -57,7 +59,10 @@ def test_fidelity__checks_are_booleans_computed_from_the_table(summary: dict) ->
     assert checks["nu_mean_le_0.05"] == (on["nu_mean"]["max"] <= 0.05)
     assert checks["map_precision_ge_0.9"] == (on["map_precision"]["min"] >= 0.9)
     assert checks["completeness_seen_ge_0.8"] == (on["completeness_seen"]["min"] >= 0.8)
-    assert checks["nees_le_6"] == (on["nees"]["max"] <= 6.0)
+    episodes = [r["robots"] for r in summary["episodes"]["loop"]["exchange_on"]]
+    per_robot = [[m["nees"] for m in e.values()] for e in episodes]
+    means = [sum(col) / len(col) for col in zip(*per_robot, strict=True)]
+    assert checks["nees_mean_le_6"] == all(v <= 6.0 for v in means)
     assert checks["duplicates_le_0.05"] == (on["duplicates"]["max"] <= 0.05)
     assert checks["coverage_ge_0.85"] == (on["coverage"]["min"] >= 0.85)
     assert checks["exchange_completeness_higher"] == (
@@ -94,7 +99,6 @@ def test_checks_from_table__each_target_flips_its_own_check() -> None:
         ("nu_mean", 0.026, ["exchange_nu_mean_within_5mm"]),  # 6 mm worse than off
         ("map_precision", 0.89, ["map_precision_ge_0.9"]),
         ("completeness_seen", 0.79, ["completeness_seen_ge_0.8"]),
-        ("nees", 6.1, ["nees_le_6"]),
         ("duplicates", 0.06, ["duplicates_le_0.05"]),
         ("coverage", 0.84, ["coverage_ge_0.85"]),
         ("completeness", 0.5, ["exchange_completeness_higher"]),
@@ -152,8 +156,8 @@ def test_misses__names_every_robot_beyond_a_target_worst_first() -> None:
     """Floors and ceilings on their right side, equality passes (the checks use ≥ / ≤), the
     team's coverage per seed; the markdown names them under the map's checks."""
     results = [
-        _result(0, 0.90, robot_0={"map_precision": 0.7}, robot_1={"nees": 6.0}),
-        _result(1, 0.84, robot_0={"map_precision": 0.85, "nees": 9.5}, robot_1={}),
+        _result(0, 0.90, robot_0={"map_precision": 0.7}, robot_1={"completeness_seen": 0.8}),
+        _result(1, 0.84, robot_0={"map_precision": 0.85, "duplicates": 0.07}, robot_1={}),
     ]
     got = misses(results)
     assert got == {
@@ -161,7 +165,7 @@ def test_misses__names_every_robot_beyond_a_target_worst_first() -> None:
             {"seed": 0, "robot": "robot_0", "value": 0.7},
             {"seed": 1, "robot": "robot_0", "value": 0.85},
         ],
-        "nees_le_6": [{"seed": 1, "robot": "robot_0", "value": 9.5}],
+        "duplicates_le_0.05": [{"seed": 1, "robot": "robot_0", "value": 0.07}],
         "coverage_ge_0.85": [{"seed": 1, "robot": "team", "value": 0.84}],
     }
     text = markdown(summarise({"loop": {"exchange_on": results, "exchange_off": results[:1]}}))
@@ -185,6 +189,26 @@ def test_nees_excess__counts_robots_above_the_target_against_the_start_draws_bin
     assert "gives 0.4 (95 %: 0–2)" in text
     assert text.endswith("their start draws e₀ᵀP0⁻¹e₀: 8.8, 6.5")  # worst NEES first
     assert "for 0 of 4 robots" in nees_excess([_result(0, 0.9, a={}, b={}).to_dict()] * 2)
+
+
+def test_nees_checks__monte_carlo_mean_per_robot_and_count_above_the_target() -> None:
+    """``nees_mean_le_6``: each robot's mean ``nees`` over the seeds (robot_0 here: (9 + 3)/2
+    = 6 passes, 6.2 fails); ``nees_above_6_consistent``: robots above 6 at most the top of
+    the binomial 95 % interval of n · P(χ²(3) > 6) (n = 4: 0–2)."""
+
+    def run(a: float, b: float, c: float = 3.0) -> list:
+        return [
+            _result(0, 0.9, robot_0={"nees": a}, robot_1={"nees": c}),
+            _result(1, 0.9, robot_0={"nees": b}, robot_1={"nees": c}),
+        ]
+
+    assert nees_checks(run(9.0, 3.0)) == {"nees_mean_le_6": True, "nees_above_6_consistent": True}
+    assert not nees_checks(run(9.4, 3.0))["nees_mean_le_6"]
+    assert nees_checks(run(6.5, 6.5)) == {"nees_mean_le_6": False, "nees_above_6_consistent": True}
+    assert not nees_checks(run(6.5, 6.5, c=6.5))["nees_above_6_consistent"]  # 4 above, top 2
+    text = nees_means_text([r.to_dict() for r in run(9.0, 3.0)])
+    assert text.startswith("mean `nees` over the 2 seeds: robot_0 6.00, robot_1 3.00")
+    assert "95 % band of a mean of 2 χ²(3): 0.62–7.22" in text  # χ²(6) quantiles / 2
 
 
 def test_worst_robots__lowest_map_precision_per_map_and_setting() -> None:
