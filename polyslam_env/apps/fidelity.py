@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from policies.base import make_team
+from policies.base import make_team, policy_factory, policy_names
 from polyslam_env.apps.jobs import run_jobs
 from polyslam_env.apps.rollout import EpisodeResult, evaluate_episode, run_episode
 from polyslam_env.core.config import Config, check_range
@@ -119,6 +119,14 @@ class FidelityConfig(Config):
         check_range("first_seed", self.first_seed, 0, 2**31)
         check_range("robots", self.robots, 1, 64)
         check_range("steps", self.steps, 1, 1_000_000)
+        if self.policy not in policy_names():
+            raise ConfigError(
+                f"policy: {self.policy!r} is not a policy; valid: {', '.join(policy_names())}"
+            )
+        if getattr(policy_factory(self.policy), "takes_checkpoint", False):
+            raise ConfigError(
+                f"policy: {self.policy!r} needs a checkpoint; fidelity runs scripted policies"
+            )
 
 
 def has_initial_error() -> bool:

@@ -11,11 +11,12 @@ def register(sub: Any) -> None:
         "fidelity",
         help="SLAM fidelity on large generated maps: targets checked, exchange on vs off",
         description="For each layout generator in --maps and each of --seeds seeds, run a"
-        " frontier team with initial error (where the env supports it) for --steps steps,"
-        " with the map exchange on and off on the same seeds; print a table per map (per"
-        " robot nu_mean, map_precision, completeness_seen, duplicates, NEES; team coverage)"
-        " with the issue's targets checked; write OUT/summary.json and OUT/table.md, and per"
-        " map and setting a picture of the map of the robot of lowest map_precision.",
+        " team of --policy (default: frontier) with initial error (where the env supports"
+        " it) for --steps steps, with the map exchange on and off on the same seeds; print a"
+        " table per map (per robot nu_mean, map_precision, completeness_seen, duplicates,"
+        " NEES; team coverage) with the issue's targets checked; write OUT/summary.json and"
+        " OUT/table.md, and per map and setting a picture of the map of the robot of lowest"
+        " map_precision.",
     )
     parser.add_argument(
         "--maps",
@@ -26,6 +27,12 @@ def register(sub: Any) -> None:
     parser.add_argument("--seed", type=int, default=0, help="first seed (default: 0)")
     parser.add_argument("--robots", type=int, default=3, help="robots (default: 3)")
     parser.add_argument("--steps", type=int, default=600, help="steps per episode (default: 600)")
+    parser.add_argument(
+        "--policy",
+        default="frontier",
+        help="scripted policy of every robot (default: frontier; frontier_closing adds active"
+        " loop closing)",
+    )
     parser.add_argument("--workers", type=int, default=1, help="processes (default: 1)")
     parser.add_argument("--out", default="out/fidelity", help="output folder (out/fidelity)")
     parser.add_argument(
@@ -55,7 +62,12 @@ def run(args: argparse.Namespace) -> int:
 
     maps = tuple(name.strip() for name in args.maps.split(","))
     config = FidelityConfig(
-        maps=maps, seeds=args.seeds, first_seed=args.seed, robots=args.robots, steps=args.steps
+        maps=maps,
+        seeds=args.seeds,
+        first_seed=args.seed,
+        robots=args.robots,
+        steps=args.steps,
+        policy=args.policy,
     )
     out = check_output_folder(args.out, "--out")
     total = len(maps) * len(SETTINGS) * args.seeds

@@ -211,6 +211,14 @@ def test_nees_checks__monte_carlo_mean_per_robot_and_count_above_the_target() ->
     assert "95 % band of a mean of 2 χ²(3): 0.62–7.22" in text  # χ²(6) quantiles / 2
 
 
+def test_fidelity_config__policy_must_be_a_scripted_policy() -> None:
+    with pytest.raises(ConfigError, match="policy: 'nope' is not a policy; valid: frontier"):
+        FidelityConfig(policy="nope")
+    with pytest.raises(ConfigError, match="policy: 'ppo' needs a checkpoint"):
+        FidelityConfig(policy="ppo")
+    assert FidelityConfig(policy="frontier_closing").policy == "frontier_closing"
+
+
 def test_worst_robots__lowest_map_precision_per_map_and_setting() -> None:
     on = [
         _result(0, 0.9, robot_0={"map_precision": 0.95}, robot_1={"map_precision": 0.8}),
