@@ -1,0 +1,49 @@
+"""scripts/landmark_consistency.py: a landmark's offset and turn read against a true wall."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+
+from polyslam_env.slam.polynomial import Polynomial
+
+
+def _script() -> ModuleType:
+    path = Path(__file__).resolve().parents[1] / "scripts" / "landmark_consistency.py"
+    spec = importlib.util.spec_from_file_location("landmark_consistency", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("variate", [1, 2])
+@pytest.mark.parametrize("slope", [0.0, 0.3])
+def test_wall_errors__offset_and_turn_of_a_shifted_turned_line(variate: int, slope: float) -> None:
+    """A true wall η = 1 + slope·ξ on ξ ∈ [0, 4] sampled every 2.5 mm (as boundary points),
+    and the mapped line turned from it by 0.5° about ξ = 2 and shifted by 3 cm along η: the
+    offset is 3 cm (true − mapped: −0.03) and the turn −0.5° (true − mapped), to the
+    sampling's resolution."""
+    script = _script()
+    xi = np.arange(0.0, 4.0, 0.0025)
+    eta = 1.0 + slope * xi
+    true = np.column_stack([xi, eta] if variate == 1 else [eta, xi])
+    turn = math.radians(0.5)
+    mapped_slope = math.tan(math.atan(slope) + turn)
+    c0 = 1.0 + 0.03 + 2.0 * (slope - mapped_slope)  # through (2, η(2) + 0.03)
+    poly = Polynomial(variate, np.array([c0, mapped_slope]), 0.2, 3.8)
+    offset, got_turn, matched = script.wall_errors(poly, true)
+    assert matched >= script.SAMPLES // 2
+    assert offset == pytest.approx(-0.03, abs=2e-3)  # the ξ match is within 5 mm
+    assert got_turn == pytest.approx(-turn, rel=0.02)
+
+
+def test_wall_errors__none_without_a_wall_near() -> None:
+    script = _script()
+    far = np.column_stack([np.arange(0.0, 4.0, 0.0025), np.full(1600, 3.0)])
+    assert script.wall_errors(Polynomial(1, np.array([1.0, 0.0]), 0.0, 4.0), far) is None
