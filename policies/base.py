@@ -116,15 +116,6 @@ class PolicyContext:
         x, y, c, s = self.vector(observation)[self.vector_layout["pose"]]
         return np.array([x * self.pose_scale, y * self.pose_scale, math.atan2(s, c)])
 
-    def pose_std(self, observation: Any) -> np.ndarray:  # (3,)
-        """Standard deviations (m, m, rad) of the pose estimate as the observation reports
-        them: the covariance in the robot's frame, which holds the start prior's share J P0 Jᵀ
-        (:meth:`relative_pose_std` takes it out). A value at its cap is clipped (see
-        ``pose_std_scale``)."""
-        return self.vector(observation)[self.vector_layout["pose_std"]] * np.asarray(
-            self.pose_std_scale
-        )
-
     def relative_pose_std(self, observation: Any) -> np.ndarray | None:  # (3,)
         """Standard deviations (m, m, rad) of the pose relative to where the robot really
         started, the filter's own uncertainty P_S: the observed variances less the start

@@ -71,7 +71,7 @@ def wall_errors(poly: Polynomial, boundary: np.ndarray) -> tuple[float, float, i
 def robot_report(env: object, i: int, min_length: float) -> dict[str, float]:
     state = env.episode  # type: ignore[attr-defined]
     slam = state.slams[i]
-    true_start = state.histories[i].run(slam.polynomials()).true_poses[0]
+    true_start = state.histories[i].true[0]
     boundary = transform_points(
         boundary_samples(state.world.layout, XI_TOL)[0], inverse(true_start)
     )

@@ -277,7 +277,7 @@ def nees_checks(results: Sequence[EpisodeResult]) -> dict[str, bool]:
     means = robot_nees_means([r.robots for r in results])
     robots = [m for r in results for m in r.robots.values()]
     above = sum(m["nees"] > target for m in robots)
-    hi = float(stats.binom.interval(0.95, len(robots), float(stats.chi2.sf(target, 3)))[1])
+    _, _, hi = start_draw_count(len(robots))
     return {
         "nees_mean_le_6": all(v <= target for v in means.values()),
         "nees_above_6_consistent": above <= hi,
@@ -388,14 +388,22 @@ def nees_excess(episodes: Sequence[Mapping[str, Any]]) -> str:
     target = TARGETS["nees_max"]
     robots = [m for e in episodes for m in e["robots"].values()]
     above = sorted((m for m in robots if m["nees"] > target), key=lambda m: -m["nees"])
-    p = float(stats.chi2.sf(target, 3))
-    lo, hi = stats.binom.interval(0.95, len(robots), p)
+    expected, lo, hi = start_draw_count(len(robots))
     draws = ", ".join(f"{m['start_nees']:.1f}" for m in above)
     return (
         f"`nees` above {target:g} for {len(above)} of {len(robots)} robots; from the start"
-        f" draws alone a consistent filter gives {p * len(robots):.1f} (95 %: {lo:.0f}–{hi:.0f})"
+        f" draws alone a consistent filter gives {expected:.1f} (95 %: {lo:.0f}–{hi:.0f})"
         + (f"; their start draws e₀ᵀP0⁻¹e₀: {draws}" if above else "")
     )
+
+
+def start_draw_count(robots: int) -> tuple[float, float, float]:
+    """Of ``robots`` robots, how many a consistent filter has above :data:`TARGETS`
+    ``nees_max`` from their start draws alone (χ²(3) each): the expected count and the
+    binomial 95 % interval (lo, hi)."""
+    p = float(stats.chi2.sf(TARGETS["nees_max"], 3))
+    lo, hi = stats.binom.interval(0.95, robots, p)
+    return p * robots, float(lo), float(hi)
 
 
 def nees_means_text(episodes: Sequence[Mapping[str, Any]]) -> str:
