@@ -29,6 +29,8 @@ BACKENDS: tuple[str, ...] = (
 )
 #: What turns a landmark's frozen shape (``SlamConfig.shape_rotation``).
 SHAPE_ROTATIONS: tuple[str, ...] = ("heading", "considered")
+#: How a merged landmark's turn is made (``SlamConfig.merge_turn``).
+MERGE_TURNS: tuple[str, ...] = ("fit", "weights")
 
 
 @dataclass(frozen=True)
@@ -102,6 +104,11 @@ class SlamConfig(Config):
     # "considered": its own state, the heading error it was fitted with plus the fit's own
     #   slope error, carried with its correlations but never estimated (Schmidt–Kalman).
     shape_rotation: str = "considered"
+    # A merged landmark's turn α (with rotation states): "weights", a length-weighted mean of
+    # the pieces' turns (their offsets' share left out: α comes out underconfident); "fit",
+    # the merged fit's direction as a function of both pieces' c0s and turns plus the fit's
+    # residual scatter (fitting.turn_gradient; README "Merged walls' turns from their fits")
+    merge_turn: str = "weights"
     join_pieces: bool = True  # join end-to-end pieces of one wall (merging.py; paper: False)
     stretch_ends: bool = True  # a hit just past an end stretches it (association; paper: False)
     # beams whose hit lies within this many σ (of its place along the curve) of a landmark's
@@ -157,6 +164,7 @@ class SlamConfig(Config):
         check_non_negative("slam.blas_threads", self.blas_threads)
         check_choice("slam.backend", self.backend, BACKENDS)
         check_choice("slam.shape_rotation", self.shape_rotation, SHAPE_ROTATIONS)
+        check_choice("slam.merge_turn", self.merge_turn, MERGE_TURNS)
 
     @property
     def rotation_states(self) -> bool:

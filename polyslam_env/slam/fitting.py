@@ -463,8 +463,23 @@ def _c0_gradient(
     """(N, 2): ∂c0/∂ξ_i and ∂c0/∂η_i from the normal equations (see :func:`fit_polynomial`)."""
     e0 = np.zeros(m + 1)
     e0[0] = 1.0
-    # row 0 of M⁻¹ = R⁻¹R⁻ᵀ, from two triangular solves
-    row0 = scipy.linalg.solve_triangular(r, scipy.linalg.solve_triangular(r, e0, trans="T"))
+    return _coefficient_gradient(e0, scale, w, a_mat, r, a_s, resid, m)
+
+
+def _coefficient_gradient(
+    e: np.ndarray,
+    scale: float,
+    w: np.ndarray,
+    a_mat: np.ndarray,
+    r: np.ndarray,
+    a_s: np.ndarray,
+    resid: np.ndarray,
+    m: int,
+) -> np.ndarray:
+    """(N, 2): ∂(eᵀa_s)/∂ξ_i and ∂(eᵀa_s)/∂η_i of a linear function e (m+1,) of the scaled
+    coefficients a_s, from the normal equations (see :func:`fit_polynomial`)."""
+    # eᵀM⁻¹ = eᵀR⁻¹R⁻ᵀ, from two triangular solves
+    row0 = scipy.linalg.solve_triangular(r, scipy.linalg.solve_triangular(r, e, trans="T"))
     powers = np.arange(m + 1)
     # d/dξ of (ξ/s)^j = j (ξ/s)^(j−1) / s
     d_a = np.zeros_like(a_mat)
@@ -475,6 +490,37 @@ def _c0_gradient(
     d_eta = w * q_a
     d_xi = w * (q_da * resid - q_a * slope)
     return np.stack([d_xi, d_eta], axis=-1)
+
+
+def turn_gradient(points: PointSet, fit: Fit, pivot: float) -> tuple[np.ndarray, float]:
+    """(∂α/∂X (n_state,), residual variance) of the turn α of ``fit``, the LMS fit of
+    ``points``, about its point at ξ = ``pivot``.
+
+    ∂α/∂X: how the fitted curve's direction there, atan(p'(ξ_p)), moves when the points move
+    as their ``d_state`` says, the weights held (as :func:`fit_polynomial`'s c0 gradient, with
+    the full derivative: the shape is what moves). For points sampled on landmarks (a merge)
+    this is the merged shape's turn as a linear function of their c0s and turns: two pieces
+    of one straight wall far apart fix its direction through their offsets.
+
+    The residual variance is the part no state holds: where the points disagree with the fit
+    (pieces that are not quite one curve), an error of the shape of size ``fit.rms`` at each
+    point, taken as independent between points: rms² · Σ_i (∂α/∂η_i)², the least-squares
+    variance of the turn for that scatter."""
+    poly = fit.poly
+    xi, eta = _split(points.xy, poly.variate)
+    scale = max(float(np.abs(xi).max()), 1e-9)
+    w = points.weights / points.weights.max()
+    a_mat, _, r, m = _weighted_qr(xi / scale, np.sqrt(w), fit.order)
+    a_s = poly.coeffs[: m + 1] * scale ** np.arange(m + 1)
+    resid = eta - a_mat @ a_s
+    e = np.zeros(m + 1)  # p'(ξ_p) = Σ_k k a_s[k] (ξ_p/s)^(k−1) / s
+    e[1:] = np.arange(1, m + 1) * (pivot / scale) ** np.arange(m) / scale
+    slope = float(poly.slope(pivot))
+    d = _coefficient_gradient(e, scale, w, a_mat, r, a_s, resid, m) / (1.0 + slope * slope)
+    d_xy = d if poly.variate == 1 else d[:, ::-1]
+    sign = 1.0 if poly.variate == 1 else -1.0  # α turns counter-clockwise in (x¹, x²)
+    residual_var = fit.rms**2 * float(np.sum(d[:, 1] ** 2))
+    return sign * np.einsum("nj,njs->s", d_xy, points.d_state), residual_var
 
 
 def centroid_xi(points: PointSet, variate: int) -> float:

@@ -37,6 +37,7 @@ from polyslam_env.slam.fitting import (
     centroid_xi,
     fit_polynomial,
     store_beams,
+    turn_gradient,
 )
 from polyslam_env.slam.landmarks import (
     LandmarkTable,
@@ -456,6 +457,7 @@ class PolySlam:
         rotation: Sequence[tuple[int, float]] = (),
         turn: tuple[np.ndarray, float] | None = None,
         points: PointSet | None = None,
+        turn_gradient: tuple[np.ndarray, float] | None = None,
     ) -> int:
         """Append a fitted landmark to the state; returns its new id. ``side``: the face its
         beams saw (+1 from +η, −1 from −η, 0 unknown; see :mod:`~polyslam_env.slam.merging`);
@@ -488,7 +490,7 @@ class PolySlam:
         evidence = (fit.poly.lo, fit.poly.hi) if evidence is None else evidence
         poly = clip_to_evidence(fit.poly, evidence)
         if self.config.rotation_states:
-            self._add_rotation(n, poly, rotation, turn)
+            self._add_rotation(n, poly, rotation, turn, turn_gradient)
         return self.table.append(
             poly,
             pivot=0.5 * (poly.lo + poly.hi) if pivot is None else pivot,
@@ -506,6 +508,7 @@ class PolySlam:
         poly: Polynomial,
         rotation: Sequence[tuple[int, float]],
         turn: tuple[np.ndarray, float] | None = None,
+        gradient: tuple[np.ndarray, float] | None = None,
     ) -> None:
         """The new landmark's shape turn α into the state, after its c0 was appended at index
         3 + 2n and before its table row is: [pose, c0_1 … c0_n, α_1 … α_n, c0_new] becomes
@@ -516,25 +519,32 @@ class PolySlam:
         turned by the current heading error plus its slope's fit error: its row is a copy of
         the heading's, with the fit's variance (:meth:`_rotation_fit_var`) added (a clone, as
         in Roumeliotis & Burdick's stochastic cloning). A shape fitted over older landmarks'
-        points (a merge, a refit) takes their turns with the weights in ``rotation``, and the
-        rest, 1 − Σ w, from the current heading with that share of the fit variance. α is
+        points (a refit, or a merge with ``merge_turn="weights"``) takes their turns with the
+        weights in ``rotation``, and the rest, 1 − Σ w, from the current heading with that share
+        of the fit variance. A merge with ``merge_turn="fit"`` (an option) passes ``gradient``
+        instead, (∂α/∂X, variance) of the merged fit's own direction
+        (:func:`~polyslam_env.slam.fitting.turn_gradient`): the pieces' offsets fix a long
+        wall's direction far better than their own short turns. α is
         then *considered*, not estimated (no gain: the stored shape stays the estimate), and
         its correlations carry how a wall made long ago ties the current heading to the
         heading of its time.
         """
         size = self.mean.size  # 3 + 2n + 1: the new c0 is last
         gx = np.zeros(size)
-        rest = 1.0
-        for row, weight in rotation:
-            gx[3 + n + row] += weight
-            rest -= weight
-        var = self._rotation_fit_var(poly)
-        if turn is None:
-            gx[2] += rest
-        else:  # e.g. a received wall: the frame transform's turn
-            gx[:3] += rest * np.asarray(turn[0], dtype=float)
-            var += turn[1]
-        var *= rest * rest
+        if gradient is not None:  # a merge's turn from its fit (config.merge_turn "fit")
+            gx[: size - 1], var = gradient
+        else:
+            rest = 1.0
+            for row, weight in rotation:
+                gx[3 + n + row] += weight
+                rest -= weight
+            var = self._rotation_fit_var(poly)
+            if turn is None:
+                gx[2] += rest
+            else:  # e.g. a received wall: the frame transform's turn
+                gx[:3] += rest * np.asarray(turn[0], dtype=float)
+                var += turn[1]
+            var *= rest * rest
         mean, cov = ekf.augment(self.mean, self.cov, 0.0, gx, np.ones(1), np.array([[var]]))
         order = np.r_[0 : 3 + n, size - 1, 3 + n : size - 1, size]
         self.mean, self.cov = mean[order], cov[np.ix_(order, order)]
@@ -566,10 +576,13 @@ class PolySlam:
         evidence: tuple[float, float] | None = None,
         rotation: Sequence[tuple[int, float]] = (),
         points: PointSet | None = None,
+        turn_gradient: tuple[np.ndarray, float] | None = None,
     ) -> int:
         """Add the fit (its G_x may touch the old c0s; ``points``: what it was fitted on) and
         then drop the old landmarks."""
-        new_id = self._augment(fit, side, evidence, rotation, points=points)
+        new_id = self._augment(
+            fit, side, evidence, rotation, points=points, turn_gradient=turn_gradient
+        )
         for lid in old_ids:
             self._remove(lid)
         return new_id
@@ -740,7 +753,10 @@ class PolySlam:
         )
         w = _length_weight(poly.hi - poly.lo, other.hi - other.lo)
         rotation = [(idx, w), (j, 1 - w)]
-        return self._replace([landmark_id, other_id], fit, side, evidence, rotation, pts)
+        gradient = None
+        if cfg.rotation_states and cfg.merge_turn == "fit":
+            gradient = turn_gradient(pts, fit, centroid_xi(pts, fit.poly.variate))
+        return self._replace([landmark_id, other_id], fit, side, evidence, rotation, pts, gradient)
 
     def _turn_of(self, index: int) -> tuple[int, float] | None:
         """(state index of landmark ``index``'s turn α, its pivot ξ), None without rotation

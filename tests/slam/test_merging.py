@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from polyslam_env.slam.fitting import PointSet, fit_polynomial
+from polyslam_env.slam.fitting import PointSet, centroid_xi, fit_polynomial, turn_gradient
 from polyslam_env.slam.merging import (
     JOIN_GAP,
     THIN_WALL,
@@ -243,3 +243,67 @@ def test_fit__a_shape_curving_away_between_its_points_is_refused() -> None:
         assert (fit is not None) == accepted, curvature
         steep = fit_polynomial(ps, 3, 1).poly.max_slope()
         assert (steep <= MAX_SLOPE) == accepted
+
+
+@pytest.mark.parametrize(("variate", "order"), [(1, 1), (2, 1), (1, 3), (2, 2)])
+def test_turn_gradient__merged_turn_matches_finite_differences(variate: int, order: int) -> None:
+    """∂α/∂X of the merged shape's turn about its pivot, α = atan of its direction there
+    (counter-clockwise in (x¹, x²)), against central differences over both pieces' c0s and
+    turns: each piece's points are its shape with that c0, turned rigidly about its pivot
+    point, and the fit is made again."""
+    coeffs_a = np.array([0.3, 0.4, 0.05, -0.01])[: order + 1]
+    coeffs_b = np.array([0.35, 0.42, 0.04, -0.01])[: order + 1]
+    a = Polynomial(variate, coeffs_a, 0.0, 1.5)
+    b = Polynomial(variate, coeffs_b, 3.0, 4.0)  # end to end, 1.5 m apart
+    i_a, i_b, t_a, t_b, n = 4, 5, 6, 7, 8
+    piv_a, piv_b = 0.75, 3.5
+    state = np.array([0.1, 0.2, 0.3, 9.0, a.c0, b.c0, 0.0, 0.0])
+    pts = merge_points(a, i_a, 1e-4, b, i_b, 3e-4, 5, n, (t_a, piv_a), (t_b, piv_b))
+    fit = fit_polynomial(pts, order, variate)
+    pivot = centroid_xi(pts, variate)
+
+    def turn(x: np.ndarray) -> float:
+        xy = []
+        for poly, c0, alpha, piv in ((a, x[i_a], x[t_a], piv_a), (b, x[i_b], x[t_b], piv_b)):
+            moved = poly.with_c0(c0)
+            centre = moved.points_at(np.array([piv]))[0]
+            c, s = np.cos(alpha), np.sin(alpha)
+            xy.append(centre + (moved.equally_spaced(5) - centre) @ np.array([[c, -s], [s, c]]).T)
+        ps = PointSet(np.vstack(xy), pts.d_state, pts.d_noise, pts.noise_cov, pts.weights)
+        slope = float(fit_polynomial(ps, order, variate).poly.slope(pivot))
+        return float(np.arctan(slope)) if variate == 1 else float(-np.arctan(slope))
+
+    fd = np.zeros(n)
+    for j in range(n):
+        step = np.zeros(n)
+        step[j] = FD_STEP
+        fd[j] = (turn(state + step) - turn(state - step)) / (2 * FD_STEP)
+    grad, _ = turn_gradient(pts, fit, pivot)
+    np.testing.assert_allclose(grad, fd, rtol=FD_RTOL, atol=FD_ATOL)
+    # the pieces' offsets turn the merged wall (1 cm between pieces ~3 m apart: ~1/300 rad)
+    assert abs(grad[i_a]) > 0.1 and abs(grad[i_b]) > 0.1
+    if order == 1:  # a line's pieces turned counter-clockwise turn it so (curves: not always)
+        assert grad[t_a] > 0 and grad[t_b] > 0
+    np.testing.assert_array_equal(grad[:4], 0.0)
+
+
+@pytest.mark.parametrize("variate", [1, 2])
+def test_turn_gradient__residual_variance_is_the_least_squares_turn_variance(variate: int) -> None:
+    """Two parallel pieces 1 cm apart are not quite one line: the merged line's turn gets the
+    textbook weighted least-squares slope variance for a scatter of the fit's RMS at every
+    point, σ² Σ w_i² (ξ_i − ξ̄)² / (Σ w_i (ξ_i − ξ̄)²)² (ξ̄ the weighted mean), times the
+    slope-to-angle factor 1/(1 + b'²)²; pieces on one line get none."""
+    for offset in (0.01, 0.0):
+        a = Polynomial(variate, np.array([1.0, 0.0]), 0.0, 2.0)
+        b = Polynomial(variate, np.array([1.0 + offset, 0.0]), 2.5, 3.5)
+        pts = merge_points(a, 3, 1e-4, b, 4, 3e-4, 5, 5)
+        fit = fit_polynomial(pts, 1, variate)
+        _, var = turn_gradient(pts, fit, centroid_xi(pts, variate))
+        xi = np.concatenate([np.linspace(0.0, 2.0, 5), np.linspace(2.5, 3.5, 5)])
+        w = np.concatenate([np.full(5, 1e4), np.full(5, 1e4 / 3)])
+        w = w / w.max()
+        centred = xi - np.average(xi, weights=w)
+        expected = fit.rms**2 * np.sum(w**2 * centred**2) / np.sum(w * centred**2) ** 2
+        expected /= (1.0 + fit.poly.coeffs[1] ** 2) ** 2
+        assert var == pytest.approx(expected, rel=1e-9, abs=1e-18)
+        assert (var > 1e-12) == (offset > 0)  # 1 cm: ~6e-7 rad²; one line: rounding only

@@ -150,32 +150,76 @@ def test_shape_rotation__bad_value_names_the_field() -> None:
 
     with pytest.raises(ConfigError, match="slam.shape_rotation"):
         SlamConfig(shape_rotation="estimated")
+    with pytest.raises(ConfigError, match="slam.merge_turn"):
+        SlamConfig(merge_turn="mean")
 
 
-def test_merged_landmark__its_rotation_is_the_length_weighted_mean_of_the_parts() -> None:
-    """Two pieces of one straight wall end to end merge into one landmark whose turn is
-    w·α_a + (1 − w)·α_b with w = L_a³/(L_a³ + L_b³): its covariance row is that combination of
-    the parts' rows (taken before the merge), and the layout stays [pose, c0 × n, α × n]."""
+def _two_pieces(config: SlamConfig) -> tuple[PolySlam, np.ndarray]:
+    """A SLAM whose map is two pieces of one straight wall end to end (2 m and 1 m, a 10 cm
+    gap), their c0s and turns correlated with the pose and each other as a run would make
+    them; and its covariance before they merge."""
     rng = np.random.default_rng(3)
-    slam = PolySlam(SlamConfig(), np.linspace(-1.5, 1.5, 9), 4.0)
+    slam = PolySlam(config, np.linspace(-1.5, 1.5, 9), 4.0)
     slam.mean = np.zeros(3)
     slam.cov = random_spd(rng, 3, 1e-4)
-    a = Polynomial(1, np.array([1.0, 0.0]), 0.0, 2.0)  # 2 m
-    b = Polynomial(1, np.array([1.0, 0.0]), 2.1, 3.1)  # 1 m, 10 cm gap: one wall
+    a = Polynomial(1, np.array([1.0, 0.0]), 0.0, 2.0)
+    b = Polynomial(1, np.array([1.0, 0.0]), 2.1, 3.1)
     slam.insert_landmark(_fit(a, 3), merge=False)
     slam.insert_landmark(_fit(b, slam.mean.size), merge=False)
-    # the parts' turns: made correlated with the pose and each other, as a run would
     slam.cov[3:, 3:] += 1e-6 * np.eye(4)
     assert_symmetric_psd(slam.cov)
-    rows = slam.cov[[5, 6]].copy()  # α_a, α_b over [pose, c0_a, c0_b, α_a, α_b]
-    own = slam.cov[np.ix_([5, 6], [5, 6])].copy()
-    merged = slam._merge_once(slam.landmark_ids[1])
-    assert merged is not None and slam.n_landmarks == 1
+    return slam, slam.cov.copy()
+
+
+def test_merged_landmark__with_weights_its_rotation_is_the_length_weighted_mean_of_the_parts() -> (
+    None
+):
+    """``merge_turn="weights"`` (the default): the merged turn is w·α_a + (1 − w)·α_b with
+    w = L_a³/(L_a³ + L_b³): its covariance row is that combination of the parts' rows (taken
+    before the merge), and the layout stays [pose, c0 × n, α × n]."""
+    config = SlamConfig()
+    assert config.merge_turn == "weights"  # the default
+    slam, before = _two_pieces(config)
+    assert slam._merge_once(slam.landmark_ids[1]) is not None and slam.n_landmarks == 1
     w_a = 2.0**3 / (2.0**3 + 1.0**3)  # the 2 m piece weighs 8/9, the 1 m one 1/9
-    weights = np.array([w_a, 1.0 - w_a])  # over (α_a, α_b)
+    weights = np.array([w_a, 1.0 - w_a])  # over (α_a, α_b): state 5, 6 before
     assert slam.mean.shape == (5,)  # [pose, c0, α]
-    np.testing.assert_allclose(slam.cov[4, :3], weights @ rows[:, :3], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(slam.cov[4, :3], weights @ before[5:7, :3], rtol=1e-9, atol=1e-15)
+    own = before[5:7, 5:7]
     assert slam.cov[4, 4] == pytest.approx(weights @ own @ weights, rel=1e-9)
+    assert_symmetric_psd(slam.cov)
+
+
+def test_merged_landmark__its_rotation_is_the_merged_fits_direction() -> None:
+    """``merge_turn="fit"``: the merged turn is the direction of the line fitted
+    through both pieces, so it depends on their offsets as well as their turns. The oracle:
+    a weighted ``np.polyfit`` through ε_M points on each piece, each piece moved by its c0
+    and turned by its α about its pivot, differentiated numerically over (c0_a, c0_b, α_a,
+    α_b); the merged α's covariance row is that gradient times the parts' rows."""
+    config = SlamConfig(merge_turn="fit")
+    slam, before = _two_pieces(config)
+    pieces = [(0.0, 2.0, 1.0, before[3, 3]), (2.1, 3.1, 2.6, before[4, 4])]  # lo, hi, pivot, var
+
+    def direction(x: np.ndarray) -> float:  # x = (c0_a, c0_b, α_a, α_b)
+        xs, ys, ws = [], [], []
+        for k, (lo, hi, pivot, var) in enumerate(pieces):
+            px = np.linspace(lo, hi, config.eps_m)
+            c, s = math.cos(x[2 + k]), math.sin(x[2 + k])
+            dx, dy = px - pivot, np.zeros_like(px)
+            xs.append(pivot + c * dx - s * dy)
+            ys.append(1.0 + x[k] + s * dx + c * dy)
+            ws.append(np.full(len(px), 1.0 / math.sqrt(var)))  # polyfit weighs residuals
+        slope = np.polyfit(np.concatenate(xs), np.concatenate(ys), 1, w=np.concatenate(ws))[0]
+        return math.atan(slope)
+
+    x0, h = np.array([0.0, 0.0, 0.0, 0.0]), 1e-6
+    g = np.array([(direction(x0 + h * e) - direction(x0 - h * e)) / (2 * h) for e in np.eye(4)])
+    assert slam._merge_once(slam.landmark_ids[1]) is not None and slam.n_landmarks == 1
+    assert slam.mean.shape == (5,)
+    np.testing.assert_allclose(slam.cov[4, :3], g @ before[3:7, :3], rtol=1e-6, atol=1e-15)
+    assert slam.cov[4, 4] == pytest.approx(g @ before[3:7, 3:7] @ g, rel=1e-6)
+    # 1 cm between the pieces' offsets turns a wall ~2.6 m between their centres by ~1/260
+    assert g[1] > 0.3 and g[0] < -0.3
     assert_symmetric_psd(slam.cov)
 
 
