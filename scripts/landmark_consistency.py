@@ -40,6 +40,7 @@ from polyslam_env.core.geometry import inverse, transform_points
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import parallel_env
 from polyslam_env.metrics.boundary import boundary_samples
+from polyslam_env.slam.config import MERGE_TURNS, SlamConfig
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.generators import GENERATORS
 
@@ -108,6 +109,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=600)
     parser.add_argument("--exchange", action="store_true", help="the map exchange on")
     parser.add_argument("--min-length", type=float, default=1.0, help="m, for the turn (1.0)")
+    parser.add_argument(
+        "--merge-turn",
+        choices=MERGE_TURNS,
+        default=SlamConfig().merge_turn,
+        help="slam.merge_turn: how a merged landmark's turn is made (default: the config's)",
+    )
     args = parser.parse_args(argv)
     if args.map not in GENERATORS:
         print(f"--map: {args.map!r} is not a layout generator; valid: {', '.join(GENERATORS)}")
@@ -117,7 +124,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         config = FidelityConfig(maps=(args.map,), robots=args.robots, steps=args.steps)
-        env = parallel_env(EnvConfig.from_dict(episode_config(config, args.map, args.exchange)))
+        fields = episode_config(config, args.map, args.exchange)
+        fields["slam"] = {**fields.get("slam", {}), "merge_turn": args.merge_turn}
+        env = parallel_env(EnvConfig.from_dict(fields))
     except ConfigError as err:
         print(err)
         return 2
