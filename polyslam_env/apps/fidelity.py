@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from scipy import stats
 
 from policies.base import make_team, policy_factory, policy_names
@@ -106,6 +107,9 @@ class FidelityConfig(Config):
     robots: int = 3
     steps: int = 600
     policy: str = "frontier"
+    #: env config fields set on every episode, ``KEY=VALUE`` with dotted keys and YAML values
+    #: (``slam.merge_turn=fit``): a variant of the filter or the world under the same protocol
+    env_set: tuple[str, ...] = ()
 
     def validate(self) -> None:
         if not self.maps:
@@ -127,6 +131,24 @@ class FidelityConfig(Config):
             raise ConfigError(
                 f"policy: {self.policy!r} needs a checkpoint; fidelity runs scripted policies"
             )
+        EnvConfig().replace(**self.env_overrides())  # a bad field or value: its ConfigError
+
+    def env_overrides(self) -> dict[str, Any]:
+        """``env_set`` as ``Config.replace`` keywords (``slam__merge_turn="fit"``)."""
+        out: dict[str, Any] = {}
+        for pair in self.env_set:
+            key, sep, value = pair.partition("=")
+            if not sep or not key.strip():
+                raise ConfigError(
+                    f"env_set (--set): expected KEY=VALUE (e.g. slam.eps_z=10), got {pair!r}"
+                )
+            try:
+                out[key.strip().replace(".", "__")] = yaml.safe_load(value)
+            except yaml.YAMLError:
+                raise ConfigError(
+                    f"env_set (--set): {key.strip()}: {value!r} is not a value"
+                ) from None
+        return out
 
 
 def has_initial_error() -> bool:
@@ -147,7 +169,7 @@ def episode_config(config: FidelityConfig, name: str, exchange: bool) -> dict[st
         fields["channel"] = None
     if has_initial_error():
         fields["initial_error"] = True
-    return EnvConfig.from_dict(fields).to_dict()
+    return EnvConfig.from_dict(fields).replace(**config.env_overrides()).to_dict()
 
 
 def _run_job(job: tuple[dict[str, Any], str, int]) -> EpisodeResult:

@@ -33,6 +33,14 @@ def register(sub: Any) -> None:
         help="scripted policy of every robot (default: frontier; frontier_closing adds active"
         " loop closing)",
     )
+    parser.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="KEY=VALUE",
+        help="env config fields for every episode, dotted keys and YAML values (e.g."
+        " slam.merge_turn=fit): a variant under the same protocol",
+    )
     parser.add_argument("--workers", type=int, default=1, help="processes (default: 1)")
     parser.add_argument("--out", default="out/fidelity", help="output folder (out/fidelity)")
     parser.add_argument(
@@ -68,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
         robots=args.robots,
         steps=args.steps,
         policy=args.policy,
+        env_set=tuple(args.set),
     )
     out = check_output_folder(args.out, "--out")
     total = len(maps) * len(SETTINGS) * args.seeds
