@@ -137,6 +137,16 @@ def test_episode_config__env_set_reaches_every_episode_and_bad_pairs_are_named()
             FidelityConfig(env_set=(pair,))
 
 
+def test_fidelity_cli__bad_set_is_a_one_line_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = ["fidelity", "--maps", "loop", "--seeds", "1", "--steps", "2", "--quiet"]
+    assert main([*args, "--out", str(tmp_path), "--set", "slam.merge_turn=mean"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "slam.merge_turn: must be one of" in err
+    assert "Traceback" not in err and not (tmp_path / "summary.json").exists()
+
+
 def test_fidelity_config__bad_map_named() -> None:
     with pytest.raises(ConfigError, match="maps: 'maze'"):
         FidelityConfig(maps=("maze",))
