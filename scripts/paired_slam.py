@@ -30,13 +30,13 @@ from typing import Any
 
 import numpy as np
 import scipy.stats
-import yaml
 
 from policies.base import make_team
 from polyslam_env.apps.fidelity import FidelityConfig, episode_config
 from polyslam_env.apps.jobs import run_jobs
 from polyslam_env.apps.rollout import run_episode
 from polyslam_env.cli.common import progress_bar
+from polyslam_env.core.config import parse_overrides
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import parallel_env
@@ -85,12 +85,10 @@ def setting(base: dict[str, Any], pairs: list[str]) -> dict[str, Any]:
     """The env config ``base`` with ``["slam.eps_z=10", ...]`` applied (dotted keys reach
     nested fields through ``Config.replace``, values are YAML), validated; a one-line error
     on a malformed pair, a ``ConfigError`` on an unknown field or a bad value."""
-    overrides: dict[str, Any] = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key:
-            sys.exit(f"paired_slam: expected KEY=VALUE (e.g. slam.eps_z=10), got {pair!r}")
-        overrides[key.replace(".", "__")] = yaml.safe_load(value)
+    try:
+        overrides = parse_overrides(pairs)
+    except ConfigError as err:  # a malformed pair: the script's one-line exit
+        sys.exit(f"paired_slam: {err}")
     return EnvConfig.from_dict(base).replace(**overrides).to_dict()
 
 

@@ -2,24 +2,18 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import pytest
 
 from polyslam_env.slam.polynomial import Polynomial
+from tests.scripts_module import load_script
 
 
 def _script() -> ModuleType:
-    path = Path(__file__).resolve().parents[1] / "scripts" / "landmark_consistency.py"
-    spec = importlib.util.spec_from_file_location("landmark_consistency", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("landmark_consistency")
 
 
 @pytest.mark.parametrize("variate", [1, 2])

@@ -2,23 +2,17 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 from types import ModuleType
 
 import pytest
 
 from polyslam_env.apps.fidelity import FidelityConfig, episode_config
 from polyslam_env.core.errors import ConfigError
+from tests.scripts_module import load_script
 
 
 def _script() -> ModuleType:
-    path = Path(__file__).resolve().parents[1] / "scripts" / "paired_slam.py"
-    spec = importlib.util.spec_from_file_location("paired_slam", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("paired_slam")
 
 
 def test_setting__nested_yaml_values_and_a_one_line_error() -> None:

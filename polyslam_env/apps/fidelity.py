@@ -27,13 +27,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from scipy import stats
 
 from policies.base import make_team, policy_factory, policy_names
 from polyslam_env.apps.jobs import run_jobs
 from polyslam_env.apps.rollout import EpisodeResult, evaluate_episode, run_episode
-from polyslam_env.core.config import Config, check_range
+from polyslam_env.core.config import Config, check_range, parse_overrides
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.environment.config import GENERATOR_PREFIX, EnvConfig
 from polyslam_env.environment.parallel import parallel_env
@@ -135,20 +134,7 @@ class FidelityConfig(Config):
 
     def env_overrides(self) -> dict[str, Any]:
         """``env_set`` as ``Config.replace`` keywords (``slam__merge_turn="fit"``)."""
-        out: dict[str, Any] = {}
-        for pair in self.env_set:
-            key, sep, value = pair.partition("=")
-            if not sep or not key.strip():
-                raise ConfigError(
-                    f"env_set (--set): expected KEY=VALUE (e.g. slam.eps_z=10), got {pair!r}"
-                )
-            try:
-                out[key.strip().replace(".", "__")] = yaml.safe_load(value)
-            except yaml.YAMLError:
-                raise ConfigError(
-                    f"env_set (--set): {key.strip()}: {value!r} is not a value"
-                ) from None
-        return out
+        return parse_overrides(self.env_set, "env_set (--set)")
 
 
 def has_initial_error() -> bool:

@@ -19,7 +19,7 @@ import dataclasses
 import math
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar, get_args, get_origin, get_type_hints
 
@@ -121,6 +121,24 @@ def check_range(name: str, value: float, low: float, high: float) -> None:
 def check_choice(name: str, value: str, choices: tuple[str, ...]) -> None:
     if value not in choices:
         raise ConfigError(f"{name}: must be one of {', '.join(choices)}; got {value!r}")
+
+
+def parse_overrides(pairs: Sequence[str], label: str = "--set") -> dict[str, Any]:
+    """``["slam.eps_z=10", ...]`` as :meth:`Config.replace` keywords (``slam__eps_z=10``):
+    dotted keys reach nested fields, values are YAML. A malformed pair or an unreadable value
+    is a one-line :class:`ConfigError` starting with ``label``; unknown fields and bad values
+    are the ``replace``'s errors."""
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ConfigError(f"{label}: expected KEY=VALUE (e.g. slam.eps_z=10), got {pair!r}")
+        try:
+            out[key.replace(".", "__")] = yaml.safe_load(value)
+        except yaml.YAMLError:
+            raise ConfigError(f"{label}: {key}: {value!r} is not a value") from None
+    return out
 
 
 # -- internals ------------------------------------------------------------------------------

@@ -331,6 +331,13 @@ def _split(xy: np.ndarray, variate: int) -> tuple[np.ndarray, np.ndarray]:
     return (xy[:, 0], xy[:, 1]) if variate == 1 else (xy[:, 1], xy[:, 0])
 
 
+def _scaled(points: PointSet, variate: int) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """(ξ, η, scale, w) of a fit: the abscissae are scaled by max|ξ| in the design, and the
+    weights by their largest (a fit is invariant to a common weight factor)."""
+    xi, eta = _split(points.xy, variate)
+    return xi, eta, max(float(np.abs(xi).max()), 1e-9), points.weights / points.weights.max()
+
+
 def _distinct_count(xi: np.ndarray, scale: float) -> int:
     """Number of distinct abscissae, up to a relative tolerance of 1e-9."""
     sorted_xi = np.sort(xi)
@@ -417,9 +424,7 @@ def fit_polynomial(
     if order < 1:
         raise ValueError(f"order must be >= 1, got {order}")
     var = choose_variate(points.xy, points.weights) if variate is None else variate
-    xi, eta = _split(points.xy, var)
-    scale = max(float(np.abs(xi).max()), 1e-9)
-    w = points.weights / points.weights.max()  # c0 is invariant to a common weight factor
+    xi, eta, scale, w = _scaled(points, var)
     m = min(order, _distinct_count(xi, max(scale, 1.0)) - 1)
     if auto_order and m > 1:
         noise_var = max(float(np.trace(points.noise_cov)) / points.n_points, min_noise_var)
@@ -435,7 +440,9 @@ def fit_polynomial(
         )
         dc0 = np.stack([-w * slope, w], axis=-1) / w.sum()  # (N, 2) in (ξ, η)
     else:
-        dc0 = _c0_gradient(xi / scale, scale, w, a_mat, r, a_s, resid, m)
+        e0 = np.zeros(m + 1)
+        e0[0] = 1.0
+        dc0 = _coefficient_gradient(e0, scale, w, a_mat, r, a_s, resid, m)
     dc0_xy = dc0 if var == 1 else dc0[:, ::-1]
     coeffs = np.zeros(order + 1)
     coeffs[: m + 1] = a_s / scale ** np.arange(m + 1)
@@ -448,22 +455,6 @@ def fit_polynomial(
         rms=float(np.sqrt(np.mean(resid**2))),
         order=m,
     )
-
-
-def _c0_gradient(
-    xi_s: np.ndarray,
-    scale: float,
-    w: np.ndarray,
-    a_mat: np.ndarray,
-    r: np.ndarray,
-    a_s: np.ndarray,
-    resid: np.ndarray,
-    m: int,
-) -> np.ndarray:
-    """(N, 2): ∂c0/∂ξ_i and ∂c0/∂η_i from the normal equations (see :func:`fit_polynomial`)."""
-    e0 = np.zeros(m + 1)
-    e0[0] = 1.0
-    return _coefficient_gradient(e0, scale, w, a_mat, r, a_s, resid, m)
 
 
 def _coefficient_gradient(
@@ -479,14 +470,14 @@ def _coefficient_gradient(
     """(N, 2): ∂(eᵀa_s)/∂ξ_i and ∂(eᵀa_s)/∂η_i of a linear function e (m+1,) of the scaled
     coefficients a_s, from the normal equations (see :func:`fit_polynomial`)."""
     # eᵀM⁻¹ = eᵀR⁻¹R⁻ᵀ, from two triangular solves
-    row0 = scipy.linalg.solve_triangular(r, scipy.linalg.solve_triangular(r, e, trans="T"))
+    row = scipy.linalg.solve_triangular(r, scipy.linalg.solve_triangular(r, e, trans="T"))
     powers = np.arange(m + 1)
     # d/dξ of (ξ/s)^j = j (ξ/s)^(j−1) / s
     d_a = np.zeros_like(a_mat)
     d_a[:, 1:] = powers[1:] * a_mat[:, :-1] / scale  # (N, m+1)
     slope = d_a @ a_s  # (N,) dη/dξ at each point
-    q_a = a_mat @ row0  # (N,) e0ᵀ M⁻¹ A_iᵀ
-    q_da = d_a @ row0  # (N,) e0ᵀ M⁻¹ A_i'ᵀ
+    q_a = a_mat @ row  # (N,) eᵀ M⁻¹ A_iᵀ
+    q_da = d_a @ row  # (N,) eᵀ M⁻¹ A_i'ᵀ
     d_eta = w * q_a
     d_xi = w * (q_da * resid - q_a * slope)
     return np.stack([d_xi, d_eta], axis=-1)
@@ -507,9 +498,7 @@ def turn_gradient(points: PointSet, fit: Fit, pivot: float) -> tuple[np.ndarray,
     point, taken as independent between points: rms² · Σ_i (∂α/∂η_i)², the least-squares
     variance of the turn for that scatter."""
     poly = fit.poly
-    xi, eta = _split(points.xy, poly.variate)
-    scale = max(float(np.abs(xi).max()), 1e-9)
-    w = points.weights / points.weights.max()
+    xi, eta, scale, w = _scaled(points, poly.variate)
     a_mat, _, r, m = _weighted_qr(xi / scale, np.sqrt(w), fit.order)
     a_s = poly.coeffs[: m + 1] * scale ** np.arange(m + 1)
     resid = eta - a_mat @ a_s
