@@ -162,12 +162,8 @@ def _match(
         if not inside.any():
             continue
         slope = poly.slope(xi)
-        norm = np.sqrt(1.0 + slope * slope)
-        if poly.variate == 1:
-            normal = np.stack([-slope, np.ones_like(slope)], axis=1) / norm[:, None]
-        else:
-            normal = np.stack([np.ones_like(slope), -slope], axis=1) / norm[:, None]
-        r = (eta - poly.value(xi)) / norm
+        normal = poly.normals(xi)  # (N, 2)
+        r = (eta - poly.value(xi)) / np.sqrt(1.0 + slope * slope)
         g = np.einsum("ni,nij->nj", normal, dp_dt)  # (N, 3) ∂r/∂T
         pred = np.sqrt(np.einsum("ni,ij,nj->n", g, cov_t, g) + point_var + wall_var[w])
         parallel = np.abs(np.einsum("ni,ni->n", normal, tangents)) <= np.sqrt(1 - cos_max**2)

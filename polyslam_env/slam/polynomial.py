@@ -81,6 +81,13 @@ class Polynomial:
             return p[..., 0], p[..., 1]
         return p[..., 1], p[..., 0]
 
+    def normals(self, xi: np.ndarray) -> np.ndarray:
+        """Unit normals (n, 2) of the curve at the given ξ, in (x¹, x²): (−B', 1)/√(1 + B'²)
+        in (ξ, η), the side of growing η."""
+        slope = self.slope(np.asarray(xi, dtype=float))
+        norm = np.sqrt(1.0 + slope * slope)
+        return self.to_xy(-slope / norm, 1.0 / norm)
+
     def points_at(self, xi: np.ndarray) -> np.ndarray:
         """Points on the curve at the given ξ, shape (n, 2)."""
         xi = np.asarray(xi, dtype=float)
