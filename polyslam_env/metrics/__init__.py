@@ -1,4 +1,5 @@
-"""Evaluation metrics (SPEC §5), each computed against ground truth the robots never see.
+"""Evaluation metrics (SPEC §5), each computed against ground truth the robots never see
+(except ``expected_precision``: the map precision a robot's own filter expects).
 
 It owns: ``pose`` (frames, position and landmark errors, NEES in both forms, the χ² band),
 ``boundary`` (the true boundary and distances to it), ``mapping`` (ν in both forms,
@@ -16,7 +17,9 @@ from polyslam_env.metrics.mapping import (
     completeness,
     completeness_and_error,
     completeness_seen,
+    count_interval,
     duplicates,
+    expected_precision,
     has_map,
     hit_fraction,
     map_distances,
@@ -48,9 +51,11 @@ __all__ = [
     "completeness",
     "completeness_and_error",
     "completeness_seen",
+    "count_interval",
     "cov_to_absolute",
     "distance_to_boundary",
     "duplicates",
+    "expected_precision",
     "has_map",
     "hit_fraction",
     "landmark_distances",

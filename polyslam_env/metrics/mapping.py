@@ -26,6 +26,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from scipy import special
 from scipy.spatial import cKDTree
 
 from polyslam_env.core.geometry import transform_points
@@ -170,6 +171,56 @@ def map_precision(
         return 1.0
     d = np.concatenate(ds)
     return float(np.count_nonzero(d <= tol)) / len(d)
+
+
+def expected_precision(
+    lengths: np.ndarray,
+    jacobian: np.ndarray,
+    cov: np.ndarray,
+    tol: float = 0.05,
+    floor: float = 0.9,
+    draws: int = 400,
+    seed: int = 0,
+) -> tuple[float, float]:
+    """:func:`map_precision` as the filter itself expects it: (its mean, the probability that
+    it is below ``floor``), for a map whose points (arc lengths ``lengths`` (M,) m) are off
+    their true walls along the normal by e = ``jacobian`` (M, S) times the state error, and
+    that error ~ N(0, ``cov``) (S, S) (``PolySlam.map_error_jacobian`` and ``PolySlam.cov``).
+
+    No ground truth goes in: it is the robot's own estimate of its map's precision. The mean
+    is exact, Σ ℓ_i P(|e_i| ≤ tol) / Σ ℓ_i with e_i ~ N(0, J_i P J_iᵀ); the probability comes
+    from ``draws`` draws of the state error (the points' errors are correlated through it),
+    from ``default_rng(seed)``, so the same inputs give the same numbers. An empty map gives
+    (1.0, 0.0), as :func:`map_precision` gives 1.0."""
+    lengths = np.asarray(lengths, dtype=float)
+    if lengths.size == 0 or not lengths.sum() > 0:
+        return 1.0, 0.0
+    used = np.flatnonzero(np.any(jacobian != 0.0, axis=0))
+    jac = jacobian[:, used]  # (M, U)
+    block = cov[np.ix_(used, used)]
+    values, vectors = np.linalg.eigh(0.5 * (block + block.T))
+    root = vectors * np.sqrt(np.clip(values, 0.0, None))  # block = root rootᵀ (PSD part)
+    sd = np.linalg.norm(jac @ root, axis=1)  # (M,)
+    weights = lengths / lengths.sum()
+    with np.errstate(divide="ignore"):
+        within = np.where(sd > 0, special.erf(tol / (np.sqrt(2.0) * sd)), 1.0)
+    mean = float(weights @ within)
+    z = np.random.default_rng(seed).standard_normal((root.shape[1], draws))
+    errors = jac @ (root @ z)  # (M, draws)
+    precision = weights @ (np.abs(errors) <= tol)  # (draws,)
+    return mean, float(np.mean(precision < floor))
+
+
+def count_interval(probs: Sequence[float], prob: float = 0.95) -> tuple[float, int, int]:
+    """How many of independent events with probabilities ``probs`` happen: the expected count
+    and the central ``prob`` interval (lo, hi) of its exact (Poisson-binomial) distribution."""
+    pmf = np.ones(1)
+    for p in probs:
+        pmf = np.convolve(pmf, [1.0 - p, p])
+    cdf = np.cumsum(pmf)
+    lo = int(np.searchsorted(cdf, (1.0 - prob) / 2.0 - 1e-12))
+    hi = int(np.searchsorted(cdf, (1.0 + prob) / 2.0 - 1e-12))
+    return float(np.sum(probs)), lo, min(hi, len(pmf) - 1)
 
 
 #: Radius (m) around the robot's true beam hits within which the true boundary counts as seen

@@ -36,6 +36,7 @@ from polyslam_env.slam.fitting import (
     StoredPoint,
     centroid_xi,
     fit_polynomial,
+    polynomial_points,
     store_beams,
     turn_gradient,
 )
@@ -201,6 +202,31 @@ class PolySlam:
     def c0_variance(self, landmark_id: int) -> float:
         k = self.table.state_index(landmark_id)
         return float(self.cov[k, k])
+
+    def map_error_jacobian(self, spacing: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+        """How the state's errors move the map: at points every ``spacing`` m of ξ along
+        every landmark's extent, each point's arc length (M,) (m: the points weigh as
+        :func:`~polyslam_env.metrics.mapping.map_precision`'s arc-length samples do) and the
+        Jacobian (M, state size) of its offset along the curve's normal w.r.t. the state: 1/√(1
+        + B'²) on its c0, and with rotation states its turn α about the pivot
+        (:func:`~polyslam_env.slam.fitting.polynomial_points`' ∂π/∂α = J(π − π_c)). The state
+        lives in the true-start frame (class docstring), so with :attr:`cov` it gives the
+        filter's own distribution of the map's errors where the map metrics place the map
+        (:func:`~polyslam_env.metrics.mapping.expected_precision`). What no state holds (a
+        frozen shape's higher-order fit error) is not in it."""
+        n_state = self.mean.size
+        lengths, rows = [np.zeros(0)], [np.zeros((0, n_state))]
+        for i, poly in enumerate(self.polynomials()):
+            n = max(2, math.ceil((poly.hi - poly.lo) / spacing) + 1)
+            xi = np.linspace(poly.lo, poly.hi, n)
+            # a unit c0 variance: only the points' Jacobian d_state is used
+            pts = polynomial_points(poly, 3 + i, 1.0, n, poly.lo, poly.hi, n_state,
+                                    self._turn_of(i))  # fmt: skip
+            rows.append(np.einsum("ni,nij->nj", poly.normals(xi), pts.d_state))
+            ds = np.sqrt(1.0 + poly.slope(xi) ** 2) * ((poly.hi - poly.lo) / (n - 1))
+            ds[[0, -1]] *= 0.5  # the trapezoid rule: each point weighs its share of the arc
+            lengths.append(ds)
+        return np.concatenate(lengths), np.vstack(rows)
 
     # -- one step -----------------------------------------------------------------------------
     def step(self, odometry: np.ndarray, ranges: np.ndarray) -> SlamStepInfo:
