@@ -35,8 +35,10 @@ from polyslam_env.apps.rollout import EpisodeResult, evaluate_episode, run_episo
 from polyslam_env.core.config import Config, check_range, parse_overrides
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.environment.config import GENERATOR_PREFIX, EnvConfig
-from polyslam_env.environment.parallel import parallel_env
+from polyslam_env.environment.parallel import PolySlamParallelEnv, parallel_env
+from polyslam_env.metrics.mapping import count_interval, expected_precision
 from polyslam_env.metrics.pose import nees_band
+from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.generators import GENERATORS
 
 __all__ = [
@@ -50,7 +52,9 @@ __all__ = [
     "misses",
     "nees_excess",
     "picture",
+    "precision_expected_text",
     "run_fidelity",
+    "self_assessment",
     "summarise",
     "worst_robots",
 ]
@@ -160,7 +164,26 @@ def episode_config(config: FidelityConfig, name: str, exchange: bool) -> dict[st
 
 def _run_job(job: tuple[dict[str, Any], str, int]) -> EpisodeResult:
     config, policy, seed = job
-    return evaluate_episode(config, policy, {}, seed)
+    return evaluate_episode(config, policy, {}, seed, after=self_assessment)
+
+
+def self_assessment(env: PolySlamParallelEnv, result: EpisodeResult) -> None:
+    """Add to each robot's metrics in ``result`` the map precision its own filter expects at
+    the episode's end, ``map_precision_expected``, and the probability it gives to a
+    precision below the target, ``map_precision_risk``
+    (:func:`~polyslam_env.metrics.mapping.expected_precision`: no ground truth goes in).
+    Other back-ends than the polynomial EKF get neither."""
+    state = env.episode
+    assert state is not None  # an episode ran
+    for agent, slam in zip(env.possible_agents, state.slams, strict=True):
+        if agent not in result.robots or not isinstance(slam, PolySlam):
+            continue
+        lengths, jacobian = slam.map_error_jacobian()
+        mean, risk = expected_precision(
+            lengths, jacobian, slam.cov, floor=TARGETS["map_precision_min"]
+        )
+        result.robots[agent]["map_precision_expected"] = mean
+        result.robots[agent]["map_precision_risk"] = risk
 
 
 def run_fidelity(
@@ -383,6 +406,9 @@ def markdown(summary: Mapping[str, Any]) -> str:
             if episodes:
                 lines.append(f"- {setting.replace('_', ' ')}: {nees_means_text(episodes)}")
                 lines.append(f"- {setting.replace('_', ' ')}: {nees_excess(episodes)}")
+                expected = precision_expected_text(episodes)
+                if expected:
+                    lines.append(f"- {setting.replace('_', ' ')}: {expected}")
         lines.append("")
     return "\n".join(lines)
 
@@ -402,6 +428,27 @@ def nees_excess(episodes: Sequence[Mapping[str, Any]]) -> str:
         f"`nees` above {target:g} for {len(above)} of {len(robots)} robots; from the start"
         f" draws alone a consistent filter gives {expected:.1f} (95 %: {lo:.0f}–{hi:.0f})"
         + (f"; their start draws e₀ᵀP0⁻¹e₀: {draws}" if above else "")
+    )
+
+
+def precision_expected_text(episodes: Sequence[Mapping[str, Any]]) -> str:
+    """The robots of ``episodes`` below the ``map_precision`` target against what their own
+    filters expected (:func:`self_assessment`): the count, the expected count Σ P(below)
+    with its exact 95 % interval (:func:`~polyslam_env.metrics.mapping.count_interval`, the
+    robots' episodes being independent), and the mean precision observed and expected; ""
+    when the episodes carry no self-assessment."""
+    robots = [m for e in episodes for m in e["robots"].values()]
+    if not robots or any("map_precision_risk" not in m for m in robots):
+        return ""
+    target = TARGETS["map_precision_min"]
+    below = sum(m["map_precision"] < target for m in robots)
+    expected, lo, hi = count_interval([m["map_precision_risk"] for m in robots])
+    observed_mean = float(np.mean([m["map_precision"] for m in robots]))
+    expected_mean = float(np.mean([m["map_precision_expected"] for m in robots]))
+    return (
+        f"`map_precision` below {target:g} for {below} of {len(robots)} robots; their own"
+        f" filters expected {expected:.1f} (95 %: {lo}–{hi}); mean `map_precision`"
+        f" {observed_mean:.3f}, expected by the filters {expected_mean:.3f}"
     )
 
 

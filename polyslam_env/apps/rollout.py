@@ -82,12 +82,21 @@ def run_episode(
 
 
 def evaluate_episode(
-    config: Mapping[str, Any], policy: str, policy_kwargs: Mapping[str, Any], seed: int
+    config: Mapping[str, Any],
+    policy: str,
+    policy_kwargs: Mapping[str, Any],
+    seed: int,
+    after: Callable[[PolySlamParallelEnv, EpisodeResult], None] | None = None,
 ) -> EpisodeResult:
-    """Build the env and team in this process and run one episode (a worker's job)."""
+    """Build the env and team in this process and run one episode (a worker's job);
+    ``after(env, result)`` runs at the end, before the env is closed (it may add to
+    ``result``: what only the episode's final state holds)."""
     env = parallel_env(EnvConfig.from_dict(dict(config)))
     try:
-        return run_episode(env, make_team(policy, env, **policy_kwargs), seed)
+        result = run_episode(env, make_team(policy, env, **policy_kwargs), seed)
+        if after is not None:
+            after(env, result)
+        return result
     finally:
         env.close()
 

@@ -20,6 +20,7 @@ from polyslam_env.apps.fidelity import (
     nees_excess,
     nees_means_text,
     picture,
+    precision_expected_text,
     run_fidelity,
     summarise,
     worst_robots,
@@ -218,6 +219,38 @@ def test_nees_excess__counts_robots_above_the_target_against_the_start_draws_bin
     assert "gives 0.4 (95 %: 0–2)" in text
     assert text.endswith("their start draws e₀ᵀP0⁻¹e₀: 8.8, 6.5")  # worst NEES first
     assert "for 0 of 4 robots" in nees_excess([_result(0, 0.9, a={}, b={}).to_dict()] * 2)
+
+
+def test_fidelity__every_robot_carries_its_filters_expected_precision(summary: dict) -> None:
+    """The self-assessment (``self_assessment``, no ground truth) is in each robot's metrics
+    and in the markdown, one line per setting."""
+    for setting in SETTINGS:
+        for episode in summary["episodes"]["loop"][setting]:
+            for m in episode["robots"].values():
+                assert 0.0 <= m["map_precision_expected"] <= 1.0
+                assert 0.0 <= m["map_precision_risk"] <= 1.0
+    text = markdown(summary)
+    assert text.count("robots; their own filters expected") == len(SETTINGS)
+
+
+def test_precision_expected_text__counts_against_the_filters_own_risks() -> None:
+    """Robots below 0.9 (equality passes) against Σ P(below) = 0.1 + 0.5 + 0.5 + 0.9 = 2.0,
+    whose exact 95 % interval is 1–3 (P(0) = P(4) = 0.9 · 0.5² · 0.1 = 0.0225, below 2.5 %);
+    without self-assessments, no line."""
+    risks = {"robot_0": 0.1, "robot_1": 0.5}
+    results = [
+        _result(0, 0.9, robot_0={"map_precision": 0.95}, robot_1={"map_precision": 0.9}),
+        _result(1, 0.9, robot_0={"map_precision": 0.85}, robot_1={"map_precision": 0.7}),
+    ]
+    for r, extra in zip(results, ({}, {"robot_0": 0.5, "robot_1": 0.9}), strict=True):
+        for agent, m in r.robots.items():
+            m["map_precision_risk"] = extra.get(agent, risks[agent])
+            m["map_precision_expected"] = 0.9
+    text = precision_expected_text([r.to_dict() for r in results])
+    assert text.startswith("`map_precision` below 0.9 for 2 of 4 robots")
+    assert "their own filters expected 2.0 (95 %: 1–3)" in text
+    assert text.endswith("mean `map_precision` 0.850, expected by the filters 0.900")
+    assert precision_expected_text([_result(0, 0.9, a={}).to_dict()]) == ""
 
 
 def test_nees_checks__monte_carlo_mean_per_robot_and_count_above_the_target() -> None:
