@@ -116,6 +116,10 @@ class SlamConfig(Config):
     # beams that, cast from the sigma points at this many σ of the pose and the landmark's c0,
     # miss it (kernels.steady_beams: short curved landmarks, round pillars); paper: 0
     end_sigma: float = 2.0
+    # landmarks whose extent (along ξ, m) is shorter than this do not update the pose: a shape
+    # fitted over a short stretch (a round pillar's arc as a line or a cubic) errs there more
+    # than its fit model says (README "Single robots over whole episodes"); 0: every landmark
+    min_update_extent: float = 0.0
     # beams in the update are at least this far apart in angle (degrees; 0: every beam; the
     # others feed only the map: robot.update_beam_mask; paper: 0)
     update_spacing_deg: float = 22.5
@@ -154,6 +158,7 @@ class SlamConfig(Config):
                 )
         check_non_negative("slam.merge_min_overlap", self.merge_min_overlap)
         check_non_negative("slam.end_sigma", self.end_sigma)
+        check_non_negative("slam.min_update_extent", self.min_update_extent)
         check_range("slam.update_spacing_deg", self.update_spacing_deg, 0.0, 360.0)
         check_non_negative("slam.odom_sigma_xy", self.odom_sigma_xy)
         check_non_negative("slam.odom_sigma_theta_deg", self.odom_sigma_theta_deg)

@@ -279,7 +279,9 @@ class PolySlam:
             lap = self._lap("map", lap)
 
         good_beams = sorted(
-            b for b, lid in assoc.good_ids.items() if lid in self.table and self._update_beams[b]
+            b
+            for b, lid in assoc.good_ids.items()
+            if lid in self.table and self._update_beams[b] and self._long_enough(lid)
         )
         used = self._update(good_beams, np.asarray(ranges, dtype=float))
         self.divergence_f = f
@@ -783,6 +785,14 @@ class PolySlam:
         if cfg.rotation_states and cfg.merge_turn == "fit":
             gradient = turn_gradient(pts, fit, centroid_xi(pts, fit.poly.variate))
         return self._replace([landmark_id, other_id], fit, side, evidence, rotation, pts, gradient)
+
+    def _long_enough(self, landmark_id: int) -> bool:
+        """Whether the landmark is long enough to update the pose (``min_update_extent``)."""
+        floor = self.config.min_update_extent
+        if floor <= 0.0:
+            return True
+        i = self.table.index_of(landmark_id)
+        return bool(self.table.hi[i] - self.table.lo[i] >= floor)
 
     def _turn_of(self, index: int) -> tuple[int, float] | None:
         """(state index of landmark ``index``'s turn α, its pivot ξ), None without rotation

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from polyslam_env.core.errors import ConfigError
 from polyslam_env.slam import kernels
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit
@@ -291,6 +292,23 @@ def test_beam_whose_hit_may_pass_the_end__is_left_out_with_end_sigma() -> None:
             info = slam.step(np.zeros(3), np.array([math.hypot(target - 1.0, 0.6)]))
             used[end_sigma, target] = info.beams_used
     assert used == {(2.0, 0.58): 0, (2.0, 0.4): 1, (0.0, 0.58): 1, (0.0, 0.4): 1}
+
+
+def test_short_landmark__does_not_update_with_min_update_extent() -> None:
+    """The landmark y = 0.8, x ∈ [0.2, 0.6] is 0.4 m long; a beam on its middle updates the
+    pose by default and with ``min_update_extent`` 0.3 m, and not with 0.5 m (its extent is
+    shorter); a negative floor is a one-line error naming the field."""
+    used = {}
+    for floor in (0.0, 0.3, 0.5):
+        slam = _looking_at_a_wall_end(0.4, min_update_extent=floor)
+        before = slam.pose
+        info = slam.step(np.zeros(3), np.array([math.hypot(0.4 - 1.0, 0.6)]))
+        used[floor] = info.beams_used
+        if not info.beams_used:
+            assert np.array_equal(slam.pose, before)
+    assert used == {0.0: 1, 0.3: 1, 0.5: 0}
+    with pytest.raises(ConfigError, match="slam.min_update_extent"):
+        SlamConfig(min_update_extent=-0.1)
 
 
 def _looking_at_a_wall_end(target: float, **config: object) -> PolySlam:
