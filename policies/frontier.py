@@ -10,7 +10,8 @@ the whole map from any start, as the env's belief grid does. It then
    five beams' swept stripes (else every beam line would be a frontier);
 2. plans the cheapest paths (Dijkstra, 8-connected) on the grid with obstacles inflated by the
    robot radius plus a margin and a soft cost near obstacles, and picks the frontier of best
-   utility: the unknown area within ``gain_radius`` of it discounted by
+   utility: the unknown area within ``gain_radius`` of it (``gain="visible"``: only what rays
+   from it reach before an obstacle, not the space behind a wall) discounted by
    ``exp(−path length / decay)`` (rather than the nearest: a room's worth of unknown space
    beats a sliver next door), preferring goals at least ``min_goal`` away;
 3. follows the path by pure pursuit within the (v, ω) limits, slowing down or turning away
@@ -52,7 +53,15 @@ from policies.base import Policy, PolicyContext, PolicyError
 from policies.scripted import avoid_robots, beam_index, wall_follow_command
 from polyslam_env.core import raster
 
-__all__ = ["FrontierPolicy", "OwnMap", "Search", "frontier_closing", "grid_path"]
+__all__ = [
+    "GAINS",
+    "FrontierPolicy",
+    "OwnMap",
+    "Search",
+    "frontier_closing",
+    "grid_path",
+    "visible_gain",
+]
 
 #: 8-neighbour offsets (row, col) used for the graph edges (the other four are their reverses).
 _EDGE_OFFSETS = ((0, 1), (1, 0), (1, 1), (1, -1))
@@ -219,6 +228,7 @@ class FrontierPolicy(Policy):
         anchor_below: float = 0.012,
         close_rest: int = 40,
         close_reach: float = math.inf,
+        gain: str = "square",
     ) -> None:
         super().__init__(context)
         if map_size is None:  # the map seen from any start, as the env's belief grid
@@ -254,6 +264,9 @@ class FrontierPolicy(Policy):
                 "frontier: need anchor_below <= close_below <= close_above, got"
                 f" {anchor_below}, {close_below}, {close_above}"
             )
+        if gain not in GAINS:
+            raise PolicyError(f"frontier: gain must be one of {', '.join(GAINS)}, got {gain!r}")
+        self.gain = gain
         if close_rest < 0:
             raise PolicyError(f"frontier: close_rest must be >= 0, got {close_rest!r}")
         self.close_loops = bool(close_loops) and context.p0_sigma is not None
@@ -516,17 +529,23 @@ class FrontierPolicy(Policy):
         self, frontier: np.ndarray, dist: np.ndarray, window: tuple[slice, slice]
     ) -> tuple[np.ndarray, np.ndarray]:
         """The gain and the utility (H, W) of the cells of ``window``: the gain is the unknown
-        fraction of the square within ``gain_radius`` of a cell (what its beams may reveal),
+        fraction of the square within ``gain_radius`` of a cell (what its beams may reveal;
+        with ``gain="visible"`` on frontier cells only, along rays that stop at obstacles:
+        :func:`visible_gain`),
         the utility, on frontier cells only (−inf elsewhere), that gain discounted by
         ``exp(−path length / decay)``, ``dist`` (H, W) m being the path lengths. Cells at
         least ``min_goal`` away and not claimed by another robot are preferred whenever any
         exist: the others' utility is −inf then."""
         m = self.map
         known = m.free[window] | m.obstacles[window]
-        size = 2 * self.gain_cells + 1
-        gain = ndimage.uniform_filter((~known).astype(np.float32), size, mode="constant")
-        utility = np.where(frontier, (gain + 1e-3) * np.exp(-dist / self.decay), -np.inf)
         rows, cols = np.nonzero(frontier)
+        if self.gain == "visible":
+            gain = np.zeros(known.shape, dtype=np.float32)
+            gain[rows, cols] = visible_gain(known, m.obstacles[window], rows, cols, self.gain_cells)
+        else:
+            size = 2 * self.gain_cells + 1
+            gain = ndimage.uniform_filter((~known).astype(np.float32), size, mode="constant")
+        utility = np.where(frontier, (gain + 1e-3) * np.exp(-dist / self.decay), -np.inf)
         preferred = dist[rows, cols] >= self.min_goal
         if self._claims:
             pts = np.column_stack([cols + window[1].start, rows + window[0].start])
@@ -630,6 +649,36 @@ class FrontierPolicy(Policy):
                 if side < ctx.robot_radius + 0.2:
                     cap = min(cap, max(ahead, 0.0) / ctx.dt)
         return cap
+
+
+#: How a frontier cell's gain counts the unknown space around it: ``square``, the unknown
+#: fraction of the square within ``gain_radius`` (walls and all: space behind a wall counts);
+#: ``visible``, the unknown fraction along :data:`GAIN_RAYS` rays of ``gain_radius`` that stop
+#: at the first obstacle (:func:`visible_gain`).
+GAINS = ("square", "visible")
+GAIN_RAYS = 16
+
+
+def visible_gain(
+    known: np.ndarray, obstacles: np.ndarray, rows: np.ndarray, cols: np.ndarray, reach: int
+) -> np.ndarray:
+    """Per cell (rows[k], cols[k]) of the grids ``known`` and ``obstacles`` (H, W) bool, the
+    fraction of the cells along :data:`GAIN_RAYS` rays of ``reach`` cells from it (evenly
+    spaced directions, the k-th cell of a ray the one nearest to k cells out) that are unknown
+    and that the ray reaches before an obstacle or the grid's edge: what its beams might reveal,
+    not the space behind a wall. (K,) float32."""
+    h, w = known.shape
+    seen = np.zeros(len(rows))
+    for angle in np.linspace(0.0, 2.0 * np.pi, GAIN_RAYS, endpoint=False):
+        alive = np.ones(len(rows), dtype=bool)
+        for k in range(1, reach + 1):
+            r = np.round(rows + k * np.sin(angle)).astype(np.intp)
+            c = np.round(cols + k * np.cos(angle)).astype(np.intp)
+            alive &= (r >= 0) & (r < h) & (c >= 0) & (c < w)
+            r, c = np.where(alive, r, 0), np.where(alive, c, 0)
+            alive &= ~obstacles[r, c]
+            seen += alive & ~known[r, c]
+    return (seen / (GAIN_RAYS * reach)).astype(np.float32)
 
 
 def frontier_closing(context: PolicyContext, **kwargs: Any) -> FrontierPolicy:

@@ -11,7 +11,7 @@ from scipy import ndimage
 
 import polyslam_env
 from policies import make_policy, make_team
-from policies.frontier import FrontierPolicy, grid_path
+from policies.frontier import GAIN_RAYS, FrontierPolicy, grid_path, visible_gain
 
 LARGE = {"width": 24, "height": 14, "min_room_size": 1.5, "max_room_size": 5}
 
@@ -251,3 +251,60 @@ def test_frontier_closing__bad_thresholds_are_named() -> None:
     with pytest.raises(ValueError, match="close_reach must be > 0"):
         make_policy("frontier_closing", env, "robot_0", close_reach=0.0)
     assert not make_policy("frontier", env, "robot_0").close_loops  # off by default
+
+
+def _visible_gain_oracle(
+    known: np.ndarray, obstacles: np.ndarray, row: int, col: int, reach: int
+) -> float:
+    """One cell's visible gain, walked ray by ray and cell by cell in plain Python."""
+    h, w = known.shape
+    seen = 0
+    for j in range(GAIN_RAYS):
+        angle = 2.0 * math.pi * j / GAIN_RAYS
+        for k in range(1, reach + 1):
+            r, c = round(row + k * math.sin(angle)), round(col + k * math.cos(angle))
+            if not (0 <= r < h and 0 <= c < w) or obstacles[r, c]:
+                break
+            seen += int(not known[r, c])
+    return seen / (GAIN_RAYS * reach)
+
+
+def test_visible_gain__counts_what_rays_reach_not_the_space_behind_a_wall() -> None:
+    """A known room closed by a wall along row 10, unknown beyond it, and an open unknown
+    stretch to the east: a cell by the wall sees none of the space behind it (the square gain
+    counts it), a cell facing the open stretch sees some; every cell matches the oracle."""
+    known = np.zeros((30, 30), dtype=bool)
+    obstacles = np.zeros((30, 30), dtype=bool)
+    known[:10, :20] = True  # the room; east of column 20 it is open and unknown
+    obstacles[10, :20] = True  # the wall, beyond which it is unknown
+    known[10, :20] = True
+    reach = 8
+    rows, cols = np.array([9, 5, 5, 0]), np.array([5, 19, 5, 29])
+    gain = visible_gain(known, obstacles, rows, cols, reach)
+    assert gain.dtype == np.float32
+    expected = [
+        _visible_gain_oracle(known, obstacles, r, c, reach) for r, c in zip(rows, cols, strict=True)
+    ]
+    np.testing.assert_allclose(gain, expected, rtol=1e-6)
+    assert gain[0] == 0.0  # by the wall: everything unknown within reach is behind it
+    square = ndimage.uniform_filter((~known).astype(float), 2 * reach + 1, mode="constant")
+    assert square[9, 5] > 0.25  # the square gain counts the space behind the wall
+    assert gain[1] > 0.25  # facing the open stretch
+    assert gain[2] == 0.0  # in the middle of the known room
+
+
+def test_frontier__gain_mode_is_checked_and_visible_plans() -> None:
+    env = polyslam_env.parallel_env(map="generator:warehouse", num_robots=1)
+    with pytest.raises(ValueError, match="gain must be one of square, visible"):
+        make_policy("frontier", env, "robot_0", gain="seen")
+    team = make_team("frontier", env, gain="visible")
+    obs, _ = env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        obs, *_ = env.step(team.act(obs, rng))
+    moved = float(
+        np.hypot(
+            *(env.unwrapped.episode.world.poses[0][:2] - env.unwrapped.episode.start_poses[0][:2])
+        )
+    )
+    assert moved > 0.5  # it explores (30 steps of up to 0.3 m)
