@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from policies.base import make_team, policy_factory, policy_names
+from policies.base import PolicyError, make_team, policy_factory, policy_names
 from polyslam_env.apps.jobs import run_jobs
 from polyslam_env.apps.rollout import EpisodeResult, evaluate_episode, run_episode
 from polyslam_env.core.config import Config, check_range, parse_overrides
@@ -113,6 +113,8 @@ class FidelityConfig(Config):
     #: env config fields set on every episode, ``KEY=VALUE`` with dotted keys and YAML values
     #: (``slam.merge_turn=fit``): a variant of the filter or the world under the same protocol
     env_set: tuple[str, ...] = ()
+    #: the policy's keyword arguments, ``KEY=VALUE`` with YAML values (``gain=visible``)
+    policy_set: tuple[str, ...] = ()
 
     def validate(self) -> None:
         if not self.maps:
@@ -140,6 +142,21 @@ class FidelityConfig(Config):
         """``env_set`` as ``Config.replace`` keywords (``slam__merge_turn="fit"``)."""
         return parse_overrides(self.env_set, "env_set (--set)")
 
+    def policy_kwargs(self) -> dict[str, Any]:
+        """``policy_set`` as the policy's keyword arguments (``{"gain": "visible"}``)."""
+        return parse_overrides(self.policy_set, "policy_set (--policy-set)")
+
+    def check_policy(self) -> None:
+        """Build the team once on the first map's env: a keyword the policy does not take, or
+        a bad value, is a one-line ConfigError now rather than in every worker."""
+        env = parallel_env(EnvConfig.from_dict(episode_config(self, self.maps[0], True)))
+        try:
+            make_team(self.policy, env, **self.policy_kwargs())
+        except (TypeError, PolicyError) as err:
+            raise ConfigError(f"policy_set (--policy-set): {err}") from None
+        finally:
+            env.close()
+
 
 def has_initial_error() -> bool:
     """Whether this version's EnvConfig has ``initial_error`` (added by issue 14)."""
@@ -162,9 +179,9 @@ def episode_config(config: FidelityConfig, name: str, exchange: bool) -> dict[st
     return EnvConfig.from_dict(fields).replace(**config.env_overrides()).to_dict()
 
 
-def _run_job(job: tuple[dict[str, Any], str, int]) -> EpisodeResult:
-    config, policy, seed = job
-    return evaluate_episode(config, policy, {}, seed, after=self_assessment)
+def _run_job(job: tuple[dict[str, Any], str, dict[str, Any], int]) -> EpisodeResult:
+    config, policy, kwargs, seed = job
+    return evaluate_episode(config, policy, kwargs, seed, after=self_assessment)
 
 
 def self_assessment(env: PolySlamParallelEnv, result: EpisodeResult) -> None:
@@ -200,7 +217,9 @@ def run_fidelity(
         for name in config.maps
         for setting in SETTINGS
     }
-    jobs = [(configs[name, setting], config.policy, seed) for name, setting, seed in keys]
+    config.check_policy()
+    kwargs = config.policy_kwargs()
+    jobs = [(configs[name, setting], config.policy, kwargs, seed) for name, setting, seed in keys]
     start = time.perf_counter()
     results = run_jobs(_run_job, jobs, workers, progress)
     grouped: dict[str, dict[str, list[EpisodeResult]]] = {
@@ -246,7 +265,9 @@ def picture(config: FidelityConfig, worst: Mapping[str, Any], path: str | Path) 
     fields = episode_config(config, worst["map"], worst["setting"] == "exchange_on")
     env = parallel_env(EnvConfig.from_dict(fields))
     try:
-        result = run_episode(env, make_team(config.policy, env), worst["seed"])
+        result = run_episode(
+            env, make_team(config.policy, env, **config.policy_kwargs()), worst["seed"]
+        )
         state = env.episode
         assert state is not None
         i = env.possible_agents.index(worst["robot"])

@@ -41,6 +41,13 @@ def register(sub: Any) -> None:
         help="env config fields for every episode, dotted keys and YAML values (e.g."
         " slam.merge_turn=fit): a variant under the same protocol",
     )
+    parser.add_argument(
+        "--policy-set",
+        nargs="+",
+        default=[],
+        metavar="KEY=VALUE",
+        help="keyword arguments of the policy, YAML values (e.g. gain=visible)",
+    )
     parser.add_argument("--workers", type=int, default=1, help="processes (default: 1)")
     parser.add_argument("--out", default="out/fidelity", help="output folder (out/fidelity)")
     parser.add_argument(
@@ -77,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
         steps=args.steps,
         policy=args.policy,
         env_set=tuple(args.set),
+        policy_set=tuple(args.policy_set),
     )
     out = check_output_folder(args.out, "--out")
     total = len(maps) * len(SETTINGS) * args.seeds

@@ -148,6 +148,29 @@ def test_fidelity_cli__bad_set_is_a_one_line_error(
     assert "Traceback" not in err and not (tmp_path / "summary.json").exists()
 
 
+def test_fidelity__policy_set_reaches_the_policy_and_bad_keywords_are_named(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--policy-set gain=visible`` gives every robot that policy argument (recorded in the
+    settings); a keyword the policy does not take, or a bad value, is a one-line error before
+    any episode runs, and nothing is written."""
+    config = FidelityConfig(
+        maps=("loop",), seeds=1, robots=1, steps=3, policy_set=("gain=visible",)
+    )
+    assert config.policy_kwargs() == {"gain": "visible"}
+    summary = run_fidelity(config)
+    assert summary["settings"]["policy_set"] == ["gain=visible"]
+    for bad, says in (("gain=seen", "gain must be one of"), ("nothing=1", "unexpected keyword")):
+        with pytest.raises(ConfigError, match=f"policy_set \\(--policy-set\\): .*{says}"):
+            FidelityConfig(maps=("loop",), seeds=1, steps=3, policy_set=(bad,)).check_policy()
+    out = tmp_path / "out"
+    code = main(["fidelity", "--maps", "loop", "--seeds", "1", "--steps", "3", "--policy-set",
+                 "gain=seen", "--out", str(out)])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert code != 0 and len(err.splitlines()) == 1 and "gain must be one of" in err
+    assert not (out / "summary.json").exists()
+
+
 def test_fidelity_config__bad_map_named() -> None:
     with pytest.raises(ConfigError, match="maps: 'maze'"):
         FidelityConfig(maps=("maze",))
