@@ -123,10 +123,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"--seeds: must be >= 1, got {args.seeds}")
         return 2
     try:
-        config = FidelityConfig(maps=(args.map,), robots=args.robots, steps=args.steps)
-        fields = episode_config(config, args.map, args.exchange)
-        fields["slam"] = {**fields.get("slam", {}), "merge_turn": args.merge_turn}
-        env = parallel_env(EnvConfig.from_dict(fields))
+        config = FidelityConfig(
+            maps=(args.map,),
+            robots=args.robots,
+            steps=args.steps,
+            env_set=(f"slam.merge_turn={args.merge_turn}",),
+        )
+        env = parallel_env(EnvConfig.from_dict(episode_config(config, args.map, args.exchange)))
     except ConfigError as err:
         print(err)
         return 2

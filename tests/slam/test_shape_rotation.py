@@ -21,6 +21,7 @@ from polyslam_env.slam.fitting import Fit
 from polyslam_env.slam.landmarks import LandmarkTable
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam, _fit_inverse_table
+from tests.slam.finite_differences import FD_RTOL, fd_jacobian
 from tests.slam.test_ekf import assert_symmetric_psd, random_spd
 
 #: One wall per case: a line and a cubic, each in both variates, seen from a pose that hits
@@ -212,12 +213,12 @@ def test_merged_landmark__its_rotation_is_the_merged_fits_direction() -> None:
         slope = np.polyfit(np.concatenate(xs), np.concatenate(ys), 1, w=np.concatenate(ws))[0]
         return math.atan(slope)
 
-    x0, h = np.array([0.0, 0.0, 0.0, 0.0]), 1e-6
-    g = np.array([(direction(x0 + h * e) - direction(x0 - h * e)) / (2 * h) for e in np.eye(4)])
+    # central differences: FD_STEP and FD_RTOL's stated truncation and round-off margins
+    g = fd_jacobian(direction, np.zeros(4))
     assert slam._merge_once(slam.landmark_ids[1]) is not None and slam.n_landmarks == 1
     assert slam.mean.shape == (5,)
-    np.testing.assert_allclose(slam.cov[4, :3], g @ before[3:7, :3], rtol=1e-6, atol=1e-15)
-    assert slam.cov[4, 4] == pytest.approx(g @ before[3:7, 3:7] @ g, rel=1e-6)
+    np.testing.assert_allclose(slam.cov[4, :3], g @ before[3:7, :3], rtol=FD_RTOL, atol=1e-15)
+    assert slam.cov[4, 4] == pytest.approx(g @ before[3:7, 3:7] @ g, rel=FD_RTOL)
     # 1 cm between the pieces' offsets turns a wall ~2.6 m between their centres by ~1/260
     assert g[1] > 0.3 and g[0] < -0.3
     assert_symmetric_psd(slam.cov)
