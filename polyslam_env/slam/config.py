@@ -104,11 +104,12 @@ class SlamConfig(Config):
     # "considered": its own state, the heading error it was fitted with plus the fit's own
     #   slope error, carried with its correlations but never estimated (Schmidt–Kalman).
     shape_rotation: str = "considered"
-    # A merged landmark's turn α (with rotation states): "weights", a length-weighted mean of
-    # the pieces' turns (their offsets' share left out: α comes out underconfident); "fit",
-    # the merged fit's direction as a function of both pieces' c0s and turns plus the fit's
-    # residual scatter (fitting.turn_gradient; README "Merged walls' turns from their fits")
-    merge_turn: str = "weights"
+    # A merged landmark's turn α (with rotation states): "fit", the merged fit's direction as
+    # a function of both pieces' c0s and turns plus the fit's residual scatter
+    # (fitting.turn_gradient; README "Merged walls' turns from their fits"); "weights", a
+    # length-weighted mean of the pieces' turns (their offsets' share left out: α comes out
+    # underconfident, and the maps' own expected precision several times too pessimistic)
+    merge_turn: str = "fit"
     join_pieces: bool = True  # join end-to-end pieces of one wall (merging.py; paper: False)
     stretch_ends: bool = True  # a hit just past an end stretches it (association; paper: False)
     # beams whose hit lies within this many σ (of its place along the curve) of a landmark's
@@ -118,8 +119,9 @@ class SlamConfig(Config):
     end_sigma: float = 2.0
     # landmarks whose extent (along ξ, m) is shorter than this do not update the pose: a shape
     # fitted over a short stretch (a round pillar's arc as a line or a cubic) errs there more
-    # than its fit model says (README "Single robots over whole episodes"); 0: every landmark
-    min_update_extent: float = 0.0
+    # than its fit model says (README "Single robots over whole episodes"; the round columns'
+    # arcs are at most 0.24–0.4 m long); 0: every landmark (paper)
+    min_update_extent: float = 0.3
     # beams in the update are at least this far apart in angle (degrees; 0: every beam; the
     # others feed only the map: robot.update_beam_mask; paper: 0)
     update_spacing_deg: float = 22.5
@@ -189,7 +191,8 @@ class SlamConfig(Config):
 #: ``paper``: the paper's algorithm and §4 values. Our defaults differ in these places:
 #: end-to-end pieces of one wall are joined (``join_pieces``); a hit just past a wall's end on
 #: its continued curve stretches it (``stretch_ends``); a beam whose hit may lie past a wall's
-#: end is left out of the update (``end_sigma``); only beams 22.5° apart enter the update
+#: end is left out of the update (``end_sigma``), and so is a landmark shorter than 0.3 m
+#: (``min_update_extent``); only beams 22.5° apart enter the update
 #: (``update_spacing_deg``; the paper's five are 45° apart); a point near two clusters joins
 #: them (``link_clusters``), so the sparse hits of beams sweeping a wall come together; and
 #: ε_Z is 15, not 10, because linked clusters grow fast and a shape fitted to more points
@@ -200,6 +203,7 @@ PRESETS: dict[str, SlamConfig] = {
         join_pieces=False,
         stretch_ends=False,
         end_sigma=0.0,
+        min_update_extent=0.0,
         update_spacing_deg=0.0,
         link_clusters=False,
         shape_rotation="heading",

@@ -122,11 +122,11 @@ def test_episode_config__exchange_off_has_no_channel_and_no_coverage_end() -> No
 def test_episode_config__env_set_reaches_every_episode_and_bad_pairs_are_named() -> None:
     """``--set`` (``env_set``) sets dotted env fields with YAML values on both settings; a
     malformed pair, an unknown field or a bad value is a one-line ConfigError naming it."""
-    config = FidelityConfig(maps=("loop",), env_set=("slam.merge_turn=fit", "slam.eps_z=12"))
+    config = FidelityConfig(maps=("loop",), env_set=("slam.merge_turn=weights", "slam.eps_z=12"))
     for exchange in (True, False):
         env = EnvConfig.from_dict(episode_config(config, "loop", exchange))
-        assert env.slam.merge_turn == "fit" and env.slam.eps_z == 12
-        assert env.replace(slam__merge_turn="weights", slam__eps_z=15) == EnvConfig.from_dict(
+        assert env.slam.merge_turn == "weights" and env.slam.eps_z == 12
+        assert env.replace(slam__merge_turn="fit", slam__eps_z=15) == EnvConfig.from_dict(
             episode_config(TINY, "loop", exchange)
         ).replace(num_robots=env.num_robots, max_steps=env.max_steps)
     for pair, message in (

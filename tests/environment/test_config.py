@@ -86,6 +86,7 @@ def test_env_config__slam_preset_replaces_slam_and_conflicts_with_custom_slam() 
         join_pieces=False,
         stretch_ends=False,
         end_sigma=0.0,
+        min_update_extent=0.0,
         update_spacing_deg=0.0,
         link_clusters=False,
         shape_rotation="heading",

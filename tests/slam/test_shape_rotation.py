@@ -175,11 +175,10 @@ def _two_pieces(config: SlamConfig) -> tuple[PolySlam, np.ndarray]:
 def test_merged_landmark__with_weights_its_rotation_is_the_length_weighted_mean_of_the_parts() -> (
     None
 ):
-    """``merge_turn="weights"`` (the default): the merged turn is w·α_a + (1 − w)·α_b with
+    """``merge_turn="weights"`` (an option): the merged turn is w·α_a + (1 − w)·α_b with
     w = L_a³/(L_a³ + L_b³): its covariance row is that combination of the parts' rows (taken
     before the merge), and the layout stays [pose, c0 × n, α × n]."""
-    config = SlamConfig()
-    assert config.merge_turn == "weights"  # the default
+    config = SlamConfig(merge_turn="weights")
     slam, before = _two_pieces(config)
     assert slam._merge_once(slam.landmark_ids[1]) is not None and slam.n_landmarks == 1
     w_a = 2.0**3 / (2.0**3 + 1.0**3)  # the 2 m piece weighs 8/9, the 1 m one 1/9
@@ -192,7 +191,7 @@ def test_merged_landmark__with_weights_its_rotation_is_the_length_weighted_mean_
 
 
 def test_merged_landmark__its_rotation_is_the_merged_fits_direction() -> None:
-    """``merge_turn="fit"``: the merged turn is the direction of the line fitted
+    """``merge_turn="fit"`` (the default): the merged turn is the direction of the line fitted
     through both pieces, so it depends on their offsets as well as their turns. The oracle:
     a weighted ``np.polyfit`` through ε_M points on each piece, each piece moved by its c0
     and turned by its α about its pivot, differentiated numerically over (c0_a, c0_b, α_a,
