@@ -111,7 +111,7 @@ class FidelityConfig(Config):
     steps: int = 600
     policy: str = "frontier"
     #: env config fields set on every episode, ``KEY=VALUE`` with dotted keys and YAML values
-    #: (``slam.merge_turn=fit``): a variant of the filter or the world under the same protocol
+    #: (``slam.merge_turn=weights``): a variant of the filter or the world under the same protocol
     env_set: tuple[str, ...] = ()
     #: the policy's keyword arguments, ``KEY=VALUE`` with YAML values (``gain=visible``)
     policy_set: tuple[str, ...] = ()
@@ -139,7 +139,7 @@ class FidelityConfig(Config):
         EnvConfig().replace(**self.env_overrides())  # a bad field or value: its ConfigError
 
     def env_overrides(self) -> dict[str, Any]:
-        """``env_set`` as ``Config.replace`` keywords (``slam__merge_turn="fit"``)."""
+        """``env_set`` as ``Config.replace`` keywords (``slam__merge_turn="weights"``)."""
         return parse_overrides(self.env_set, "env_set (--set)")
 
     def policy_kwargs(self) -> dict[str, Any]:

@@ -39,7 +39,7 @@ def register(sub: Any) -> None:
         default=[],
         metavar="KEY=VALUE",
         help="env config fields for every episode, dotted keys and YAML values (e.g."
-        " slam.merge_turn=fit): a variant under the same protocol",
+        " slam.merge_turn=weights): a variant under the same protocol",
     )
     parser.add_argument(
         "--policy-set",

@@ -549,7 +549,7 @@ class PolySlam:
         in Roumeliotis & Burdick's stochastic cloning). A shape fitted over older landmarks'
         points (a refit, or a merge with ``merge_turn="weights"``) takes their turns with the
         weights in ``rotation``, and the rest, 1 − Σ w, from the current heading with that share
-        of the fit variance. A merge with ``merge_turn="fit"`` (an option) passes ``gradient``
+        of the fit variance. A merge with ``merge_turn="fit"`` (the default) passes ``gradient``
         instead, (∂α/∂X, variance) of the merged fit's own direction
         (:func:`~polyslam_env.slam.fitting.turn_gradient`): the pieces' offsets fix a long
         wall's direction far better than their own short turns. α is
