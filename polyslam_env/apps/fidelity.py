@@ -52,6 +52,8 @@ __all__ = [
     "misses",
     "nees_excess",
     "picture",
+    "precision_checks",
+    "precision_count",
     "precision_expected_text",
     "run_fidelity",
     "self_assessment",
@@ -373,7 +375,11 @@ def summarise(grouped: Mapping[str, Mapping[str, Sequence[EpisodeResult]]]) -> d
         for name, by_setting in grouped.items()
     }
     checks = {
-        name: {**checks_from_table(t), **nees_checks(grouped[name]["exchange_on"])}
+        name: {
+            **checks_from_table(t),
+            **nees_checks(grouped[name]["exchange_on"]),
+            **precision_checks(grouped[name]["exchange_off"]),
+        }
         for name, t in table.items()
     }
     return {
@@ -452,18 +458,45 @@ def nees_excess(episodes: Sequence[Mapping[str, Any]]) -> str:
     )
 
 
+def precision_count(
+    robots: Sequence[Mapping[str, float]],
+) -> tuple[int, float, int, int] | None:
+    """Of ``robots`` (metrics with :func:`self_assessment`'s keys), how many are below the
+    ``map_precision`` target, the count their own filters expected (Σ P(below)) and its exact
+    95 % interval (lo, hi) (:func:`~polyslam_env.metrics.mapping.count_interval`, the robots'
+    filters being independent); None when any robot carries no self-assessment."""
+    if not robots or any("map_precision_risk" not in m for m in robots):
+        return None
+    below = sum(m["map_precision"] < TARGETS["map_precision_min"] for m in robots)
+    expected, lo, hi = count_interval([m["map_precision_risk"] for m in robots])
+    return below, expected, lo, hi
+
+
+def precision_checks(results: Sequence[EpisodeResult]) -> dict[str, bool]:
+    """``own_map_uncertainty_honest`` on one setting's episodes (the exchange off, so every
+    wall is the robot's own): the robots below the ``map_precision`` target are within the
+    95 % interval of the count their own filters expected (:func:`precision_count`), on
+    both sides, since a filter that claims too much uncertainty is as wrong as one that
+    claims too little. Empty when the back-end gives no self-assessment. Received walls are
+    left out: they carry the camera transform's noise, which their refinement on shared
+    walls does not reduce (README "What the robots' filters expect of their maps")."""
+    counted = precision_count([m for r in results for m in r.robots.values()])
+    if counted is None:
+        return {}
+    below, _, lo, hi = counted
+    return {"own_map_uncertainty_honest": lo <= below <= hi}
+
+
 def precision_expected_text(episodes: Sequence[Mapping[str, Any]]) -> str:
     """The robots of ``episodes`` below the ``map_precision`` target against what their own
-    filters expected (:func:`self_assessment`): the count, the expected count Σ P(below)
-    with its exact 95 % interval (:func:`~polyslam_env.metrics.mapping.count_interval`, the
-    robots' episodes being independent), and the mean precision observed and expected; ""
-    when the episodes carry no self-assessment."""
+    filters expected (:func:`precision_count`), and the mean precision observed and
+    expected; "" when the episodes carry no self-assessment."""
     robots = [m for e in episodes for m in e["robots"].values()]
-    if not robots or any("map_precision_risk" not in m for m in robots):
+    counted = precision_count(robots)
+    if counted is None:
         return ""
     target = TARGETS["map_precision_min"]
-    below = sum(m["map_precision"] < target for m in robots)
-    expected, lo, hi = count_interval([m["map_precision_risk"] for m in robots])
+    below, expected, lo, hi = counted
     observed_mean = float(np.mean([m["map_precision"] for m in robots]))
     expected_mean = float(np.mean([m["map_precision_expected"] for m in robots]))
     return (

@@ -20,6 +20,7 @@ from polyslam_env.apps.fidelity import (
     nees_excess,
     nees_means_text,
     picture,
+    precision_checks,
     precision_expected_text,
     run_fidelity,
     summarise,
@@ -72,6 +73,7 @@ def test_fidelity__checks_are_booleans_computed_from_the_table(summary: dict) ->
     assert checks["exchange_nu_mean_within_5mm"] == (
         on["nu_mean"]["mean"] <= off["nu_mean"]["mean"] + 0.005
     )
+    assert "own_map_uncertainty_honest" in checks  # the polynomial EKF assesses itself
     assert summary["passed"] == all(checks.values())
     assert TARGETS["nu_mean_max"] == 0.05
 
@@ -274,6 +276,31 @@ def test_precision_expected_text__counts_against_the_filters_own_risks() -> None
     assert "their own filters expected 2.0 (95 %: 1–3)" in text
     assert text.endswith("mean `map_precision` 0.850, expected by the filters 0.900")
     assert precision_expected_text([_result(0, 0.9, a={}).to_dict()]) == ""
+
+
+def test_precision_checks__the_count_below_the_target_within_the_filters_interval() -> None:
+    """``own_map_uncertainty_honest``: with risks 0.1, 0.5, 0.5, 0.9 the exact 95 % interval
+    of the count below 0.9 is 1–3 (above); 2 below passes, none below fails (the filters
+    claimed too much uncertainty), all 4 below fails (too little); no self-assessment, no
+    check."""
+
+    def run(*precisions: float) -> list:
+        results = [
+            _result(0, 0.9, robot_0={"map_precision": precisions[0]}, robot_1={}),
+            _result(1, 0.9, robot_0={"map_precision": precisions[1]}, robot_1={}),
+        ]
+        results[1].robots["robot_1"]["map_precision"] = precisions[3]
+        results[0].robots["robot_1"]["map_precision"] = precisions[2]
+        for r, risks in zip(results, ((0.1, 0.5), (0.5, 0.9)), strict=True):
+            for m, risk in zip(r.robots.values(), risks, strict=True):
+                m["map_precision_risk"] = risk
+                m["map_precision_expected"] = 0.95
+        return results
+
+    assert precision_checks(run(0.95, 0.85, 0.99, 0.7)) == {"own_map_uncertainty_honest": True}
+    assert precision_checks(run(0.95, 0.9, 0.99, 0.91)) == {"own_map_uncertainty_honest": False}
+    assert precision_checks(run(0.8, 0.8, 0.8, 0.8)) == {"own_map_uncertainty_honest": False}
+    assert precision_checks([_result(0, 0.9, a={})]) == {}
 
 
 def test_nees_checks__monte_carlo_mean_per_robot_and_count_above_the_target() -> None:
