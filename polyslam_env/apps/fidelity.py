@@ -418,7 +418,8 @@ def markdown(summary: Mapping[str, Any]) -> str:
         lines.append("")
         checks = summary["checks"][name]
         lines.append(
-            "checks: " + ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in checks.items())
+            "checks (the exchange on; own_map_uncertainty_honest: off): "
+            + ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in checks.items())
         )
         lines.append("")
         for setting in SETTINGS:
