@@ -167,7 +167,8 @@ def has_initial_error() -> bool:
 
 def episode_config(config: FidelityConfig, name: str, exchange: bool) -> dict[str, Any]:
     """The EnvConfig (as a dict) of one map and setting: full-length episodes, initial error
-    on where supported, the default channel or none."""
+    on where supported, the default channel or none; ``env_set``'s ``channel.*`` fields set
+    the exchange-on setting's channel (the other has none)."""
     fields: dict[str, Any] = {
         "map": GENERATOR_PREFIX + name,
         "num_robots": config.robots,
@@ -178,7 +179,12 @@ def episode_config(config: FidelityConfig, name: str, exchange: bool) -> dict[st
         fields["channel"] = None
     if has_initial_error():
         fields["initial_error"] = True
-    return EnvConfig.from_dict(fields).replace(**config.env_overrides()).to_dict()
+    overrides = {
+        key: value
+        for key, value in config.env_overrides().items()
+        if exchange or not key.startswith("channel__")
+    }
+    return EnvConfig.from_dict(fields).replace(**overrides).to_dict()
 
 
 def _run_job(job: tuple[dict[str, Any], str, dict[str, Any], int]) -> EpisodeResult:

@@ -76,6 +76,11 @@ class ChannelConfig(Config):
     # Refine the camera's frame transform on the walls both maps hold before fusing received
     # walls (comms/alignment.py); False: the paper's camera-only transform.
     align_maps: bool = True
+    # With align_maps, refuse a refinement that started again from ±2σ of the camera's
+    # estimate ends elsewhere (two basins: repeating shelf rows, comms/alignment.py). An
+    # option: it also refuses some right refinements, and on the loop the exchange then
+    # no longer raises completeness (README "Active loop closing")
+    align_restarts: bool = False
     # How robots meet and find the transform between their frames:
     # "rendezvous" (the paper): a mutual camera sighting within ``range``; the camera's range
     #   and bearings give the transform.

@@ -1047,6 +1047,7 @@ class RendezvousExchange:
             slam.config.range_sigma,
             chain_var=[normal_variance(rec.polynomial, rec.c0_var) for rec in message.records],
             wall_var=[var for _, var in anchors],
+            restarts=self.config.align_restarts,
         )
 
     def _fuse(

@@ -131,6 +131,10 @@ def test_episode_config__env_set_reaches_every_episode_and_bad_pairs_are_named()
         assert env.replace(slam__merge_turn="fit", slam__eps_z=15) == EnvConfig.from_dict(
             episode_config(TINY, "loop", exchange)
         ).replace(num_robots=env.num_robots, max_steps=env.max_steps)
+    config = FidelityConfig(maps=("loop",), env_set=("channel.align_restarts=true",))
+    on = EnvConfig.from_dict(episode_config(config, "loop", True))
+    assert on.channel is not None and on.channel.align_restarts
+    assert EnvConfig.from_dict(episode_config(config, "loop", False)).channel is None
     for pair, message in (
         ("slam.merge_turn", "expected KEY=VALUE"),
         ("slam.merge_turnx=fit", "unknown key 'slam.merge_turnx'"),

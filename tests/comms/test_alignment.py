@@ -67,6 +67,34 @@ def test_align_transform__refuses_a_correction_the_camera_makes_unlikely(
     np.testing.assert_allclose(t, T_TRUE, atol=1e-5)
 
 
+def test_refine_transform__a_second_basin_in_repeating_walls_keeps_the_camera_transform() -> None:
+    """``restarts``: shelf faces every 1 m (y = 0, 1, 2, 3 on x ∈ [0, 6]) and a camera 0.45 m
+    off along them with σ 0.4 m: a shift by one period is 2.5σ, well inside the camera's
+    region, so the walls pair with either copy. One Gauss–Newton run lands in a basin with a
+    posterior σ of millimetres; started again 2σ away along the prior's axes it lands in the
+    other one, so the refinement is refused and the camera transform kept. With a unique
+    basin the restarts agree (below)."""
+    faces = [Polynomial(1, [float(y), 0.0, 0.0, 0.0], 0.0, 6.0) for y in range(4)]
+    chains = [w.sample_arclength(0.05) for w in faces]  # true transform: identity
+    cov_t = np.diag([0.05**2, 0.4**2, 0.01**2])
+    t0 = np.array([0.0, 0.45, 0.0])
+    t, cov = alignment.refine_transform(t0, cov_t, chains, faces, sigma=0.005)
+    assert np.sqrt(cov[1, 1]) < 0.01  # without restarts: confident, in one of the basins
+    t, cov = alignment.refine_transform(t0, cov_t, chains, faces, sigma=0.005, restarts=True)
+    np.testing.assert_array_equal(t, t0)
+    np.testing.assert_array_equal(cov, cov_t)
+
+
+def test_refine_transform__restarts_agree_where_the_walls_fix_the_transform() -> None:
+    """The corner and curved wall above fix all of T: with restarts the refinement is the
+    same as without (every restart ends in the one basin)."""
+    t0 = T_TRUE + np.array([0.03, -0.02, 0.02])
+    plain = alignment.refine_transform(t0, COV_T, _chains(WALLS), WALLS, sigma=0.02)
+    again = alignment.refine_transform(t0, COV_T, _chains(WALLS), WALLS, 0.02, restarts=True)
+    np.testing.assert_array_equal(again[0], plain[0])
+    np.testing.assert_array_equal(again[1], plain[1])
+
+
 def test_align_transform__without_shared_walls_keeps_the_camera_transform() -> None:
     t0 = T_TRUE + np.array([0.03, -0.02, 0.02])
     far = [Polynomial(1, [10.0, 0.0, 0.0, 0.0], 9.0, 12.0)]  # nothing near the chains
