@@ -37,10 +37,9 @@ from polyslam_env.slam.polynomial import Polynomial
 #: posterior's metric.
 CHI2_3DOF_99 = 11.345
 #: With restarts, the refinement is run again from t0 ± this many σ along each principal
-#: axis of Σ_T, the
-#: region where the camera puts the truth (each axis 95 %); repeating walls (shelf rows, a
-#: corridor's doors) can hold a second basin there, and a solution that depends on where the
-#: search starts is not an estimate.
+#: axis of Σ_T, the region where the camera puts the truth (each axis 95 %); repeating walls
+#: (shelf rows, a corridor's doors) can hold a second basin there, and a solution that
+#: depends on where the search starts is not an estimate.
 RESTART_SIGMAS = 2.0
 GATE_SIGMAS = 3.0  # a point pairs with a wall within 3σ of its predicted normal distance
 MAX_ANGLE_DEG = 30.0  # same direction: tangents within 30° (the merge test's angle)

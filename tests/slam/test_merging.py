@@ -15,13 +15,9 @@ from polyslam_env.slam.merging import (
     overlap_interval,
 )
 from polyslam_env.slam.polynomial import Polynomial
+from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 
 GAMMA_M = 0.35  # paper value
-# Central differences with step 1e-6: truncation ~1e-12, round-off ~1e-10 relative;
-# 1e-5 catches any wrong term, which would be O(1) relative.
-FD_STEP = 1e-6
-FD_RTOL = 1e-5
-FD_ATOL = 1e-6
 
 
 def wall_value(x: np.ndarray) -> np.ndarray:
@@ -76,13 +72,7 @@ def test_merge_points__jacobians_on_both_c0s_match_finite_differences(
         return fit_polynomial(pts, 3, variate).c0
 
     fit = fit_polynomial(merge_points(a, i_a, 1e-4, b, i_b, 3e-4, 5, 6), 3)
-    fd = np.zeros(6)
-    for j in range(6):
-        step = np.zeros(6)
-        step[j] = FD_STEP
-        fd[j] = (
-            merged_c0(state + step, fit.poly.variate) - merged_c0(state - step, fit.poly.variate)
-        ) / (2 * FD_STEP)
+    fd = fd_jacobian(lambda x: merged_c0(x, fit.poly.variate), state)
     np.testing.assert_allclose(fit.Gx[0], fd, rtol=FD_RTOL, atol=FD_ATOL)
     # both c0s enter (b's share of the intercept at ξ = 0 is small: its points are far from 0
     # and weigh 1/3 of a's; measured ≥ 0.004)
@@ -273,11 +263,7 @@ def test_turn_gradient__merged_turn_matches_finite_differences(variate: int, ord
         slope = float(fit_polynomial(ps, order, variate).poly.slope(pivot))
         return float(np.arctan(slope)) if variate == 1 else float(-np.arctan(slope))
 
-    fd = np.zeros(n)
-    for j in range(n):
-        step = np.zeros(n)
-        step[j] = FD_STEP
-        fd[j] = (turn(state + step) - turn(state - step)) / (2 * FD_STEP)
+    fd = fd_jacobian(turn, state)
     grad, _ = turn_gradient(pts, fit, pivot)
     np.testing.assert_allclose(grad, fd, rtol=FD_RTOL, atol=FD_ATOL)
     # the pieces' offsets turn the merged wall (1 cm between pieces ~3 m apart: ~1/300 rad)
