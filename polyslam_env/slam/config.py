@@ -126,6 +126,21 @@ class SlamConfig(Config):
     # others feed only the map: robot.update_beam_mask; paper: 0)
     update_spacing_deg: float = 22.5
     link_clusters: bool = True  # clusters joined by a point near both (association; paper: False)
+    # straight pieces of one wall whose supporting hits are at most this far apart along it
+    # (m: a doorway, 0.6–1.0 m in the generators and in most buildings, and the end margins)
+    # are linked by a collinearity pseudo-measurement when its χ² gate passes (links.py);
+    # 0: never (paper)
+    link_gap: float = 1.2
+    # steps after a landmark is made (refit, merged) that its links are sought: by then the
+    # beams have updated its c0, while a fresh fit hangs the hits of several steps on one pose
+    # and states its offset relative to that pose too precisely (linked at once, the lone
+    # office robot's final NEES was 4.9 over 20 runs, above the band; README)
+    link_age: int = 10
+    # m, how far a real wall may run from the straight line through its linked pieces (the
+    # links' noise beyond the fits'): the generators' and YAML maps' walls are exactly straight,
+    # so this is a floor that keeps the link's innovation covariance well conditioned; raise
+    # it for walls that are not (links.py)
+    wall_straightness: float = 0.001
     blas_threads: int = 1  # BLAS threads during a step (polyslam_env/core/blas.py); 0: leave as is
     backend: str = "polynomial"  # one of BACKENDS; the point ones map the pillars
     points: PointBackendConfig = field(default_factory=PointBackendConfig)
@@ -161,6 +176,14 @@ class SlamConfig(Config):
         check_non_negative("slam.merge_min_overlap", self.merge_min_overlap)
         check_non_negative("slam.end_sigma", self.end_sigma)
         check_non_negative("slam.min_update_extent", self.min_update_extent)
+        check_non_negative("slam.link_gap", self.link_gap)
+        if (
+            isinstance(self.link_age, bool)
+            or not isinstance(self.link_age, int)
+            or self.link_age < 0
+        ):
+            raise ConfigError(f"slam.link_age: must be an integer >= 0, got {self.link_age!r}")
+        check_positive("slam.wall_straightness", self.wall_straightness)
         check_range("slam.update_spacing_deg", self.update_spacing_deg, 0.0, 360.0)
         check_non_negative("slam.odom_sigma_xy", self.odom_sigma_xy)
         check_non_negative("slam.odom_sigma_theta_deg", self.odom_sigma_theta_deg)
@@ -206,6 +229,7 @@ PRESETS: dict[str, SlamConfig] = {
         min_update_extent=0.0,
         update_spacing_deg=0.0,
         link_clusters=False,
+        link_gap=0.0,
         shape_rotation="heading",
     )
 }

@@ -163,6 +163,47 @@ def update_sparse_inplace(
     return accepted, nis
 
 
+def update_rows(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    innovation: np.ndarray,
+    H: np.ndarray,
+    R: np.ndarray,
+    gate_prob: float = 0.99,
+    considered: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """One jointly gated EKF update with m dense rows H (m, N) and noise R (m, m): the
+    new (mean, cov, NIS), or None when the NIS ν ᵀS⁻¹ν exceeds the χ²(m) quantile
+    ``gate_prob`` (the hypothesis behind the rows is rejected; nothing changes).
+
+    For the rare pseudo-measurements that tie landmarks to each other (:mod:`links`); the
+    per-beam rows go through :func:`update_sparse_inplace`. The state entries at
+    ``considered`` (indices) are considered, not estimated (Schmidt–Kalman: their rows of K
+    are zero). P⁺ is the Joseph form (I − KH) P (I − KH)ᵀ + K R Kᵀ, right for that gain too,
+    expanded as P − K Uᵀ − U Kᵀ + K S Kᵀ with U = P Hᵀ, and symmetrised.
+    """
+    n = mean.size
+    H = np.atleast_2d(np.asarray(H, dtype=float))
+    nu = np.asarray(innovation, dtype=float).reshape(-1)
+    R = np.atleast_2d(np.asarray(R, dtype=float))
+    m = nu.size
+    if H.shape != (m, n) or R.shape != (m, m) or cov.shape != (n, n):
+        raise ValueError(f"update_rows: H {H.shape}, R {R.shape}, cov {cov.shape}, {m} rows")
+    U = cov @ H.T  # (N, m)
+    S = _symmetrise(H @ U) + R  # (m, m)
+    nis = float(nu @ np.linalg.solve(S, nu))
+    if not nis <= _chi2_upper(m, gate_prob):
+        return None
+    K = np.linalg.solve(S, U.T).T  # (N, m)
+    if considered is not None:
+        K[np.asarray(considered, dtype=np.int64)] = 0.0
+    new_mean = mean + K @ nu
+    new_mean[2] = wrap_angle(new_mean[2])
+    KU = K @ U.T  # (N, N)
+    new_cov = cov - KU - KU.T + K @ S @ K.T
+    return new_mean, _symmetrise(new_cov), nis
+
+
 def _alpha_rows(
     alpha_index: np.ndarray | None, h_alpha: np.ndarray | None, k: int, n: int
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -341,6 +341,28 @@ class LandmarkTable:
         self.eta_range[index] = rng[0]
         self._changed(ids=False)
 
+    def set_shape(self, index: int, poly: Polynomial) -> None:
+        """New shape of landmark ``index`` (same variate, extent and order at most the
+        table's widest, e.g. a line turned by a link's estimate of its turn)."""
+        if poly.variate != self.variate[index] or (poly.lo, poly.hi) != (
+            self.lo[index],
+            self.hi[index],
+        ):
+            raise ValueError("set_shape: the variate and extent must stay")
+        if poly.order + 1 > self.shape.shape[1]:
+            raise ValueError(f"set_shape: order {poly.order} above the table's")
+        self.polys[index] = poly
+        shape, order = self.shape.copy(), self.order.copy()
+        shape[index] = 0.0
+        shape[index, 1 : poly.order + 1] = poly.shape
+        order[index] = len(_own_order(shape[index])) - 1
+        self.shape, self.order = shape, order
+        rng = shape_range(shape[index : index + 1], self.lo[index : index + 1],
+                          self.hi[index : index + 1])  # fmt: skip
+        self.eta_range = self.eta_range.copy()
+        self.eta_range[index] = rng[0]
+        self._changed(ids=False)
+
     def _changed(self, ids: bool) -> None:
         self._packed = None
         self._rows = None

@@ -41,6 +41,7 @@ from polyslam_env.slam.fitting import (
     turn_gradient,
 )
 from polyslam_env.slam.landmarks import (
+    EXTENT_MARGIN,
     LandmarkTable,
     ShapesView,
     boxes_near,
@@ -48,6 +49,7 @@ from polyslam_env.slam.landmarks import (
     evidence_on,
     hull,
 )
+from polyslam_env.slam.links import evidence_gap, link_rows, turned_line
 from polyslam_env.slam.merging import JOIN_GAP, choose_merge, face_normal, merge_points
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -83,6 +85,7 @@ class SlamStepInfo:
     sigma: float
     divergence_f: float
     diverging: bool
+    linked: int = 0  # pieces of one wall linked across a gap (links.py)
 
 
 class PolySlam:
@@ -111,9 +114,15 @@ class PolySlam:
     lets a wall seen again long after it was made correct nothing of the heading, and the
     same frozen error, repeated step after step, made the filter overconfident on loops.
     Each landmark therefore carries its turn α as a state: cloned from the heading when the
-    shape is fitted (:meth:`_add_rotation`), never estimated (Schmidt–Kalman: zero gain, so
-    the stored shape stays the estimate), its correlations updated by every beam on it
-    (``kernels.update_sparse``).
+    shape is fitted (:meth:`_add_rotation`), never estimated by the beams (Schmidt–Kalman:
+    zero gain, so the stored shape stays the estimate), its correlations updated by every
+    beam on it (``kernels.update_sparse``).
+
+    **Pieces of one wall linked.** A straight landmark made, refit or merged ``link_age``
+    steps ago is linked to the straight pieces of its wall across gaps up to ``link_gap``
+    (doorways) by a collinearity pseudo-measurement (:mod:`~polyslam_env.slam.links`,
+    :meth:`_link_walls`); that update does estimate the two lines' turns, and turns the
+    stored lines by them.
 
     Set :attr:`profile` to a dict to collect per-stage wall times (s) of every step under
     the keys ``predict``, ``association``, ``map`` (extents, refits, new landmarks,
@@ -145,6 +154,8 @@ class PolySlam:
             config.eps_m, config.eps_z, config.cluster_radius, self.table, config.link_clusters
         )
         self.step_count = 0
+        self._wall_of: dict[int, int] = {}  # landmark id → its wall group (links.py)
+        self._received: set[int] = set()  # ids holding a received landmark (never linked)
         self.diverging = False
         self.divergence_f = 0.0
         self.profile: dict[str, list[float]] | None = None
@@ -198,6 +209,12 @@ class PolySlam:
     def polynomials(self) -> list[Polynomial]:
         """The map: every landmark with its current c0, in state order."""
         return self.table.polynomials(self.c0s)
+
+    @property
+    def wall_groups(self) -> dict[int, int]:
+        """Landmark id → its wall group: pieces linked across gaps, directly or through others,
+        share one (:mod:`~polyslam_env.slam.links`); a copy."""
+        return dict(self._wall_of)
 
     def c0_variance(self, landmark_id: int) -> float:
         k = self.table.state_index(landmark_id)
@@ -275,6 +292,7 @@ class PolySlam:
             if new_id is not None:
                 created += 1
                 merged += self._merge_into_map(new_id)
+        linked = self._link_changed()
         if self.profile is not None:
             lap = self._lap("map", lap)
 
@@ -300,6 +318,7 @@ class PolySlam:
             sigma=sigma,
             divergence_f=f,
             diverging=self.diverging,
+            linked=linked,
         )
 
     def _association_candidates(self, points: Sequence[StoredPoint], sigma: float) -> np.ndarray:
@@ -461,6 +480,7 @@ class PolySlam:
         id of the landmark that holds it afterwards (after a merge, the merged landmark's
         id)."""
         lid = self._augment(fit, turn=turn)
+        self._received.add(lid)
         if merge and self._merge_into_map(lid):
             return self.table.ids[-1]
         return lid
@@ -519,7 +539,7 @@ class PolySlam:
         poly = clip_to_evidence(fit.poly, evidence)
         if self.config.rotation_states:
             self._add_rotation(n, poly, rotation, turn, turn_gradient)
-        return self.table.append(
+        landmark_id = self.table.append(
             poly,
             pivot=0.5 * (poly.lo + poly.hi) if pivot is None else pivot,
             xi_var=float(self.cov[0, 0] if poly.variate == 1 else self.cov[1, 1]),
@@ -529,6 +549,8 @@ class PolySlam:
             side=side,
             evidence=evidence,
         )
+        self._wall_of[landmark_id] = landmark_id
+        return landmark_id
 
     def _add_rotation(
         self,
@@ -595,6 +617,8 @@ class PolySlam:
             drop.append(self._turn_index(idx))
         self.mean, self.cov = ekf.remove(self.mean, self.cov, drop)
         self.table.remove(idx)
+        self._wall_of.pop(landmark_id, None)
+        self._received.discard(landmark_id)
 
     def _replace(
         self,
@@ -612,6 +636,9 @@ class PolySlam:
             fit, side, evidence, rotation, points=points, turn_gradient=turn_gradient
         )
         for lid in old_ids:
+            self._join_walls(new_id, lid)
+            if lid in self._received:
+                self._received.add(new_id)
             self._remove(lid)
         return new_id
 
@@ -785,6 +812,107 @@ class PolySlam:
         if cfg.rotation_states and cfg.merge_turn == "fit":
             gradient = turn_gradient(pts, fit, centroid_xi(pts, fit.poly.variate))
         return self._replace([landmark_id, other_id], fit, side, evidence, rotation, pts, gradient)
+
+    # -- links between pieces of one wall (links.py) ---------------------------------------------
+    def _link_changed(self) -> int:
+        """Link the landmarks created, refit or merged ``config.link_age`` steps ago to the
+        straight pieces of their walls across gaps (:meth:`_link_walls`); a linked landmark is
+        then checked for merges again (pieces a few cm apart that no join fit could explain
+        may now be one polynomial). Returns the number of links."""
+        table = self.table
+        made_at = self.step_count - self.config.link_age
+        fresh = [lid for lid, at in zip(table.ids, table.changed_at, strict=True)
+                 if at == made_at]  # fmt: skip
+        links = 0
+        for landmark_id in fresh:
+            made = self._link_walls(landmark_id)
+            if made:
+                links += made
+                self._merge_into_map(landmark_id)
+        return links
+
+    def _link_walls(self, landmark_id: int) -> int:
+        """Link a straight landmark to every straight piece of another wall group, made at
+        least ``config.link_age`` steps ago, whose evidence lies at most ``config.link_gap``
+        from its own along their common axis, nearest first, when the collinearity
+        pseudo-measurement passes its χ²(2) gate (:mod:`~polyslam_env.slam.links`); returns
+        the number of links made."""
+        cfg, table = self.config, self.table
+        if cfg.link_gap <= 0.0 or landmark_id not in table or landmark_id in self._received:
+            return 0
+        idx = table.index_of(landmark_id)
+        if table.order[idx] != 1:
+            return 0
+        evidence = self._evidence(idx)
+        reach = cfg.link_gap * (1.0 + 1e-9) + EXTENT_MARGIN
+        candidates = []
+        matured = self.step_count - cfg.link_age  # partners at least as old (_link_changed)
+        for j in table.near(self._box(idx), self.c0s, reach).tolist():
+            if j == idx or table.variate[j] != table.variate[idx] or table.order[j] != 1:
+                continue
+            if table.changed_at[j] > matured or table.ids[j] in self._received:
+                continue
+            gap = evidence_gap(evidence, self._evidence(j))
+            if -2.0 * EXTENT_MARGIN <= gap <= cfg.link_gap:
+                candidates.append((gap, table.ids[j]))
+        links = 0
+        for _, other_id in sorted(candidates):
+            if self._wall_of[other_id] != self._wall_of[landmark_id]:
+                links += self._link_pair(landmark_id, other_id)
+        return links
+
+    def _link_pair(self, first: int, second: int) -> bool:
+        """The collinearity update of two straight landmarks (rows at the middle of each one's
+        evidence, noise each fit's variance beyond the range noise plus
+        ``config.wall_straightness``²), estimating their two turns (:meth:`_apply_turn`);
+        whether it passed the gate and was applied."""
+        table = self.table
+        i, j = table.index_of(first), table.index_of(second)
+        xis = np.array([0.5 * sum(self._evidence(i)), 0.5 * sum(self._evidence(j))])
+        residual, H = link_rows(
+            self._polynomial(i), 3 + i, self._turn_of(i),
+            self._polynomial(j), 3 + j, self._turn_of(j),
+            xis, self.mean.size,
+        )  # fmt: skip
+        r = float(table.model_var[i] + table.model_var[j]) + self.config.wall_straightness**2
+        considered = None
+        if self.config.rotation_states:  # every turn but the two lines' own
+            turns = self._turn_index(0) + np.arange(len(table))
+            considered = np.delete(turns, [i, j])
+        result = ekf.update_rows(
+            self.mean, self.cov, -residual, H, r * np.eye(2), self.config.gate_prob, considered
+        )
+        if result is None:
+            return False
+        before = self.mean[:3].copy()
+        self.mean, self.cov, _ = result
+        if self.config.rotation_states:
+            for k in (i, j):
+                self._apply_turn(k)
+        self._state_version += 1
+        self._carry_stored_points(before, self.mean[:3])
+        self._join_walls(first, second)
+        return True
+
+    def _apply_turn(self, index: int) -> None:
+        """Turn straight landmark ``index``'s stored line by its estimated turn α̂ about its
+        pivot and reset α̂ to 0: an error-state reset. Turns about one point add, and the
+        offset at the pivot stays (:func:`~polyslam_env.slam.links.turned_line`), so the
+        errors keep their meaning and the covariance stays."""
+        t = self._turn_index(index)
+        line = turned_line(self._polynomial(index), float(self.table.pivot[index]), self.mean[t])
+        self.mean[3 + index], self.mean[t] = line.c0, 0.0
+        self.table.set_shape(index, line)
+
+    def _join_walls(self, keep: int, other: int) -> None:
+        """Put landmark ``other``'s wall group into landmark ``keep``'s (a link or a merge:
+        what they share is in the state now, and must not be used again)."""
+        target, source = self._wall_of[keep], self._wall_of[other]
+        if target == source:
+            return
+        for lid, group in self._wall_of.items():
+            if group == source:
+                self._wall_of[lid] = target
 
     def _long_enough(self, landmark_id: int) -> bool:
         """Whether the landmark is long enough to update the pose (``min_update_extent``)."""

@@ -1,0 +1,300 @@
+"""Links between straight pieces of one wall across a gap (polyslam_env/slam/links.py)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import scipy.stats
+
+from polyslam_env.core.errors import ConfigError
+from polyslam_env.slam import ekf
+from polyslam_env.slam.config import PRESETS, SlamConfig
+from polyslam_env.slam.fitting import Fit, polynomial_points
+from polyslam_env.slam.links import evidence_gap, link_rows, turned_line
+from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.robot import PolySlam
+from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
+from tests.slam.test_map_building import cast, drive, straight
+
+
+def _rotate_about(points: np.ndarray, centre: np.ndarray, angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return (points - centre) @ np.array([[c, -s], [s, c]]).T + centre
+
+
+def _eta_of_turned_line(
+    poly: Polynomial, c0: float, pivot: float, angle: float, xi: float
+) -> float:
+    """Oracle: η at ξ of the line ``poly`` with offset ``c0``, turned by ``angle`` about its
+    point at ``pivot`` — two of its points rotated, the line through them evaluated."""
+    line = Polynomial(poly.variate, np.r_[c0, poly.coeffs[1:]], poly.lo, poly.hi)
+    centre = line.points_at(np.array([pivot]))[0]
+    a, b = _rotate_about(line.points_at(np.array([pivot - 1.0, pivot + 1.0])), centre, angle)
+    k = 0 if poly.variate == 1 else 1  # the ξ column
+    t = (xi - a[k]) / (b[k] - a[k])
+    return float(a[1 - k] + t * (b[1 - k] - a[1 - k]))
+
+
+LINES = [  # (variate, c0, slope)
+    (1, 0.8, 0.02),
+    (1, -2.0, -0.7),
+    (2, 3.0, 0.3),
+]
+
+
+@pytest.mark.parametrize(("variate", "c0", "slope"), LINES)
+def test_link_rows__residual_and_jacobian_match_the_turned_lines(
+    variate: int, c0: float, slope: float
+) -> None:
+    """State [pose, c0_i, c0_j, α_i, α_j]: the rows' residual is η_i − η_j of the two lines
+    turned by their α about their pivots (a brute-force oracle), and H its central finite
+    differences."""
+    first = Polynomial(variate, np.array([c0, slope]), -3.0, -1.0)
+    second = Polynomial(variate, np.array([c0 + 0.03, slope + 0.01]), 0.0, 2.5)
+    pivots, xis = (-2.2, 1.1), np.array([-2.0, 1.25])
+    n_state = 7
+
+    def residual(state: np.ndarray, row: int) -> float:
+        eta = [
+            _eta_of_turned_line(p, state[3 + k], pivots[k], state[5 + k], float(xis[row]))
+            for k, p in enumerate((first, second))
+        ]
+        return eta[0] - eta[1]
+
+    state = np.array([0.1, -0.2, 0.3, c0, c0 + 0.03, 0.0, 0.0])
+    got, H = link_rows(first, 3, (5, pivots[0]), second, 4, (6, pivots[1]), xis, n_state)
+    for row in range(2):
+        assert got[row] == pytest.approx(residual(state, row), abs=1e-12)
+        expected = fd_jacobian(lambda x, row=row: residual(x, row), state)
+        np.testing.assert_allclose(H[row], expected, rtol=FD_RTOL, atol=FD_ATOL)
+
+
+def test_link_rows__without_turn_states_touch_only_the_offsets() -> None:
+    line = Polynomial(1, np.array([0.5, 0.1]), 0.0, 1.0)
+    _, H = link_rows(line, 3, None, line, 4, None, np.array([0.5, 2.0]), 5)
+    np.testing.assert_array_equal(H, [[0, 0, 0, 1, -1], [0, 0, 0, 1, -1]])
+
+
+def test_link_rows__pieces_of_different_variates_are_refused() -> None:
+    with pytest.raises(ValueError, match="variate"):
+        link_rows(
+            Polynomial(1, np.array([0.0, 0.1]), 0.0, 1.0), 3, None,
+            Polynomial(2, np.array([0.0, 0.1]), 0.0, 1.0), 4, None,
+            np.array([0.5]), 5,
+        )  # fmt: skip
+
+
+@pytest.mark.parametrize(("variate", "c0", "slope"), LINES)
+@pytest.mark.parametrize("angle", [0.3, -0.05])
+def test_turned_line__is_the_line_rotated_about_its_pivot(
+    variate: int, c0: float, slope: float, angle: float
+) -> None:
+    line = Polynomial(variate, np.array([c0, slope, 0.0, 0.0]), -1.0, 2.0)
+    turned = turned_line(line, 0.4, angle)
+    assert (turned.variate, turned.lo, turned.hi, turned.order) == (variate, -1.0, 2.0, 3)
+    for xi in (-1.0, 0.4, 1.7):
+        assert float(turned.value(xi)) == pytest.approx(
+            _eta_of_turned_line(line, c0, 0.4, angle, xi), abs=1e-12
+        )
+
+
+def test_turned_line__refuses_a_curve() -> None:
+    with pytest.raises(ValueError, match="straight"):
+        turned_line(Polynomial(1, np.array([0.0, 0.1, 0.01]), 0.0, 1.0), 0.5, 0.1)
+
+
+def test_evidence_gap__distance_between_intervals_negative_when_overlapping() -> None:
+    assert evidence_gap((0.0, 1.0), (1.8, 3.0)) == pytest.approx(0.8)
+    assert evidence_gap((1.8, 3.0), (0.0, 1.0)) == pytest.approx(0.8)
+    assert evidence_gap((0.0, 2.0), (1.5, 3.0)) == pytest.approx(-0.5)
+
+
+def _random_problem(seed: int, n: int = 6, m: int = 2) -> tuple[np.ndarray, ...]:
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(n, n))
+    cov = a @ a.T + 0.1 * np.eye(n)
+    H = rng.normal(size=(m, n))
+    R = np.diag(rng.uniform(0.1, 0.5, m))
+    mean = rng.normal(size=n)
+    return mean, cov, H, R
+
+
+@pytest.mark.parametrize("considered", [None, np.array([4, 5])])
+def test_update_rows__is_the_textbook_joseph_update_with_schmidt_rows(
+    considered: np.ndarray | None,
+) -> None:
+    """The textbook form, literally: K = P Hᵀ S⁻¹ with the considered rows zeroed, x + Kν,
+    (I − KH) P (I − KH)ᵀ + K R Kᵀ; the considered entries keep their estimate and their own
+    covariance."""
+    mean, cov, H, R = _random_problem(0)
+    nu = np.array([0.05, -0.02])
+    new_mean, new_cov, nis = ekf.update_rows(mean, cov, nu, H, R, 1.0 - 1e-12, considered)
+    S = H @ cov @ H.T + R
+    K = cov @ H.T @ np.linalg.inv(S)
+    if considered is not None:
+        K[considered] = 0.0
+    A = np.eye(len(mean)) - K @ H
+    expected_mean = mean + K @ nu
+    expected_mean[2] = ekf.wrap_angle(expected_mean[2])
+    np.testing.assert_allclose(new_mean, expected_mean, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(new_cov, A @ cov @ A.T + K @ R @ K.T, rtol=1e-10, atol=1e-12)
+    np.testing.assert_array_equal(new_cov, new_cov.T)
+    assert np.linalg.eigvalsh(new_cov).min() > 0.0
+    assert nis == pytest.approx(float(nu @ np.linalg.solve(S, nu)), rel=1e-12)
+    if considered is not None:
+        np.testing.assert_array_equal(new_mean[considered], mean[considered])
+        np.testing.assert_allclose(
+            new_cov[np.ix_(considered, considered)], cov[np.ix_(considered, considered)],
+            rtol=1e-12, atol=1e-15,
+        )  # fmt: skip
+
+
+def test_update_rows__gate_is_the_chi2_quantile_of_the_row_count() -> None:
+    """ν scaled to put its NIS just inside and just outside χ²(2)'s 0.99 quantile."""
+    mean, cov, H, R = _random_problem(1)
+    S = H @ cov @ H.T + R
+    direction = np.array([1.0, 0.5])
+    unit = float(direction @ np.linalg.solve(S, direction))
+    limit = scipy.stats.chi2.ppf(0.99, 2)
+    inside = direction * math.sqrt(0.999 * limit / unit)
+    outside = direction * math.sqrt(1.001 * limit / unit)
+    assert ekf.update_rows(mean, cov, inside, H, R, 0.99) is not None
+    assert ekf.update_rows(mean, cov, outside, H, R, 0.99) is None
+
+
+# -- in the filter --------------------------------------------------------------------------
+DOORS = np.array(  # y = 0.8 with 0.8 m doorways at x ∈ [2, 2.8] and [5, 5.8]
+    [[[-1.0, 0.8], [2.0, 0.8]], [[2.8, 0.8], [5.0, 0.8]], [[5.8, 0.8], [9.0, 0.8]]]
+)
+
+
+def _groups(slam: PolySlam) -> dict[int, list[int]]:
+    groups: dict[int, list[int]] = {}
+    for lid, group in slam.wall_groups.items():
+        groups.setdefault(group, []).append(lid)
+    return groups
+
+
+def test_doorways__the_pieces_of_one_wall_are_linked_into_one_group() -> None:
+    """Driving 8 m along a wall with two doorways: every straight piece ends in one wall
+    group, linked across the doorways."""
+    for seed in range(5):
+        slam, *_ = drive(DOORS, straight(8.0), seed)
+        assert slam.n_landmarks >= 3, seed
+        assert len(_groups(slam)) == 1, (seed, _groups(slam))
+
+
+def _offsets_at_middles(slam: PolySlam) -> tuple[np.ndarray, np.ndarray]:
+    """Each landmark's error at the middle of its evidence (η − 0.8: the wall is y = 0.8,
+    the robot's frame is the world's) and their covariance by the filter (rows as
+    :func:`link_rows`' for one curve)."""
+    errors, rows = [], []
+    for i, poly in enumerate(slam.polynomials()):
+        xi = float(np.mean(slam.table.evidence[i]))
+        pts = polynomial_points(poly, 3 + i, 1.0, 1, xi, xi, slam.mean.size, slam._turn_of(i))
+        rows.append(pts.d_state[0, 1] - float(poly.slope(xi)) * pts.d_state[0, 0])
+        errors.append(float(poly.value(xi)) - 0.8)
+    J = np.array(rows)
+    return np.array(errors), J @ slam.cov @ J.T
+
+
+def test_doorways__linked_pieces_are_where_their_filter_says_nees_over_seeds() -> None:
+    """The linked pieces' errors at their middles against the filter's own covariance of
+    them: summed over 20 seeds, eᵀC⁻¹e is χ² with as many dof as pieces (two-sided 99 %
+    band) — the links neither pull the pieces off the wall nor claim more than they give."""
+    total, dof = 0.0, 0
+    for seed in range(20):
+        slam, *_ = drive(DOORS, straight(8.0), seed)
+        e, C = _offsets_at_middles(slam)
+        total += float(e @ np.linalg.solve(C, e))
+        dof += e.size
+    lo, hi = scipy.stats.chi2.ppf([0.005, 0.995], dof)
+    assert lo <= total <= hi, (total, dof, lo, hi)
+
+
+def test_doorways__link_gap_zero_links_nothing() -> None:
+    slam, *_ = drive(DOORS, straight(8.0), 0, SlamConfig(link_gap=0.0))
+    assert len(_groups(slam)) == slam.n_landmarks >= 3
+    assert PRESETS["paper"].link_gap == 0.0
+
+
+def test_link__is_never_made_twice_within_a_group() -> None:
+    slam, *_ = drive(DOORS, straight(8.0), 1)
+    mean, cov = slam.mean.copy(), slam.cov.copy()
+    for lid in slam.landmark_ids:
+        assert slam._link_walls(lid) == 0
+    np.testing.assert_array_equal(slam.mean, mean)
+    np.testing.assert_array_equal(slam.cov, cov)
+
+
+def test_parallel_walls__a_shelf_depth_apart_are_not_linked() -> None:
+    """Two parallel faces 0.3 m apart, the second beginning 0.5 m after the first ends (a
+    shelf face and the next row's): the χ²(2) gate keeps them apart."""
+    walls = np.array([[[-1.0, 0.8], [2.0, 0.8]], [[2.5, 1.1], [6.0, 1.1]]])
+    for seed in range(3):
+        slam, *_ = drive(walls, straight(5.5), seed)
+        assert len(_groups(slam)) == slam.n_landmarks >= 2, seed
+
+
+def test_link__covariance_stays_symmetric_psd() -> None:
+    slam, *_ = drive(DOORS, straight(8.0), 2)
+    np.testing.assert_array_equal(slam.cov, slam.cov.T)
+    assert np.linalg.eigvalsh(slam.cov).min() > -1e-12
+
+
+def test_link_age__a_landmark_is_linked_only_once_it_and_its_partner_are_that_old() -> None:
+    """With ``link_age`` 10, after every step each wall group that holds a landmark made in
+    the last 10 steps holds only that one (a fresh fit's offset is stated too precisely to
+    link: README)."""
+    cfg = SlamConfig()
+    rng = np.random.default_rng(3)
+    groups_seen: list[int] = []
+    angles = np.radians((90.0, 45.0, 0.0, -45.0, -90.0))
+    slam = PolySlam(cfg, angles, 2.0)
+    pose = np.zeros(3)
+    for dist, turn in straight(8.0):
+        pose = pose + np.array([dist * math.cos(pose[2]), dist * math.sin(pose[2]), turn])
+        ranges = cast(pose, DOORS, angles) + rng.normal(0.0, 0.02, len(angles))
+        slam.step(np.array([dist, 0.0, turn]), ranges)
+        young = {
+            lid
+            for lid, at in zip(slam.table.ids, slam.table.changed_at, strict=True)
+            if at > slam.step_count - cfg.link_age
+        }
+        for lid in young:
+            group = slam.wall_groups[lid]
+            assert [k for k, g in slam.wall_groups.items() if g == group] == [lid]
+        groups_seen.append(len(set(slam.wall_groups.values())))
+    assert groups_seen[-1] == 1 < max(groups_seen)  # linked in the end
+
+
+BAD_LINK_SETTINGS = [
+    ("link_gap", -1.0),
+    ("link_age", -1),
+    ("link_age", 2.5),
+    ("wall_straightness", 0.0),
+]
+
+
+@pytest.mark.parametrize(("field", "value"), BAD_LINK_SETTINGS)
+def test_link_settings__bad_values_are_errors_naming_the_field(field: str, value: object) -> None:
+    with pytest.raises(ConfigError, match=f"slam.{field}"):
+        SlamConfig(**{field: value})
+
+
+def test_received_landmark__is_never_linked() -> None:
+    """A received wall's covariance leaves out the errors its walls share with the sender's
+    transform (the strict xfail in tests/comms/test_alignment.py), so a link would trust it
+    too much: the piece across the doorway, received, stays in its own group."""
+    slam, *_ = drive(DOORS, straight(1.5), 0)
+    assert slam.n_landmarks == 1
+    received = Polynomial(1, np.array([0.8, 0.0]), 2.8, 5.0)
+    n_state = slam.mean.size
+    fit = Fit(received, 0.8, np.zeros((1, n_state)), np.ones((1, 1)), np.array([[1e-4]]), 0.0, 1)
+    lid = slam.insert_landmark(fit, merge=False)
+    for _ in range(slam.config.link_age + 2):
+        slam.step(np.zeros(3), np.full(5, np.inf))
+    assert len(set(slam.wall_groups.values())) == 2
+    assert slam.wall_groups[lid] == lid
