@@ -18,7 +18,11 @@ the whole map from any start, as the env's belief grid does. It then
    when a front beam is short;
 4. replans when the goal is reached, stops being a frontier, the path gets blocked, the robot
    stalls, a robot is seen near the goal, or every ``replan_every`` steps; a goal it could not
-   reach is blacklisted for a while.
+   reach is blacklisted for a while;
+5. backs off when it stalls against another robot: two robots that meet too close to pass
+   (round a corner, where the camera saw neither in time) would each turn away, turn back to
+   their paths and stop again for ever; each drives ``BACK_OFF_STEPS`` steps directly away
+   from the other, then plans again with that goal blacklisted.
 
 **Active loop closing** (``close_loops``, off by default; the policy ``frontier_closing`` turns
 it on; after Stachniss, Hähnel & Burgard's active loop closing, on the EKF's own numbers):
@@ -62,6 +66,9 @@ __all__ = [
     "grid_path",
     "visible_gain",
 ]
+
+#: Steps a robot stalled against another drives away from it before it plans again.
+BACK_OFF_STEPS = 8
 
 #: 8-neighbour offsets (row, col) used for the graph edges (the other four are their reverses).
 _EDGE_OFFSETS = ((0, 1), (1, 0), (1, 1), (1, -1))
@@ -283,6 +290,8 @@ class FrontierPolicy(Policy):
         self._blacklist: dict[tuple[int, int], int] = {}  # goal cell → step it expires
         self._step = 0
         self._trail: list[np.ndarray] = []  # recent positions, for stall detection
+        #: own-frame direction (rad) to drive while backing off from a robot, and until when
+        self._back_off: tuple[float, int] | None = None
         self._wall_error = 0.0
         #: (other robot's position, own position, step it expires) in the own frame, from
         #: camera sightings: frontiers nearer the other robot are left to it (module doc)
@@ -379,7 +388,11 @@ class FrontierPolicy(Policy):
         """The action that follows the path (the walls when there is none), kept clear of
         mapped obstacles and of the robots the camera sees."""
         ctx = self.context
-        if self.path is None:
+        if self._backing_off(pose, detections):
+            assert self._back_off is not None
+            v, omega = self._head(pose, self._back_off[0], ranges)
+            v = self._safe_speed(pose, v, omega)
+        elif self.path is None:
             v, omega, self._wall_error = wall_follow_command(
                 ranges, ctx, prev_error=self._wall_error
             )
@@ -388,6 +401,42 @@ class FrontierPolicy(Policy):
             v = self._safe_speed(pose, v, omega)
         v, omega = avoid_robots(v, omega, detections, ctx)
         return ctx.action(v, omega)
+
+    def _backing_off(self, pose: np.ndarray, detections: np.ndarray) -> bool:
+        """Whether to back off from a robot now: one is, or was until the last
+        ``BACK_OFF_STEPS``, too close ahead to pass (no free travel left, within ±80°: what
+        :func:`~policies.scripted.avoid_robots` stops for) while this robot stalled. Ending a
+        back-off drops the path and rests its goal, as a stall does."""
+        if self._back_off is not None:
+            if self._step < self._back_off[1]:
+                return True
+            self._back_off = None
+            if self.goal is not None:
+                self._blacklist[self.goal] = self._step + 60
+            self.path = self.goal = None
+            return False
+        stalled = len(self._trail) >= 8 and np.hypot(*(self._trail[-1] - self._trail[0])) < 0.1
+        if not stalled or len(detections) == 0:
+            return False
+        ctx = self.context
+        gap = detections[:, 0] - 2 * ctx.robot_radius - 0.1  # as avoid_robots
+        blocking = (gap <= 0.0) & (np.abs(detections[:, 1]) <= math.radians(80))
+        if not blocking.any():
+            return False
+        nearest = int(np.argmin(np.where(blocking, detections[:, 0], np.inf)))
+        away = pose[2] + float(detections[nearest, 1]) + math.pi
+        self._back_off = (away, self._step + BACK_OFF_STEPS)
+        return True
+
+    def _head(self, pose: np.ndarray, direction: float, ranges: np.ndarray) -> tuple[float, float]:
+        """(v, ω) that drive toward the own-frame ``direction`` (rad): on the spot while it
+        is more than 0.7 rad off, then forward within the front beams' cap."""
+        ctx = self.context
+        alpha = math.remainder(direction - pose[2], 2 * math.pi)
+        omega = float(np.clip(alpha / ctx.dt, -ctx.omega_max, ctx.omega_max))
+        if abs(alpha) > 0.7:
+            return 0.0, omega
+        return min(0.5 * ctx.v_max, self._speed_cap(ranges)), omega
 
     def _claim(self, pose: np.ndarray, detections: np.ndarray) -> bool:
         """Remember the robots the camera sees (k, 2: distance m, bearing rad) as claims;

@@ -11,7 +11,7 @@ from scipy import ndimage
 
 import polyslam_env
 from policies import make_policy, make_team
-from policies.frontier import GAIN_RAYS, FrontierPolicy, grid_path, visible_gain
+from policies.frontier import BACK_OFF_STEPS, GAIN_RAYS, FrontierPolicy, grid_path, visible_gain
 
 LARGE = {"width": 24, "height": 14, "min_room_size": 1.5, "max_room_size": 5}
 
@@ -308,3 +308,51 @@ def test_frontier__gain_mode_is_checked_and_visible_plans() -> None:
         )
     )
     assert moved > 0.5  # it explores (30 steps of up to 0.3 m)
+
+
+def test_back_off__a_robot_stalled_against_another_drives_away_then_plans_again() -> None:
+    env = polyslam_env.parallel_env(map="two_rooms", num_robots=2)
+    policy = make_policy("frontier", env, "robot_0")
+    assert isinstance(policy, FrontierPolicy)
+    policy.reset(0)
+    pose = np.array([1.0, 1.0, 0.0])
+    policy._trail = [pose[:2].copy()] * 8  # stalled
+    policy.goal, policy.path = (5, 5), np.array([[2.0, 1.0]])
+    # a robot 5 cm from touching (avoid_robots keeps 0.1 m), 0.2 rad left of ahead
+    contact = np.array([[2 * policy.context.robot_radius + 0.05, 0.2]])
+    assert not policy._backing_off(pose, np.array([[1.5, 0.2]]))  # far enough to pass
+    assert policy._backing_off(pose, contact)
+    assert policy._back_off is not None
+    assert math.remainder(policy._back_off[0] - (0.2 + math.pi), 2 * math.pi) == pytest.approx(0)
+    # it heads away from the other robot, turning on the spot first
+    clear = np.full(len(policy.context.beam_angles), 5.0)
+    v, omega = policy._head(pose, policy._back_off[0], clear)
+    assert v == 0.0 and omega != 0.0
+    policy._step += BACK_OFF_STEPS  # then it plans again, that goal rested
+    assert not policy._backing_off(pose, np.zeros((0, 2)))
+    assert policy.path is None and policy.goal is None and (5, 5) in policy._blacklist
+
+
+def test_back_off__two_robots_that_meet_round_a_corner_part_again() -> None:
+    """The loop, seed 4, exchange on: robots 1 and 2 meet round the corridor's corner at
+    step 37, 0.28 m apart when their cameras first see each other. Before the back-off they
+    stayed there, each turning away and back, for 460 steps. Now no two robots stay within
+    0.35 m of each other for 30 steps in a row: a stall is 8 steps, a back-off 8 more, and
+    30 leaves room for a second try."""
+    env = polyslam_env.parallel_env(
+        map="generator:loop", num_robots=3, initial_error=True, max_steps=150, coverage_target=None
+    )
+    team = make_team("frontier", env)
+    obs, _ = env.reset(seed=4)
+    team.reset(4)
+    rng = np.random.default_rng([4, 1])
+    state = env.episode
+    assert state is not None
+    close = np.zeros((3, 3), dtype=int)
+    while env.agents:
+        obs, *_ = env.step(team.act(obs, rng))
+        xy = np.array([state.world.poses[i][:2] for i in range(3)])
+        near = np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1)) < 0.35
+        close = np.where(near, close + 1, 0)
+        np.fill_diagonal(close, 0)
+        assert close.max() < 30, close
