@@ -54,7 +54,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from policies.base import Policy, PolicyContext, PolicyError
-from policies.scripted import avoid_robots, beam_index, wall_follow_command
+from policies.scripted import avoid_robots, beam_index, contact_gap, wall_follow_command
 from polyslam_env.core import raster
 
 __all__ = [
@@ -349,7 +349,7 @@ class FrontierPolicy(Policy):
         if np.hypot(*(self.path[-1] - pose[:2])) < 0.25:
             self._stop_closing()  # there, and still uncertain: explore again
             return False
-        if len(self._trail) >= 8 and np.hypot(*(self._trail[-1] - self._trail[0])) < 0.1:
+        if self._stalled():
             return True
         rows, cols = self.map.cells(self.path)
         return bool(np.any(self.map.obstacles[rows, cols]))
@@ -415,11 +415,9 @@ class FrontierPolicy(Policy):
                 self._blacklist[self.goal] = self._step + 60
             self.path = self.goal = None
             return False
-        stalled = len(self._trail) >= 8 and np.hypot(*(self._trail[-1] - self._trail[0])) < 0.1
-        if not stalled or len(detections) == 0:
+        if not self._stalled() or len(detections) == 0:
             return False
-        ctx = self.context
-        gap = detections[:, 0] - 2 * ctx.robot_radius - 0.1  # as avoid_robots
+        gap = contact_gap(detections[:, 0], self.context)
         blocking = (gap <= 0.0) & (np.abs(detections[:, 1]) <= math.radians(80))
         if not blocking.any():
             return False
@@ -427,6 +425,10 @@ class FrontierPolicy(Policy):
         away = pose[2] + float(detections[nearest, 1]) + math.pi
         self._back_off = (away, self._step + BACK_OFF_STEPS)
         return True
+
+    def _stalled(self) -> bool:
+        """Whether the robot moved less than 0.1 m over its last 8 positions."""
+        return len(self._trail) >= 8 and bool(np.hypot(*(self._trail[-1] - self._trail[0])) < 0.1)
 
     def _head(self, pose: np.ndarray, direction: float, ranges: np.ndarray) -> tuple[float, float]:
         """(v, ω) that drive toward the own-frame ``direction`` (rad): on the spot while it
@@ -497,7 +499,7 @@ class FrontierPolicy(Policy):
             return True
         if np.hypot(*(self.path[-1] - pose[:2])) < 0.25:
             return True
-        if len(self._trail) >= 8 and np.hypot(*(self._trail[-1] - self._trail[0])) < 0.1:
+        if self._stalled():
             self._blacklist[self.goal] = self._step + 60  # stalled: give this goal a rest
             return True
         if not self._still_frontier(self.goal):

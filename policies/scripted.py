@@ -82,6 +82,12 @@ def beam_index(angles: np.ndarray, target: float) -> int:
     return int(np.argmin(diff))
 
 
+def contact_gap(distance: Any, ctx: PolicyContext) -> Any:
+    """m of free travel left before touching a robot seen ``distance`` m away (centres; a
+    float or an array): the two radii and a 0.1 m margin off."""
+    return distance - 2 * ctx.robot_radius - 0.1
+
+
 def avoid_robots(
     v: float, omega: float, detections: np.ndarray, ctx: PolicyContext, keep: float = 0.45
 ) -> tuple[float, float]:
@@ -94,7 +100,7 @@ def avoid_robots(
     for d, bearing in detections:
         if d > keep + ctx.v_max * ctx.dt or abs(bearing) > math.radians(80):
             continue
-        gap = d - 2 * ctx.robot_radius - 0.1  # m of free travel before touching
+        gap = contact_gap(d, ctx)
         v = min(v, max(gap * math.cos(bearing), 0.0) / ctx.dt)
         if d < keep + 0.5 * ctx.v_max * ctx.dt:
             away = -1.0 if bearing >= -math.radians(10) else 1.0

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.fitting import polynomial_points
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -101,8 +102,7 @@ def turned_line(poly: Polynomial, pivot: float, angle: float) -> Polynomial:
     xi_axis, eta_axis = (0, 1) if poly.variate == 1 else (1, 0)
     direction = np.zeros(2)
     direction[xi_axis], direction[eta_axis] = 1.0, slope
-    c, s = np.cos(angle), np.sin(angle)
-    turned = np.array([c * direction[0] - s * direction[1], s * direction[0] + c * direction[1]])
+    turned = rotation(angle) @ direction
     new_slope = float(turned[eta_axis] / turned[xi_axis])
     coeffs = np.zeros_like(poly.coeffs)
     coeffs[0], coeffs[1] = eta_c - new_slope * pivot, new_slope

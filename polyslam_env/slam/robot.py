@@ -819,6 +819,8 @@ class PolySlam:
         straight pieces of their walls across gaps (:meth:`_link_walls`); a linked landmark is
         then checked for merges again (pieces a few cm apart that no join fit could explain
         may now be one polynomial). Returns the number of links."""
+        if self.config.link_gap <= 0.0:
+            return 0
         table = self.table
         made_at = self.step_count - self.config.link_age
         fresh = [lid for lid, at in zip(table.ids, table.changed_at, strict=True)
