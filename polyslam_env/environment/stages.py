@@ -425,7 +425,8 @@ def map_bookkeeping(
     """Update each acting robot's map completeness, map error and bytes-sent count (changes
     them) and return the changes. Completeness and map error (ground truth, the map placed by
     the robot's true start pose) are re-evaluated only when the robot's map changed
-    structurally (a landmark created, refit, merged or received), else their changes are 0."""
+    structurally (a landmark created, refit, merged, linked or received), else their changes
+    are 0."""
     received = {d.receiver for d in exchanged.delivered} if exchanged is not None else set()
     completeness: dict[int, float] = {}
     map_error: dict[int, float] = {}
@@ -441,7 +442,7 @@ def _map_change(
 ) -> tuple[float, float]:
     """Changes of robot i's completeness and map error ∫δ ds (m²) this step (0, 0 if its map
     did not change); both sampled every ``MAPPING_STEP``, the map placed by the true start."""
-    if info is None or not (info.created or info.refit or info.merged or received):
+    if info is None or not (info.created or info.refit or info.merged or info.linked or received):
         return 0.0, 0.0
     polys = state.slams[i].polynomials()
     place = state.histories[i].true[0]  # the true start (see metrics.mapping)

@@ -160,6 +160,20 @@ def test_map_error_term__worse_map_negative_better_positive_unchanged_zero(
     assert _map_error_term(state, monkeypatch, 0.1, _CHANGED) == 0.0
 
 
+def test_map_error_term__a_step_whose_only_change_is_a_link_is_re_evaluated(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A link turns stored lines (slam/links.py): a structural change like a refit, so the
+    step's map is evaluated again, here 0.2 m off: the same −0.2 m × length as above."""
+    from polyslam_env.environment.rewards import MAPPING_STEP
+
+    state = _fresh_state()
+    _map_error_term(state, monkeypatch, 0.0, _CHANGED)
+    only_linked = dataclasses.replace(_CHANGED, created=0, linked=1)
+    worse = _map_error_term(state, monkeypatch, 0.2, only_linked)
+    assert -0.2 * (_LENGTH + MAPPING_STEP) - 1e-12 <= worse <= -0.2 * _LENGTH
+
+
 def test_map_error_term__deleting_a_correct_map_earns_nothing(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
