@@ -141,6 +141,15 @@ class SlamConfig(Config):
     # so this is a floor that keeps the link's innovation covariance well conditioned; raise
     # it for walls that are not (links.py)
     wall_straightness: float = 0.001
+    # straight walls meet at right angles (most floor plans; the generators' walls are all
+    # parallel to the axes): a straight landmark ``link_age`` steps old is tied in direction to
+    # the best-known straight landmark of another direction group when the χ²(1) gate on
+    # their angle's distance from the nearest multiple of 90° passes (links.py); False: never
+    # (paper; set it for walls at other angles)
+    square_walls: bool = True
+    # degrees, how far a real wall may be from square to the others (the square link's noise
+    # beyond the fits'): 1 mm per metre, as wall_straightness
+    wall_squareness_deg: float = 0.057
     blas_threads: int = 1  # BLAS threads during a step (polyslam_env/core/blas.py); 0: leave as is
     backend: str = "polynomial"  # one of BACKENDS; the point ones map the pillars
     points: PointBackendConfig = field(default_factory=PointBackendConfig)
@@ -184,6 +193,11 @@ class SlamConfig(Config):
         ):
             raise ConfigError(f"slam.link_age: must be an integer >= 0, got {self.link_age!r}")
         check_positive("slam.wall_straightness", self.wall_straightness)
+        check_positive("slam.wall_squareness_deg", self.wall_squareness_deg)
+        if not isinstance(self.square_walls, bool):
+            raise ConfigError(
+                f"slam.square_walls: must be true or false, got {self.square_walls!r}"
+            )
         check_range("slam.update_spacing_deg", self.update_spacing_deg, 0.0, 360.0)
         check_non_negative("slam.odom_sigma_xy", self.odom_sigma_xy)
         check_non_negative("slam.odom_sigma_theta_deg", self.odom_sigma_theta_deg)
@@ -230,6 +244,7 @@ PRESETS: dict[str, SlamConfig] = {
         update_spacing_deg=0.0,
         link_clusters=False,
         link_gap=0.0,
+        square_walls=False,
         shape_rotation="heading",
     )
 }

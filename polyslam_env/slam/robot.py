@@ -49,7 +49,7 @@ from polyslam_env.slam.landmarks import (
     evidence_on,
     hull,
 )
-from polyslam_env.slam.links import evidence_gap, link_rows, turned_line
+from polyslam_env.slam.links import evidence_gap, line_angle, link_rows, off_square, turned_line
 from polyslam_env.slam.merging import JOIN_GAP, choose_merge, face_normal, merge_points
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -85,7 +85,7 @@ class SlamStepInfo:
     sigma: float
     divergence_f: float
     diverging: bool
-    linked: int = 0  # pieces of one wall linked across a gap (links.py)
+    linked: int = 0  # pieces of one wall linked across a gap, walls tied square (links.py)
 
 
 class PolySlam:
@@ -122,7 +122,9 @@ class PolySlam:
     steps ago is linked to the straight pieces of its wall across gaps up to ``link_gap``
     (doorways) by a collinearity pseudo-measurement (:mod:`~polyslam_env.slam.links`,
     :meth:`_link_walls`); that update does estimate the two lines' turns, and turns the
-    stored lines by them.
+    stored lines by them. With ``square_walls`` a straight landmark is also tied square to
+    the straight wall of another direction group whose angle to it is best known
+    (:meth:`_square_wall`).
 
     Set :attr:`profile` to a dict to collect per-stage wall times (s) of every step under
     the keys ``predict``, ``association``, ``map`` (extents, refits, new landmarks,
@@ -155,6 +157,7 @@ class PolySlam:
         )
         self.step_count = 0
         self._wall_of: dict[int, int] = {}  # landmark id → its wall group (links.py)
+        self._direction_of: dict[int, int] = {}  # landmark id → its direction group (ditto)
         self._received: set[int] = set()  # ids holding a received landmark (never linked)
         self.diverging = False
         self.divergence_f = 0.0
@@ -215,6 +218,13 @@ class PolySlam:
         """Landmark id → its wall group: pieces linked across gaps, directly or through others,
         share one (:mod:`~polyslam_env.slam.links`); a copy."""
         return dict(self._wall_of)
+
+    @property
+    def direction_groups(self) -> dict[int, int]:
+        """Landmark id → its direction group: straight walls tied square (or parallel, as
+        pieces of one wall are) to each other, directly or through others (:mod:`~polyslam_env.
+        slam.links`); a copy."""
+        return dict(self._direction_of)
 
     def c0_variance(self, landmark_id: int) -> float:
         k = self.table.state_index(landmark_id)
@@ -550,6 +560,7 @@ class PolySlam:
             evidence=evidence,
         )
         self._wall_of[landmark_id] = landmark_id
+        self._direction_of[landmark_id] = landmark_id
         return landmark_id
 
     def _add_rotation(
@@ -618,6 +629,7 @@ class PolySlam:
         self.mean, self.cov = ekf.remove(self.mean, self.cov, drop)
         self.table.remove(idx)
         self._wall_of.pop(landmark_id, None)
+        self._direction_of.pop(landmark_id, None)
         self._received.discard(landmark_id)
 
     def _replace(
@@ -819,7 +831,7 @@ class PolySlam:
         straight pieces of their walls across gaps (:meth:`_link_walls`); a linked landmark is
         then checked for merges again (pieces a few cm apart that no join fit could explain
         may now be one polynomial). Returns the number of links."""
-        if self.config.link_gap <= 0.0:
+        if self.config.link_gap <= 0.0 and not self.config.square_walls:
             return 0
         table = self.table
         made_at = self.step_count - self.config.link_age
@@ -827,7 +839,7 @@ class PolySlam:
                  if at == made_at]  # fmt: skip
         links = 0
         for landmark_id in fresh:
-            made = self._link_walls(landmark_id)
+            made = self._link_walls(landmark_id) + self._square_wall(landmark_id)
             if made:
                 links += made
                 self._merge_into_map(landmark_id)
@@ -871,18 +883,84 @@ class PolySlam:
         table = self.table
         i, j = table.index_of(first), table.index_of(second)
         xis = np.array([0.5 * sum(self._evidence(i)), 0.5 * sum(self._evidence(j))])
+        if self._direction_of[first] == self._direction_of[second]:
+            xis = xis.mean(keepdims=True)  # parallel already: only the offset is new
         residual, H = link_rows(
             self._polynomial(i), 3 + i, self._turn_of(i),
             self._polynomial(j), 3 + j, self._turn_of(j),
             xis, self.mean.size,
         )  # fmt: skip
         r = float(table.model_var[i] + table.model_var[j]) + self.config.wall_straightness**2
+        if not self._update_pair(i, j, -residual, H, r * np.eye(xis.size)):
+            return False
+        self._join_walls(first, second)
+        return True
+
+    def _square_wall(self, landmark_id: int) -> int:
+        """Tie straight landmark ``landmark_id`` in direction to the straight landmark of
+        another direction group, made at least ``config.link_age`` steps ago, whose angle to
+        it the state knows best, by the pseudo-measurement that their angle is a multiple of
+        90° (:func:`~polyslam_env.slam.links.off_square`), noise ``config.wall_squareness_deg``²
+        plus each fit's direction variance beyond the range noise, gated by χ²(1); estimates
+        the two lines' turns as a link does. Needs ``config.square_walls`` and rotation
+        states; received landmarks take no part. Returns 1 if tied, else 0."""
+        cfg, table = self.config, self.table
+        if (
+            not cfg.square_walls
+            or not cfg.rotation_states
+            or landmark_id not in table
+            or landmark_id in self._received
+        ):
+            return 0
+        i = table.index_of(landmark_id)
+        if table.order[i] != 1 or not self._long_enough(landmark_id):
+            return 0
+        group = self._direction_of[landmark_id]
+        matured = self.step_count - cfg.link_age
+        others = np.array(
+            [
+                j
+                for j, (lid, at) in enumerate(zip(table.ids, table.changed_at, strict=True))
+                if table.order[j] == 1
+                and at <= matured
+                and lid not in self._received
+                and self._direction_of[lid] != group
+                and self._long_enough(lid)
+            ],
+            dtype=np.int64,
+        )
+        if others.size == 0:
+            return 0
+        t_i, t_others = self._turn_index(i), self._turn_index(0) + others
+        cov = self.cov
+        relative = cov[t_i, t_i] + cov[t_others, t_others] - 2.0 * cov[t_i, t_others]
+        j = int(others[int(np.argmin(relative))])
+        t_j = self._turn_index(j)
+        angle = line_angle(table.polys[i]) + self.mean[t_i]
+        angle -= line_angle(table.polys[j]) + self.mean[t_j]
+        H = np.zeros((1, self.mean.size))
+        H[0, t_i], H[0, t_j] = 1.0, -1.0
+        r = math.radians(cfg.wall_squareness_deg) ** 2 + sum(
+            float(table.model_var[k]) / float(table.fit_half[k]) ** 2 for k in (i, j)
+        )
+        if not self._update_pair(i, j, np.array([-off_square(angle)]), H, np.array([[r]])):
+            return 0
+        self._join_groups(self._direction_of, landmark_id, table.ids[j])
+        return 1
+
+    def _update_pair(
+        self, i: int, j: int, innovation: np.ndarray, H: np.ndarray, R: np.ndarray
+    ) -> bool:
+        """A pseudo-measurement tying straight landmarks ``i`` and ``j`` (indices):
+        :func:`~polyslam_env.slam.ekf.update_rows` with every turn but the two lines' own
+        considered, then both stored lines turned by their estimates (:meth:`_apply_turn`);
+        whether it passed its gate and was applied."""
         considered = None
         if self.config.rotation_states:  # every turn but the two lines' own
-            turns = self._turn_index(0) + np.arange(len(table))
+            turns = self._turn_index(0) + np.arange(len(self.table))
             considered = np.delete(turns, [i, j])
         result = ekf.update_rows(
-            self.mean, self.cov, -residual, H, r * np.eye(2), self.config.gate_prob, considered
+            self.mean, self.cov, innovation, H, R, self.config.gate_prob, considered
         )
         if result is None:
             return False
@@ -893,7 +971,6 @@ class PolySlam:
                 self._apply_turn(k)
         self._state_version += 1
         self._carry_stored_points(before, self.mean[:3])
-        self._join_walls(first, second)
         return True
 
     def _apply_turn(self, index: int) -> None:
@@ -908,13 +985,20 @@ class PolySlam:
 
     def _join_walls(self, keep: int, other: int) -> None:
         """Put landmark ``other``'s wall group into landmark ``keep``'s (a link or a merge:
-        what they share is in the state now, and must not be used again)."""
-        target, source = self._wall_of[keep], self._wall_of[other]
+        what they share is in the state now, and must not be used again), and so their
+        direction groups (one wall is parallel to itself)."""
+        self._join_groups(self._wall_of, keep, other)
+        self._join_groups(self._direction_of, keep, other)
+
+    @staticmethod
+    def _join_groups(group_of: dict[int, int], keep: int, other: int) -> None:
+        """Put landmark ``other``'s group of ``group_of`` into landmark ``keep``'s."""
+        target, source = group_of[keep], group_of[other]
         if target == source:
             return
-        for lid, group in self._wall_of.items():
+        for lid, group in group_of.items():
             if group == source:
-                self._wall_of[lid] = target
+                group_of[lid] = target
 
     def _long_enough(self, landmark_id: int) -> bool:
         """Whether the landmark is long enough to update the pose (``min_update_extent``)."""

@@ -119,7 +119,7 @@ def test_rendezvous_mode__with_the_pillar_sensor_on_sends_no_features() -> None:
     data = _config(max_steps=250, channel={"range": 3.0})
     data["world"]["camera"]["enabled"] = True
     env = parallel_env(EnvConfig.from_dict(data))
-    run_episode(env, make_team("frontier", env), seed=2)  # a seed whose robots meet
+    run_episode(env, make_team("frontier", env), seed=0)  # a seed whose robots meet
     exchange = env.episode.exchange
     assert exchange is not None
     assert any(d.received for d in exchange.history), "no rendezvous message was fused"
@@ -169,7 +169,8 @@ def test_alignment_mode_on_walls__a_shifted_building_is_vetoed_or_ambiguous() ->
     never accepted, while some wrong hypotheses were on the table."""
     config = _walls_config(map="generator:warehouse", max_steps=400)
     env = parallel_env(EnvConfig.from_dict(config))
-    run_episode(env, make_team("frontier", env), seed=1)
+    # a seed whose aligner meets wrong hypotheses (4 declined; seeds 1–6 accept no wrong one)
+    run_episode(env, make_team("frontier", env), seed=4)
     state = env.episode
     assert state.exchange is not None
     from polyslam_env.environment.stages import _true_transform

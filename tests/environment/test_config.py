@@ -90,6 +90,7 @@ def test_env_config__slam_preset_replaces_slam_and_conflicts_with_custom_slam() 
         update_spacing_deg=0.0,
         link_clusters=False,
         link_gap=0.0,
+        square_walls=False,
         shape_rotation="heading",
     )
     with pytest.raises(ConfigError, match="slam_preset"):

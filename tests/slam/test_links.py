@@ -12,11 +12,11 @@ from polyslam_env.core.errors import ConfigError
 from polyslam_env.slam import ekf
 from polyslam_env.slam.config import PRESETS, SlamConfig
 from polyslam_env.slam.fitting import Fit, polynomial_points
-from polyslam_env.slam.links import evidence_gap, link_rows, turned_line
+from polyslam_env.slam.links import evidence_gap, line_angle, link_rows, off_square, turned_line
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
-from tests.slam.test_map_building import cast, drive, straight
+from tests.slam.test_map_building import cast, drive, straight, turn_around
 
 
 def _rotate_about(points: np.ndarray, centre: np.ndarray, angle: float) -> np.ndarray:
@@ -275,6 +275,8 @@ BAD_LINK_SETTINGS = [
     ("link_age", -1),
     ("link_age", 2.5),
     ("wall_straightness", 0.0),
+    ("wall_squareness_deg", -0.1),
+    ("square_walls", "yes"),
 ]
 
 
@@ -298,3 +300,116 @@ def test_received_landmark__is_never_linked() -> None:
         slam.step(np.zeros(3), np.full(5, np.inf))
     assert len(set(slam.wall_groups.values())) == 2
     assert slam.wall_groups[lid] == lid
+    assert slam.direction_groups[lid] == lid  # nor tied square
+
+
+# -- walls tied square ------------------------------------------------------------------------
+@pytest.mark.parametrize(("variate", "slope"), [(1, 0.3), (1, -2.0), (2, 0.3), (2, -0.01)])
+def test_line_angle__is_the_direction_of_two_points_of_the_line(variate: int, slope: float) -> None:
+    """Oracle: the angle of the chord between two points of the line, taken modulo π."""
+    poly = Polynomial(variate, np.array([0.4, slope]), -1.0, 1.0)
+    a, b = poly.points_at(np.array([-1.0, 1.0]))
+    chord = math.atan2(b[1] - a[1], b[0] - a[0])
+    assert math.isclose(math.sin(line_angle(poly) - chord), 0.0, abs_tol=1e-12)
+    assert -math.pi < line_angle(poly) <= math.pi
+
+
+@pytest.mark.parametrize(
+    ("angle_deg", "expected_deg"),
+    [(0.3, 0.3), (89.5, -0.5), (-91.0, -1.0), (180.2, 0.2), (44.0, 44.0), (46.0, -44.0)],
+)
+def test_off_square__is_the_distance_to_the_nearest_multiple_of_90(
+    angle_deg: float, expected_deg: float
+) -> None:
+    assert math.isclose(
+        math.degrees(off_square(math.radians(angle_deg))), expected_deg, abs_tol=1e-9
+    )
+
+
+#: y = 0.8 above the path, and a wall x = 2 below it, square to the first, ending 0.3 m below
+#: the path (a room's wall meeting a corridor); the drive sweeps the −45° beam along it, turns
+#: round and comes back, so both walls are long straight landmarks.
+CORNER = np.array([[[-1.0, 0.8], [6.0, 0.8]], [[2.0, -3.0], [2.0, -0.3]]])
+CORNER_TRUTH = {1: (0.8, 0.0), 2: (2.0, 0.5 * math.pi)}  # variate → (offset, direction)
+CORNER_DRIVE = straight(4.0, 0.05) + turn_around() + straight(3.5, 0.05)
+
+
+def _straight_errors(slam: PolySlam) -> tuple[np.ndarray, np.ndarray]:
+    """For each straight landmark of the corner, its offset error at the middle of its
+    evidence and its direction error (``line_angle`` against the true wall's), with their
+    covariance by the filter (the direction moves with the landmark's turn α alone)."""
+    errors, rows = [], []
+    n = slam.mean.size
+    for i, poly in enumerate(slam.polynomials()):
+        if slam.table.order[i] != 1:
+            continue
+        offset, direction = CORNER_TRUTH[poly.variate]
+        xi = float(np.mean(slam.table.evidence[i]))
+        pts = polynomial_points(poly, 3 + i, 1.0, 1, xi, xi, n, slam._turn_of(i))
+        eta = 1 if poly.variate == 1 else 0
+        rows.append(pts.d_state[0, eta] - float(poly.slope(xi)) * pts.d_state[0, 1 - eta])
+        errors.append(float(poly.value(xi)) - offset)
+        turn = np.zeros(n)
+        turn[slam._turn_index(i)] = 1.0
+        rows.append(turn)
+        errors.append(line_angle(poly) - direction)
+    J = np.array(rows)
+    return np.array(errors), J @ slam.cov @ J.T
+
+
+def test_square_walls__the_corner_walls_are_tied_once() -> None:
+    """Both corner walls end in one direction group; tying again changes nothing (a fact is
+    used once); with ``square_walls`` off (and in the paper preset) nothing is tied."""
+    for seed in range(3):
+        slam, *_ = drive(CORNER, CORNER_DRIVE, seed)
+        variates = {p.variate for p in slam.polynomials()}
+        assert variates == {1, 2}, seed
+        assert len(set(slam.direction_groups.values())) == 1, (seed, slam.direction_groups)
+        mean, cov = slam.mean.copy(), slam.cov.copy()
+        for lid in slam.landmark_ids:
+            assert slam._square_wall(lid) == 0
+        np.testing.assert_array_equal(slam.mean, mean)
+        np.testing.assert_array_equal(slam.cov, cov)
+        off, *_ = drive(CORNER, CORNER_DRIVE, seed, SlamConfig(square_walls=False))
+        assert len(set(off.direction_groups.values())) == off.n_landmarks
+    assert PRESETS["paper"].square_walls is False
+
+
+def test_square_walls__tied_walls_are_where_their_filter_says_nees_over_seeds() -> None:
+    """The corner walls' offsets and directions against the filter's own covariance of them:
+    summed over 20 seeds, eᵀC⁻¹e is χ² with as many dof as rows (two-sided 99 % band) — the
+    tie neither turns the walls off the truth nor claims more than it gives."""
+    total, dof = 0.0, 0
+    for seed in range(20):
+        slam, *_ = drive(CORNER, CORNER_DRIVE, seed)
+        assert len(set(slam.direction_groups.values())) == 1, seed
+        e, C = _straight_errors(slam)
+        total += float(e @ np.linalg.solve(C, e))
+        dof += e.size
+    lo, hi = scipy.stats.chi2.ppf([0.005, 0.995], dof)
+    assert lo <= total <= hi, (total, dof, lo, hi)
+
+
+def test_square_walls__a_wall_20_degrees_off_square_is_not_tied() -> None:
+    """The corner with its second wall turned 20° from square: the χ²(1) gate refuses the
+    tie in every seed, so the walls stay in two direction groups."""
+    end = np.array([2.0, -0.3])
+    angle = math.radians(70.0)
+    start = end - 2.7 * np.array([math.cos(angle), math.sin(angle)])
+    walls = np.array([CORNER[0], [start, end]])
+    for seed in range(5):
+        slam, *_ = drive(walls, CORNER_DRIVE, seed)
+        long_straight = [
+            lid
+            for i, lid in enumerate(slam.table.ids)
+            if slam.table.order[i] == 1 and slam.table.hi[i] - slam.table.lo[i] >= 0.3
+        ]
+        assert len(long_straight) >= 2, seed
+        groups = slam.direction_groups
+        assert len({groups[lid] for lid in long_straight}) == len(long_straight), seed
+
+
+def test_square_walls__covariance_stays_symmetric_psd() -> None:
+    slam, *_ = drive(CORNER, CORNER_DRIVE, 4)
+    np.testing.assert_array_equal(slam.cov, slam.cov.T)
+    assert np.linalg.eigvalsh(slam.cov).min() > -1e-12
