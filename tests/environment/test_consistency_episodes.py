@@ -2,9 +2,9 @@
 
 A frontier robot explores a generated office floor, a warehouse or a pillar hall for a whole
 episode with
-``initial_error`` on: its true start is drawn from P0 around its frame origin. Over 20 seeded
+``initial_error`` on: its true start is drawn from P0 around its frame origin. Over 60 seeded
 runs the standard pose NEES *at the last step* must lie in the two-sided 95 % band of the mean
-of 20 χ²(3) variables, χ²(60)/20, both for the pose in the robot's frame (error includes the
+of 60 χ²(3) variables, χ²(180)/60, both for the pose in the robot's frame (error includes the
 start offset, covariance :attr:`PolySlam.pose_cov`) and for the filter's own estimate relative
 to the true start (:attr:`PolySlam.pose_cov_relative`, where P0 plays no part, the stricter
 test). And at every step of every run the pose covariance stays above the propagated P0
@@ -24,7 +24,12 @@ from polyslam_env.core.geometry import between, wrap_remainder
 from polyslam_env.environment.parallel import parallel_env
 from polyslam_env.slam.ekf import start_error_cov
 
-RUNS = 20
+#: 60, not the issue's minimum of 20: one run's final NEES has a heavy tail (a wall group's
+#: direction 2σ off, a run of 16), so the mean of 20 swings by more than its χ² band allows
+#: (the lone pillar-hall robot: 4.21 over seeds 0–19 with walls tied square, above the band's
+#: 4.16, and 3.28 over seeds 0–59, inside the 60-run band 2.41–3.65, which is the stricter test
+#: of the mean; README "Walls tied square")
+RUNS = 60
 #: (map, steps): rooms off a corridor; shelf rows, whose many short faces and corners are where
 #: beams pass a wall's end (slam.end_sigma: the lone warehouse robot was above the band without
 #: it); round pillars, short strongly curved landmarks whose beams may miss them within the
