@@ -30,6 +30,7 @@ import numpy as np
 
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.fitting import J_ROT
+from polyslam_env.slam.links import line_angle, off_square
 from polyslam_env.slam.polynomial import Polynomial
 
 #: χ²₃ 99 % quantile: a correction of T further than this (in Σ_T's metric) is refused, and
@@ -173,6 +174,44 @@ def _refine_from(
     # down (Förstner & Wrobel's σ̂₀², capped below at 1)
     factor = max(1.0, float(weight @ (residual * residual)) / len(counts))
     return t, factor * 0.5 * (posterior + posterior.T)
+
+
+#: Straight walls shorter than this (m) give no direction to :func:`square_turn`: a short
+#: piece's fitted direction is loose (a degree or more), and a round column's arc fitted as a
+#: line has none; 1 m as for the alignment's other length floors.
+SQUARE_MIN_LENGTH = 1.0
+
+
+def straight_walls(
+    polys: Sequence[Polynomial], min_length: float = SQUARE_MIN_LENGTH
+) -> list[tuple[float, float]]:
+    """(direction, length) of each straight polynomial (no coefficient past the slope) at
+    least ``min_length`` long along ξ: :func:`~polyslam_env.slam.links.line_angle`."""
+    return [
+        (line_angle(p), float(p.hi - p.lo))
+        for p in polys
+        if not np.any(p.coeffs[2:]) and p.hi - p.lo >= min_length
+    ]
+
+
+def square_turn(
+    sent: Sequence[tuple[float, float]], held: Sequence[tuple[float, float]], turn: float
+) -> float | None:
+    """The transform's turn (rad) nearest ``turn`` that lays the sender's straight walls
+    ``sent`` square to the receiver's ``held`` (each (direction in its own frame, length), as
+    :func:`straight_walls` gives them): both maps' walls are tied square among themselves
+    (``SlamConfig.square_walls``), so T's turn is the difference of their directions modulo
+    90°. Each sent wall gives one such turn against the longest held wall; the answer is their
+    length-weighted median (a wall the sender mapped off square does not move it). None when
+    either side has no straight wall."""
+    if not sent or not held:
+        return None
+    reference = max(held, key=lambda w: w[1])[0]
+    turns = np.array([turn - off_square(d + turn - reference) for d, _ in sent])
+    weights = np.array([length for _, length in sent])
+    order = np.argsort(turns)
+    cumulative = np.cumsum(weights[order])
+    return float(turns[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
 
 
 def _tangents(chain: np.ndarray) -> np.ndarray:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -207,3 +209,75 @@ def test_refine_transform__covariance_holds_errors_the_walls_share() -> None:
     rng = np.random.default_rng(13)
     upper = 3.0 + 2.576 * np.sqrt(6.0 / 300)
     assert _mean_nees_of_shared_offsets(rng, 0.02, 300) <= upper
+
+
+# -- the refined turn against square walls ---------------------------------------------------
+def _straight(direction_deg: float, length: float, c0: float = 0.5) -> Polynomial:
+    """A straight wall of the given direction (|direction| < 45° from its variate's axis)."""
+    variate = 1 if abs(math.remainder(direction_deg, 180.0)) < 45.0 else 2
+    angle = math.radians(direction_deg if variate == 1 else 90.0 - direction_deg)
+    return Polynomial(variate, [c0, math.tan(angle), 0.0, 0.0], 0.0, length)
+
+
+def test_straight_walls__keeps_long_straight_walls_with_their_directions() -> None:
+    walls = [
+        _straight(0.4, 2.0),
+        _straight(90.3, 1.5),
+        _straight(10.0, 0.6),  # too short to give a direction
+        Polynomial(1, [0.0, 0.1, 0.3, 0.0], 0.0, 3.0),  # curved
+    ]
+    got = alignment.straight_walls(walls)
+    assert len(got) == 2
+    assert math.isclose(got[0][0], math.radians(0.4)) and got[0][1] == 2.0
+    assert math.isclose(got[1][0], math.radians(90.3)) and got[1][1] == 1.5
+
+
+def test_square_turn__is_the_turn_that_squares_the_sent_walls_nearest_the_camera() -> None:
+    """The receiver's walls run at 0.3° (+ k·90°) in its frame, the sender's at 0.3° − θ in
+    its own, θ = 23°: every turn θ + k·90° squares them, and the one nearest the camera's turn
+    is θ; a sent wall off square by 7° (shorter than the rest together) does not move the
+    length-weighted median."""
+    theta = 23.0
+    held = alignment.straight_walls([_straight(0.3, 4.0), _straight(90.3, 2.0)])
+    sent_walls = [_straight(0.3 - theta + k * 90.0, 2.0) for k in (0, 1, 2)]
+    sent = alignment.straight_walls([*sent_walls, _straight(7.3 - theta, 1.5)])
+    for camera in (theta + 1.4, theta - 2.0, theta + 44.0):
+        got = alignment.square_turn(sent, held, math.radians(camera))
+        assert got is not None
+        assert math.isclose(math.degrees(got), theta, abs_tol=1e-9), camera
+    assert alignment.square_turn([], held, 0.0) is None
+    assert alignment.square_turn(sent, [], 0.0) is None
+
+
+def test_off_square__refuses_a_refined_turn_beyond_3_sigma_of_the_square_one() -> None:
+    """A receiver that mapped a room's corner (its longest straight wall runs along x) and a
+    message whose straight wall runs at −20° in the sender's frame: the square turns are
+    20° + k·90° (+ the receiver's wall's own direction). A refined turn 2.9 σ from it is kept,
+    3.1 σ is refused, σ² the refined turn's variance plus twice the receiver's wall's turn
+    variance; with ``square_walls`` off nothing is refused."""
+    from types import SimpleNamespace
+
+    from polyslam_env.comms.exchange import RendezvousExchange
+    from polyslam_env.comms.messages import PolynomialRecord
+    from polyslam_env.slam.config import SlamConfig
+    from tests.slam.test_links import CORNER, CORNER_DRIVE
+    from tests.slam.test_map_building import drive
+
+    slam, *_ = drive(CORNER, CORNER_DRIVE, 0)
+    lengths = [p.hi - p.lo for p in slam.polynomials()]
+    k = int(np.argmax(lengths))
+    wall = slam.polynomials()[k]
+    assert not np.any(wall.coeffs[2:]) and wall.variate == 1  # the wall along x
+    square = math.radians(20.0) + math.atan(float(wall.coeffs[1]))
+    turn = len(slam.table) + 3 + k
+    cov = np.diag([1e-4, 1e-4, math.radians(0.15) ** 2])
+    sigma = math.sqrt(cov[2, 2] + 2.0 * slam.cov[turn, turn])
+    message = SimpleNamespace(records=(PolynomialRecord(1, _straight(-20.0, 3.0), 1e-4),))
+    camera = np.array([1.0, 2.0, math.radians(21.0)])
+    for factor, refused in ((0.0, False), (2.9, False), (3.1, True), (-3.1, True)):
+        refined = np.array([1.0, 2.0, square + factor * sigma])
+        got = RendezvousExchange._off_square(slam, message, camera, refined, cov)
+        assert got is refused, factor
+    slam.config = SlamConfig(square_walls=False)
+    refined = np.array([1.0, 2.0, square + 5.0 * sigma])
+    assert not RendezvousExchange._off_square(slam, message, camera, refined, cov)
