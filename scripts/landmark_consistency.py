@@ -115,6 +115,14 @@ def main(argv: list[str] | None = None) -> int:
         default=SlamConfig().merge_turn,
         help="slam.merge_turn: how a merged landmark's turn is made (default: the config's)",
     )
+    parser.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="env config fields on every episode, as polyslam fidelity --set"
+        " (slam.square_walls=false)",
+    )
     args = parser.parse_args(argv)
     if args.map not in GENERATORS:
         print(f"--map: {args.map!r} is not a layout generator; valid: {', '.join(GENERATORS)}")
@@ -127,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
             maps=(args.map,),
             robots=args.robots,
             steps=args.steps,
-            env_set=(f"slam.merge_turn={args.merge_turn}",),
+            env_set=(f"slam.merge_turn={args.merge_turn}", *args.set),
         )
         env = parallel_env(EnvConfig.from_dict(episode_config(config, args.map, args.exchange)))
     except ConfigError as err:

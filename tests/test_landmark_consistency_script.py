@@ -41,3 +41,9 @@ def test_wall_errors__none_without_a_wall_near() -> None:
     script = _script()
     far = np.column_stack([np.arange(0.0, 4.0, 0.0025), np.full(1600, 3.0)])
     assert script.wall_errors(Polynomial(1, np.array([1.0, 0.0]), 0.0, 4.0), far) is None
+
+
+def test_main__a_bad_set_field_is_a_one_line_error(capsys: pytest.CaptureFixture[str]) -> None:
+    assert _script().main(["--seeds", "1", "--set", "slam.square_wall=false"]) == 2
+    out = capsys.readouterr().out.strip()
+    assert len(out.splitlines()) == 1 and "slam.square_wall" in out
