@@ -41,6 +41,7 @@ from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import parallel_env
 from polyslam_env.metrics.boundary import boundary_samples
 from polyslam_env.slam.config import MERGE_TURNS, SlamConfig
+from polyslam_env.slam.links import line_angle, off_square
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.generators import GENERATORS
 
@@ -69,7 +70,16 @@ def wall_errors(poly: Polynomial, boundary: np.ndarray) -> tuple[float, float, i
     return float(np.mean(diffs)), slope / (1.0 + mean_slope**2), len(diffs)
 
 
-def robot_report(env: object, i: int, min_length: float) -> dict[str, float]:
+def square_turn_error(poly: Polynomial, frame_heading: float) -> float:
+    """Turn error (rad) of straight ``poly`` in a frame whose heading in the world is
+    ``frame_heading``, where every true wall runs along an axis (the generators' maps): its
+    direction's distance from the nearest multiple of 90°."""
+    return off_square(line_angle(poly) + frame_heading)
+
+
+def robot_report(
+    env: object, i: int, min_length: float, square_truth: bool = False
+) -> dict[str, float]:
     state = env.episode  # type: ignore[attr-defined]
     slam = state.slams[i]
     true_start = state.histories[i].true[0]
@@ -85,6 +95,8 @@ def robot_report(env: object, i: int, min_length: float) -> dict[str, float]:
         if found is None:
             continue
         offset, turn, _ = found
+        if square_truth and slam.table.order[j] == 1:
+            turn = square_turn_error(poly, float(true_start[2]))
         c0_nees.append(offset * offset / slam.cov[3 + j, 3 + j])
         if rotations and poly.length() >= min_length:
             var = slam.cov[3 + n + j, 3 + n + j]
@@ -123,6 +135,14 @@ def main(argv: list[str] | None = None) -> int:
         help="env config fields on every episode, as polyslam fidelity --set"
         " (slam.square_walls=false)",
     )
+    parser.add_argument(
+        "--square-truth",
+        action="store_true",
+        help="a straight landmark's turn error is its direction's distance from the nearest"
+        " multiple of 90° in the true frame (exact on the generators' maps, whose walls all"
+        " run along the axes); the default fit to nearby boundary points takes a shelf"
+        " corner's perpendicular face for the wall at a short landmark's end",
+    )
     args = parser.parse_args(argv)
     if args.map not in GENERATORS:
         print(f"--map: {args.map!r} is not a layout generator; valid: {', '.join(GENERATORS)}")
@@ -146,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     for seed in range(args.seeds):
         run_episode(env, make_team("frontier", env), seed)
         for i in range(args.robots):
-            rows.append(robot_report(env, i, args.min_length))
+            rows.append(robot_report(env, i, args.min_length, args.square_truth))
         print(f"seed {seed} done ({time.perf_counter() - began:.0f} s)", file=sys.stderr)
     keys = list(rows[0])
     table = {k: np.array([r[k] for r in rows]) for k in keys}

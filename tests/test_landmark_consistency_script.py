@@ -47,3 +47,14 @@ def test_main__a_bad_set_field_is_a_one_line_error(capsys: pytest.CaptureFixture
     assert _script().main(["--seeds", "1", "--set", "slam.square_wall=false"]) == 2
     out = capsys.readouterr().out.strip()
     assert len(out.splitlines()) == 1 and "slam.square_wall" in out
+
+
+def test_square_turn_error__is_the_distance_from_the_nearest_axis_in_the_world() -> None:
+    """A line 0.3° off its frame's x axis, in a frame turned 90° in the world, is 0.3° off the
+    world's y axis; a variate-2 line at 90.2° in an unturned frame is 0.2° off."""
+    script = _script()
+    along_x = Polynomial(1, np.array([0.5, math.tan(math.radians(0.3))]), 0.0, 2.0)
+    got = script.square_turn_error(along_x, math.pi / 2)
+    assert math.isclose(math.degrees(got), 0.3, abs_tol=1e-9)
+    along_y = Polynomial(2, np.array([0.5, math.tan(math.radians(-0.2))]), 0.0, 2.0)
+    assert math.isclose(math.degrees(script.square_turn_error(along_y, 0.0)), 0.2, abs_tol=1e-9)
