@@ -69,6 +69,8 @@ __all__ = [
 
 #: Steps a robot stalled against another drives away from it before it plans again.
 BACK_OFF_STEPS = 8
+#: rad: a robot further than this off its heading turns on the spot before it drives on.
+TURN_FIRST = 0.7
 
 #: 8-neighbour offsets (row, col) used for the graph edges (the other four are their reverses).
 _EDGE_OFFSETS = ((0, 1), (1, 0), (1, 1), (1, -1))
@@ -432,13 +434,16 @@ class FrontierPolicy(Policy):
 
     def _head(self, pose: np.ndarray, direction: float, ranges: np.ndarray) -> tuple[float, float]:
         """(v, ω) that drive toward the own-frame ``direction`` (rad): on the spot while it
-        is more than 0.7 rad off, then forward within the front beams' cap."""
-        ctx = self.context
+        is more than :data:`TURN_FIRST` off, then forward within the front beams' cap."""
         alpha = math.remainder(direction - pose[2], 2 * math.pi)
-        omega = float(np.clip(alpha / ctx.dt, -ctx.omega_max, ctx.omega_max))
-        if abs(alpha) > 0.7:
-            return 0.0, omega
-        return min(0.5 * ctx.v_max, self._speed_cap(ranges)), omega
+        if abs(alpha) > TURN_FIRST:
+            return 0.0, self._turn_rate(alpha)
+        return min(0.5 * self.context.v_max, self._speed_cap(ranges)), self._turn_rate(alpha)
+
+    def _turn_rate(self, alpha: float) -> float:
+        """ω (rad/s) that turns by ``alpha`` (rad) in one step, within ±ω_max."""
+        ctx = self.context
+        return float(np.clip(alpha / ctx.dt, -ctx.omega_max, ctx.omega_max))
 
     def _claim(self, pose: np.ndarray, detections: np.ndarray) -> bool:
         """Remember the robots the camera sees (k, 2: distance m, bearing rad) as claims;
@@ -656,8 +661,8 @@ class FrontierPolicy(Policy):
         c, s = math.cos(pose[2]), math.sin(pose[2])
         fx, fy = c * dx + s * dy, -s * dx + c * dy  # target in the robot frame
         dist, alpha = math.hypot(fx, fy), math.atan2(fy, fx)
-        if abs(alpha) > 0.7:  # turn on the spot first
-            return 0.0, float(np.clip(alpha / ctx.dt, -ctx.omega_max, ctx.omega_max))
+        if abs(alpha) > TURN_FIRST:
+            return 0.0, self._turn_rate(alpha)
         v = min(ctx.v_max, 0.8 * dist / ctx.dt)
         v = min(v, self._speed_cap(ranges))
         omega = 2.0 * math.sin(alpha) / max(dist, 1e-6) * v + 0.3 * alpha / ctx.dt

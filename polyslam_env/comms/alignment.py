@@ -182,16 +182,18 @@ def _refine_from(
 SQUARE_MIN_LENGTH = 1.0
 
 
+def is_straight_wall(poly: Polynomial, min_length: float = SQUARE_MIN_LENGTH) -> bool:
+    """Whether ``poly`` is straight (no coefficient past the slope) and at least
+    ``min_length`` long along ξ."""
+    return not np.any(poly.coeffs[2:]) and poly.hi - poly.lo >= min_length
+
+
 def straight_walls(
     polys: Sequence[Polynomial], min_length: float = SQUARE_MIN_LENGTH
 ) -> list[tuple[float, float]]:
-    """(direction, length) of each straight polynomial (no coefficient past the slope) at
-    least ``min_length`` long along ξ: :func:`~polyslam_env.slam.links.line_angle`."""
-    return [
-        (line_angle(p), float(p.hi - p.lo))
-        for p in polys
-        if not np.any(p.coeffs[2:]) and p.hi - p.lo >= min_length
-    ]
+    """(direction, length) of each of ``polys`` that :func:`is_straight_wall`:
+    :func:`~polyslam_env.slam.links.line_angle`."""
+    return [(line_angle(p), float(p.hi - p.lo)) for p in polys if is_straight_wall(p, min_length)]
 
 
 def square_turn(

@@ -100,8 +100,8 @@ import scipy.linalg
 from scipy.spatial import cKDTree
 
 from polyslam_env.comms.alignment import (
-    SQUARE_MIN_LENGTH,
     frame_points,
+    is_straight_wall,
     refine_transform,
     square_turn,
     straight_walls,
@@ -675,8 +675,9 @@ class RendezvousExchange:
         return tuple(dropped)
 
     def counters(self, i: int) -> dict[str, int]:
-        """Robot i's traffic: bytes, rendezvous, messages and polynomials, and the received
-        points it did not take (too uncertain, see :data:`RECEIVED_SIGMAS`)."""
+        """Robot i's traffic: bytes, rendezvous, messages and polynomials, the received
+        points it did not take (too uncertain, see :data:`RECEIVED_SIGMAS`) and the refined
+        transforms it refused as off square (:meth:`_off_square`)."""
         c = self.channel.counters(i)
         return {
             "bytes_sent": c.bytes_sent,
@@ -692,6 +693,7 @@ class RendezvousExchange:
             "polynomials_sent": self._polys_sent[i],
             "polynomials_received": self._polys_received[i],
             "received_points_dropped": self.dropped_points[i],
+            "refinements_off_square": self.off_square[i],
             "alignments_attempted": sum(a.receiver == i for a in self.alignments),
             "alignments_accepted": sum(a.receiver == i and a.result.accepted
                                        for a in self.alignments),
@@ -1090,19 +1092,15 @@ class RendezvousExchange:
         cfg = slam.config
         if not (cfg.square_walls and cfg.rotation_states):
             return False
-        held = [
-            (lid, poly)
-            for lid, poly in zip(slam.table.ids, slam.polynomials(), strict=True)
-            if not np.any(poly.coeffs[2:]) and poly.hi - poly.lo >= SQUARE_MIN_LENGTH
-        ]
+        polys = slam.polynomials()
+        held = [k for k, poly in enumerate(polys) if is_straight_wall(poly)]
         sent = straight_walls([rec.polynomial for rec in message.records])
         if not held or not sent:
             return False
-        longest, poly = max(held, key=lambda h: h[1].hi - h[1].lo)
-        square = square_turn(sent, straight_walls([poly]), float(t[2]))
+        k = max(held, key=lambda k: polys[k].hi - polys[k].lo)  # the longest
+        square = square_turn(sent, straight_walls([polys[k]]), float(t[2]))
         assert square is not None
-        k = slam.table.index_of(longest)
-        turn_var = float(slam.cov[3 + len(slam.table) + k, 3 + len(slam.table) + k])
+        turn_var = slam.turn_variance(slam.table.ids[k])
         sigma = math.sqrt(float(cov_refined[2, 2]) + 2.0 * turn_var)
         return abs(wrap_scalar(float(refined[2]) - square)) > SQUARE_SIGMAS * sigma
 

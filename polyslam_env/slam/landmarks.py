@@ -334,12 +334,7 @@ class LandmarkTable:
         self.polys[index] = Polynomial(poly.variate, poly.coeffs, lo, hi)
         self.lo, self.hi = self.lo.copy(), self.hi.copy()
         self.lo[index], self.hi[index] = lo, hi
-        rng = shape_range(
-            self.shape[index : index + 1], self.lo[index : index + 1], self.hi[index : index + 1]
-        )
-        self.eta_range = self.eta_range.copy()
-        self.eta_range[index] = rng[0]
-        self._changed(ids=False)
+        self._reshaped(index)
 
     def set_shape(self, index: int, poly: Polynomial) -> None:
         """New shape of landmark ``index`` (same variate, extent and order at most the
@@ -357,8 +352,13 @@ class LandmarkTable:
         shape[index, 1 : poly.order + 1] = poly.shape
         order[index] = len(_own_order(shape[index])) - 1
         self.shape, self.order = shape, order
-        rng = shape_range(shape[index : index + 1], self.lo[index : index + 1],
-                          self.hi[index : index + 1])  # fmt: skip
+        self._reshaped(index)
+
+    def _reshaped(self, index: int) -> None:
+        """Landmark ``index``'s shape or extent changed: its η range again, caches dropped."""
+        rng = shape_range(
+            self.shape[index : index + 1], self.lo[index : index + 1], self.hi[index : index + 1]
+        )
         self.eta_range = self.eta_range.copy()
         self.eta_range[index] = rng[0]
         self._changed(ids=False)

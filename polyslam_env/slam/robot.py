@@ -230,6 +230,13 @@ class PolySlam:
         k = self.table.state_index(landmark_id)
         return float(self.cov[k, k])
 
+    def turn_variance(self, landmark_id: int) -> float:
+        """Variance (rad²) of the landmark's turn α (needs rotation states)."""
+        if not self.config.rotation_states:
+            raise ValueError("turn_variance: this filter has no turn states (shape_rotation)")
+        k = self._turn_index(self.table.index_of(landmark_id))
+        return float(self.cov[k, k])
+
     def map_error_jacobian(self, spacing: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
         """How the state's errors move the map: at points every ``spacing`` m of ξ along
         every landmark's extent, each point's arc length (M,) (m: the points weigh as

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -186,32 +187,56 @@ def test_doorways__the_pieces_of_one_wall_are_linked_into_one_group() -> None:
         assert len(_groups(slam)) == 1, (seed, _groups(slam))
 
 
-def _offsets_at_middles(slam: PolySlam) -> tuple[np.ndarray, np.ndarray]:
-    """Each landmark's error at the middle of its evidence (η − 0.8: the wall is y = 0.8,
-    the robot's frame is the world's) and their covariance by the filter (rows as
-    :func:`link_rows`' for one curve)."""
+def _wall_errors(
+    slam: PolySlam, truth: dict[int, tuple[float, float]], directions: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each landmark's offset error at the middle of its evidence against its variate's true
+    wall, ``truth[variate]`` = (offset, direction) (the robot's frame is the world's), with
+    ``directions`` also each straight landmark's direction error (``line_angle``; it moves
+    with the landmark's turn α alone) and only straight landmarks; and their covariance by the
+    filter (offset rows as :func:`link_rows`' for one curve)."""
     errors, rows = [], []
+    n = slam.mean.size
     for i, poly in enumerate(slam.polynomials()):
+        if directions and slam.table.order[i] != 1:
+            continue
+        offset, direction = truth[poly.variate]
         xi = float(np.mean(slam.table.evidence[i]))
-        pts = polynomial_points(poly, 3 + i, 1.0, 1, xi, xi, slam.mean.size, slam._turn_of(i))
-        rows.append(pts.d_state[0, 1] - float(poly.slope(xi)) * pts.d_state[0, 0])
-        errors.append(float(poly.value(xi)) - 0.8)
+        pts = polynomial_points(poly, 3 + i, 1.0, 1, xi, xi, n, slam._turn_of(i))
+        eta = 1 if poly.variate == 1 else 0
+        rows.append(pts.d_state[0, eta] - float(poly.slope(xi)) * pts.d_state[0, 1 - eta])
+        errors.append(float(poly.value(xi)) - offset)
+        if directions:
+            turn = np.zeros(n)
+            turn[slam._turn_index(i)] = 1.0
+            rows.append(turn)
+            errors.append(line_angle(poly) - direction)
     J = np.array(rows)
     return np.array(errors), J @ slam.cov @ J.T
+
+
+def _assert_chi2_over_seeds(errors_of: Callable[[int], tuple[np.ndarray, np.ndarray]]) -> None:
+    """Summed over seeds 0–19, eᵀC⁻¹e of ``errors_of(seed)`` = (e, C) lies in the two-sided
+    99 % band of a χ² with as many dof as rows."""
+    total, dof = 0.0, 0
+    for seed in range(20):
+        e, C = errors_of(seed)
+        total += float(e @ np.linalg.solve(C, e))
+        dof += e.size
+    lo, hi = scipy.stats.chi2.ppf([0.005, 0.995], dof)
+    assert lo <= total <= hi, (total, dof, lo, hi)
 
 
 def test_doorways__linked_pieces_are_where_their_filter_says_nees_over_seeds() -> None:
     """The linked pieces' errors at their middles against the filter's own covariance of
     them: summed over 20 seeds, eᵀC⁻¹e is χ² with as many dof as pieces (two-sided 99 %
     band) — the links neither pull the pieces off the wall nor claim more than they give."""
-    total, dof = 0.0, 0
-    for seed in range(20):
+
+    def errors_of(seed: int) -> tuple[np.ndarray, np.ndarray]:
         slam, *_ = drive(DOORS, straight(8.0), seed)
-        e, C = _offsets_at_middles(slam)
-        total += float(e @ np.linalg.solve(C, e))
-        dof += e.size
-    lo, hi = scipy.stats.chi2.ppf([0.005, 0.995], dof)
-    assert lo <= total <= hi, (total, dof, lo, hi)
+        return _wall_errors(slam, {1: (0.8, 0.0)})  # the wall is y = 0.8
+
+    _assert_chi2_over_seeds(errors_of)
 
 
 def test_doorways__link_gap_zero_links_nothing() -> None:
@@ -334,29 +359,6 @@ CORNER_TRUTH = {1: (0.8, 0.0), 2: (2.0, 0.5 * math.pi)}  # variate → (offset, 
 CORNER_DRIVE = straight(4.0, 0.05) + turn_around() + straight(3.5, 0.05)
 
 
-def _straight_errors(slam: PolySlam) -> tuple[np.ndarray, np.ndarray]:
-    """For each straight landmark of the corner, its offset error at the middle of its
-    evidence and its direction error (``line_angle`` against the true wall's), with their
-    covariance by the filter (the direction moves with the landmark's turn α alone)."""
-    errors, rows = [], []
-    n = slam.mean.size
-    for i, poly in enumerate(slam.polynomials()):
-        if slam.table.order[i] != 1:
-            continue
-        offset, direction = CORNER_TRUTH[poly.variate]
-        xi = float(np.mean(slam.table.evidence[i]))
-        pts = polynomial_points(poly, 3 + i, 1.0, 1, xi, xi, n, slam._turn_of(i))
-        eta = 1 if poly.variate == 1 else 0
-        rows.append(pts.d_state[0, eta] - float(poly.slope(xi)) * pts.d_state[0, 1 - eta])
-        errors.append(float(poly.value(xi)) - offset)
-        turn = np.zeros(n)
-        turn[slam._turn_index(i)] = 1.0
-        rows.append(turn)
-        errors.append(line_angle(poly) - direction)
-    J = np.array(rows)
-    return np.array(errors), J @ slam.cov @ J.T
-
-
 def test_square_walls__the_corner_walls_are_tied_once() -> None:
     """Both corner walls end in one direction group; tying again changes nothing (a fact is
     used once); with ``square_walls`` off (and in the paper preset) nothing is tied."""
@@ -379,15 +381,13 @@ def test_square_walls__tied_walls_are_where_their_filter_says_nees_over_seeds() 
     """The corner walls' offsets and directions against the filter's own covariance of them:
     summed over 20 seeds, eᵀC⁻¹e is χ² with as many dof as rows (two-sided 99 % band) — the
     tie neither turns the walls off the truth nor claims more than it gives."""
-    total, dof = 0.0, 0
-    for seed in range(20):
+
+    def errors_of(seed: int) -> tuple[np.ndarray, np.ndarray]:
         slam, *_ = drive(CORNER, CORNER_DRIVE, seed)
         assert len(set(slam.direction_groups.values())) == 1, seed
-        e, C = _straight_errors(slam)
-        total += float(e @ np.linalg.solve(C, e))
-        dof += e.size
-    lo, hi = scipy.stats.chi2.ppf([0.005, 0.995], dof)
-    assert lo <= total <= hi, (total, dof, lo, hi)
+        return _wall_errors(slam, CORNER_TRUTH, directions=True)
+
+    _assert_chi2_over_seeds(errors_of)
 
 
 def test_square_walls__a_wall_20_degrees_off_square_is_not_tied() -> None:
