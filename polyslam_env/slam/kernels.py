@@ -594,6 +594,7 @@ def steady_beams(
     cov: np.ndarray,  # (3+n, 3+n)
     angles: np.ndarray,  # (B,) every beam's angle
     beams: np.ndarray,  # (k,) int64: the beams wanted
+    assigned: np.ndarray,  # (k,) int64: the landmark each was associated with (−1: any)
     reach: float,
     variate: np.ndarray,
     order: np.ndarray,
@@ -612,7 +613,12 @@ def steady_beams(
     landmark at the mean but, cast from one of the 8 sigma points (the mean ± ``spread``
     times each column of the Cholesky factor of that 4 × 4 covariance), misses it (past an
     end, hits another landmark first, or meets it below ``min_sine``); returns how many are
-    kept. Beams with no usable hit at the mean are kept (beam_rows skips them anyway). The
+    kept. Beams with no usable hit at the mean are kept (beam_rows skips them anyway). A beam
+    whose hit at the mean is on another landmark than the one its point was ``assigned`` to
+    (the association's, by the point's distance to each curve) is dropped too: the map does
+    not know which wall it met. A received wall's extent ran 24 cm past a corner (its end is
+    only as good as the frame transform); a beam that truly hit the corner's other wall was
+    cast onto that overhang and moved the wall 20 cm off the line it had been on. The
     shape's rotation, when it is a state, stays at its mean: its effect on where the beam
     meets the curve is the lever of a turn about the fit's centre, small on a short arc.
 
@@ -646,9 +652,9 @@ def steady_beams(
     moved = boxes.copy()  # a sigma point's c0 moves its landmark's curve, and its box, along η
     kept = 0
     for b in range(n_beams):
-        keep[b] = True
         j = landmark[b]
-        if j >= 0 and not _grazing(slope[b], denom[b], min_sine):
+        keep[b] = j < 0 or assigned[b] < 0 or j == assigned[b]
+        if keep[b] and j >= 0 and not _grazing(slope[b], denom[b], min_sine):
             index[0], index[1], index[2], index[3] = 0, 1, 2, 3 + j
             for r in range(4):
                 for c in range(4):
@@ -1100,6 +1106,7 @@ def update_scan(
     angles: np.ndarray,  # (B,) every beam's angle
     ranges: np.ndarray,  # (B,) every beam's reading
     beams: np.ndarray,  # (k,) int64: the beams to update with, in this order
+    assigned: np.ndarray,  # (k,) int64: the landmark each was associated with (−1: any)
     reach: float,
     variate: np.ndarray,
     order: np.ndarray,
@@ -1124,8 +1131,9 @@ def update_scan(
     consider_from: int,  # entries from here on are considered, not estimated (Schmidt)
     end_sigma: float,  # rows within this many σ of their landmark's end are dropped; 0: none
 ) -> int:
-    """The rows of ``beams`` (:func:`beam_rows`) but, with ``end_sigma`` > 0, those that miss
-    their landmark from one of its sigma points at ``end_sigma`` (:func:`steady_beams`) and
+    """The rows of ``beams`` (:func:`beam_rows`) but, with ``end_sigma`` > 0, those cast at
+    the mean onto another landmark than the one ``assigned``, those that miss their landmark
+    from one of its sigma points at ``end_sigma`` (:func:`steady_beams`) and
     those whose hit may lie past its end (:func:`ends_in_doubt`), their R made a joint
     bound (:func:`share_landmark_error`), and the gated update with them
     (:func:`update_sparse`); returns how many rows passed the gate, or −1 when no beam had a
@@ -1138,8 +1146,8 @@ def update_scan(
     if end_sigma > 0.0:
         steady = np.empty(n_beams, np.bool_)
         steady_beams(
-            mean, cov, angles, beams, reach, variate, order, shape, lo, hi, boxes, max_range,
-            min_sine, n_lm, end_sigma, steady,
+            mean, cov, angles, beams, assigned, reach, variate, order, shape, lo, hi, boxes,
+            max_range, min_sine, n_lm, end_sigma, steady,
         )  # fmt: skip
         beams = beams[steady]
     k = beam_rows(

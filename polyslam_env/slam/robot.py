@@ -313,12 +313,12 @@ class PolySlam:
         if self.profile is not None:
             lap = self._lap("map", lap)
 
-        good_beams = sorted(
-            b
+        good = sorted(
+            (b, self.table.index_of(lid))
             for b, lid in assoc.good_ids.items()
             if lid in self.table and self._update_beams[b] and self._long_enough(lid)
         )
-        used = self._update(good_beams, np.asarray(ranges, dtype=float))
+        used = self._update(good, np.asarray(ranges, dtype=float))
         self.divergence_f = f
         self.diverging = self._is_diverging()
         if self.profile is not None:
@@ -1066,15 +1066,16 @@ class PolySlam:
         return fit
 
     # -- EKF update -------------------------------------------------------------------------------
-    def _update(self, beams: list[int], ranges: np.ndarray) -> int:
-        """Batched, gated update with the associated beams (their rows as in
-        :meth:`_map_args`); returns how many were used."""
+    def _update(self, beams: list[tuple[int, int]], ranges: np.ndarray) -> int:
+        """Batched, gated update with the associated beams ((beam, landmark index) pairs;
+        their rows as in :meth:`_map_args`, each on the landmark it is cast onto, which must
+        be its own with ``end_sigma`` > 0); returns how many were used."""
         if not beams or self.n_landmarks == 0:
             return 0
         mean = self.mean
         before = mean[:3].copy()
-        chosen = np.array(beams, dtype=np.int64)
-        args = (mean, self.cov, self.beam_angles, ranges, chosen)
+        chosen, assigned = np.array(beams, dtype=np.int64).T.copy()
+        args = (mean, self.cov, self.beam_angles, ranges, chosen, assigned)
         used = kernels.update_scan(*args, *self._map_args())
         if used < 0:  # no usable row: nothing ran
             return 0

@@ -609,11 +609,15 @@ def update_scan(
     angles: np.ndarray,
     ranges: np.ndarray,
     beams: np.ndarray,
+    assigned: np.ndarray,
     *args: Any,
 ) -> int:
     """``kernels.update_scan`` with the numpy update (:func:`update_sparse_inplace`) in place
     of the compiled one and :func:`xi_variances` for ``kernels.ends_in_doubt``, to stand in
-    for it (``args``: reach … n_fit, gate, n_lm, alpha_base, consider_from, end_sigma)."""
+    for it (``args``: reach … n_fit, gate, n_lm, alpha_base, consider_from, end_sigma). It
+    does not choose beams as ``kernels.steady_beams`` does (``assigned`` is not read): where
+    it stands in, no beam hits another landmark than its own or misses it from a sigma
+    point."""
     from polyslam_env.slam import kernels
 
     *map_args, gate, n_lm, alpha_base, consider_from, end_sigma = args

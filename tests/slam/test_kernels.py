@@ -488,9 +488,11 @@ def test_ends_in_doubt__equals_dense_oracle(
 def test_steady_beams__equals_sigma_point_oracle(
     polys: list[Polynomial], pose: np.ndarray, beams: np.ndarray, seed: int, scale: float
 ) -> None:
-    """A beam is dropped exactly when it hits landmark j at the mean (above the tangent limit)
-    and the float oracle's cast from one of the 8 sigma points, the mean ± 2 times a column of
-    the Cholesky factor of P over (x, y, θ, c0_j), does not hit j above that limit."""
+    """A beam is dropped exactly when the float oracle's cast at the mean hits another
+    landmark than the one it was assigned to (−1: any), or when it hits landmark j at the mean
+    (above the tangent limit) and the cast from one of the 8 sigma points, the mean ± 2 times
+    a column of the Cholesky factor of P over (x, y, θ, c0_j), does not hit j above that
+    limit."""
     rng = np.random.default_rng(seed)
     table = _table(polys)
     c0s = np.array([p.c0 for p in polys])
@@ -498,9 +500,10 @@ def test_steady_beams__equals_sigma_point_oracle(
     cov = random_spd(rng, 3 + n, scale)
     mean = np.concatenate([pose, c0s])
     keep = np.empty(beams.size, np.bool_)
+    assigned = rng.integers(-1, n, beams.size)
     kept = kernels.steady_beams(
-        mean, cov, beams, np.arange(beams.size), math.inf, *table.arrays(), table.boxes(c0s),
-        max_range, min_sine, n, spread, keep,
+        mean, cov, beams, np.arange(beams.size), assigned, math.inf, *table.arrays(),
+        table.boxes(c0s), max_range, min_sine, n, spread, keep,
     )  # fmt: skip
     every, rows = list(range(n)), table.rows()
 
@@ -512,6 +515,10 @@ def test_steady_beams__equals_sigma_point_oracle(
         return hit.landmark
 
     for b, angle in enumerate(beams.tolist()):
+        hit = ref.cast(*pose.tolist(), [angle], every, rows, c0s.tolist(), max_range)[0]
+        if hit is not None and assigned[b] >= 0 and hit.landmark != assigned[b]:
+            assert not keep[b], (b, hit.landmark, assigned[b])
+            continue
         j = usable_hit(*pose.tolist(), angle, c0s)
         want = True
         if j >= 0:

@@ -294,6 +294,37 @@ def test_beam_whose_hit_may_pass_the_end__is_left_out_with_end_sigma() -> None:
     assert used == {(2.0, 0.58): 0, (2.0, 0.4): 1, (0.0, 0.58): 1, (0.0, 0.4): 1}
 
 
+def test_beam_cast_onto_another_landmark_than_its_own__is_left_out() -> None:
+    """A received wall y = 0.45 known to 10 cm (its c0), whose extent runs 24 cm past the
+    corner it makes with the wall x = x_c (a received wall's end is only as good as the frame
+    transform), and a beam from the origin, 15° left of straight up, that truly hits the
+    second wall 0.24 m beyond the first wall's line. Its point belongs to the second wall (the
+    association's), but at the mean the beam is cast onto the first wall's overhang, 24 cm
+    short: within the χ² gate (2.3σ), cast from the first wall's sigma points at ±2σ still
+    onto it, and far enough from its end for ``end_sigma``. The update would move that wall
+    by ~20 cm off the line it is on; the beam is left out and the wall stays. With the first
+    wall ending at the corner the same beam is cast onto the second wall and used."""
+    angle = math.radians(105.0)
+    t_hit = 0.45 / math.sin(angle) + 0.24  # the range to the second wall
+    x_c = t_hit * math.cos(angle)
+    results = {}
+    for end in (x_c + 0.24, x_c - EXTENT_MARGIN - 0.01):
+        slam = PolySlam(SlamConfig(), np.array([angle]), MAX_RANGE)
+        for poly, var in (
+            (Polynomial(1, np.array([0.45, 0.0, 0.0, 0.0]), -3.0, end), 0.1**2),
+            (Polynomial(2, np.array([x_c, 0.0, 0.0, 0.0]), 0.45, 3.0), 1e-4),
+        ):
+            gx = np.zeros((1, slam.mean.size))
+            slam.insert_landmark(
+                Fit(poly, poly.c0, gx, np.ones((1, 1)), np.eye(1) * var, 0.01, 1), merge=False
+            )
+        first = slam.c0s[0]
+        info = slam.step(np.zeros(3), np.array([t_hit]))
+        results[end > x_c] = (info.beams_used, float(slam.c0s[0] - first))
+    assert results[True] == (0, 0.0)
+    assert results[False] == (1, 0.0)  # cast onto the second wall: the first has no row
+
+
 def test_short_landmark__does_not_update_with_min_update_extent() -> None:
     """The landmark y = 0.8, x ∈ [0.2, 0.6] is 0.4 m long; a beam on its middle updates the
     pose by default and with ``min_update_extent`` 0.3 m, and not with 0.5 m (its extent is
