@@ -183,6 +183,26 @@ def _open_room_policy(**kwargs: Any) -> FrontierPolicy:
     return policy
 
 
+def test_safe_speed__a_robot_within_the_margin_of_a_wall_drives_along_it_but_not_into_it() -> None:
+    """A robot 5 cm from a mapped wall, inside its radius + 4 cm margin: driving along the wall
+    or away from it keeps its clearance and goes at full speed; driving into it does not move
+    (before, every arc there was refused, and a robot so placed stood for 15 steps while each
+    replanned path led straight on). In the open, full speed."""
+    policy = _open_room_policy()
+    ctx = policy.context
+    rows, cols = policy.map.cells(np.array([[-3.0, 0.0]]))
+    wall = policy.map.centre(int(rows[0]), int(cols[0]) - 1)
+    assert policy.map.obstacles[int(rows[0]), int(cols[0]) - 1]
+    x = float(wall[0]) + 0.5 * policy.map.res + 0.05  # 5 cm from the wall's cell
+    assert 0.05 < ctx.robot_radius + 0.04
+    speeds = {
+        name: policy._safe_speed(np.array([x, 0.0, heading]), ctx.v_max, 0.0)
+        for name, heading in (("along", 0.5 * math.pi), ("away", 0.0), ("into", math.pi))
+    }
+    assert speeds == {"along": ctx.v_max, "away": ctx.v_max, "into": 0.0}
+    assert policy._safe_speed(np.array([0.0, 0.0, 0.3]), ctx.v_max, 0.2) == ctx.v_max
+
+
 def _anchor(policy: FrontierPolicy, x: float, y: float) -> tuple[int, int]:
     rows, cols = policy.map.cells(np.array([[x, y]]))
     policy._anchors[rows[0], cols[0]] = True
