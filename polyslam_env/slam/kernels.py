@@ -618,7 +618,7 @@ def steady_beams(
     (the association's, by the point's distance to each curve) is dropped too: the map does
     not know which wall it met. A received wall's extent ran 24 cm past a corner (its end is
     only as good as the frame transform); a beam that truly hit the corner's other wall was
-    cast onto that overhang and moved the wall 20 cm off the line it had been on. The
+    cast onto that overhang and moved the wall 26 cm, to 17 cm off its true line. The
     shape's rotation, when it is a state, stays at its mean: its effect on where the beam
     meets the curve is the lever of a turn about the fit's centre, small on a short arc.
 
