@@ -1,4 +1,5 @@
-"""The episodes are bit-identical to those recorded before the package was reorganised."""
+"""The episodes are bit-identical to those recorded (``tests/golden/episodes.py``), played with
+the pinned floating-point kernels they were recorded with."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import json
 
 import pytest
 
-from tests.golden.episodes import ENV_EPISODES, GOLDEN, env_episode, simulate_episode
+from tests.golden.episodes import ENV_EPISODES, GOLDEN, SIMULATE_KEY, play_pinned
 
 RECORDED: dict[str, list[str]] = json.loads(GOLDEN.read_text())
 
@@ -24,12 +25,13 @@ def _first_difference(expected: list[str], got: list[str]) -> str:
 def test_env_episode__bit_identical_to_recorded(
     name: str, seed: int, steps: int, overrides: dict[str, object]
 ) -> None:
-    expected = RECORDED[f"{name}/seed{seed}"]
-    got = env_episode(dict(overrides), seed, steps)
+    key = f"{name}/seed{seed}"
+    expected = RECORDED[key]
+    got = play_pinned([key])[key]
     assert got == expected, _first_difference(expected, got)
 
 
 def test_simulate__bit_identical_to_recorded() -> None:
-    expected = RECORDED["simulate-paper/seed4"]
-    got = simulate_episode(4)
+    expected = RECORDED[SIMULATE_KEY]
+    got = play_pinned([SIMULATE_KEY])[SIMULATE_KEY]
     assert got == expected, _first_difference(expected, got)

@@ -5,14 +5,23 @@
 episodes and requires every step's digest to match, i.e. the episodes are bit-identical. A
 digest covers everything the env returns (observations, rewards, reward terms, terminations,
 truncations, the final metrics except wall times) or, for ``simulate``, every robot's estimate,
-covariance and final map. Bit-identity holds for the same library versions (numpy, pymunk) on
-the same kind of machine; re-record only for an intended behaviour change, and say so.
+covariance and final map.
+
+Bit-identity needs the same library versions (CI installs them from ``.ci/constraints.txt``)
+and the same floating-point kernels. OpenBLAS picks its matrix kernels by CPU at load time
+(AVX-512 machines round a product's partial sums differently from AVX2 ones) and numpy picks
+its SIMD loops likewise, so the episodes are played in a child process with both pinned to the
+AVX2 ("Haswell") paths every x86-64 CPU of the last decade runs (``PINNED_ENV``): the same
+digests on an Intel or an AMD machine. Re-record only for an intended behaviour change, and say
+so in the commit.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
+import subprocess
 import sys
 from pathlib import Path
 from typing import Any
@@ -20,6 +29,18 @@ from typing import Any
 import numpy as np
 
 GOLDEN = Path(__file__).with_name("golden.json")
+ROOT = Path(__file__).resolve().parents[2]
+
+#: The floating-point kernels the digests were recorded with (see the module docstring); set
+#: before numpy loads, hence a child process.
+PINNED_ENV = {
+    "OPENBLAS_CORETYPE": "Haswell",
+    "NPY_DISABLE_CPU_FEATURES": (
+        "AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL AVX512_SPR AVX512_KNL"
+        " AVX512_KNM"
+    ),
+    "OPENBLAS_NUM_THREADS": "1",
+}
 
 #: (name, seed, steps, env overrides). Together they cover vector and grid observations, SLAM
 #: on and off, the exchange (rendezvous happen on the paper and two_rooms maps), a generated map
@@ -102,17 +123,46 @@ def simulate_episode(seed: int) -> list[str]:
     return out
 
 
-def record_all() -> dict[str, list[str]]:
-    episodes = {
-        f"{name}/seed{seed}": env_episode(overrides, seed, steps)
-        for name, seed, steps, overrides in ENV_EPISODES
-    }
-    episodes["simulate-paper/seed4"] = simulate_episode(4)
-    return episodes
+SIMULATE_KEY = "simulate-paper/seed4"
+
+
+def episode_keys() -> list[str]:
+    return [f"{name}/seed{seed}" for name, seed, _, _ in ENV_EPISODES] + [SIMULATE_KEY]
+
+
+def play(key: str) -> list[str]:
+    """The digests of the recorded episode ``key``, in this process."""
+    if key == SIMULATE_KEY:
+        return simulate_episode(4)
+    for name, seed, steps, overrides in ENV_EPISODES:
+        if key == f"{name}/seed{seed}":
+            return env_episode(dict(overrides), seed, steps)
+    raise KeyError(key)
+
+
+def play_pinned(keys: list[str]) -> dict[str, list[str]]:
+    """``{key: play(key)}`` in a child process with ``PINNED_ENV``'s floating-point kernels."""
+    env = {**os.environ, **PINNED_ENV}
+    done = subprocess.run(
+        [sys.executable, "-m", "tests.golden.episodes", "--play", *keys],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if done.returncode != 0:
+        raise RuntimeError(f"golden episodes {keys} failed:\n{done.stderr}")
+    result: dict[str, list[str]] = json.loads(done.stdout.splitlines()[-1])
+    return result
 
 
 if __name__ == "__main__":
-    if sys.argv[1:] != ["--record"]:
-        sys.exit("usage: python -m tests.golden.episodes --record")
-    GOLDEN.write_text(json.dumps(record_all(), indent=0) + "\n")
-    print(f"recorded {GOLDEN}")
+    args = sys.argv[1:]
+    if args[:1] == ["--play"] and len(args) > 1:
+        print(json.dumps({key: play(key) for key in args[1:]}))
+    elif args == ["--record"]:
+        GOLDEN.write_text(json.dumps(play_pinned(episode_keys()), indent=0) + "\n")
+        print(f"recorded {GOLDEN}")
+    else:
+        sys.exit("usage: python -m tests.golden.episodes --record | --play KEY...")
