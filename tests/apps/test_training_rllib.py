@@ -24,8 +24,9 @@ from typing import Any
 import pytest
 import yaml
 
+from polyslam_env.apps.cluster import join_error
 from polyslam_env.apps.training import EPISODE_TAGS
-from polyslam_env.apps.training_rllib import _join_error, rllib_checkpoints
+from polyslam_env.apps.training_rllib import rllib_checkpoints
 from polyslam_env.cli.main import main
 
 NEEDS_RAY = "needs the [ray] extra: pip install 'polyslam[ray]'"
@@ -252,9 +253,9 @@ def test_join_error__names_the_token_fix() -> None:
         except RuntimeError as cause:
             raise ConnectionError("Failed to connect to Ray cluster at 10.0.0.1:6379") from cause
     except ConnectionError as err:
-        text = _join_error("10.0.0.1:6379", err)
+        text = join_error("10.0.0.1:6379", err)
     assert "\n" not in text and "RAY_AUTH_MODE=token" in text and "10.0.0.1:6379" in text
-    other = _join_error("h:1", ConnectionError("Could not find any running Ray instance.\nmore"))
+    other = join_error("h:1", ConnectionError("Could not find any running Ray instance.\nmore"))
     assert other == (
         "--address h:1: could not join the Ray cluster: Could not find any running Ray instance."
     )
