@@ -107,12 +107,15 @@ def run_jobs(
     if kept:
         _say(f"--resume: {kept} of {len(jobs)} {runner.noun}s already in {runner.log}")
     study = _Study(runner, seeds, log, progress)
+    sigterm = _SigTerm()
     with _bar(runner, len(jobs), kept) as bar:
         study.bar = bar
         try:
-            _drive(_backend(runner, fn, jobs), todo, study, results)
-        except (KeyboardInterrupt, _Terminated) as stop:
-            raise _interrupted(stop, runner, len(jobs), kept + study.done) from None
+            backend = _backend(runner, fn, jobs)
+            with sigterm, backend:  # after Ray is joined: it installs a SIGTERM handler too
+                _drive(backend, todo, study, results)
+        except KeyboardInterrupt:
+            raise _interrupted(sigterm.seen, runner, len(jobs), kept + study.done) from None
     if log is not None:
         results = [None] * len(jobs)
         for index, result in _logged(log, len(jobs)).items():
@@ -184,19 +187,18 @@ class _Study:
 
 def _drive(backend: _Backend, todo: list[int], study: _Study, results: list[Any]) -> None:
     """Run the jobs ``todo`` on ``backend`` until each finished or failed twice."""
-    with _sigterm_raises(), backend:
-        for k in todo:
+    for k in todo:
+        backend.submit(k)
+    remaining = len(todo)
+    while remaining:
+        k, result, error = backend.next()
+        if error is None:
+            study.finished(k, result, results)
+            remaining -= 1
+        elif study.raised(k, error):
             backend.submit(k)
-        remaining = len(todo)
-        while remaining:
-            k, result, error = backend.next()
-            if error is None:
-                study.finished(k, result, results)
-                remaining -= 1
-            elif study.raised(k, error):
-                backend.submit(k)
-            else:
-                remaining -= 1
+        else:
+            remaining -= 1
 
 
 def _error_text(error: BaseException) -> str:
@@ -227,30 +229,33 @@ def _bar(runner: Runner, total: int, kept: int) -> Iterator[Any]:
 
 
 # -- stopping --------------------------------------------------------------------------------
-class _Terminated(Exception):
-    """SIGTERM arrived (raised by the handler :func:`_sigterm_raises` installs)."""
+class _SigTerm:
+    """While inside (in the main thread), SIGTERM raises ``KeyboardInterrupt``, as Ctrl-C
+    does, and sets ``seen``. (KeyboardInterrupt is what Ray's blocking calls pass on from a
+    signal handler; another exception comes out of them as a SystemError.)"""
+
+    def __init__(self) -> None:
+        self.seen = self.installed = False
+        self.previous: Any = None
+
+    def _handler(self, signum: int, frame: Any) -> None:
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def __enter__(self) -> _SigTerm:
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGTERM, self._handler)
+            self.installed = True
+        return self
+
+    def __exit__(self, kind: Any, value: Any, tb: Any) -> None:
+        if self.installed:  # None: a handler set outside Python (Ray's), gone with Ray
+            previous = signal.SIG_DFL if self.previous is None else self.previous
+            signal.signal(signal.SIGTERM, previous)
 
 
-@contextmanager
-def _sigterm_raises() -> Iterator[None]:
-    """SIGTERM raises :class:`_Terminated` in the main thread while inside (Ray installs a
-    SIGTERM handler of its own that exits, so this is entered after Ray is joined)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum: int, frame: Any) -> None:
-        raise _Terminated()
-
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
-def _interrupted(stop: BaseException, runner: Runner, total: int, done: int) -> Interrupted:
-    name, code = ("SIGTERM", 143) if isinstance(stop, _Terminated) else ("Ctrl-C", 130)
+def _interrupted(sigterm: bool, runner: Runner, total: int, done: int) -> Interrupted:
+    name, code = ("SIGTERM", 143) if sigterm else ("Ctrl-C", 130)
     where = (
         f"in {runner.log}; the same command with --resume goes on from there"
         if runner.log is not None
