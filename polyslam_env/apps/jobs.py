@@ -120,7 +120,7 @@ def run_jobs(
         results = [None] * len(jobs)
         for index, result in _logged(log, len(jobs)).items():
             results[index] = result
-    if jobs and all(r is None for r in results):
+    if runner.failed and all(r is None for r in results):
         first = runner.failed[0]
         raise PolyslamError(
             f"every {runner.noun} failed; the first, {runner.noun} {first['index']}"
@@ -222,7 +222,11 @@ def _bar(runner: Runner, total: int, kept: int) -> Iterator[Any]:
     from tqdm import tqdm
 
     with tqdm(
-        total=total, initial=kept, desc=runner.desc, unit=runner.noun[:3], disable=not runner.bar
+        total=total,
+        initial=kept,
+        desc=runner.desc,
+        unit={"episode": "ep"}.get(runner.noun, runner.noun),
+        disable=not runner.bar,
     ) as bar:
         bar.set_postfix_str("failed 0", refresh=False)
         yield bar

@@ -35,6 +35,22 @@ def flaky(job: tuple[int, str, str]) -> dict[str, Any]:
     return {"seed": seed, "value": seed * 0.1}
 
 
+def retried_and_reported(runner: Runner, folder: Path, capsys: Any) -> str:
+    """Run three :func:`flaky` jobs with ``runner`` (fine, failing once, failing always) and
+    check the outcome: the second retried and done, the third reported and left out, the
+    study going on. Returns what went to stderr."""
+    jobs = [(10, "fine", ""), (11, "once", str(folder)), (12, "always", str(folder))]
+    results = run_jobs(flaky, jobs, runner, seed_of=lambda job: job[0])
+    assert results == [{"seed": 10, "value": 1.0}, {"seed": 11, "value": 1.1}, None]
+    error = "ValueError: map file of seed 12 does not load"
+    assert runner.failed == [{"index": 2, "seed": 12, "error": error}]
+    err: str = capsys.readouterr().err
+    assert "episode 1 (seed 11) failed: ValueError: map file of seed 11 does not load" in err
+    assert err.count("trying it once more") == 2  # episodes 1 and 2, once each
+    assert f"episode 2 (seed 12) failed again: {error}; going on without it" in err
+    return err
+
+
 def counted(job: tuple[int, str]) -> float:
     """A test-only job ``(seed, folder)`` that leaves a file per run, to count the runs."""
     seed, folder = job
@@ -44,7 +60,7 @@ def counted(job: tuple[int, str]) -> float:
 
 
 def test_codec__round_trips_results_bit_for_bit_as_strict_json() -> None:
-    value = {
+    value: dict[str, Any] = {
         "floats": [0.1, -0.0, 1e-300, math.pi, math.nan, math.inf, -math.inf],
         "numpy": [np.float32(0.1), np.int64(7), np.bool_(True), np.arange(6.0).reshape(2, 3)],
         "tuple": (1, "a", None),
@@ -58,7 +74,7 @@ def test_codec__round_trips_results_bit_for_bit_as_strict_json() -> None:
     assert back["numpy"][3].shape == (2, 3) and back["numpy"][3].dtype == np.float64
     assert back["tuple"] == (1, "a", None) and back["by_int"] == {3: [1.5], 4: []}
     floats = back["floats"]
-    assert [x.hex() for x in floats[:4]] == [x.hex() for x in value["floats"][:4]]  # type: ignore[union-attr]
+    assert [x.hex() for x in floats[:4]] == [x.hex() for x in value["floats"][:4]]
     assert math.isnan(floats[4]) and floats[5:] == [math.inf, -math.inf]
     with pytest.raises(TypeError, match="set"):
         encode({1, 2})
@@ -114,20 +130,13 @@ def test_run_jobs__refuses_a_log_of_another_study(tmp_path: Path) -> None:
 def test_run_jobs__a_failing_job_is_retried_once_reported_and_the_study_goes_on(
     tmp_path: Path, workers: int, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    jobs = [(10, "fine", ""), (11, "once", str(tmp_path)), (12, "always", str(tmp_path))]
-    runner = Runner(workers=workers, log=tmp_path / "episodes.jsonl", bar=True, desc="study")
-    results = run_jobs(flaky, jobs, runner, seed_of=lambda job: job[0])
-    assert results == [{"seed": 10, "value": 1.0}, {"seed": 11, "value": 1.1}, None]
-    error = "ValueError: map file of seed 12 does not load"
-    assert runner.failed == [{"index": 2, "seed": 12, "error": error}]
-    err = capsys.readouterr().err
-    assert "episode 1 (seed 11) failed: ValueError: map file of seed 11" in err
-    assert err.count("trying it once more") == 2  # episodes 1 and 2, once each
-    assert f"episode 2 (seed 12) failed again: {error}; going on without it" in err
+    log = tmp_path / "episodes.jsonl"
+    runner = Runner(workers=workers, log=log, bar=True, desc="study")
+    err = retried_and_reported(runner, tmp_path, capsys)
     assert "3/3" in err and "failed 1" in err  # the progress bar
-    logged = [json.loads(line) for line in runner.log.read_text().splitlines()]  # type: ignore[union-attr]
+    logged = [json.loads(line) for line in log.read_text().splitlines()]
     assert {r["index"]: "result" in r for r in logged} == {0: True, 1: True, 2: False}
-    assert [r["failed"] for r in logged if r["index"] == 2] == [error]
+    assert [r["failed"] for r in logged if r["index"] == 2] == [runner.failed[0]["error"]]
 
 
 def test_run_jobs__every_job_failing_is_one_error(tmp_path: Path) -> None:

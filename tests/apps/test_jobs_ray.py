@@ -19,10 +19,10 @@ from typing import Any
 
 import pytest
 
-from polyslam_env.apps.jobs import Runner, run_jobs
+from polyslam_env.apps.jobs import Runner
 from polyslam_env.cli.main import main
 from tests.apps import ray_cluster as cluster
-from tests.apps.test_jobs import flaky
+from tests.apps.test_jobs import retried_and_reported
 
 #: 4 seeds × 2 settings of 30 steps on loop: long enough to be killed half-way on 2 CPUs
 #: (about a second an episode), short enough for the suite.
@@ -30,7 +30,7 @@ STUDY = ["fidelity", "--maps", "loop", "--seeds", "4", "--steps", "30", "--robot
 EPISODES = 8
 FLAGS = ["--quiet", "--no-pictures"]
 #: Wall-clock metrics measure the machine, not the episode.
-TIMINGS = ("slam_time_ms",)
+TIMINGS = ("slam_time_ms", "slam_time_ms_median")
 
 
 @pytest.fixture(scope="module")
@@ -50,14 +50,17 @@ def straight(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def _episodes(out: Path) -> dict[int, Any]:
     """Each episode of the results log in ``out`` by index, its timings left out."""
-    episodes = {}
-    for line in (out / "episodes.jsonl").read_text().splitlines():
-        record = json.loads(line)
-        for metrics in record["result"]["fields"]["robots"].values():
-            for key in TIMINGS:
-                metrics.pop(key)
-        episodes[record["index"]] = record
-    return episodes
+    records = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    return {record["index"]: _untimed(record) for record in records}
+
+
+def _untimed(data: Any) -> Any:
+    """``data`` without the :data:`TIMINGS` keys of its dicts, at any depth."""
+    if isinstance(data, dict):
+        return {k: _untimed(v) for k, v in data.items() if k not in TIMINGS}
+    if isinstance(data, list):
+        return [_untimed(v) for v in data]
+    return data
 
 
 def test_cluster__same_episodes_as_a_local_run(
@@ -110,12 +113,20 @@ def test_cluster__killed_half_way_and_resumed_gives_the_straight_table(
 def test_cluster__a_task_that_raises_is_retried_once_and_reported(
     head: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    jobs = [(10, "fine", ""), (11, "once", str(tmp_path)), (12, "always", str(tmp_path))]
-    runner = Runner(address=head, log=tmp_path / "episodes.jsonl")
-    results = run_jobs(flaky, jobs, runner, seed_of=lambda job: job[0])
-    assert results == [{"seed": 10, "value": 1.0}, {"seed": 11, "value": 1.1}, None]
-    error = "ValueError: map file of seed 12 does not load"
-    assert runner.failed == [{"index": 2, "seed": 12, "error": error}]
-    err = capsys.readouterr().err
-    assert "episode 1 (seed 11) failed: ValueError: map file of seed 11 does not load" in err
-    assert f"episode 2 (seed 12) failed again: {error}; going on without it" in err
+    # the test-only job of test_jobs.py, imported by the Ray workers from this checkout
+    retried_and_reported(Runner(address=head), tmp_path, capsys)
+
+
+def test_cluster__evaluate_and_reproduce_same_as_local(head: str, tmp_path: Path) -> None:
+    config = tmp_path / "paper.yaml"
+    config.write_text("steps: 20\nruns: 2\n")  # the paper's study, 2 runs of 20 steps
+    commands = {
+        "evaluate": ["evaluate", "--map", "two_rooms", "--episodes", "2", "--steps", "10"],
+        "reproduce": ["reproduce", "--config", str(config)],
+    }
+    for name, command in commands.items():
+        local, remote = tmp_path / f"{name}_local", tmp_path / f"{name}_ray"
+        assert main([*command, "--quiet", "--workers", "1", "--out", str(local)]) == 0
+        assert main([*command, "--quiet", "--address", head, "--out", str(remote)]) == 0
+        assert len(_episodes(remote)) == 2, name
+        assert _episodes(remote) == _episodes(local), name
