@@ -6,7 +6,10 @@ from __future__ import annotations
 
 import json
 import math
+import signal
+import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -201,3 +204,43 @@ def test_study_flags__one_line_errors(
     assert main(["evaluate", "--episodes", "1", "--resume", "--workers", "1"]) == 2
     assert "--resume: needs --out" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()  # nothing written
+
+
+def test_fidelity_cli__sigterm_stops_the_workers_and_resume_gives_the_straight_table(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # 2 seeds × 2 settings of 30 steps (about a second each) in 2 local processes: a real
+    # SIGTERM to the CLI once the first episode is logged
+    study = [*FIDELITY[:-4], "--steps", "30", "--robots", "2", "--quiet", "--no-pictures"]
+    killed, straight = tmp_path / "killed", tmp_path / "straight"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "polyslam_env.cli", *study, "--workers", "2", "--out", str(killed)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    log = killed / "episodes.jsonl"
+    try:
+        deadline = time.monotonic() + 240
+        while not (log.exists() and log.read_bytes().count(b"\n")) and time.monotonic() < deadline:
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.05)
+        workers = _children(proc.pid)
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143, stderr
+    assert "polyslam: interrupted (SIGTERM):" in stderr and "--resume" in stderr
+    assert workers and not [pid for pid in workers if Path(f"/proc/{pid}").exists()]
+    assert 1 <= log.read_bytes().count(b"\n") < 4, "the study was not killed half-way"
+
+    assert main([*study, "--workers", "2", "--out", str(killed), "--resume"]) == 0
+    assert main([*study, "--workers", "1", "--out", str(straight)]) == 0
+    assert (killed / "table.md").read_text() == (straight / "table.md").read_text()
+
+
+def _children(pid: int) -> list[int]:
+    """The processes ``pid`` started (Linux /proc)."""
+    tasks = Path(f"/proc/{pid}/task").glob("*/children")
+    return [int(child) for path in tasks for child in path.read_text().split()]
