@@ -20,9 +20,11 @@ from polyslam_env.metrics.episode import meaningful
 __all__ = [
     "COMPARED",
     "EpisodeResult",
+    "EvaluateJob",
     "compare",
     "episode_row",
     "evaluate_episode",
+    "evaluate_job",
     "run_episode",
     "summarise",
 ]
@@ -99,6 +101,16 @@ def evaluate_episode(
         return result
     finally:
         env.close()
+
+
+#: An evaluation job: the env config (a dict), the policy's name and keyword arguments, seed.
+EvaluateJob = tuple[Mapping[str, Any], str, Mapping[str, Any], int]
+
+
+def evaluate_job(job: EvaluateJob) -> EpisodeResult:
+    """:func:`evaluate_episode` of one job (what :func:`~polyslam_env.apps.jobs.run_jobs`
+    runs, in a worker or as a Ray task)."""
+    return evaluate_episode(*job)
 
 
 def _spread(values: list[float]) -> dict[str, float]:
