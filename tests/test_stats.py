@@ -13,6 +13,8 @@ from tests.stats import (
     log_chi2_mean_cdf,
     log_chi2_mean_power,
     standard_normal_failures,
+    weighted_chi2_band,
+    weighted_chi2_cdf,
 )
 
 
@@ -58,3 +60,22 @@ def test_standard_normal_failures__passes_normal_draws_and_names_each_fault() ->
     mixed = z.copy()
     mixed[:, 2] = (z[:, 0] + z[:, 2]) / math.sqrt(2.0)
     assert [f.split(":")[0] for f in standard_normal_failures(mixed)] == ["correlation"]
+
+
+def test_weighted_chi2_cdf__equal_weights_are_a_scaled_chi2() -> None:
+    for x in (10.0, 30.0, 55.0):
+        want = scipy.stats.chi2.cdf(x, 30)
+        assert weighted_chi2_cdf(x * 1e-6, np.full(30, 1e-6)) == pytest.approx(want, abs=1e-9)
+
+
+def test_weighted_chi2_band__holds_sampled_draws_of_unequal_weights() -> None:
+    """90 weights spread over three decades (as P²'s eigenvalues over 30 runs): 10⁵ sampled
+    sums fall below and above the 99 % band's ends in 0.5 % ± 4.5 binomial standard errors."""
+    rng = np.random.default_rng(2)
+    weights = rng.uniform(0.0, 1.0, 90) ** 3 * 1e-6
+    draws = 100_000
+    sums = (rng.standard_normal((draws, 90)) ** 2 * weights).sum(axis=1)
+    lo, hi = weighted_chi2_band(weights, 0.01)
+    se = math.sqrt(0.005 * 0.995 / draws)
+    assert abs(np.mean(sums < lo) - 0.005) < 4.5 * se
+    assert abs(np.mean(sums > hi) - 0.005) < 4.5 * se
