@@ -48,7 +48,7 @@ class PointBackendConfig(Config):
     # landmark whose χ²(2) distance is within this quantile, starts a new landmark when every
     # landmark is beyond ``new_landmark_prob``'s, and is dropped in between.
     gate_prob: float = 0.99
-    new_landmark_prob: float = 0.9999
+    new_landmark_prob: float = 0.9999  # χ²(2) quantile beyond which a reading starts a landmark
 
     def validate(self) -> None:
         if isinstance(self.particles, bool) or self.particles < 1:
