@@ -20,6 +20,7 @@ than the study's full command is said so on the page, with the full command besi
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import platform
@@ -87,39 +88,23 @@ def render_paper(data: Sequence[Any]) -> tuple[str, str]:
     return "\n".join(lines), headline
 
 
-def render_text_table(
-    formatter: Callable[[dict[str, Any]], str],
-) -> Callable[[Sequence[Any]], tuple[str, str]]:
-    """A study whose app prints a plain-text table (``table_text``): that table, its checks."""
+def render_app_table(module: str) -> Callable[[Sequence[Any]], tuple[str, str]]:
+    """A study whose app (``polyslam_env.apps.<module>``) prints a plain-text table with its
+    ``table_text``: that table and the summary's checks."""
 
     def render(data: Sequence[Any]) -> tuple[str, str]:
         summary = data[0]
-        text = f"```text\n{formatter(summary)}\n```\n\n{_checks_text(summary['checks'])}"
+        table_text = importlib.import_module(f"polyslam_env.apps.{module}").table_text
+        text = f"```text\n{table_text(summary)}\n```\n\n{_checks_text(summary['checks'])}"
         checks = [v for v in summary["checks"].values() if isinstance(v, bool)]
         return text, f"{sum(checks)} of {len(checks)} checks hold ({summary['runs']} runs)"
 
     return render
 
 
-def render_mblcc(data: Sequence[Any]) -> tuple[str, str]:
-    """Seed 003: the four FastSLAM variants against the seed's Table 1."""
-    from polyslam_env.apps.reproduce_mblcc import table_text
-
-    return render_text_table(table_text)(data)
-
-
-def render_alignment(data: Sequence[Any]) -> tuple[str, str]:
-    """Seed 004: the aligners per stage."""
-    from polyslam_env.apps.reproduce_alignment import table_text
-
-    return render_text_table(table_text)(data)
-
-
 def render_seif(data: Sequence[Any]) -> tuple[str, str]:
     """Seed 001: the blind fusion of one run's pieces."""
-    from polyslam_env.apps.reproduce_seif import table_text
-
-    text, _ = render_text_table(table_text)(data)
+    text, _ = render_app_table("reproduce_seif")(data)
     t = data[0]["table"]
     headline = (
         f"{100 * t['fraction_correct']:.0f} % of pieces fused correctly, fused map error"
@@ -212,14 +197,14 @@ STUDIES: dict[str, Study] = {
         "Seed 003: MBLCC FastSLAM",
         ("polyslam reproduce --paper mblcc --runs 50 --out {out}",),
         ("summary.json",),
-        render_mblcc,
+        render_app_table("reproduce_mblcc"),
     ),
     "alignment": Study(
         "alignment.md",
         "Seed 004: map alignment",
         ("polyslam reproduce --paper alignment --runs 10 --out {out}",),
         ("summary.json",),
-        render_alignment,
+        render_app_table("reproduce_alignment"),
     ),
     "seif": Study(
         "seif.md",

@@ -20,7 +20,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from polyslam_env.metrics.episode import METRIC_UNITS
+from polyslam_env.metrics.episode import COUNTER_KEYS, METRIC_UNITS
 
 __all__ = ["GROUPS", "LABELS", "describe_setup", "format_run_table", "shown_metrics"]
 
@@ -33,18 +33,7 @@ LABELS: dict[str, str] = {
     "start_nees": "start_nees (the draw)",
 }
 #: Counts, printed as whole numbers.
-COUNTS = frozenset(
-    {
-        "landmarks",
-        "bytes_sent",
-        "bytes_received",
-        "rendezvous",
-        "alignments_attempted",
-        "alignments_accepted",
-        "alignments_wrong",
-        "collisions",
-    }
-)
+COUNTS = frozenset({"landmarks", *COUNTER_KEYS, "collisions"})
 _EXCHANGED = ("bytes_sent", "bytes_received")
 _ALIGNED = (*_EXCHANGED, "alignments_attempted", "alignments_accepted", "alignments_wrong")
 
