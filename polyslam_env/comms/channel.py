@@ -79,7 +79,7 @@ class ChannelConfig(Config):
     # With align_maps, refuse a refinement that started again from ±2σ of the camera's
     # estimate ends elsewhere (two basins: repeating shelf rows, comms/alignment.py). An
     # option: it also refuses some right refinements, and on the loop the exchange then
-    # no longer raises completeness (README "Active loop closing")
+    # no longer raises completeness (docs/design/exchange.md)
     align_restarts: bool = False
     # How robots meet and find the transform between their frames:
     # "rendezvous" (the paper): a mutual camera sighting within ``range``; the camera's range

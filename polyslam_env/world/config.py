@@ -55,7 +55,7 @@ PAPER_BEAMS_DEG: tuple[float, ...] = (90.0, 45.0, 0.0, -45.0, -90.0)
 #: times for a landmark, and with nine a robot passing a room maps too little of what it sees.
 #: The EKF update uses every other beam (``slam.update_spacing_deg``): with all seventeen the
 #: error a landmark's shape gives every beam on it, repeated step after step, makes the filter
-#: overconfident (README "SLAM on large floor plans").
+#: overconfident (docs/design/slam.md, "The update").
 DEFAULT_BEAMS_DEG: tuple[float, ...] = tuple(90.0 - 11.25 * i for i in range(17))
 
 
