@@ -200,8 +200,8 @@ def _rendered(obj: Any, members: Any = None) -> Iterator[Any]:
     chosen = _public_members(obj) if members is None else (obj.members[m] for m in members)
     for member in chosen:
         member = member.final_target if member.is_alias else member
-        if member.kind.value != "attribute":  # data: documented by its #: comment, if any
-            yield from _rendered(member)
+        if member.kind.value != "attribute" or "property" in member.labels:
+            yield from _rendered(member)  # (data is documented by its #: comment, if any)
 
 
 def undocumented(docs: Path = DOCS) -> list[str]:
