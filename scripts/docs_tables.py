@@ -122,10 +122,13 @@ def render_fidelity(data: Sequence[Any]) -> tuple[str, str]:
     on = [by["exchange_on"] for by in summary["table"].values()]
     precision = min(t["map_precision"]["min"] for t in on)
     nu = max(t["nu_mean"]["max"] for t in on)
-    passed = "every check holds" if summary["passed"] else "not every check holds"
+    failed = [f"{m} `{c}`" for m, checks in summary["checks"].items() for c, ok in checks.items()
+              if not ok]  # fmt: skip
+    passed = "every check holds" if not failed else "fails: " + ", ".join(failed)
+    seeds = summary.get("settings", {}).get("seeds", "?")
     headline = (
         f"with the exchange: worst robot `map_precision` {precision:.3f}, worst `nu_mean`"
-        f" {100 * nu:.1f} cm on {', '.join(summary['table'])}; {passed}"
+        f" {100 * nu:.1f} cm on {', '.join(summary['table'])} ({seeds} seeds); {passed}"
     )
     return text, headline
 
