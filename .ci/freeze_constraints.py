@@ -25,7 +25,7 @@ from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 
 ROOT = Path(__file__).resolve().parents[1]
-EXTRAS = "dev,rl,video,ray,bench"
+EXTRAS = "dev,rl,video,ray,bench,docs"
 
 
 def _requirements(pyproject: Path, extras: list[str]) -> list[Requirement]:

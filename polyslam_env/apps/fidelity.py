@@ -488,7 +488,7 @@ def precision_checks(results: Sequence[EpisodeResult]) -> dict[str, bool]:
     both sides, since a filter that claims too much uncertainty is as wrong as one that
     claims too little. Empty when the back-end gives no self-assessment. Received walls are
     left out: they carry the camera transform's noise, which their refinement on shared
-    walls does not reduce (README "What the robots' filters expect of their maps")."""
+    walls does not reduce (docs/design/consistency.md, "The maps' own uncertainty")."""
     counted = precision_count([m for r in results for m in r.robots.values()])
     if counted is None:
         return {}

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from policies.base import TeamPolicy, make_team
+from polyslam_env.core.jit import compile_seconds
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import PolySlamParallelEnv, parallel_env
 from polyslam_env.metrics.episode import meaningful
@@ -27,6 +28,7 @@ __all__ = [
     "evaluate_job",
     "run_episode",
     "summarise",
+    "warm_up",
 ]
 
 
@@ -50,6 +52,11 @@ class EpisodeResult:
         }
 
 
+def policy_rng(seed: int) -> np.random.Generator:
+    """The policies' random stream of episode ``seed``, separate from the env's."""
+    return np.random.default_rng([seed, 1])
+
+
 def run_episode(
     env: PolySlamParallelEnv,
     team: TeamPolicy,
@@ -62,7 +69,7 @@ def run_episode(
     """
     observations, _ = env.reset(seed=seed)
     team.reset(seed)
-    rng = np.random.default_rng([seed, 1])
+    rng = policy_rng(seed)
     state = env.episode
     assert state is not None  # made by reset
     coverage = [float(state.coverage.coverage)]
@@ -81,6 +88,31 @@ def run_episode(
             on_step(env)
     ordered = {a: robots[a] for a in env.possible_agents if a in robots}
     return EpisodeResult(seed, state.step_count, ordered, team_info, coverage)
+
+
+def warm_up(
+    env: PolySlamParallelEnv,
+    team: TeamPolicy,
+    seed: int,
+    steps: int,
+    on_step: Callable[[], None] | None = None,
+) -> float:
+    """Play the first ``steps`` steps of the seeded episode (fewer if it ends sooner), untimed,
+    so that the compiled kernels they use are compiled or loaded from numba's disk cache
+    before a timed run of the same episode; returns the seconds that took
+    (:func:`~polyslam_env.core.jit.compile_seconds`). The env and the team are reset again by
+    :func:`run_episode`, so the timed episode is the same, bit for bit."""
+    before = compile_seconds()
+    observations, _ = env.reset(seed=seed)
+    team.reset(seed)
+    rng = policy_rng(seed)
+    for _ in range(steps):
+        if not env.agents:
+            break
+        observations, *_ = env.step(team.act(observations, rng))
+        if on_step is not None:
+            on_step()
+    return compile_seconds() - before
 
 
 def evaluate_episode(

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from polyslam_env.core.errors import OutputError
+from polyslam_env.core.names import robot_name
 
 
 def fmt(value: float) -> str:
@@ -33,7 +34,7 @@ def format_table(
 
 def agent_label(index: int) -> str:
     """A robot's name in every table and metrics file: the env's agent name ``robot_<i>``."""
-    return f"robot_{index}"
+    return robot_name(index)
 
 
 def check_output_folder(path: str | Path, flag: str) -> Path:
