@@ -20,31 +20,23 @@ from typing import Any
 import numpy as np
 
 from polyslam_env.core.blas import blas_threads
-from polyslam_env.slam import ekf, kernels
-from polyslam_env.slam.association import (
-    GAP_SPLIT,
-    AssociationResult,
-    MapBook,
-    fit_cluster,
-    qbad_refit_points,
-)
+from polyslam_env.slam import ekf, kernels, map_kernels
+from polyslam_env.slam.association import Association, fit_cluster, qbad_refit_points
+from polyslam_env.slam.columns import N_NEW, NEW, REFIT
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import (
     MAX_SLOPE,
     Fit,
     PointSet,
-    StoredPoint,
     centroid_xi,
     fit_polynomial,
     polynomial_points,
-    store_beams,
     turn_gradient,
 )
 from polyslam_env.slam.landmarks import (
     EXTENT_MARGIN,
     LandmarkTable,
     ShapesView,
-    boxes_near,
     clip_to_evidence,
     evidence_on,
     hull,
@@ -52,6 +44,7 @@ from polyslam_env.slam.landmarks import (
 from polyslam_env.slam.links import evidence_gap, line_angle, link_rows, off_square, turned_line
 from polyslam_env.slam.merging import JOIN_GAP, choose_merge, face_normal, merge_points
 from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.stored import PointArrays, StoredPoints
 
 #: The innovation screen of the divergence test (:meth:`PolySlam._is_diverging`): the last
 #: SCREEN_WINDOW beams whose return (or lack of one) the map predicts, each an outlier when
@@ -151,10 +144,9 @@ class PolySlam:
         self.mean = np.zeros(3)  # (3+n,) relative to the true start (see class docstring)
         self.cov = np.zeros((3, 3))  # (3+n, 3+n) ditto: the true start is known exactly
         self._first_xy: tuple[float, float] | None = None  # x̂_{k|k−1}'s position (FEJ)
-        self.table = LandmarkTable()  # the map: ids, shapes, extents, Q_bad, … in state order
-        self.book = MapBook(
-            config.eps_m, config.eps_z, config.cluster_radius, self.table, config.link_clusters
-        )
+        self.table = LandmarkTable()  # the map: ids, shapes, extents, … in state order
+        self.points = StoredPoints()  # the clusters' and Q_bad sets' beam points
+        self.association = Association(config, self.beam_angles)
         self.step_count = 0
         self._wall_of: dict[int, int] = {}  # landmark id → its wall group (links.py)
         self._direction_of: dict[int, int] = {}  # landmark id → its direction group (ditto)
@@ -284,28 +276,25 @@ class PolySlam:
         if self.profile is not None:
             lap = self._lap("predict", lap)
 
-        points = store_beams(
-            self.mean[:3], pose_cov, ranges, self.beam_angles, cfg.range_sigma, self.step_count
+        ranges = np.ascontiguousarray(ranges, dtype=float)
+        association, points = self.association, self.points
+        fit_inverse = _fit_inverse_table(
+            self._n_fit, max(cfg.order, self.table.shape_buffer.shape[1] - 1)
         )
-        assoc = self.book.associate(
+        if association.run(
+            self.mean, self.cov, ranges, self.step_count, rho, sigma, fit_inverse, self.table,
             points,
-            self.table.packed(),
-            self.c0s,
-            rho,
-            sigma,
-            cfg.squared_error,
-            candidates=self._association_candidates(points, sigma),
-            rows=self.table.arrays(),
-            extends=self._continues_past_end if cfg.stretch_ends else None,
-        )
+        ):  # fmt: skip
+            self.table.extents_changed()
         if self.profile is not None:
             lap = self._lap("association", lap)
 
-        self._extend_extents(points, assoc)
-        refit = sum(self._refit(r.landmark_id, r.points, rho) for r in assoc.refits)
+        refit = 0
+        for landmark_id, request in association.refits(points):
+            refit += self._refit(landmark_id, self._take(REFIT, request), rho)
         created = merged = 0
-        for request in assoc.new_landmarks:
-            new_id = self._create(request.points, rho)
+        for request in range(int(points.counters[N_NEW])):
+            new_id = self._create(self._take(NEW, request), rho)
             if new_id is not None:
                 created += 1
                 merged += self._merge_into_map(new_id)
@@ -313,11 +302,11 @@ class PolySlam:
         if self.profile is not None:
             lap = self._lap("map", lap)
 
-        good = sorted(
+        good = [
             (b, self.table.index_of(lid))
-            for b, lid in assoc.good_ids.items()
-            if lid in self.table and self._update_beams[b] and self._long_enough(lid)
-        )
+            for b, lid in enumerate(association.good.tolist())
+            if lid >= 0 and lid in self.table and self._update_beams[b] and self._long_enough(lid)
+        ]
         used = self._update(good, np.asarray(ranges, dtype=float))
         self.divergence_f = f
         self.diverging = self._is_diverging()
@@ -338,20 +327,6 @@ class PolySlam:
             linked=linked,
         )
 
-    def _association_candidates(self, points: Sequence[StoredPoint], sigma: float) -> np.ndarray:
-        """Landmarks whose box lies within σ_k (in metres) of this step's points' box: the
-        only ones a point can be good or bad for (see MapBook.associate); with
-        ``stretch_ends``, within GAP_SPLIT when that is wider (a point may continue one)."""
-        if not points:
-            return np.zeros(0, dtype=int)
-        xs, ys = zip(*(p.xy.tolist() for p in points), strict=True)
-        box = np.array([min(xs), max(xs), min(ys), max(ys)])
-        reach = math.sqrt(sigma) if self.config.squared_error else sigma  # ε² ≤ σ_k there
-        if self.config.stretch_ends:
-            reach = max(reach, GAP_SPLIT)
-        reach = reach * (1.0 + 1e-9) + 1e-12  # ≥ the threshold despite rounding
-        return boxes_near(self._boxes(), box, reach)
-
     def _boxes(self) -> np.ndarray:
         """Bounding boxes (n, 4) of the landmarks at the current c0s, cached by the table until
         the map or the state changes (the association and an update without map change share
@@ -371,82 +346,12 @@ class PolySlam:
         self.profile.setdefault(stage, []).append(now - since)
         return now
 
-    def _extend_extents(self, points: Sequence[StoredPoint], assoc: AssociationResult) -> None:
-        """Stretch a landmark's extent over the points just beyond its end that its curve,
-        continued there, explains (:meth:`_continued_xi`).
-
-        A good point (ε ≤ ρ_k of an end point) belongs to the same wall (paper §3.1, case 1);
-        the extent grows to it only when the extrapolated curve itself explains it, otherwise
-        the extrapolation would be trusted where it bends away from a curved wall. An
-        ``extended`` point (ε > ρ_k, up to GAP_SPLIT past the end: the association's
-        ``extends`` test) stretches the extent the same way; its beam, which meets the curve
-        at the very end of the new extent, is not used in this step's update.
-
-        With ``stretch_ends``, a good point past the extent that the curve does not explain
-        does not update c0 either. The paper takes its beam to have no admissible intersection
-        there, but a beam that comes in obliquely past the end can cross the curve inside
-        the extent and stop short of it: on a shelf's side face, a few centimetres from the
-        corner of the face the landmark is. Its innovation is then the distance between the
-        two faces along the beam (13 cm in the warehouse episode where this was found), and
-        with a few centimetres of pose uncertainty the χ² gate let it through: one beam moved
-        the pose by 4 cm and 0.24°.
-        """
-        table = self.table
-        for point in points:
-            idx = assoc.good.get(point.beam, assoc.extended.get(point.beam))
-            if idx is None or self._within_extent(point, idx):
-                continue
-            xi = self._continued_xi(point, idx)
-            if xi is not None:
-                table.extend_to_hit(idx, xi)
-            elif self.config.stretch_ends:
-                assoc.good_ids.pop(point.beam, None)  # its hit is not on the landmark
-
-    def _within_extent(self, point: StoredPoint, idx: int) -> bool:
-        """Whether ``point``'s ξ lies on landmark ``idx``'s extent."""
-        table = self.table
-        xi = point.xy[0] if table.variate[idx] == 1 else point.xy[1]
-        return bool(table.lo[idx] <= xi <= table.hi[idx])
-
-    def _continued_xi(self, point: StoredPoint, idx: int) -> float | None:
-        """ξ of ``point``, which lies past landmark ``idx``'s extent (the caller's test), when
-        the curve continued there explains it (|η − p(ξ)| ≤ 2σ of the range noise); None
-        otherwise."""
-        table = self.table
-        v1 = table.variate[idx] == 1
-        xi, eta = (point.xy[0], point.xy[1]) if v1 else (point.xy[1], point.xy[0])
-        curve = float(table.polys[idx].with_c0(0.0).value(xi)) + self.mean[3 + idx]
-        return float(xi) if abs(eta - curve) <= 2.0 * self.config.range_sigma else None
-
-    def _continues_past_end(self, point: StoredPoint, idx: int) -> bool:
-        """The association's ``extends`` test (``stretch_ends``): ``point`` lies at most
-        GAP_SPLIT past landmark ``idx``'s end, on its continued curve, where that curve is
-        known to within the range noise relative to the robot: lever² · var(turn) ≤ σ²,
-        the lever being the distance from the shape's pivot and the turn its rotation
-        relative to the robot's heading (:meth:`_relative_turn_var`). A shape fitted on a
-        short stretch is not stretched far on its frozen slope; a cluster, a join or a refit
-        brings its next piece instead."""
-        if self._within_extent(point, idx):
-            return False
-        xi = self._continued_xi(point, idx)
-        if xi is None:
-            return False
-        table = self.table
-        if min(abs(xi - table.lo[idx]), abs(xi - table.hi[idx])) > GAP_SPLIT:
-            return False
-        lever = xi - float(table.pivot[idx])
-        return lever * lever * self._relative_turn_var(idx) <= self._range_var
-
-    def _relative_turn_var(self, idx: int) -> float:
-        """Variance of landmark ``idx``'s shape rotation relative to the robot's heading:
-        var(α − θ) from the state with rotation states; otherwise the kernels' frozen-shape
-        model (the fit's slope error and the heading's random walk since the fit)."""
-        if self.config.rotation_states:
-            a = self._turn_index(idx)
-            cov = self.cov
-            return float(cov[a, a] + cov[2, 2] - 2.0 * cov[a, 2])
-        poly = self.table.polys[idx]
-        return self._rotation_fit_var(poly) + float(self._turn_var()[idx])
+    def _take(self, kind: int, owner: int) -> PointArrays:
+        """The points of one of this step's requests (copies), which leave the stored points."""
+        rows = self.points.rows_of(kind, owner)
+        taken = self.points.take(rows)
+        self.points.drop(rows)
+        return taken
 
     def _screen_innovations(self, ranges: np.ndarray) -> None:
         """Hook of :meth:`_is_diverging`, run right after the prediction: the NIS of every beam
@@ -621,12 +526,16 @@ class PolySlam:
         """Variance of a fitted shape's turn from its slope's fit error: the slope's
         σ²·M⁻¹[1, 1]/h² (N = ε_Z + 1 equally spaced points over the half-extent h, order ≥ 1:
         the kernels' frozen-shape model) over (1 + b'²)², the slope-to-angle factor at the
-        centroid."""
+        centroid (:func:`~polyslam_env.slam.map_kernels.rotation_fit_var`)."""
         order = max(len(np.trim_zeros(np.asarray(poly.coeffs[1:], dtype=float), "b")), 1)
-        inverse = _fit_inverse_table(self._n_fit, self.config.order)[order]
-        half = max(0.5 * (poly.hi - poly.lo), 0.05)
-        slope = float(poly.slope(0.5 * (poly.lo + poly.hi)))
-        return float(self._range_var * inverse[1, 1] / (half * half) / (1.0 + slope * slope) ** 2)
+        shape = np.zeros(poly.order + 1)
+        shape[1:] = poly.coeffs[1:]
+        inverse = _fit_inverse_table(self._n_fit, self.config.order)
+        return float(
+            map_kernels.rotation_fit_var(
+                shape, order, poly.lo, poly.hi, inverse, self._range_var, 2.0
+            )
+        )
 
     def _remove(self, landmark_id: int) -> None:
         idx = self.table.index_of(landmark_id)
@@ -635,6 +544,7 @@ class PolySlam:
             drop.append(self._turn_index(idx))
         self.mean, self.cov = ekf.remove(self.mean, self.cov, drop)
         self.table.remove(idx)
+        self.points.drop_qbad(landmark_id)
         self._wall_of.pop(landmark_id, None)
         self._direction_of.pop(landmark_id, None)
         self._received.discard(landmark_id)
@@ -661,7 +571,7 @@ class PolySlam:
             self._remove(lid)
         return new_id
 
-    def _refit(self, landmark_id: int, bad: Sequence, rho: float) -> int:
+    def _refit(self, landmark_id: int, bad: PointArrays, rho: float) -> int:
         """Refit a landmark on Q_bad ∪ R; returns 1 if it was replaced."""
         if landmark_id not in self.table:
             return 0
@@ -681,8 +591,7 @@ class PolySlam:
         if fit is None or fit.rms > self._max_fit_rms(rho):
             return 0  # the bad points do not make one wall with p*: keep p* as it is
         side = self._side_in(int(self.table.side[state_index - 3]), poly, fit.poly)
-        xy = np.array([p.xy for p in bad], dtype=float)  # (k, 2) the bad hits
-        xi_bad = xy[:, 0] if fit.poly.variate == 1 else xy[:, 1]
+        xi_bad = bad.xy[:, 0] if fit.poly.variate == 1 else bad.xy[:, 1]  # the bad hits' ξ
         evidence = hull(
             evidence_on(self._evidence(state_index - 3), poly, fit.poly),
             (float(xi_bad.min()), float(xi_bad.max())),
@@ -692,7 +601,7 @@ class PolySlam:
         self._merge_into_map(new_id)
         return 1
 
-    def _create(self, cluster: Sequence, rho: float) -> int | None:
+    def _create(self, cluster: PointArrays, rho: float) -> int | None:
         """A new landmark from a full cluster; unused points go back to a cluster."""
         result = fit_cluster(
             cluster,
@@ -704,7 +613,10 @@ class PolySlam:
             auto_order=self.config.auto_order,
             min_noise_var=self.config.range_sigma**2,
         )
-        self.book.restore_cluster(result.leftover)
+        # the unused points go back as one cluster of the newest ≤ ε_Z: the next point then
+        # refits the newest evidence instead of an ever-growing set every step
+        leftover = result.leftover
+        self.points.add_cluster(leftover.subset(np.arange(len(leftover))[-self.config.eps_z :]))
         if result.fit is None:
             return None
         return self._augment(result.fit, _observed_side(result.used, result.fit.poly.variate))
@@ -1172,30 +1084,9 @@ class PolySlam:
         return age * self._turn_var_per_step
 
     def _carry_stored_points(self, before: np.ndarray, after: np.ndarray) -> None:
-        """Move cluster and Q_bad points rigidly with a pose correction.
-
-        Stored points were placed from the pose estimates of their steps, which odometry ties
-        rigidly to the current pose; the fits model them so (∂π/∂X through the current pose).
-        When the update corrects the current pose, the recent trajectory moves with it, and so
-        must the points: else a new landmark mixes stale coordinates with the corrected pose.
-        """
-        book, table = self.book, self.table
-        groups = [*book.clusters, *table.qbad.values()]
-        flat = [p for group in groups for p in group]
-        if not flat:
-            return
-        moved = _carry(flat, before, after)
-        start = 0
-        clusters = []
-        for group in book.clusters:
-            clusters.append(moved[start : start + len(group)])
-            start += len(group)
-        book.clusters = clusters
-        qbad = {}
-        for lid, pts in table.qbad.items():  # most landmarks have none
-            qbad[lid] = moved[start : start + len(pts)] if pts else []
-            start += len(pts)
-        table.qbad = qbad
+        """Move cluster and Q_bad points rigidly with a pose correction
+        (:meth:`StoredPoints.carry`)."""
+        self.points.carry(before, after)
 
 
 def update_beam_mask(angles: np.ndarray, spacing_deg: float) -> np.ndarray:
@@ -1230,37 +1121,11 @@ def _length_weight(first: float, second: float) -> float:
     return a / (a + b)
 
 
-def _carry(points: list[StoredPoint], before: np.ndarray, after: np.ndarray) -> list[StoredPoint]:
-    """The points moved by the rigid motion taking pose ``before`` (3,) to ``after`` (3,).
-
-    All points go through one (N, 7) array [xy, direction, pose] and one 7×7 matmul; each
-    new point's arrays are row views of the result.
-    """
-    bx, by, dtheta = float(before[0]), float(before[1]), float(after[2] - before[2])
-    ax, ay = float(after[0]), float(after[1])
-    c, s = math.cos(dtheta), math.sin(dtheta)
-    rows = np.concatenate([a for p in points for a in (p.xy, p.direction, p.pose)])
-    rows = rows.reshape(len(points), 7) - np.array([bx, by, 0.0, 0.0, bx, by, 0.0])
-    motion = np.zeros((7, 7))  # Rᵀ on xy, direction and pose xy (row vectors times Rᵀ)
-    motion[0, :2] = motion[2, 2:4] = motion[4, 4:6] = c, s
-    motion[1, :2] = motion[3, 2:4] = motion[5, 4:6] = -s, c
-    motion[6, 6] = 1.0
-    rows = rows @ motion
-    rows += np.array([ax, ay, 0.0, 0.0, ax, ay, dtheta])
-    new = tuple.__new__
-    return [
-        new(StoredPoint, (moved, turned, p.sigma, p.weight, pose, p.beam, p.step))
-        for moved, turned, pose, p in zip(
-            rows[:, :2], rows[:, 2:4], rows[:, 4:], points, strict=True
-        )
-    ]
-
-
-def _observed_side(points: Sequence[StoredPoint], variate: int) -> int:
+def _observed_side(points: PointArrays, variate: int) -> int:
     """The face the beams of ``points`` saw on a curve of ``variate``: beams travelling
     towards +η came from the −η side (−1), and vice versa; 0 if they cancel."""
     axis = 1 if variate == 1 else 0
-    total = sum(float(p.direction[axis]) for p in points)
+    total = sum(points.direction[:, axis].tolist())  # in order, as Python adds
     return -1 if total > 0 else (1 if total < 0 else 0)
 
 

@@ -253,7 +253,7 @@ def test_hit_past_an_end__on_the_continued_wall_stretches_it_with_stretch_ends_o
         assert slam.table.polys[0].hi == (hit[0] if expect else wall[1]), (cfg.stretch_ends, hit)
         assert slam.table.evidence[0][1] == (hit[0] if expect else wall[1])
         assert info.beams_used == 0
-        assert len(slam.book.clusters) == int(not expect)
+        assert len(slam.points.clusters()) == int(not expect)
 
 
 def test_hit_past_an_end__off_the_curve_does_not_update_through_the_extent() -> None:
