@@ -15,12 +15,12 @@ in a cluster. A wall whose hits are sparse (a beam sweeping it at range, 0.3 m a
 speed) then grows hit by hit, as it would with denser hits through the paper's case 1; a gap
 wider than :data:`GAP_SPLIT` (a doorway) is never crossed.
 
-The association runs compiled over the map's buffers (:class:`Association`,
-:func:`~polyslam_env.slam.map_kernels.associate_scan`): it stores the clusters' and Q_bad sets'
-points (:class:`~polyslam_env.slam.stored.StoredPoints`), stretches extents, and leaves the
-rare rest as requests: the caller builds their point sets (:func:`qbad_refit_points`,
-:func:`fit_cluster`), fits them and augments / removes state entries and the landmark
-table's rows. It never touches the EKF.
+The association runs compiled over the map's buffers
+(:func:`~polyslam_env.slam.map_kernels.associate_scan`, in the step's first call): it stores
+the clusters' and Q_bad sets' points (:class:`~polyslam_env.slam.stored.StoredPoints`),
+stretches extents, and leaves the rare rest as requests: the caller builds their point sets
+(:func:`qbad_refit_points`, :func:`fit_cluster`), fits them and augments / removes state
+entries and the landmark table's rows. It never touches the EKF.
 """
 
 from __future__ import annotations
@@ -30,9 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyslam_env.slam import kernels, map_kernels
-from polyslam_env.slam.columns import N_REFIT
-from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam import kernels
 from polyslam_env.slam.fitting import (
     MAX_SLOPE,
     Fit,
@@ -42,14 +40,13 @@ from polyslam_env.slam.fitting import (
     polynomial_points,
     stored_points,
 )
-from polyslam_env.slam.landmarks import LandmarkTable, ShapeArrays, ShapeRow, shape_arrays
+from polyslam_env.slam.landmarks import ShapeArrays, ShapeRow, shape_arrays
 from polyslam_env.slam.map_kernels import GAP_SPLIT
 from polyslam_env.slam.polynomial import Polynomial
-from polyslam_env.slam.stored import PointArrays, StoredPoints
+from polyslam_env.slam.stored import PointArrays
 
 __all__ = [
     "GAP_SPLIT",
-    "Association",
     "ClusterFit",
     "fit_cluster",
     "nearest_by_error",
@@ -83,63 +80,6 @@ def nearest_by_error(
     best, err = np.empty(len(points), dtype=np.int64), np.empty(len(points))
     kernels.nearest_by_error(points, cand, *arrays, c0, bool(squared), best, err)
     return list(zip(best.tolist(), err.tolist(), strict=True))
-
-
-# -- the association step -----------------------------------------------------------------------
-class Association:
-    """One robot's association stage (module docstring): the compiled
-    :func:`~polyslam_env.slam.map_kernels.associate_scan` with its model and its output
-    buffers, made once per robot.
-
-    After :meth:`run`, ``good[b]`` is the id of the landmark beam b updates (−1: none), and
-    the stored points hold this step's requests: :meth:`refits` (landmark id, request) and
-    ``n_new`` clusters to fit (:meth:`new_landmarks`)."""
-
-    def __init__(self, config: SlamConfig, beam_angles: np.ndarray) -> None:
-        self.angles = np.ascontiguousarray(beam_angles, dtype=float)  # (B,)
-        self.params = np.zeros(map_kernels.N_PARAMS)
-        self.params[map_kernels.P_RANGE_SIGMA] = config.range_sigma
-        self.params[map_kernels.P_RANGE_VAR] = config.range_sigma**2
-        self.params[map_kernels.P_CLUSTER_RADIUS] = config.cluster_radius
-        self.params[map_kernels.P_TURN_VAR_PER_STEP] = config.odom_cov[2, 2]
-        self.params[map_kernels.P_SQUARE] = 2.0
-        self.switches = np.zeros(map_kernels.N_SWITCHES, dtype=np.int64)
-        self.switches[map_kernels.S_SQUARED] = config.squared_error
-        self.switches[map_kernels.S_STRETCH_ENDS] = config.stretch_ends
-        self.switches[map_kernels.S_ROTATION_STATES] = config.rotation_states
-        self.switches[map_kernels.S_LINK_CLUSTERS] = config.link_clusters
-        self.switches[map_kernels.S_EPS_M] = config.eps_m
-        self.switches[map_kernels.S_EPS_Z] = config.eps_z
-        self.good = np.full(self.angles.size, -1, dtype=np.int64)  # (B,) landmark id, −1: none
-        self.requests = np.zeros(self.angles.size, dtype=np.int64)  # (B,) refit requests' ids
-
-    def run(
-        self,
-        mean: np.ndarray,
-        cov: np.ndarray,
-        ranges: np.ndarray,
-        step: int,
-        rho: float,
-        sigma: float,
-        fit_inverse: np.ndarray,
-        table: LandmarkTable,
-        points: StoredPoints,
-    ) -> int:
-        """Associate this step's returns (``ranges`` (B,) at the predicted ``mean``, ``cov``)
-        with the map as it stood at the step's start; returns how many extents it stretched."""
-        points.reserve(self.angles.size)
-        return int(
-            map_kernels.associate_scan(
-                mean, cov, ranges, self.angles, step, rho, sigma, self.params, self.switches,
-                fit_inverse, *table.buffers, len(table), *points.buffers, self.requests,
-                self.good,
-            )
-        )  # fmt: skip
-
-    def refits(self, points: StoredPoints) -> list[tuple[int, int]]:
-        """This step's refit requests: (landmark id, request number), in request order."""
-        count = int(points.counters[N_REFIT])
-        return list(zip(self.requests[:count].tolist(), range(count), strict=True))
 
 
 # -- building the fits ----------------------------------------------------------------------

@@ -43,6 +43,11 @@ from polyslam_env.slam.columns import (
     NEXT_RANK,
     ORDER,
     OWNER,
+    P_CLUSTER_RADIUS,
+    P_RANGE_SIGMA,
+    P_RANGE_VAR,
+    P_SQUARE,
+    P_TURN_VAR_PER_STEP,
     PIVOT,
     PTH,
     PX,
@@ -50,6 +55,12 @@ from polyslam_env.slam.columns import (
     QBAD,
     RANK,
     REFIT,
+    S_EPS_M,
+    S_EPS_Z,
+    S_LINK_CLUSTERS,
+    S_ROTATION_STATES,
+    S_SQUARED,
+    S_STRETCH_ENDS,
     SIGMA,
     SIZE,
     STAMP,
@@ -81,21 +92,6 @@ GAP_SPLIT = 0.3
 #: m², the smallest pose uncertainty a point's LMS weight divides by: a pose known exactly (the
 #: start, without odometry noise) weighs as one known to a micrometre, not infinitely.
 POSE_VAR_FLOOR = 1e-12
-
-# -- the association's model (float64 ``params`` and int64 ``switches`` slots) -------------------
-P_RANGE_SIGMA = 0  # σ of the range noise (m)
-P_RANGE_VAR = 1  # σ²
-P_CLUSTER_RADIUS = 2  # R (m)
-P_TURN_VAR_PER_STEP = 3  # the odometry's heading variance per step (rad²)
-P_SQUARE = 4  # 2.0: the exponent of Python's ``x ** 2`` (module docstring)
-N_PARAMS = 5
-S_SQUARED = 0  # the paper's squared approximation error
-S_STRETCH_ENDS = 1
-S_ROTATION_STATES = 2  # each landmark's turn α is a state (at 3 + n + row)
-S_LINK_CLUSTERS = 3
-S_EPS_M = 4
-S_EPS_Z = 5
-N_SWITCHES = 6
 
 
 # -- small pieces ---------------------------------------------------------------------------------

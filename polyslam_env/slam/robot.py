@@ -12,17 +12,37 @@ from __future__ import annotations
 import functools
 import math
 import time
-from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from typing import NamedTuple
 
 import numpy as np
 
 from polyslam_env.core.blas import blas_threads
-from polyslam_env.slam import ekf, kernels, map_kernels
-from polyslam_env.slam.association import Association, fit_cluster, qbad_refit_points
-from polyslam_env.slam.columns import N_NEW, NEW, REFIT
+from polyslam_env.slam import ekf, map_kernels, step_kernels
+from polyslam_env.slam.association import fit_cluster, qbad_refit_points
+from polyslam_env.slam.columns import (
+    G_REQUEST,
+    G_ROW,
+    N_NEW,
+    N_PER_BEAM,
+    N_REFIT,
+    N_VALUES,
+    NEW,
+    REFIT,
+    S_SCREEN_ALARM,
+    ST_EXTENTS,
+    ST_FRESH,
+    ST_OUTLIERS,
+    ST_PAPER_TEST,
+    ST_SCREEN,
+    ST_USED,
+    V_BEFORE,
+    V_F,
+    V_FIRST_X,
+    V_FIRST_Y,
+    V_RHO,
+    V_SIGMA,
+)
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import (
     MAX_SLOPE,
@@ -43,28 +63,30 @@ from polyslam_env.slam.landmarks import (
 )
 from polyslam_env.slam.links import evidence_gap, line_angle, link_rows, off_square, turned_line
 from polyslam_env.slam.merging import JOIN_GAP, choose_merge, face_normal, merge_points
+from polyslam_env.slam.model import (
+    REACH_MARGIN,
+    SCREEN_CONTAMINATION,
+    SCREEN_FALSE_ALARM,
+    SCREEN_WINDOW,
+    step_model,
+    update_beam_mask,
+)
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.stored import PointArrays, StoredPoints
 
-#: The innovation screen of the divergence test (:meth:`PolySlam._is_diverging`): the last
-#: SCREEN_WINDOW beams whose return (or lack of one) the map predicts, each an outlier when
-#: its NIS exceeds the χ²(1) gate quantile (probability 1 − gate_prob for a consistent
-#: filter). Besides, up to SCREEN_CONTAMINATION of the beams of a healthy robot are gross
-#: outliers (occlusion by walls not yet mapped, polynomials reaching past their support: 6.5 %
-#: of 6,785 beams over 40 healthy wall-following episodes, up to 17 % in one episode), so an
-#: alarm needs the count that Bin(SCREEN_WINDOW, 1 − gate_prob + SCREEN_CONTAMINATION)
-#: reaches with probability at most SCREEN_FALSE_ALARM (7 of 10 with the defaults).
-SCREEN_WINDOW = 10
-SCREEN_CONTAMINATION = 0.15
-SCREEN_FALSE_ALARM = 1e-3
-#: Slack (m) added to box distances when selecting the landmarks a beam can reach: covers
-#: the root polishing and rounding of the hit point, which the exact test then decides.
-REACH_MARGIN = 1e-3
+__all__ = [
+    "REACH_MARGIN",
+    "SCREEN_CONTAMINATION",
+    "SCREEN_FALSE_ALARM",
+    "SCREEN_WINDOW",
+    "PolySlam",
+    "SlamStepInfo",
+    "update_beam_mask",
+]
 JOIN_RMS = 1.0
 
 
-@dataclass(frozen=True)
-class SlamStepInfo:
+class SlamStepInfo(NamedTuple):
     """What one SLAM step did (for logs, metrics and tests)."""
 
     step: int
@@ -132,21 +154,14 @@ class PolySlam:
     ) -> None:
         self.config = config
         self.beam_angles = np.asarray(beam_angles, dtype=float)  # (B,)
-        self._update_beams = update_beam_mask(self.beam_angles, config.update_spacing_deg)
-        # the divergence screen tests the same beams: its count assumes independent beams
-        self._screen_angles = np.ascontiguousarray(self.beam_angles[self._update_beams])
+        self._model = step_model(config, self.beam_angles, max_range)  # the compiled step's
         self._range_var = float(config.range_sigma**2)
         self._n_fit = config.eps_z + 1  # points of the cluster a landmark is born from
-        self._turn_var_per_step = float(config.odom_cov[2, 2])  # rad², see _turn_var
-        self._outlier = np.empty(self._screen_angles.size, dtype=bool)  # the screen's flags
-        self._min_sine = float(np.sin(np.deg2rad(config.tangent_min_deg)))
         self.max_range = float(max_range)
         self.mean = np.zeros(3)  # (3+n,) relative to the true start (see class docstring)
         self.cov = np.zeros((3, 3))  # (3+n, 3+n) ditto: the true start is known exactly
-        self._first_xy: tuple[float, float] | None = None  # x̂_{k|k−1}'s position (FEJ)
         self.table = LandmarkTable()  # the map: ids, shapes, extents, … in state order
         self.points = StoredPoints()  # the clusters' and Q_bad sets' beam points
-        self.association = Association(config, self.beam_angles)
         self.step_count = 0
         self._wall_of: dict[int, int] = {}  # landmark id → its wall group (links.py)
         self._direction_of: dict[int, int] = {}  # landmark id → its direction group (ditto)
@@ -155,14 +170,15 @@ class PolySlam:
         self.divergence_f = 0.0
         self.profile: dict[str, list[float]] | None = None
         self._state_version = 0  # bumped by every update (map changes bump the table's version)
-        kp0_eig = np.linalg.eigvalsh(config.k_divergence * config.p0)  # (3,) ascending
-        self._kp0_norm = float(max(-kp0_eig[0], kp0_eig[-1]))  # ‖K P0‖
-        self._kp0_min = float(kp0_eig[0])  # λ_min(K P0)
-        self._gate = ekf.chi2_1dof_quantile(config.gate_prob)
-        self._screen: deque[bool] = deque(maxlen=SCREEN_WINDOW)  # outlier flags, oldest first
-        self._screen_alarm = ekf.outlier_count_threshold(
-            SCREEN_WINDOW, 1.0 - config.gate_prob + SCREEN_CONTAMINATION, SCREEN_FALSE_ALARM
-        )
+        # the compiled step's outcome (columns: G_*, ST_*, V_*), kept between steps: the
+        # screen's window and the first-estimates position live there
+        status = np.zeros(ST_SCREEN + SCREEN_WINDOW, dtype=np.int64)
+        values = np.zeros(N_VALUES)
+        values[V_FIRST_X] = values[V_FIRST_Y] = math.nan  # no prediction yet: the standard F
+        per_beam = np.full((N_PER_BEAM, self.beam_angles.size), -1, dtype=np.int64)
+        self._outcome = (per_beam, status, values)
+        self._fit_width = 0
+        self._inverse = np.zeros((1, 1, 1))
 
     # -- read-only views ------------------------------------------------------------------
     @property
@@ -218,6 +234,13 @@ class PolySlam:
         slam.links`); a copy."""
         return dict(self._direction_of)
 
+    @property
+    def last_update_beams(self) -> np.ndarray:
+        """The beams (ascending indices) the last step handed to its update: each good for a
+        landmark still in the map, one of the update's beams, on a long enough landmark (the
+        update's own tests may still leave some out)."""
+        return np.flatnonzero(self._outcome[0][G_ROW] >= 0)
+
     def c0_variance(self, landmark_id: int) -> float:
         k = self.table.state_index(landmark_id)
         return float(self.cov[k, k])
@@ -258,39 +281,81 @@ class PolySlam:
     def step(self, odometry: np.ndarray, ranges: np.ndarray) -> SlamStepInfo:
         """Advance by one control period given odometry (3,) and range readings (B,).
 
-        BLAS runs on ``config.blas_threads`` threads meanwhile (see :mod:`polyslam_env.core.blas`).
+        Two compiled calls (:mod:`~polyslam_env.slam.step_kernels`) with the rare map changes
+        between them; those run with BLAS on ``config.blas_threads`` threads (see
+        :mod:`polyslam_env.core.blas`): their products are the step's only BLAS calls.
         """
-        with blas_threads(self.config.blas_threads):
-            return self._step(odometry, ranges)
-
-    def _step(self, odometry: np.ndarray, ranges: np.ndarray) -> SlamStepInfo:
         start = lap = time.perf_counter()
-        cfg = self.config
         self.step_count += 1
-        self._predict(odometry)
-        self._screen_innovations(np.asarray(ranges, dtype=float))
-        pose_cov = self.cov[:3, :3]
-        f = ekf.divergence_ratio(pose_cov, cfg.p0, cfg.k_divergence, self._kp0_norm)
-        rho = ekf.thresholds(f, cfg.rho_min, cfg.rho_max)
-        sigma = ekf.thresholds(f, cfg.sigma_min, cfg.sigma_max)
-        if self.profile is not None:
+        self.mean = self.mean.copy()  # a fresh working mean (callers may hold the last one)
+        odometry = np.asarray(odometry, dtype=float)
+        ranges = np.asarray(ranges, dtype=float)
+        self.points.reserve(ranges.size)
+        table, points, model = self.table, self.points, self._model
+        real, index, shape = table.buffers
+        preal, pindex, counters = points.buffers
+        per_beam, status, values = self._outcome
+        fit_inverse, n = self._fit_inverse(), len(table)
+        if self.profile is None:
+            step_kernels.begin_step(
+                self.mean, self.cov, odometry, ranges, model.beams, real, index, shape, n, preal,
+                pindex, counters, model.params, model.switches, fit_inverse, self.step_count,
+                per_beam, status, values,
+            )  # fmt: skip
+        else:
+            step_kernels.predict_step(
+                self.mean, self.cov, odometry, ranges, model.beams, real, index, shape, n,
+                model.params, model.switches, fit_inverse, self.step_count, status, values,
+            )  # fmt: skip
             lap = self._lap("predict", lap)
-
-        ranges = np.ascontiguousarray(ranges, dtype=float)
-        association, points = self.association, self.points
-        fit_inverse = _fit_inverse_table(
-            self._n_fit, max(cfg.order, self.table.shape_buffer.shape[1] - 1)
-        )
-        if association.run(
-            self.mean, self.cov, ranges, self.step_count, rho, sigma, fit_inverse, self.table,
-            points,
-        ):  # fmt: skip
-            self.table.extents_changed()
-        if self.profile is not None:
+            step_kernels.associate_step(
+                self.mean, self.cov, ranges, model.beams, real, index, shape, n, preal, pindex,
+                counters, model.params, model.switches, fit_inverse, self.step_count, per_beam,
+                status, values,
+            )  # fmt: skip
             lap = self._lap("association", lap)
+        if status[ST_EXTENTS]:
+            table.extents_changed()
+        rho, sigma = float(values[V_RHO]), float(values[V_SIGMA])
+        counts = (0, 0, 0, 0)
+        if points.counters[N_REFIT] or points.counters[N_NEW] or status[ST_FRESH]:
+            with blas_threads(self.config.blas_threads):
+                counts = self._change_map(rho, int(status[ST_FRESH]))
+        refit, created, merged, linked = counts
+        if self.profile is not None:
+            lap = self._lap("map", lap)
 
+        real, index, shape = table.buffers  # (the map changes may have grown them)
+        step_kernels.finish_step(
+            self.mean, self.cov, ranges, model.beams, real, index, shape, len(table),
+            model.params, model.switches, self._fit_inverse(), self.step_count, per_beam, status,
+            values,
+        )  # fmt: skip
+        used = int(status[ST_USED])
+        if used >= 0:  # the update ran
+            self._state_version += 1
+            if used:  # the pose moved
+                self._carry_stored_points(values[V_BEFORE : V_BEFORE + 3], self.mean[:3])
+        self.divergence_f = float(values[V_F])
+        self.diverging = bool(
+            (status[ST_PAPER_TEST] and self._beyond_k_p0())
+            or status[ST_OUTLIERS] >= model.switches[S_SCREEN_ALARM]
+        )
+        if self.profile is not None:
+            self._lap("update", lap)
+        return SlamStepInfo(
+            self.step_count, time.perf_counter() - start, len(table), max(used, 0), created,
+            refit, merged, rho, sigma, self.divergence_f, self.diverging, linked,
+        )  # fmt: skip
+
+    def _change_map(self, rho: float, fresh: int) -> tuple[int, int, int, int]:
+        """This step's requests (refits, new landmarks with their merges) and links: (refit,
+        created, merged, linked) counts."""
+        points = self.points
+        per_beam = self._outcome[0]
         refit = 0
-        for landmark_id, request in association.refits(points):
+        for request in range(int(points.counters[N_REFIT])):
+            landmark_id = int(per_beam[G_REQUEST, request])
             refit += self._refit(landmark_id, self._take(REFIT, request), rho)
         created = merged = 0
         for request in range(int(points.counters[N_NEW])):
@@ -298,46 +363,31 @@ class PolySlam:
             if new_id is not None:
                 created += 1
                 merged += self._merge_into_map(new_id)
-        linked = self._link_changed()
-        if self.profile is not None:
-            lap = self._lap("map", lap)
+        points.counters[N_REFIT] = points.counters[N_NEW] = 0
+        # links are sought for landmarks changed link_age steps ago: those the kernel counted,
+        # or (link_age 0) those changed now
+        changed_now = self.config.link_age == 0 and (refit or created)
+        linked = self._link_changed() if fresh or changed_now else 0
+        return refit, created, merged, linked
 
-        good = [
-            (b, self.table.index_of(lid))
-            for b, lid in enumerate(association.good.tolist())
-            if lid >= 0 and lid in self.table and self._update_beams[b] and self._long_enough(lid)
-        ]
-        used = self._update(good, np.asarray(ranges, dtype=float))
-        self.divergence_f = f
-        self.diverging = self._is_diverging()
-        if self.profile is not None:
-            self._lap("update", lap)
-        return SlamStepInfo(
-            step=self.step_count,
-            time_s=time.perf_counter() - start,
-            n_landmarks=self.n_landmarks,
-            beams_used=used,
-            created=created,
-            refit=refit,
-            merged=merged,
-            rho=rho,
-            sigma=sigma,
-            divergence_f=f,
-            diverging=self.diverging,
-            linked=linked,
-        )
+    def _fit_inverse(self) -> np.ndarray:
+        """The frozen shapes' fit model (``_fit_inverse_table``) up to the table's widest order."""
+        width = self.table.shape_buffer.shape[1]
+        if width != self._fit_width:
+            self._fit_width = width
+            self._inverse = _fit_inverse_table(self._n_fit, max(self.config.order, width - 1))
+        return self._inverse
+
+    def _beyond_k_p0(self) -> bool:
+        """The paper's divergence test, P_{k|k−1} beyond K·P0 (``ekf.is_diverging``)."""
+        cfg = self.config
+        return ekf.is_diverging(self.cov[:3, :3], cfg.p0, cfg.k_divergence)
 
     def _boxes(self) -> np.ndarray:
         """Bounding boxes (n, 4) of the landmarks at the current c0s, cached by the table until
         the map or the state changes (the association and an update without map change share
         them)."""
         return self.table.boxes(self.c0s, self._state_version)
-
-    def _predict(self, odometry: np.ndarray) -> None:
-        """EKF prediction into the working arrays (the mean is small: a fresh copy)."""
-        self.mean = self.mean.copy()
-        ekf.predict_inplace(self.mean, self.cov, odometry, self.config.odom_cov, self._first_xy)
-        self._first_xy = (float(self.mean[0]), float(self.mean[1]))
 
     def _lap(self, stage: str, since: float) -> float:
         """Record the time since ``since`` under ``stage`` (profiling on); returns now."""
@@ -352,42 +402,6 @@ class PolySlam:
         taken = self.points.take(rows)
         self.points.drop(rows)
         return taken
-
-    def _screen_innovations(self, ranges: np.ndarray) -> None:
-        """Hook of :meth:`_is_diverging`, run right after the prediction: the NIS of every beam
-        against the map as it stood before this step's changes (created or refit landmarks
-        would explain the very beams they were made of), at the predicted pose. A beam without
-        return whose predicted hit lies within range counts with the range r_max: a lower
-        bound of its true range, so its NIS is a lower bound too.
-
-        Only the beams the update uses (``update_spacing_deg``) are screened: the alarm's
-        count is binomial for independent beams, and beams closer together share more of
-        their landmark's error (with all seventeen default beams, 3 of 100 healthy episodes
-        raised the flag)."""
-        if self.n_landmarks == 0:
-            return
-        outlier = self._outlier
-        screened = np.ascontiguousarray(ranges[self._update_beams])
-        args = (self.mean, self.cov, self._screen_angles, screened, outlier)
-        k = kernels.screen_scan(*args, *self._map_args())
-        self._screen.extend(outlier[:k].tolist())
-
-    def _is_diverging(self) -> bool:
-        """The paper's test (P beyond K·P0) or the innovation screen: at least
-        ``_screen_alarm`` of the last :data:`SCREEN_WINDOW` screened beams are outliers
-        (:meth:`_screen_innovations`, thresholds in the note on :data:`SCREEN_WINDOW`).
-
-        A lost filter (kidnapped, wheels slipping) predicts most beams wrong at once, while a
-        healthy one meets an outlier now and then; counting outliers rather than summing NIS
-        keeps one gross outlier from raising the alarm alone.
-        """
-        cfg = self.config
-        pose_cov = self.cov[:3, :3]
-        # λ_max(P − K P0) ≤ ‖P‖_F − λ_min(K P0): far below K P0, skip the eigenvalues
-        small = float((pose_cov * pose_cov).sum()) < (0.5 * self._kp0_min) ** 2
-        if not small and ekf.is_diverging(pose_cov, cfg.p0, cfg.k_divergence):
-            return True
-        return sum(self._screen) >= self._screen_alarm
 
     # -- public landmark insertion (map exchange) -----------------------------------------------
     def insert_landmark(
@@ -977,129 +991,10 @@ class PolySlam:
             return None
         return fit
 
-    # -- EKF update -------------------------------------------------------------------------------
-    def _update(self, beams: list[tuple[int, int]], ranges: np.ndarray) -> int:
-        """Batched, gated update with the associated beams ((beam, landmark index) pairs;
-        their rows as in :meth:`_map_args`, each on the landmark it is cast onto, which must
-        be its own with ``end_sigma`` > 0); returns how many were used."""
-        if not beams or self.n_landmarks == 0:
-            return 0
-        mean = self.mean
-        before = mean[:3].copy()
-        chosen, assigned = np.array(beams, dtype=np.int64).T.copy()
-        args = (mean, self.cov, self.beam_angles, ranges, chosen, assigned)
-        used = kernels.update_scan(*args, *self._map_args())
-        if used < 0:  # no usable row: nothing ran
-            return 0
-        self._state_version += 1
-        if used:  # else the pose did not move
-            self._carry_stored_points(before, mean[:3])
-        return used
-
-    def _map_args(self) -> tuple[Any, ...]:  # the kernels type their arguments
-        """The map and model arguments of the scan kernels (``kernels.screen_scan``,
-        ``kernels.update_scan``): the landmarks within range at the current mean, the table's
-        arrays, the model constants and the χ² gate.
-
-        Each beam's hit (:func:`~polyslam_env.slam.kernels.beam_rows`, a whole scan per call,
-        on the landmarks within range) gives one row of H: the pose part and 1/D on the c0
-        hit (SPEC §3, :mod:`~polyslam_env.slam.measurement`). Near-tangent hits are skipped.
-        R adds to the range noise the landmark's fit variance beyond the noise, and with
-        ``shape_follows_pose`` the frozen shape's own errors:
-
-        A shape was fitted to points placed with the pose estimate of its time, so that
-        pose's error moves the whole shape rigidly. ``c0``'s Jacobian G_x carries the part of
-        that motion a constant offset can: the shift of the curve at its centroid ξ_c. What
-        it cannot carry (the shape is outside the state, as in the paper) is
-
-        * the rotation by δα about the centroid (ξ_c, η_c), which changes η at ξ* by
-          ±[(ξ* − ξ_c) + B'(ξ*)(η* − η_c)]·δα (+ for x¹-variate, − for x²-variate), and
-        * the translation along ξ by δξ, which changes η at ξ* by −(B'(ξ*) − B'(ξ_c))·δξ.
-
-        The heading error changes little after a landmark is made (odometry turns it by
-        little and a wall hardly corrects absolute heading), so the shape's rotation is taken
-        equal to the robot's current heading error: ±lever/D is added to ∂h/∂θ
-        (∂h/∂η = ∂h/∂c0 = 1/D). Without it a frozen slope makes the absolute heading look
-        observable: P_θθ shrinks while the error stays. The position error, in contrast, is
-        corrected by the update, so the translation term is treated as noise: its variance
-        ((B'(ξ*) − B'(ξ_c))/D)²·σ²_ξ, with σ²_ξ the pose variance along ξ when the landmark was
-        made, goes into R together with the shape's own fit error: the shape was fitted to
-        noisy points, so its estimation error is a bias every later beam on it shares. For N
-        points equally spaced over the fitted extent, the fit's η at t = (ξ* − ξ_c)/half-extent
-        has variance σ² a(t)ᵀM⁻¹a(t) (a = [1, t, …, t^m]); the constant part σ²/N is c0's and
-        already in the state, the rest goes into R. It is small inside the fitted extent
-        (~σ²·m/N) and grows fast where the curve is extrapolated. N = ε_Z + 1, the size of the
-        cluster a landmark is born from. And the rotation the shape is taken to share is the
-        heading error *when it was fitted*, which the current one has drifted from since: that
-        drift's variance (:meth:`_turn_var`) times (lever/D)² goes into R as well.
-
-        With rotation states (``shape_rotation="considered"``) the rotation is instead the
-        landmark's own α: ±lever/D goes to ∂h/∂α, and neither the heading drift nor the
-        slope's part of the fit variance (σ²·t²·M⁻¹[1, 1], which α's variance holds) enters R.
-        The last four arguments are the landmark count, α_1's state index (−1: none),
-        the first considered state index (the α block, or the state size: none) and
-        ``end_sigma``: the update leaves out beams whose hit may lie past their landmark's
-        end (``kernels.ends_in_doubt``).
-        """
-        table, n_fit = self.table, self._n_fit
-        return (
-            self.max_range + REACH_MARGIN,
-            table.variate,
-            table.order,
-            table.shape,
-            table.lo,
-            table.hi,
-            self._boxes(),
-            self.max_range,
-            self._min_sine,
-            self._range_var,
-            table.model_var,
-            self.config.shape_follows_pose,
-            table.pivot,
-            table.xi_var,
-            self._turn_var(),
-            table.fit_half,
-            _fit_inverse_table(n_fit, table.shape.shape[1] - 1),
-            n_fit,
-            self._gate,
-            len(table),
-            3 + len(table) if self.config.rotation_states else -1,  # α_1's state index
-            # the considered entries (Schmidt): the rotations, or none
-            3 + len(table) if self.config.rotation_states else self.mean.size,
-            self.config.end_sigma,
-        )
-
-    def _turn_var(self) -> np.ndarray:  # (n,)
-        """Per landmark, the variance of the robot's heading change since its shape was last
-        fitted: the odometry's heading variance per step times the steps since then.
-
-        ``shape_follows_pose`` takes a frozen shape's rotation to equal the current heading
-        error; it equals the heading error *when the shape was fitted*, and the two drift apart
-        by the heading noise the odometry adds in between (a random walk). Its effect on a
-        beam, ±lever·δ/D, is an error of that beam's range; its variance goes into R
-        (``kernels.beam_rows``). Without it the filter trusts walls made long ago, when it comes
-        back to them around a loop, as if its heading had not moved since.
-        """
-        age = self.step_count - np.asarray(self.table.changed_at, dtype=float)
-        return age * self._turn_var_per_step
-
     def _carry_stored_points(self, before: np.ndarray, after: np.ndarray) -> None:
         """Move cluster and Q_bad points rigidly with a pose correction
         (:meth:`StoredPoints.carry`)."""
         self.points.carry(before, after)
-
-
-def update_beam_mask(angles: np.ndarray, spacing_deg: float) -> np.ndarray:
-    """Which beams (B,) bool enter the EKF update: in order of angle, each beam at least
-    ``spacing_deg`` from the last one kept, starting from the first (all when 0)."""
-    keep = np.zeros(len(angles), dtype=bool)
-    last = -np.inf
-    tol = 1e-9
-    for i in np.argsort(angles, kind="stable"):
-        if np.rad2deg(angles[i] - last) >= spacing_deg - tol:
-            keep[i] = True
-            last = angles[i]
-    return keep
 
 
 @functools.lru_cache(maxsize=16)

@@ -2,24 +2,42 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from polyslam_env.slam import map_kernels
+from polyslam_env.slam import map_kernels, step_kernels
 from polyslam_env.slam.association import (
     GAP_SPLIT,
-    Association,
     fit_cluster,
     nearest_by_error,
     qbad_refit_points,
 )
-from polyslam_env.slam.columns import CLUSTER, KIND, N_NEW, N_REFIT, NEW, QBAD, REFIT
+from polyslam_env.slam.columns import (
+    CLUSTER,
+    G_GOOD,
+    G_REQUEST,
+    KIND,
+    N_NEW,
+    N_PER_BEAM,
+    N_REFIT,
+    N_VALUES,
+    NEW,
+    QBAD,
+    REFIT,
+    ST_EXTENTS,
+    ST_SCREEN,
+    V_RHO,
+    V_SIGMA,
+)
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import concat, fit_polynomial, polynomial_points, stored_points
 from polyslam_env.slam.landmarks import LandmarkTable
 from polyslam_env.slam.measurement import cast
+from polyslam_env.slam.model import SCREEN_WINDOW, step_model
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import _fit_inverse_table
 from polyslam_env.slam.stored import PointArrays, StoredPoints, point_arrays
@@ -120,6 +138,17 @@ def table_of(polys: list[Polynomial], rng: np.random.Generator | None = None) ->
     return table
 
 
+class Associated(NamedTuple):
+    """What one run of the compiled association left: per beam, the id of the landmark it
+    updates (−1: none), and this step's refit requests (landmark id, request number)."""
+
+    good: np.ndarray
+    refit_ids: list[int]
+
+    def refits(self, points: StoredPoints) -> list[tuple[int, int]]:
+        return [(lid, r) for r, lid in enumerate(self.refit_ids)]
+
+
 def associate(
     config: SlamConfig,
     table: LandmarkTable,
@@ -131,15 +160,25 @@ def associate(
     sigma: float = SIGMA,
     cov: np.ndarray | None = None,
     step: int = 1,
-) -> Association:
-    """One run of the compiled association (the state's c0s after the pose in ``mean``)."""
-    association = Association(config, angles)
+) -> Associated:
+    """One run of the compiled association (``step_kernels.associate_step``, as PolySlam's
+    step runs it) at thresholds ρ_k, σ_k (the state's c0s after the pose in ``mean``)."""
+    model = step_model(config, angles, 3.0)
     cov = np.eye(mean.size) * 1e-4 if cov is None else cov
     fit_inverse = _fit_inverse_table(config.eps_z + 1, max(config.order, 5))
-    changed = association.run(mean, cov, ranges, step, rho, sigma, fit_inverse, table, points)
-    if changed:
+    per_beam = np.full((N_PER_BEAM, angles.size), -1, dtype=np.int64)
+    status, values = np.zeros(ST_SCREEN + SCREEN_WINDOW, np.int64), np.zeros(N_VALUES)
+    values[V_RHO], values[V_SIGMA] = rho, sigma
+    points.reserve(angles.size)
+    step_kernels.associate_step(
+        mean, cov, np.asarray(ranges, dtype=float), model.beams, *table.buffers, len(table),
+        *points.buffers, model.params, model.switches, fit_inverse, step, per_beam, status,
+        values,
+    )  # fmt: skip
+    if status[ST_EXTENTS]:
         table.extents_changed()
-    return association
+    requests = per_beam[G_REQUEST, : points.counters[N_REFIT]].tolist()
+    return Associated(per_beam[G_GOOD].copy(), requests)
 
 
 def straight_up(xs: list[float], ys: list[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
