@@ -923,6 +923,39 @@ def normalised_innovations(
 
 
 @njit
+def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from: int) -> None:
+    """P⁺ = P − (K Wᵀ + W Kᵀ) in place, ``kt`` = Kᵀ and ``wt`` = Wᵀ (k, n), whose columns
+    from ``consider_from`` on are K's considered rows: zero (:func:`update_sparse`).
+
+    The upper triangle row by row from the diagonal, in blocks: on the estimated rows i < c
+    a considered column j ≥ c takes K_i·W_j alone, and the considered block (i, j ≥ c) does
+    not change at all: each of its entries would subtract an exact zero (a running sum that
+    starts at +0 and adds ±0 stays +0), so the result is the same bits as the full update's
+    (tested against it). Then the lower triangle mirrors the changed upper one."""
+    count, n = kt.shape
+    c = min(max(consider_from, 0), n)
+    acc = np.empty(n)  # row i of K Wᵀ + W Kᵀ from the diagonal on
+    for i in range(c):
+        m = n - i  # slices from the diagonal: loops from 0 vectorise
+        inner = c - i  # the estimated columns
+        part = acc[:m]
+        part[:] = 0.0
+        for q in range(count):
+            k_i, w_i = kt[q, i], wt[q, i]
+            k_row, w_row = kt[q, i:], wt[q, i:]
+            for j in range(inner):
+                part[j] += k_i * w_row[j] + w_i * k_row[j]
+            for j in range(inner, m):
+                part[j] += k_i * w_row[j]
+        row = cov[i, i:]
+        for j in range(m):
+            row[j] -= part[j]
+    for i in range(n):  # mirror (the considered block's triangles are equal and unchanged)
+        for j in range(min(i, c)):
+            cov[i, j] = cov[j, i]
+
+
+@njit
 def update_sparse(
     mean: np.ndarray,  # (3+n,) written in place
     cov: np.ndarray,  # (3+n, 3+n) symmetric, written in place
@@ -949,7 +982,10 @@ def update_sparse(
     * The entries from ``consider_from`` on are *considered* (Schmidt–Kalman): their rows of K
       are zero, so their estimates and their own covariance stay, while their
       cross-covariances with the rest follow the update; the Joseph form keeps P⁺ right for
-      that gain.
+      that gain. The covariance update goes in blocks (the considered block is left alone,
+      the cross block takes one product instead of two): with the n turns of n landmarks
+      considered it does about half the work of the full (3 + 2n)² update, and the result
+      is the same bits as the full one (tested).
 
     Not bit-identical to the numpy version it replaced (BLAS's fused products and the
     Z₊Z₊ᵀ − Z₋Z₋ᵀ split of its syrk): equal to rounding, checked against it in the tests.
@@ -1015,22 +1051,7 @@ def update_sparse(
             for m in range(count):
                 ks += s_sym[q, m] * kt[m, a]
             wt[q, a] = pht[q, a] - 0.5 * ks
-    acc = np.empty(n)  # row i of K Wᵀ + W Kᵀ from the diagonal on
-    for i in range(n):
-        m = n - i  # slices from the diagonal: loops from 0 vectorise
-        part = acc[:m]
-        part[:] = 0.0
-        for q in range(count):
-            k_i, w_i = kt[q, i], wt[q, i]
-            k_row, w_row = kt[q, i:], wt[q, i:]
-            for j in range(m):
-                part[j] += k_i * w_row[j] + w_i * k_row[j]
-        row = cov[i, i:]
-        for j in range(m):
-            row[j] -= part[j]
-    for i in range(n):  # mirror the upper triangle
-        for j in range(i):
-            cov[i, j] = cov[j, i]
+    joseph_blocks(cov, kt, wt, consider_from)
     return count
 
 

@@ -603,6 +603,23 @@ def update_sparse(
     return int(ok.sum())
 
 
+def joseph_full(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray) -> None:
+    """P⁺ = P − (K Wᵀ + W Kᵀ) over the whole upper triangle, mirrored: the loop
+    ``kernels.joseph_blocks`` replaced (in Python floats, the same order of operations)."""
+    count, n = kt.shape
+    for i in range(n):
+        part = [0.0] * (n - i)
+        for q in range(count):
+            k_i, w_i = float(kt[q, i]), float(wt[q, i])
+            for j in range(n - i):
+                part[j] += k_i * float(wt[q, i + j]) + w_i * float(kt[q, i + j])
+        for j in range(n - i):
+            cov[i, i + j] -= part[j]
+    for i in range(n):
+        for j in range(i):
+            cov[i, j] = cov[j, i]
+
+
 def update_scan(
     mean: np.ndarray,
     cov: np.ndarray,
