@@ -32,7 +32,8 @@ ORDER = 2  # its shape's own order (no zero tail, ≥ 1)
 SIDE = 3  # face its beams saw: +1 from +η, −1 from −η, 0 unknown
 CHANGED_AT = 4  # step it was created, refit or merged
 STAMP = 5  # bumped whenever its shape or extent changes (lazy Polynomial views)
-N_INDEX = 6
+RECEIVED = 6  # 1: it holds a received landmark (never linked nor tied square)
+N_INDEX = 7
 
 # -- stored beam points: real fields -------------------------------------------------------------
 X = 0  # frame-0 position

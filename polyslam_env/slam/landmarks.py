@@ -37,6 +37,7 @@ from polyslam_env.slam.columns import (
     N_REAL,
     ORDER,
     PIVOT,
+    RECEIVED,
     SIDE,
     STAMP,
     VARIATE,
@@ -220,10 +221,11 @@ class LandmarkTable:
     ``model_var`` (its fit variance beyond the range noise), ``fit_half`` (half the extent it
     was fitted over; see PolySlam); ``index`` (N_INDEX, capacity) — its stable ``id``,
     ``variate``, own ``order``, ``side`` (the face its beams saw, see ``merging``),
-    ``changed_at`` (the step it was created, refit or merged) and ``stamp`` (bumped whenever
-    its shape or extent changes); and ``shape_buffer`` (capacity, M+1), rows [0, b_1, …, b_M]
-    zero-padded to the largest order so far. The first ``n`` columns are in use; the named
-    properties (``lo``, ``variate``, ``shape``, …) are views of them. The compiled step
+    ``changed_at`` (the step it was created, refit or merged), ``stamp`` (bumped whenever
+    its shape or extent changes) and ``received`` (it holds a received landmark's data);
+    and ``shape_buffer`` (capacity, M+1), rows [0, b_1, …, b_M] zero-padded to the largest
+    order so far. The first ``n`` columns are in use; the named properties (``lo``,
+    ``variate``, ``shape``, …) are views of them. The compiled step
     writes the extents in place (:mod:`~polyslam_env.slam.map_kernels`); appends and removals
     shift whole columns.
 
@@ -312,6 +314,10 @@ class LandmarkTable:
         return self.index[CHANGED_AT, : len(self.ids)]
 
     @property
+    def received(self) -> np.ndarray:  # (n,) int64 1: holds a received landmark's data
+        return self.index[RECEIVED, : len(self.ids)]
+
+    @property
     def stamp(self) -> np.ndarray:  # (n,) int64 moves with every change of shape or extent
         return self.index[STAMP, : len(self.ids)]
 
@@ -344,12 +350,13 @@ class LandmarkTable:
         step: int = 0,
         side: int = 0,
         evidence: tuple[float, float] | None = None,
+        received: bool = False,
     ) -> int:
         """Add a landmark at the end (its c0 was appended to the state); returns its new id.
 
         ``evidence`` (default: the extent) is the ξ-interval of the hits that support it; the
         extent must lie within it ± :data:`EXTENT_MARGIN` (the caller clips, see
-        :func:`clip_to_evidence`)."""
+        :func:`clip_to_evidence`); ``received``: it holds a received landmark's data."""
         landmark_id = self._next_id
         self._next_id += 1
         i = len(self.ids)
@@ -367,6 +374,7 @@ class LandmarkTable:
         index[ID, i], index[VARIATE, i] = landmark_id, poly.variate
         index[ORDER, i] = len(_own_order(shape)) - 1
         index[SIDE, i], index[CHANGED_AT, i], index[STAMP, i] = int(side), step, 0
+        index[RECEIVED, i] = int(received)
         self.ids.append(landmark_id)
         self._built.append(poly)
         self._built_stamp.append(0)

@@ -12,21 +12,11 @@ import numpy as np
 from polyslam_env.slam import columns as col
 from polyslam_env.slam import ekf
 from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.divergence import screen_alarm
 
 #: Slack (m) added to box distances when selecting the landmarks a beam can reach: covers
 #: the root polishing and rounding of the hit point, which the exact test then decides.
 REACH_MARGIN = 1e-3
-#: The innovation screen of the divergence test (``PolySlam._is_diverging``): the last
-#: SCREEN_WINDOW beams whose return (or lack of one) the map predicts, each an outlier when
-#: its NIS exceeds the χ²(1) gate quantile (probability 1 − gate_prob for a consistent
-#: filter). Besides, up to SCREEN_CONTAMINATION of the beams of a healthy robot are gross
-#: outliers (occlusion by walls not yet mapped, polynomials reaching past their support: 6.5 %
-#: of 6,785 beams over 40 healthy wall-following episodes, up to 17 % in one episode), so an
-#: alarm needs the count that Bin(SCREEN_WINDOW, 1 − gate_prob + SCREEN_CONTAMINATION)
-#: reaches with probability at most SCREEN_FALSE_ALARM (7 of 10 with the defaults).
-SCREEN_WINDOW = 10
-SCREEN_CONTAMINATION = 0.15
-SCREEN_FALSE_ALARM = 1e-3
 
 
 class StepModel(NamedTuple):
@@ -85,9 +75,7 @@ def step_model(config: SlamConfig, beam_angles: np.ndarray, max_range: float) ->
     s[col.S_N_FIT] = config.eps_z + 1
     s[col.S_LINK_AGE] = config.link_age
     s[col.S_LINKS] = config.link_gap > 0.0 or config.square_walls
-    s[col.S_SCREEN_ALARM] = ekf.outlier_count_threshold(
-        SCREEN_WINDOW, 1.0 - config.gate_prob + SCREEN_CONTAMINATION, SCREEN_FALSE_ALARM
-    )
+    s[col.S_SCREEN_ALARM] = screen_alarm(config)
     angles = np.asarray(beam_angles, dtype=float).reshape(-1)
     beams = np.zeros((col.N_BEAM_MODEL, angles.size))
     beams[col.B_ANGLE] = angles

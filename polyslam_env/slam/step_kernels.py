@@ -60,8 +60,8 @@ from polyslam_env.slam.columns import (
     V_RHO,
     V_SIGMA,
 )
+from polyslam_env.slam.divergence import SCREEN_WINDOW
 from polyslam_env.slam.kernels import _max, _min
-from polyslam_env.slam.model import SCREEN_WINDOW
 
 
 @njit

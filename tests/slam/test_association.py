@@ -34,12 +34,13 @@ from polyslam_env.slam.columns import (
     V_SIGMA,
 )
 from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.divergence import SCREEN_WINDOW
 from polyslam_env.slam.fitting import concat, fit_polynomial, polynomial_points, stored_points
 from polyslam_env.slam.landmarks import LandmarkTable
+from polyslam_env.slam.maintenance import fit_inverse_table as _fit_inverse_table
 from polyslam_env.slam.measurement import cast
-from polyslam_env.slam.model import SCREEN_WINDOW, step_model
+from polyslam_env.slam.model import step_model
 from polyslam_env.slam.polynomial import Polynomial
-from polyslam_env.slam.robot import _fit_inverse_table
 from polyslam_env.slam.stored import PointArrays, StoredPoints, point_arrays
 from tests.slam import reference_association as oracle
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian

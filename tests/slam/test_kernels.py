@@ -20,9 +20,9 @@ from polyslam_env.apps.benchmark import make_inputs, make_slam, make_walls
 from polyslam_env.slam import ekf, kernels, step_kernels
 from polyslam_env.slam.association import nearest_by_error
 from polyslam_env.slam.landmarks import LandmarkTable, boxes_near
+from polyslam_env.slam.maintenance import fit_inverse_table as _fit_inverse_table
 from polyslam_env.slam.measurement import cast
 from polyslam_env.slam.polynomial import Polynomial
-from polyslam_env.slam.robot import _fit_inverse_table
 from tests.slam import reference_floats as ref
 from tests.slam.test_ekf import assert_symmetric_psd, random_spd
 from tests.slam.test_reference import beam_sets, brute_force_range, polynomials, poses

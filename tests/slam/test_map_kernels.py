@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 from polyslam_env.core.geometry import symmetric_eigvals3
 from polyslam_env.slam import map_kernels
+from polyslam_env.slam.maintenance import fit_inverse_table as _fit_inverse_table
 from polyslam_env.slam.polynomial import Polynomial
-from polyslam_env.slam.robot import _fit_inverse_table
 from tests.slam import reference_association as oracle
 
 

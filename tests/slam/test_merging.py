@@ -229,7 +229,7 @@ def test_fit__a_shape_curving_away_between_its_points_is_refused() -> None:
         xy = np.column_stack([xi, curvature * (xi - 0.17) ** 2])
         n = len(xy)
         ps = PointSet(xy, np.zeros((n, 2, 3)), np.zeros((n, 2, 0)), np.zeros((0, 0)), np.ones(n))
-        fit = slam._fit(ps)
+        fit = slam.maintenance.fit(ps)
         assert (fit is not None) == accepted, curvature
         steep = fit_polynomial(ps, 3, 1).poly.max_slope()
         assert (steep <= MAX_SLOPE) == accepted
