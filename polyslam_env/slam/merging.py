@@ -42,9 +42,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from polyslam_env.slam.association import GAP_SPLIT, nearest_by_error
+from polyslam_env.slam import kernels
+from polyslam_env.slam.association import GAP_SPLIT
 from polyslam_env.slam.fitting import PointSet, concat, polynomial_points
-from polyslam_env.slam.landmarks import pack
+from polyslam_env.slam.landmarks import own_orders
 from polyslam_env.slam.polynomial import Polynomial
 
 _SAMPLES = 64  # samples of p2 used to project it on p's axis
@@ -99,9 +100,18 @@ def merge_gamma(poly: Polynomial, other: Polynomial, a: float, b: float) -> tupl
 
 
 def _errors(points: np.ndarray, poly: Polynomial) -> np.ndarray:  # (k,)
-    """The approximation error of each point (k, 2) by ``poly`` (``nearest_by_error``)."""
-    rows = pack([poly]).rows()
-    return np.array([eps for _, eps in nearest_by_error(points.tolist(), [0], rows, [poly.c0])])
+    """The approximation error of each point (k, 2) by ``poly`` (the association's
+    ``kernels.nearest_by_error`` with ``poly`` the one candidate)."""
+    shape = np.zeros((1, poly.order + 1))
+    shape[0, 1:] = poly.coeffs[1:]
+    order = own_orders(shape)
+    xy = np.ascontiguousarray(points, dtype=float)
+    best, errors = np.empty(len(xy), dtype=np.int64), np.empty(len(xy))
+    kernels.nearest_by_error(
+        xy, np.zeros(1, dtype=np.int64), np.array([poly.variate], dtype=np.int64), order, shape,
+        np.array([poly.lo]), np.array([poly.hi]), np.array([poly.c0]), False, best, errors,
+    )  # fmt: skip
+    return errors
 
 
 def _rms(values: np.ndarray) -> float:
