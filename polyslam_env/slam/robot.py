@@ -174,6 +174,7 @@ class PolySlam:
     # -- read-only views ------------------------------------------------------------------
     @property
     def pose(self) -> np.ndarray:  # (3,)
+        """The pose estimate (x, y, θ) in the robot's start frame (a copy)."""
         return self.mean[:3].copy()
 
     @property
@@ -195,6 +196,7 @@ class PolySlam:
 
     @property
     def n_landmarks(self) -> int:
+        """The number of landmarks (polynomials) in the map."""
         return len(self.table)
 
     @property

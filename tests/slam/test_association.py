@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 from polyslam_env.slam import map_kernels, step_kernels
 from polyslam_env.slam.association import (
@@ -81,15 +82,25 @@ poly_strategy = st.builds(
 )
 
 
+def _xy(n: int, reach: float) -> st.SearchStrategy[np.ndarray]:
+    """n points (n, 2) in the square ±``reach``."""
+    return hnp.arrays(np.float64, (n, 2), elements=st.floats(-reach, reach))
+
+
+#: offsets c0 of up to 8 landmarks (a test uses the first len(polys))
+c0_strategy = hnp.arrays(np.float64, 8, elements=st.floats(-3.0, 3.0))
+
+
 @settings(max_examples=40, deadline=None)
 @given(
     polys=st.lists(poly_strategy, min_size=1, max_size=4),
-    seed=st.integers(0, 2**32 - 1),
+    pts=_xy(15, 4.0),
+    offsets=c0_strategy,
 )
-def test_approximation_error__matches_brute_force(polys: list[Polynomial], seed: int) -> None:
-    rng = np.random.default_rng(seed)
-    pts = rng.uniform(-4.0, 4.0, (15, 2))
-    c0s = list(rng.normal(0.0, 1.0, len(polys)))
+def test_approximation_error__matches_brute_force(
+    polys: list[Polynomial], pts: np.ndarray, offsets: np.ndarray
+) -> None:
+    c0s = list(offsets[: len(polys)])
     err = approximation_error(pts, polys, c0s)
     ref = brute_force_error(pts, polys, c0s)
     np.testing.assert_allclose(err, ref, rtol=1e-10, atol=1e-10)  # same formula, round-off only
@@ -101,16 +112,15 @@ def test_approximation_error__matches_brute_force(polys: list[Polynomial], seed:
 @settings(max_examples=60, deadline=None)
 @given(
     polys=st.lists(poly_strategy, min_size=1, max_size=5),
-    seed=st.integers(0, 2**32 - 1),
+    pts=_xy(6, 4.0),
+    offsets=c0_strategy,
     squared=st.booleans(),
 )
 def test_nearest_by_error__is_the_argmin_of_approximation_error(
-    polys: list[Polynomial], seed: int, squared: bool
+    polys: list[Polynomial], pts: np.ndarray, offsets: np.ndarray, squared: bool
 ) -> None:
-    rng = np.random.default_rng(seed)
     arrays = table_of(polys)
-    pts = rng.uniform(-4.0, 4.0, (6, 2))
-    c0s = rng.normal(0.0, 1.0, len(polys))
+    c0s = offsets[: len(polys)].copy()
     err = approximation_error(pts, arrays.packed(), c0s, squared)
     got = nearest_by_error(
         pts.tolist(), list(range(len(polys))), arrays.rows(), c0s.tolist(), squared
@@ -393,23 +403,26 @@ def assert_same_points(got: PointArrays, want: list[oracle.StoredPoint]) -> None
 @settings(max_examples=60, deadline=None)
 @given(
     polys=st.lists(poly_strategy, min_size=1, max_size=8),
-    seed=st.integers(0, 2**32 - 1),
+    pose=hnp.arrays(np.float64, 3, elements=st.floats(-2.0, 2.0)),
+    offsets=c0_strategy,
+    turns=hnp.arrays(np.float64, 8, elements=st.floats(-1.0, 1.0)),
+    ranges=hnp.arrays(np.float64, 9, elements=st.floats(0.1, 3.0)),
     squared=st.booleans(),
 )
 def test_associate__box_candidates_classify_like_the_whole_map(
-    polys: list[Polynomial], seed: int, squared: bool
-) -> None:
+    polys: list[Polynomial], pose: np.ndarray, offsets: np.ndarray, turns: np.ndarray,
+    ranges: np.ndarray, squared: bool,
+) -> None:  # fmt: skip
     # the kernel hands the error search only the landmarks whose box lies within σ_k of the
     # points' box; every point must land in the same case (good / bad / cluster) with the
     # same p* as against every landmark (without stretch_ends: its GAP_SPLIT reach is a
     # choice, not a bound)
-    rng = np.random.default_rng(seed)
     rho, sigma = (0.04, 0.3) if not squared else (0.0016, 0.09)
     config = SlamConfig(eps_m=50, eps_z=50, squared_error=squared, stretch_ends=False)
     table, points = table_of(polys), StoredPoints()
-    mean = np.concatenate([rng.uniform(-2.0, 2.0, 3), rng.normal(0.0, 1.0, 2 * len(polys))])
+    n = len(polys)
+    mean = np.concatenate([pose, offsets[:n], turns[:n]])  # c0s, then the turns α
     angles = np.linspace(-np.pi, np.pi, 9, endpoint=False)
-    ranges = rng.uniform(0.1, 3.0, angles.size)
     got = associate(config, table, points, mean, ranges, angles, rho, sigma)
     xy = oracle.store_beams(mean[:3], np.eye(3) * 1e-4, ranges, angles, 0.02)
     everything = nearest_by_error(
