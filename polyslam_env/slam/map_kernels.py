@@ -77,6 +77,7 @@ from polyslam_env.slam.kernels import (
     _min,
     boxes,
     boxes_near,
+    horner,
     hypot,
     nearest_by_error,
     taylor_shift,
@@ -183,6 +184,105 @@ def _sum_like_numpy(a: np.ndarray) -> float:
         total += a[i]
         i += 1
     return total
+
+
+# -- the merge test of two polynomials ------------------------------------------------------------
+#: samples of the other polynomial projected on p's axis (``merging`` module: overlap and γ)
+MERGE_SAMPLES = 64
+#: :func:`merge_test`'s answers
+DISJOINT, SHORT_OVERLAP, MEASURED = 0, 1, 2
+
+
+@njit
+def _linspace(start: float, stop: float, num: int, out: np.ndarray) -> None:
+    """``np.linspace(start, stop, num)`` (num ≥ 2) into ``out``: the same floats (i·step +
+    start, i/div·delta + start when the step underflows to 0, the end point exactly)."""
+    div = num - 1
+    delta = stop - start
+    step = delta / div
+    for i in range(num):
+        out[i] = (i / div) * delta + start if step == 0.0 else i * step + start
+    out[num - 1] = stop
+
+
+@njit
+def _on_curve(c: np.ndarray, variate: int, xi: np.ndarray, out: np.ndarray) -> None:
+    """Points (n, 2) of the curve with coefficients ``c`` at ``xi`` (``Polynomial.points_at``;
+    Horner in polyval's order: the same floats)."""
+    m = c.size - 1
+    for i in range(xi.size):
+        eta = horner(c, m, xi[i], c[0])[0]
+        out[i, 0], out[i, 1] = (xi[i], eta) if variate == 1 else (eta, xi[i])
+
+
+@njit
+def _rms_error(xy: np.ndarray, variate: int, c: np.ndarray, lo: float, hi: float) -> float:
+    """RMS approximation error of the points ``xy`` by one polynomial (``nearest_by_error``
+    with it the only candidate), its mean summed as numpy sums."""
+    m = c.size - 1
+    order = 1
+    for k in range(m, 0, -1):  # the shape's own order (its last non-zero power, ≥ 1)
+        if c[k] != 0.0:
+            order = max(k, 1)
+            break
+    shape = np.zeros((1, m + 1))
+    shape[0, 1:] = c[1:]
+    n = xy.shape[0]
+    best, errors = np.empty(n, dtype=np.int64), np.empty(n)
+    nearest_by_error(
+        xy, np.zeros(1, dtype=np.int64), np.full(1, variate, dtype=np.int64),
+        np.full(1, order, dtype=np.int64), shape, np.full(1, lo), np.full(1, hi),
+        np.full(1, c[0]), False, best, errors,
+    )  # fmt: skip
+    return math.sqrt(_sum_like_numpy(errors * errors) / n)
+
+
+@njit
+def merge_test(
+    p_variate: int, p_coeffs: np.ndarray, p_lo: float, p_hi: float,
+    o_variate: int, o_coeffs: np.ndarray, o_lo: float, o_hi: float,
+    min_overlap: float,
+    out: np.ndarray,  # (4,) out: a, b, γ, the ξ on the other polynomial of its tangent
+) -> int:  # fmt: skip
+    """The merge test's geometry of p (coefficients with its c0, extent) against another
+    polynomial (see ``merging``): the other's :data:`MERGE_SAMPLES` samples projected on p's
+    axis give the overlap [a, b]; :data:`DISJOINT` when there is none, :data:`SHORT_OVERLAP`
+    when neither includes the other and it is shorter than ``min_overlap``; else
+    :data:`MEASURED` with γ = max(RMS error of the other on p's m+1 equally spaced points of
+    [a, b], RMS error of p on up to m+1 of the other's samples projecting there) and where the
+    other's tangent is to be taken (the middle of those samples). The same floats as the
+    readable version in ``tests/slam/reference_merging.py`` (tested)."""
+    xi_o = np.empty(MERGE_SAMPLES)
+    _linspace(o_lo, o_hi, MERGE_SAMPLES, xi_o)
+    samples = np.empty((MERGE_SAMPLES, 2))
+    _on_curve(o_coeffs, o_variate, xi_o, samples)
+    axis = 0 if p_variate == 1 else 1
+    xi_s = samples[:, axis]
+    lo2, hi2 = xi_s.min(), xi_s.max()
+    a = lo2 if lo2 > p_lo else p_lo  # Python's max(p_lo, lo2), min(p_hi, hi2)
+    b = hi2 if hi2 < p_hi else p_hi
+    if b < a:
+        return DISJOINT
+    included = (p_lo <= lo2 and hi2 <= p_hi) or (lo2 <= p_lo and p_hi <= hi2)
+    if not (included or b - a >= min_overlap):
+        return SHORT_OVERLAP
+    m = p_coeffs.size - 1
+    xi_p = np.empty(m + 1)
+    _linspace(a, b, m + 1, xi_p)
+    on_p = np.empty((m + 1, 2))
+    _on_curve(p_coeffs, p_variate, xi_p, on_p)
+    gamma_p = _rms_error(on_p, o_variate, o_coeffs, o_lo, o_hi)
+    inside = np.flatnonzero((xi_s >= a) & (xi_s <= b))
+    if inside.size == 0:
+        inside = np.arange(MERGE_SAMPLES)
+    spots = np.empty(m + 1)
+    _linspace(0.0, float(inside.size - 1), m + 1, spots)
+    pick = np.unique(np.rint(spots).astype(np.int64))  # rint: numpy's round, half to even
+    gamma_o = _rms_error(samples[inside[pick]], p_variate, p_coeffs, p_lo, p_hi)
+    out[0], out[1] = a, b
+    out[2] = gamma_o if gamma_o > gamma_p else gamma_p  # Python's max(gamma_p, gamma_o)
+    out[3] = xi_o[inside[inside.size // 2]]
+    return MEASURED
 
 
 # -- stored points --------------------------------------------------------------------------------
