@@ -331,6 +331,16 @@ def _count_of(pindex: np.ndarray, size: int, kind: int, owner: int) -> int:
 
 
 @njit
+def _hand_over(
+    pindex: np.ndarray, size: int, kind: int, owner: int, new_kind: int, new_owner: int
+) -> None:
+    """Every point of one holder (``kind``, ``owner``) goes to another, ranks kept."""
+    for row in range(size):
+        if pindex[KIND, row] == kind and pindex[OWNER, row] == owner:
+            pindex[KIND, row], pindex[OWNER, row] = new_kind, new_owner
+
+
+@njit
 def _cluster_keys(pindex: np.ndarray, size: int) -> np.ndarray:
     """The clusters' keys in cluster order (oldest first)."""
     keys = np.empty(size, dtype=np.int64)
@@ -369,9 +379,7 @@ def _add_bad(
         request = counters[N_REFIT]
         requests[request] = landmark_id
         counters[N_REFIT] += 1
-    for row in range(size):
-        if pindex[KIND, row] == QBAD and pindex[OWNER, row] == landmark_id:
-            pindex[KIND, row], pindex[OWNER, row] = REFIT, request
+    _hand_over(pindex, size, QBAD, landmark_id, REFIT, request)
 
 
 @njit
@@ -420,9 +428,7 @@ def _add_to_cluster(
     if _count_of(pindex, size, CLUSTER, key) > eps_z:
         request = counters[N_NEW]
         counters[N_NEW] += 1
-        for row in range(size):
-            if pindex[KIND, row] == CLUSTER and pindex[OWNER, row] == key:
-                pindex[KIND, row], pindex[OWNER, row] = NEW, request
+        _hand_over(pindex, size, CLUSTER, key, NEW, request)
 
 
 # -- the association step -------------------------------------------------------------------------
