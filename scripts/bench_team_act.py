@@ -1,18 +1,23 @@
 """The frontier team's act on the office floor: ms, MPE steps and Python calls per team act.
 
-The episode of issue 41: ``map="generator:office_floor"``, 3 robots, seed 9, a frontier team
-(``--policy`` for another); steps 0 … ``first`` − 1 are played untimed (numba compiles, maps
-fill), then the team's act (the three robots' ``act`` calls of one env step) is measured on
-steps ``first`` … ``last`` − 1:
+The episode of issue 41, as ``polyslam benchmark``'s ``floor`` section and ``polyslam fidelity``
+play it: the office floor (``generator:office_floor``), 3 robots, seed 9, the exchange on and the
+initial error where supported (:func:`polyslam_env.apps.fidelity.episode_config`), a frontier team
+(``--policy`` for another) drawing from ``default_rng([seed, 1])`` as
+:func:`~polyslam_env.apps.rollout.run_episode` seeds it. Steps 0 … ``first`` − 1 are played
+untimed (numba compiles, maps fill), then the team's act (the three robots' ``act`` calls of one
+env step) is measured on steps ``first`` … ``last`` − 1:
 
 * ``act_ms``: wall time per team act (mean: planning steps are the costly ones, and the mean is
   what a run pays; median and maximum beside it);
 * ``mpe_steps_per_act``: that mean over the step time of PettingZoo MPE ``simple_spread`` (3
-  agents, random actions, through the benchmark's harness,
-  :func:`polyslam_env.apps.benchmark.parallel_stepper`), whose steps are interleaved with the
-  acts (:data:`MPE_PER_ACT` after each act), so that both see the same load on a busy machine;
+  agents, random actions, reset when done, as the benchmark's reference section steps it),
+  whose steps are interleaved with the acts (:data:`MPE_PER_ACT` after each act), so that
+  both see the same load on a busy machine;
 * ``act_cpu_ms``, ``mpe_steps_per_act_cpu``: the same in CPU time (``time.process_time``) of
   this process, which other processes disturb less than wall time;
+* ``actions_sha256``: a digest of all the episode's actions (the same in two trees: the same
+  decisions);
 * ``calls_per_act``: cProfile's total call count (primitive and recursive) of the team acts,
   over the steps, in a second, profiled play of the same episode (machine-independent).
 
@@ -28,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import hashlib
 import json
 import os
 import pstats
@@ -39,13 +45,8 @@ from typing import Any
 
 import numpy as np
 
-#: The episode: issue 41's office-floor frontier episode.
-EPISODE: dict[str, Any] = {
-    "map": "generator:office_floor",
-    "num_robots": 3,
-    "coverage_target": None,  # the whole window, whatever the coverage
-}
-SEED, FIRST, LAST = 9, 100, 400
+#: The episode: issue 41's office-floor frontier episode (module doc).
+MAP, ROBOTS, SEED, FIRST, LAST = "office_floor", 3, 9, 100, 400
 #: MPE steps timed after each team act.
 MPE_PER_ACT = 5
 
@@ -56,11 +57,15 @@ def _mpe_stepper(seed: int = 0) -> Callable[[], None] | None:
         from mpe2 import simple_spread_v3
     except ImportError:
         return None
-    from polyslam_env.apps.benchmark import parallel_stepper
-
     env = simple_spread_v3.parallel_env(N=3)
     rng = np.random.default_rng(seed)
-    step = parallel_stepper(env, lambda e, a: int(rng.integers(e.action_space(a).n)), seed)
+    env.reset(seed=seed)
+
+    def step() -> None:  # as the benchmark's reference section steps it
+        if not env.agents:
+            env.reset()
+        env.step({a: int(rng.integers(env.action_space(a).n)) for a in env.agents})
+
     for _ in range(20):
         step()
     return step
@@ -73,19 +78,24 @@ def _play(
     last: int,
     profiler: cProfile.Profile | None = None,
     mpe: Callable[[], None] | None = None,
-) -> np.ndarray:
+) -> tuple[np.ndarray, str]:
     """Play the episode; per team act of steps ``first`` … ``last`` − 1 (profiled by
     ``profiler`` when given): its wall and CPU seconds, then those of :data:`MPE_PER_ACT`
-    steps of ``mpe`` run right after it (zero without). (T, 4)."""
-    import polyslam_env
+    steps of ``mpe`` run right after it (zero without), (T, 4); and a digest of every action
+    of the episode (two trees that take the same decisions give the same digest)."""
     from policies.base import make_team
+    from polyslam_env.apps.fidelity import FidelityConfig, episode_config
+    from polyslam_env.environment.config import EnvConfig
+    from polyslam_env.environment.parallel import parallel_env
 
-    env = polyslam_env.parallel_env(**EPISODE, max_steps=last)
+    config = FidelityConfig(maps=(MAP,), robots=ROBOTS, steps=last)
+    env = parallel_env(EnvConfig.from_dict(episode_config(config, MAP, exchange=True)))
     team = make_team(policy, env)
     obs, _ = env.reset(seed=seed)
     team.reset(seed)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng([seed, 1])
     rows = []
+    digest = hashlib.sha256()
     for step in range(last):
         if not env.agents:
             break
@@ -102,9 +112,11 @@ def _play(
             for _ in range(MPE_PER_ACT if mpe is not None else 0):
                 mpe()  # type: ignore[misc]
             rows.append((*act, time.perf_counter() - wall, time.process_time() - cpu))
+        for agent in sorted(actions):
+            digest.update(np.asarray(actions[agent]).tobytes())
         obs, *_ = env.step(actions)
     env.close()
-    return np.array(rows).reshape(-1, 4)
+    return np.array(rows).reshape(-1, 4), digest.hexdigest()[:16]
 
 
 def measure_team_act(
@@ -114,16 +126,21 @@ def measure_team_act(
     per team act on the office-floor episode (module doc)."""
     _play(policy, seed, 0, min(first, last))  # compile the kernels first
     mpe = _mpe_stepper()
-    times = _play(policy, seed, first, last, mpe=mpe)  # (T, 4) s
+    times, actions = _play(policy, seed, first, last, mpe=mpe)  # (T, 4) s
     profiler = cProfile.Profile()
-    steps = len(_play(policy, seed, first, last, profiler))
+    steps = len(_play(policy, seed, first, last, profiler)[0])
     calls = pstats.Stats(profiler).total_calls  # type: ignore[attr-defined]
     act, act_cpu = 1e3 * times[:, 0], 1e3 * times[:, 1].mean()
     mpe_ms = 1e3 * times[:, 2].sum() / (len(times) * MPE_PER_ACT) if mpe else float("nan")
     mpe_cpu = 1e3 * times[:, 3].sum() / (len(times) * MPE_PER_ACT) if mpe else float("nan")
     return {
         "policy": policy,
-        "episode": {**EPISODE, "seed": seed, "steps": [first, last]},
+        "episode": {
+            "map": f"generator:{MAP}",
+            "robots": ROBOTS,
+            "seed": seed,
+            "steps": [first, last],
+        },
         "steps": len(times),
         "act_ms": {
             "mean": float(act.mean()),
@@ -136,6 +153,7 @@ def measure_team_act(
         "mpe_step_cpu_ms": mpe_cpu,
         "mpe_steps_per_act_cpu": act_cpu / mpe_cpu,
         "calls_per_act": calls / max(steps, 1),
+        "actions_sha256": actions,
         "load": os.getloadavg()[0],
     }
 
@@ -146,7 +164,8 @@ def _line(tree: str, r: dict[str, Any]) -> str:
         f"{tree:<24} act {a['mean']:6.2f} ms (median {a['median']:5.2f}, max {a['max']:6.1f})"
         f" = {r['mpe_steps_per_act']:5.1f} MPE steps (MPE {r['mpe_step_ms']:.3f} ms);"
         f" CPU {r['act_cpu_ms']:5.2f} ms = {r['mpe_steps_per_act_cpu']:5.1f} MPE steps;"
-        f" {r['calls_per_act']:6.0f} calls/act; load {r['load']:.1f}"
+        f" {r['calls_per_act']:6.0f} calls/act; actions {r['actions_sha256']};"
+        f" load {r['load']:.1f}"
     )
 
 
