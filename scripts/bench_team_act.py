@@ -2,11 +2,12 @@
 
 The episode of issue 41, as ``polyslam benchmark``'s ``floor`` section and ``polyslam fidelity``
 play it: the office floor (``generator:office_floor``), 3 robots, seed 9, the exchange on and the
-initial error where supported (:func:`polyslam_env.apps.fidelity.episode_config`), a frontier team
-(``--policy`` for another) drawing from ``default_rng([seed, 1])`` as
-:func:`~polyslam_env.apps.rollout.run_episode` seeds it. Steps 0 … ``first`` − 1 are played
-untimed (numba compiles, maps fill), then the team's act (the three robots' ``act`` calls of one
-env step) is measured on steps ``first`` … ``last`` − 1:
+initial error where supported (:func:`polyslam_env.apps.fidelity.episode_config`), a frontier
+team drawing from ``default_rng([seed, 1])`` as :func:`~polyslam_env.apps.rollout.run_episode`
+seeds it (``--policy`` for another: a registered name or ``module:factory``, e.g.
+``policies.goals:GoalPolicy``, the goal-choice policy's loop driving to its frontier goal).
+Steps 0 … ``first`` − 1 are played untimed (numba compiles, maps fill), then the team's act (the
+three robots' ``act`` calls of one env step) is measured on steps ``first`` … ``last`` − 1:
 
 * ``act_ms``: wall time per team act (mean: planning steps are the costly ones, and the mean is
   what a run pays; median and maximum beside it);
@@ -83,13 +84,15 @@ def _play(
     ``profiler`` when given): its wall and CPU seconds, then those of :data:`MPE_PER_ACT`
     steps of ``mpe`` run right after it (zero without), (T, 4); and a digest of every action
     of the episode (two trees that take the same decisions give the same digest)."""
-    from policies.base import make_team
+    from policies.base import POLICIES, make_team
     from polyslam_env.apps.fidelity import FidelityConfig, episode_config
     from polyslam_env.environment.config import EnvConfig
     from polyslam_env.environment.parallel import parallel_env
 
     config = FidelityConfig(maps=(MAP,), robots=ROBOTS, steps=last)
     env = parallel_env(EnvConfig.from_dict(episode_config(config, MAP, exchange=True)))
+    if ":" in policy:  # module:factory, e.g. policies.goals:GoalPolicy
+        POLICIES.setdefault(policy, policy)
     team = make_team(policy, env)
     obs, _ = env.reset(seed=seed)
     team.reset(seed)
