@@ -177,15 +177,23 @@ def main() -> None:
     parser.add_argument("--policy", default="frontier")
     parser.add_argument("--compare", metavar="TREE", help="measure this checkout first")
     parser.add_argument("--json", metavar="PATH", help="write the figures here")
+    parser.add_argument(
+        "--steps", nargs=2, type=int, default=(FIRST, LAST), metavar=("FIRST", "LAST"),
+        help=f"measure steps FIRST … LAST − 1 (default {FIRST} {LAST})",
+    )  # fmt: skip
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    first, last = args.steps
+    if not 0 <= first < last:
+        parser.error(f"--steps: need 0 <= FIRST < LAST, got {first} {last}")
     results: dict[str, Any] = {}
     if args.compare:
         env = {**os.environ, "PYTHONPATH": os.path.abspath(args.compare)}
-        cmd = [sys.executable, os.path.abspath(__file__), "--child", "--policy", args.policy]
+        cmd = [sys.executable, os.path.abspath(__file__), "--child", "--policy", args.policy,
+               "--steps", str(first), str(last)]  # fmt: skip
         out = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
         results[args.compare] = json.loads(out.strip().splitlines()[-1])
-    here = measure_team_act(args.policy)
+    here = measure_team_act(args.policy, first=first, last=last)
     if args.child:
         print(json.dumps(here))
         return
