@@ -29,13 +29,12 @@ obstacle and recomputed around a removed one.
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
 
 from polyslam_env.core.jit import njit
-from polyslam_env.core.raster import scan_cells_into
+from polyslam_env.core.raster import cell_id, scan_cells_into
 
 
 class Layers(NamedTuple):
@@ -76,17 +75,6 @@ def diamond_cells(rad: int) -> int:
 
 
 @njit
-def cell_of(x: float, y: float, origin: float, res: float, n: int) -> int:
-    """Flat id of the cell holding own-frame (x, y), −1 outside the grid (as
-    ``OwnMap.index``: ``floor((p − origin) / res)``)."""
-    col = math.floor((x - origin) / res)
-    row = math.floor((y - origin) / res)
-    if 0 <= row < n and 0 <= col < n:
-        return row * n + col
-    return -1
-
-
-@njit
 def fold(
     layers: Layers,
     turned: np.ndarray,
@@ -119,13 +107,13 @@ def fold(
     k = 0  # cells whose grids change (some maybe back again), for update_layers
     for j in range(turned.shape[0]):
         if local_free[lattice_cell[j]]:
-            c = cell_of(turned[j, 0] + pose[0], turned[j, 1] + pose[1], origin, res, n)
+            c = cell_id(turned[j, 0] + pose[0], turned[j, 1] + pose[1], origin, origin, res, n, n)
             if c >= 0 and (occ[c] or not free[c]):
                 free[c], occ[c], touched[k] = True, False, c
                 k += 1
     for j in range(turned.shape[0]):
         if local_occ[lattice_cell[j]]:
-            c = cell_of(turned[j, 0] + pose[0], turned[j, 1] + pose[1], origin, res, n)
+            c = cell_id(turned[j, 0] + pose[0], turned[j, 1] + pose[1], origin, origin, res, n, n)
             if c >= 0 and not occ[c]:
                 occ[c], touched[k] = True, c
                 k += 1
@@ -144,7 +132,7 @@ def fold(
             hit[ended], touched[k] = True, ended
             k += 1
     for j in range(disc.shape[0]):
-        c = cell_of(pose[0] + disc[j, 0], pose[1] + disc[j, 1], origin, res, n)
+        c = cell_id(pose[0] + disc[j, 0], pose[1] + disc[j, 1], origin, origin, res, n, n)
         if c >= 0 and not free[c]:
             free[c], touched[k] = True, c
             k += 1
