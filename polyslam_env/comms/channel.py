@@ -282,17 +282,14 @@ class Channel:
             and (receiver is None or m.receiver == receiver)
         )
 
+    def bytes_sent(self, robot: int) -> int:
+        """One robot's bytes sent so far (``counters(robot).bytes_sent`` without the copy)."""
+        counter = self._counters.get(robot)
+        return 0 if counter is None else counter.bytes_sent
+
     def counters(self, robot: int) -> Counters:
         """A copy of one robot's counters (zeros if it never used the channel)."""
         return Counters(**vars(self._counter(robot)))
-
-    def bytes_sent(self, robots: int) -> np.ndarray:  # (robots,) int64
-        """Bytes robots 0 … ``robots`` − 1 have sent so far (every attempt's, as
-        ``counters(robot).bytes_sent``), without copying their counters."""
-        counters = self._counters
-        return np.array(
-            [counters[r].bytes_sent if r in counters else 0 for r in range(robots)], dtype=np.int64
-        )
 
     def totals(self) -> Counters:
         """Counters summed over all robots."""

@@ -223,7 +223,7 @@ class PolynomialTeam(_Filters):
         exchange = self.map_exchange
         if exchange is None:
             return np.zeros(len(self.slams), dtype=np.int64)
-        return exchange.channel.bytes_sent(len(self.slams))
+        return np.array([exchange.bytes_sent(i) for i in range(len(self.slams))], dtype=np.int64)
 
     def counters(self, i: int, true_transform: TrueTransform) -> dict[str, float]:
         if self.map_exchange is None:

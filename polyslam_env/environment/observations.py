@@ -28,7 +28,6 @@ from polyslam_env.core import raster
 from polyslam_env.environment import kernels
 from polyslam_env.environment.config import EnvConfig, ObservationConfig
 from polyslam_env.metrics.mapping import MapShapes, sample_shapes
-from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.sensors import Detection
 
@@ -160,8 +159,8 @@ class MapSampler:
     """A robot's polynomials as points every ``step`` of arc length, in its own frame.
 
     Nothing is looked at while the map's table keeps its ``version`` (only c0s moved); after
-    a change, a landmark is resampled only when its shape object changed (created, refit,
-    merged or extended: shapes are immutable, so a change is a new object), all of them in
+    a change, a landmark is resampled only when its ``stamp`` moved (created, refit, merged
+    or extended: the table bumps it with every change of shape or extent), all of them in
     one compiled call (:func:`~polyslam_env.metrics.mapping.sample_shapes`). A c0 change
     alone shifts the cached points along the polynomial's dependent axis, which is exact.
     """
@@ -170,20 +169,20 @@ class MapSampler:
         self.step = float(step)
         self._table: object | None = None  # the table the cache was built on
         self._version = -1  # its version then
-        #: landmark id → (shape object, c0 when sampled, points (k, 2), dependent axis, k)
-        self._entries: dict[int, tuple[Polynomial, float, np.ndarray, int, int]] = {}
+        #: landmark id → (its stamp, c0 when sampled, points (k, 2), dependent axis, k)
+        self._entries: dict[int, tuple[int, float, np.ndarray, int, int]] = {}
         self._c0 = np.zeros(0)  # (n,) c0 of each landmark when its points were sampled
         self._points = np.zeros((0, 2))  # (M, 2) all points at the cached c0s
         self._owner = np.zeros(0, dtype=np.intp)  # (M,) landmark (state order) of each point
         self._axis = np.zeros(0, dtype=np.intp)  # (M,) the dependent coordinate (0 or 1)
 
     def _rebuild(self, slam: PolySlam) -> None:
-        """Resample the landmarks whose shape changed; keep the others' points."""
+        """Resample the landmarks whose stamp moved; keep the others' points."""
         table = slam.table
-        ids, shapes = list(table.ids), list(table.polys)
+        ids, stamps = list(table.ids), table.stamp.tolist()
         c0s = slam.c0s
         entries = list(map(self._entries.get, ids))
-        stale = [e is None or e[0] is not shape for e, shape in zip(entries, shapes, strict=True)]
+        stale = [e is None or e[0] != stamp for e, stamp in zip(entries, stamps, strict=True)]
         rows = np.flatnonzero(stale)
         if len(rows):
             coeffs = table.shape.copy()  # (n, M+1) [0, b_1, …]: c0 from the state
@@ -194,8 +193,8 @@ class MapSampler:
             for q, r in enumerate(rows.tolist()):
                 a, b = bounds[q], bounds[q + 1]
                 axis = 1 if variates[r] == 1 else 0
-                entries[r] = (shapes[r], c0_list[r], points[a:b], axis, b - a)
-        done: list[tuple[Polynomial, float, np.ndarray, int, int]] = entries  # type: ignore[assignment]
+                entries[r] = (stamps[r], c0_list[r], points[a:b], axis, b - a)
+        done: list[tuple[int, float, np.ndarray, int, int]] = entries  # type: ignore[assignment]
         self._entries = dict(zip(ids, done, strict=True))
         self._table, self._version = table, table.version
         counts = [e[4] for e in done]
