@@ -136,13 +136,18 @@ def _print_checks(checks: dict[str, Any]) -> None:
 
 
 def run_mblcc(args: argparse.Namespace) -> int:
-    """Seed 003: the table over ``runs`` seeds, Fig 5's particle sweep, summary and figure."""
+    """Seed 003: the table over ``runs`` seeds, Fig 5's particle sweep, the EM sweep, the
+    particles' diversity; summary and figures."""
     from polyslam_env.apps.reproduce_mblcc import (
         MblccReproduceConfig,
+        diversity_text,
+        em_sweep_text,
         plot_armse,
+        plot_diversity,
         reproduce,
         summarise,
         table_text,
+        total_jobs,
     )
     from polyslam_env.cli.common import progress_bar
     from polyslam_env.core.io import write_json
@@ -150,26 +155,35 @@ def run_mblcc(args: argparse.Namespace) -> int:
     config = _study_config(MblccReproduceConfig, args)
     out = Path(args.out)
     start = time.perf_counter()
-    sweep = [n for n in config.fig5_particles if n != config.slam.particles]
-    total = config.runs + len(sweep) * config.fig5_runs
+    total = total_jobs(config)
     with progress_bar(total, "reproduce mblcc", "run", args.quiet, leave=False) as bar:
-        runs, by_n = reproduce(config, workers=args.workers, progress=lambda n: bar.update(1))
+        runs, by_n, by_em = reproduce(
+            config, workers=args.workers, progress=lambda n: bar.update(1)
+        )
     elapsed = time.perf_counter() - start
-    summary = summarise(runs, by_n)
+    summary = summarise(runs, by_n, by_em)
     _finish(summary, config, elapsed, args.workers)
 
-    print(f"{config.runs} runs (+ {total - config.runs} for Fig 5), {elapsed:.0f} s,")
-    print(f"{args.workers} workers; mean ± std over runs, seed's Table 1 mean alongside")
+    print(f"{config.runs} runs (+ {total - config.runs} for Fig 5 and the EM sweep),")
+    print(f"{elapsed:.0f} s, {args.workers} workers; mean ± std over runs, seed's Table 1 mean")
     print(table_text(summary))
     _print_checks(summary["checks"])
     print("paired differences (mean ± standard error over runs), r1 / r2 / r3:")
     for metric, pairs in summary["paired"].items():
         for pair, cells in pairs.items():
             text = " / ".join(f"{c['mean']:+.3f} ± {c['se']:.3f}" for c in cells)
-            print(f"  {metric:<15}{pair:<36}{text}")
+            print(f"  {metric:<15}{pair:<56}{text}")
+    if summary["em_sweep"]:
+        print("EM sweep: EM-FastSLAM − FastSLAM 2.0 (m, paired over the same seeds)")
+        print(em_sweep_text(summary))
+    print("particle diversity (robots' mean; lineages_L: particles of L sweeps ago with heirs)")
+    print(diversity_text(summary))
     write_json(out / "summary.json", summary)
-    figure = plot_armse(summary, out / "fig5_armse.png")
-    print(f"wrote {out / 'summary.json'}, {figure}")
+    figures = [
+        plot_armse(summary, out / "fig5_armse.png"),
+        plot_diversity(summary, out / "diversity.png"),
+    ]
+    print(f"wrote {out / 'summary.json'}, {', '.join(str(f) for f in figures)}")
     return 0
 
 
