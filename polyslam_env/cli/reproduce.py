@@ -12,6 +12,7 @@ relative poses).
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -51,11 +52,24 @@ def register(sub: Any) -> None:
         help="a YAML file like configs/paper.yaml (mblcc: MblccReproduceConfig's fields,"
         " alignment: AlignmentReproduceConfig's, seif: SeifReproduceConfig's)",
     )
+    parser.add_argument(
+        "--protocol",
+        choices=("guarded", "seed"),
+        default=None,
+        help="alignment only: guarded (the default: 10 particles, mixture maps, descriptors"
+        " that never match the wrong landmark, shared re-paired refinement, every aligner"
+        " declining below the chance level) or seed (the seed's: 100 particles, the most"
+        " probable particle's map, confusable descriptors, each aligner refined on its own"
+        " correspondences, only RANSAC declining below 20 supports)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.protocol is not None and args.paper != "alignment":
+        print(f"--protocol applies to --paper alignment only, not {args.paper}", file=sys.stderr)
+        return 2
     if args.paper == "mblcc":
         return run_mblcc(args)
     if args.paper == "alignment":
@@ -193,14 +207,18 @@ def run_alignment(args: argparse.Namespace) -> int:
         AlignmentReproduceConfig,
         plot_errors,
         plot_times,
+        protocol_config,
         reproduce,
         summarise,
+        sweep_text,
         table_text,
     )
     from polyslam_env.cli.common import progress_bar
     from polyslam_env.core.io import write_json
 
     config = _study_config(AlignmentReproduceConfig, args)
+    if args.protocol is not None:
+        config = protocol_config(args.protocol, config)
     out = Path(args.out)
     start = time.perf_counter()
     with progress_bar(config.runs, "reproduce alignment", "run", args.quiet, leave=False) as bar:
@@ -208,10 +226,19 @@ def run_alignment(args: argparse.Namespace) -> int:
     elapsed = time.perf_counter() - start
     summary = summarise(config, records)
     _finish(summary, config, elapsed, args.workers)
-    print(f"{config.runs} runs, {elapsed:.0f} s, {args.workers} workers; errors of the")
-    print("accepted alignments against the true transform between the start frames")
+    rate = summary["descriptor_wrong_match_rate"]
+    measured = "none matched" if rate["measured"] is None else f"{100 * rate['measured']:.1f} %"
+    print(f"{config.runs} runs, {elapsed:.0f} s, {args.workers} workers, protocol")
+    print(f"{summary['protocol']}; descriptor confusion {rate['confusion']:g}, wrong matches")
+    print(f"{measured}; errors of each aligner's answers against the true transform")
     print(table_text(summary))
     _print_checks(summary["checks"])
+    print("|t| error minus RANSAC's where both answered (mean ± standard error, cells):")
+    for method, d in summary["paired_against_ransac"].items():
+        print(f"  {method:<9}{d['mean']:+.3f} ± {d['se']:.3f}  ({d['cells']})")
+    if len(summary["by_confusion"]) > 1:
+        print("over all stages, per descriptor confusion (answers %, |t| error mean ± std / m):")
+        print(sweep_text(summary))
     write_json(out / "summary.json", summary)
     figures = [
         plot_errors(summary, out / "figs3-5_errors.png"),
