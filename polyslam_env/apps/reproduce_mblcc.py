@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 
 from polyslam_env import metrics
-from polyslam_env.apps.jobs import run_jobs
+from polyslam_env.apps.jobs import Runner, run_jobs, succeeded
 from polyslam_env.core.blas import blas_threads
 from polyslam_env.core.config import Config
 from polyslam_env.core.errors import ConfigError
@@ -274,7 +274,7 @@ def _reuses_table(config: MblccReproduceConfig, setting: tuple[float, int]) -> b
 
 def reproduce(
     config: MblccReproduceConfig,
-    workers: int = 2,
+    workers: int | Runner = 2,
     progress: Callable[[int], None] | None = None,
 ) -> tuple[
     list[RunMetrics], dict[int, list[RunMetrics]], dict[tuple[float, int], list[RunMetrics]]
@@ -287,25 +287,31 @@ def reproduce(
     jobs += [(config, s, p, None) for p in sweep for s in range(config.fig5_runs)]
     em = [e for e in config.em_settings() if not _reuses_table(config, e)]
     jobs += [(config, s, None, e) for e in em for s in range(config.runs)]
-    results = run_jobs(_job, jobs, workers, progress)
-    table_runs = results[: config.runs]
-    by_n = {n: table_runs[: config.fig5_runs]} if n in config.fig5_particles else {}
+    results = run_jobs(_job, jobs, workers, progress, seed_of=lambda job: job[1])
+    table = results[: config.runs]
+    table_runs = succeeded(table)
+    by_n = {n: succeeded(table[: config.fig5_runs])} if n in config.fig5_particles else {}
     for k, p in enumerate(sweep):
         start = config.runs + k * config.fig5_runs
-        by_n[p] = results[start : start + config.fig5_runs]
+        by_n[p] = succeeded(results[start : start + config.fig5_runs])
     by_em: dict[tuple[float, int], list[RunMetrics]] = {}
     start = config.runs + len(sweep) * config.fig5_runs
     for e in config.em_settings():
         if _reuses_table(config, e):
-            by_em[e] = [{"em_fastslam": run["em_fastslam"]} for run in table_runs]
+            em_runs = table
         else:
-            by_em[e] = results[start : start + config.runs]
+            em_runs = results[start : start + config.runs]
             start += config.runs
+        by_em[e] = [
+            {"em_fastslam": run["em_fastslam"], "fastslam2": fs2["fastslam2"]}
+            for run, fs2 in zip(em_runs, table, strict=True)
+            if run is not None and fs2 is not None
+        ]
     return table_runs, dict(sorted(by_n.items())), by_em
 
 
 def total_jobs(config: MblccReproduceConfig) -> int:
-    """The number of runs :func:`reproduce` makes (for a progress bar)."""
+    """The number of runs :func:`reproduce` makes."""
     fig5 = sum(p != config.slam.particles for p in config.fig5_particles) * config.fig5_runs
     em = sum(not _reuses_table(config, e) for e in config.em_settings()) * config.runs
     return config.runs + fig5 + em
@@ -337,7 +343,7 @@ def summarise(
         checks[f"mblcc_below_shared_map_motion_proposal_{metric}_every_robot"] = bool(
             np.all(means["mblcc"] < means["shared_map_motion_proposal"])
         )
-    em_sweep = em_sweep_summary(runs, by_em or {})
+    em_sweep = em_sweep_summary(by_em or {})
     for metric in METRICS:
         checks[f"em_fastslam_below_fastslam2_{metric}_every_robot_at_some_em_setting"] = any(
             all(c["mean"] < 0 for c in cell["paired"][metric]["robots"]) for cell in em_sweep
@@ -426,16 +432,14 @@ def paired_differences(runs: Sequence[RunMetrics]) -> dict[str, dict[str, list[d
     }
 
 
-def em_sweep_summary(
-    runs: Sequence[RunMetrics], by_em: dict[tuple[float, int], list[RunMetrics]]
-) -> list[dict[str, Any]]:
+def em_sweep_summary(by_em: dict[tuple[float, int], list[RunMetrics]]) -> list[dict[str, Any]]:
     """Per EM setting (R = ``scale`` × ``slam.em_mobility``, ``passes`` moves per sweep): the
-    mean and std per robot over runs, and the paired differences EM − FastSLAM 2.0 over the
-    same seeds as the table's runs."""
-    fs2 = [run["fastslam2"] for run in runs]
+    mean and std per robot over runs, and the paired differences EM − FastSLAM 2.0, each of
+    ``by_em``'s runs holding both on one seed (the seeds where both succeeded)."""
     out = []
     for (scale, passes), em_runs in by_em.items():
         em = [run["em_fastslam"] for run in em_runs]
+        fs2 = [run["fastslam2"] for run in em_runs]
         table = _per_robot_table(em_runs, METRICS, ("em_fastslam",))
         out.append(
             {

@@ -180,7 +180,8 @@ def test_run_one__wrong_matches_are_matches_between_different_landmarks() -> Non
 
 
 def test_cli__seed_protocol_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    """``--protocol seed`` over a short world (100 particles, 2 stages, 1 run)."""
+    """``--protocol seed`` over a short world (100 particles, 2 stages, 1 run), and again
+    with ``--resume`` from its results log."""
     config = tmp_path / "short.yaml"
     short = AlignmentReproduceConfig(stages=2, world=SHORT_WORLD, confusion_sweep=(0.5,))
     config.write_text(yaml.safe_dump(short.to_dict()))
@@ -193,6 +194,18 @@ def test_cli__seed_protocol_end_to_end(tmp_path: Path, capsys: pytest.CaptureFix
     assert summary["descriptor_wrong_match_rate"]["confusion"] == 0.25
     out = capsys.readouterr().out
     assert "protocol" in out and "per descriptor confusion" in out
+    # through the results log: a resumed study runs nothing and gives the same tables
+    (tmp_path / "summary.json").unlink()
+    assert (
+        main(
+            [*args, "--runs", "1", "--workers", "1", "--quiet", "--out", str(tmp_path), "--resume"]
+        )
+        == 0
+    )
+    resumed = json.loads((tmp_path / "summary.json").read_text())
+    assert "1 of 1 runs already in" in capsys.readouterr().err
+    for key in ("table", "by_confusion", "descriptor_wrong_match_rate", "paired_against_ransac"):
+        assert resumed[key] == summary[key]
 
 
 def test_cli__protocol_with_another_paper__is_a_one_line_error(

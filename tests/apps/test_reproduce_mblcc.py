@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
+from polyslam_env.apps import reproduce_mblcc
 from polyslam_env.apps.reproduce_mblcc import (
     ALGORITHMS,
     COLUMNS,
@@ -102,6 +103,14 @@ def test_cli__reproduce_mblcc_writes_summary_and_figure(
     assert (out / "diversity.png").stat().st_size > 10_000
     text = capsys.readouterr().out
     assert "multirobot_known_start" in text and "check mblcc_lowest_pose_error" in text
+    # through the results log: a resumed study runs nothing and gives the same tables
+    (out / "summary.json").unlink()
+    args = ["reproduce", "--paper", "mblcc", "--runs", "2", "--config", str(config)]
+    assert main([*args, "--out", str(out), "--quiet", "--resume"]) == 0
+    resumed = json.loads((out / "summary.json").read_text())
+    assert "5 of 5 runs already in"  # 2 table, 1 Fig 5, 2 EM in capsys.readouterr().err
+    for key in ("table", "paired", "em_sweep", "diversity", "armse_by_particles"):
+        assert resumed[key] == summary[key]
 
 
 def _fake_runs(rng: np.random.Generator, runs: int, columns: tuple[str, ...]) -> list:
@@ -122,7 +131,14 @@ def test_em_sweep__paired_differences_equal_a_direct_computation() -> None:
     runs, run k of the setting against run k of the table; the team's as the robots' mean."""
     rng = np.random.default_rng(0)
     runs = _fake_runs(rng, 7, COLUMNS)
-    by_em = {(s, p): _fake_runs(rng, 7, ("em_fastslam",)) for s in (1.0, 10.0) for p in (1, 5)}
+    by_em = {
+        (s, p): [
+            {**em, "fastslam2": run["fastslam2"]}
+            for em, run in zip(_fake_runs(rng, 7, ("em_fastslam",)), runs, strict=True)
+        ]
+        for s in (1.0, 10.0)
+        for p in (1, 5)
+    }
     summary = summarise(runs, by_em=by_em)
     assert [(c["scale"], c["passes"]) for c in summary["em_sweep"]] == list(by_em)
     for cell, em_runs in zip(summary["em_sweep"], by_em.values(), strict=True):
@@ -149,5 +165,26 @@ def test_reproduce__em_runs_pair_with_the_table_runs_of_the_same_seeds() -> None
     assert list(by_n) == [10] and len(runs) == 1
     assert list(by_em) == [(1.0, 1), (10.0, 1)]
     assert [r["em_fastslam"] for r in by_em[(1.0, 1)]] == [r["em_fastslam"] for r in runs]
-    assert by_em[(10.0, 1)][0] == run_one(cfg, seed=0, em=(10.0, 1))
-    assert by_em[(10.0, 1)][0] != {"em_fastslam": runs[0]["em_fastslam"]}
+    assert [r["fastslam2"] for r in by_em[(10.0, 1)]] == [r["fastslam2"] for r in runs]
+    alone = run_one(cfg, seed=0, em=(10.0, 1))["em_fastslam"]
+    assert by_em[(10.0, 1)][0]["em_fastslam"] == alone
+    assert alone != runs[0]["em_fastslam"]
+
+
+def test_reproduce__a_failed_run_drops_only_its_own_pairs(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A job that fails twice leaves ``None`` in its place (apps.jobs); the EM sweep then
+    pairs the other seeds, each EM run with the FastSLAM 2.0 run of its own seed."""
+    cfg = SMALL.replace(runs=2, fig5_particles=(10,), fig5_runs=1)
+    real = reproduce_mblcc._job
+
+    def failing(job: reproduce_mblcc.Job) -> reproduce_mblcc.RunMetrics:
+        if job[1] == 0 and job[3] == (10.0, 1):
+            raise RuntimeError("lost worker")
+        return real(job)
+
+    monkeypatch.setattr(reproduce_mblcc, "_job", failing)
+    runs, _, by_em = reproduce(cfg, workers=1)
+    assert len(runs) == 2 and len(by_em[(1.0, 1)]) == 2
+    [pair] = by_em[(10.0, 1)]
+    assert pair["fastslam2"] == runs[1]["fastslam2"]
+    assert pair["em_fastslam"] == run_one(cfg, seed=1, em=(10.0, 1))["em_fastslam"]
