@@ -19,12 +19,14 @@ METHODS = ("ransac", "svd", "icp", "imp_icp")
 
 
 def _pm(cell: dict[str, float], key: str = "std", digits: int = 2) -> str:
-    return f"{cell['mean']:.{digits}f} ± {cell[key]:.{digits}f}"
+    """mean ± ``key`` (std, or se for a difference, which gets its sign)."""
+    sign = "+" if key == "se" else ""
+    return f"{cell['mean']:{sign}.{digits}f} ± {cell[key]:.{digits}f}"
 
 
 def mblcc_tables(summary: dict[str, Any]) -> str:
     """Table 1 (mean ± std over runs, the seed's mean in brackets), the paired differences,
-    the EM sweep and the diversity."""
+    the EM sweep and the diversity (robots' mean; — where an episode was too short)."""
     out = ["| robot | column | pose error (m) | landmark error (m) |", "|---|---|---|---|"]
     for r in range(3):
         for alg in COLUMNS:
@@ -36,7 +38,7 @@ def mblcc_tables(summary: dict[str, Any]) -> str:
     out += ["", "| pair (a − b) | metric | r1 | r2 | r3 |", "|---|---|---|---|---|"]
     for metric, pairs in summary["paired"].items():
         for pair, cells in pairs.items():
-            text = " | ".join(_pm(c, "se") for c in cells)
+            text = " | ".join(_pm(c, "se", 3) for c in cells)
             out.append(f"| {pair} | {metric} | {text} |")
     out += ["", "| R × | moves | metric | r1 | r2 | r3 | team |", "|---|---|---|---|---|---|---|"]
     for cell in summary["em_sweep"]:
@@ -48,8 +50,9 @@ def mblcc_tables(summary: dict[str, Any]) -> str:
     out += ["", f"| column | {names} |", "|---" * (len(DIVERSITY) + 1) + "|"]
     for alg in COLUMNS:
         div = summary["diversity"]
-        row = [sum(c["mean"] for c in div[m][alg]) / 3 for m in DIVERSITY]
-        out.append(f"| {alg} | " + " | ".join(f"{v:.3f}" for v in row) + " |")
+        means = [[c["mean"] for c in div[m][alg]] for m in DIVERSITY]
+        row = ["—" if None in v else f"{sum(v) / len(v):.3f}" for v in means]
+        out.append(f"| {alg} | " + " | ".join(row) + " |")
     return "\n".join(out)
 
 
