@@ -26,7 +26,7 @@ def _pm(cell: dict[str, float], key: str = "std", digits: int = 2) -> str:
 
 def mblcc_tables(summary: dict[str, Any]) -> str:
     """Table 1 (mean ± std over runs, the seed's mean in brackets), the paired differences,
-    the EM sweep and the diversity (robots' mean; — where an episode was too short)."""
+    the EM sweep, and the diversity per column and per EM setting."""
     out = ["| robot | column | pose error (m) | landmark error (m) |", "|---|---|---|---|"]
     for r in range(3):
         for alg in COLUMNS:
@@ -49,11 +49,20 @@ def mblcc_tables(summary: dict[str, Any]) -> str:
     names = " | ".join(DIVERSITY)
     out += ["", f"| column | {names} |", "|---" * (len(DIVERSITY) + 1) + "|"]
     for alg in COLUMNS:
-        div = summary["diversity"]
-        means = [[c["mean"] for c in div[m][alg]] for m in DIVERSITY]
-        row = ["—" if None in v else f"{sum(v) / len(v):.3f}" for v in means]
-        out.append(f"| {alg} | " + " | ".join(row) + " |")
+        out.append(
+            f"| {alg} | {_diversity_row({m: summary['diversity'][m][alg] for m in DIVERSITY})}"
+        )
+    out += ["", f"| R × | moves | {names} |", "|---" * (len(DIVERSITY) + 2) + "|"]
+    for cell in summary["em_sweep"]:
+        row = _diversity_row(cell["diversity"])
+        out.append(f"| {cell['scale']:g} | {cell['passes']} | {row}")
     return "\n".join(out)
+
+
+def _diversity_row(cells: dict[str, list[dict[str, float]]]) -> str:
+    """The robots' mean of each diversity measure (— where an episode was too short)."""
+    means = [[c["mean"] for c in cells[m]] for m in DIVERSITY]
+    return " | ".join("—" if None in v else f"{sum(v) / len(v):.3f}" for v in means) + " |"
 
 
 def _answer(row: dict[str, Any]) -> str:

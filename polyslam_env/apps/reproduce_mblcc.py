@@ -434,19 +434,21 @@ def paired_differences(runs: Sequence[RunMetrics]) -> dict[str, dict[str, list[d
 
 def em_sweep_summary(by_em: dict[tuple[float, int], list[RunMetrics]]) -> list[dict[str, Any]]:
     """Per EM setting (R = ``scale`` × ``slam.em_mobility``, ``passes`` moves per sweep): the
-    mean and std per robot over runs, and the paired differences EM − FastSLAM 2.0, each of
+    mean and std per robot over runs of the errors (``table``) and of the particle diversity
+    (``diversity``), and the paired differences EM − FastSLAM 2.0, each of
     ``by_em``'s runs holding both on one seed (the seeds where both succeeded)."""
     out = []
     for (scale, passes), em_runs in by_em.items():
         em = [run["em_fastslam"] for run in em_runs]
         fs2 = [run["fastslam2"] for run in em_runs]
-        table = _per_robot_table(em_runs, METRICS, ("em_fastslam",))
+        table = _per_robot_table(em_runs, (*METRICS, *DIVERSITY), ("em_fastslam",))
         out.append(
             {
                 "scale": float(scale),
                 "passes": int(passes),
                 "runs": len(em),
                 "table": {m: table[m]["em_fastslam"] for m in METRICS},
+                "diversity": {m: table[m]["em_fastslam"] for m in DIVERSITY},
                 "paired": {m: paired(em, fs2, m) for m in METRICS},
             }
         )

@@ -155,6 +155,8 @@ def test_em_sweep__paired_differences_equal_a_direct_computation() -> None:
             assert got["team"]["mean"] == pytest.approx(team.mean(), rel=1e-12)
             assert got["team"]["se"] == pytest.approx(team.std(ddof=1) / np.sqrt(7), rel=1e-12)
             assert cell["table"][metric][0]["mean"] == pytest.approx(em[:, 0].mean(), rel=1e-12)
+        spread = np.array([[r["spread"] for r in run["em_fastslam"]] for run in em_runs])
+        assert cell["diversity"]["spread"][2]["mean"] == pytest.approx(spread[:, 2].mean())
 
 
 def test_reproduce__em_runs_pair_with_the_table_runs_of_the_same_seeds() -> None:
