@@ -154,8 +154,9 @@ class PolicyContext:
         """(v, ω) in physical units as an action of this env: clipped to the limits
         (continuous, float32) or the nearest discrete action (relative to the limits)."""
         v_lo = -self.v_max if self.allow_reverse else 0.0
-        v = float(np.clip(v, v_lo, self.v_max))
-        omega = float(np.clip(omega, -self.omega_max, self.omega_max))
+        # min(max(x, lo), hi) is numpy's clip of a scalar, signed zeros and nan included
+        v = float(min(max(v, v_lo), self.v_max))
+        omega = float(min(max(omega, -self.omega_max), self.omega_max))
         if self.action_mode == "discrete":
             scale = np.array([self.v_max, self.omega_max])
             d = np.sum(((self.discrete - (v, omega)) / scale) ** 2, axis=1)  # (K,)

@@ -1,5 +1,5 @@
 """A study on 1 and 2 Ray workers (a local head started with ``--num-cpus 1``, then 2), and
-on 1 and 2 local processes, in one run: wall times and their ratios (docs/notes/ray.md).
+on 1 and 2 local processes, in one run: wall times and their ratios (docs/guide/cluster.md).
 
     python scripts/ray_scaling.py [--seeds 6] [--steps 100] [--rounds 2]
 

@@ -180,6 +180,7 @@ def _open_room_policy(**kwargs: Any) -> FrontierPolicy:
     m.occ[rows[1] + 1, cols[0] - 1 : cols[1] + 2] = True
     m.occ[rows[0] - 1 : rows[1] + 2, cols[0] - 1] = True
     m.occ[rows[0] - 1 : rows[1] + 2, cols[1] + 1] = True
+    m.rebuild()  # the grids were written directly: bring the clearance and frontier along
     return policy
 
 
