@@ -14,8 +14,8 @@ and a pose and returns what a goal can be picked from.
    :func:`visible_gain`), and its utility, the gain discounted by ``exp(−path length / decay)``
    (a room's worth of unknown space beats a sliver next door), goals at least ``min_goal`` away
    and not excluded preferred. A per-cell ``discount`` (F,) multiplies the utility: the hook
-   for coordinated exploration (a team-mate's announced goal discounts the frontiers it will
-   see).
+   for coordinated exploration; :func:`team_discount` is Burgard et al.'s (a team-mate's
+   announced goal discounts the frontiers it will see, ``policies.team``).
 
 Every numerical piece is a compiled kernel (:mod:`policies.planner_kernels`), bit-identical to
 the readable scipy planner kept as the oracle in ``tests/policies/reference.py``.
@@ -43,6 +43,7 @@ __all__ = [
     "Search",
     "free_start",
     "grid_path",
+    "team_discount",
     "visible_gain",
 ]
 
@@ -109,6 +110,20 @@ def visible_gain(
             alive &= ~obstacles[r, c]
             seen += alive & ~known[r, c]
     return (seen / (GAIN_RAYS * reach)).astype(np.float32)
+
+
+def team_discount(points: np.ndarray, goals: np.ndarray, reach: float) -> np.ndarray:  # (F,)
+    """The share of each frontier point's (F, 2) utility that no team-mate heading to
+    ``goals`` (K, 2) is expected to take: ``Π_k (1 − P(d_k))`` with Burgard et al. (2005)'s
+    visibility probability ``P(d) = max(0, 1 − d / reach)``
+    (:func:`policies.planner_kernels.team_discount`); all ones without goals."""
+    if not reach > 0:
+        raise ValueError(f"team_discount: reach must be > 0, got {reach!r}")
+    return kernels.team_discount(
+        np.ascontiguousarray(points, dtype=float).reshape(-1, 2),
+        np.ascontiguousarray(goals, dtype=float).reshape(-1, 2),
+        float(reach),
+    )
 
 
 @dataclass(frozen=True, eq=False)

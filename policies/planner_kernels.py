@@ -462,3 +462,21 @@ def path_blocked(path: np.ndarray, obst: np.ndarray, origin: float, res: float, 
         if 0 <= row < n and 0 <= col < n and obst[row * n + col]:
             return True
     return False
+
+
+# -- goal scoring: the team's announced goals ---------------------------------------------------
+@njit
+def team_discount(points: np.ndarray, goals: np.ndarray, reach: float) -> np.ndarray:  # (F,)
+    """Per own-frame point (F, 2), the share of its utility no team-mate is expected to take:
+    ``Π_k (1 − P(|point − goals[k]|))`` over the team-mates' goals (K, 2), with Burgard et al.
+    (2005)'s visibility probability ``P(d) = 1 − d / reach`` within ``reach`` m, 0 beyond (a
+    team-mate that reaches its goal sees a frontier at distance d with that probability; the
+    product is the chance that none of them does, the robots' views taken as independent).
+    """
+    out = np.ones(points.shape[0])
+    for f in range(points.shape[0]):
+        for k in range(goals.shape[0]):
+            d = math.hypot(points[f, 0] - goals[k, 0], points[f, 1] - goals[k, 1])
+            if d < reach:
+                out[f] *= d / reach  # 1 − P(d)
+    return out

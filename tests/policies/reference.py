@@ -190,3 +190,19 @@ def lookahead_target(path: np.ndarray, pose: np.ndarray, lookahead: float) -> np
     nearest = int(np.argmin(d))
     ahead = np.flatnonzero(d[nearest:] >= lookahead)
     return path[nearest + ahead[0]] if len(ahead) else path[-1]
+
+
+def team_discount(points: np.ndarray, goals: np.ndarray, reach: float) -> np.ndarray:  # (F,)
+    """Burgard et al.'s discount of each point (F, 2) by the team-mates' goals (K, 2): the
+    product over goals of 1 − P(d), P(d) = max(0, 1 − d / reach), written out point by point
+    (the readable version of ``planner_kernels.team_discount``, which writes 1 − P(d) as
+    d / reach: equal up to the rounding of 1 − (1 − x), an ulp per factor)."""
+    out = []
+    for point in points:
+        share = 1.0
+        for goal in goals:
+            d = math.hypot(point[0] - goal[0], point[1] - goal[1])
+            seen = max(0.0, 1.0 - d / reach)  # P(d)
+            share *= 1.0 - seen
+        out.append(share)
+    return np.array(out, dtype=float)
