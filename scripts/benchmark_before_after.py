@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"repeat {k + 1}/{args.repeats}: {side}", file=sys.stderr, flush=True)
                 results[side].append(measure(src, out, f"{side}_{k}", args.runs))
     rows: list[dict[str, Any]] = []
-    for name, goal, at_most in TARGETS:
+    for _issues, name, goal, at_most in TARGETS:
         b = _median([r["targets"].get(name) for r in results["before"]])
         a = _median([r["targets"].get(name) for r in results["after"]])
         met = None if a is None else (a <= goal if at_most else a >= goal)

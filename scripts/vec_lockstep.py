@@ -22,7 +22,8 @@ import time
 import numpy as np
 
 import polyslam_env
-from polyslam_env.apps.benchmark import ENV_CONFIG, _cpu_seconds
+from polyslam_env.apps.benchmark_env import cpu_seconds as _cpu_seconds
+from polyslam_env.apps.benchmark_harness import ENV_CONFIG
 from polyslam_env.environment.vector import make_vec_env
 
 WARMUP = 30

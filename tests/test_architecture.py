@@ -136,3 +136,102 @@ def test_slam__imports_alone_without_world_env_or_physics() -> None:
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+# -- no import circles ----------------------------------------------------------------------------
+def _module(path: Path, root: Path) -> str:
+    """The dotted name of a source file under ``root`` (a package's ``__init__`` is the
+    package)."""
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _type_only_lines(path: Path) -> set[int]:
+    """Lines of the imports under ``if TYPE_CHECKING:`` (read by type checkers, never run)."""
+    lines: set[int] = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if not isinstance(node, ast.If):
+            continue
+        test = node.test
+        name = test.id if isinstance(test, ast.Name) else getattr(test, "attr", None)
+        if name == "TYPE_CHECKING":
+            for inner in node.body:
+                lines |= {n.lineno for n in ast.walk(inner) if isinstance(n, ast.stmt)}
+    return lines
+
+
+def _module_graph(sources: list[Path], root: Path) -> dict[str, set[str]]:
+    """Module → the package's modules it imports when run (anywhere in it: a lazy import is an
+    arrow; one under ``if TYPE_CHECKING:`` never runs and is not); ``from x import y`` is an
+    arrow to ``x.y`` when that is a module, else to ``x``."""
+    names = {_module(p, root) for p in sources}
+    graph: dict[str, set[str]] = {}
+    for path in sources:
+        me = _module(path, root)
+        typing_only = _type_only_lines(path)
+        found = {
+            m for line, m in _imports(path) if m in names and m != me and line not in typing_only
+        }
+        # ``from x import y`` yields both x and x.y: the arrow goes to x.y alone when y is one
+        graph[me] = {m for m in found if not any(o.startswith(m + ".") for o in found)}
+    return graph
+
+
+def import_circles(sources: list[Path], root: Path = ROOT) -> list[list[str]]:
+    """The strongly connected components of more than one module of ``sources`` (files under
+    ``root``), by Tarjan's algorithm."""
+    graph = _module_graph(sources, root)
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    circles: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = [stack.pop()]
+            while component[-1] != v:
+                component.append(stack.pop())
+            if len(component) > 1:
+                circles.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return circles
+
+
+def test_imports__form_no_circle() -> None:
+    """No module imports, directly or through others, a module that imports it back: the
+    arrows between modules run one way, as between parts."""
+    assert import_circles([p for _, p in _sources()]) == []
+
+
+def test_circle_check__catches_a_planted_circle(tmp_path: Path) -> None:
+    """The check is not vacuous: two planted modules importing each other (one lazily) are
+    reported; a one-way pair is not, nor a pair closed only by a type checker's import (a
+    helper typed against its owner: never run)."""
+    package = tmp_path / "polyslam_env"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "a.py").write_text("import polyslam_env.b\n")
+    (package / "b.py").write_text("def f():\n    from polyslam_env import a\n")
+    (package / "c.py").write_text("from polyslam_env.a import x\n")
+    (package / "d.py").write_text("from polyslam_env.e import y\n")
+    (package / "e.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from polyslam_env.d import z\n"
+    )
+    files = sorted(package.glob("*.py"))
+    assert import_circles(files, tmp_path) == [["polyslam_env.a", "polyslam_env.b"]]
+    (package / "e.py").write_text("def g():\n    from polyslam_env.d import z\n")  # run: a circle
+    assert import_circles(files, tmp_path) == [
+        ["polyslam_env.a", "polyslam_env.b"],
+        ["polyslam_env.d", "polyslam_env.e"],
+    ]

@@ -38,12 +38,15 @@ PRINTING = [
     (["divergence_rates.py", "--seeds", "1"], "healthy (80 steps): flag fired in"),
     (["bench_team_act.py", "--steps", "2", "4", "--compare", "."], "this tree "),
     (["exchange_bytes.py"], "polynomials"),
+    (["floor_before_after.py", "--tree", ".", "--first", "2", "--last", "4"], "env calls"),
     (["landmark_consistency.py", "--seeds", "1", "--robots", "1", "--steps", "40"], "c0_nees"),
     (["nees_episodes.py", "--runs", "1", "--steps", "20"], "seed 0: final NEES frame"),
+    (["physics_substeps.py", "--substeps", "20,10", "--steps", "40", "--generators", "rooms"],
+     "calls per world step"),
     (["seif_fusion_nees.py", "--episodes", "1", "--steps", "20"], "NEES"),
     (["slam_table.py", "--seeds", "1", "--workers", "1"], "paper Table 1:"),
     (["vec_lockstep.py", "--steps", "10"], "2 processes / one:"),
-]
+]  # fmt: skip
 
 
 @pytest.mark.slow

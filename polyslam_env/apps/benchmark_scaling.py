@@ -1,7 +1,8 @@
 """The benchmark's system figures: processes, team size, memory, compile cost, the profile.
 
-Each runs the full-SLAM env of :data:`polyslam_env.apps.benchmark.ENV_CONFIG` (3 robots, paper
-map, vector observations) unless it says otherwise, with seeded uniform random actions:
+Each runs the full-SLAM env of :data:`~polyslam_env.apps.benchmark_harness.ENV_CONFIG` (3
+robots, paper map, vector observations) unless it says otherwise, with seeded uniform random
+actions:
 
 * :func:`bench_workers`: ``N`` processes, each stepping its own env, started together; env
   steps/s per process, their total, and the total over the one-process figure of the same run;
@@ -28,11 +29,13 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from polyslam_env.apps.benchmark_harness import ENV_CONFIG, profiling, random_stepper
 
 __all__ = [
     "TEAM_CONFIG",
@@ -41,7 +44,6 @@ __all__ = [
     "bench_team",
     "bench_workers",
     "profile_env",
-    "random_stepper",
 ]
 
 #: The team-size env: a generated rooms map (new layout per reset), exchange on (the default
@@ -53,24 +55,7 @@ TEAM_CONFIG: dict[str, Any] = {
 }
 
 
-def random_stepper(env: Any, seed: int) -> Callable[[], None]:
-    """One env step per call with seeded uniform random actions; resets when all are done."""
-    rng = np.random.default_rng(seed)
-    space = env.action_space(env.possible_agents[0])
-    low, high = space.low, space.high
-    env.reset(seed=seed)
-
-    def step() -> None:
-        if not env.agents:
-            env.reset()
-        env.step({agent: rng.uniform(low, high) for agent in env.agents})
-
-    return step
-
-
 def _env_config() -> dict[str, Any]:
-    from polyslam_env.apps.benchmark import ENV_CONFIG
-
     return dict(ENV_CONFIG)
 
 
@@ -308,7 +293,7 @@ def profile_env(
     for k in range(PROFILE_WARMUP + steps):
         actions = {a: rng.uniform(space.low, space.high) for a in env.agents}  # type: ignore[attr-defined]
         start = time.perf_counter()
-        with _profiling(profiler) if k >= PROFILE_WARMUP else contextlib.nullcontext():
+        with profiling(profiler) if k >= PROFILE_WARMUP else contextlib.nullcontext():
             if not env.agents:
                 env.reset()
             else:
@@ -329,15 +314,6 @@ def profile_env(
         "step_ms": 1e3 * total / steps,
         **by,
     }
-
-
-@contextlib.contextmanager
-def _profiling(profiler: cProfile.Profile) -> Iterator[None]:
-    profiler.enable()
-    try:
-        yield
-    finally:
-        profiler.disable()
 
 
 def _entry(func: tuple[str, int, str], row: tuple[Any, ...], total: float) -> dict[str, Any]:

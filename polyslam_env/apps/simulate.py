@@ -25,7 +25,7 @@ from polyslam_env.core.errors import ConfigError, MapFileError
 from polyslam_env.core.geometry import compose_inverse
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.environment import stages
-from polyslam_env.metrics.episode import COMMS_METRICS, RobotHistory, RobotRun, robot_metrics
+from polyslam_env.metrics.episode import COMMS_METRICS, RobotRun, TeamHistory, robot_metrics
 from polyslam_env.scenarios.paths import builtin_paths, load_paths
 from polyslam_env.slam.config import SlamConfig, slam_preset
 from polyslam_env.slam.robot import PolySlam
@@ -175,10 +175,13 @@ def simulate(
     ]
     every = slams + shadows  # the exchanging SLAMs, then the lone shadows
     robots = list(range(num_robots)) + shadow  # every[j] runs on world robot robots[j]
-    histories = [
-        RobotHistory(frames[r], s.pose, s.pose_cov, true_pose=world.poses[r], p0=scfg.p0)
-        for s, r in zip(every, robots, strict=True)
-    ]
+    history = TeamHistory(
+        frames[robots],
+        np.array([s.pose for s in every]),
+        np.array([s.pose_cov for s in every]),
+        world.poses[robots],
+        scfg.p0,
+    )
     ex = _make_exchange(exchange, num_robots, seed, wcfg, scfg)
     angles = np.asarray(wcfg.range_sensor.angles)
     log: list[dict[str, Any]] = []
@@ -191,11 +194,11 @@ def simulate(
         if ex is not None:
             delivered = stages.exchange_maps(ex, k, slams, world.active, sensing, angles)
             log += _delivered_log(delivered)
-        estimates = [(s.pose, s.pose_cov) for s in every]
-        stages.record(histories, robots, world, sensing, estimates, infos, result.collided)
+        estimates = np.array([s.pose for s in every]), np.array([s.pose_cov for s in every])
+        stages.record(history, robots, world, sensing, estimates, infos, result.collided)
         if progress is not None:
             progress(k)
-    all_runs = [h.run(s.polynomials()) for h, s in zip(histories, every, strict=True)]
+    all_runs = [history.robot(j).run(s.polynomials()) for j, s in enumerate(every)]
     runs, lone_runs = all_runs[:num_robots], dict(zip(shadow, all_runs[num_robots:], strict=True))
     if ex is None:
         return SimulationResult(layout, runs, seed, steps, shadow_runs=lone_runs)

@@ -37,6 +37,11 @@ COLUMNS = {
     "memory": [("episode", 9), ("steps", 6), ("peak MB", 9), ("RSS MB", 9)],
     "compile": [("cold s", 9), ("warm s", 9), ("compile s", 9), ("cached", 7)],
     "workers": [("processes", 9), ("steps/s each", 12), ("total", 9), ("× one", 7)],
+    "floor": [("per step", 9), ("mean ms", 9), ("median ms", 9), ("MPE steps", 9),
+              ("calls", 7), ("SLAM", 7), ("exchange", 8), ("rest", 7)],
+    "reproduce": [("runs", 5), ("workers", 7), ("seconds", 9)],
+    "train": [("timesteps", 9), ("env steps", 9), ("seconds", 9), ("env steps/s", 11),
+              ("× MPE", 7), ("× today", 7)],
 }  # fmt: skip
 #: What follows the columns: the SLAM rows end with their stage timings.
 TAILS = {
@@ -48,6 +53,9 @@ TAILS = {
     "memory": "",
     "compile": "",
     "workers": "",
+    "floor": "",
+    "reproduce": "",
+    "train": "",
 }
 
 
@@ -56,7 +64,7 @@ def _columns(section: str, cells: list[str]) -> str:
     rest right rather than being cut)."""
     out = []
     for k, (cell, (_, width)) in enumerate(zip(cells, COLUMNS[section], strict=True)):
-        left = section in ("env", "backends") and k == 0
+        left = section in ("env", "backends", "floor") and k == 0
         out.append(f"{cell:<{width}}" if left else f"{cell:>{width}}")
     return " ".join(out)
 
@@ -76,6 +84,12 @@ TITLES = {
     "memory": "RSS of one env (3 robots, full SLAM) in a fresh process, after each episode",
     "compile": "first env reset + step in a fresh process: empty numba cache vs warm cache",
     "workers": "env steps per second with N processes, each stepping its own env (full SLAM)",
+    "floor": "office-floor frontier episode (generator:office_floor seed 9, 3 robots, frontier"
+    " team, exchange on), steps 101-400: env step and team act; Python calls per step (cProfile),"
+    " the env step's split into the team SLAM's step, its exchange and the rest",
+    "reproduce": "polyslam reproduce --runs N (the core paper's runs, 2 workers)",
+    "train": "polyslam train --config configs/train_goals.yaml, cut short: env steps per second"
+    " of the whole run",
     "profile": "profile of the env step",
 }
 
@@ -90,7 +104,11 @@ def register(sub: Any) -> None:
         " mpe2 is installed). Figures are medians over repeats with their spread; compare"
         " machines by the ratios.",
     )
-    parser.add_argument("--quick", action="store_true", help="a few minutes instead of ~6")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="a few minutes instead of ~15 (without the reproduction and training runs)",
+    )
     parser.add_argument("--json", metavar="PATH", help="also write the results as JSON here")
     parser.add_argument(
         "--only",
@@ -103,13 +121,15 @@ def register(sub: Any) -> None:
             "vec",
             "backends",
             "reference",
+            "floor",
             "team",
             "memory",
             "compile",
+            "reproduce",
+            "train",
         ),
-        help="run only these sections: slam world env vec backends reference team memory"
-        " compile"
-        " (default: all)",
+        help="run only these sections: slam world env vec backends reference floor team memory"
+        " compile reproduce train (default: all; reproduce and train only without --quick)",
     )
     parser.add_argument(
         "--workers",
@@ -246,8 +266,8 @@ def _backends_row(r: dict[str, Any]) -> str:
     return _columns("backends", cells)
 
 
-def _opt(value: float | None) -> str:
-    return "n/a" if value is None else f"{value:.2f}"
+def _opt(value: float | None, digits: int = 2) -> str:
+    return "n/a" if value is None else f"{value:.{digits}f}"
 
 
 def _team_row(r: dict[str, Any]) -> str:
@@ -295,6 +315,34 @@ def _profile_table(p: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _floor_rows(r: dict[str, Any]) -> str:
+    """Two lines, the env step (with its calls split) and the team act, and MPE's calls."""
+    env, act = r["env_step"], r["team_act"]
+    lines = [
+        _columns("floor", ["env step", f"{env['mean_ms']:.2f}", f"{env['median_ms']:.2f}",
+                           _opt(env["mpe_steps"]), f"{r['env_calls']:.0f}",
+                           f"{r['env_calls_slam']:.0f}", f"{r['env_calls_exchange']:.0f}",
+                           f"{r['env_calls_rest']:.0f}"]),
+        _columns("floor", ["team act", f"{act['mean_ms']:.2f}", f"{act['median_ms']:.2f}",
+                           _opt(act["mpe_steps"]), f"{r['act_calls']:.0f}", "", "", ""]),
+    ]  # fmt: skip
+    if r.get("mpe_calls") is not None:
+        lines.append(f"(one MPE simple_spread step: {r['mpe_calls']:.0f} calls;"
+                     f" team coverage at the end {100 * r['coverage']:.1f} %)")  # fmt: skip
+    return "\n".join(lines)
+
+
+def _reproduce_row(r: dict[str, Any]) -> str:
+    return _columns("reproduce", [str(r["runs"]), str(r["workers"]), f"{r['seconds']:.1f}"])
+
+
+def _train_row(r: dict[str, Any]) -> str:
+    cells = [str(r["timesteps"]), f"{r['env_steps']:.0f}", f"{r['seconds']:.1f}",
+             f"{r['env_steps_per_s']:.1f}", _opt(r.get("ratio_to_mpe"), 4),
+             _opt(r.get("ratio_to_today"))]  # fmt: skip
+    return _columns("train", cells)
+
+
 FORMATTERS = {
     "slam": _slam_row,
     "world": _world_row,
@@ -304,18 +352,22 @@ FORMATTERS = {
     "memory": _memory_row,
     "compile": _compile_row,
     "workers": _workers_row,
+    "floor": _floor_rows,
+    "reproduce": _reproduce_row,
+    "train": _train_row,
     "profile": _profile_table,
 }
 
 
 def _format_targets(rows: list[dict[str, Any]]) -> str:
-    """Issue 15's targets: measured, goal, met (ratios to MPE are known only at the end)."""
-    lines = [f"{'target (issue 15)':<34} {'measured':>10} {'goal':>10}  met"]
+    """Issues 15's and 41's targets: measured, goal, met (ratios to MPE are known only at the
+    end; n/a: not measured in this run)."""
+    lines = [f"{'issue':<6} {'target':<37} {'measured':>10} {'goal':>8}  met"]
     for r in rows:
         met = "n/a" if r["met"] is None else "yes" if r["met"] else "NO"
         value = "n/a" if r["measured"] is None else f"{r['measured']:.2f}"
         goal = ("≤ " if r["at_most"] else "≥ ") + f"{r['goal']:g}"
-        lines.append(f"{r['target']:<34} {value:>10} {goal:>10}  {met}")
+        lines.append(f"{r['issue']:<6} {r['target']:<37} {value:>10} {goal:>8}  {met}")
     return "\n".join(lines)
 
 

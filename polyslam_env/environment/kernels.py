@@ -1,4 +1,5 @@
-"""Compiled kernels of the observations: the egocentric local map's occupied and free cells.
+"""Compiled kernels of the observations: the egocentric local map's occupied and free cells,
+and the vector observation's parts.
 
 Plain loops compiled by :func:`polyslam_env.core.jit.njit`, with the same float operations in
 the same order as the numpy version they replaced (the oracle in
@@ -99,3 +100,60 @@ def vector_head(
         m = p + 7
         for i in range(occ.shape[1]):
             out[k, m + i] = codes[0] if free[k, i] else (codes[2] if occ[k, i] else codes[1])
+
+
+@njit
+def vector_tail(
+    seen: np.ndarray,
+    distance: np.ndarray,
+    bearing: np.ndarray,
+    cam_range: float,
+    slots: int,
+    since: np.ndarray,
+    rendezvous: np.ndarray,
+    cap: int,
+    step: np.ndarray,
+    max_steps: int,
+    first: int,
+    out: np.ndarray,
+) -> None:
+    """The last parts of K robots' vector observations, written into row k of ``out`` (K, D)
+    float32 from column ``first`` on: ``slots`` camera slots, nearest first (ties: the lower
+    target index), each ``(1, min(d / cam_range, 1), cos b, sin b)`` of a robot seen
+    (``seen[k, t]``, (K, T), at ``distance`` and ``bearing`` (K, T)) and zeros when empty;
+    then ``since`` (K,) steps since the last rendezvous / ``max_steps`` clipped to 1 (1 for
+    −1, never), min(``rendezvous`` (K,), ``cap``) / ``cap`` and ``step`` (K,) / ``max_steps``
+    clipped to 1."""
+    targets = seen.shape[1]
+    order = np.empty(targets, dtype=np.int64)
+    for k in range(seen.shape[0]):
+        n = 0
+        for t in range(targets):  # insertion by (distance, target): a stable sort
+            if seen[k, t]:
+                m = n
+                while m > 0 and distance[k, t] < distance[k, order[m - 1]]:
+                    order[m] = order[m - 1]
+                    m -= 1
+                order[m] = t
+                n += 1
+        c = first
+        for j in range(slots):
+            if j < n:
+                t = order[j]
+                d = distance[k, t] / cam_range
+                out[k, c] = 1.0
+                out[k, c + 1] = 1.0 if 1.0 < d else d  # min(d, 1.0)
+                out[k, c + 2] = math.cos(bearing[k, t])
+                out[k, c + 3] = math.sin(bearing[k, t])
+            else:
+                for i in range(4):
+                    out[k, c + i] = 0.0
+            c += 4
+        if since[k] < 0:
+            out[k, c] = 1.0
+        else:
+            s = since[k] / max_steps
+            out[k, c] = 1.0 if 1.0 < s else s
+        out[k, c + 1] = min(rendezvous[k], cap) / cap
+        p = step[k] / max_steps
+        out[k, c + 2] = 1.0 if 1.0 < p else p

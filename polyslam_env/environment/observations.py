@@ -8,14 +8,18 @@ Nothing here reads ground truth. Each robot keeps
   when only c0 moved (a c0 change shifts every point of the curve along its dependent axis).
 
 :class:`ObservationEncoder` turns these, the ranges, the pose estimate, camera detections and
-channel state into the vector (or grid + vector) observation, and owns the spaces.
+channel state into the vector (or grid + vector) observation, and owns the spaces. The env
+encodes the whole team at once from one :class:`TeamView` (arrays over the robots) with two
+compiled calls; :class:`RobotView` is one robot's view, for encoding a single robot.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from gymnasium import spaces
@@ -23,7 +27,7 @@ from gymnasium import spaces
 from polyslam_env.core import raster
 from polyslam_env.environment import kernels
 from polyslam_env.environment.config import EnvConfig, ObservationConfig
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.metrics.mapping import MapShapes, sample_shapes
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.sensors import Detection
 
@@ -32,6 +36,7 @@ __all__ = [
     "MapSampler",
     "ObservationEncoder",
     "RobotView",
+    "TeamView",
     "belief_grids",
     "sweep_beliefs",
 ]
@@ -74,6 +79,8 @@ class BeliefGrid:
         self.stack, self.row = stack, row
         self.free = stack[0][row]  # (n, n) view
         self.hit = stack[1][row]  # (n, n) view
+        #: the stack with each grid flat: free and hit, each (R, n·n) views
+        self.flat_stack = (stack[0].reshape(len(stack[0]), -1), stack[1].reshape(len(stack[1]), -1))
         self.max_range = float(max_range)
         #: (origin, resolution, shape) in the arguments' order of polyslam_env.core.raster
         self._grid = ((self.origin, self.origin), self.resolution, (self.n, self.n))
@@ -82,12 +89,14 @@ class BeliefGrid:
     def __getstate__(self) -> dict[str, object]:
         """Pickled without the views (a pickled view is a copy): rebuilt from the stack."""
         state = self.__dict__.copy()
-        del state["free"], state["hit"]
+        del state["free"], state["hit"], state["flat_stack"]
         return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
-        self.free, self.hit = self.stack[0][self.row], self.stack[1][self.row]
+        free, hit = self.stack
+        self.free, self.hit = free[self.row], hit[self.row]
+        self.flat_stack = (free.reshape(len(free), -1), hit.reshape(len(hit), -1))
 
     def _flat_cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Flat cell index (M,) of points (M, 2) (0 where outside) and whether each is inside."""
@@ -149,51 +158,55 @@ def sweep_beliefs(
 class MapSampler:
     """A robot's polynomials as points every ``step`` of arc length, in its own frame.
 
-    A landmark is resampled only when its shape object changed (created, refit, merged or
-    extended: shapes are immutable, so a change is a new object); a c0 change alone shifts the
-    cached points along the polynomial's dependent axis, which is exact.
+    Nothing is looked at while the map's table keeps its ``version`` (only c0s moved); after
+    a change, a landmark is resampled only when its ``stamp`` moved (created, refit, merged
+    or extended: the table bumps it with every change of shape or extent), all of them in
+    one compiled call (:func:`~polyslam_env.metrics.mapping.sample_shapes`). A c0 change
+    alone shifts the cached points along the polynomial's dependent axis, which is exact.
     """
 
     def __init__(self, step: float) -> None:
         self.step = float(step)
-        self._shapes: list[Polynomial] = []  # cached shape objects, in state order
-        self._ids: list[int] = []
+        self._table: object | None = None  # the table the cache was built on
+        self._version = -1  # its version then
+        #: landmark id → (its stamp, c0 when sampled, points (k, 2), dependent axis, k)
+        self._entries: dict[int, tuple[int, float, np.ndarray, int, int]] = {}
         self._c0 = np.zeros(0)  # (n,) c0 of each landmark when its points were sampled
         self._points = np.zeros((0, 2))  # (M, 2) all points at the cached c0s
         self._owner = np.zeros(0, dtype=np.intp)  # (M,) landmark (state order) of each point
         self._axis = np.zeros(0, dtype=np.intp)  # (M,) the dependent coordinate (0 or 1)
-        self._per_id: dict[int, tuple[Polynomial, float, np.ndarray]] = {}
-
-    def _stale(self, slam: PolySlam) -> bool:
-        ids = slam.table.ids
-        if list(ids) != self._ids:
-            return True
-        return any(slam.shapes[lid] is not shp for lid, shp in zip(ids, self._shapes, strict=True))
 
     def _rebuild(self, slam: PolySlam) -> None:
-        """Resample the landmarks whose shape changed; keep the others' points."""
-        ids = list(slam.table.ids)
+        """Resample the landmarks whose stamp moved; keep the others' points."""
+        table = slam.table
+        ids, stamps = list(table.ids), table.stamp.tolist()
         c0s = slam.c0s
-        per_id: dict[int, tuple[Polynomial, float, np.ndarray]] = {}
-        for lid, c0 in zip(ids, c0s, strict=True):
-            shape = slam.shapes[lid]
-            old = self._per_id.get(lid)
-            if old is None or old[0] is not shape:
-                old = (shape, float(c0), shape.with_c0(float(c0)).sample_arclength(self.step))
-            per_id[lid] = old
-        self._per_id, self._ids = per_id, ids
-        self._shapes = [per_id[lid][0] for lid in ids]
-        self._c0 = np.array([per_id[lid][1] for lid in ids])
-        pts = [per_id[lid][2] for lid in ids]
-        counts = [len(p) for p in pts]
-        self._points = np.vstack(pts) if pts else np.zeros((0, 2))
-        self._owner = np.repeat(np.arange(len(ids)), counts)
-        axes = [1 if shp.variate == 1 else 0 for shp in self._shapes]
-        self._axis = np.repeat(np.array(axes, dtype=np.intp), counts)
+        entries = list(map(self._entries.get, ids))
+        stale = [e is None or e[0] != stamp for e, stamp in zip(entries, stamps, strict=True)]
+        rows = np.flatnonzero(stale)
+        if len(rows):
+            coeffs = table.shape.copy()  # (n, M+1) [0, b_1, …]: c0 from the state
+            coeffs[:, 0] = c0s
+            fresh = MapShapes(table.variate, coeffs, table.lo, table.hi)
+            points, starts = sample_shapes(fresh, self.step, rows)
+            bounds, variates, c0_list = starts.tolist(), table.variate.tolist(), c0s.tolist()
+            for q, r in enumerate(rows.tolist()):
+                a, b = bounds[q], bounds[q + 1]
+                axis = 1 if variates[r] == 1 else 0
+                entries[r] = (stamps[r], c0_list[r], points[a:b], axis, b - a)
+        done: list[tuple[int, float, np.ndarray, int, int]] = entries  # type: ignore[assignment]
+        self._entries = dict(zip(ids, done, strict=True))
+        self._table, self._version = table, table.version
+        counts = [e[4] for e in done]
+        self._c0 = np.array([e[1] for e in done])
+        self._points = np.concatenate([e[2] for e in done]) if done else np.zeros((0, 2))
+        self._owner = np.repeat(np.arange(len(done)), counts)
+        self._axis = np.repeat(np.array([e[3] for e in done], dtype=np.intp), counts)
 
     def points(self, slam: PolySlam) -> np.ndarray:  # (M, 2)
         """All map points of ``slam`` in its frame."""
-        if self._stale(slam):
+        table = slam.table
+        if table is not self._table or table.version != self._version:
             self._rebuild(slam)
         out = self._points.copy()
         if len(out):
@@ -204,7 +217,8 @@ class MapSampler:
 
 @dataclass(frozen=True)
 class RobotView:
-    """Everything one robot knows at the end of a step (its own frame)."""
+    """Everything one robot knows at the end of a step (its own frame); for encoding one robot
+    (the env encodes the team from a :class:`TeamView`)."""
 
     ranges: np.ndarray  # (B,) noisy ranges, inf = no return
     pose: np.ndarray  # (3,) estimated pose in its start frame
@@ -215,6 +229,68 @@ class RobotView:
     steps_since_rendezvous: int | None  # None: never met anyone
     rendezvous: int
     step: int
+
+
+#: ``TeamView.since`` of a robot that never met anyone.
+NEVER = -1
+
+
+class TeamView(NamedTuple):
+    """What K robots know at the end of a step, each in its own frame, as arrays."""
+
+    ranges: np.ndarray  # (K, B) noisy ranges, inf = no return
+    poses: np.ndarray  # (K, 3) estimated poses in their start frames
+    pose_stds: np.ndarray  # (K, 3) standard deviations of the pose estimates
+    map_points: np.ndarray  # (M, 2): robot k's map points are rows starts[k]:starts[k + 1]
+    map_starts: np.ndarray  # (K + 1,) int64
+    belief: BeliefGrid  # the grid of one of them: the stack of their grids, its geometry
+    belief_rows: np.ndarray  # (K,) int64: robot k's belief grid is row belief_rows[k] of it
+    seen: np.ndarray  # (K, T) bool: robot k's camera sees robot t
+    distance: np.ndarray  # (K, T) m, as the camera measured it (where seen)
+    bearing: np.ndarray  # (K, T) rad, ditto
+    since: np.ndarray  # (K,) int64 steps since the last rendezvous, NEVER (−1) for none
+    rendezvous: np.ndarray  # (K,) int64 rendezvous so far
+    step: np.ndarray  # (K,) int64 the env step each observation is of
+
+    @classmethod
+    def of(cls, views: Sequence[RobotView]) -> TeamView:
+        """The team view of single-robot views (their belief grids in one stack, as
+        :func:`belief_grids` makes a team's)."""
+        if not views:
+            raise ValueError("TeamView.of: no views")
+        belief = views[0].belief
+        if any(v.belief.stack is not belief.stack for v in views):
+            raise ValueError("TeamView.of: the views' belief grids are not in one stack")
+        points = [v.map_points.reshape(-1, 2) for v in views]
+        starts = np.zeros(len(views) + 1, dtype=np.int64)
+        starts[1:] = np.cumsum([len(p) for p in points])
+        targets = 1 + max((d.target for v in views for d in v.detections), default=-1)
+        seen = np.zeros((len(views), targets), dtype=bool)
+        distance, bearing = np.zeros((len(views), targets)), np.zeros((len(views), targets))
+        for k, view in enumerate(views):
+            for d in view.detections:
+                seen[k, d.target] = True
+                distance[k, d.target], bearing[k, d.target] = d.distance, d.bearing
+        since = [NEVER if v.steps_since_rendezvous is None else v.steps_since_rendezvous
+                 for v in views]  # fmt: skip
+        return cls(
+            ranges=np.array([v.ranges for v in views], dtype=float),
+            poses=np.array([v.pose for v in views], dtype=float),
+            pose_stds=np.array([v.pose_std for v in views], dtype=float),
+            map_points=np.concatenate(points) if points else _NO_POINTS,
+            map_starts=starts,
+            belief=belief,
+            belief_rows=np.array([v.belief.row for v in views], dtype=np.int64),
+            seen=seen,
+            distance=distance,
+            bearing=bearing,
+            since=np.array(since, dtype=np.int64),
+            rendezvous=np.array([v.rendezvous for v in views], dtype=np.int64),
+            step=np.array([v.step for v in views], dtype=np.int64),
+        )
+
+    def __len__(self) -> int:  # robots, not fields
+        return len(self.poses)
 
 
 class ObservationEncoder:
@@ -282,15 +358,14 @@ class ObservationEncoder:
         row-major); a cell is never both, and neither means unknown. Occupied: the robot's map
         points (and, with ``use_hits``, the belief grid's hits); free: the belief grid's free
         cells."""
-        occ, free = self._local_cells([view])
+        occ, free = self.team_cells(TeamView.of([view]))
         return occ[0], free[0]
 
-    def _local_cells(self, views: Sequence[RobotView]) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`local_cells` of K views (K, G²) each, by the compiled
-        :func:`~polyslam_env.environment.kernels.local_cells`: in one call when the views'
-        belief grids share a stack (a team's do), else one call per view."""
-        k, gg = len(views), self.g * self.g
-        poses = np.array([v.pose for v in views])  # (K, 3)
+    def team_cells(self, team: TeamView) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`local_cells` of K robots (K, G²) each, in one call of the compiled
+        :func:`~polyslam_env.environment.kernels.local_cells`."""
+        k, gg = len(team), self.g * self.g
+        poses = team.poses
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
         # R(θ)ᵀ (core.geometry.rotation, transposed) of each heading, C-contiguous: numpy's
         # batched product then equals the products of one robot at a time (the same BLAS
@@ -298,96 +373,85 @@ class ObservationEncoder:
         rots_t = np.empty((k, 2, 2))
         rots_t[:, 0, 0], rots_t[:, 0, 1], rots_t[:, 1, 0], rots_t[:, 1, 1] = c, s, -s, c
         centres = self.cell_centres @ rots_t + poses[:, None, :2]  # (K, G², 2) own frames
-        ego = [
-            (v.map_points - v.pose[:2]) @ np.ascontiguousarray(rots_t[j].T)  # @ R(θ): ego
-            if len(v.map_points)
-            else _NO_POINTS
-            for j, v in enumerate(views)
-        ]
-        starts = np.zeros(k + 1, dtype=np.int64)
-        starts[1:] = np.cumsum([len(e) for e in ego])
-        points = np.concatenate(ego) if starts[-1] else _NO_POINTS  # (M, 2) ego frames
+        points = self._ego_points(team, rots_t)  # (M, 2) ego frames
         occ, free = np.empty((k, gg), dtype=bool), np.empty((k, gg), dtype=bool)
-        b = views[0].belief
-        if all(v.belief.stack is b.stack for v in views):
-            groups = [(slice(0, k), b, np.array([v.belief.row for v in views], dtype=np.int64))]
-        else:
-            groups = [
-                (slice(j, j + 1), v.belief, np.array([v.belief.row])) for j, v in enumerate(views)
-            ]
-        for sl, grid, rows in groups:
-            free_stack, hit_stack = grid.stack
-            kernels.local_cells(
-                centres[sl], points, starts[sl.start : sl.stop + 1],
-                self.g, self.res, free_stack.reshape(len(free_stack), -1),
-                hit_stack.reshape(len(hit_stack), -1), rows, grid.origin, grid.resolution,
-                grid.n, self.use_hits, occ[sl], free[sl],
-            )  # fmt: skip
+        grid = team.belief
+        free_stack, hit_stack = grid.flat_stack
+        kernels.local_cells(
+            centres, points, team.map_starts, self.g, self.res, free_stack, hit_stack,
+            team.belief_rows, grid.origin, grid.resolution, grid.n, self.use_hits, occ, free,
+        )  # fmt: skip
         return occ, free
+
+    @staticmethod
+    def _ego_points(team: TeamView, rots_t: np.ndarray) -> np.ndarray:  # (M, 2)
+        """Every robot's map points in its egocentric frame: (p − xy) @ R(θ), one robot's
+        points at a time (the product of one robot's points with its own rotation, as the
+        single-robot form computes it, so the cells do not depend on the team's size)."""
+        starts = team.map_starts.tolist()
+        if starts[-1] == 0:
+            return _NO_POINTS
+        out = np.empty((starts[-1], 2))
+        for j, (a, b) in enumerate(itertools.pairwise(starts)):
+            if b > a:
+                out[a:b] = (team.map_points[a:b] - team.poses[j, :2]) @ np.ascontiguousarray(
+                    rots_t[j].T
+                )
+        return out
 
     def local_map(self, view: RobotView) -> np.ndarray:  # (3, G, G) float32
         """Occupied / free / unknown channels of the egocentric grid (x forward = columns)."""
         occ, free = self.local_cells(view)
-        out = np.empty((3, self.g * self.g), dtype=np.float32)
-        out[0], out[1], out[2] = occ, free, ~(occ | free)
-        return out.reshape(3, self.g, self.g)
+        return self._channels(occ[None], free[None])[0]
 
-    def _detections(self, detections: list[Detection]) -> list[float]:  # (4K,)
-        """Slots nearest first, ``(seen, d/range, cos α, sin α)``, zeros for empty slots."""
-        cam_range = self.config.world.camera.range
-        out: list[float] = []
-        for det in sorted(detections, key=lambda d: (d.distance, d.target))[: self.k]:
-            d = min(det.distance / cam_range, 1.0)
-            out += (1.0, d, math.cos(det.bearing), math.sin(det.bearing))
-        return out + [0.0] * (4 * self.k - len(out))
+    def _channels(self, occ: np.ndarray, free: np.ndarray) -> np.ndarray:  # (K, 3, G, G)
+        out = np.empty((len(occ), 3, self.g * self.g), dtype=np.float32)
+        out[:, 0], out[:, 1], out[:, 2] = occ, free, ~(occ | free)
+        return out.reshape(len(occ), 3, self.g, self.g)
 
     def vector(
         self, view: RobotView, cells: tuple[np.ndarray, np.ndarray] | None
     ) -> np.ndarray:  # (D,) float32
         """The flat vector; the local map's (occupied, free) ``cells`` (G²,) are folded in as
         one coded channel if given."""
+        team = TeamView.of([view])
         if cells is None:
-            return self._vectors([view], _NO_CELLS, _NO_CELLS)[0]
-        return self._vectors([view], cells[0][None], cells[1][None])[0]
+            return self.team_vectors(team, _NO_CELLS, _NO_CELLS)[0]
+        return self.team_vectors(team, cells[0][None], cells[1][None])[0]
 
-    def _vectors(
-        self, views: Sequence[RobotView], occ: np.ndarray, free: np.ndarray
+    def team_vectors(
+        self, team: TeamView, occ: np.ndarray, free: np.ndarray
     ) -> np.ndarray:  # (K, D) float32
-        """:meth:`vector` of K views, the local maps' cells ``occ``, ``free`` (K, G²) or
-        (K, 0) for none. Ranges, pose, standard deviations and local map are written by the
-        compiled :func:`~polyslam_env.environment.kernels.vector_head` (one call), the rest
-        as Python floats."""
+        """:meth:`vector` of K robots, the local maps' cells ``occ``, ``free`` (K, G²) or
+        (K, 0) for none, written by two compiled calls: ranges, pose, standard deviations and
+        local map (:func:`~polyslam_env.environment.kernels.vector_head`), then detections,
+        channel and progress (:func:`~polyslam_env.environment.kernels.vector_tail`)."""
         oc = self.config.observation
-        lay = self._layout
-        out = np.empty((len(views), *self.vector_space.shape), dtype=np.float32)
+        out = np.empty((len(team), *self.vector_space.shape), dtype=np.float32)
         kernels.vector_head(
-            np.array([v.ranges for v in views]), self.max_range, np.array([v.pose for v in views]),
-            self.pose_scale, np.array([v.pose_std for v in views]), STD_CAPS, occ, free,
-            _CODES, out,
+            team.ranges, self.max_range, team.poses, self.pose_scale, team.pose_stds, STD_CAPS,
+            occ, free, _CODES, out,
         )  # fmt: skip
-        t = self.config.max_steps
-        tail = slice(lay["detections"].start, lay["progress"].stop)
-        for row, view in zip(out, views, strict=True):
-            since = view.steps_since_rendezvous
-            # detections, channel and progress are adjacent: one assignment
-            row[tail] = [
-                *self._detections(view.detections),
-                1.0 if since is None else min(since / t, 1.0),
-                min(view.rendezvous, oc.rendezvous_cap) / oc.rendezvous_cap,
-                min(view.step / t, 1.0),
-            ]
+        kernels.vector_tail(
+            team.seen, team.distance, team.bearing, self.config.world.camera.range, self.k,
+            team.since, team.rendezvous, oc.rendezvous_cap, team.step, self.config.max_steps,
+            self._layout["detections"].start, out,
+        )  # fmt: skip
         return out
 
     def encode(self, view: RobotView) -> np.ndarray | dict[str, np.ndarray]:
         """The observation of one robot in :attr:`space`."""
-        return self.encode_team([view])[0]
+        return self.encode_team(TeamView.of([view]))[0]
 
-    def encode_team(self, views: Sequence[RobotView]) -> list[np.ndarray | dict[str, np.ndarray]]:
-        """The observations of K robots (:meth:`encode` of each), the vectors' numerical
-        parts computed for all robots in one call of each kernel."""
-        if self.mode == "grid":
-            return [{"grid": self.local_map(v), "vector": self.vector(v, None)} for v in views]
-        if not views:
+    def encode_team(self, team: TeamView) -> list[np.ndarray | dict[str, np.ndarray]]:
+        """The observations of K robots (:meth:`encode` of each), the numerical parts computed
+        for all robots in one call of each kernel."""
+        if not len(team):
             return []
-        occ, free = self._local_cells(views)
-        return [row.copy() for row in self._vectors(views, occ, free)]
+        occ, free = self.team_cells(team)
+        if self.mode == "grid":
+            grids = self._channels(occ, free)
+            none = np.zeros((len(team), 0), dtype=bool)  # no local map in the vector
+            vectors = self.team_vectors(team, none, none)
+            return [{"grid": g, "vector": v} for g, v in zip(grids, vectors, strict=True)]
+        return list(self.team_vectors(team, occ, free))

@@ -27,7 +27,6 @@ from pettingzoo.utils.conversions import parallel_to_aec
 
 from polyslam_env import metrics
 from polyslam_env.core.errors import ConfigError, MapFileError
-from polyslam_env.core.geometry import transform_points
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.environment import stages
 from polyslam_env.environment.config import EnvConfig, resolve_config
@@ -35,9 +34,8 @@ from polyslam_env.environment.facts import public_facts
 from polyslam_env.environment.faults import FaultEvent, FaultPlan
 from polyslam_env.environment.observations import ObservationEncoder
 from polyslam_env.environment.rewards import REWARD_TERMS, combine, reward_terms
-from polyslam_env.environment.state import EpisodeState, estimate, estimates
+from polyslam_env.environment.state import EpisodeState, estimates
 from polyslam_env.render.state import RenderState
-from polyslam_env.slam.backends import PointSlamRobot
 from polyslam_env.world.generators import LayoutGenerator, make_generator
 from polyslam_env.world.grid import FreeGrid, free_space_grid
 from polyslam_env.world.layout import Layout
@@ -328,7 +326,6 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         events = stages.inject_faults(state, self._faults)
         state.sensing = stages.sense(state.world)
         slam_infos = stages.slam(state, result.odometry)
-        stages.map_features(state)
         exchanged = stages.exchange(state)
         robot_estimates = estimates(state)
         stages.record_histories(state, result, slam_infos, robot_estimates)
@@ -412,20 +409,6 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
             self._renderer_layout = layout
         return self._renderer.render(self.render_state())
 
-    @staticmethod
-    def _map_for_render(state: EpisodeState, i: int, start: np.ndarray) -> list[np.ndarray]:
-        """Robot i's map as absolute polylines: its polynomials, or (point back-ends) a square
-        of 0.6 m around each landmark estimate, wide enough to show around the pillar it
-        marks; placed by its true ``start``."""
-        if not state.slams:
-            return []
-        slam = state.slams[i]
-        if isinstance(slam, PointSlamRobot):
-            square = 0.3 * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1], [-1, -1]])  # (5, 2)
-            centres = transform_points(slam.landmarks().means, start)  # (M, 2)
-            return [c + square for c in centres]
-        return metrics.map_points(slam.polynomials(), start, 0.02)
-
     def render_state(self) -> RenderState:
         """A snapshot of the episode for the renderer (ground truth and estimates, absolute).
 
@@ -438,20 +421,17 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
             raise RuntimeError("render_state() called before reset()")
         n = self.config.num_robots
         starts = [h.true[0] for h in state.histories]
-        est = np.array([estimate(state, i)[0] for i in range(n)])
-        cov = np.array(
-            [
-                state.slams[i].pose_cov_relative if state.slams else estimate(state, i)[1]
-                for i in range(n)
-            ]
-        )
+        est, own = estimates(state)
+        team = state.slam
+        relative = [team.pose_cov_relative(i) for i in range(n)]
+        cov = np.array([own[i] if c is None else c for i, c in enumerate(relative)])
         est_abs = np.array(
             [metrics.pose_to_absolute(est[i : i + 1], starts[i])[0] for i in range(n)]
         )
         cov_abs = np.array(
             [metrics.cov_to_absolute(cov[i : i + 1], starts[i])[0] for i in range(n)]
         )
-        maps = [self._map_for_render(state, i, starts[i]) for i in range(n)]
+        maps = [team.render_map(i, starts[i]) for i in range(n)]
         grid = state.coverage
         return RenderState(
             true_poses=state.world.poses,

@@ -4,9 +4,13 @@ Each stage is a function of what it reads (the :class:`EpisodeState` and the out
 stages) that returns what it produces; a stage that changes the state says so in its first
 line. In the order ``PolySlamParallelEnv.step`` runs them:
 
-    simulate → sense → slam → map_features → exchange → record → observe → sweep_coverage
-    → map_bookkeeping → (reward terms, combine: :mod:`~polyslam_env.environment.rewards`)
-    → fail_robots → done → infos
+    simulate → sense → slam → exchange → record → observe → sweep_coverage → map_bookkeeping
+    → (reward terms, combine: :mod:`~polyslam_env.environment.rewards`) → fail_robots → done
+    → infos
+
+Every stage works on the whole team at once: the SLAM stage and the exchange call the team's
+SLAM object (:mod:`~polyslam_env.environment.backends`, one per ``slam.backend``), the sensing,
+the belief and coverage sweeps and the observations are compiled calls over (N, …) arrays.
 
 :func:`~polyslam_env.apps.simulate.simulate` runs the team without the RL env through the same
 cores — :func:`simulate`, :func:`sense`, :func:`run_slam`, :func:`exchange_maps` and
@@ -25,41 +29,46 @@ from typing import Any
 import numpy as np
 
 from polyslam_env import metrics
-from polyslam_env.comms.channel import ChannelConfig, in_radio_range
-from polyslam_env.comms.consensus import ConsensusExchange
-from polyslam_env.comms.exchange import AlignmentAttempt, ExchangeStep, RendezvousExchange
-from polyslam_env.comms.seif_exchange import SeifMapExchange
+from polyslam_env.comms.exchange import AlignmentAttempt, ExchangeStep
 from polyslam_env.core.geometry import beam_endpoints, between, wrap_remainder
+from polyslam_env.environment.backends import (
+    WRONG_ALIGNMENT_DEG,
+    WRONG_ALIGNMENT_M,
+    exchange_maps,
+    is_wrong_alignment,
+    make_exchange,
+    make_team_slam,
+    run_slam,
+)
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.faults import FaultEvent, FaultPlan, kidnap, perturb_starts
 from polyslam_env.environment.observations import (
     MapSampler,
     ObservationEncoder,
-    RobotView,
+    TeamView,
     belief_grids,
     sweep_beliefs,
 )
 from polyslam_env.environment.rewards import MAPPING_STEP, MAPPING_TOL, MapChanges
-from polyslam_env.environment.state import EpisodeState, Sensing, estimate
-from polyslam_env.metrics.episode import RobotHistory, final_robot_metrics, team_metrics
-from polyslam_env.slam.backends import PointSlamRobot, SlamRobot, make_point_slams
-from polyslam_env.slam.config import SlamConfig
-from polyslam_env.slam.features import FeatureBook
-from polyslam_env.slam.robot import PolySlam, SlamStepInfo
-from polyslam_env.world.config import WorldConfig
+from polyslam_env.environment.sensing import Sensing
+from polyslam_env.environment.state import NEVER, EpisodeState
+from polyslam_env.metrics.episode import TeamHistory, final_robot_metrics, team_metrics
+from polyslam_env.slam.robot import SlamStepInfo
 from polyslam_env.world.grid import FreeGrid
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.physics import StepResult, World
-from polyslam_env.world.point_sensor import PillarReading
-from polyslam_env.world.sensors import Detection
+from polyslam_env.world.sensors import CameraFrame
 
 __all__ = [
+    "WRONG_ALIGNMENT_DEG",
+    "WRONG_ALIGNMENT_M",
     "done",
     "exchange",
     "exchange_maps",
     "fail_robots",
     "infos",
     "inject_faults",
+    "is_wrong_alignment",
     "make_exchange",
     "map_bookkeeping",
     "new_episode",
@@ -74,7 +83,6 @@ __all__ = [
 ]
 
 Obs = np.ndarray | dict[str, np.ndarray]
-_NO_POINTS = np.zeros((0, 2))  # (0, 2): the map of a robot without SLAM
 
 
 # -- reset ----------------------------------------------------------------------------------------
@@ -82,8 +90,8 @@ def new_episode(
     config: EnvConfig, rngs: dict[str, np.random.Generator], layout: Layout, free: FreeGrid
 ) -> EpisodeState:
     """A fresh episode on ``layout`` (its free-space grid ``free``) with the named streams
-    ``rngs``: a new pymunk world, fresh SLAMs, grids and histories, the first sensor readings
-    and the first coverage sweep.
+    ``rngs``: a new pymunk world, the team's fresh SLAM, grids and histories, the first sensor
+    readings and the first coverage sweep.
 
     Each robot's frame is its nominal start pose (the layout's); with ``initial_error`` (and
     SLAM on) its true start is drawn around it from N(0, P0) (:func:`perturb_starts`, stream
@@ -97,90 +105,35 @@ def new_episode(
     start_poses = world.poses  # (N, 3), each robot's frame in the absolute frame
     if config.initial_error and config.slam_enabled:
         perturb_starts(world, config.slam.p0, rngs["start_error"])
-    angles = np.asarray(wc.range_sensor.angles)  # (B,)
-    max_range = wc.range_sensor.max_range
-    pillar_sensor = wc.pillar_sensor
-    slams: list[SlamRobot] = []
-    if config.slam_enabled and config.slam.backend == "polynomial":
-        slams = [PolySlam(config.slam, angles, max_range) for _ in range(n)]
-    elif config.slam_enabled:
-        rng = rngs["particles"]
-        sigmas = (pillar_sensor.sigma_range, pillar_sensor.sigma_bearing_deg)
-        ids = pillar_sensor.identities
-        slams = list(make_point_slams(config.slam, sigmas, rng, start_poses, ids))
-    polynomial = config.slam_enabled and config.slam.backend == "polynomial"
-    channel = config.channel
-    on_pillars = (
-        channel is not None and channel.mode == "alignment" and channel.features == "pillars"
-    )
-    pillar_books = polynomial and on_pillars
-    features = [FeatureBook(pillar_sensor.descriptor_dim) for _ in range(n)] if pillar_books else []
+
+    def samplers() -> list[MapSampler]:
+        return [MapSampler(0.5 * oc.grid_resolution) for _ in range(n)]
+
     state = EpisodeState(
         rngs=rngs,
         world=world,
         coverage=coverage,
         start_poses=start_poses,
-        angles=angles,
-        slams=slams,
-        exchange=None
-        if config.channel is None or not polynomial
-        else make_exchange(config.channel, n, rngs["channel"], wc, config.slam, rngs["alignment"]),
-        consensus=ConsensusExchange(config.channel, start_poses, rngs["channel"])
-        if config.channel is not None and config.slam_enabled and config.slam.backend == "mblcc"
-        else None,
-        seif_exchange=SeifMapExchange(channel, n, rngs["channel"], rngs["alignment"])
-        if channel is not None
-        and channel.mode == "alignment"
-        and config.slam_enabled
-        and config.slam.backend == "seif"
-        else None,
-        features=features,
-        beliefs=belief_grids(oc, layout.bounds, max_range, n),
-        samplers=[MapSampler(0.5 * oc.grid_resolution) for _ in range(n)],
-        histories=[],  # filled below: a history starts from the robot's estimate
+        angles=np.asarray(wc.range_sensor.angles),  # (B,)
+        slam=make_team_slam(config, rngs, start_poses, samplers),
+        beliefs=belief_grids(oc, layout.bounds, wc.range_sensor.max_range, n),
+        history=TeamHistory(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3, 3))),  # below
+        histories=[],  # ditto
         sensing=sense(world),
-        last_rendezvous=[None] * n,
-        completeness=[0.0] * n,
-        map_error=[0.0] * n,
-        bytes_sent=[0] * n,
+        last_rendezvous=np.full(n, NEVER, dtype=np.int64),
+        rendezvous=np.zeros(n, dtype=np.int64),
+        completeness=np.zeros(n),
+        map_error=np.zeros(n),
+        bytes_sent=np.zeros(n, dtype=np.int64),
         links=[],
         coverage_series=[],
     )
-    state.histories = [
-        RobotHistory(
-            start_poses[i],
-            *estimate(state, i),
-            true_pose=world.poses[i],
-            p0=config.slam.p0 if config.slam_enabled else None,
-        )
-        for i in range(n)
-    ]
+    poses, covs = state.slam.estimates(world, start_poses)  # a history starts from them
+    p0 = config.slam.p0 if config.slam_enabled else None
+    state.history = TeamHistory(start_poses, poses, covs, world.poses, p0)
+    state.histories = [state.history.robot(i) for i in range(n)]
     sweep_coverage(state)
     return state
-
-
-def make_exchange(
-    channel: ChannelConfig,
-    num_robots: int,
-    rng: np.random.Generator,
-    world: WorldConfig,
-    slam: SlamConfig,
-    align_rng: np.random.Generator | None = None,
-) -> RendezvousExchange:
-    """The rendezvous exchange of a team (env and ``simulate``): ``rng`` is the channel's
-    stream, ``align_rng`` the aligners' (alignment mode); the camera's noise and the SLAM's
-    order settings come from the configs."""
-    return RendezvousExchange(
-        channel,
-        num_robots,
-        rng,
-        world.camera.sigma_d,
-        world.camera.sigma_bearing,
-        slam.order,
-        slam.auto_order,
-        max_range=world.range_sensor.max_range,
-        align_rng=align_rng,
-    )
 
 
 # -- shared with simulate -------------------------------------------------------------------------
@@ -197,73 +150,23 @@ def sense(world: World, camera: bool = True) -> Sensing:
     off in the world's config skips the camera (and its draws) and reports no detections."""
     true_ranges, ranges = world.scan_with_truth()
     on = camera and world.config.camera.enabled
-    detections = world.camera() if on else [[] for _ in range(world.num_robots)]
+    frame = world.camera_frame() if on else CameraFrame.empty(world.num_robots)
     pillars = tuple(world.sense_pillars()) if world.config.pillar_sensor.enabled else ()
-    return Sensing(ranges, true_ranges, detections, pillars)
-
-
-def run_slam(
-    slams: Sequence[SlamRobot],
-    robots: Sequence[int],
-    active: np.ndarray,
-    odometry: np.ndarray,
-    ranges: np.ndarray,
-    pillars: Sequence[PillarReading] = (),
-) -> list[SlamStepInfo | None]:
-    """One step (changes the SLAMs) of every SLAM whose robot is active: ``slams[j]`` runs on
-    world robot ``robots[j]``'s odometry (N, 3) and its ranges (N, B) (polynomial EKF) or its
-    pillar readings ``pillars`` (point back-ends); None for failed robots."""
-    out: list[SlamStepInfo | None] = []
-    for slam, i in zip(slams, robots, strict=True):
-        if not active[i]:
-            out.append(None)
-        elif isinstance(slam, PointSlamRobot):
-            out.append(slam.step(odometry[i], pillars[i].ids, pillars[i].z))
-        else:
-            out.append(slam.step(odometry[i], ranges[i]))
-    return out
-
-
-def exchange_maps(
-    exchange: RendezvousExchange,
-    step: int,
-    slams: Sequence[PolySlam],
-    active: np.ndarray,
-    sensing: Sensing,
-    angles: np.ndarray,
-    poses: np.ndarray | None = None,
-    features: Sequence[FeatureBook] = (),
-) -> ExchangeStep:
-    """One exchange step (changes the exchange and the receivers' SLAMs) after the SLAM step
-    ``step``: log the active robots' scans, then detect, send, deliver and apply. Alignment
-    mode needs the true ``poses`` (N, 3) (the radio's range is physics) and the robots'
-    ``features``."""
-    for i, s in enumerate(slams):
-        if active[i]:
-            exchange.record_scan(i, s.pose, sensing.ranges[i], angles)
-    in_range: list[tuple[int, int]] = []
-    if exchange.config.mode == "alignment":
-        if poses is None:
-            raise ValueError("alignment mode needs the robots' true poses for the radio range")
-        near = in_radio_range(poses, exchange.config.range)  # (N, N)
-        i_idx, j_idx = np.nonzero(np.triu(near, k=1))
-        in_range = list(zip(i_idx.tolist(), j_idx.tolist(), strict=True))
-    return exchange.step(
-        step, slams, sensing.detections, active, in_range=in_range, features=features
-    )
+    return Sensing(ranges, true_ranges, frame, pillars)
 
 
 def record(
-    histories: Sequence[RobotHistory],
+    history: TeamHistory,
     robots: Sequence[int],
     world: World,
     sensing: Sensing,
-    estimates: Sequence[tuple[np.ndarray, np.ndarray]],
+    estimates: tuple[np.ndarray, np.ndarray],
     slam_infos: Sequence[SlamStepInfo | None],
     collided: np.ndarray,
 ) -> None:
-    """Append the step to the histories (changes them) of active robots: ``histories[j]``
-    follows world robot ``robots[j]`` with estimate ``estimates[j]`` (pose (3,), cov (3, 3)).
+    """Append the step to the team's history (changes it), for the slots whose robot is
+    active: slot j follows world robot ``robots[j]`` with estimate ``estimates`` = (poses
+    (J, 3), covariances (J, 3, 3)) row j and the SLAM step ``slam_infos[j]``.
 
     Hit points are the true points the beams hit: the noiseless ranges of the step's ray cast
     placed with the true poses (beams without return give none).
@@ -273,66 +176,41 @@ def record(
     phi = poses[:, 2:3] + world.range_sensor.angles  # (N, B)
     ranges = np.where(ok, sensing.true_ranges, 0.0)  # no inf · cos: no NaN, no warning
     ends = beam_endpoints(poses[:, None, :2], phi, ranges)  # (N, B, 2)
-    for history, i, (est, cov), info in zip(histories, robots, estimates, slam_infos, strict=True):
-        if not world.active[i]:
-            continue
-        history.record(
-            poses[i],
-            est,
-            cov,
-            ends[i][ok[i]],
-            None if info is None else info.time_s,
-            bool(collided[i]),
-            bool(info is not None and info.diverging),
-        )
+    of = np.asarray(robots, dtype=np.int64)  # (J,) slot → world robot
+    slots = np.flatnonzero(world.active[of])  # (K,)
+    if not len(slots):
+        return
+    live = of[slots]  # (K,) their robots
+    seen = ok[live]  # (K, B)
+    times = np.array([np.nan if i is None else i.time_s for i in slam_infos])  # (J,)
+    diverging = np.array([i is not None and i.diverging for i in slam_infos], dtype=bool)
+    est, cov = estimates
+    history.record(
+        slots, poses[live], est[slots], cov[slots], ends[live][seen],
+        np.repeat(slots, seen.sum(axis=1)), times[slots], collided[live], diverging[slots],
+    )  # fmt: skip
 
 
 # -- the env's stages -----------------------------------------------------------------------------
 def slam(state: EpisodeState, odometry: np.ndarray) -> list[SlamStepInfo | None]:  # (N,)
-    """The SLAM stage (changes the SLAMs): :func:`run_slam` for robot i's own SLAM; None for
-    every robot without SLAM."""
-    world = state.world
-    if not state.slams:
-        return [None] * world.num_robots
-    robots = range(len(state.slams))
-    sensing = state.sensing
-    return run_slam(state.slams, robots, world.active, odometry, sensing.ranges, sensing.pillars)
-
-
-def map_features(state: EpisodeState) -> None:
-    """The feature stage (changes the feature books): every active robot places the pillars
-    it sees with its SLAM's pose estimate (:class:`~polyslam_env.slam.features.FeatureBook`);
-    nothing outside the exchange's alignment mode, the books' only reader."""
-    for i, book in enumerate(state.features):
-        if state.world.active[i]:
-            reading = state.sensing.pillars[i]
-            book.add(state.slams[i].pose, reading.ids, reading.z, reading.descriptors)
+    """The SLAM stage (changes the SLAMs): one step of the team's SLAM on the odometry
+    (N, 3) and this step's readings; None for every robot without SLAM or failed."""
+    return state.slam.step(state.world.active, odometry, state.sensing)
 
 
 def exchange(state: EpisodeState) -> ExchangeStep | None:
-    """The exchange stage (changes links, last rendezvous, exchange, SLAMs): the mutual
-    sightings for rendering, then :func:`exchange_maps` if the exchange is on."""
-    state.links = _mutual_pairs(state.sensing.detections)
-    if state.consensus is not None:
-        points = [s for s in state.slams if isinstance(s, PointSlamRobot)]
-        state.consensus.step(state.step_count, points, state.world.active, state.world.poses)
-    if state.seif_exchange is not None:
-        points = [s for s in state.slams if isinstance(s, PointSlamRobot)]
-        state.seif_exchange.step(state.step_count, points, state.world.active, state.world.poses)
-    if state.exchange is None:
+    """The exchange stage (changes links, rendezvous counts, bytes sent, the exchange and
+    SLAMs): the mutual sightings for rendering, then the team SLAM's exchange; the robots of
+    each new rendezvous count it and remember its step."""
+    seen = state.sensing.camera.seen  # (N, N)
+    i_idx, j_idx = np.nonzero(np.triu(seen & seen.T, k=1))
+    state.links = list(zip(i_idx.tolist(), j_idx.tolist(), strict=True))
+    out = state.slam.exchange(state.step_count, state.world, state.sensing)
+    if out is None:
         return None
-    out = exchange_maps(
-        state.exchange,
-        state.step_count,
-        [s for s in state.slams if isinstance(s, PolySlam)],  # all of them: see new_episode
-        state.world.active,
-        state.sensing,
-        state.angles,
-        state.world.poses,
-        state.features,
-    )
-    for i, j in out.new_rendezvous:
-        state.last_rendezvous[i] = state.last_rendezvous[j] = state.step_count
+    for pair in out.new_rendezvous:
+        state.last_rendezvous[list(pair)] = state.step_count
+        state.rendezvous[list(pair)] += 1
     return out
 
 
@@ -340,12 +218,12 @@ def record_histories(
     state: EpisodeState,
     result: StepResult,
     slam_infos: Sequence[SlamStepInfo | None],
-    estimates: Sequence[tuple[np.ndarray, np.ndarray]],
+    estimates: tuple[np.ndarray, np.ndarray],
 ) -> None:
     """The record stage (changes the histories): :func:`record` of every robot."""
     robots = range(state.world.num_robots)
     record(
-        state.histories, robots, state.world, state.sensing, estimates, slam_infos, result.collided
+        state.history, robots, state.world, state.sensing, estimates, slam_infos, result.collided
     )
 
 
@@ -353,50 +231,42 @@ def observe(
     state: EpisodeState,
     encoder: ObservationEncoder,
     acting: Mapping[str, int],
-    estimates: Sequence[tuple[np.ndarray, np.ndarray]],
+    estimates: tuple[np.ndarray, np.ndarray],
 ) -> dict[str, Obs]:
     """Observations of the ``acting`` agents (name → robot); first sweeps each active robot's
-    beams into its own belief grid, placed with its estimated pose (changes the grids)."""
-    sweeping = [i for i in acting.values() if state.world.active[i]]
-    if sweeping:
-        poses = np.array([estimates[i][0] for i in sweeping])  # (K, 3)
-        grids = [state.beliefs[i] for i in sweeping]
-        sweep_beliefs(grids, poses, state.angles, state.sensing.ranges[sweeping])
+    beams into its own belief grid, placed with its estimated pose (changes the grids).
+    Everything a robot knows is gathered for the team into one :class:`TeamView`."""
+    poses, covs = estimates
+    active = state.world.active
     robots = list(acting.values())
+    sweeping = [i for i in robots if active[i]]
+    if sweeping:
+        grids = [state.beliefs[i] for i in sweeping]
+        sweep_beliefs(grids, poses[sweeping], state.angles, state.sensing.ranges[sweeping])
     if not robots:
         return {}
-    covs = np.array([estimates[i][1] for i in robots])  # (K, 3, 3)
-    stds = np.sqrt(np.maximum(np.diagonal(covs, axis1=1, axis2=2), 0.0))  # (K, 3)
-    views = [_view(state, i, estimates[i][0], std) for i, std in zip(robots, stds, strict=True)]
-    return dict(zip(acting, encoder.encode_team(views), strict=True))
-
-
-def _view(state: EpisodeState, i: int, pose: np.ndarray, pose_std: np.ndarray) -> RobotView:
-    """What robot i knows, with its estimated pose (3,) and the standard deviations (3,) of
-    its pose estimate."""
-    last = state.last_rendezvous[i]
-    count = state.exchange.rendezvous(i) if state.exchange is not None else 0
-    return RobotView(
-        ranges=state.sensing.ranges[i],
-        pose=pose,
-        pose_std=pose_std,
-        map_points=_map_points(state, i),
-        belief=state.beliefs[i],
-        detections=state.sensing.detections[i],
-        steps_since_rendezvous=None if last is None else state.step_count - last,
-        rendezvous=count,
-        step=state.step_count,
+    stds = np.sqrt(np.maximum(np.diagonal(covs[robots], axis1=1, axis2=2), 0.0))  # (K, 3)
+    maps = [state.slam.map_points(i) for i in robots]
+    starts = np.zeros(len(robots) + 1, dtype=np.int64)
+    starts[1:] = np.cumsum([len(m) for m in maps])
+    camera = state.sensing.camera
+    last = state.last_rendezvous[robots]
+    team = TeamView(
+        ranges=state.sensing.ranges[robots],
+        poses=poses[robots],
+        pose_stds=stds,
+        map_points=np.concatenate(maps),
+        map_starts=starts,
+        belief=state.beliefs[0],  # a team's grids are rows of one stack (belief_grids)
+        belief_rows=np.asarray(robots, dtype=np.int64),
+        seen=camera.seen[robots],
+        distance=camera.distance[robots],
+        bearing=camera.bearing[robots],
+        since=np.where(last == NEVER, NEVER, state.step_count - last),
+        rendezvous=state.rendezvous[robots],
+        step=np.full(len(robots), state.step_count, dtype=np.int64),
     )
-
-
-def _map_points(state: EpisodeState, i: int) -> np.ndarray:  # (M, 2)
-    """Robot i's map as points in its frame: its polynomials sampled, or its landmarks."""
-    if not state.slams:
-        return _NO_POINTS
-    slam = state.slams[i]
-    if isinstance(slam, PointSlamRobot):
-        return slam.landmarks().means
-    return state.samplers[i].points(slam)
+    return dict(zip(acting, encoder.encode_team(team), strict=True))
 
 
 def sweep_coverage(state: EpisodeState) -> np.ndarray:  # (N,) m²
@@ -430,11 +300,15 @@ def map_bookkeeping(
     received = {d.receiver for d in exchanged.delivered} if exchanged is not None else set()
     completeness: dict[int, float] = {}
     map_error: dict[int, float] = {}
-    bytes_sent: dict[int, int] = {}
     for i in acting.values():
         completeness[i], map_error[i] = _map_change(state, i, slam_infos[i], i in received)
-        bytes_sent[i] = _bytes_change(state, i)
-    return MapChanges(completeness, bytes_sent, map_error)
+    total = state.slam.bytes_sent()  # (N,), or (0,) without a map exchange
+    if len(total):
+        sent = (total - state.bytes_sent).tolist()
+        state.bytes_sent[:] = total
+    else:
+        sent = [0] * len(state.bytes_sent)
+    return MapChanges(completeness, {i: sent[i] for i in acting.values()}, map_error)
 
 
 def _map_change(
@@ -444,23 +318,14 @@ def _map_change(
     did not change); both sampled every ``MAPPING_STEP``, the map placed by the true start."""
     if info is None or not (info.created or info.refit or info.merged or info.linked or received):
         return 0.0, 0.0
-    polys = state.slams[i].polynomials()
     place = state.histories[i].true[0]  # the true start (see metrics.mapping)
-    layout = state.world.layout
     comp, error = metrics.completeness_and_error(
-        polys, place, layout, tol=MAPPING_TOL, step=MAPPING_STEP
+        state.slam.map_shapes(i), place, state.world.layout, tol=MAPPING_TOL, step=MAPPING_STEP
     )
-    d_comp, state.completeness[i] = comp - state.completeness[i], comp
-    d_error, state.map_error[i] = error - state.map_error[i], error
+    d_comp = comp - float(state.completeness[i])
+    d_error = error - float(state.map_error[i])
+    state.completeness[i], state.map_error[i] = comp, error
     return d_comp, d_error
-
-
-def _bytes_change(state: EpisodeState, i: int) -> int:
-    if state.exchange is None:
-        return 0
-    total = state.exchange.bytes_sent(i)
-    delta, state.bytes_sent[i] = total - state.bytes_sent[i], total
-    return delta
 
 
 def inject_faults(state: EpisodeState, plan: FaultPlan) -> list[FaultEvent]:
@@ -521,16 +386,16 @@ def infos(
     out: dict[str, dict[str, Any]] = {}
     team: dict[str, Any] | None = None
     for agent, i in acting.items():
-        history = state.histories[i]
         info: dict[str, Any] = {
             "reward_terms": terms[agent],
             "step": state.step_count,
-            "diverging": bool(state.slams and state.slams[i].diverging),
-            "diverged_at": history.diverged_at,
+            "diverging": state.slam.diverging(i),
+            "diverged_at": state.histories[i].diverged_at,
         }
-        hits = [e.to_info() for e in events if e.robot == i]
-        if hits:
-            info["faults"] = hits
+        if events:
+            hits = [e.to_info() for e in events if e.robot == i]
+            if hits:
+                info["faults"] = hits
         if terminations[agent] or truncations[agent]:
             if team is None:
                 team = team_metrics(state.coverage_series, state.coverage)
@@ -541,51 +406,14 @@ def infos(
 
 
 def _final_metrics(state: EpisodeState, i: int) -> dict[str, float]:
-    counters: dict[str, float] = {}
-    if state.exchange is not None:
-        counters.update(state.exchange.counters(i))
-        counters["alignments_wrong"] = sum(
-            a.receiver == i and is_wrong_alignment(a.result.transform, _true_transform(state, a))
-            for a in state.exchange.alignments
-        )
-    if state.consensus is not None:
-        counters.update(state.consensus.counters(i))
-    if state.seif_exchange is not None:
-        counters.update(state.seif_exchange.counters(i))
-        counters["alignments_wrong"] = sum(
-            a.receiver == i and is_wrong_alignment(a.result.transform, _true_transform(state, a))
-            for a in state.seif_exchange.alignments
-        )
-    slam = state.slams[i] if state.slams else None
-    landmarks = None
-    if isinstance(slam, PointSlamRobot):
-        lm = slam.landmarks()
-        landmarks = (None if slam.anonymous else lm.ids, lm.means)
+    team = state.slam
     return final_robot_metrics(
         state.histories[i],
-        slam.polynomials() if slam is not None else None,
+        team.polynomials(i),
         state.world.layout,
         state.coverage.robot_coverage(i),
-        counters,
-        landmarks,
-    )
-
-
-#: An accepted alignment more than this far from the true transform between the two robots'
-#: frames is wrong (issue 18's definition): 0.2 m in position or 3° in heading.
-WRONG_ALIGNMENT_M = 0.2
-WRONG_ALIGNMENT_DEG = 3.0
-
-
-def is_wrong_alignment(transform: np.ndarray | None, truth: np.ndarray) -> bool:
-    """Whether an accepted ``transform`` (3,) is more than 0.2 m or 3° off ``truth`` (3,);
-    False for a declined one (None)."""
-    if transform is None:
-        return False
-    err = between(truth, transform, wrap_remainder)
-    return bool(
-        np.hypot(err[0], err[1]) > WRONG_ALIGNMENT_M
-        or abs(err[2]) > np.radians(WRONG_ALIGNMENT_DEG)
+        team.counters(i, lambda attempt: _true_transform(state, attempt)),
+        team.landmarks(i),
     )
 
 
@@ -595,9 +423,3 @@ def _true_transform(state: EpisodeState, attempt: AlignmentAttempt) -> np.ndarra
     receiver = state.histories[attempt.receiver].true[0]
     sender = state.histories[attempt.sender].true[0]
     return between(receiver, sender, wrap_remainder)
-
-
-def _mutual_pairs(detections: list[list[Detection]]) -> list[tuple[int, int]]:
-    """Pairs (i < j) that see each other."""
-    seen = {(i, d.target) for i, dets in enumerate(detections) for d in dets}
-    return sorted((i, j) for i, j in seen if i < j and (j, i) in seen)

@@ -4,8 +4,9 @@ This module owns the per-robot record of an episode and the numbers computed fro
 the env and :func:`polyslam_env.apps.simulate.simulate` (which run the same record stage,
 :func:`polyslam_env.environment.stages.record`):
 
-* :class:`RobotHistory` grows by one entry per step (true and estimated poses, covariances,
-  beam hit points, SLAM wall times, collisions, path length) and becomes a :class:`RobotRun`;
+* :class:`TeamHistory` grows by one row per step for the whole team (true and estimated
+  poses, covariances, beam hit points, SLAM wall times, collisions, path length), and each of
+  its slots, a :class:`RobotHistory`, becomes a :class:`RobotRun`;
 * :func:`robot_metrics` turns a :class:`RobotRun` into the paper's numbers (SPEC §5);
 * :func:`final_robot_metrics` and :func:`team_metrics` are the env's end-of-episode
   ``infos[agent]["metrics"]`` and ``infos[agent]["team"]``.
@@ -36,6 +37,7 @@ __all__ = [
     "ROBOT_METRIC_KEYS",
     "RobotHistory",
     "RobotRun",
+    "TeamHistory",
     "final_robot_metrics",
     "map_metrics",
     "meaningful",
@@ -227,11 +229,138 @@ def robot_metrics(run: RobotRun, layout: Layout) -> dict[str, float]:
     }
 
 
+class TeamHistory:
+    """What a team did during an episode, one slot per history (a robot's SLAM; ``simulate``
+    gives a robot a second, lone SLAM in a slot of its own), in growable arrays: one
+    :meth:`record` per step writes every slot's row at once.
+
+    Slot ``j``'s rows ``0 … len(j) − 1`` are its steps (row 0: the start); a slot whose robot
+    failed stops growing. :meth:`robot` is slot j as a :class:`RobotHistory`.
+    """
+
+    def __init__(
+        self,
+        start_poses: np.ndarray,
+        est_poses: np.ndarray,
+        est_covs: np.ndarray,
+        true_poses: np.ndarray | None = None,
+        p0: np.ndarray | None = None,
+    ) -> None:
+        """Slot j starts from its frame ``start_poses[j]`` (J, 3) (absolute), estimate
+        ``est_poses[j]`` (J, 3) and covariance ``est_covs[j]`` (J, 3, 3) (own frame), and its
+        robot's true pose ``true_poses[j]`` (J, 3) (default: the frame's origin); ``p0`` (3, 3)
+        is the start-error covariance the estimates include, if any."""
+        self.start_poses = np.array(start_poses, dtype=float).reshape(-1, 3)  # (J, 3) absolute
+        j = len(self.start_poses)
+        self.p0 = None if p0 is None else np.asarray(p0, dtype=float)
+        first = self.start_poses if true_poses is None else np.asarray(true_poses, dtype=float)
+        self._true = np.empty((64, j, 3))  # (capacity, J, 3) absolute
+        self._est = np.empty((64, j, 3))  # own frames
+        self._cov = np.empty((64, j, 3, 3))
+        self._times = np.full((64, j), np.nan)  # s per SLAM step, NaN: none (row 0: none)
+        self._true[0], self._est[0], self._cov[0] = first, est_poses, est_covs
+        self.lengths = np.ones(j, dtype=np.int64)  # (J,) rows of each slot
+        self._hits = np.empty((256, 2))  # (capacity, 2) every hit point, absolute
+        self._hit_owner = np.empty(256, dtype=np.int64)  # its slot
+        self._n_hits = 0
+        self.collisions = np.zeros(j, dtype=np.int64)  # (J,)
+        self.path_length = np.zeros(j)  # (J,) m, true distance travelled
+        self.diverged = np.zeros(j, dtype=bool)  # (J,) flagged at any step
+        self.diverged_at = np.full(j, -1, dtype=np.int64)  # (J,) first step flagged, −1: never
+
+    def __len__(self) -> int:
+        return len(self.start_poses)
+
+    def robot(self, j: int) -> RobotHistory:
+        """Slot ``j`` as a :class:`RobotHistory`."""
+        return RobotHistory.of(self, j)
+
+    def record(
+        self,
+        slots: np.ndarray,
+        true_poses: np.ndarray,
+        est_poses: np.ndarray,
+        est_covs: np.ndarray,
+        hits: np.ndarray,
+        hit_slots: np.ndarray,
+        slam_times: np.ndarray,
+        collided: np.ndarray,
+        diverging: np.ndarray,
+    ) -> None:
+        """Append one step to the slots ``slots`` (K,) (ascending; the others are not
+        recorded): true poses (K, 3), estimates (K, 3), covariances (K, 3, 3), SLAM seconds
+        (K,) (NaN: none), collided and diverging flags (K,), and the step's beam hit points
+        (H, 2) with the slot of each ``hit_slots`` (H,) (in the order they are appended)."""
+        rows = self.lengths[slots]  # (K,) the row each slot writes
+        self._grow(int(rows.max()) + 1 if len(rows) else 0)
+        last = self._true[rows - 1, slots]  # (K, 3) each slot's previous true pose
+        step = np.hypot(true_poses[:, 0] - last[:, 0], true_poses[:, 1] - last[:, 1])
+        self.path_length[slots] += step
+        self._true[rows, slots] = true_poses
+        self._est[rows, slots] = est_poses
+        self._cov[rows, slots] = est_covs
+        self._times[rows, slots] = slam_times
+        self.collisions[slots] += collided
+        first = diverging & ~self.diverged[slots]
+        self.diverged_at[slots[first]] = rows[first]
+        self.diverged[slots] |= diverging
+        self.lengths[slots] = rows + 1
+        self._add_hits(hits, hit_slots)
+
+    def _grow(self, rows: int) -> None:
+        """Room for ``rows`` rows per slot (the capacity doubles)."""
+        have = len(self._true)
+        if rows <= have:
+            return
+        size = max(rows, 2 * have)
+        for name in ("_true", "_est", "_cov", "_times"):
+            old = getattr(self, name)
+            new = (
+                np.full((size, *old.shape[1:]), np.nan)
+                if name == "_times"
+                else np.empty((size, *old.shape[1:]))
+            )
+            new[:have] = old
+            setattr(self, name, new)
+
+    def _add_hits(self, hits: np.ndarray, owners: np.ndarray) -> None:
+        n, m = self._n_hits, len(hits)
+        if n + m > len(self._hits):
+            size = max(n + m, 2 * len(self._hits))
+            grown, owner = np.empty((size, 2)), np.empty(size, dtype=np.int64)
+            grown[:n], owner[:n] = self._hits[:n], self._hit_owner[:n]
+            self._hits, self._hit_owner = grown, owner
+        self._hits[n : n + m] = hits
+        self._hit_owner[n : n + m] = owners
+        self._n_hits = n + m
+
+    # -- one slot's record ----------------------------------------------------------------
+    def true(self, j: int) -> np.ndarray:  # (k+1, 3)
+        return self._true[: self.lengths[j], j]
+
+    def est(self, j: int) -> np.ndarray:  # (k+1, 3)
+        return self._est[: self.lengths[j], j]
+
+    def cov(self, j: int) -> np.ndarray:  # (k+1, 3, 3)
+        return self._cov[: self.lengths[j], j]
+
+    def slam_times(self, j: int) -> np.ndarray:  # (k',) seconds of the steps that had one
+        times = self._times[1 : self.lengths[j], j]
+        return times[~np.isnan(times)]
+
+    def hits(self, j: int) -> np.ndarray:  # (H_j, 2)
+        n = self._n_hits
+        return self._hits[:n][self._hit_owner[:n] == j]
+
+
 class RobotHistory:
-    """What one robot did during an episode (estimates in its own start frame).
+    """What one robot did during an episode (estimates in its own start frame): one slot of a
+    :class:`TeamHistory` (its own one-slot team when made alone).
 
     ``start_pose`` is the robot's frame in the absolute frame; ``true_pose`` its true pose at
     the start, which is the frame's origin unless the start is drawn with an initial error.
+    ``true``, ``est`` and ``cov`` are the rows so far (read-only views: (k+1, 3), (k+1, 3),
+    (k+1, 3, 3)).
     """
 
     def __init__(
@@ -242,18 +371,57 @@ class RobotHistory:
         true_pose: np.ndarray | None = None,
         p0: np.ndarray | None = None,
     ) -> None:
-        self.start_pose = np.asarray(start_pose, dtype=float).copy()  # (3,) absolute
-        self.p0 = None if p0 is None else np.asarray(p0, dtype=float)  # start-error cov in cov
-        first = self.start_pose if true_pose is None else np.asarray(true_pose, dtype=float)
-        self.true: list[np.ndarray] = [first.copy()]  # (3,) each, absolute
-        self.est: list[np.ndarray] = [np.asarray(est_pose, dtype=float).copy()]  # (3,) own frame
-        self.cov: list[np.ndarray] = [np.asarray(est_cov, dtype=float).copy()]  # (3, 3) each
-        self.hits: list[np.ndarray] = []  # (h, 2) each, absolute
-        self.slam_times: list[float] = []  # s
-        self.collisions = 0
-        self.path_length = 0.0  # m, true distance travelled
-        self.diverged = False
-        self.diverged_at: int | None = None  # first step (1-based) flagged diverging
+        first = None if true_pose is None else np.asarray(true_pose, dtype=float)[None]
+        team = TeamHistory(
+            np.asarray(start_pose, dtype=float)[None],
+            np.asarray(est_pose, dtype=float)[None],
+            np.asarray(est_cov, dtype=float)[None],
+            first,
+            p0,
+        )
+        self._bind(team, 0)
+
+    @classmethod
+    def of(cls, team: TeamHistory, slot: int) -> RobotHistory:
+        """Slot ``slot`` of ``team``."""
+        history = cls.__new__(cls)
+        history._bind(team, slot)
+        return history
+
+    def _bind(self, team: TeamHistory, slot: int) -> None:
+        self.team, self.slot = team, slot
+        self.start_pose = team.start_poses[slot]  # (3,) absolute
+        self.p0 = team.p0
+
+    @property
+    def true(self) -> np.ndarray:  # (k+1, 3) absolute
+        return self.team.true(self.slot)
+
+    @property
+    def est(self) -> np.ndarray:  # (k+1, 3) own frame
+        return self.team.est(self.slot)
+
+    @property
+    def cov(self) -> np.ndarray:  # (k+1, 3, 3)
+        return self.team.cov(self.slot)
+
+    @property
+    def collisions(self) -> int:
+        return int(self.team.collisions[self.slot])
+
+    @property
+    def path_length(self) -> float:  # m, true distance travelled
+        return float(self.team.path_length[self.slot])
+
+    @property
+    def diverged(self) -> bool:
+        return bool(self.team.diverged[self.slot])
+
+    @property
+    def diverged_at(self) -> int | None:
+        """The first step (1-based) flagged diverging, None if never."""
+        at = int(self.team.diverged_at[self.slot])
+        return None if at < 0 else at
 
     def record(
         self,
@@ -266,36 +434,36 @@ class RobotHistory:
         diverging: bool,
     ) -> None:
         """Append one step: poses (3,), covariance (3, 3), beam hit points (h, 2)."""
-        (x, y), (x0, y0) = true_pose[:2].tolist(), self.true[-1][:2].tolist()
-        self.path_length += float(np.hypot(x - x0, y - y0))
-        self.true.append(np.array(true_pose, dtype=float))  # np.array copies
-        self.est.append(np.array(est_pose, dtype=float))
-        self.cov.append(np.array(est_cov, dtype=float))
-        self.hits.append(hits)
-        if slam_time is not None:
-            self.slam_times.append(slam_time)
-        self.collisions += int(collided)
-        if diverging and not self.diverged:
-            self.diverged_at = len(self.true) - 1
-        self.diverged |= diverging
+        hits = np.asarray(hits, dtype=float).reshape(-1, 2)
+        self.team.record(
+            np.array([self.slot]),
+            np.asarray(true_pose, dtype=float)[None],
+            np.asarray(est_pose, dtype=float)[None],
+            np.asarray(est_cov, dtype=float)[None],
+            hits,
+            np.full(len(hits), self.slot),
+            np.array([np.nan if slam_time is None else slam_time]),
+            np.array([bool(collided)]),
+            np.array([bool(diverging)]),
+        )
 
     def true_path(self) -> np.ndarray:  # (k, 2)
-        return np.array([p[:2] for p in self.true])
+        return self.true[:, :2].copy()
 
     def est_path_abs(self) -> np.ndarray:  # (k, 2)
         """Estimated positions in the absolute frame, placed by the true start (as the map
         metrics place the map; the frame's offset from the true start is unobservable)."""
-        return metrics.pose_to_absolute(np.array(self.est), self.true[0])[:, :2]
+        return metrics.pose_to_absolute(self.est.copy(), self.true[0])[:, :2]
 
     def run(self, polys: list[Polynomial]) -> RobotRun:
         return RobotRun(
-            start_pose=self.start_pose,
-            true_poses=np.array(self.true),
-            est_poses=np.array(self.est),
-            est_covs=np.array(self.cov),
+            start_pose=self.start_pose.copy(),
+            true_poses=self.true.copy(),
+            est_poses=self.est.copy(),
+            est_covs=self.cov.copy(),
             polynomials=polys,
-            hit_points=np.vstack(self.hits) if self.hits else np.zeros((0, 2)),
-            slam_times=np.array(self.slam_times),
+            hit_points=self.team.hits(self.slot),
+            slam_times=self.team.slam_times(self.slot),
             diverged=self.diverged,
             collisions=self.collisions,
             p0=self.p0,

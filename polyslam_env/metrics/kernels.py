@@ -8,8 +8,13 @@
 * :func:`covered`: which boundary samples lie strictly within ``tol`` of some map point (the
   completeness), with the map points bucketed in a grid of side ≥ ``tol`` so that only the
   3 × 3 buckets around a sample are searched.
+* :func:`sample_rows`: many polynomials sampled every ``step`` of arc length in one call, with
+  the float operations of :meth:`~polyslam_env.slam.polynomial.Polynomial.sample_arclength`
+  in the same order (numpy's ``linspace``, Horner's ``polyval``, ``diff``, the norm as the sum
+  of two squares, ``cumsum`` and ``interp``), so the points are bit-identical to it.
 
-Oracles: brute force over all segments and all points (``tests/metrics/test_kernels.py``).
+Oracles: brute force over all segments and all points, and ``Polynomial.sample_arclength``
+(``tests/metrics/test_kernels.py``).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import numpy as np
 from polyslam_env.core.jit import njit
 from polyslam_env.world.kernels import _segment_distance
 
-__all__ = ["covered", "wall_distances"]
+__all__ = ["covered", "sample_rows", "wall_distances"]
 
 #: Most buckets a side in :func:`covered`.
 _MAX_BUCKETS = 256
@@ -130,3 +135,106 @@ def covered(samples: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
                 break
         out[s] = found
     return out
+
+
+@njit
+def _horner(coeffs: np.ndarray, row: int, x: float) -> float:
+    """Σ_j coeffs[row, j] x^j as ``np.polynomial.polynomial.polyval`` computes it (Horner from
+    the highest power, started at ``c[-1] + x·0``); zero-padded high powers change nothing."""
+    m = coeffs.shape[1]
+    value = coeffs[row, m - 1] + x * 0.0
+    for i in range(2, m + 1):
+        value = coeffs[row, m - i] + value * x
+    return value
+
+
+@njit
+def _interp(x: float, xp: np.ndarray, fp: np.ndarray) -> float:
+    """``np.interp(x, xp, fp)`` for one ``x`` and a non-decreasing ``xp`` (numpy's C code:
+    the last ``j`` with ``xp[j] ≤ x``, the slope form and its NaN fallbacks)."""
+    n = xp.shape[0]
+    if x != x:
+        return x
+    if x > xp[n - 1]:
+        return fp[n - 1]
+    if x < xp[0]:
+        return fp[0]
+    lo, hi = 0, n  # bisection for the first index with xp > x
+    while lo < hi:
+        mid = lo + ((hi - lo) >> 1)
+        if x >= xp[mid]:
+            lo = mid + 1
+        else:
+            hi = mid
+    j = lo - 1
+    if j == n - 1 or xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    out = slope * (x - xp[j]) + fp[j]
+    if out != out:
+        out = slope * (x - xp[j + 1]) + fp[j + 1]
+        if out != out and fp[j] == fp[j + 1]:
+            out = fp[j]
+    return out
+
+
+@njit
+def sample_rows(
+    variate: np.ndarray,
+    coeffs: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    rows: np.ndarray,
+    step: float,
+    dense: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Points (M, 2) every ``step`` of arc length along each polynomial ``rows[q]`` (Q,) of
+    (``variate`` (n,), ``coeffs`` (n, m+1) = [c0, b_1, …] zero-padded, extent ``lo``–``hi``
+    (n,)), both ends included, and where each one's points start, (Q + 1,): ``Polynomial.
+    sample_arclength(step, dense)`` of each, bit for bit (module docstring)."""
+    q_count = rows.shape[0]
+    starts = np.zeros(q_count + 1, dtype=np.int64)
+    xi = np.empty(dense)
+    arc = np.empty(dense)
+    eta = np.empty(dense)
+    chunks = []
+    for q in range(q_count):
+        r = rows[q]
+        a, b = lo[r], hi[r]
+        if b == a:  # one point
+            ts = np.full(1, a)
+        else:
+            div = dense - 1
+            delta = b - a
+            stride = delta / div
+            for k in range(dense):  # np.linspace(a, b, dense)
+                xi[k] = (k / div) * delta + a if stride == 0.0 else k * stride + a
+            xi[dense - 1] = b
+            for k in range(dense):
+                eta[k] = _horner(coeffs, r, xi[k])
+            arc[0] = 0.0
+            total = 0.0
+            for k in range(1, dense):  # cumsum of ‖Δ(ξ, η)‖
+                d1, d2 = xi[k] - xi[k - 1], eta[k] - eta[k - 1]
+                total += math.sqrt(d1 * d1 + d2 * d2)
+                arc[k] = total
+            count = max(math.floor(total / step) + 1, 2)
+            div2 = count - 1
+            stride2 = total / div2
+            ts = np.empty(count)
+            for k in range(count):  # np.interp(np.linspace(0, total, count), arc, xi)
+                t = (k / div2) * total + 0.0 if stride2 == 0.0 else k * stride2 + 0.0
+                if k == count - 1:
+                    t = total
+                ts[k] = _interp(t, arc, xi)
+        pts = np.empty((ts.shape[0], 2))
+        first = 0 if variate[r] == 1 else 1
+        for k in range(ts.shape[0]):
+            pts[k, first] = ts[k]
+            pts[k, 1 - first] = _horner(coeffs, r, ts[k])
+        chunks.append(pts)
+        starts[q + 1] = starts[q] + ts.shape[0]
+    out = np.empty((starts[q_count], 2))
+    for q in range(q_count):
+        out[starts[q] : starts[q + 1]] = chunks[q]
+    return out, starts

@@ -23,7 +23,9 @@ metrics (``completeness``, ``completeness_seen``) 0.0 (nothing was mapped); call
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 from scipy import special
@@ -31,83 +33,80 @@ from scipy.spatial import cKDTree
 
 from polyslam_env.core.geometry import transform_points
 from polyslam_env.metrics.boundary import boundary_samples, distance_to_boundary
-from polyslam_env.metrics.kernels import covered
+from polyslam_env.metrics.kernels import covered, sample_rows
 from polyslam_env.metrics.pose import _check_pose
-from polyslam_env.slam.polynomial import Polynomial, polyval_rows
+from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
 
 
 # -- mapping error and completeness -----------------------------------------------------------
-def sample_arclength_batch(
-    polys: Sequence[Polynomial], step: float, dense: int = 512
-) -> list[np.ndarray]:
-    """``[p.sample_arclength(step, dense) for p in polys]``, bit for bit, in one numpy pass.
+class MapShapes(NamedTuple):
+    """A polynomial map as arrays (what the compiled sampler reads): row i is polynomial i
+    with its current c0."""
 
-    The completeness resamples a whole map whenever it changes, and one polynomial at a time
-    the overhead of ~15 numpy calls each dominates. Every operation here is elementwise or runs
-    along one row (linspace, Horner, diff, cumsum) exactly as in
-    :meth:`~polyslam_env.slam.polynomial.Polynomial.sample_arclength`, so the points are the
-    same; only ``np.interp`` runs per polynomial. A zero extent (or a ξ step that underflows
-    to 0, which linspace treats apart) takes the polynomial's own method.
-    """
-    out = [np.zeros((0, 2))] * len(polys)
-    batch: list[Polynomial] = []  # (Q) the polynomials done here, and their places in out
-    places: list[int] = []
-    for k, poly in enumerate(polys):
-        if (poly.hi - poly.lo) / (dense - 1) != 0.0:
-            batch.append(poly)
-            places.append(k)
-        else:
-            out[k] = poly.sample_arclength(step, dense)
-    if not batch:
-        return out
-    coeffs = np.zeros((len(batch), max(len(p.coeffs) for p in batch)))  # (Q, m+1), zero-padded
-    for row, poly in enumerate(batch):
-        coeffs[row, : len(poly.coeffs)] = poly.coeffs
-    lo = np.array([p.lo for p in batch])  # (Q,)
-    hi = np.array([p.hi for p in batch])
-    # linspace(lo, hi, dense) per row, as numpy computes it: k · ((hi − lo) / (dense − 1)) + lo,
-    # the last one set to hi (a linspace call with array ends is slower than this).
-    xi = np.arange(dense, dtype=float) * ((hi - lo) / (dense - 1))[:, None] + lo[:, None]
-    xi[:, -1] = hi  # (Q, dense)
-    eta = polyval_rows(coeffs, xi)
-    # Arc length: the norm of each (Δx, Δy) is sqrt(Δx² + Δy²) (add.reduce of two squares),
-    # and Δξ² + Δη² is the same sum whichever of ξ, η is x.
-    dxi, deta = np.diff(xi, axis=1), np.diff(eta, axis=1)  # (Q, dense − 1)
-    arc = np.zeros((len(batch), dense))  # (Q, dense)
-    np.cumsum(np.sqrt(dxi * dxi + deta * deta), axis=1, out=arc[:, 1:])
-    total = arc[:, -1]  # (Q,)
-    counts = np.maximum(np.floor(total / step).astype(np.intp) + 1, 2)  # (Q,)
-    # linspace(0, total, n) per row, the same way: k · (total / (n − 1)) + 0, the last = total.
-    owner = np.repeat(np.arange(len(batch)), counts)  # (M,)
-    ends = np.cumsum(counts)
-    index = np.arange(len(owner)) - np.repeat(ends - counts, counts)  # (M,) within its row
-    targets = index.astype(float) * (total / (counts - 1))[owner] + 0.0
-    targets[ends - 1] = total
-    xi_q = np.concatenate(
-        [
-            np.interp(targets[end - n : end], arc[row], xi[row])
-            for row, (n, end) in enumerate(zip(counts.tolist(), ends.tolist(), strict=True))
-        ]
-    )  # (M,)
-    eta_q = polyval_rows(coeffs[owner], xi_q[:, None])[:, 0]
-    second = np.array([p.variate == 2 for p in batch])[owner]  # (M,): ξ is y
-    pts = np.column_stack([np.where(second, eta_q, xi_q), np.where(second, xi_q, eta_q)])
-    for k, n, end in zip(places, counts.tolist(), ends.tolist(), strict=True):
-        out[k] = pts[end - n : end]
-    return out
+    variate: np.ndarray  # (n,) int, 1 or 2
+    coeffs: np.ndarray  # (n, m+1): [c0, b_1, …, b_m], zero-padded to the largest order
+    lo: np.ndarray  # (n,) extent on ξ
+    hi: np.ndarray  # (n,)
+
+    @classmethod
+    def of(cls, polys: Sequence[Polynomial] | MapShapes) -> MapShapes:
+        """``polys`` as arrays (as given when already packed)."""
+        if isinstance(polys, MapShapes):
+            return polys
+        width = max((len(p.coeffs) for p in polys), default=2)
+        coeffs = np.zeros((len(polys), width))  # (n, m+1)
+        for row, poly in enumerate(polys):
+            coeffs[row, : len(poly.coeffs)] = poly.coeffs
+        variate = np.array([p.variate for p in polys], dtype=np.int64)
+        lo = np.array([p.lo for p in polys], dtype=float)
+        hi = np.array([p.hi for p in polys], dtype=float)
+        return cls(variate, coeffs, lo, hi)
+
+    def __len__(self) -> int:  # rows, not fields
+        return len(self.variate)
 
 
-def map_points(
-    polys: Sequence[Polynomial], start_pose: np.ndarray, step: float = 0.01
-) -> list[np.ndarray]:
+MapLike = Sequence[Polynomial] | MapShapes
+
+
+def sample_shapes(
+    shapes: MapShapes, step: float, rows: np.ndarray | None = None, dense: int = 512
+) -> tuple[np.ndarray, np.ndarray]:
+    """Points (M, 2) every ``step`` of arc length along the polynomials ``rows`` (all when
+    None), in that order, and where each one's points start (Q + 1,): ``Polynomial.
+    sample_arclength(step, dense)`` of each, bit for bit, in one compiled call
+    (:func:`~polyslam_env.metrics.kernels.sample_rows`)."""
+    picked = np.arange(len(shapes), dtype=np.int64) if rows is None else rows
+    return sample_rows(
+        np.ascontiguousarray(shapes.variate, dtype=np.int64),
+        np.ascontiguousarray(shapes.coeffs, dtype=float),
+        np.ascontiguousarray(shapes.lo, dtype=float),
+        np.ascontiguousarray(shapes.hi, dtype=float),
+        np.ascontiguousarray(picked, dtype=np.int64),
+        float(step),
+        int(dense),
+    )
+
+
+def sample_arclength_batch(polys: MapLike, step: float, dense: int = 512) -> list[np.ndarray]:
+    """``[p.sample_arclength(step, dense) for p in polys]``, bit for bit, in one compiled call
+    (:func:`sample_shapes`)."""
+    shapes = MapShapes.of(polys)
+    points, starts = sample_shapes(shapes, step, dense=dense)
+    bounds = starts.tolist()
+    return [points[a:b] for a, b in itertools.pairwise(bounds)]
+
+
+def map_points(polys: MapLike, start_pose: np.ndarray, step: float = 0.01) -> list[np.ndarray]:
     """Each polynomial's points every ``step`` of arc length, in the absolute frame: (n_q, 2)."""
     x0 = _check_pose(start_pose)
-    own = sample_arclength_batch(polys, step)
-    if not own:
+    shapes = MapShapes.of(polys)
+    if not len(shapes):
         return []
+    own, starts = sample_shapes(shapes, step)
     # One transform for all points (it is pointwise, so the same numbers as one per polynomial).
-    return np.split(transform_points(np.vstack(own), x0), np.cumsum([len(q) for q in own])[:-1])
+    return np.split(transform_points(own, x0), starts[1:-1])
 
 
 def map_distances(
@@ -334,7 +333,7 @@ def completeness(
 
 
 def completeness_and_error(
-    polys: Sequence[Polynomial],
+    polys: MapLike,
     start_pose: np.ndarray,
     layout: Layout,
     tol: float = 0.05,
@@ -342,11 +341,11 @@ def completeness_and_error(
 ) -> tuple[float, float]:
     """``(completeness(...), map_error_length(...))`` with the same arguments, from one
     sampling of the map (the numbers are the same; the env's reward needs both each time a
-    map changes)."""
-    pts = map_points(polys, start_pose, step)
-    if not pts:
+    map changes). ``polys`` may be the map as arrays (:class:`MapShapes`)."""
+    shapes = MapShapes.of(polys)
+    if not len(shapes):
         return _covered_fraction(np.zeros((0, 2)), layout, tol, step), 0.0
-    stacked = np.vstack(pts)
+    stacked = transform_points(sample_shapes(shapes, step)[0], _check_pose(start_pose))
     error = float(distance_to_boundary(stacked, layout).sum()) * step
     return _covered_fraction(stacked, layout, tol, step), error
 

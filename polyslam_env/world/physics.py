@@ -65,7 +65,7 @@ from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.nearby import wall_index
 from polyslam_env.world.point_sensor import PillarReading, PillarSensor
-from polyslam_env.world.sensors import Camera, Detection, RangeSensor
+from polyslam_env.world.sensors import Camera, CameraFrame, Detection, RangeSensor
 
 #: Solver iterations per physics step, fixed so results do not depend on pymunk defaults; 40
 #: (not pymunk's 10) keeps a robot pushed into a wall corner within 0.1 mm of it.
@@ -398,6 +398,10 @@ class World:
 
     def camera(self) -> list[list[Detection]]:
         """Per robot, the other robots it sees (noise from ``rngs["camera"]``)."""
-        return self.camera_sensor.detect(
+        return self.camera_frame().lists()
+
+    def camera_frame(self) -> CameraFrame:
+        """:meth:`camera` as arrays (the same draws)."""
+        return self.camera_sensor.frame(
             self._pose, self.active, self.walls, self.pillars, self.rngs["camera"]
         )

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -130,6 +131,30 @@ class Detection:
     bearing: float  # rad
 
 
+class CameraFrame(NamedTuple):
+    """One camera frame of the whole team as arrays: row = observer, column = target."""
+
+    seen: np.ndarray  # (N, N) bool
+    distance: np.ndarray  # (N, N) noisy distance, m (meaningful where seen)
+    bearing: np.ndarray  # (N, N) noisy bearing, rad, wrapped (meaningful where seen)
+
+    @classmethod
+    def empty(cls, n: int) -> CameraFrame:
+        """A frame in which nobody sees anybody (camera off)."""
+        return cls(np.zeros((n, n), dtype=bool), np.zeros((n, n)), np.zeros((n, n)))
+
+    def lists(self) -> list[list[Detection]]:
+        """Per observer, its :class:`Detection` s in target order."""
+        out: list[list[Detection]] = [[] for _ in range(len(self.seen))]
+        if not self.seen.any():
+            return out
+        obs, tgt = np.nonzero(self.seen)
+        d, b = self.distance[self.seen].tolist(), self.bearing[self.seen].tolist()
+        for i, j, dj, bj in zip(obs.tolist(), tgt.tolist(), d, b, strict=True):
+            out[i].append(Detection(j, dj, bj))
+        return out
+
+
 class Camera:
     """Detects other robots within range and field of view with a clear line of sight.
 
@@ -168,18 +193,24 @@ class Camera:
         rng: np.random.Generator,
     ) -> list[list[Detection]]:
         """Per observer, its detections with noisy distance (≥ 0) and bearing (wrapped)."""
+        return self.frame(poses, active, walls, circles, rng).lists()
+
+    def frame(
+        self,
+        poses: np.ndarray,
+        active: np.ndarray,
+        walls: Walls,
+        circles: np.ndarray,
+        rng: np.random.Generator,
+    ) -> CameraFrame:
+        """:meth:`detect` as arrays: who sees whom, with noisy distance (≥ 0) and bearing
+        (wrapped) where seen (the same draws: one pair of normals per robot pair)."""
         n = len(poses)
         mask, dist, bearing = self.visible(poses, np.asarray(active, dtype=bool), walls, circles)
         noise = rng.standard_normal((n, n, 2))  # drawn for every pair, seen or not
-        out: list[list[Detection]] = [[] for _ in range(n)]
         if not mask.any():
-            return out
+            return CameraFrame(mask, np.zeros((n, n)), np.zeros((n, n)))
         d, b = np.empty((n, n)), np.empty((n, n))
         cfg = self.config
         kernels.camera_noise(dist, bearing, noise, cfg.sigma_d, cfg.sigma_bearing, d, b)
-        obs, tgt = np.nonzero(mask)
-        for i, j, dj, bj in zip(
-            obs.tolist(), tgt.tolist(), d[mask].tolist(), b[mask].tolist(), strict=True
-        ):
-            out[i].append(Detection(j, dj, bj))
-        return out
+        return CameraFrame(mask, d, b)

@@ -15,8 +15,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from polyslam_env.apps import benchmark
-from polyslam_env.apps.benchmark import Stats, rate_samples, scaling_exponent, targets, time_calls
+from polyslam_env.apps import benchmark, benchmark_harness
+from polyslam_env.apps.benchmark import targets
+from polyslam_env.apps.benchmark_components import scaling_exponent
+from polyslam_env.apps.benchmark_harness import Stats, rate_samples, time_calls
 from polyslam_env.cli.main import main
 
 
@@ -36,7 +38,7 @@ class FakeClock:
 @pytest.fixture
 def clock(monkeypatch: pytest.MonkeyPatch) -> Iterator[FakeClock]:
     fake = FakeClock()
-    monkeypatch.setattr(benchmark, "time", fake)
+    monkeypatch.setattr(benchmark_harness, "time", fake)
     yield fake
 
 
@@ -111,19 +113,56 @@ def test_targets__met_flags_and_missing_figures() -> None:
         "world": {"rows": [{"robots": 3, "ratio_to_pymunk": 3.5}]},
         "team": [{"robots": 3, "mean_ms": 4.0}, {"robots": 20, "mean_ms": 44.0}],
     }
-    rows = targets(results)
-    assert [r["target"] for r in rows] == [name for name, _, _ in benchmark.TARGETS]
-    met = {r["target"]: r["met"] for r in rows}
-    assert met == {
-        "full-SLAM env / MPE simple_spread": True,
-        "slam_enabled=False env / MPE": False,
-        "SLAM step µs, 30 landmarks": True,
-        "SLAM step µs, 300 landmarks": False,
-        "world step, 3 robots / pymunk": True,
-        "SB3 vec 2 procs / one process": None,  # not measured
-        "step cost 20 / 3 robots": False,  # 11×
+    results["floor"] = {
+        "env_step": {"mpe_steps": 4.5},
+        "team_act": {"mpe_steps": 9.0},
+        "env_calls": 1400.0,
+        "act_calls": 700.0,
     }
-    assert rows[-1]["measured"] == pytest.approx(11.0, rel=1e-12)
+    results["reproduce"] = {"runs": 100, "seconds": 14.0}
+    rows = targets(results)
+    assert [(r["issue"], r["target"]) for r in rows] == [
+        (issue, name) for issue, name, _, _ in benchmark.TARGETS
+    ]
+    met = [(r["issue"], r["target"], r["met"]) for r in rows]
+    assert met == [
+        ("15, 41", "full-SLAM env / MPE simple_spread", True),
+        ("15", "slam_enabled=False env / MPE", False),
+        ("15, 41", "SLAM step µs, 30 landmarks", True),
+        ("15", "SLAM step µs, 300 landmarks", False),
+        ("41", "SLAM step µs, 300 landmarks", True),  # 250 ≤ 250
+        ("15", "world step, 3 robots / pymunk", True),
+        ("15", "SB3 vec 2 procs / one process", None),  # not measured
+        ("15, 41", "step cost 20 / 3 robots", False),  # 11×
+        ("41", "floor env step, MPE steps", True),
+        ("41", "floor team act, MPE steps", False),
+        ("41", "floor Python calls per env step", True),
+        ("41", "floor Python calls per team act", False),
+        ("41", "reproduce --runs 100, s", True),
+        ("41", "train env steps/s over MPE, × today", None),  # not measured
+    ]
+    assert rows[7]["measured"] == pytest.approx(11.0, rel=1e-12)
+
+
+def test_train_row__its_ratios_to_mpe_and_to_today(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The training row's env steps/s over the same run's MPE rate, and that over today's
+    ratio (:data:`~polyslam_env.apps.benchmark.TRAIN_TODAY_MPE`)."""
+    from polyslam_env.apps import benchmark_system
+
+    monkeypatch.setattr(benchmark_system, "bench_train", lambda t: {"env_steps_per_s": 30.0})
+    monkeypatch.setattr(benchmark, "TRAIN_TODAY_MPE", 0.002)
+    out: dict[str, Any] = {}
+    plan = benchmark.PLANS["full"]
+    benchmark._command_sections(out, plan, {"train"}, lambda s, r: None, 5000.0)
+    assert out["train"]["ratio_to_mpe"] == pytest.approx(30.0 / 5000.0, rel=1e-12)
+    assert out["train"]["ratio_to_today"] == pytest.approx(3.0, rel=1e-12)
+
+
+def test_targets__reproduce_counts_only_with_100_runs() -> None:
+    """The target is about ``--runs 100``: a shorter reproduction's seconds are no figure."""
+    rows = targets({"reproduce": {"runs": 20, "seconds": 3.0}})
+    row = next(r for r in rows if r["target"].startswith("reproduce"))
+    assert row["measured"] is None and row["met"] is None
 
 
 def test_run_benchmark__rejects_unknown_section() -> None:
@@ -138,7 +177,25 @@ def test_benchmark_command__quick_json_has_every_section(
     assert main(["benchmark", "--quick", "--tiny", "--json", str(out)]) == 0
     data = json.loads(out.read_text())
     assert {"slam", "world", "env", "vec", "reference", "targets"} <= set(data)
-    assert {"vec_one_process", "team", "memory", "compile"} <= set(data)
+    assert {"vec_one_process", "team", "memory", "compile", "floor"} <= set(data)
+    assert data["reproduce"]["runs"] == benchmark.PLANS["tiny"].reproduce_runs
+    assert data["reproduce"]["seconds"] > 0
+    assert "train" not in data  # a plan's 0 timesteps leave it out
+    floor, mpe = data["floor"], data["reference"]
+    assert floor["steps"] == [3, 5] and floor["robots"] == 3
+    assert floor["env_calls"] == pytest.approx(
+        floor["env_calls_slam"] + floor["env_calls_exchange"] + floor["env_calls_rest"]
+    )
+    assert floor["env_calls_slam"] > 0 and floor["act_calls"] > 0
+    for part in ("env_step", "team_act"):
+        figure = floor[part]
+        assert figure["mean_ms"] > 0
+        if mpe["installed"]:  # ms over the same run's ms per MPE step
+            ms_per_mpe_step = 1e3 / mpe["steps_per_s"]["median"]
+            # 1e-9 relative: the same floats divided, JSON keeps 17 digits.
+            assert figure["mpe_steps"] == pytest.approx(
+                figure["mean_ms"] / ms_per_mpe_step, rel=1e-9
+            )
     assert [r["landmarks"] for r in data["slam"]] == list(benchmark.PLANS["tiny"].slam_sizes)
     for row in data["slam"]:
         assert {"step_us", "reference_solve3_us", "ratio_to_solve3", "stages_us"} <= set(row)

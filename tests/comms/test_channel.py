@@ -276,3 +276,17 @@ def test_channel_config__round_trips_through_dict() -> None:
     cfg = ChannelConfig(loss_prob=0.2, precision="float32", payload="grid", max_age=5)
     assert ChannelConfig.from_dict(cfg.to_dict()) == cfg
     assert ChannelConfig.from_dict({"max_age": None}).max_age is None
+
+
+def test_channel__bytes_sent_equals_each_robots_counter() -> None:
+    """Lost and chunked attempts count; a robot that never sent, or never used the channel,
+    has sent 0."""
+    channel = Channel(ChannelConfig(bandwidth_bytes_per_step=10, loss_prob=0.5),
+                      np.random.default_rng(1))  # fmt: skip
+    channel.send(0, 1, bytes(25), step=0)
+    channel.send(2, 0, bytes(7), step=0)
+    for k in range(6):
+        channel.deliver(k, always)
+    got = [channel.bytes_sent(r) for r in range(4)]
+    assert got == [channel.counters(r).bytes_sent for r in range(4)]
+    assert got[0] >= 25 and got[1] == 0 and got[3] == 0

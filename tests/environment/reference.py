@@ -49,6 +49,21 @@ def local_cells(
     return occ, free
 
 
+def detection_slots(encoder: ObservationEncoder, view: RobotView) -> list[float]:  # (4K,)
+    """Camera slots nearest first (ties: the lower target), ``(seen, d/range, cos α, sin α)``,
+    zeros for empty slots."""
+    cam_range = encoder.config.world.camera.range
+    out: list[float] = []
+    for det in sorted(view.detections, key=lambda d: (d.distance, d.target))[: encoder.k]:
+        out += (
+            1.0,
+            min(det.distance / cam_range, 1.0),
+            math.cos(det.bearing),
+            math.sin(det.bearing),
+        )
+    return out + [0.0] * (4 * encoder.k - len(out))
+
+
 def vector(
     encoder: ObservationEncoder, view: RobotView, cells: tuple[np.ndarray, np.ndarray] | None
 ) -> np.ndarray:
@@ -76,7 +91,7 @@ def vector(
         local[free] = FREE
     since, t = view.steps_since_rendezvous, encoder.config.max_steps
     out[lay["detections"].start : lay["progress"].stop] = [
-        *encoder._detections(view.detections),
+        *detection_slots(encoder, view),
         1.0 if since is None else min(since / t, 1.0),
         min(view.rendezvous, oc.rendezvous_cap) / oc.rendezvous_cap,
         min(view.step / t, 1.0),

@@ -19,7 +19,6 @@ from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.comms.consensus import ConsensusExchange, decode, encode
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.core.geometry import between, compose, transform_points, wrap_remainder
-from polyslam_env.environment import stages
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import PolySlamParallelEnv
 from polyslam_env.metrics.episode import RobotHistory, final_robot_metrics, meaningful
@@ -196,7 +195,7 @@ def test_point_backend__observes_its_landmarks_and_reports_landmark_metrics(back
     assert isinstance(slam, PointSlamRobot)
     lm = slam.landmarks()
     assert len(lm.ids) > 0
-    np.testing.assert_array_equal(stages._map_points(env.episode, 0), lm.means)
+    np.testing.assert_array_equal(env.episode.slam.map_points(0), lm.means)
     m = infos["robot_0"]["metrics"]
     assert m["has_landmarks"] == 1.0 and m["has_map"] == 0.0 and m["slam"] == 1.0
     # a pillar sensor with σ_r = 3 cm and 1° places pillars within a few cm; 0.5 m would

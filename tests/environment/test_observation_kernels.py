@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 
 from polyslam_env.environment.config import resolve_config
-from polyslam_env.environment.observations import BeliefGrid, ObservationEncoder, RobotView
+from polyslam_env.environment.observations import (
+    BeliefGrid,
+    ObservationEncoder,
+    RobotView,
+    TeamView,
+)
 from polyslam_env.world.sensors import Detection
 from tests.environment import reference
 
@@ -46,10 +51,12 @@ def test_vector__equals_the_oracle(mode: str) -> None:
         ranges = rng.uniform(0.0, 3.0, beams)
         ranges[rng.random(beams) < 0.3] = np.inf
         pose = np.array([*rng.uniform(-30.0, 30.0, 2), rng.uniform(-4, 4)])  # some clipped
+        tie = float(rng.uniform(0, 2))  # some detections at the same distance: ties by target
         detections = [
-            Detection(int(j), float(rng.uniform(0, 2)), float(rng.uniform(-3, 3)))
-            for j in range(int(rng.integers(0, 4)))
-        ]
+            Detection(int(j), tie if rng.random() < 0.3 else float(rng.uniform(0, 2)),
+                      float(rng.uniform(-3, 3)))
+            for j in sorted(rng.choice(6, int(rng.integers(0, 5)), replace=False).tolist())
+        ]  # fmt: skip
         view = RobotView(
             ranges=ranges, pose=pose, pose_std=rng.uniform(0.0, 4.0, 3),
             map_points=np.zeros((0, 2)), belief=belief, detections=detections,
@@ -110,7 +117,7 @@ def test_encode_team__equals_each_view_alone_and_the_oracle() -> None:
                 step=10 * k,
             )
         )
-    team = encoder.encode_team(views)
+    team = encoder.encode_team(TeamView.of(views))
     for view, got in zip(views, team, strict=True):
         np.testing.assert_array_equal(got, encoder.encode(view))
         cells = reference.local_cells(

@@ -251,7 +251,7 @@ def test_observations__local_map_shows_own_polynomials_and_swept_space() -> None
     assert np.all(grid.sum(axis=0) == 1.0)  # every cell is exactly one of the three classes
     assert grid[1].any()  # swept free space around the robot
     if env.episode.slams[0].n_landmarks:
-        assert grid[0].any() or env.episode.samplers[0].points(env.episode.slams[0]).size > 0
+        assert grid[0].any() or env.episode.slam.map_points(0).size > 0
 
 
 # -- rewards ----------------------------------------------------------------------------------

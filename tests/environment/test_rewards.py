@@ -12,6 +12,7 @@ from polyslam_env.environment.config import RewardConfig
 from polyslam_env.environment.parallel import REWARD_TERMS, parallel_env
 from polyslam_env.environment.rewards import MapChanges, combine, reward_terms
 from polyslam_env.environment.state import EpisodeState
+from polyslam_env.metrics.mapping import MapShapes
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import SlamStepInfo
 
@@ -122,7 +123,8 @@ def _map_error_term(
     state: EpisodeState, monkeypatch: pytest.MonkeyPatch, offset: float, info: SlamStepInfo | None
 ) -> float:
     """The unweighted map_error term of robot 0 after its map becomes ``_line(offset)``."""
-    monkeypatch.setattr(state.slams[0], "polynomials", lambda: _line(offset))
+    shapes = MapShapes.of(_line(offset))
+    monkeypatch.setattr(state.slam, "map_shapes", lambda i: shapes)
     acting = {"robot_0": 0}
     changes = stages.map_bookkeeping(state, acting, [info, None], None)
     terms = reward_terms(acting, np.zeros(2, bool), np.zeros(2), changes)
@@ -178,7 +180,7 @@ def test_map_error_term__deleting_a_correct_map_earns_nothing(
 ) -> None:
     state = _fresh_state()
     _map_error_term(state, monkeypatch, 0.0, _CHANGED)
-    monkeypatch.setattr(state.slams[0], "polynomials", lambda: [])
+    monkeypatch.setattr(state.slam, "map_shapes", lambda i: MapShapes.of([]))
     changes = stages.map_bookkeeping(state, {"robot_0": 0}, [_CHANGED, None], None)
     assert abs(changes.map_error[0]) < 1e-12  # the map had no error to remove
     assert changes.completeness[0] < 0.0  # but the mapping term loses its completeness

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from polyslam_env.metrics.boundary import distance_to_boundary
-from polyslam_env.metrics.kernels import covered, wall_distances
+from polyslam_env.metrics.kernels import covered, sample_rows, wall_distances
+from polyslam_env.slam.landmarks import PackedPolynomials
+from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.generators import make_generator
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.nearby import WallIndex
@@ -76,3 +78,32 @@ def test_covered__empty_inputs_and_zero_tolerance() -> None:
     assert not covered(samples, np.zeros((0, 2)), 0.1).any()
     assert not covered(samples, samples.copy(), 0.0).any()
     assert covered(np.zeros((0, 2)), samples, 0.1).shape == (0,)
+
+
+def _random_polynomials(rng: np.random.Generator, n: int) -> list[Polynomial]:
+    """Lines to cubics of either variate, extents from 0 (a point) to 8 m, steep and flat."""
+    polys = []
+    for k in range(n):
+        order = int(rng.integers(1, 4))
+        coeffs = rng.normal(0.0, [1.0, 2.0, 0.5, 0.2][: order + 1])
+        lo = float(rng.uniform(-4.0, 4.0))
+        width = [0.0, 1e-3, float(rng.uniform(0.01, 8.0))][min(k % 7, 2)]
+        polys.append(Polynomial(int(rng.integers(1, 3)), coeffs, lo, lo + width))
+    return polys
+
+
+@pytest.mark.parametrize("step", [0.01, 0.05, 0.1, 3.0])
+def test_sample_rows__equals_sample_arclength_bit_for_bit(step: float) -> None:
+    """The oracle is ``Polynomial.sample_arclength`` (numpy's linspace, polyval, norm, cumsum
+    and interp), one polynomial at a time; the kernel samples all rows, zero-padded to the
+    widest order, in one call."""
+    polys = _random_polynomials(np.random.default_rng(int(step * 100)), 40)
+    packed = PackedPolynomials.from_polynomials(polys)
+    coeffs = packed.shape.copy()
+    coeffs[:, 0] = [p.c0 for p in polys]
+    rows = np.arange(len(polys))[::-1].copy()  # any order of rows
+    points, starts = sample_rows(packed.variate, coeffs, packed.lo, packed.hi, rows, step, 512)
+    assert starts[0] == 0 and starts[-1] == len(points)
+    for q, r in enumerate(rows.tolist()):
+        want = polys[r].sample_arclength(step)
+        np.testing.assert_array_equal(points[starts[q] : starts[q + 1]], want)

@@ -1,0 +1,99 @@
+"""Training throughput of ``polyslam train --config configs/train_goals.yaml``, before and after.
+
+Runs the shipped goal-choice training config cut to ``--timesteps`` robot decisions (no
+checkpoints between, no final evaluation: a copy of the YAML in a temporary folder) from each
+source tree given (``--tree``; each on ``PYTHONPATH`` in its own process), ``--repeats``
+times each, interleaved (A, B, A, B, …) so that the machine's load hits every tree alike. Per
+run: the wall time of the whole ``polyslam train`` process (worker start and PPO's updates
+included), its env steps (robot decisions × ``decide_every`` / ``num_robots``; every decision
+is ``decide_every`` env steps of the team) and env steps per second, and the CPU seconds of
+the process and its workers per env step (``RUSAGE_CHILDREN``: less sensitive to the load than
+the wall time). The table gives each tree's median and, for the later trees, the ratio of
+their median env steps per second to the first tree's.
+
+    python scripts/train_throughput.py --tree /work/wt/envstep-base --tree . --repeats 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+#: Runs the CLI of whichever ``polyslam_env`` is first on ``PYTHONPATH``.
+CLI = "import sys; from polyslam_env.cli.main import main; sys.exit(main(sys.argv[1:]))"
+
+
+def short_config(tree: Path, timesteps: int, folder: Path) -> tuple[Path, dict[str, Any]]:
+    """``tree``'s ``configs/train_goals.yaml`` cut to ``timesteps``, written into ``folder``."""
+    config = yaml.safe_load((tree / "configs" / "train_goals.yaml").read_text())
+    config.update(timesteps=timesteps, eval_episodes=0, checkpoint_every=10 * timesteps)
+    path = folder / "train_goals_short.yaml"
+    path.write_text(yaml.safe_dump(config, sort_keys=False))
+    return path, config
+
+
+def run(tree: Path, timesteps: int) -> dict[str, float]:
+    """One shortened training run from ``tree``: wall and CPU seconds, env steps."""
+    with tempfile.TemporaryDirectory(prefix="polyslam-train-throughput-") as tmp:
+        folder = Path(tmp)
+        path, config = short_config(tree, timesteps, folder)
+        env = {**os.environ, "PYTHONPATH": str(tree), "SDL_VIDEODRIVER": "dummy"}
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.perf_counter()
+        subprocess.run(
+            [sys.executable, "-c", CLI, "train", "--config", str(path), "--out",
+             str(folder / "out"), "--quiet"],
+            cwd=tree, env=env, check=True, stdout=subprocess.DEVNULL,
+        )  # fmt: skip
+        seconds = time.perf_counter() - start
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    env_steps = timesteps * config["decide_every"] / config["env"]["num_robots"]
+    return {
+        "seconds": seconds,
+        "env_steps": env_steps,
+        "env_steps_per_s": env_steps / seconds,
+        "cpu_ms_per_env_step": 1e3 * cpu / env_steps,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--tree", type=Path, action="append", required=True,
+                        help="a source tree (repeat: the first is the reference)")  # fmt: skip
+    parser.add_argument("--timesteps", type=int, default=1536, help="robot decisions per run")
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--out", type=Path, help="write the runs as JSON here")
+    args = parser.parse_args(argv)
+    trees = [t.resolve() for t in args.tree]
+    runs: dict[str, list[dict[str, float]]] = {str(t): [] for t in trees}
+    for k in range(args.repeats):
+        for tree in trees:
+            print(f"repeat {k + 1}/{args.repeats}: {tree}", file=sys.stderr, flush=True)
+            runs[str(tree)].append(run(tree, args.timesteps))
+    first = None
+    print(f"{'tree':<40} {'env steps/s':>11} {'CPU ms/env step':>15} {'× first':>8}")
+    for tree in trees:
+        rate = float(np.median([r["env_steps_per_s"] for r in runs[str(tree)]]))
+        cpu = float(np.median([r["cpu_ms_per_env_step"] for r in runs[str(tree)]]))
+        first = rate if first is None else first
+        print(f"{tree!s:<40} {rate:>11.2f} {cpu:>15.1f} {rate / first:>8.2f}")
+    print(f"load: {os.getloadavg()[0]:.2f} (1-min average at the end)")
+    if args.out is not None:
+        args.out.write_text(json.dumps(runs, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
