@@ -23,7 +23,7 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from polyslam_env.environment.config import GENERATOR_PREFIX
-    from polyslam_env.world.generators import GENERATORS
+    from polyslam_env.world.generators import GENERATORS, SHARED_FIELDS
     from polyslam_env.world.maps import builtin_maps, load_map
 
     print("built-in maps:")
@@ -38,12 +38,19 @@ def run(args: argparse.Namespace) -> int:
     for name in sorted(GENERATORS):
         defaults = GENERATORS[name]()
         params = ", ".join(
-            f"{f.name}={_plain(getattr(defaults, f.name))}"
-            for f in dataclasses.fields(defaults)
-            if f.name not in SET_BY_ENV
+            f"{key}={_plain(getattr(defaults, key))}"
+            for key in _listing_order([f.name for f in dataclasses.fields(defaults)], SHARED_FIELDS)
+            if key not in SET_BY_ENV
         )
         print(f"  {GENERATOR_PREFIX + name:<22} {params}")
     return 0
+
+
+def _listing_order(names: list[str], shared: tuple[str, ...]) -> list[str]:
+    """The floor's size first, then the family's own parameters, then the shared ones."""
+    size = [n for n in names if n in ("width", "height")]
+    own = [n for n in names if n not in shared]
+    return size + own + [n for n in names if n in shared and n not in size]
 
 
 def _plain(value: Any) -> str:
