@@ -8,7 +8,18 @@ retry template that checks every draw; see :mod:`.base` for the guarantees):
 * :mod:`.offices` — ``office_floor``: rooms off one or two long corridors;
 * :mod:`.warehouses` — ``warehouse``: shelf rows, aisles, pillars in a loading area;
 * :mod:`.loops` — ``loop``: a corridor loop around a solid block;
-* :mod:`.halls` — ``pillar_hall``: round columns on a jittered grid, partition walls.
+* :mod:`.halls` — ``pillar_hall``: round columns on a jittered grid, partition walls;
+
+and the families beyond Manhattan floors (issue 42), 20–40 m:
+
+* :mod:`.caves` — ``cave_system``: chambers with curved walls, winding narrow passages, rock
+  islands;
+* :mod:`.angled` — ``angled_floor``: walls and corridors at arbitrary angles, polygonal rooms,
+  turned furniture;
+* :mod:`.curved` — ``curved_floor``: round halls, curved and straight corridors, rooms of
+  curved and straight walls.
+
+The curved families are drawn as a field traced into walls (:mod:`.fields`).
 
 :data:`GENERATORS` maps each name (``map: "generator:<name>"`` in an env config) to its class;
 :func:`make_generator` builds one with its parameters validated.
@@ -18,6 +29,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from polyslam_env.world.generators.angled import AngledFloorGenerator
 from polyslam_env.world.generators.base import (
     SHARED_FIELDS,
     GenerationError,
@@ -25,7 +37,8 @@ from polyslam_env.world.generators.base import (
     LayoutGenerator,
     is_enclosed,
 )
-from polyslam_env.world.generators.caves import CaveGenerator
+from polyslam_env.world.generators.caves import CaveGenerator, CaveSystemGenerator
+from polyslam_env.world.generators.curved import CurvedFloorGenerator
 from polyslam_env.world.generators.halls import PillarHallGenerator
 from polyslam_env.world.generators.loops import LoopGenerator
 from polyslam_env.world.generators.offices import OfficeFloorGenerator
@@ -35,7 +48,10 @@ from polyslam_env.world.generators.warehouses import WarehouseGenerator
 __all__ = [
     "GENERATORS",
     "SHARED_FIELDS",
+    "AngledFloorGenerator",
     "CaveGenerator",
+    "CaveSystemGenerator",
+    "CurvedFloorGenerator",
     "GenerationError",
     "GeneratorBase",
     "LayoutGenerator",
@@ -55,6 +71,9 @@ GENERATORS: dict[str, type[GeneratorBase]] = {
     "warehouse": WarehouseGenerator,
     "loop": LoopGenerator,
     "pillar_hall": PillarHallGenerator,
+    "cave_system": CaveSystemGenerator,
+    "angled_floor": AngledFloorGenerator,
+    "curved_floor": CurvedFloorGenerator,
 }
 
 

@@ -7,7 +7,8 @@ construction) whose family draws the walls in :meth:`GeneratorBase._draw` (and r
 1. draw walls (then pillars, given the walls) from the ``rng`` only;
 2. check the outer boundary encloses every wall (:func:`is_enclosed`);
 3. check the free space is one 4-connected component at the robot's inflation, on two rasters
-   (:func:`connected_for_robot`);
+   (:func:`connected_for_robot`; families with walls at angles to the raster accept raster
+   slivers there, :attr:`GeneratorBase.slivers`);
 4. place ``num_start_poses`` start poses in it, each at least ``2·robot_radius + margin`` from
    every wall and ``max(start_separation, 2·robot_radius + margin)`` from each other;
 5. pass the map-file validation (``layout_from_dict(layout_to_dict(...))``).
@@ -21,13 +22,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 import numpy as np
 
 from polyslam_env.core.config import Config, check_positive, check_range
 from polyslam_env.core.errors import ConfigError
-from polyslam_env.world.grid import FreeGrid, free_space_grid, is_connected
+from polyslam_env.world.grid import (
+    FreeGrid,
+    connected_up_to_slivers,
+    free_space_grid,
+    is_connected,
+)
 from polyslam_env.world.layout import Layout, point_segment_distance, points_in_polygon
 from polyslam_env.world.maps import layout_from_dict, layout_to_dict
 
@@ -83,6 +89,12 @@ class GeneratorBase(Config):
     max_tries: int = 20
     name: str = "layout"
 
+    #: Cells a separate raster sliver may have (touching the main free space diagonally) in the
+    #: connectivity check (:func:`~polyslam_env.world.grid.connected_up_to_slivers`): 0 for
+    #: the rectilinear families, where none can arise; walls meeting at an angle to the raster
+    #: leave one- or two-cell slivers that the robot's centre reaches through the corner.
+    slivers: ClassVar[int] = 0
+
     def validate(self) -> None:
         check_positive("width", self.width)
         check_positive("height", self.height)
@@ -114,7 +126,7 @@ class GeneratorBase(Config):
             layout = Layout(name=self.name, walls=tuple(walls), pillars=pillars)
             if not is_enclosed(layout):
                 continue
-            grid = connected_for_robot(layout, self.robot_radius, self.margin)
+            grid = connected_for_robot(layout, self.robot_radius, self.margin, self.slivers)
             if grid is None:
                 continue
             poses = self._start_poses(layout, grid, rng)
@@ -171,13 +183,17 @@ def is_enclosed(layout: Layout, tol: float = 1e-9) -> bool:
     return True
 
 
-def connected_for_robot(layout: Layout, radius: float, margin: float) -> FreeGrid | None:
+def connected_for_robot(
+    layout: Layout, radius: float, margin: float, slivers: int = 0
+) -> FreeGrid | None:
     """The first check raster if free space is one component on every check raster
-    (:data:`CONNECTIVITY_CHECKS`), else None."""
+    (:data:`CONNECTIVITY_CHECKS`; up to raster slivers of at most ``slivers`` cells), else
+    None."""
     first = None
     for resolution, extra in CONNECTIVITY_CHECKS:
         grid = free_space_grid(layout, resolution, radius + extra * margin)
-        if not is_connected(grid):
+        one = connected_up_to_slivers(grid, slivers) if slivers else is_connected(grid)
+        if not one:
             return None
         first = first or grid
     return first

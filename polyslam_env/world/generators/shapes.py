@@ -117,3 +117,25 @@ def cuts(lo: float, widths: list[float]) -> list[float]:
 
 def outline(width: float, height: float) -> np.ndarray:
     return rectangle(0.0, 0.0, width, height)
+
+
+def spanning_tree(points: np.ndarray) -> list[tuple[int, int]]:
+    """Edges (i, j) of the Euclidean minimum spanning tree of ``points`` (n, 2) (Prim's, in
+    the order they join the tree; ties to the lowest index)."""
+    n = len(points)
+    if n < 2:
+        return []
+    dist = np.hypot(*(points[:, None, :] - points[None, :, :]).transpose(2, 0, 1))  # (n, n)
+    in_tree = np.zeros(n, dtype=bool)
+    in_tree[0] = True
+    best = dist[0].copy()  # (n,) distance to the tree
+    parent = np.zeros(n, dtype=int)
+    edges = []
+    for _ in range(n - 1):
+        j = int(np.argmin(np.where(in_tree, np.inf, best)))
+        edges.append((int(parent[j]), j))
+        in_tree[j] = True
+        closer = dist[j] < best
+        best = np.where(closer, dist[j], best)
+        parent = np.where(closer, j, parent)
+    return edges
