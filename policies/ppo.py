@@ -34,7 +34,7 @@ __all__ = [
     "make_ppo",
 ]
 
-#: The learned goal-choice policy shipped with the package (README "Learned policy" says how
+#: The learned goal-choice policy shipped with the package (docs/results/learning.md says how
 #: it was trained: ``polyslam train --config configs/train_goals.yaml``).
 SHIPPED = Path(__file__).resolve().parent / "checkpoints" / "ppo_goals.zip"
 

@@ -5,7 +5,7 @@ The public API: ``parallel_env`` (the PettingZoo parallel env), ``env`` (its AEC
 polyslam_env`` stays light; the env pulls in pymunk, PettingZoo and scipy. Importing the package
 also registers the Gymnasium id ``polyslam/Team-v0`` (an entry-point string, no env import).
 
-The parts, one folder each (README "Architecture" draws the arrows between them):
+The parts, one folder each (docs/design/architecture.md draws the arrows between them):
 ``core`` shared basics · ``world`` pymunk world and sensors · ``slam`` the per-robot EKF SLAM ·
 ``comms`` rendezvous exchange · ``metrics`` · ``environment`` the PettingZoo env ·
 ``render`` pictures · ``scenarios`` shipped path files · ``apps`` what the CLI runs · ``cli``.

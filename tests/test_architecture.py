@@ -1,4 +1,4 @@
-"""The arrows between the package's parts run one way (README "Architecture").
+"""The arrows between the package's parts run one way (docs/design/architecture.md).
 
 Every ``import`` in ``polyslam_env/`` and ``policies/`` is read with :mod:`ast` (imports inside
 functions included: a lazy import is still an arrow) and checked against the table below.

@@ -31,7 +31,7 @@ import numpy as np
 from scipy import stats
 
 from policies.base import PolicyError, make_team, policy_factory, policy_names
-from polyslam_env.apps.jobs import run_jobs
+from polyslam_env.apps.jobs import Runner, run_jobs, runner_of
 from polyslam_env.apps.rollout import EpisodeResult, evaluate_episode, run_episode
 from polyslam_env.core.config import Config, check_range, parse_overrides
 from polyslam_env.core.errors import ConfigError, MapFileError
@@ -263,11 +263,12 @@ def self_assessment(env: PolySlamParallelEnv, result: EpisodeResult) -> None:
 
 def run_fidelity(
     config: FidelityConfig,
-    workers: int = 1,
+    workers: int | Runner = 1,
     progress: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
-    """Run every map × seed × setting (in ``workers`` processes) and :func:`summarise` them;
-    ``progress(k)`` is called after each finished episode. Adds the settings and wall time."""
+    """Run every map × seed × setting (in ``workers`` processes, or as its :class:`Runner`
+    says) and :func:`summarise` them; ``progress(k)`` is called after each finished
+    episode. Adds the settings and wall time; an episode that failed is left out."""
     seeds = [config.first_seed + k for k in range(config.seeds)]
     keys = [(name, setting, seed) for name in config.maps for setting in SETTINGS for seed in seeds]
     configs = {
@@ -280,12 +281,13 @@ def run_fidelity(
     kwargs = config.policy_kwargs()
     jobs = [(configs[name, setting], config.policy, kwargs, seed) for name, setting, seed in keys]
     start = time.perf_counter()
-    results = run_jobs(_run_job, jobs, workers, progress)
+    results = run_jobs(_run_job, jobs, workers, progress, seed_of=lambda job: job[3])
     grouped: dict[str, dict[str, list[EpisodeResult]]] = {
         labels[name]: {s: [] for s in SETTINGS} for name in config.maps
     }
     for (name, setting, _), result in zip(keys, results, strict=True):
-        grouped[labels[name]][setting].append(result)
+        if result is not None:
+            grouped[labels[name]][setting].append(result)
     summary = summarise(grouped)
     summary["settings"] = {
         **config.to_dict(),
@@ -295,7 +297,7 @@ def run_fidelity(
         "seed_list": seeds,
         "initial_error": has_initial_error(),
         "coverage_target": None,
-        "workers": workers,
+        **runner_of(workers).settings(),
     }
     summary["elapsed_s"] = time.perf_counter() - start
     return summary
@@ -546,7 +548,7 @@ def precision_checks(results: Sequence[EpisodeResult]) -> dict[str, bool]:
     both sides, since a filter that claims too much uncertainty is as wrong as one that
     claims too little. Empty when the back-end gives no self-assessment. Received walls are
     left out: they carry the camera transform's noise, which their refinement on shared
-    walls does not reduce (README "What the robots' filters expect of their maps")."""
+    walls does not reduce (docs/design/consistency.md, "The maps' own uncertainty")."""
     counted = precision_count([m for r in results for m in r.robots.values()])
     if counted is None:
         return {}

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from polyslam_env.apps.jobs import run_jobs
+from polyslam_env.apps.jobs import Runner, run_jobs, succeeded
 from polyslam_env.apps.simulate import SimulationResult, simulate
 from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.core.config import Config
@@ -141,20 +141,21 @@ def _run_job(job: tuple[ReproduceConfig, int, bool]) -> RunResult:
 
 def reproduce(
     config: ReproduceConfig,
-    workers: int = 2,
+    workers: int | Runner = 2,
     seeds: Sequence[int] | None = None,
     progress: Callable[[int], None] | None = None,
     keep: Sequence[int] = (),
 ) -> list[RunResult]:
-    """All runs (seeds 0..runs−1 unless given), in ``workers`` processes, in seed order; the
-    runs of the seeds in ``keep`` also keep their simulation (for the figures, so that the
-    figure run is not simulated a second time)."""
+    """All runs (seeds 0..runs−1 unless given), in ``workers`` processes (or as its
+    :class:`Runner` says), in seed order, a run that failed left out; the runs of the seeds
+    in ``keep`` also keep their simulation (for the figures, so that the figure run is not
+    simulated a second time; not with a results log, which holds plain data only)."""
     seeds = list(range(config.runs)) if seeds is None else list(seeds)
     jobs = [(config, s, s in keep) for s in seeds]
     # One run per round trip: a run takes ~0.1–1 s, a round trip ~1 ms, while a chunk of
     # several runs left at the end keeps one worker busy alone (100 runs in chunks of 6 on 2
     # workers: up to 6 runs' time with the other core idle).
-    return run_jobs(_run_job, jobs, workers, progress, chunksize=1)
+    return succeeded(run_jobs(_run_job, jobs, workers, progress, seed_of=lambda job: job[1]))
 
 
 def summarise(runs: Sequence[RunResult]) -> dict[str, Any]:

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from polyslam_env.apps.jobs import run_jobs
+from polyslam_env.apps.jobs import Runner, run_jobs, succeeded
 from polyslam_env.apps.reproduce_mblcc import matched_filter_config
 from polyslam_env.core.blas import blas_threads
 from polyslam_env.core.config import Config
@@ -192,13 +192,14 @@ def _job(job: tuple[AlignmentReproduceConfig, int]) -> list[Record]:
 
 def reproduce(
     config: AlignmentReproduceConfig,
-    workers: int = 2,
+    workers: int | Runner = 2,
     progress: Callable[[int], None] | None = None,
 ) -> list[Record]:
     """All runs' records (seeds 0..runs−1), in parallel over ``workers`` processes;
     ``progress(k)`` after the k-th run."""
     jobs = [(config, s) for s in range(config.runs)]
-    return [r for run in run_jobs(_job, jobs, workers, progress) for r in run]
+    runs = run_jobs(_job, jobs, workers, progress, seed_of=lambda job: job[1])
+    return [r for run in succeeded(runs) for r in run]
 
 
 def summarise(config: AlignmentReproduceConfig, records: Sequence[Record]) -> dict[str, Any]:

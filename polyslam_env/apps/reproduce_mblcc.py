@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from polyslam_env import metrics
-from polyslam_env.apps.jobs import run_jobs
+from polyslam_env.apps.jobs import Runner, run_jobs, succeeded
 from polyslam_env.core.blas import blas_threads
 from polyslam_env.core.config import Config
 from polyslam_env.core.errors import ConfigError
@@ -181,7 +181,7 @@ def _job(job: tuple[MblccReproduceConfig, int, int | None]) -> RunMetrics:
 
 def reproduce(
     config: MblccReproduceConfig,
-    workers: int = 2,
+    workers: int | Runner = 2,
     progress: Callable[[int], None] | None = None,
 ) -> tuple[list[RunMetrics], dict[int, list[RunMetrics]]]:
     """The table's runs (seeds 0..runs−1) and Fig 5's runs per particle count, in parallel."""
@@ -191,12 +191,12 @@ def reproduce(
     ]
     sweep = [p for p in config.fig5_particles if p != n]
     jobs += [(config, s, p) for p in sweep for s in range(config.fig5_runs)]
-    results = run_jobs(_job, jobs, workers, progress)
-    table_runs = results[: config.runs]
-    by_n = {n: table_runs[: config.fig5_runs]} if n in config.fig5_particles else {}
+    results = run_jobs(_job, jobs, workers, progress, seed_of=lambda job: job[1])
+    table_runs = succeeded(results[: config.runs])
+    by_n = {n: succeeded(results[: config.fig5_runs])} if n in config.fig5_particles else {}
     for k, p in enumerate(sweep):
         start = config.runs + k * config.fig5_runs
-        by_n[p] = results[start : start + config.fig5_runs]
+        by_n[p] = succeeded(results[start : start + config.fig5_runs])
     return table_runs, dict(sorted(by_n.items()))
 
 

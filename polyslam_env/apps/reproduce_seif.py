@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from polyslam_env.apps.jobs import run_jobs
+from polyslam_env.apps.jobs import Runner, run_jobs, succeeded
 from polyslam_env.apps.reproduce_mblcc import matched_filter_config
 from polyslam_env.core.blas import blas_threads
 from polyslam_env.core.config import Config
@@ -167,11 +167,11 @@ def _job(job: tuple[SeifReproduceConfig, int]) -> dict[str, Any]:
 
 def reproduce(
     config: SeifReproduceConfig,
-    workers: int = 2,
+    workers: int | Runner = 2,
     progress: Callable[[int], None] | None = None,
 ) -> list[dict[str, Any]]:
     jobs = [(config, s) for s in range(config.runs)]
-    return run_jobs(_job, jobs, workers, progress)
+    return succeeded(run_jobs(_job, jobs, workers, progress, seed_of=lambda job: job[1]))
 
 
 def summarise(config: SeifReproduceConfig, runs: list[dict[str, Any]]) -> dict[str, Any]:

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from policies.base import TeamPolicy, make_team
+from polyslam_env.core.jit import compile_seconds
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import PolySlamParallelEnv, parallel_env
 from polyslam_env.metrics.episode import meaningful
@@ -20,11 +21,14 @@ from polyslam_env.metrics.episode import meaningful
 __all__ = [
     "COMPARED",
     "EpisodeResult",
+    "EvaluateJob",
     "compare",
     "episode_row",
     "evaluate_episode",
+    "evaluate_job",
     "run_episode",
     "summarise",
+    "warm_up",
 ]
 
 
@@ -48,6 +52,11 @@ class EpisodeResult:
         }
 
 
+def policy_rng(seed: int) -> np.random.Generator:
+    """The policies' random stream of episode ``seed``, separate from the env's."""
+    return np.random.default_rng([seed, 1])
+
+
 def run_episode(
     env: PolySlamParallelEnv,
     team: TeamPolicy,
@@ -60,7 +69,7 @@ def run_episode(
     """
     observations, _ = env.reset(seed=seed)
     team.reset(seed)
-    rng = np.random.default_rng([seed, 1])
+    rng = policy_rng(seed)
     state = env.episode
     assert state is not None  # made by reset
     coverage = [float(state.coverage.coverage)]
@@ -81,6 +90,31 @@ def run_episode(
     return EpisodeResult(seed, state.step_count, ordered, team_info, coverage)
 
 
+def warm_up(
+    env: PolySlamParallelEnv,
+    team: TeamPolicy,
+    seed: int,
+    steps: int,
+    on_step: Callable[[], None] | None = None,
+) -> float:
+    """Play the first ``steps`` steps of the seeded episode (fewer if it ends sooner), untimed,
+    so that the compiled kernels they use are compiled or loaded from numba's disk cache
+    before a timed run of the same episode; returns the seconds that took
+    (:func:`~polyslam_env.core.jit.compile_seconds`). The env and the team are reset again by
+    :func:`run_episode`, so the timed episode is the same, bit for bit."""
+    before = compile_seconds()
+    observations, _ = env.reset(seed=seed)
+    team.reset(seed)
+    rng = policy_rng(seed)
+    for _ in range(steps):
+        if not env.agents:
+            break
+        observations, *_ = env.step(team.act(observations, rng))
+        if on_step is not None:
+            on_step()
+    return compile_seconds() - before
+
+
 def evaluate_episode(
     config: Mapping[str, Any],
     policy: str,
@@ -99,6 +133,16 @@ def evaluate_episode(
         return result
     finally:
         env.close()
+
+
+#: An evaluation job: the env config (a dict), the policy's name and keyword arguments, seed.
+EvaluateJob = tuple[Mapping[str, Any], str, Mapping[str, Any], int]
+
+
+def evaluate_job(job: EvaluateJob) -> EpisodeResult:
+    """:func:`evaluate_episode` of one job (what :func:`~polyslam_env.apps.jobs.run_jobs`
+    runs, in a worker or as a Ray task)."""
+    return evaluate_episode(*job)
 
 
 def _spread(values: list[float]) -> dict[str, float]:

@@ -8,7 +8,14 @@ import io
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from polyslam_env.cli.common import check_output_file, fmt, progress_bar
+from polyslam_env.cli.common import (
+    RESULTS_LOG,
+    add_study_arguments,
+    check_output_file,
+    fmt,
+    report_failed,
+    study_runner,
+)
 from polyslam_env.cli.run import add_env_arguments, env_config, explain_choices, policy_kwargs
 
 if TYPE_CHECKING:
@@ -29,7 +36,12 @@ def register(sub: Any) -> None:
     )
     add_env_arguments(parser)
     parser.add_argument("--episodes", type=int, default=4, help="number of episodes (default 4)")
-    parser.add_argument("--workers", type=int, help="processes (default: min(2, episodes))")
+    add_study_arguments(parser, "min(2, episodes)")
+    parser.add_argument(
+        "--out",
+        help=f"keep the study in this folder: {RESULTS_LOG} (each finished episode, for"
+        " --resume) and summary.json (as --json)",
+    )
     parser.add_argument("--json", help="write all results (per episode + summary) here")
     parser.add_argument("--csv", help="write one row per robot per episode here")
     parser.add_argument("--plot", help="write the team coverage-over-time plot (PNG) here")
@@ -38,11 +50,9 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from concurrent.futures import ProcessPoolExecutor
-
     from policies.base import make_team
-    from polyslam_env.apps.rollout import evaluate_episode, summarise
-    from polyslam_env.core.io import write_json
+    from polyslam_env.apps.jobs import run_jobs, succeeded
+    from polyslam_env.apps.rollout import evaluate_job, summarise
     from polyslam_env.environment.parallel import parallel_env
 
     for flag in ("json", "csv", "plot"):
@@ -57,23 +67,18 @@ def run(args: argparse.Namespace) -> int:
     explain_choices(args, cfg)
     probe.close()
     seeds = [args.seed + k for k in range(args.episodes)]
-    workers = args.workers or min(2, args.episodes)
+    runner = study_runner(args, args.out, min(2, args.episodes), "evaluate")
     config = cfg.to_dict()
-    results: list[EpisodeResult] = []
-    bar = progress_bar(len(seeds), "evaluate", "ep", args.quiet)
-    with bar, ProcessPoolExecutor(max_workers=workers) as pool:
-        jobs = [pool.submit(evaluate_episode, config, args.policy, kwargs, s) for s in seeds]
-        for job in jobs:
-            results.append(job.result())
-            bar.update(1)
+    jobs = [(config, args.policy, kwargs, s) for s in seeds]
+    results = succeeded(run_jobs(evaluate_job, jobs, runner, seed_of=lambda job: job[3]))
     summary = summarise(results)
     print(f"policy {args.policy!r}, map {cfg.map!r}, {len(seeds)} episodes, seeds {seeds[0]}..")
     print(format_summary(summary))
-    written = []
-    if args.json:
-        meta = {"policy": args.policy, "map": cfg.map, "seeds": seeds, "config": config}
-        episodes = [r.to_dict() for r in results]
-        written.append(write_json(args.json, {**meta, "summary": summary, "episodes": episodes}))
+    report_failed(runner)
+    meta = {"policy": args.policy, "map": cfg.map, "seeds": seeds, "config": config}
+    episodes = [r.to_dict() for r in results]
+    data = {**meta, "summary": summary, "episodes": episodes, "failed": runner.failed}
+    written = _write_json(args, data)
     if args.csv:
         written.append(write_csv(args.csv, results))
     if args.plot:
@@ -92,14 +97,20 @@ def _policy_names(text: str) -> list[str]:
     return names
 
 
+def _write_json(args: argparse.Namespace, data: dict[str, Any]) -> list[Path]:
+    """``data`` to ``--json`` and to ``OUT/summary.json``, as asked; the files written."""
+    from polyslam_env.core.io import write_json
+
+    paths = [Path(p) for p in (args.json, args.out and Path(args.out) / "summary.json") if p]
+    return [write_json(path, data) for path in paths]
+
+
 def run_many(args: argparse.Namespace) -> int:
     """``--policy a,b,...``: every policy on the same seeds and map, compared in one table."""
-    from concurrent.futures import ProcessPoolExecutor
-
     from policies.base import make_team, policy_factory
-    from polyslam_env.apps.rollout import compare, evaluate_episode, summarise
+    from polyslam_env.apps.jobs import run_jobs
+    from polyslam_env.apps.rollout import compare, evaluate_job, summarise
     from polyslam_env.core.errors import PolyslamError
-    from polyslam_env.core.io import write_json
     from polyslam_env.environment.parallel import parallel_env
 
     names = _policy_names(args.policy)
@@ -123,36 +134,30 @@ def run_many(args: argparse.Namespace) -> int:
         probe.close()
         explain_choices(each[name], configs[name])
     seeds = [args.seed + k for k in range(args.episodes)]
-    jobs_total = len(names) * len(seeds)
-    workers = args.workers or min(2, jobs_total)
+    runner = study_runner(args, args.out, min(2, len(names) * len(seeds)), "evaluate")
     dicts = {name: cfg.to_dict() for name, cfg in configs.items()}
+    jobs = [(dicts[name], name, kwargs[name], s) for name in names for s in seeds]
     results: dict[str, list[EpisodeResult]] = {name: [] for name in names}
-    bar = progress_bar(jobs_total, "evaluate", "ep", args.quiet)
-    with bar, ProcessPoolExecutor(max_workers=workers) as pool:
-        jobs = [
-            (name, pool.submit(evaluate_episode, dicts[name], name, kwargs[name], s))
-            for name in names
-            for s in seeds
-        ]
-        for name, job in jobs:
-            results[name].append(job.result())
-            bar.update(1)
+    done = run_jobs(evaluate_job, jobs, runner, seed_of=lambda job: job[3])
+    for job, result in zip(jobs, done, strict=True):
+        if result is not None:
+            results[job[1]].append(result)
     table = compare(results)
     the_map = configs[names[0]].map
     print(f"map {the_map!r}, {len(seeds)} episodes per policy, seeds {seeds[0]}..{seeds[-1]}")
     print(format_comparison(table))
-    written = []
-    if args.json:
-        data = {
-            "policies": names,
-            "map": the_map,
-            "seeds": seeds,
-            "configs": dicts,
-            "comparison": table,
-            "summary": {n: summarise(results[n]) for n in names},
-            "episodes": {n: [r.to_dict() for r in results[n]] for n in names},
-        }
-        written.append(write_json(args.json, data))
+    report_failed(runner)
+    data = {
+        "policies": names,
+        "map": the_map,
+        "seeds": seeds,
+        "configs": dicts,
+        "comparison": table,
+        "summary": {n: summarise(results[n]) for n in names},
+        "episodes": {n: [r.to_dict() for r in results[n]] for n in names},
+        "failed": runner.failed,
+    }
+    written = _write_json(args, data)
     if args.csv:
         written.append(write_csv(args.csv, [(n, r) for n in names for r in results[n]]))
     if args.plot:

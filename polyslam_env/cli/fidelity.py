@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from polyslam_env.cli.common import RESULTS_LOG, add_study_arguments
+
 
 def register(sub: Any) -> None:
     parser = sub.add_parser(
@@ -17,7 +19,8 @@ def register(sub: Any) -> None:
         " table per map (per robot nu_mean, map_precision, completeness_seen, duplicates,"
         " NEES; team coverage) with the issue's targets checked; write OUT/summary.json and"
         " OUT/table.md, and per map and setting a picture of the map of the robot of lowest"
-        " map_precision.",
+        f" map_precision. Each finished episode goes to OUT/{RESULTS_LOG} (--resume goes on"
+        " from it); --address runs the episodes on a Ray cluster.",
     )
     parser.add_argument(
         "--maps",
@@ -56,7 +59,7 @@ def register(sub: Any) -> None:
         help="run --steps on fixed maps too; by default a built-in map or map file runs"
         " --steps per 300 m² of its free area (at least --steps, rounded up to 100)",
     )
-    parser.add_argument("--workers", type=int, default=1, help="processes (default: 1)")
+    add_study_arguments(parser, "1")
     parser.add_argument("--out", default="out/fidelity", help="output folder (out/fidelity)")
     parser.add_argument(
         "--no-pictures",
@@ -80,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         run_fidelity,
         worst_robots,
     )
-    from polyslam_env.cli.common import check_output_folder, progress_bar
+    from polyslam_env.cli.common import progress_bar, report_failed, study_runner, where_text
     from polyslam_env.core.io import write_atomic, write_json
 
     maps = tuple(name.strip() for name in args.maps.split(","))
@@ -95,15 +98,17 @@ def run(args: argparse.Namespace) -> int:
         policy_set=tuple(args.policy_set),
         area_budget=not args.fixed_steps,
     )
-    out = check_output_folder(args.out, "--out")
+    runner = study_runner(args, args.out, 1, "fidelity")
+    out = args.out
     total = len(maps) * len(SETTINGS) * args.seeds
-    with progress_bar(total, "fidelity", "ep", args.quiet) as bar:
-        summary = run_fidelity(config, workers=args.workers, progress=lambda _: bar.update(1))
+    summary = run_fidelity(config, workers=runner)
+    summary["failed"] = runner.failed
     text = markdown(summary)
     print(text)
+    report_failed(runner)
     print(
-        f"{total} episodes in {summary['elapsed_s']:.0f} s; all checks passed: "
-        f"{'yes' if summary['passed'] else 'NO'}"
+        f"{total} episodes in {summary['elapsed_s']:.0f} s, {where_text(runner)}; all checks"
+        f" passed: {'yes' if summary['passed'] else 'NO'}"
     )
     json_path = write_json(Path(out) / "summary.json", summary)
     md_path = write_atomic(Path(out) / "table.md", text + "\n")

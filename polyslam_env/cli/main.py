@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from polyslam_env.cli import COMMANDS
-from polyslam_env.core.errors import PolyslamError
+from polyslam_env.core.errors import Interrupted, PolyslamError
 
 #: Optional dependencies and how to get them (the extras in pyproject.toml).
 EXTRAS = {
@@ -59,6 +59,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(f"polyslam: error: {args.command} needs {root}: {EXTRAS[root]}", file=sys.stderr)
         return 2
+    except Interrupted as stop:
+        print(f"polyslam: {stop}", file=sys.stderr)
+        return stop.code
     except KeyboardInterrupt:
         print("polyslam: interrupted", file=sys.stderr)
         return 130

@@ -16,6 +16,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+from polyslam_env.cli.common import (
+    RESULTS_LOG,
+    add_study_arguments,
+    report_failed,
+    study_runner,
+    where_text,
+)
+
 FRACTION = "r3_multi_beats_single_fraction_of_runs"
 
 
@@ -30,7 +38,9 @@ def register(sub: Any) -> None:
         " cars; print its Table 1 next to the seed's; write summary.json and fig5_armse.png."
         " alignment: seed 004's four map aligners on two robots' growing FastSLAM maps;"
         " print errors per method and stage; write summary.json and figs3-5/fig6 pictures."
-        " seif: seed 001's SEIF fusion of one run cut into 8 pieces; write summary.json.",
+        " seif: seed 001's SEIF fusion of one run cut into 8 pieces; write summary.json."
+        f" Each finished run goes to OUT/{RESULTS_LOG} (--resume goes on from it);"
+        " --address runs them on a Ray cluster.",
     )
     parser.add_argument(
         "--paper",
@@ -45,7 +55,7 @@ def register(sub: Any) -> None:
         help="number of runs (default: 100; mblcc 50; alignment and seif 10)",
     )
     parser.add_argument("--out", default="out/reproduce", help="output folder")
-    parser.add_argument("--workers", type=int, default=2, help="parallel processes (default: 2)")
+    add_study_arguments(parser, "2")
     parser.add_argument(
         "--config",
         help="a YAML file like configs/paper.yaml (mblcc: MblccReproduceConfig's fields,"
@@ -73,25 +83,23 @@ def run(args: argparse.Namespace) -> int:
         table_rows,
         write_csv,
     )
-    from polyslam_env.cli.common import progress_bar
     from polyslam_env.core.io import write_json
 
     config = ReproduceConfig.from_yaml(args.config) if args.config else default_config()
     if args.runs is not None:
         config = config.replace(runs=args.runs)
     out = Path(args.out)
+    runner = study_runner(args, out, 2, "reproduce", "run")
     start = time.perf_counter()
-    with progress_bar(config.runs, "reproduce", "run", args.quiet, leave=False) as bar:
-        runs = reproduce(config, workers=args.workers, progress=lambda n: bar.update(1), keep=(0,))
+    runs = reproduce(config, workers=runner)  # the log keeps plain data: figures run again
     elapsed = time.perf_counter() - start
     summary = summarise(runs)
-    summary["elapsed_s"] = elapsed
-    summary["workers"] = args.workers
+    _stamp(summary, elapsed, runner)
 
     rows = table_rows(summary)
     head = ["metric", "r1", "r2", "r3", "paper r1 / r2 / r3"]
     widths = [max(len(str(r[i])) for r in [head, *rows]) for i in range(len(head))]
-    print(f"{config.runs} runs, {config.map!r} map, {elapsed:.0f} s, {args.workers} workers")
+    print(f"{config.runs} runs, {config.map!r} map, {elapsed:.0f} s, {where_text(runner)}")
     for row in [head, *rows]:
         print("  ".join(str(c).ljust(w) for c, w in zip(row, widths, strict=True)))
     single = summary["r3_single"]["completeness"]
@@ -104,14 +112,12 @@ def run(args: argparse.Namespace) -> int:
     if summary["bytes_per_message"]:
         b = summary["bytes_per_message"]
         print(f"bytes per message: {b['mean']:.0f} (min {b['min']:.0f}, max {b['max']:.0f})")
-    for name, ok in summary["checks"].items():
-        if isinstance(ok, bool):
-            print(f"check {name}: {'yes' if ok else 'NO'}")
+    _print_checks(summary["checks"])
+    report_failed(runner)
 
     write_json(out / "summary.json", summary)
     write_csv(out / "table.csv", summary)
-    figure_run = runs[0] if runs[0].result is not None else run_one(config, seed=0, keep=True)
-    figures = plot_figures(figure_run, out)
+    figures = plot_figures(run_one(config, seed=0, keep=True), out)
     print(f"wrote {out / 'summary.json'}, {out / 'table.csv'}, " + ", ".join(map(str, figures)))
     return 0
 
@@ -122,10 +128,16 @@ def _study_config(cls: Any, args: argparse.Namespace) -> Any:
     return config if args.runs is None else config.replace(runs=args.runs)
 
 
-def _finish(summary: dict[str, Any], config: Any, elapsed: float, workers: int) -> None:
-    """Stamp a study's summary with its run settings."""
+def _stamp(summary: dict[str, Any], elapsed: float, runner: Any) -> None:
+    """Stamp a study's summary with its wall time, where it ran and the runs that failed."""
     summary["elapsed_s"] = elapsed
-    summary["workers"] = workers
+    summary.update(runner.settings())
+    summary["failed"] = runner.failed
+
+
+def _finish(summary: dict[str, Any], config: Any, elapsed: float, runner: Any) -> None:
+    """Stamp a seed study's summary with its run settings."""
+    _stamp(summary, elapsed, runner)
     summary["config"] = config.to_dict()
 
 
@@ -144,24 +156,24 @@ def run_mblcc(args: argparse.Namespace) -> int:
         summarise,
         table_text,
     )
-    from polyslam_env.cli.common import progress_bar
     from polyslam_env.core.io import write_json
 
     config = _study_config(MblccReproduceConfig, args)
     out = Path(args.out)
+    runner = study_runner(args, out, 2, "reproduce mblcc", "run")
     start = time.perf_counter()
     sweep = [n for n in config.fig5_particles if n != config.slam.particles]
     total = config.runs + len(sweep) * config.fig5_runs
-    with progress_bar(total, "reproduce mblcc", "run", args.quiet, leave=False) as bar:
-        runs, by_n = reproduce(config, workers=args.workers, progress=lambda n: bar.update(1))
+    runs, by_n = reproduce(config, workers=runner)
     elapsed = time.perf_counter() - start
     summary = summarise(runs, by_n)
-    _finish(summary, config, elapsed, args.workers)
+    _finish(summary, config, elapsed, runner)
 
     print(f"{config.runs} runs (+ {total - config.runs} for Fig 5), {elapsed:.0f} s,")
-    print(f"{args.workers} workers; mean ± std over runs, seed's Table 1 mean alongside")
+    print(f"{where_text(runner)}; mean ± std over runs, seed's Table 1 mean alongside")
     print(table_text(summary))
     _print_checks(summary["checks"])
+    report_failed(runner)
     print("paired differences (mean ± standard error over runs), r1 / r2 / r3:")
     for metric, pairs in summary["paired"].items():
         for pair, cells in pairs.items():
@@ -183,21 +195,21 @@ def run_alignment(args: argparse.Namespace) -> int:
         summarise,
         table_text,
     )
-    from polyslam_env.cli.common import progress_bar
     from polyslam_env.core.io import write_json
 
     config = _study_config(AlignmentReproduceConfig, args)
     out = Path(args.out)
+    runner = study_runner(args, out, 2, "reproduce alignment", "run")
     start = time.perf_counter()
-    with progress_bar(config.runs, "reproduce alignment", "run", args.quiet, leave=False) as bar:
-        records = reproduce(config, workers=args.workers, progress=lambda _: bar.update(1))
+    records = reproduce(config, workers=runner)
     elapsed = time.perf_counter() - start
     summary = summarise(config, records)
-    _finish(summary, config, elapsed, args.workers)
-    print(f"{config.runs} runs, {elapsed:.0f} s, {args.workers} workers; errors of the")
+    _finish(summary, config, elapsed, runner)
+    print(f"{config.runs} runs, {elapsed:.0f} s, {where_text(runner)}; errors of the")
     print("accepted alignments against the true transform between the start frames")
     print(table_text(summary))
     _print_checks(summary["checks"])
+    report_failed(runner)
     write_json(out / "summary.json", summary)
     figures = [
         plot_errors(summary, out / "figs3-5_errors.png"),
@@ -215,20 +227,20 @@ def run_seif(args: argparse.Namespace) -> int:
         summarise,
         table_text,
     )
-    from polyslam_env.cli.common import progress_bar
     from polyslam_env.core.io import write_json
 
     config = _study_config(SeifReproduceConfig, args)
     out = Path(args.out)
+    runner = study_runner(args, out, 2, "reproduce seif", "run")
     start = time.perf_counter()
-    with progress_bar(config.runs, "reproduce seif", "run", args.quiet, leave=False) as bar:
-        runs = reproduce(config, workers=args.workers, progress=lambda _: bar.update(1))
+    runs = reproduce(config, workers=runner)
     elapsed = time.perf_counter() - start
     summary = summarise(config, runs)
-    _finish(summary, config, elapsed, args.workers)
-    print(f"{config.runs} runs of {config.pieces} pieces, {elapsed:.0f} s, {args.workers} workers")
+    _finish(summary, config, elapsed, runner)
+    print(f"{config.runs} runs of {config.pieces} pieces, {elapsed:.0f} s, {where_text(runner)}")
     print(table_text(summary))
     _print_checks(summary["checks"])
+    report_failed(runner)
     write_json(out / "summary.json", summary)
     print(f"wrote {out / 'summary.json'}")
     return 0

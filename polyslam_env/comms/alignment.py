@@ -92,8 +92,8 @@ def refine_transform(
     solution is not unique: the same refinement started from t0 ± :data:`RESTART_SIGMAS` σ
     along each principal axis of Σ_T ends further from it than the χ²₃ 99 % quantile in its
     posterior's metric (a second basin, as in repeating shelf rows, where a transform refined
-    1.6 m and 5° off the truth with a posterior σ of 3 cm was accepted: README "Active loop
-    closing")."""
+    1.6 m and 5° off the truth with a posterior σ of 3 cm was accepted; docs/design/exchange.md
+    says why this is an option)."""
     t0 = np.asarray(t0, dtype=float)
     cov_t = np.asarray(cov_t, dtype=float)
     args = (chains, walls, sigma, iterations, chain_var, wall_var)

@@ -79,7 +79,7 @@ class ChannelConfig(Config):
     # With align_maps, refuse a refinement that started again from ±2σ of the camera's
     # estimate ends elsewhere (two basins: repeating shelf rows, comms/alignment.py). An
     # option: it also refuses some right refinements, and on the loop the exchange then
-    # no longer raises completeness (README "Active loop closing")
+    # no longer raises completeness (docs/design/exchange.md)
     align_restarts: bool = False
     # How robots meet and find the transform between their frames:
     # "rendezvous" (the paper): a mutual camera sighting within ``range``; the camera's range
@@ -110,7 +110,7 @@ class ChannelConfig(Config):
     # walls (m) within 0.1 m of the receiver's own: about two sides of a room, walls in two
     # directions, so that the transform is fixed in all three coordinates.
     min_agreement: float = 5.0
-    aligner: str = "ransac"
+    aligner: str = "ransac"  # alignment mode: ransac, svd, icp or imp_icp (slam/alignment/)
     # Fewest supports of an accepted alignment: 6 correspondences leave 2·6 − 3 = 9 degrees of
     # freedom for the covariance the refinement estimates from its residuals; the aligners'
     # own chance test (a wrong transform's supports at probability 1e-6) raises it on dense

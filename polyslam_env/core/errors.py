@@ -23,3 +23,13 @@ class OutputError(PolyslamError, ValueError):
 
 class DisplayError(PolyslamError, RuntimeError):
     """No window can be opened for ``render_mode="human"`` (e.g. a headless machine)."""
+
+
+class Interrupted(Exception):
+    """A long run stopped by SIGTERM or Ctrl-C after keeping what it had; the message says
+    what was kept and how to go on, ``code`` is the exit status (143 for SIGTERM, 130 for
+    Ctrl-C, as a shell reports a process those signals ended)."""
+
+    def __init__(self, message: str, code: int) -> None:
+        super().__init__(message)
+        self.code = code

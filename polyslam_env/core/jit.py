@@ -8,19 +8,26 @@ one place.
 The cache lives next to the source (``__pycache__``) when that folder is writable, otherwise in
 numba's per-user cache folder. When neither is writable (a read-only install under a read-only
 home), it goes to a per-user folder under the system temp directory.
+
+:func:`compile_seconds` is the wall time this process has spent so far making kernels ready:
+compiling them, or loading them from that cache, on first use of each argument types. A caller
+that times work doing its first calls (``polyslam run``'s ``slam_time_ms``) reads it before and
+after to tell that one-off cost apart.
 """
 
 from __future__ import annotations
 
+import functools
 import inspect
 import os
 import tempfile
+import time
 from collections.abc import Callable
 from typing import Any, TypeVar, cast
 
 import numba
 
-__all__ = ["fallback_cache_dir", "njit"]
+__all__ = ["compile_seconds", "fallback_cache_dir", "njit"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -31,16 +38,57 @@ def fallback_cache_dir() -> str:
     return os.path.join(tempfile.gettempdir(), f"polyslam-numba-{user}")
 
 
+class _CompileClock:
+    """Seconds spent in the kernels' ``compile`` (a compile, or a load from the disk cache),
+    counted once when one kernel's compile compiles the kernels it calls."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+        self.depth = 0
+
+    def timed(self, compile_fn: Callable[..., Any]) -> Callable[..., Any]:
+        @functools.wraps(compile_fn)
+        def compile_timed(*args: Any, **kwargs: Any) -> Any:
+            self.depth += 1
+            start = time.perf_counter()
+            try:
+                return compile_fn(*args, **kwargs)
+            finally:
+                self.depth -= 1
+                if self.depth == 0:
+                    self.seconds += time.perf_counter() - start
+
+        return compile_timed
+
+
+_CLOCK = _CompileClock()
+
+
+def compile_seconds() -> float:
+    """Wall seconds this process has spent so far compiling kernels made by :func:`njit` or
+    loading them from numba's disk cache (each kernel, each new argument types, once)."""
+    return _CLOCK.seconds
+
+
 def njit(fn: F) -> F:
     """Compile ``fn`` with numba (nopython, cached on disk, no fastmath).
 
     A function with no source file (defined in ``exec``'d text) cannot be cached; it is compiled
-    once per process instead.
+    once per process instead. The time its compiles (and cache loads) take is counted in
+    :func:`compile_seconds`.
     """
     if not os.path.isfile(inspect.getfile(fn)):
-        return cast(F, numba.njit(cache=False)(fn))
+        return cast(F, _clocked(numba.njit(cache=False)(fn)))
     try:
-        return cast(F, numba.njit(cache=True)(fn))
+        return cast(F, _clocked(numba.njit(cache=True)(fn)))
     except RuntimeError:  # no writable cache folder next to the source or in the user's home
         numba.config.CACHE_DIR = fallback_cache_dir()  # type: ignore[attr-defined]
-        return cast(F, numba.njit(cache=True)(fn))
+        return cast(F, _clocked(numba.njit(cache=True)(fn)))
+
+
+def _clocked(dispatcher: Any) -> Any:
+    """``dispatcher`` with its ``compile`` timed by the process's clock. numba calls
+    ``self.compile`` for every new argument types, from a Python call or from another kernel's
+    typing, and it loads from the disk cache inside it, so this sees both."""
+    dispatcher.compile = _CLOCK.timed(dispatcher.compile)
+    return dispatcher

@@ -95,7 +95,7 @@ class ObservationConfig(Config):
     :meth:`position_scale`.
     """
 
-    mode: Literal["vector", "grid"] = "vector"
+    mode: Literal["vector", "grid"] = "vector"  # a flat vector, or image channels + vector
     grid_size: int = 11  # G: local egocentric grid is G × G cells
     grid_resolution: float = 0.2  # m per local grid cell
     belief_size: float | None = None  # m, side of each robot's own grid around its start
@@ -163,7 +163,7 @@ def _size(map_size: tuple[float, float]) -> str:
 class ActionConfig(Config):
     """Continuous (v, ω) in physical units, or an index into a table of (v, ω) fractions."""
 
-    mode: Literal["continuous", "discrete"] = "continuous"
+    mode: Literal["continuous", "discrete"] = "continuous"  # (v, ω) in m/s, rad/s, or an index
     discrete: tuple[tuple[float, float], ...] = DEFAULT_DISCRETE  # fractions of (v_max, ω_max)
 
     def validate(self) -> None:
@@ -191,9 +191,9 @@ class FaultConfig(Config):
       (true motion = scale × odometry).
     """
 
-    kind: Literal["fail", "kidnap", "slip"] = "fail"
-    robot: int = 0
-    step: int = 1
+    kind: Literal["fail", "kidnap", "slip"] = "fail"  # what happens (see the class docstring)
+    robot: int = 0  # which robot, 0-based
+    step: int = 1  # env step (1-based) it happens in (slip: the first slipping step)
     distance: float = 0.0  # m, kidnap only
     angle: float = 0.0  # rad, kidnap only
     scale: float = 1.0  # slip only: true motion / reported motion, in (0, 1]
@@ -229,7 +229,7 @@ class EnvConfig(Config):
 
     map: str = "paper"  # built-in name, path to a YAML map, or "generator:<name>" (GENERATORS)
     map_params: Any = None  # mapping of generator parameters (generator maps only)
-    num_robots: int = 3
+    num_robots: int = 3  # robots in the team, 1..64 (the map needs a start pose for each)
     max_steps: int = 500  # truncation
     world: WorldConfig = field(default_factory=WorldConfig)
     slam: SlamConfig = field(default_factory=SlamConfig)

@@ -258,9 +258,13 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         return public_facts(self.config, self._map_size)
 
     def observation_space(self, agent: str) -> spaces.Space[Any]:
+        """``agent``'s observation space (the class docstring's Observations; the same for
+        every robot); an unknown agent raises ``KeyError`` naming the agents."""
         return self._observation_spaces[self._check_agent(agent)]
 
     def action_space(self, agent: str) -> spaces.Space[Any]:
+        """``agent``'s action space: ``Box`` of (v, ω) in m/s and rad/s, or ``Discrete`` with
+        ``action__mode="discrete"``; an unknown agent raises ``KeyError``."""
         return self._action_spaces[self._check_agent(agent)]
 
     def _check_agent(self, agent: str) -> str:
@@ -466,6 +470,7 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         )
 
     def close(self) -> None:
+        """Close the render window, if any (calling it again does nothing)."""
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None

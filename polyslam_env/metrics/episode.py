@@ -30,7 +30,9 @@ from polyslam_env.world.layout import Layout
 
 __all__ = [
     "COMMS_METRICS",
+    "FLAG_KEYS",
     "MAP_METRIC_KEYS",
+    "METRIC_UNITS",
     "ROBOT_METRIC_KEYS",
     "RobotHistory",
     "RobotRun",
@@ -76,6 +78,36 @@ ROBOT_METRIC_KEYS: tuple[str, ...] = (
     "collisions",
     "path_length",
 )
+#: The unit of each end-of-episode metric ("" for a pure number: a NEES, a fraction or a count).
+METRIC_UNITS: dict[str, str] = {
+    "nees": "",
+    "nees_rel": "",
+    "start_nees": "",
+    "nees_paper": "m², rad²",
+    "nu": "m",
+    "nu_mean": "m",
+    "nu_mean_abs": "m",
+    "completeness": "",
+    "completeness_seen": "",
+    "map_precision": "",
+    "duplicates": "",
+    "pose_error": "m",
+    "landmark_error": "m",
+    "landmarks": "",
+    "coverage": "",
+    "bytes_sent": "B",
+    "bytes_received": "B",
+    "rendezvous": "",
+    "alignments_attempted": "",
+    "alignments_accepted": "",
+    "alignments_wrong": "",
+    "slam_time_ms": "ms",
+    "collisions": "",
+    "path_length": "m",
+}
+#: Metrics that are 0/1 flags saying which other metrics mean something (``has_map``,
+#: ``has_landmarks``, ``slam``): tables show the metrics, not the flags.
+FLAG_KEYS: tuple[str, ...] = ("has_map", "has_landmarks", "slam")
 #: The map-quality metrics (:func:`map_metrics`), in order.
 MAP_METRIC_KEYS: tuple[str, ...] = (
     "nu",

@@ -14,6 +14,7 @@ import numpy as np
 
 from polyslam_env import metrics
 from polyslam_env.core.geometry import transform_points
+from polyslam_env.core.names import robot_name
 from polyslam_env.world.layout import Layout
 
 if TYPE_CHECKING:
@@ -121,7 +122,7 @@ def plot_runs(
             continue
         draw_layout(ax, layout)
         draw_robot_map(ax, runs[i])
-        ax.set_title(titles[i] if titles else f"robot r{i + 1}", fontsize=10)
+        ax.set_title(titles[i] if titles else robot_name(i), fontsize=10)
         ax.tick_params(labelsize=7)
     fig.suptitle(
         "green: mapped polynomials · red: true walls · blue: true path · dashed red: estimate",

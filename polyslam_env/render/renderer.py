@@ -26,6 +26,7 @@ import numpy as np
 
 from polyslam_env.core.errors import DisplayError, OutputError
 from polyslam_env.core.io import ordinary_permissions
+from polyslam_env.core.names import robot_name
 from polyslam_env.render.state import RenderState
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
@@ -415,7 +416,7 @@ class Renderer:
             if not np.isfinite([x, y]).all():
                 continue
             cx, cy = self.view(np.array([x, y]))
-            text = font.render(f"r{i}", True, _blend(self._color(i, state), OUTLINE, 0.3))
+            text = font.render(robot_name(i), True, _blend(self._color(i, state), OUTLINE, 0.3))
             frame.blit(text, (round(cx + offset), round(cy - offset - text.get_height() + 4)))
 
     def _draw_legend(
@@ -496,7 +497,7 @@ class LegendItem:
 def legend_items(num_robots: int, ellipse_label: str, failed: bool) -> list[LegendItem]:
     """The keys: robot colours, then what walls, maps, paths, ellipses and links look like."""
     c = ROBOT_COLORS[0]
-    items = [LegendItem("dot", robot_color(i), 0, f"r{i}") for i in range(num_robots)]
+    items = [LegendItem("dot", robot_color(i), 0, robot_name(i)) for i in range(num_robots)]
     items += [
         LegendItem("line", WALL, 2, "wall"),
         LegendItem("line", c, 5, "map"),

@@ -148,6 +148,7 @@ class PointSlamRobot:
 
     @property
     def pose_cov(self) -> np.ndarray:  # (3, 3)
+        """The pose's covariance in the robot's frame: the back-end's own plus J P0 Jᵀ."""
         return self.pose_cov_relative + start_error_cov(self.pose, self.p0)
 
     def _read_pose(self) -> None:

@@ -48,7 +48,7 @@ class PointBackendConfig(Config):
     # landmark whose χ²(2) distance is within this quantile, starts a new landmark when every
     # landmark is beyond ``new_landmark_prob``'s, and is dropped in between.
     gate_prob: float = 0.99
-    new_landmark_prob: float = 0.9999
+    new_landmark_prob: float = 0.9999  # χ²(2) quantile beyond which a reading starts a landmark
 
     def validate(self) -> None:
         if isinstance(self.particles, bool) or self.particles < 1:
@@ -106,7 +106,7 @@ class SlamConfig(Config):
     shape_rotation: str = "considered"
     # A merged landmark's turn α (with rotation states): "fit", the merged fit's direction as
     # a function of both pieces' c0s and turns plus the fit's residual scatter
-    # (fitting.turn_gradient; README "Merged walls' turns from their fits"); "weights", a
+    # (fitting.turn_gradient; docs/design/slam.md "Shapes, turns and walls"); "weights", a
     # length-weighted mean of the pieces' turns (their offsets' share left out: α comes out
     # underconfident, and the maps' own expected precision several times too pessimistic)
     merge_turn: str = "fit"
@@ -119,7 +119,7 @@ class SlamConfig(Config):
     end_sigma: float = 2.0
     # landmarks whose extent (along ξ, m) is shorter than this do not update the pose: a shape
     # fitted over a short stretch (a round pillar's arc as a line or a cubic) errs there more
-    # than its fit model says (README "Single robots over whole episodes"; the round columns'
+    # than its fit model says (docs/design/consistency.md; the round columns'
     # arcs are at most 0.24–0.4 m long); 0: every landmark (paper)
     min_update_extent: float = 0.3
     # beams in the update are at least this far apart in angle (degrees; 0: every beam; the
@@ -134,7 +134,7 @@ class SlamConfig(Config):
     # steps after a landmark is made (refit, merged) that its links are sought: by then the
     # beams have updated its c0, while a fresh fit hangs the hits of several steps on one pose
     # and states its offset relative to that pose too precisely (linked at once, the lone
-    # office robot's final NEES was 4.9 over 20 runs, above the band; README)
+    # office robot's final NEES was 4.9 over 20 runs, above the band; docs/design/slam.md)
     link_age: int = 10
     # m, how far a real wall may run from the straight line through its linked pieces (the
     # links' noise beyond the fits'): the generators' and YAML maps' walls are exactly straight,
@@ -233,7 +233,7 @@ class SlamConfig(Config):
 #: (``update_spacing_deg``; the paper's five are 45° apart); a point near two clusters joins
 #: them (``link_clusters``), so the sparse hits of beams sweeping a wall come together; and
 #: ε_Z is 15, not 10, because linked clusters grow fast and a shape fitted to more points
-#: carries a smaller frozen error (README "SLAM on large floor plans" has the measurements).
+#: carries a smaller frozen error (docs/results/fidelity.md has the measurements).
 PRESETS: dict[str, SlamConfig] = {
     "paper": SlamConfig(
         eps_z=10,

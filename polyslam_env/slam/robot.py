@@ -175,6 +175,7 @@ class PolySlam:
     # -- read-only views ------------------------------------------------------------------
     @property
     def pose(self) -> np.ndarray:  # (3,)
+        """The pose estimate (x, y, θ) in the robot's start frame (a copy)."""
         return self.mean[:3].copy()
 
     @property
@@ -196,6 +197,7 @@ class PolySlam:
 
     @property
     def n_landmarks(self) -> int:
+        """The number of landmarks (polynomials) in the map."""
         return len(self.table)
 
     @property

@@ -55,7 +55,7 @@ PAPER_BEAMS_DEG: tuple[float, ...] = (90.0, 45.0, 0.0, -45.0, -90.0)
 #: times for a landmark, and with nine a robot passing a room maps too little of what it sees.
 #: The EKF update uses every other beam (``slam.update_spacing_deg``): with all seventeen the
 #: error a landmark's shape gives every beam on it, repeated step after step, makes the filter
-#: overconfident (README "SLAM on large floor plans").
+#: overconfident (docs/design/slam.md, "The update").
 DEFAULT_BEAMS_DEG: tuple[float, ...] = tuple(90.0 - 11.25 * i for i in range(17))
 
 
@@ -63,7 +63,7 @@ DEFAULT_BEAMS_DEG: tuple[float, ...] = tuple(90.0 - 11.25 * i for i in range(17)
 class RangeSensorConfig(Config):
     """Range beams at fixed angles from the robot axis; no return is reported as ``inf``."""
 
-    angles_deg: tuple[float, ...] = DEFAULT_BEAMS_DEG
+    angles_deg: tuple[float, ...] = DEFAULT_BEAMS_DEG  # degrees from the axis: 17, +90° to −90°
     max_range: float = 2.0  # m
     sigma: float = 0.02  # m, Gaussian range noise
     hit_robots: bool = False  # whether beams also stop at other robots
@@ -108,7 +108,7 @@ class PillarSensorConfig(Config):
     noisy appearance descriptor (seed 003's point sensing, seed 004's descriptors). Off by
     default: the paper's robots have no such sensor."""
 
-    enabled: bool = False
+    enabled: bool = False  # the point back-ends and pillar alignment need it on
     max_range: float = 4.0  # m, to the pillar's centre
     fov_deg: float = 360.0  # full angle, centred on the robot axis
     sigma_range: float = 0.03  # m

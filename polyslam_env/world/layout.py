@@ -90,7 +90,8 @@ def points_in_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     px, py = points[..., 0, None], points[..., 1, None]
     x0, y0, x1, y1 = poly[:-1, 0], poly[:-1, 1], poly[1:, 0], poly[1:, 1]
     crosses = (y0 > py) != (y1 > py)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # a (nearly) horizontal edge gives ±inf or nan here; it crosses no point's row, so unused
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         x_at = x0 + (py - y0) * (x1 - x0) / (y1 - y0)
     inside = np.count_nonzero(crosses & (px < x_at), axis=-1) % 2 == 1
     return np.asarray(inside)

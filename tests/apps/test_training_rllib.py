@@ -1,21 +1,17 @@
 """``polyslam train --backend rllib``: RLlib PPO on a local Ray instance and on a cluster.
 
-The Ray tests need the ``ray`` extra and are skipped without it. They hold a file lock so
-that pytest-xdist never runs two at once: ``ray stop --force`` (the cluster test's teardown)
-stops every Ray process on the machine.
+The Ray tests need the ``ray`` extra and are skipped without it, and hold the lock of
+:mod:`tests.apps.ray_cluster`.
 """
 
 from __future__ import annotations
 
-import fcntl
 import json
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
-import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -24,12 +20,11 @@ from typing import Any
 import pytest
 import yaml
 
+from polyslam_env.apps.cluster import join_error
 from polyslam_env.apps.training import EPISODE_TAGS
-from polyslam_env.apps.training_rllib import _join_error, rllib_checkpoints
+from polyslam_env.apps.training_rllib import rllib_checkpoints
 from polyslam_env.cli.main import main
-
-NEEDS_RAY = "needs the [ray] extra: pip install 'polyslam[ray]'"
-HEAD_FLAGS = ("--disable-usage-stats", "--include-dashboard=false")
+from tests.apps import ray_cluster as cluster
 
 
 def _tiny_config(tmp_path: Path, **top: Any) -> Path:
@@ -51,53 +46,16 @@ def _tiny_config(tmp_path: Path, **top: Any) -> Path:
 
 @pytest.fixture
 def ray_lock() -> Iterator[None]:
-    """Ray installed, and no other Ray test running (see the module docstring)."""
-    pytest.importorskip("ray", reason=NEEDS_RAY)
-    with open(Path(tempfile.gettempdir()) / "polyslam-ray-tests.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _ray_cli() -> str:
-    here = Path(sys.executable).with_name("ray")
-    found = str(here) if here.exists() else shutil.which("ray")
-    if found is None:
-        pytest.skip("the `ray` command is not on PATH")
-    return found
+    """Ray installed, and no other Ray test running (see :mod:`tests.apps.ray_cluster`)."""
+    with cluster.ray_lock():
+        yield
 
 
 @pytest.fixture
 def ray_head(ray_lock: None, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
     """A separate Ray head node (`ray start --head`) on a free port; always stopped."""
-    monkeypatch.delenv("RAY_ADDRESS", raising=False)
-    # Ray ≥ 2.5x: `ray start` turns token authentication on when ~/.ray/auth_token exists
-    # (any earlier local ray.init() writes one), and a driver given an explicit address does
-    # not, unless RAY_AUTH_MODE says so (the mismatch's one-line error:
-    # test_join_error__names_the_token_fix). The head inherits this process's mode: the one
-    # an earlier local ray.init() here set (token, kept: this process's Ray caches it), else
-    # none for both.
-    if os.environ.get("RAY_AUTH_MODE") is None:
-        monkeypatch.setenv("RAY_AUTH_MODE", "disabled")
-    ray, port = _ray_cli(), _free_port()
-    try:
-        subprocess.run(
-            [ray, "start", "--head", f"--port={port}", "--num-cpus=2", *HEAD_FLAGS],
-            check=True,
-            capture_output=True,
-            timeout=120,
-        )
-        yield f"127.0.0.1:{port}"
-    finally:
-        subprocess.run([ray, "stop", "--force"], capture_output=True, timeout=120)
+    with cluster.ray_head(monkeypatch) as address:
+        yield address
 
 
 def test_missing_ray__one_line_error_naming_the_extra(
@@ -252,9 +210,9 @@ def test_join_error__names_the_token_fix() -> None:
         except RuntimeError as cause:
             raise ConnectionError("Failed to connect to Ray cluster at 10.0.0.1:6379") from cause
     except ConnectionError as err:
-        text = _join_error("10.0.0.1:6379", err)
+        text = join_error("10.0.0.1:6379", err)
     assert "\n" not in text and "RAY_AUTH_MODE=token" in text and "10.0.0.1:6379" in text
-    other = _join_error("h:1", ConnectionError("Could not find any running Ray instance.\nmore"))
+    other = join_error("h:1", ConnectionError("Could not find any running Ray instance.\nmore"))
     assert other == (
         "--address h:1: could not join the Ray cluster: Could not find any running Ray instance."
     )

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -208,7 +209,7 @@ def test_run__tables_name_robots_as_the_env_does(
 ) -> None:
     assert main(["run", *QUICK, "--robots", "2", "--out", str(tmp_path)]) == 0
     header = capsys.readouterr().out.splitlines()[1]
-    assert header.split() == ["robot_0", "robot_1"]
+    assert header.split() == ["unit", "robot_0", "robot_1"]
 
 
 def test_evaluate__comma_list_compares_policies_on_the_same_seeds(
@@ -280,3 +281,50 @@ def test_evaluate__bad_comma_list_exits_2_with_one_line(
     assert main(["evaluate", "--policy", policies, "--episodes", "1", "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert needle in err and len(err.splitlines()) == 1
+
+
+def test_run__table_shows_what_applies_grouped_json_keeps_all(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from polyslam_env.metrics.episode import ROBOT_METRIC_KEYS
+
+    assert main(["run", *QUICK, "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    rows = [line.split()[0] for line in printed.splitlines() if line.startswith("  ")]
+    for absent in ("has_map", "has_landmarks", "slam", "landmark_error", "alignments_wrong"):
+        assert absent not in rows  # the polynomial back-end at camera rendezvous
+    lines = printed.splitlines()
+    assert [ln for ln in lines if ln in ("pose", "map", "exchange", "cost")] == [
+        "pose",
+        "map",
+        "exchange",
+        "cost",
+    ]
+    nees = next(i for i, ln in enumerate(lines) if ln.startswith("  nees (with start draw)"))
+    assert lines[nees + 1].startswith("  nees_rel")  # beside it
+    assert "nees carries each robot's start draw" in printed
+    data = json.loads((tmp_path / "metrics.json").read_text())
+    assert set(ROBOT_METRIC_KEYS) <= set(data["robots"]["robot_0"])  # JSON keeps every metric
+    assert data["kernels"]["warmup_steps"] == 2  # QUICK's 2 steps: the warm-up plays them all
+    assert "kernels first used later in the episode" in printed
+
+
+def test_run__warm_up_leaves_the_timed_episode_as_it_was() -> None:
+    # The warm-up plays the same seeded episode's first steps; the timed episode must be the
+    # one a run without warm-up plays, bit for bit (SLAM wall times aside).
+    from policies.base import make_team
+    from polyslam_env.apps.rollout import run_episode, warm_up
+    from polyslam_env.environment.parallel import parallel_env
+
+    def episode(warm: int) -> dict[str, Any]:
+        env = parallel_env(map="two_rooms", num_robots=2, max_steps=15)
+        team = make_team("frontier", env)
+        if warm:
+            warm_up(env, team, 4, warm)
+        result = run_episode(env, team, 4)
+        env.close()
+        for metrics in result.robots.values():
+            metrics.pop("slam_time_ms")
+        return result.to_dict()
+
+    assert episode(8) == episode(0)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.stats import nbinom
 
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered
 from polyslam_env.core.errors import ConfigError
@@ -30,13 +31,22 @@ def _run_until_empty(channel: Channel, start: int, limit: int = 500) -> list[Del
     return out
 
 
-def test_channel__lossy_in_view_delivers_every_message_exactly_once() -> None:
+#: 40 seeds × 12 messages, every one delivered in the end. Each attempt is lost with the
+#: configured probability p, independently, so the lost attempts before the 480 deliveries are
+#: negative binomial NB(480, 1 − p): at p = 0.5 mean 480, sd 31. The two-sided band holds
+#: 99.9 % of it.
+SEEDS, MESSAGES, LOSS, ALPHA = 40, 12, 0.5, 1e-3
+
+
+def _lost_attempts(loss_prob: float) -> int:
+    """Lost attempts over SEEDS channels of MESSAGES messages at ``loss_prob``; checks on the way
+    that each message is delivered exactly once and the counters add up."""
     total_lost = 0
-    for seed in range(40):
+    for seed in range(SEEDS):
         rng = np.random.default_rng(seed)
-        channel = Channel(ChannelConfig(loss_prob=0.5), np.random.default_rng(1000 + seed))
+        channel = Channel(ChannelConfig(loss_prob=loss_prob), np.random.default_rng(1000 + seed))
         sent = {}
-        for i in range(12):
+        for i in range(MESSAGES):
             sender, receiver = i % 3, (i + 1) % 3
             payload = _payload(rng, int(rng.integers(1, 300)))
             sent[channel.send(sender, receiver, payload, step=0)] = (sender, receiver, payload)
@@ -47,11 +57,35 @@ def test_channel__lossy_in_view_delivers_every_message_exactly_once() -> None:
         totals = channel.totals()
         assert totals.attempts == totals.messages_delivered + totals.messages_lost
         assert totals.bytes_sent == totals.bytes_received + totals.bytes_lost
-        assert totals.messages_delivered == totals.messages_received == 12
+        assert totals.messages_delivered == totals.messages_received == MESSAGES
         assert sum(d.attempts for d in got) == totals.attempts
         total_lost += totals.messages_lost
-    # 40 seeds × 12 messages at loss 0.5 expect ~480 lost attempts; 300 is > 10σ below.
-    assert total_lost > 300
+    return total_lost
+
+
+def _loss_band(loss_prob: float) -> tuple[int, int]:
+    """The central 1 − ALPHA of NB(SEEDS · MESSAGES, 1 − loss_prob)."""
+    n = SEEDS * MESSAGES
+    q = 1.0 - loss_prob
+    return int(nbinom.ppf(ALPHA / 2, n, q)), int(nbinom.isf(ALPHA / 2, n, q))
+
+
+def test_channel__lossy_in_view_delivers_every_message_exactly_once_at_the_loss_rate() -> None:
+    lo, hi = _loss_band(LOSS)  # 383 … 587
+    lost = _lost_attempts(LOSS)
+    assert lo <= lost <= hi, f"{lost} lost attempts at loss {LOSS}: outside [{lo}, {hi}]"
+
+
+def test_channel__a_channel_losing_too_much_or_too_little_fails_the_loss_band() -> None:
+    """Mutants: channels that lose 0.7 or 0.4 of the attempts when asked for 0.5. The band
+    catches them with probability 1 − 5e-25 and 0.995 (NB(480, 0.3) and NB(480, 0.6) outside
+    it; 0.6 and 0.45 would be caught with probability 0.9995 and 0.36); the one-sided check it
+    replaces, more than 300 lost, passed both."""
+    lo, hi = _loss_band(LOSS)
+    for mutant in (0.7, 0.4):
+        lost = _lost_attempts(mutant)
+        assert not lo <= lost <= hi, (mutant, lost)
+        assert lost > 300  # the old check passed it
 
 
 def test_channel__lost_attempt_retried_next_step_not_same_step() -> None:

@@ -143,3 +143,30 @@ def test_njit__read_only_install_caches_in_a_temp_folder(
     assert second == {"value": 3.0, "hits": 1, "misses": 0, "cache_dir": expected}
     assert list(Path(expected).rglob("*.nbi")), "no numba index file in the fallback folder"
     assert not list(site.rglob("*.nbi")) and not list(home.rglob("*"))  # nothing written there
+
+
+def test_compile_seconds__counts_a_kernels_first_compile_once() -> None:
+    # A kernel compiled in this process (exec'd: never in the disk cache): its first call's
+    # compile is counted, a second call with the same types adds nothing, and a kernel
+    # compiled while typing another (a nested compile) is counted once, not twice.
+    import time
+
+    from polyslam_env.core.jit import compile_seconds
+
+    scope: dict[str, object] = {"njit": njit}
+    exec(
+        "@njit\ndef inner(x):\n    return x + 1.5\n\n"
+        "@njit\ndef outer(x):\n    return inner(x) * 2.0\n",
+        scope,
+    )
+    outer = scope["outer"]
+    before = compile_seconds()
+    start = time.perf_counter()
+    assert outer(1.0) == 5.0  # type: ignore[operator]
+    first_call = time.perf_counter() - start
+    counted = compile_seconds() - before
+    assert 0.0 < counted <= first_call  # nested: counted once, within the call's wall time
+    assert counted > 0.5 * first_call  # the first call is mostly compiling
+    again = compile_seconds()
+    assert outer(2.0) == 7.0  # type: ignore[operator]
+    assert compile_seconds() == again

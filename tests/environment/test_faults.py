@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
-import scipy.special
 
 import polyslam_env
 from polyslam_env import parallel_env
@@ -12,12 +13,9 @@ from polyslam_env.core.geometry import between, wrap_remainder
 from polyslam_env.environment.config import EnvConfig, FaultConfig
 from polyslam_env.environment.parallel import PolySlamParallelEnv
 from polyslam_env.slam.config import SlamConfig
+from tests.stats import standard_normal_failures
 
 SMALL = {"map": "two_rooms", "num_robots": 2, "coverage_target": None, "channel": None}
-
-
-def _chi2_quantile(dof: int, prob: float) -> float:
-    return float(scipy.special.chdtri(dof, 1.0 - prob))
 
 
 def _offsets(env: PolySlamParallelEnv) -> np.ndarray:  # (N, 3)
@@ -27,20 +25,39 @@ def _offsets(env: PolySlamParallelEnv) -> np.ndarray:  # (N, 3)
     return between(state.start_poses, state.world.poses, wrap_remainder)
 
 
-def test_initial_error__offsets_are_distributed_as_p0() -> None:
-    """n = 2 × 150 offsets whitened with P0's Cholesky factor, z = L⁻¹e, are N(0, I) if the
-    draw is right: n‖z̄‖² ~ χ²(3) and Σ z_k² ~ χ²(n) per axis (the diagonal of the Wishart
-    scatter matrix). Each check at the 0.1 % / 99.9 % quantiles, seven checks: a correct draw
-    fails with probability < 1 %. (The redraws near walls would bias this; two_rooms' starts
-    are ≥ 0.3 m from walls, 6 σ of P0's 5 cm.)"""
+@functools.cache  # shared by the test and its mutants (read only)
+def _whitened_offsets(seeds: int) -> np.ndarray:  # (2 · seeds, 3)
+    """The two robots' drawn offsets over ``seeds`` resets, whitened with P0's Cholesky factor:
+    z = L⁻¹e, N(0, I) if the draw is right."""
     env = parallel_env(**SMALL)
-    e = np.concatenate([(env.reset(seed=s), _offsets(env))[1] for s in range(150)])  # (n, 3)
-    n = len(e)
-    z = np.linalg.solve(np.linalg.cholesky(SlamConfig().p0), e.T).T  # (n, 3)
-    assert n * float(z.mean(axis=0) @ z.mean(axis=0)) < _chi2_quantile(3, 0.999)
-    lo, hi = _chi2_quantile(n, 0.001), _chi2_quantile(n, 0.999)
-    for axis, s in enumerate((z * z).sum(axis=0).tolist()):
-        assert lo < s < hi, f"axis {axis}: Σz² = {s:.1f} outside χ²({n}) band [{lo:.1f}, {hi:.1f}]"
+    e = np.concatenate([(env.reset(seed=s), _offsets(env))[1] for s in range(seeds)])  # (n, 3)
+    return np.linalg.solve(np.linalg.cholesky(SlamConfig().p0), e.T).T
+
+
+def test_initial_error__offsets_are_distributed_as_p0() -> None:
+    """n = 2 × 150 whitened offsets: their mean, each axis's variance and their correlations
+    (the Wishart scatter's Bartlett pieces, ``tests.stats.standard_normal_failures``), each at
+    the 0.1 % tails: a correct draw fails one of the 8 checks with probability < 1 %. (The
+    redraws near walls would bias this; two_rooms' starts are ≥ 0.3 m from walls, 6 σ of P0's
+    5 cm.)"""
+    assert standard_normal_failures(_whitened_offsets(150)) == []
+
+
+def test_initial_error__correlated_offsets_fail_the_p0_checks() -> None:
+    """Mutants of the same 300 draws: x and y fully correlated (y := x, each axis still N(0, 1):
+    the mean and per-axis checks alone, the test before, pass it), and correlated by ρ = 0.5
+    (y := ρx + √(1 − ρ²)y). The correlation check rejects a ρ of 0.5 at n = 300 with probability
+    > 0.999 and of 0.3 with 0.92 (Bartlett's R₀₁ = ρ‖z₀‖ + √(1 − ρ²) N(0, 1) ≈ ρ√n against
+    χ²(3)'s 0.1 % tail, 16.3; 2·10⁴ Wishart draws)."""
+    z = _whitened_offsets(150)
+    full = z.copy()
+    full[:, 1] = full[:, 0]
+    failures = standard_normal_failures(full)
+    # only the correlation check fails it: the mean and per-axis checks (the test before) pass
+    assert failures and all(f.startswith("correlation") for f in failures), failures
+    half = z.copy()
+    half[:, 1] = 0.5 * z[:, 0] + np.sqrt(0.75) * z[:, 1]
+    assert any(f.startswith("correlation") for f in standard_normal_failures(half))
 
 
 def test_initial_error__off_starts_exactly_at_the_frame_origin() -> None:

@@ -10,7 +10,13 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, parallel_seed_test
+from pettingzoo.test import (
+    api_test,
+    max_cycles_test,
+    parallel_api_test,
+    parallel_seed_test,
+    seed_test,
+)
 
 import polyslam_env
 from polyslam_env.environment.parallel import REWARD_TERMS, PolySlamParallelEnv, parallel_env
@@ -101,6 +107,14 @@ def test_env__aec_version_passes_api_test(overrides: dict[str, Any]) -> None:
 @pytest.mark.parametrize("overrides", [VARIANTS[0], VARIANTS[2]])
 def test_env__passes_parallel_seed_test(overrides: dict[str, Any]) -> None:
     parallel_seed_test(lambda: parallel_env(max_steps=50, **overrides), num_cycles=50)
+
+
+@pytest.mark.parametrize("overrides", [VARIANTS[0], VARIANTS[2]])
+def test_env__aec_version_passes_seed_test(overrides: dict[str, Any]) -> None:
+    """PettingZoo's AEC ``seed_test(env_constructor, num_cycles)``: two envs reset with the
+    same seed, stepped with the same seeded actions, agree on every agent, observation,
+    reward, end and info."""
+    seed_test(lambda: polyslam_env.env(max_steps=50, **overrides), num_cycles=50)
 
 
 def test_env__passes_max_cycles_test() -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import types
+
 import numpy as np
 import pytest
 
@@ -116,3 +118,42 @@ def test_simulate__step_numbers_are_one_based_like_the_env() -> None:
     messages = result.meta["exchange"]
     assert messages
     assert all(1 <= m["sent_step"] <= m["delivered_step"] <= result.steps for m in messages)
+
+
+def _se2(pose: np.ndarray) -> np.ndarray:  # (3, 3)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    return np.array([[c, -s, pose[0]], [s, c, pose[1]], [0.0, 0.0, 1.0]])
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_true_transform__is_the_senders_true_start_seen_from_the_receivers(seed: int) -> None:
+    """``stages._true_transform``, the truth of every ``alignments_wrong`` count, against an
+    independent computation: with M(x) the homogeneous matrix of pose x and s_i robot i's true
+    start (where its SLAM's frame is), the transform of the sender's frame into the receiver's
+    is M(s_r)⁻¹ M(s_s), and it carries a world point's coordinates in the sender's frame to its
+    coordinates in the receiver's. Real episode states with the start offset on, so the true
+    starts are not the nominal frames (a transform between the nominal frames, or the inverse
+    one, misses by the 5 cm / 1° offsets, far beyond rounding)."""
+    env = parallel_env(map="generator:rooms", num_robots=3, initial_error=True)
+    env.reset(seed=seed)
+    state = env.episode
+    assert state is not None
+    starts = state.world.poses  # (3, 3): the true starts, before any step
+    point = np.array([1.3, -0.4, 1.0])  # a world point, homogeneous
+    for sender, receiver in ((0, 1), (2, 0), (1, 2)):
+        attempt = types.SimpleNamespace(sender=sender, receiver=receiver)
+        got = stages._true_transform(state, attempt)  # type: ignore[arg-type]
+        m = np.linalg.solve(_se2(starts[receiver]), _se2(starts[sender]))
+        want = np.array([m[0, 2], m[1, 2], np.arctan2(m[1, 0], m[0, 0])])
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)  # rounding of unit-scale trig
+        in_sender = np.linalg.solve(_se2(starts[sender]), point)
+        in_receiver = np.linalg.solve(_se2(starts[receiver]), point)
+        np.testing.assert_allclose(_se2(got) @ in_sender, in_receiver, rtol=0, atol=1e-12)
+        # the mutants, nominal frames instead of true starts and the inverse transform, fail the
+        # first check
+        frames = state.start_poses
+        nominal = np.linalg.solve(_se2(frames[receiver]), _se2(frames[sender]))
+        assert np.abs(nominal[:2, 2] - want[:2]).max() > 1e-12
+        swapped = types.SimpleNamespace(sender=receiver, receiver=sender)
+        inverse = stages._true_transform(state, swapped)  # type: ignore[arg-type]
+        assert np.abs(inverse - want).max() > 1e-12

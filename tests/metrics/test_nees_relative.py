@@ -11,6 +11,7 @@ from polyslam_env.metrics.episode import RobotRun, nees_relative, start_nees
 from polyslam_env.metrics.pose import nees_band
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.ekf import start_error_cov
+from tests.stats import standard_normal_failures
 
 
 def test_nees_relative__is_the_mean_nees_against_the_filters_own_covariance() -> None:
@@ -53,14 +54,27 @@ def test_start_nees__is_the_start_offset_against_p0() -> None:
 
 def test_start_nees__of_the_envs_start_draws_is_chi2_3() -> None:
     """The env draws each true start from P0 and the metric reads it back against P0: over 40
-    seeded one-step episodes of 3 robots the mean of the 120 values lies in the 99 % band of
-    a mean of 120 χ²(3) values (a redraw where a robot does not fit is rare: 5 cm starts with
-    clearance to spare)."""
+    seeded one-step episodes of 3 robots each value is e₀ᵀP0⁻¹e₀ of that robot's drawn offset
+    (to rounding), the 120 offsets whitened by P0 pass the mean, per-axis and correlation checks
+    of ``tests.stats.standard_normal_failures`` (offsets with x and y correlated have the same
+    χ²(3) mean, so the mean alone could not see them; the correlation check catches full
+    correlation at n = 120 with probability ≈ 1: R₀₁² ≈ 120 against χ²(3)'s 0.1 % tail 16.3), and
+    their mean lies in the 99 % band of a mean of 120 χ²(3) values (a redraw where a robot does
+    not fit is rare: 5 cm starts with clearance to spare)."""
+    p0 = SlamConfig().p0
+    chol = np.linalg.cholesky(p0)
     env = polyslam_env.parallel_env(map="generator:office_floor", num_robots=3, max_steps=1)
-    values = []
+    values, whitened = [], []
     for seed in range(40):
         env.reset(seed=seed)
+        state = env.unwrapped.episode
+        e0 = between(state.start_poses, state.world.poses, wrap_remainder)  # (3, 3)
         _, _, _, _, infos = env.step({a: env.action_space(a).sample() * 0 for a in env.agents})
-        values += [infos[a]["metrics"]["start_nees"] for a in infos]
+        got = [infos[a]["metrics"]["start_nees"] for a in infos]
+        want = [float(e @ np.linalg.solve(p0, e)) for e in e0]
+        np.testing.assert_allclose(got, want, rtol=1e-12)  # a 3 × 3 solve's rounding
+        values += got
+        whitened.append(np.linalg.solve(chol, e0.T).T)
+    assert standard_normal_failures(np.concatenate(whitened)) == []
     lo, hi = nees_band(3, len(values), 0.99)
     assert lo <= np.mean(values) <= hi

@@ -307,3 +307,12 @@ def test_save_video__mp4_through_imageio(tmp_path: Path) -> None:
     path = save_video(frames, tmp_path / "clip.mp4", fps=4)
     back = imageio.mimread(path)
     assert len(back) == 4 and back[0].shape == (32, 48, 3)
+
+
+def test_legend__names_robots_as_the_env_does() -> None:
+    from polyslam_env.environment.parallel import parallel_env
+    from polyslam_env.render.renderer import legend_items
+
+    env = parallel_env(map="two_rooms", num_robots=3)
+    dots = [item.label for item in legend_items(3, "2σ ellipse", False) if item.kind == "dot"]
+    assert dots == env.possible_agents == ["robot_0", "robot_1", "robot_2"]

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 from polyslam_env.slam.association import (
     GAP_SPLIT,
@@ -61,15 +62,25 @@ poly_strategy = st.builds(
 )
 
 
+def _xy(n: int, reach: float) -> st.SearchStrategy[np.ndarray]:
+    """n points (n, 2) in the square ±``reach``."""
+    return hnp.arrays(np.float64, (n, 2), elements=st.floats(-reach, reach))
+
+
+#: offsets c0 of up to 8 landmarks (a test uses the first len(polys))
+c0_strategy = hnp.arrays(np.float64, 8, elements=st.floats(-3.0, 3.0))
+
+
 @settings(max_examples=40, deadline=None)
 @given(
     polys=st.lists(poly_strategy, min_size=1, max_size=4),
-    seed=st.integers(0, 2**32 - 1),
+    pts=_xy(15, 4.0),
+    offsets=c0_strategy,
 )
-def test_approximation_error__matches_brute_force(polys: list[Polynomial], seed: int) -> None:
-    rng = np.random.default_rng(seed)
-    pts = rng.uniform(-4.0, 4.0, (15, 2))
-    c0s = list(rng.normal(0.0, 1.0, len(polys)))
+def test_approximation_error__matches_brute_force(
+    polys: list[Polynomial], pts: np.ndarray, offsets: np.ndarray
+) -> None:
+    c0s = list(offsets[: len(polys)])
     err = approximation_error(pts, polys, c0s)
     ref = brute_force_error(pts, polys, c0s)
     np.testing.assert_allclose(err, ref, rtol=1e-10, atol=1e-10)  # same formula, round-off only
@@ -88,19 +99,19 @@ def landmark_arrays(polys: list[Polynomial]) -> LandmarkTable:
 @settings(max_examples=60, deadline=None)
 @given(
     polys=st.lists(poly_strategy, min_size=1, max_size=8),
-    seed=st.integers(0, 2**32 - 1),
+    hits=_xy(5, 3.0),
+    offsets=c0_strategy,
     squared=st.booleans(),
 )
 def test_associate__box_candidates_classify_like_the_whole_map(
-    polys: list[Polynomial], seed: int, squared: bool
+    polys: list[Polynomial], hits: np.ndarray, offsets: np.ndarray, squared: bool
 ) -> None:
     # PolySlam hands associate only the landmarks whose box lies within σ_k of the points'
     # box; every point must land in the same case (good / bad / cluster) with the same p*.
-    rng = np.random.default_rng(seed)
     arrays = landmark_arrays(polys)
-    c0s = rng.normal(0.0, 1.0, len(polys))
+    c0s = offsets[: len(polys)].copy()
     rho, sigma = (0.04, 0.3) if not squared else (0.0016, 0.09)
-    pts = [point(rng.uniform(-3.0, 3.0, 2), beam=b) for b in range(5)]
+    pts = [point(hits[b], beam=b) for b in range(5)]
     xy = np.array([q.xy for q in pts])
     box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
     reach = np.sqrt(sigma) if squared else sigma
@@ -122,16 +133,15 @@ def test_associate__box_candidates_classify_like_the_whole_map(
 @settings(max_examples=60, deadline=None)
 @given(
     polys=st.lists(poly_strategy, min_size=1, max_size=5),
-    seed=st.integers(0, 2**32 - 1),
+    pts=_xy(6, 4.0),
+    offsets=c0_strategy,
     squared=st.booleans(),
 )
 def test_nearest_by_error__is_the_argmin_of_approximation_error(
-    polys: list[Polynomial], seed: int, squared: bool
+    polys: list[Polynomial], pts: np.ndarray, offsets: np.ndarray, squared: bool
 ) -> None:
-    rng = np.random.default_rng(seed)
     arrays = landmark_arrays(polys)
-    pts = rng.uniform(-4.0, 4.0, (6, 2))
-    c0s = rng.normal(0.0, 1.0, len(polys))
+    c0s = offsets[: len(polys)].copy()
     err = approximation_error(pts, arrays.packed(), c0s, squared)
     got = nearest_by_error(
         pts.tolist(), list(range(len(polys))), arrays.rows(), c0s.tolist(), squared

@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
-import pytest
 
 from polyslam_env import metrics
 from polyslam_env.apps.simulate import simulate, wall_follow_controller
 from polyslam_env.core.seeding import make_rngs
+from polyslam_env.metrics.episode import RobotRun
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.maps import load_map
 from polyslam_env.world.physics import World
+from tests.stats import log_chi2_mean_band, log_mean, weighted_chi2_band
 
 
 def _assert_symmetric_psd(cov: np.ndarray) -> None:
@@ -43,15 +46,9 @@ def test_step__covariance_symmetric_psd_and_state_consistent_over_long_run() -> 
 
 
 def test_map__wall_following_on_curved_cave__accurate_and_complete() -> None:
-    """Wall following on the curved cave map, 5 seeds, 200 steps.
-
-    Bounds: nu_mean ≤ 0.04 m per run and ≤ 0.035 m on average (the issue's 0.03 m target is
-    for the paper map; the cave bends tighter, and a cubic over a cluster of 0.35 m radius
-    leaves ~1 cm more there; measured mean 0.031 m); completeness ≥ 0.55 × the boundary the
-    beams actually hit in every run and ≥ 0.65 × on average (measured 0.61–0.81, mean 0.70:
-    on tight bends clusters whose cubic misses ρ_k are refused and wait for more points,
-    and stretches seen by fewer than ε_Z beams stay unmapped).
-    """
+    """Wall following on the curved cave map, 5 seeds, 200 steps: the issue's targets, stated
+    for the paper map as means over seeds, hold on the cave's bends too: mean nu_mean ≤ 0.03 m
+    and mean completeness ≥ 0.8 × the boundary the beams actually hit."""
     ratios, errors = [], []
     for seed in range(5):
         result = simulate("cave", num_robots=1, steps=200, seed=seed)
@@ -59,10 +56,8 @@ def test_map__wall_following_on_curved_cave__accurate_and_complete() -> None:
         errors.append(m["nu_mean"])
         ratios.append(m["completeness"] / m["hit_fraction"])
         assert m["landmarks"] >= 5
-    assert max(errors) <= 0.04, errors
-    assert np.mean(errors) <= 0.035, errors
-    assert min(ratios) >= 0.55, ratios
-    assert np.mean(ratios) >= 0.65, ratios
+    assert np.mean(errors) <= 0.03, errors
+    assert np.mean(ratios) >= 0.8, ratios
 
 
 def test_map__paper_paths__meet_the_issue_targets() -> None:
@@ -82,25 +77,59 @@ def test_map__paper_paths__meet_the_issue_targets() -> None:
     assert all(m["collisions"] == 0 for r in runs for m in r)
 
 
+#: Runs of the two_rooms NEES tests, fixed from the power: the log-mean band of 30 final NEES
+#: at α = 1 % rejects a filter reporting half its covariance with probability 0.93
+#: (``tests.stats.log_chi2_mean_power``).
+NEES_RUNS = 30
+
+
+@functools.cache
+def _two_rooms_runs() -> tuple[RobotRun, ...]:
+    """One robot on two_rooms, 120 steps, start offset drawn from P0, seeds 0 … NEES_RUNS − 1."""
+    return tuple(
+        simulate("two_rooms", num_robots=1, steps=120, seed=seed, initial_error=True).runs[0]
+        for seed in range(NEES_RUNS)
+    )
+
+
+def _final(run: RobotRun) -> tuple[float, float]:
+    """The last step's NEES eᵀP⁻¹e and the paper's index eᵀPe (absolute frame)."""
+    args = (run.true_poses[-1:], run.est_poses[-1:], run.est_covs[-1:], run.start_pose)
+    return float(metrics.nees_series(*args)[0]), float(metrics.nees_paper_series(*args)[0])
+
+
 def test_nees__straight_walls_with_initial_error__consistent_over_seeds() -> None:
-    """Standard NEES over 20 seeded runs when the start offset is drawn from P0.
+    """NEES_RUNS seeded runs with the start offset drawn from P0. The final step's NEES is
+    χ²(3) for a consistent filter: the mean of its log lies in the exact 99 % band
+    (``tests.stats``), and the mutant reporting half the covariance (every NEES doubled) falls
+    outside it. The issue's own target, the time-averaged NEES within a factor 2 of 3
+    (1.5 … 6), still holds for the mean over runs; it was the whole test before, and the
+    mutant (mean doubled, 5.6 here) passed it."""
+    runs = _two_rooms_runs()
+    final = np.array([_final(run)[0] for run in runs])
+    lo, hi = log_chi2_mean_band(3, NEES_RUNS, 0.01)
+    assert lo <= log_mean(final) <= hi, (log_mean(final), lo, hi, final)
+    assert not lo <= log_mean(2.0 * final) <= hi  # the mutant is caught
+    averaged = [metrics.nees(r.true_poses, r.est_poses, r.est_covs, r.start_pose) for r in runs]
+    assert 1.5 <= float(np.mean(averaged)) <= 6.0, averaged
 
-    A consistent filter gives 3; the issue asks for a factor of 2 (1.5 … 6). The per-run
-    NEES is a time average of correlated terms, so the band is checked on the mean over runs.
-    """
-    values = [
-        simulate("two_rooms", num_robots=1, steps=120, seed=seed, initial_error=True).metrics()[0][
-            "nees"
-        ]
-        for seed in range(20)
-    ]
-    assert 1.5 <= float(np.mean(values)) <= 6.0, values
 
-
-def test_nees_paper__is_tiny_like_the_papers_table() -> None:
-    """eᵀPe (P, not P⁻¹, as printed) is ~1e-6 for cm errors and P ~ (5 cm)²: Table 1's order."""
-    m = simulate("two_rooms", num_robots=1, steps=100, seed=0).metrics()[0]
-    assert 1e-9 < m["nees_paper"] < 1e-4
+def test_nees_paper__is_its_generalised_chi2_over_seeds() -> None:
+    """The paper's index eᵀPe (P, not P⁻¹, as printed: ~1e-6 for cm errors and P ~ (5 cm)²,
+    Table 1's order). For a consistent filter e ~ N(0, P) at a step, so eᵀPe = Σ λ_i² w_i² with
+    λ_i the eigenvalues of P and w_i ~ N(0, 1): summed over the NEES_RUNS runs' last steps it
+    lies in the exact 99 % band of that weighted χ² (``tests.stats.weighted_chi2_band``). The
+    mutant reporting half the covariance halves the sum and quarters its weights: it falls out
+    here, though this test's power against it is only 0.48 (from the same weights: the sum is
+    dominated by a few position eigenvalues; the NEES test above is the sharp one). Before:
+    1e-9 < nees_paper < 1e-4, five decades, which the mutant passed."""
+    runs = _two_rooms_runs()
+    total = sum(_final(run)[1] for run in runs)
+    weights = np.concatenate([np.linalg.eigvalsh(run.est_covs[-1]) ** 2 for run in runs])
+    lo, hi = weighted_chi2_band(weights, 0.01)
+    assert lo <= total <= hi, (total, lo, hi)
+    lo_m, hi_m = weighted_chi2_band(weights / 4.0, 0.01)
+    assert not lo_m <= total / 2.0 <= hi_m  # the mutant is caught
 
 
 def test_divergence__covariance_beyond_k_p0_is_flagged_not_silent() -> None:
@@ -143,4 +172,11 @@ def test_step__rejects_nothing_silently_on_no_returns() -> None:
         info = slam.step(np.array([0.05, 0.0, 0.01]), np.full(3, np.inf))
         assert info.beams_used == 0 and info.n_landmarks == 0
     assert np.all(np.isfinite(slam.mean))
-    assert slam.pose[0] == pytest.approx(20 * 0.05, rel=0.1)
+    # prediction only: the pose is the 20 odometry increments composed, computed here with
+    # rotation matrices (rounding of 20 compositions of unit-scale values)
+    pose = np.eye(3)
+    for _ in range(20):
+        c, s = np.cos(0.01), np.sin(0.01)
+        pose = pose @ np.array([[c, -s, 0.05], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    want = [pose[0, 2], pose[1, 2], np.arctan2(pose[1, 0], pose[0, 0])]
+    np.testing.assert_allclose(slam.pose, want, rtol=0, atol=1e-12)

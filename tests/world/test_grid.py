@@ -51,29 +51,38 @@ def test_free_space_grid__matches_brute_force(
     assert np.array_equal(grid.mask, _brute_force(layout, grid, inflate))
 
 
+def _points(n: int, lo: tuple[float, float], hi: tuple[float, float]) -> st.SearchStrategy:
+    """n points (n, 2) with x in [lo[0], hi[0]] and y in [lo[1], hi[1]]."""
+    xy = st.tuples(st.floats(lo[0], hi[0]), st.floats(lo[1], hi[1]))
+    return st.lists(xy, min_size=n, max_size=n).map(np.array)
+
+
 @settings(max_examples=30, deadline=None)
 @given(
-    seed=st.integers(0, 2**32 - 1),
+    ends=_points(8, (0.2, 0.2), (3.8, 2.8)),
+    centres=_points(2, (0.5, 0.5), (3.5, 2.5)),
     resolution=st.floats(0.02, 0.2),
     inflate=st.floats(0.0, 0.5),
 )
 def test_free_space_grid__random_walls_match_brute_force(
-    seed: int, resolution: float, inflate: float
+    ends: np.ndarray, centres: np.ndarray, resolution: float, inflate: float
 ) -> None:
-    rng = np.random.default_rng(seed)
-    inner = [rng.uniform([0.2, 0.2], [3.8, 2.8], size=(2, 2)) for _ in range(4)]
-    pillars = np.column_stack([rng.uniform([0.5, 0.5], [3.5, 2.5], size=(2, 2)), [0.1, 0.2]])
+    inner = [ends[2 * k : 2 * k + 2] for k in range(4)]  # four straight walls
+    pillars = np.column_stack([centres, [0.1, 0.2]])
     layout = Layout("random", walls=(BOX, *inner), pillars=pillars)
     grid = free_space_grid(layout, resolution, inflate)
     assert np.array_equal(grid.mask, _brute_force(layout, grid, inflate))
 
 
 @settings(max_examples=30, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 40))
-def test_polygon_mask__matches_points_in_polygon(seed: int, n: int) -> None:
-    rng = np.random.default_rng(seed)
-    angles = np.sort(rng.uniform(0, 2 * np.pi, n))
-    radii = rng.uniform(0.3, 1.5, n)
+@given(
+    vertices=st.lists(
+        st.tuples(st.floats(0.0, 2 * np.pi), st.floats(0.3, 1.5)), min_size=3, max_size=40
+    )
+)
+def test_polygon_mask__matches_points_in_polygon(vertices: list[tuple[float, float]]) -> None:
+    """A star-shaped polygon: vertices (angle, radius) about the origin, in angle order."""
+    angles, radii = np.array(sorted(vertices)).T
     poly = np.column_stack([radii * np.cos(angles), radii * np.sin(angles)])
     poly = np.vstack([poly, poly[:1]])
     xs, ys = np.linspace(-1.6, 1.6, 57), np.linspace(-1.6, 1.6, 43)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.world.config import CameraConfig, RangeSensorConfig, WorldConfig
@@ -51,14 +52,22 @@ def brute_ray(
     return best if best <= max_range else math.inf
 
 
+def _floats(shape: tuple[int, ...], lo: float, hi: float) -> st.SearchStrategy[np.ndarray]:
+    return hnp.arrays(np.float64, shape, elements=st.floats(lo, hi))
+
+
 @settings(max_examples=30, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), n_rays=st.integers(1, 20), n_seg=st.integers(0, 8))
-def test_cast_rays__matches_brute_force(seed: int, n_rays: int, n_seg: int) -> None:
-    rng = np.random.default_rng(seed)
-    segments = rng.uniform(-2, 2, size=(n_seg, 4))
-    circles = np.column_stack([rng.uniform(-2, 2, (3, 2)), rng.uniform(0.05, 0.3, 3)])
-    origins = rng.uniform(-2, 2, size=(n_rays, 2))
-    angles = rng.uniform(-np.pi, np.pi, n_rays)
+@given(
+    segments=st.integers(0, 8).flatmap(lambda n: _floats((n, 4), -2.0, 2.0)),
+    centres=_floats((3, 2), -2.0, 2.0),
+    radii=_floats((3,), 0.05, 0.3),
+    rays=st.integers(1, 20).flatmap(lambda n: _floats((n, 3), -2.0, 2.0)),
+)
+def test_cast_rays__matches_brute_force(
+    segments: np.ndarray, centres: np.ndarray, radii: np.ndarray, rays: np.ndarray
+) -> None:
+    circles = np.column_stack([centres, radii])
+    origins, angles = rays[:, :2], rays[:, 2] * (np.pi / 2.0)  # headings in [−π, π]
     got = cast_rays(origins, angles, segments, circles, 2.5)
     want = [brute_ray(o, a, segments, circles, 2.5) for o, a in zip(origins, angles, strict=True)]
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)  # same maths, different order

@@ -48,6 +48,7 @@ class LandmarkMessage:
 
     @property
     def nbytes(self) -> int:
+        """The message's size in bytes: its ids and means."""
         return int(self.ids.nbytes + self.means.nbytes)
 
 

@@ -2,8 +2,9 @@
 
 Same car and range-bearing models (``slam.points.models``), dense covariance, prediction per
 control period, one batched update per sweep linearised at the predicted mean. A landmark
-seen for the first time enters at the point its measurement places with a prior of
-``NEW_VARIANCE`` (the information form's "no prior information", up to ~1e-10 relative).
+seen for the first time enters at the point its measurement places, with that measurement's
+exact linearised covariance (the information form's "no prior information"), and that
+measurement is not used again in the update.
 """
 
 from __future__ import annotations
@@ -15,15 +16,12 @@ from polyslam_env.slam.points import models
 from polyslam_env.slam.points.config import PointSlamConfig
 from polyslam_env.slam.points.interface import PointMeasurements
 
-NEW_VARIANCE = 1e10
-START_VARIANCE = 1e-12
-
 
 class PointEkf:
     def __init__(self, config: PointSlamConfig, initial_pose: np.ndarray) -> None:
         self.config = config
         self.mu = np.asarray(initial_pose, dtype=float).copy()
-        self.P = np.eye(3) * START_VARIANCE
+        self.P = np.zeros((3, 3))  # the start is known, as the SEIF's
         self.slot: dict[int, int] = {}
         sv, sg = config.control_sigmas
         self.W = np.diag([sv * sv, sg * sg])
@@ -39,18 +37,16 @@ class PointEkf:
             self.P = Fx @ self.P @ Fx.T
             self.P[:3, :3] += G @ self.W @ G.T
             self.mu[:3] = pose
+        fresh = set()
         for lid, z in zip(meas.ids.tolist(), meas.z, strict=True):
             if lid not in self.slot:
-                point, _ = models.locate(self.mu[:3], z)
-                n = len(self.mu)
-                self.mu = np.concatenate([self.mu, point])
-                P = np.zeros((n + 2, n + 2))
-                P[:n, :n] = self.P
-                P[n:, n:] = np.eye(2) * NEW_VARIANCE
-                self.P = P
-                self.slot[lid] = n
+                self._augment(z)
+                self.slot[lid] = len(self.mu) - 2
+                fresh.add(lid)
         rows, innovs = [], []
         for lid, z in zip(meas.ids.tolist(), meas.z, strict=True):
+            if lid in fresh:  # its measurement placed it (``_augment``)
+                continue
             k = self.slot[lid]
             z_hat, jp, jm = models.observe(self.mu[:3], self.mu[k : k + 2])
             C = np.zeros((2, len(self.mu)))
@@ -69,3 +65,19 @@ class PointEkf:
         self.mu[2] = float(wrap_angle(self.mu[2]))
         I_KC = np.eye(len(self.mu)) - K @ C
         self.P = I_KC @ self.P @ I_KC.T + K @ R @ K.T
+
+    def _augment(self, z: np.ndarray) -> None:
+        """Add the landmark measurement z places, with its exact linearised covariance:
+        m = locate(x, z), P_mm = G_x P_xx G_xᵀ + G_z Q G_zᵀ, P_m· = G_x P_x·."""
+        point, g_z = models.locate(self.mu[:3], z)
+        angle = self.mu[2] + z[1]
+        g_x = np.array([[1.0, 0.0, -z[0] * np.sin(angle)], [0.0, 1.0, z[0] * np.cos(angle)]])
+        n = len(self.mu)
+        cross = g_x @ self.P[:3, :]  # (2, n)
+        P = np.zeros((n + 2, n + 2))
+        P[:n, :n] = self.P
+        P[n:, :n] = cross
+        P[:n, n:] = cross.T
+        P[n:, n:] = g_x @ self.P[:3, :3] @ g_x.T + g_z @ self.Q @ g_z.T
+        self.mu = np.concatenate([self.mu, point])
+        self.P = P

@@ -1,0 +1,116 @@
+"""``scripts/docs_tables.py``: results pages' sections written from their commands' JSON."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.scripts_module import load_script
+
+ROOT = Path(__file__).resolve().parents[2]
+tables = load_script("docs_tables")
+
+META = {
+    "command": "polyslam reproduce --paper seif --runs 10 --out /tmp/x --quiet",
+    "started": "2026-11-27T19:00:00Z",
+    "finished": "2026-11-27T19:05:00Z",
+    "load_before": "1.00 1.00 1.00",
+    "load_after": "1.50 1.20 1.00",
+    "wall_s": 300,
+    "machine": "2 cores, a CPU",
+}
+
+
+def seif_summary(runs: int = 2) -> dict[str, Any]:
+    """A real ``reproduce --paper seif`` summary (its own ``summarise``) of made-up runs."""
+    from polyslam_env.apps.reproduce_seif import SeifReproduceConfig, summarise
+
+    made = [
+        {
+            "fraction_correct": 1.0 - 0.1 * i,
+            "single_rms": 0.1,
+            "fused_rms": 0.11 + 0.01 * i,
+            "wrong_collapses": i,
+            "collapsed": 280,
+        }
+        for i in range(runs)
+    ]
+    return summarise(SeifReproduceConfig(runs=runs), made)
+
+
+def test_replace_section__keeps_the_marks_and_the_rest() -> None:
+    text = "a\n<!-- BEGIN generated: x -->\nold\n<!-- END generated: x -->\nb\n"
+    out = tables.replace_section(text, "x", "new")
+    assert out == "a\n<!-- BEGIN generated: x -->\nnew\n<!-- END generated: x -->\nb\n"
+    with pytest.raises(SystemExit, match="needs one"):
+        tables.replace_section("no marks", "x", "new")
+
+
+def test_section__names_command_date_machine_load_and_says_when_the_run_was_smaller() -> None:
+    study = tables.STUDIES["seif"]
+    data = [seif_summary()]
+    full = tables.section("seif", study, data, META)
+    assert "`polyslam reproduce --paper seif --runs 10 --out /tmp/x --quiet`" in full
+    assert "2026-11-27 19:00–19:05 UTC" in full and "2 cores, a CPU" in full
+    assert "1.00 1.00 1.00 before, 1.50 1.20 1.00 after" in full
+    assert "smaller run" not in full  # the study's command: only --out and --quiet differ
+    smaller = tables.section(
+        "seif", study, data, {**META, "command": META["command"].replace("10", "3")}
+    )
+    assert "**A smaller run than the study's own**" in smaller
+    assert "`polyslam reproduce --paper seif --runs 10 --out OUT`" in smaller
+
+
+def test_render_seif__the_apps_own_table_and_checks() -> None:
+    summary = seif_summary()
+    text, headline = tables.render_seif([summary])
+    assert "pieces fused correctly: 95 %" in text  # mean of 1.0 and 0.9
+    assert "2 of 2 checks hold" in text
+    assert headline.startswith("95 % of pieces fused correctly")
+
+
+def test_render_speed__targets_and_machine() -> None:
+    results = {
+        "targets": [
+            {"target": "full-SLAM env / MPE", "measured": 0.17, "goal": 0.5, "at_most": False,
+             "met": False},
+            {"target": "SLAM step, 30 landmarks", "measured": 118.0, "goal": 60, "at_most": True,
+             "met": False},
+            {"target": "team", "measured": None, "goal": 10, "at_most": True, "met": None},
+        ],
+        "machine": {"blas": "openblas ×2", "numpy": "2", "pymunk": "7", "python": "3.11",
+                    "load_before": 1.0, "load_after": 2.0},
+    }  # fmt: skip
+    text, headline = tables.render_speed([results])
+    assert "| full-SLAM env / MPE | 0.17 | ≥ 0.5 | no |" in text
+    assert "| team | — | ≤ 10 | not measured |" in text
+    assert headline == "0 of 2 speed targets met; full-SLAM env at 0.17× PettingZoo MPE's steps/s"
+
+
+def test_write__page_section_and_readme_headline(tmp_path: Path) -> None:
+    results = tmp_path / "results"
+    shutil.copytree(ROOT / "docs" / "results", results)
+    readme = tmp_path / "README.md"
+    readme.write_text("x\n<!-- BEGIN generated: headline -->\n<!-- END generated: headline -->\n")
+    run = tmp_path / "run"
+    run.mkdir()
+    with pytest.raises(SystemExit, match="run.json"):
+        tables.write("seif", run, results, readme)
+    (run / "run.json").write_text(json.dumps(META))
+    (run / "summary.json").write_text(json.dumps(seif_summary()))
+    tables.write("seif", run, results, readme)
+    page = (results / "seif.md").read_text()
+    assert page.count("<!-- BEGIN generated: seif -->") == 1 and "pieces fused correctly" in page
+    row = next(line for line in readme.read_text().splitlines() if "SEIF" in line)
+    assert "95 % of pieces fused correctly" in row and "(docs/results/seif.md)" in row
+
+
+def test_every_study_has_its_page_with_one_section() -> None:
+    for name, study in tables.STUDIES.items():
+        page = (ROOT / "docs" / "results" / study.page).read_text()
+        assert page.count(f"<!-- BEGIN generated: {name} -->") == 1
+        assert page.count(f"<!-- END generated: {name} -->") == 1
