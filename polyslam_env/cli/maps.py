@@ -27,6 +27,19 @@ def register(sub: Any) -> None:
         " `polyslam maps import MAP.yaml --out FLOOR.yaml` turns a ROS map_server map into a"
         " map file.",
     )
+    parser.add_argument(
+        "--plot",
+        default=None,
+        metavar="PNG",
+        help="also draw one layout of each generator (walls, pillars, start poses) to PNG",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="the layouts' seed (default: 0)")
+    parser.add_argument(
+        "--only",
+        default=None,
+        metavar="NAMES",
+        help="comma list of the generators to draw (default: all)",
+    )
     parser.set_defaults(func=run)
     actions = parser.add_subparsers(dest="action", metavar="ACTION")
     imp = actions.add_parser(
@@ -114,7 +127,33 @@ def run(args: argparse.Namespace) -> int:
             if key not in SET_BY_ENV
         )
         print(f"  {GENERATOR_PREFIX + name:<22} {params}")
+    if args.plot:
+        _plot(args.plot, args.seed, args.only)
     return 0
+
+
+def _plot(path: str, seed: int, only: str | None) -> None:
+    """One layout of each generator (or of those in ``only``) drawn side by side."""
+    import numpy as np
+
+    from polyslam_env.cli.common import check_output_file
+    from polyslam_env.core.errors import ConfigError
+    from polyslam_env.render.plots import plot_layouts
+    from polyslam_env.world.generators import GENERATORS, make_generator
+
+    out = check_output_file(path, "--plot")
+    names = sorted(GENERATORS) if only is None else [n.strip() for n in only.split(",")]
+    for name in names:
+        if name not in GENERATORS:
+            raise ConfigError(
+                f"--only: {name!r} is not a layout generator;"
+                f" valid: {', '.join(sorted(GENERATORS))}"
+            )
+    layouts = [
+        (f"{name} (seed {seed})", make_generator(name)(np.random.default_rng(seed)))
+        for name in names
+    ]
+    print(f"wrote {plot_layouts(layouts, out)}")
 
 
 def _listing_order(names: list[str], shared: tuple[str, ...]) -> list[str]:

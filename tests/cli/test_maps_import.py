@@ -88,3 +88,14 @@ def test_maps_import__bad_input_one_line_error(
     err = capsys.readouterr().err.strip()
     assert err.startswith("polyslam: error: ") and "\n" not in err
     assert re.search(message, err), err
+
+
+def test_maps__plot_draws_the_generators_layouts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    png = tmp_path / "layouts.png"
+    assert main(["maps", "--plot", str(png), "--only", "loop,rooms", "--seed", "3"]) == 0
+    assert png.stat().st_size > 10_000 and f"wrote {png}" in capsys.readouterr().out
+    assert main(["maps", "--plot", str(png), "--only", "maze"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--only: 'maze' is not a layout generator" in err and "\n" not in err
