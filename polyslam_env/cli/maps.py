@@ -174,7 +174,12 @@ def run_import(args: argparse.Namespace) -> int:
 
     from polyslam_env.cli.common import check_output_file
     from polyslam_env.core.errors import ConfigError, OutputError
-    from polyslam_env.world.floorplan import ImportOptions, layout_from_occupancy, shrink_that_opens
+    from polyslam_env.world.floorplan import (
+        MIN_REGION,
+        ImportOptions,
+        layout_from_occupancy,
+        shrink_that_opens,
+    )
     from polyslam_env.world.maps import map_text
     from polyslam_env.world.occupancy import read_map_yaml
 
@@ -219,7 +224,7 @@ def run_import(args: argparse.Namespace) -> int:
     for note in result.notes:
         print(f"  {note}")
     if result.pockets:
-        print(f"  {result.pockets} pockets under {0.25:g} m² behind narrow gaps (ignored)")
+        print(f"  {result.pockets} pockets under {MIN_REGION:g} m² behind narrow gaps (ignored)")
     if result.passages:
         fit = 2 * (options.robot_radius + options.margin)
         print(
