@@ -154,8 +154,9 @@ class PolicyContext:
         """(v, ω) in physical units as an action of this env: clipped to the limits
         (continuous, float32) or the nearest discrete action (relative to the limits)."""
         v_lo = -self.v_max if self.allow_reverse else 0.0
-        v = float(np.clip(v, v_lo, self.v_max))
-        omega = float(np.clip(omega, -self.omega_max, self.omega_max))
+        # min(max(x, lo), hi) is numpy's clip of a scalar, signed zeros and nan included
+        v = float(min(max(v, v_lo), self.v_max))
+        omega = float(min(max(omega, -self.omega_max), self.omega_max))
         if self.action_mode == "discrete":
             scale = np.array([self.v_max, self.omega_max])
             d = np.sum(((self.discrete - (v, omega)) / scale) ** 2, axis=1)  # (K,)
@@ -176,6 +177,11 @@ class Policy(ABC):
     def act(self, observation: Any, rng: np.random.Generator) -> Any:
         """The action for ``observation``; all randomness comes from ``rng``."""
 
+    def metrics(self) -> dict[str, float]:
+        """Figures of the episode so far that only the policy knows (e.g. the bytes of the
+        messages it sent), added to its robot's results by ``polyslam evaluate``; none here."""
+        return {}
+
 
 PolicyFactory = Callable[..., Policy]
 #: Policy name → ``factory(context, **kwargs)`` or a lazy ``"module:attribute"`` string.
@@ -183,6 +189,7 @@ POLICIES: dict[str, PolicyFactory | str] = {
     "paper": "policies.scripted:PaperPolicy",
     "frontier": "policies.frontier:FrontierPolicy",
     "frontier_closing": "policies.frontier:frontier_closing",
+    "frontier_team": "policies.team:frontier_team",
     "wall_follow": "policies.scripted:WallFollowPolicy",
     "random": "policies.scripted:RandomPolicy",
     "ppo": "policies.ppo:make_ppo",
@@ -258,5 +265,14 @@ class TeamPolicy:
 
 
 def make_team(name: str, env: Any, **kwargs: Any) -> TeamPolicy:
-    """The same policy ``name`` for every agent of ``env``."""
-    return TeamPolicy({a: make_policy(name, env, a, **kwargs) for a in env.possible_agents})
+    """The same policy ``name`` for every agent of ``env``. A factory with a ``team``
+    attribute makes the whole team at once, ``factory.team(contexts, **kwargs)`` → ``{agent:
+    policy}`` (team-mates that share something, e.g. ``frontier_team``'s radio)."""
+    build_team = getattr(policy_factory(name), "team", None)
+    if build_team is None:
+        return TeamPolicy({a: make_policy(name, env, a, **kwargs) for a in env.possible_agents})
+    checkpoint = kwargs.pop("checkpoint", None)
+    if checkpoint is not None:
+        raise PolicyError(f"policy {name!r} takes no checkpoint, got {checkpoint!r}")
+    contexts = [PolicyContext.from_env(env, a) for a in env.possible_agents]
+    return TeamPolicy(build_team(contexts, **kwargs))

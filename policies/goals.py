@@ -105,7 +105,7 @@ class GoalPolicy(FrontierPolicy):
         claimed = self._claim(pose, detections)
         if (self._step - 1) % self.decide_every == 0:
             self._previous_goal = self.goal
-            self._search_now = self._search(pose)
+            self._search_now = self._search(pose, complete=True)
             return True
         self._replan = claimed or self._needs_plan(pose)
         return False

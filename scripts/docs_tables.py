@@ -102,6 +102,38 @@ def render_app_table(module: str) -> Callable[[Sequence[Any]], tuple[str, str]]:
     return render
 
 
+def _seeds_markdown() -> Any:
+    """``scripts/seeds_markdown.py``, the one writer of the seed pages' Markdown tables."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    return importlib.import_module("seeds_markdown")
+
+
+def render_mblcc(data: Sequence[Any]) -> tuple[str, str]:
+    """Seed 003: Table 1 beside the seed's, paired differences, the EM sweep, diversity."""
+    summary = data[0]
+    text = f"{_seeds_markdown().mblcc_tables(summary)}\n\n{_checks_text(summary['checks'])}"
+    checks = [v for v in summary["checks"].values() if isinstance(v, bool)]
+    return (
+        text,
+        f"{sum(checks)} of {len(checks)} of the seed's orderings hold ({summary['runs']} runs)",
+    )
+
+
+def render_alignment(data: Sequence[Any]) -> tuple[str, str]:
+    """Seed 004 under the seed's protocol, then under the guarded one."""
+    tables = _seeds_markdown()
+    parts, heads = [], []
+    for summary in data:
+        parts.append(f"**{summary['protocol']} protocol** ({summary['runs']} runs):\n")
+        parts.append(tables.alignment_table(summary) + "\n")
+        if len(summary["by_confusion"]) > 1:
+            parts.append(tables.confusion_table(summary) + "\n")
+        parts.append(_checks_text(summary["checks"]) + "\n")
+        checks = [v for v in summary["checks"].values() if isinstance(v, bool)]
+        heads.append(f"{summary['protocol']}: {sum(checks)} of {len(checks)} checks hold")
+    return "\n".join(parts), f"{'; '.join(heads)} ({data[0]['runs']} runs)"
+
+
 def render_seif(data: Sequence[Any]) -> tuple[str, str]:
     """Seed 001: the blind fusion of one run's pieces."""
     text, _ = render_app_table("reproduce_seif")(data)
@@ -158,7 +190,7 @@ def render_speed(data: Sequence[Any]) -> tuple[str, str]:
 
 
 def render_learning(data: Sequence[Any]) -> tuple[str, str]:
-    """``polyslam evaluate --policy frontier,random,ppo --json`` on each map: the comparison."""
+    """``polyslam evaluate --policy frontier,frontier_team,random,ppo --json`` on each map."""
     lines = [
         "| map | policy | team coverage | steps to 90 % | `nu_mean` (m) | bytes sent |",
         "|---|---|---|---|---|---|",
@@ -198,16 +230,22 @@ STUDIES: dict[str, Study] = {
     "mblcc": Study(
         "mblcc.md",
         "Seed 003: MBLCC FastSLAM",
-        ("polyslam reproduce --paper mblcc --runs 50 --out {out}",),
+        (
+            "polyslam reproduce --paper mblcc --config configs/mblcc_tables.yaml --runs 50"
+            " --out {out}",
+        ),
         ("summary.json",),
-        render_app_table("reproduce_mblcc"),
+        render_mblcc,
     ),
     "alignment": Study(
         "alignment.md",
         "Seed 004: map alignment",
-        ("polyslam reproduce --paper alignment --runs 10 --out {out}",),
-        ("summary.json",),
-        render_app_table("reproduce_alignment"),
+        (
+            "polyslam reproduce --paper alignment --protocol seed --runs 10 --out {out}/seed",
+            "polyslam reproduce --paper alignment --protocol guarded --runs 10 --out {out}/guarded",
+        ),
+        ("seed/summary.json", "guarded/summary.json"),
+        render_alignment,
     ),
     "seif": Study(
         "seif.md",
@@ -220,10 +258,10 @@ STUDIES: dict[str, Study] = {
         "learning.md",
         "Learning",
         (
-            "polyslam evaluate --policy frontier,random,ppo --map generator:office_floor"
-            " --seed 10000 --episodes 10 --json {out}/office.json",
-            "polyslam evaluate --policy frontier,random,ppo --map generator:warehouse"
-            " --seed 10000 --episodes 10 --json {out}/warehouse.json",
+            "polyslam evaluate --policy frontier,frontier_team,random,ppo"
+            " --map generator:office_floor --seed 10000 --episodes 10 --json {out}/office.json",
+            "polyslam evaluate --policy frontier,frontier_team,random,ppo"
+            " --map generator:warehouse --seed 10000 --episodes 10 --json {out}/warehouse.json",
         ),
         ("office.json", "warehouse.json"),
         render_learning,

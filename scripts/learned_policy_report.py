@@ -1,18 +1,19 @@
-"""The shipped ``ppo`` policy against its baselines, from ``polyslam evaluate`` JSON files.
+"""A policy against a baseline, paired by seed, from ``polyslam evaluate`` JSON files.
 
 Reads the files that ``polyslam evaluate --policy frontier,random,ppo --json FILE`` wrote (one
 per map), and prints, pooled over all their episodes:
 
-* each policy's team coverage and ``nu_mean`` (the robots' mean), and ``ppo``'s ratio to
-  ``frontier`` and points above ``random``;
-* the paired differences ``ppo − frontier`` per seed, with a 95 % t interval;
-* on the same maps and seeds, the team coverage when the slot is chosen uniformly at random
-  among the candidates (what the network's training adds), and how often the network picks
-  each slot.
+* each policy's team coverage, team overlap and ``nu_mean`` (the robots' mean), and the last
+  policy's ratio to the first (the baseline) and points above ``random`` (if it ran);
+* the paired differences last − first per seed, with a 95 % t interval;
+* when the last policy is ``ppo``: on the same maps and seeds, the team coverage when the slot
+  is chosen uniformly at random among the candidates (what the network's training adds), and
+  how often the network picks each slot.
 
     polyslam evaluate --policy frontier,random,ppo --map generator:office_floor --seed 10000 \\
         --episodes 10 --json office.json
     python scripts/learned_policy_report.py office.json warehouse.json
+    python scripts/learned_policy_report.py --policies frontier,frontier_team team.json
 """
 
 from __future__ import annotations
@@ -80,34 +81,51 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("files", nargs="+", help="polyslam evaluate --json files")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument(
+        "--policies",
+        default=",".join(POLICIES),
+        help="the policies to report, the baseline first and the compared one last"
+        f" (default {','.join(POLICIES)})",
+    )
     args = parser.parse_args()
-    cov: dict[str, list[float]] = {p: [] for p in POLICIES}
-    nu: dict[str, list[float]] = {p: [] for p in POLICIES}
+    names = args.policies.split(",")
+    base, last = names[0], names[-1]
+    cov: dict[str, list[float]] = {p: [] for p in names}
+    overlap: dict[str, list[float]] = {p: [] for p in names}
+    nu: dict[str, list[float]] = {p: [] for p in names}
     jobs = []
     for path in args.files:
         report = json.load(open(path))
-        config = report["configs"]["ppo"] if "configs" in report else report["config"]
-        for p in POLICIES:
-            for e in report["episodes"][p]:
+        config = report["configs"][last] if "configs" in report else report["config"]
+        seeds = {p: sorted(e["seed"] for e in report["episodes"][p]) for p in names}
+        if any(seeds[p] != seeds[base] for p in names):
+            raise SystemExit(f"{path}: the policies' seeds differ (a failed episode?): {seeds}")
+        for p in names:
+            for e in sorted(report["episodes"][p], key=lambda e: e["seed"]):
                 cov[p].append(float(e["team"]["coverage"]))
+                overlap[p].append(float(e["team"]["overlap"]))
                 robots = [r for r in e["robots"].values() if r.get("has_map", 1.0)]
                 nu[p].append(float(np.mean([r["nu_mean"] for r in robots])))
         jobs += [(config, int(s), kind) for s in report["seeds"] for kind in ("uniform", "ppo")]
-    for p in POLICIES:
+    for p in names:
         print(
             f"{p:9s} team coverage {np.mean(cov[p]):.3f} ± {np.std(cov[p]):.3f}"
+            f"  overlap {np.mean(overlap[p]):.3f} ± {np.std(overlap[p]):.3f}"
             f"  nu_mean {np.mean(nu[p]):.4f} m  ({len(cov[p])} episodes)"
         )
-    print(
-        f"ppo / frontier coverage {np.mean(cov['ppo']) / np.mean(cov['frontier']):.3f};"
-        f" ppo − random {100 * (np.mean(cov['ppo']) - np.mean(cov['random'])):+.1f} points"
-    )
-    for name, values in (("coverage", cov), ("nu_mean", nu)):
-        diff = np.array(values["ppo"]) - np.array(values["frontier"])
+    ratio = f"{last} / {base} coverage {np.mean(cov[last]) / np.mean(cov[base]):.3f}"
+    if "random" in names:
+        ratio += f"; {last} − random {100 * (np.mean(cov[last]) - np.mean(cov['random'])):+.1f}"
+        ratio += " points"
+    print(ratio)
+    for name, values in (("coverage", cov), ("overlap", overlap), ("nu_mean", nu)):
+        diff = np.array(values[last]) - np.array(values[base])
         print(
-            f"ppo − frontier {name}, paired by seed: {diff.mean():+.4f} ± {_interval(diff):.4f}"
+            f"{last} − {base} {name}, paired by seed: {diff.mean():+.4f} ± {_interval(diff):.4f}"
             " (95 % t interval)"
         )
+    if last != "ppo":
+        return
     with Pool(args.workers) as pool:
         results = pool.map(_episode, jobs)
     uniform = [c for (c, _), (_, _, k) in zip(results, jobs, strict=True) if k == "uniform"]

@@ -36,6 +36,7 @@ def _run(*args: str, cwd: Path = ROOT) -> str:
 #: (script and tiny arguments, a line its output must contain)
 PRINTING = [
     (["divergence_rates.py", "--seeds", "1"], "healthy (80 steps): flag fired in"),
+    (["bench_team_act.py", "--steps", "2", "4", "--compare", "."], "this tree "),
     (["exchange_bytes.py"], "polynomials"),
     (["landmark_consistency.py", "--seeds", "1", "--robots", "1", "--steps", "40"], "c0_nees"),
     (["nees_episodes.py", "--runs", "1", "--steps", "20"], "seed 0: final NEES frame"),

@@ -86,6 +86,9 @@ def run_episode(
                 team_info = dict(info["team"])
         if on_step is not None:
             on_step(env)
+    for agent, policy in team.policies.items():
+        if agent in robots:
+            robots[agent].update(policy.metrics())  # what only the policy knows
     ordered = {a: robots[a] for a in env.possible_agents if a in robots}
     return EpisodeResult(seed, state.step_count, ordered, team_info, coverage)
 
@@ -190,7 +193,8 @@ def episode_row(result: EpisodeResult) -> dict[str, float | None]:
     """One episode's values of :data:`COMPARED`: the team coverage and ``steps_to_90`` (None
     if never reached), the robots' mean ``nu_mean`` (over robots with a map) and
     ``completeness`` (over robots with SLAM), NaN when there are none (e.g. without SLAM),
-    and the bytes all robots sent."""
+    and the bytes all robots sent (the env's exchange and, for policies that send messages of
+    their own, e.g. ``frontier_team``'s goals, their ``goal_bytes_sent``)."""
 
     def robots(key: str) -> list[float]:
         return [v for v in meaningful(result.robots.values(), key) if np.isfinite(v)]
@@ -204,7 +208,7 @@ def episode_row(result: EpisodeResult) -> dict[str, float | None]:
         "steps_to_90": None if steps_to_90 is None else float(steps_to_90),
         "nu_mean": mean(robots("nu_mean")),
         "completeness": mean(robots("completeness")),
-        "bytes_sent": float(sum(robots("bytes_sent"))),
+        "bytes_sent": float(sum(robots("bytes_sent")) + sum(robots("goal_bytes_sent"))),
     }
 
 

@@ -12,6 +12,7 @@ relative poses).
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -61,11 +62,24 @@ def register(sub: Any) -> None:
         help="a YAML file like configs/paper.yaml (mblcc: MblccReproduceConfig's fields,"
         " alignment: AlignmentReproduceConfig's, seif: SeifReproduceConfig's)",
     )
+    parser.add_argument(
+        "--protocol",
+        choices=("guarded", "seed"),
+        default=None,
+        help="alignment only: guarded (the default: 10 particles, mixture maps, descriptors"
+        " that never match the wrong landmark, shared re-paired refinement, every aligner"
+        " declining below the chance level) or seed (the seed's: 100 particles, the most"
+        " probable particle's map, confusable descriptors, each aligner refined on its own"
+        " correspondences, only RANSAC declining below 20 supports)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.protocol is not None and args.paper != "alignment":
+        print(f"--protocol applies to --paper alignment only, not {args.paper}", file=sys.stderr)
+        return 2
     if args.paper == "mblcc":
         return run_mblcc(args)
     if args.paper == "alignment":
@@ -148,13 +162,18 @@ def _print_checks(checks: dict[str, Any]) -> None:
 
 
 def run_mblcc(args: argparse.Namespace) -> int:
-    """Seed 003: the table over ``runs`` seeds, Fig 5's particle sweep, summary and figure."""
+    """Seed 003: the table over ``runs`` seeds, Fig 5's particle sweep, the EM sweep, the
+    particles' diversity; summary and figures."""
     from polyslam_env.apps.reproduce_mblcc import (
         MblccReproduceConfig,
+        diversity_text,
+        em_sweep_text,
         plot_armse,
+        plot_diversity,
         reproduce,
         summarise,
         table_text,
+        total_jobs,
     )
     from polyslam_env.core.io import write_json
 
@@ -162,15 +181,14 @@ def run_mblcc(args: argparse.Namespace) -> int:
     out = Path(args.out)
     runner = study_runner(args, out, 2, "reproduce mblcc", "run")
     start = time.perf_counter()
-    sweep = [n for n in config.fig5_particles if n != config.slam.particles]
-    total = config.runs + len(sweep) * config.fig5_runs
-    runs, by_n = reproduce(config, workers=runner)
+    total = total_jobs(config)
+    runs, by_n, by_em = reproduce(config, workers=runner)
     elapsed = time.perf_counter() - start
-    summary = summarise(runs, by_n)
+    summary = summarise(runs, by_n, by_em)
     _finish(summary, config, elapsed, runner)
 
-    print(f"{config.runs} runs (+ {total - config.runs} for Fig 5), {elapsed:.0f} s,")
-    print(f"{where_text(runner)}; mean ± std over runs, seed's Table 1 mean alongside")
+    print(f"{config.runs} runs (+ {total - config.runs} for Fig 5 and the EM sweep),")
+    print(f"{elapsed:.0f} s, {where_text(runner)}; mean ± std over runs, seed's Table 1 mean")
     print(table_text(summary))
     _print_checks(summary["checks"])
     report_failed(runner)
@@ -178,10 +196,18 @@ def run_mblcc(args: argparse.Namespace) -> int:
     for metric, pairs in summary["paired"].items():
         for pair, cells in pairs.items():
             text = " / ".join(f"{c['mean']:+.3f} ± {c['se']:.3f}" for c in cells)
-            print(f"  {metric:<15}{pair:<36}{text}")
+            print(f"  {metric:<15}{pair:<56}{text}")
+    if summary["em_sweep"]:
+        print("EM sweep: EM-FastSLAM − FastSLAM 2.0 (m, paired over the same seeds)")
+        print(em_sweep_text(summary))
+    print("particle diversity (robots' mean; lineages_L: particles of L sweeps ago with heirs)")
+    print(diversity_text(summary))
     write_json(out / "summary.json", summary)
-    figure = plot_armse(summary, out / "fig5_armse.png")
-    print(f"wrote {out / 'summary.json'}, {figure}")
+    figures = [
+        plot_armse(summary, out / "fig5_armse.png"),
+        plot_diversity(summary, out / "diversity.png"),
+    ]
+    print(f"wrote {out / 'summary.json'}, {', '.join(str(f) for f in figures)}")
     return 0
 
 
@@ -191,13 +217,17 @@ def run_alignment(args: argparse.Namespace) -> int:
         AlignmentReproduceConfig,
         plot_errors,
         plot_times,
+        protocol_config,
         reproduce,
         summarise,
+        sweep_text,
         table_text,
     )
     from polyslam_env.core.io import write_json
 
     config = _study_config(AlignmentReproduceConfig, args)
+    if args.protocol is not None:
+        config = protocol_config(args.protocol, config)
     out = Path(args.out)
     runner = study_runner(args, out, 2, "reproduce alignment", "run")
     start = time.perf_counter()
@@ -205,11 +235,20 @@ def run_alignment(args: argparse.Namespace) -> int:
     elapsed = time.perf_counter() - start
     summary = summarise(config, records)
     _finish(summary, config, elapsed, runner)
-    print(f"{config.runs} runs, {elapsed:.0f} s, {where_text(runner)}; errors of the")
-    print("accepted alignments against the true transform between the start frames")
+    rate = summary["descriptor_wrong_match_rate"]
+    measured = "none matched" if rate["measured"] is None else f"{100 * rate['measured']:.1f} %"
+    print(f"{config.runs} runs, {elapsed:.0f} s, {where_text(runner)}, protocol")
+    print(f"{summary['protocol']}; descriptor confusion {rate['confusion']:g}, wrong matches")
+    print(f"{measured}; errors of each aligner's answers against the true transform")
     print(table_text(summary))
     _print_checks(summary["checks"])
     report_failed(runner)
+    print("|t| error minus RANSAC's where both answered (mean ± standard error, cells):")
+    for method, d in summary["paired_against_ransac"].items():
+        print(f"  {method:<9}{d['mean']:+.3f} ± {d['se']:.3f}  ({d['cells']})")
+    if len(summary["by_confusion"]) > 1:
+        print("over all stages, per descriptor confusion (answers %, |t| error mean ± std / m):")
+        print(sweep_text(summary))
     write_json(out / "summary.json", summary)
     figures = [
         plot_errors(summary, out / "figs3-5_errors.png"),

@@ -282,6 +282,11 @@ class Channel:
             and (receiver is None or m.receiver == receiver)
         )
 
+    def bytes_sent(self, robot: int) -> int:
+        """One robot's bytes sent so far (``counters(robot).bytes_sent`` without the copy)."""
+        counter = self._counters.get(robot)
+        return 0 if counter is None else counter.bytes_sent
+
     def counters(self, robot: int) -> Counters:
         """A copy of one robot's counters (zeros if it never used the channel)."""
         return Counters(**vars(self._counter(robot)))

@@ -136,7 +136,7 @@ from polyslam_env.slam.alignment import Alignment, FeatureMap, align
 from polyslam_env.slam.corners import wall_corners
 from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
-from polyslam_env.slam.landmarks import boxes_near
+from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED
 from polyslam_env.slam.merging import find_merge
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -572,10 +572,10 @@ class RendezvousExchange:
         self._last_seen: dict[tuple[int, int], int] = {}  # pair → last step in mutual sight
         self._last_start: dict[tuple[int, int], int] = {}  # pair → step its last meeting began
         self._failed: set[int] = set()
-        # provenance, per receiver: landmark id → senders whose data it holds (rules 1–3)
+        # provenance, per receiver: landmark id → senders whose data it holds (rules 1–3),
+        # carried over its SLAM's refits and merges by their lineage events (read up to here)
         self._sources: list[dict[int, frozenset[int]]] = [{} for _ in range(num_robots)]
-        self._ids_seen: list[set[int]] = [set() for _ in range(num_robots)]
-        self._boxes_seen: list[dict[int, np.ndarray]] = [{} for _ in range(num_robots)]
+        self._lineage_at = [0] * num_robots
         self.superseded = [0] * num_robots  # landmarks replaced by a newer version (rule 2)
         self.dropped_points = [0] * num_robots  # received points too uncertain to keep
         self.off_square = [0] * num_robots  # refined transforms refused as off square (_align)
@@ -615,8 +615,6 @@ class RendezvousExchange:
             )
         active = np.asarray(active, bool)
         dropped = self._drop_failed(k, active)
-        for r, slam in enumerate(slams):
-            self._carry_sources(r, slam)
         aligning = self.config.mode == "alignment"
         pillars = aligning and self.config.features == "pillars"
         if pillars and len(features) != self.num_robots:
@@ -673,6 +671,14 @@ class RendezvousExchange:
             self._sent_ids.pop(e.msg_id)
             self._sightings.pop((e.receiver, e.sender, e.sent_step), None)
         return tuple(dropped)
+
+    def rendezvous(self, i: int) -> int:
+        """Robot i's rendezvous so far (``counters(i)["rendezvous"]`` without the copy)."""
+        return self._rendezvous[i]
+
+    def bytes_sent(self, i: int) -> int:
+        """Bytes robot i has sent so far (``counters(i)["bytes_sent"]`` without the copy)."""
+        return self.channel.bytes_sent(i)
 
     def counters(self, i: int) -> dict[str, int]:
         """Robot i's traffic: bytes, rendezvous, messages and polynomials, the received
@@ -1005,7 +1011,7 @@ class RendezvousExchange:
         returns the refits (before any trimming or merge) and the ids now holding what was
         inserted."""
         r = message.header.receiver
-        self._carry_sources(r, slam)
+        self._follow_lineage(r, slam)
         t, d_state, d_noise, noise_cov = transform
         cov_t = d_noise @ noise_cov @ d_noise.T
         if self.config.align_maps and message.records:
@@ -1030,7 +1036,6 @@ class RendezvousExchange:
                 ):
                     received.append(fit.poly)
                     ids += self._fuse(slam, piece, fit, sender, r, 0, turn)
-        self._carry_sources(r, slam)
         return received, ids
 
     def _align(
@@ -1150,39 +1155,30 @@ class RendezvousExchange:
         for lid in walls:
             if sender in sources.get(lid, ()):
                 slam.remove_landmark(lid)
-                sources.pop(lid)
                 self.superseded[r] += 1
-        before = set(slam.table.ids)
+        self._follow_lineage(r, slam)
         lid = slam.insert_landmark(_on_state(fit, slam.mean.size), turn=turn)
-        merged = before - set(slam.table.ids)
-        sources[lid] = frozenset({sender}.union(*(sources.pop(g, ()) for g in merged)))
-        if not merged:  # a pure copy of the sender's landmark: never echo it back
+        events = slam.lineage.since(self._lineage_at[r])
+        sources[events[0].landmark_id] = frozenset({sender})  # the inserted piece
+        self._follow_lineage(r, slam)  # its merges carry this sender with their partners'
+        if not any(event.kind == MERGED for event in events):
+            # a pure copy of the sender's landmark: never echo it back
             self._known[r].setdefault(lid, set()).add(sender)
         return [lid]
 
-    def _carry_sources(self, r: int, slam: PolySlam) -> None:
-        """Carry the provenance of receiver r's landmarks over its own refits and merges since
-        the last call: a new landmark inherits the senders of every vanished landmark whose
-        box (when last seen) lies within γ_M of its own — the only ones it can come from."""
+    def _follow_lineage(self, r: int, slam: PolySlam) -> None:
+        """Carry the provenance of receiver r's landmarks over the changes its SLAM made
+        since the last call (:mod:`~polyslam_env.slam.lineage`): a refit or merge holds the
+        senders of its parents, a removed landmark none; O(changes), exactly."""
         sources = self._sources[r]
-        if not sources:
-            self._ids_seen[r] = set(slam.table.ids)
-            return
-        now = set(slam.table.ids)
-        seen = self._ids_seen[r]
-        gone = [lid for lid in seen - now if lid in sources]
-        table = slam.table
-        boxes = table.boxes(slam.c0s)  # (n, 4)
-        if gone:
-            old = [(sources.pop(g), self._boxes_seen[r][g]) for g in gone]
-            reach = slam.config.gamma_max
-            for lid in sorted(now - seen):
-                box = boxes[table.index_of(lid)]
-                heirs = [src for src, b in old if len(boxes_near(b[None], box, reach))]
-                if heirs:
-                    sources[lid] = frozenset(sources.get(lid, frozenset()).union(*heirs))
-        self._ids_seen[r] = now
-        self._boxes_seen[r] = {lid: boxes[table.index_of(lid)] for lid in sources}
+        for event in slam.lineage.since(self._lineage_at[r]):
+            if event.kind in (REPLACED, MERGED):
+                inherited = [sources.pop(p) for p in event.parents if p in sources]
+                if inherited:
+                    sources[event.landmark_id] = frozenset().union(*inherited)
+            elif event.kind == REMOVED:
+                sources.pop(event.landmark_id, None)
+        self._lineage_at[r] = slam.lineage.cursor
 
 
 #: A refined transform whose turn lays the sender's straight walls further off square to the

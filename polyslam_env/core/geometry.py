@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from polyslam_env.core.jit import njit
+
 
 def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
     """Angles (any shape) wrapped to (−π, π]."""
@@ -38,21 +40,30 @@ def wrap_remainder(angle: Any) -> Any:
     return np.array(flat).reshape(np.shape(angle))
 
 
+@njit
 def symmetric_eigvals3(a: np.ndarray) -> tuple[float, float, float]:
     """Eigenvalues (ascending) of a symmetric 3×3 matrix in closed form (lower triangle read).
 
     The trigonometric solution of the characteristic cubic (Smith, 1961): with q = tr A / 3
     and p² = ‖A − qI‖²_F / 6, the eigenvalues are q + 2p·cos(φ + 2πk/3), φ = acos(det B / 2)/3,
     B = (A − qI)/p, at a twentieth of the cost of ``np.linalg.eigvalsh`` on one 3×3 matrix
-    (the SLAM asks for two spectral norms per step). Accurate to a few ulps of ‖A‖ except
-    where two eigenvalues (nearly) coincide: acos is steep at ±1, so that pair is off by up to
-    ~1e-8·p (the other eigenvalue stays exact to ulps). That is harmless for what the SLAM
-    does with them (LMS weights, thresholds), and tested in tests/test_geometry.py.
+    (the SLAM asks for two spectral norms per step, inside its compiled step). Accurate to a
+    few ulps of ‖A‖ except where two eigenvalues (nearly) coincide: acos is steep at ±1, so
+    that pair is off by up to ~1e-8·p (the other eigenvalue stays exact to ulps). That is
+    harmless for what the SLAM does with them (LMS weights, thresholds), and tested in
+    tests/core/test_geometry.py. Compiled (Python's float operations, same order).
     """
-    (a00, _, _), (a10, a11, _), (a20, a21, a22) = a.tolist()
+    a00, a10, a11 = a[0, 0], a[1, 0], a[1, 1]
+    a20, a21, a22 = a[2, 0], a[2, 1], a[2, 2]
     off = a10 * a10 + a20 * a20 + a21 * a21
-    if off == 0.0:
-        d0, d1, d2 = sorted((a00, a11, a22))
+    if off == 0.0:  # diagonal: sort the three (Python's sorted: stable, by <)
+        d0, d1, d2 = a00, a11, a22
+        if d1 < d0:
+            d0, d1 = d1, d0
+        if d2 < d1:
+            d1, d2 = d2, d1
+            if d1 < d0:
+                d0, d1 = d1, d0
         return d0, d1, d2
     q = (a00 + a11 + a22) / 3.0
     b00, b11, b22 = a00 - q, a11 - q, a22 - q
@@ -63,7 +74,9 @@ def symmetric_eigvals3(a: np.ndarray) -> tuple[float, float, float]:
         + a20 * (a10 * a21 - b11 * a20)
     )
     half_det = det / (2.0 * p * p * p)
-    phi = math.acos(min(max(half_det, -1.0), 1.0)) / 3.0
+    clipped = -1.0 if -1.0 > half_det else half_det  # Python's min(max(h, −1), 1)
+    clipped = 1.0 if 1.0 < clipped else clipped
+    phi = math.acos(clipped) / 3.0
     largest = q + 2.0 * p * math.cos(phi)
     smallest = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
     return smallest, 3.0 * q - largest - smallest, largest

@@ -10,9 +10,9 @@ cell a beam crosses over at least res/2 is always hit.
 
 Two sampling rules, both compiled kernels (:func:`polyslam_env.core.jit.njit`):
 
-* :func:`scan_cells` / :func:`mark_scans` (belief grids, frontier map): fixed ``fractions``
-  (:func:`beam_fractions`) of each beam's length, which stops half a cell short of a hit, plus
-  the hit cell;
+* :func:`scan_cells` (kernel :func:`scan_cells_into`) / :func:`mark_scans` (belief grids,
+  frontier map): fixed ``fractions`` (:func:`beam_fractions`) of each beam's length, which
+  stops half a cell short of a hit, plus the hit cell;
 * :func:`even_beam_cells` (coverage): each scan's beams sampled ``linspace(0, 1, n)`` of their
   length, with ``n`` set by the scan's longest beam, both ends included.
 
@@ -38,6 +38,7 @@ __all__ = [
     "mark_scans",
     "point_cells",
     "scan_cells",
+    "scan_cells_into",
     "sweep_team",
 ]
 
@@ -76,7 +77,7 @@ def _beam(
 
 
 @njit
-def _scan_cells(
+def scan_cells_into(
     poses: np.ndarray,
     angles: np.ndarray,
     ranges: np.ndarray,
@@ -91,7 +92,7 @@ def _scan_cells(
     hit: np.ndarray,
 ) -> None:
     """Free ids ``free`` (K, B, S) and hit ids ``hit`` (K, B) of K scans (−1: outside the grid,
-    or no return for a hit); see :func:`scan_cells`."""
+    or no return for a hit); see :func:`scan_cells`. A kernel: callable from other kernels."""
     for k in range(poses.shape[0]):
         for b in range(angles.shape[0]):
             returned, r, length, c, s = _beam(poses[k, 2], angles[b], ranges[k, b], max_range, res)
@@ -338,7 +339,7 @@ def scan_cells(
     free = np.empty((len(p), len(a), len(f)), dtype=np.int64)
     hit = np.empty((len(p), len(a)), dtype=np.int64)
     ox, oy = float(origin[0]), float(origin[1])
-    _scan_cells(p, a, r, float(max_range), f, ox, oy, float(resolution), *shape, free, hit)
+    scan_cells_into(p, a, r, float(max_range), f, ox, oy, float(resolution), *shape, free, hit)
     return free, free >= 0, hit, hit >= 0
 
 

@@ -165,14 +165,14 @@ class MapSampler:
         self._per_id: dict[int, tuple[Polynomial, float, np.ndarray]] = {}
 
     def _stale(self, slam: PolySlam) -> bool:
-        ids = slam.book.ids
+        ids = slam.table.ids
         if list(ids) != self._ids:
             return True
         return any(slam.shapes[lid] is not shp for lid, shp in zip(ids, self._shapes, strict=True))
 
     def _rebuild(self, slam: PolySlam) -> None:
         """Resample the landmarks whose shape changed; keep the others' points."""
-        ids = list(slam.book.ids)
+        ids = list(slam.table.ids)
         c0s = slam.c0s
         per_id: dict[int, tuple[Polynomial, float, np.ndarray]] = {}
         for lid, c0 in zip(ids, c0s, strict=True):

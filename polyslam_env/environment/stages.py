@@ -375,7 +375,7 @@ def _view(state: EpisodeState, i: int, pose: np.ndarray, pose_std: np.ndarray) -
     """What robot i knows, with its estimated pose (3,) and the standard deviations (3,) of
     its pose estimate."""
     last = state.last_rendezvous[i]
-    count = state.exchange.counters(i)["rendezvous"] if state.exchange is not None else 0
+    count = state.exchange.rendezvous(i) if state.exchange is not None else 0
     return RobotView(
         ranges=state.sensing.ranges[i],
         pose=pose,
@@ -458,7 +458,7 @@ def _map_change(
 def _bytes_change(state: EpisodeState, i: int) -> int:
     if state.exchange is None:
         return 0
-    total = state.exchange.counters(i)["bytes_sent"]
+    total = state.exchange.bytes_sent(i)
     delta, state.bytes_sent[i] = total - state.bytes_sent[i], total
     return delta
 

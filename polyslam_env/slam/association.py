@@ -15,17 +15,18 @@ in a cluster. A wall whose hits are sparse (a beam sweeping it at range, 0.3 m a
 speed) then grows hit by hit, as it would with denser hits through the paper's case 1; a gap
 wider than :data:`GAP_SPLIT` (a doorway) is never crossed.
 
-:class:`MapBook` keeps the clusters and fills the Q_bad sets of the landmark table; it never
-touches the EKF. :meth:`MapBook.associate` returns what to do (:class:`AssociationResult`), and the
-caller builds the point sets (:func:`qbad_refit_points`, :func:`fit_cluster`), fits them and
-augments / removes state entries and the landmark table's rows.
+The association runs compiled over the map's buffers
+(:func:`~polyslam_env.slam.map_kernels.associate_scan`, in the step's first call): it stores
+the clusters' and Q_bad sets' points (:class:`~polyslam_env.slam.stored.StoredPoints`),
+stretches extents, and leaves the rare rest as requests: the caller builds their point sets
+(:func:`qbad_refit_points`, :func:`fit_cluster`), fits them and augments / removes state
+entries and the landmark table's rows. It never touches the EKF.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -34,21 +35,23 @@ from polyslam_env.slam.fitting import (
     MAX_SLOPE,
     Fit,
     PointSet,
-    StoredPoint,
     concat,
     fit_polynomial,
     polynomial_points,
     stored_points,
 )
-from polyslam_env.slam.landmarks import (
-    LandmarkTable,
-    PolynomialsLike,
-    ShapeArrays,
-    ShapeRow,
-    pack,
-    shape_arrays,
-)
+from polyslam_env.slam.landmarks import ShapeArrays, ShapeRow, shape_arrays
+from polyslam_env.slam.map_kernels import GAP_SPLIT
 from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.stored import PointArrays
+
+__all__ = [
+    "GAP_SPLIT",
+    "ClusterFit",
+    "fit_cluster",
+    "nearest_by_error",
+    "qbad_refit_points",
+]
 
 
 # -- approximation error ---------------------------------------------------------------------
@@ -79,208 +82,9 @@ def nearest_by_error(
     return list(zip(best.tolist(), err.tolist(), strict=True))
 
 
-# -- bookkeeping ------------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class RefitRequest:
-    """Refit landmark ``landmark_id`` on its Q_bad points (``points``) ∪ R."""
-
-    landmark_id: int
-    points: list[StoredPoint]
-
-
-@dataclass(frozen=True, eq=False)
-class NewLandmarkRequest:
-    """Fit a new landmark to a cluster's points (the cluster is already removed)."""
-
-    points: list[StoredPoint]
-
-
-@dataclass(eq=False)
-class AssociationResult:
-    """What one step's association asks the SLAM to do; nothing has touched the EKF."""
-
-    good: dict[int, int] = field(default_factory=dict)  # beam → index into the polys given
-    good_ids: dict[int, int] = field(default_factory=dict)  # beam → landmark id
-    errors: dict[int, float] = field(default_factory=dict)  # beam → best ε (inf if no map)
-    extended: dict[int, int] = field(default_factory=dict)  # beam → index it continues
-    refits: list[RefitRequest] = field(default_factory=list)
-    new_landmarks: list[NewLandmarkRequest] = field(default_factory=list)
-
-
-class MapBook:
-    """Clusters and the association thresholds of one robot's map.
-
-    The landmarks themselves — ids (``ids[i]`` is the landmark whose c0 sits at state index
-    3 + i) and Q_bad sets — are the :class:`~polyslam_env.slam.landmarks.LandmarkTable`'s;
-    the book reads and fills them (a book made without a table starts an empty one).
-    """
-
-    def __init__(
-        self,
-        eps_m: int = 5,
-        eps_z: int = 10,
-        cluster_radius: float = 0.35,
-        table: LandmarkTable | None = None,
-        link: bool = False,
-    ) -> None:
-        if eps_m < 1 or eps_z < 1 or not cluster_radius > 0:
-            raise ValueError(
-                f"need eps_m >= 1, eps_z >= 1, cluster_radius > 0; "
-                f"got {eps_m}, {eps_z}, {cluster_radius}"
-            )
-        self.eps_m = eps_m
-        self.eps_z = eps_z
-        self.cluster_radius = cluster_radius
-        self.link = link
-        self.table = LandmarkTable() if table is None else table
-        self.clusters: list[list[StoredPoint]] = []
-
-    @property
-    def ids(self) -> list[int]:
-        """The table's landmark ids, in state order."""
-        return self.table.ids
-
-    @property
-    def qbad(self) -> dict[int, list[StoredPoint]]:
-        """The table's Q_bad sets, by landmark id."""
-        return self.table.qbad
-
-    # -- clusters ---------------------------------------------------------------------------
-    def add_to_cluster(self, point: StoredPoint) -> list[StoredPoint] | None:
-        """Put the point in the cluster with most neighbours within R (or a new cluster).
-
-        With ``link``, every other cluster with a point within R of it joins that cluster too:
-        clusters are then the connected components of "within R" (single linkage). Without
-        it (the paper's rule), a point bridging two clusters joins one, and two runs of hits
-        along one wall, each short of ε_Z, may never come together (SlamConfig.link_clusters).
-
-        Returns the cluster's points, and removes the cluster, once it holds more than ε_Z.
-        """
-        x, y = float(point.xy[0]), float(point.xy[1])
-        counts = [_count_within(c, x, y, self.cluster_radius) for c in self.clusters]
-        if counts and max(counts) > 0:
-            best = int(np.argmax(counts))  # ties: the oldest cluster
-            self.clusters[best].append(point)
-            joined = [i for i, n in enumerate(counts) if n > 0 and i != best] if self.link else []
-            for i in joined:
-                self.clusters[best].extend(self.clusters[i])
-            for i in reversed(joined):
-                del self.clusters[i]
-                if i < best:
-                    best -= 1
-        else:
-            best = len(self.clusters)
-            self.clusters.append([point])
-        if len(self.clusters[best]) > self.eps_z:
-            return self.clusters.pop(best)
-        return None
-
-    def restore_cluster(self, points: Sequence[StoredPoint]) -> None:
-        """Give back points a cluster fit did not use, as one cluster of the newest ≤ ε_Z.
-
-        Trimming to ε_Z keeps the cluster bounded: the next point re-triggers a fit on the
-        newest evidence instead of refitting an ever-growing set every step.
-        """
-        if points:
-            self.clusters.append(list(points)[-self.eps_z :])
-
-    # -- one step -----------------------------------------------------------------------------
-    def associate(
-        self,
-        points: Sequence[StoredPoint],
-        polys: PolynomialsLike,
-        c0s: Sequence[float] | np.ndarray,
-        rho: float,
-        sigma: float,
-        squared: bool = False,
-        candidates: np.ndarray | None = None,
-        rows: ShapeArrays | Sequence[ShapeRow] | None = None,
-        extends: Callable[[StoredPoint, int], bool] | None = None,
-    ) -> AssociationResult:
-        """Classify this step's beam points against the map as it stood at the step's start.
-
-        ``polys[i]`` / ``c0s[i]`` must be the landmark ``ids[i]``. Polynomials requested
-        during the step join the map only once the caller fits them, so the step's later
-        points are compared with the old map (one step of delay, nothing lost: they go to
-        clusters or Q_bad and are used later).
-
-        ``candidates`` (ascending indices), when given, limits the comparison to those
-        polynomials. It must hold every polynomial that could lie within σ_k of a point (ε is
-        never below the distance to a curve's bounding box, so the boxes within σ_k of the
-        points' box will do): then every point is classified exactly as against the whole
-        map; only ``errors`` reads inf for a point no candidate is near. ``rows``, the same
-        polynomials as the kernels take them (e.g. ``LandmarkTable.arrays()``), saves packing
-        ``polys`` again. ``extends(point, i)``, when given, says whether a point that is not
-        good for its nearest polynomial i continues it past its end (module docstring); such
-        a point goes to ``extended`` instead of Q_bad or a cluster.
-        """
-        if len(polys) != len(self.ids) or len(c0s) != len(self.ids):
-            raise ValueError(f"{len(polys)} polys / {len(c0s)} c0s for {len(self.ids)} landmarks")
-        if not 0 < rho <= sigma:
-            raise ValueError(f"need 0 < rho <= sigma, got rho={rho}, sigma={sigma}")
-        result = AssociationResult()
-        if not points:
-            return result
-        if len({p.beam for p in points}) != len(points):
-            raise ValueError("points must carry distinct beam indices (use store_beams)")
-        nearest = self._nearest(points, polys, c0s, squared, candidates, rows)
-        for point, (best, eps) in zip(points, nearest, strict=True):
-            result.errors[point.beam] = eps
-            if eps <= rho:
-                result.good[point.beam] = best
-                result.good_ids[point.beam] = self.ids[best]
-            elif extends is not None and best >= 0 and extends(point, best):
-                result.extended[point.beam] = best
-            elif eps <= sigma:
-                self._add_bad(self.ids[best], point, result)
-            else:
-                cluster = self.add_to_cluster(point)
-                if cluster is not None:
-                    result.new_landmarks.append(NewLandmarkRequest(cluster))
-        return result
-
-    @staticmethod
-    def _nearest(
-        points: Sequence[StoredPoint],
-        polys: PolynomialsLike,
-        c0s: Sequence[float] | np.ndarray,
-        squared: bool,
-        candidates: np.ndarray | None,
-        rows: ShapeArrays | Sequence[ShapeRow] | None,
-    ) -> list[tuple[int, float]]:
-        """(p*, ε) per point over the candidates (all polynomials when None)."""
-        shapes = pack(polys).arrays() if rows is None else shape_arrays(rows)
-        chosen = np.arange(len(shapes.variate)) if candidates is None else candidates
-        xy = np.array([p.xy for p in points], dtype=float).reshape(-1, 2)
-        return nearest_by_error(xy, chosen, shapes, c0s, squared)
-
-    def _add_bad(self, landmark_id: int, point: StoredPoint, result: AssociationResult) -> None:
-        """Add to Q_bad; past ε_M points, request (or extend this step's) refit and empty it."""
-        bad = self.qbad[landmark_id]
-        bad.append(point)
-        if len(bad) <= self.eps_m:
-            return
-        self.qbad[landmark_id] = []
-        for request in result.refits:
-            if request.landmark_id == landmark_id:
-                request.points.extend(bad)
-                return
-        result.refits.append(RefitRequest(landmark_id, bad))
-
-
-def _count_within(points: Sequence[StoredPoint], x: float, y: float, radius: float) -> int:
-    """How many of ``points`` lie within ``radius`` of (x, y) (a handful: plain floats)."""
-    count = 0
-    for p in points:
-        px, py = p.xy.tolist()
-        if math.hypot(px - x, py - y) <= radius:
-            count += 1
-    return count
-
-
 # -- building the fits ----------------------------------------------------------------------
 def qbad_refit_points(
-    qbad: Sequence[StoredPoint],
+    qbad: PointArrays,
     poly: Polynomial,
     c0_index: int,
     c0_var: float,
@@ -304,12 +108,12 @@ class ClusterFit:
     """A cluster's new landmark (or None) and how the cluster's points were split."""
 
     fit: Fit | None
-    used: list[StoredPoint]
-    leftover: list[StoredPoint]  # give back with MapBook.restore_cluster
+    used: PointArrays
+    leftover: PointArrays  # given back as a cluster (StoredPoints.add_cluster)
 
 
 def fit_cluster(
-    points: Sequence[StoredPoint],
+    points: PointArrays,
     anchor_pose: np.ndarray,
     n_state: int,
     max_rms: float,
@@ -351,13 +155,12 @@ def fit_cluster(
     wall, where the paper's single cubic spans both (≈ 0.3 m off either wall). A wall bending
     by more than ``corner_angle_deg`` within a cluster becomes two landmarks.
     """
-    pts = list(points)
-    xy = np.array([p.xy for p in pts], dtype=float)  # (N, 2)
-    tol = line_tol if line_tol is not None else max(3.0 * max(p.sigma for p in pts), 0.01)
+    xy = np.ascontiguousarray(points.xy, dtype=float)  # (N, 2)
+    tol = line_tol if line_tol is not None else max(3.0 * max(points.sigma.tolist()), 0.01)
     mask = _select_wall(xy, tol, min_second, np.radians(corner_angle_deg))
     mask = _largest_run(xy, mask, max_gap)
-    if np.count_nonzero(mask) >= min(order + 2, len(pts)) and np.count_nonzero(mask) >= 2:
-        used = [p for p, m in zip(pts, mask, strict=True) if m]
+    if np.count_nonzero(mask) >= min(order + 2, len(points)) and np.count_nonzero(mask) >= 2:
+        used = points.subset(mask)
         fit = fit_polynomial(
             stored_points(used, anchor_pose, n_state),
             order,
@@ -367,16 +170,8 @@ def fit_cluster(
             min_noise_var,
         )
         if fit.rms <= max_rms and fit.poly.max_slope() <= MAX_SLOPE:
-            return ClusterFit(fit, used, [p for p, m in zip(pts, mask, strict=True) if not m])
-    return ClusterFit(None, [], pts)
-
-
-#: m, widest gap between neighbouring points (along the wall) that one landmark may span. The
-#: smallest doorway a robot can pass is its diameter 0.13 m; consecutive hits of one beam
-#: along a wall it drives past are at most v_max·T = 0.3 m apart (the default speed limit and
-#: period) and the beams' hits interleave, so 0.3 m — the widest sampling gap, half the
-#: narrowest door of the generators (0.6 m) — separates a gap from sparse sampling.
-GAP_SPLIT = 0.3
+            return ClusterFit(fit, used, points.subset(~mask))
+    return ClusterFit(None, points.subset(np.zeros(len(points), dtype=bool)), points)
 
 
 def _largest_run(xy: np.ndarray, mask: np.ndarray, max_gap: float | None) -> np.ndarray:

@@ -18,18 +18,17 @@ Points come from three constructors:
 
 from __future__ import annotations
 
-import math
-from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
 import scipy.special
 
 from polyslam_env.core.geometry import rotation
-from polyslam_env.slam.ekf import spectral_norm_sym
+from polyslam_env.slam import map_kernels
+from polyslam_env.slam.columns import N_POINT_REAL, PTH, PX, SIGMA, UX, UY, WEIGHT, X, Y
 from polyslam_env.slam.polynomial import Polynomial, polyval
+from polyslam_env.slam.stored import PointArrays
 
 # d/dθ of R(θ) v is J R(θ) v
 J_ROT = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -72,24 +71,6 @@ class PointSet:
         return int(self.noise_cov.shape[0])
 
 
-class StoredPoint(NamedTuple):
-    """A range return kept for later (cluster or Q_bad member).
-
-    It remembers where it was seen in frame 0, along which beam direction (its range noise acts
-    along it), the range σ, its LMS weight 1/‖P_{k|k−1}‖ and the pose estimate at its time.
-    A named tuple rather than a dataclass: every stored point is rebuilt whenever an update
-    moves the pose (see PolySlam._carry_stored_points), and tuples build several times faster.
-    """
-
-    xy: np.ndarray  # (2,) frame-0 coordinates
-    direction: np.ndarray  # (2,) unit beam direction in frame 0
-    sigma: float  # range noise standard deviation (m)
-    weight: float  # 1/‖P_{k|k−1}‖ of the pose prediction that produced it
-    pose: np.ndarray  # (3,) pose estimate when it was measured
-    beam: int = -1  # beam index at its step (bookkeeping only)
-    step: int = -1  # step at which it was measured (bookkeeping only)
-
-
 @dataclass(frozen=True, eq=False)
 class Fit:
     """Result of a weighted LMS fit: the polynomial and the rows of g's Jacobians."""
@@ -104,20 +85,16 @@ class Fit:
 
 
 # -- point constructors ------------------------------------------------------------------
-#: m², the smallest pose uncertainty :func:`prediction_weight` weighs by: a pose known exactly
-#: (the start, without odometry noise) weighs as one known to a micrometre, not infinitely.
-POSE_VAR_FLOOR = 1e-12
 
 
 def prediction_weight(pose_cov: np.ndarray) -> float:
-    """LMS weight 1/‖P_{k|k−1}‖ (spectral norm of the pose block).
+    """LMS weight 1/‖P_{k|k−1}‖ (spectral norm of the pose block, floored at
+    :data:`POSE_VAR_FLOOR`; compiled: :func:`~polyslam_env.slam.map_kernels.prediction_weight`).
 
     The block is a covariance (symmetric), so its norm is its largest |eigenvalue|.
     """
-    norm = spectral_norm_sym(np.asarray(pose_cov, dtype=float)[:3, :3])
-    if not norm >= 0:
-        raise ValueError(f"pose covariance has no finite norm ({norm}); cannot weight its points")
-    return 1.0 / max(norm, POSE_VAR_FLOOR)
+    block = np.ascontiguousarray(np.asarray(pose_cov, dtype=float)[:3, :3])
+    return float(map_kernels.prediction_weight(block))
 
 
 def _beam_directions(theta: float, beam_angles: np.ndarray) -> np.ndarray:
@@ -132,29 +109,27 @@ def store_beams(
     beam_angles: np.ndarray,
     range_sigma: float,
     step: int = -1,
-) -> list[StoredPoint]:
-    """Beam returns of one step as :class:`StoredPoint` s; beams without return are skipped.
-
-    A handful of beams: plain floats per beam beat numpy's per-call cost. The step's points
-    share one copy of the pose (nothing writes into a stored point's arrays).
-    """
-    pose = np.array(pose_pred, dtype=float)  # a copy
-    x, y, theta = pose[:3].tolist()
-    weight = prediction_weight(pose_cov)
-    sigma = float(range_sigma)
-    angles = np.asarray(beam_angles, dtype=float).tolist()
-    out = []
-    for i, r in enumerate(np.asarray(ranges, dtype=float).tolist()):
-        if not math.isfinite(r):
-            continue
-        phi = theta + angles[i]
-        c, s = math.cos(phi), math.sin(phi)
-        out.append(
-            StoredPoint(
-                np.array([x + r * c, y + r * s]), np.array([c, s]), sigma, weight, pose, i, step
-            )
-        )
-    return out
+) -> PointArrays:
+    """Beam returns of one step as stored points (paper eq. 3: π = p + r (cos φ, sin φ),
+    φ = θ + β); beams without return are skipped. The compiled association makes its points
+    with the same kernel (:func:`~polyslam_env.slam.map_kernels.beam_returns`)."""
+    angles = np.ascontiguousarray(beam_angles, dtype=float).reshape(-1)
+    r = np.ascontiguousarray(ranges, dtype=float).reshape(-1)
+    cov = np.ascontiguousarray(np.asarray(pose_cov, dtype=float)[:3, :3])
+    mean = np.ascontiguousarray(pose_pred, dtype=float)[:3].copy()
+    real = np.empty((r.size, N_POINT_REAL))
+    beams = np.empty(r.size, dtype=np.int64)
+    count = map_kernels.beam_returns(mean, cov, r, angles, float(range_sigma), real, beams)
+    real = real[:count]
+    return PointArrays(
+        np.ascontiguousarray(real[:, X : Y + 1]),
+        np.ascontiguousarray(real[:, UX : UY + 1]),
+        real[:, SIGMA].copy(),
+        real[:, WEIGHT].copy(),
+        np.ascontiguousarray(real[:, PX : PTH + 1]),
+        beams[:count].copy(),
+        np.full(count, step, dtype=np.int64),
+    )
 
 
 def beam_points(
@@ -203,7 +178,7 @@ def _diag_noise(u: np.ndarray) -> np.ndarray:
 
 
 def stored_points(
-    points: Sequence[StoredPoint],
+    points: PointArrays,
     anchor_pose: np.ndarray,
     n_state: int,
     pose: np.ndarray | None = None,
@@ -225,8 +200,8 @@ def stored_points(
     anchor = np.asarray(anchor_pose, dtype=float)
     at = anchor if pose is None else np.asarray(pose, dtype=float)
     e = np.zeros(len(points)) if noise is None else np.asarray(noise, dtype=float)
-    xy0 = np.array([p.xy for p in points], dtype=float)  # (N, 2)
-    u = np.array([p.direction for p in points], dtype=float)  # (N, 2)
+    xy0 = np.ascontiguousarray(points.xy, dtype=float)  # (N, 2)
+    u = np.ascontiguousarray(points.direction, dtype=float)  # (N, 2)
     rel = (xy0 - anchor[:2]) @ rotation(at[2] - anchor[2]).T  # (N, 2) R(θ − θ̂)(π̂ − p̂)
     d_state = np.zeros((len(points), 2, n_state))
     d_state[:, :, :2] = np.eye(2)
@@ -235,8 +210,8 @@ def stored_points(
         xy=at[:2] + rel + e[:, None] * u,
         d_state=d_state,
         d_noise=_diag_noise(u),
-        noise_cov=np.diag([float(p.sigma) ** 2 for p in points]),
-        weights=np.array([p.weight for p in points], dtype=float),
+        noise_cov=np.diag([s**2 for s in points.sigma.tolist()]),  # Python's **: libm pow
+        weights=np.array(points.weight, dtype=float),
     )
 
 

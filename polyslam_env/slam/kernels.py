@@ -28,6 +28,29 @@ import math
 import numpy as np
 
 from polyslam_env.core.jit import njit
+from polyslam_env.slam.columns import (
+    CHANGED_AT,
+    ETA_HI,
+    ETA_LO,
+    FIT_HALF,
+    HI,
+    LO,
+    MODEL_VAR,
+    ORDER,
+    P_END_SIGMA,
+    P_GATE,
+    P_MAX_RANGE,
+    P_MIN_SINE,
+    P_RANGE_VAR,
+    P_REACH,
+    P_TURN_VAR_PER_STEP,
+    PIVOT,
+    S_N_FIT,
+    S_ROTATION_STATES,
+    S_SHAPE_FOLLOWS_POSE,
+    VARIATE,
+    XI_VAR,
+)
 
 #: Leading coefficients below this fraction of the largest coefficient (with t scaled to
 #: [0, 1] by r_max) are treated as zero: the degree drops (e.g. a beam parallel to ξ).
@@ -423,7 +446,7 @@ def _shape_fit_var(
     noise_var: float,
     drop_slope: bool,
 ) -> float:
-    """Variance of a frozen shape's η at scaled position t (see PolySlam._beam_rows):
+    """Variance of a frozen shape's η at scaled position t (see :func:`_beam_rows_of`):
     σ²·(a(t)ᵀ M⁻¹ a(t) − 1/N), a = [1, t, …, t^m], M⁻¹ = ``fit_inverse[m]``, floored at 0.
     ``drop_slope``: without the slope's own part σ²·t²·M⁻¹[1, 1] (the shape's rotation is a
     state then, ``SlamConfig.shape_rotation = "considered"``)."""
@@ -491,7 +514,7 @@ def beam_rows(
     and, for :func:`ends_in_doubt`, the hit's distance from the nearer end of its landmark's
     extent and the parts of ∂ξ*/∂state that are not through the range (ξ* = ξ_robot + t·dξ:
     ∂ξ*/∂state = ``xi_grad[:3]`` on the pose + ``xi_grad[3]``·∂t/∂state).
-    Returns how many. See ``PolySlam._beam_rows`` for the model (the Jacobian of
+    Returns how many. See :func:`_beam_rows_of` for the model (the Jacobian of
     SPEC §3 and the frozen shape's terms). Outputs are written, not returned: numba boxes
     every array it returns into a new Python object (~0.6 µs each)."""
     candidates = boxes_near(boxes, np.array([x, x, y, y]), reach)
@@ -900,6 +923,39 @@ def normalised_innovations(
 
 
 @njit
+def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from: int) -> None:
+    """P⁺ = P − (K Wᵀ + W Kᵀ) in place, ``kt`` = Kᵀ and ``wt`` = Wᵀ (k, n), whose columns
+    from ``consider_from`` on are K's considered rows: zero (:func:`update_sparse`).
+
+    The upper triangle row by row from the diagonal, in blocks: on the estimated rows i < c
+    a considered column j ≥ c takes K_i·W_j alone, and the considered block (i, j ≥ c) does
+    not change at all: each of its entries would subtract an exact zero (a running sum that
+    starts at +0 and adds ±0 stays +0), so the result is the same bits as the full update's
+    (tested against it). Then the lower triangle mirrors the changed upper one."""
+    count, n = kt.shape
+    c = min(max(consider_from, 0), n)
+    acc = np.empty(n)  # row i of K Wᵀ + W Kᵀ from the diagonal on
+    for i in range(c):
+        m = n - i  # slices from the diagonal: loops from 0 vectorise
+        inner = c - i  # the estimated columns
+        part = acc[:m]
+        part[:] = 0.0
+        for q in range(count):
+            k_i, w_i = kt[q, i], wt[q, i]
+            k_row, w_row = kt[q, i:], wt[q, i:]
+            for j in range(inner):
+                part[j] += k_i * w_row[j] + w_i * k_row[j]
+            for j in range(inner, m):
+                part[j] += k_i * w_row[j]
+        row = cov[i, i:]
+        for j in range(m):
+            row[j] -= part[j]
+    for i in range(n):  # mirror (the considered block's triangles are equal and unchanged)
+        for j in range(min(i, c)):
+            cov[i, j] = cov[j, i]
+
+
+@njit
 def update_sparse(
     mean: np.ndarray,  # (3+n,) written in place
     cov: np.ndarray,  # (3+n, 3+n) symmetric, written in place
@@ -926,7 +982,10 @@ def update_sparse(
     * The entries from ``consider_from`` on are *considered* (Schmidt–Kalman): their rows of K
       are zero, so their estimates and their own covariance stay, while their
       cross-covariances with the rest follow the update; the Joseph form keeps P⁺ right for
-      that gain.
+      that gain. The covariance update goes in blocks (the considered block is left alone,
+      the cross block takes one product instead of two): with the n turns of n landmarks
+      considered it does about half the work of the full (3 + 2n)² update, and the result
+      is the same bits as the full one (tested).
 
     Not bit-identical to the numpy version it replaced (BLAS's fused products and the
     Z₊Z₊ᵀ − Z₋Z₋ᵀ split of its syrk): equal to rounding, checked against it in the tests.
@@ -992,73 +1051,141 @@ def update_sparse(
             for m in range(count):
                 ks += s_sym[q, m] * kt[m, a]
             wt[q, a] = pht[q, a] - 0.5 * ks
-    acc = np.empty(n)  # row i of K Wᵀ + W Kᵀ from the diagonal on
-    for i in range(n):
-        m = n - i  # slices from the diagonal: loops from 0 vectorise
-        part = acc[:m]
-        part[:] = 0.0
-        for q in range(count):
-            k_i, w_i = kt[q, i], wt[q, i]
-            k_row, w_row = kt[q, i:], wt[q, i:]
-            for j in range(m):
-                part[j] += k_i * w_row[j] + w_i * k_row[j]
-        row = cov[i, i:]
-        for j in range(m):
-            row[j] -= part[j]
-    for i in range(n):  # mirror the upper triangle
-        for j in range(i):
-            cov[i, j] = cov[j, i]
+    joseph_blocks(cov, kt, wt, consider_from)
     return count
 
 
 # -- the SLAM step's two scans --------------------------------------------------------------------
 @njit
-def screen_scan(
-    mean: np.ndarray,  # (3+n,) the predicted state
-    cov: np.ndarray,  # (3+n, 3+n)
-    angles: np.ndarray,  # (B,) every beam's angle
-    ranges: np.ndarray,  # (B,) every beam's reading (inf or nan: no return)
-    outlier: np.ndarray,  # (B,) bool out: NIS above the gate, per row
-    reach: float,
-    variate: np.ndarray,
-    order: np.ndarray,
+def _scan_model(
+    mean: np.ndarray,
+    real: np.ndarray,
+    index: np.ndarray,
+    n: int,
+    params: np.ndarray,
+    switches: np.ndarray,
+    step: int,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """The landmarks' boxes (n, 4) at the state's c0s, each landmark's heading drift since
+    its shape was fitted (n,) (``PolySlam._turn_var``: steps since times the odometry's
+    heading variance per step) and α_1's state index (−1: no turns in the state)."""
+    c0s = mean[3 : 3 + n]
+    near = boxes(
+        c0s, index[VARIATE, :n], real[LO, :n], real[HI, :n], real[ETA_LO : ETA_HI + 1, :n].T
+    )
+    turn_var = np.empty(n)
+    for j in range(n):
+        turn_var[j] = (float(step) - float(index[CHANGED_AT, j])) * params[P_TURN_VAR_PER_STEP]
+    alpha_base = 3 + n if switches[S_ROTATION_STATES] else -1
+    return near, turn_var, alpha_base
+
+
+@njit
+def _beam_rows_of(
+    mean: np.ndarray,
+    angles: np.ndarray,
+    ranges: np.ndarray,
+    beams: np.ndarray,
+    real: np.ndarray,
+    index: np.ndarray,
     shape: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    boxes: np.ndarray,
-    max_range: float,
-    min_sine: float,
-    range_var: float,
-    model_var: np.ndarray,
-    shape_follows_pose: bool,
-    pivot: np.ndarray,
-    xi_var: np.ndarray,
-    turn_var: np.ndarray,
-    fit_half: np.ndarray,
+    n: int,
+    params: np.ndarray,
+    switches: np.ndarray,
     fit_inverse: np.ndarray,
-    n_fit: int,
-    gate: float,  # χ²(1) quantile
-    n_lm: int,  # landmarks: c0s at 3 … 3 + n_lm − 1
-    alpha_base: int,  # their shape rotations from this index (−1: none in the state)
-    consider_from: int,  # unused here (update_scan's)
-    end_sigma: float,  # unused here: every row counts (update_scan's)
+    step: int,
+    innovation: np.ndarray,
+    h_pose: np.ndarray,
+    c0_index: np.ndarray,
+    h_c0: np.ndarray,
+    alpha_index: np.ndarray,
+    h_alpha: np.ndarray,
+    variance: np.ndarray,
+    end_room: np.ndarray,
+    xi_grad: np.ndarray,
 ) -> int:
-    """Every beam's row (:func:`beam_rows`, a missing return counting as ``max_range``) and
-    whether its NIS (:func:`normalised_innovations`) exceeds ``gate``, into the first rows of
+    """:func:`beam_rows` at the state ``mean`` with the table's landmarks and the filter's
+    model: the landmarks within range at the current mean, the model constants.
+
+    Each beam's hit (:func:`~polyslam_env.slam.kernels.beam_rows`, a whole scan per call,
+    on the landmarks within range) gives one row of H: the pose part and 1/D on the c0
+    hit (SPEC §3, :mod:`~polyslam_env.slam.measurement`). Near-tangent hits are skipped.
+    R adds to the range noise the landmark's fit variance beyond the noise, and with
+    ``shape_follows_pose`` the frozen shape's own errors:
+
+    A shape was fitted to points placed with the pose estimate of its time, so that
+    pose's error moves the whole shape rigidly. ``c0``'s Jacobian G_x carries the part of
+    that motion a constant offset can: the shift of the curve at its centroid ξ_c. What
+    it cannot carry (the shape is outside the state, as in the paper) is
+
+    * the rotation by δα about the centroid (ξ_c, η_c), which changes η at ξ* by
+      ±[(ξ* − ξ_c) + B'(ξ*)(η* − η_c)]·δα (+ for x¹-variate, − for x²-variate), and
+    * the translation along ξ by δξ, which changes η at ξ* by −(B'(ξ*) − B'(ξ_c))·δξ.
+
+    The heading error changes little after a landmark is made (odometry turns it by
+    little and a wall hardly corrects absolute heading), so the shape's rotation is taken
+    equal to the robot's current heading error: ±lever/D is added to ∂h/∂θ
+    (∂h/∂η = ∂h/∂c0 = 1/D). Without it a frozen slope makes the absolute heading look
+    observable: P_θθ shrinks while the error stays. The position error, in contrast, is
+    corrected by the update, so the translation term is treated as noise: its variance
+    ((B'(ξ*) − B'(ξ_c))/D)²·σ²_ξ, with σ²_ξ the pose variance along ξ when the landmark was
+    made, goes into R together with the shape's own fit error: the shape was fitted to
+    noisy points, so its estimation error is a bias every later beam on it shares. For N
+    points equally spaced over the fitted extent, the fit's η at t = (ξ* − ξ_c)/half-extent
+    has variance σ² a(t)ᵀM⁻¹a(t) (a = [1, t, …, t^m]); the constant part σ²/N is c0's and
+    already in the state, the rest goes into R. It is small inside the fitted extent
+    (~σ²·m/N) and grows fast where the curve is extrapolated. N = ε_Z + 1, the size of the
+    cluster a landmark is born from. And the rotation the shape is taken to share is the
+    heading error *when it was fitted*, which the current one has drifted from since: that
+    drift's variance (``turn_var``: steps since the fit times the odometry's heading variance
+    per step) times (lever/D)² goes into R as well.
+
+    With rotation states (``shape_rotation="considered"``) the rotation is instead the
+    landmark's own α: ±lever/D goes to ∂h/∂α, and neither the heading drift nor the
+    slope's part of the fit variance (σ²·t²·M⁻¹[1, 1], which α's variance holds) enters R.
+    """
+    near, turn_var, alpha_base = _scan_model(mean, real, index, n, params, switches, step)
+    return beam_rows(
+        mean[0], mean[1], mean[2], angles, ranges, beams, params[P_REACH], index[VARIATE, :n],
+        index[ORDER, :n], shape[:n], real[LO, :n], real[HI, :n], mean[3 : 3 + n], near,
+        params[P_MAX_RANGE], params[P_MIN_SINE], params[P_RANGE_VAR], real[MODEL_VAR, :n],
+        switches[S_SHAPE_FOLLOWS_POSE] != 0, real[PIVOT, :n], real[XI_VAR, :n], turn_var,
+        real[FIT_HALF, :n], fit_inverse, switches[S_N_FIT], alpha_base, innovation, h_pose,
+        c0_index, h_c0, alpha_index, h_alpha, variance, end_room, xi_grad,
+    )  # fmt: skip
+
+
+@njit
+def screen_scan(
+    mean: np.ndarray,  # (3+n(+n),) the predicted state
+    cov: np.ndarray,
+    angles: np.ndarray,  # (S,) the screened beams' angles
+    ranges: np.ndarray,  # (S,) their readings (inf or nan: no return)
+    outlier: np.ndarray,  # (S,) bool out: NIS above the gate, per row
+    real: np.ndarray,  # the landmark table (n landmarks)
+    index: np.ndarray,
+    shape: np.ndarray,
+    n: int,
+    params: np.ndarray,  # the filter's model (``columns``: P_*, S_*)
+    switches: np.ndarray,
+    fit_inverse: np.ndarray,
+    step: int,
+) -> int:
+    """Every beam's row (:func:`beam_rows`, a missing return counting as r_max) and whether
+    its NIS (:func:`normalised_innovations`) exceeds the gate, into the first rows of
     ``outlier``; returns how many rows (the divergence screen of ``PolySlam``)."""
     n_beams = angles.size
     seen = np.empty(n_beams)
     for b in range(n_beams):
-        seen[b] = ranges[b] if math.isfinite(ranges[b]) else max_range
+        seen[b] = ranges[b] if math.isfinite(ranges[b]) else params[P_MAX_RANGE]
     innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))
     c0_index, h_c0, variance = np.empty(n_beams, np.int64), np.empty(n_beams), np.empty(n_beams)
     alpha_index, h_alpha = np.empty(n_beams, np.int64), np.empty(n_beams)
     end_room, xi_grad = np.empty(n_beams), np.empty((n_beams, 4))
-    k = beam_rows(
-        mean[0], mean[1], mean[2], angles, seen, np.arange(n_beams), reach, variate, order,
-        shape, lo, hi, mean[3 : 3 + n_lm], boxes, max_range, min_sine, range_var, model_var,
-        shape_follows_pose, pivot, xi_var, turn_var, fit_half, fit_inverse, n_fit, alpha_base,
-        innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance, end_room, xi_grad,
+    k = _beam_rows_of(
+        mean, angles, seen, np.arange(n_beams), real, index, shape, n, params, switches,
+        fit_inverse, step, innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance,
+        end_room, xi_grad,
     )  # fmt: skip
     nis = np.empty(k)
     normalised_innovations(
@@ -1066,7 +1193,7 @@ def screen_scan(
         variance[:k], nis,
     )  # fmt: skip
     for i in range(k):
-        outlier[i] = nis[i] > gate
+        outlier[i] = nis[i] > params[P_GATE]
     return k
 
 
@@ -1101,59 +1228,45 @@ def share_landmark_error(
 
 @njit
 def update_scan(
-    mean: np.ndarray,  # (3+n,) written in place
-    cov: np.ndarray,  # (3+n, 3+n) written in place
+    mean: np.ndarray,  # (3+n(+n),) written in place
+    cov: np.ndarray,  # written in place
     angles: np.ndarray,  # (B,) every beam's angle
     ranges: np.ndarray,  # (B,) every beam's reading
     beams: np.ndarray,  # (k,) int64: the beams to update with, in this order
     assigned: np.ndarray,  # (k,) int64: the landmark each was associated with (−1: any)
-    reach: float,
-    variate: np.ndarray,
-    order: np.ndarray,
+    real: np.ndarray,  # the landmark table (n landmarks)
+    index: np.ndarray,
     shape: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    boxes: np.ndarray,
-    max_range: float,
-    min_sine: float,
-    range_var: float,
-    model_var: np.ndarray,
-    shape_follows_pose: bool,
-    pivot: np.ndarray,
-    xi_var: np.ndarray,
-    turn_var: np.ndarray,
-    fit_half: np.ndarray,
+    n: int,
+    params: np.ndarray,  # the filter's model (``columns``: P_*, S_*)
+    switches: np.ndarray,
     fit_inverse: np.ndarray,
-    n_fit: int,
-    gate: float,  # χ²(1) quantile
-    n_lm: int,  # landmarks: c0s at 3 … 3 + n_lm − 1
-    alpha_base: int,  # their shape rotations from this index (−1: none in the state)
-    consider_from: int,  # entries from here on are considered, not estimated (Schmidt)
-    end_sigma: float,  # rows within this many σ of their landmark's end are dropped; 0: none
+    step: int,
 ) -> int:
     """The rows of ``beams`` (:func:`beam_rows`) but, with ``end_sigma`` > 0, those cast at
     the mean onto another landmark than the one ``assigned``, those that miss their landmark
     from one of its sigma points at ``end_sigma`` (:func:`steady_beams`) and
     those whose hit may lie past its end (:func:`ends_in_doubt`), their R made a joint
     bound (:func:`share_landmark_error`), and the gated update with them
-    (:func:`update_sparse`); returns how many rows passed the gate, or −1 when no beam had a
-    usable row (then nothing ran)."""
+    (:func:`update_sparse`; the turns α are considered, not estimated); returns how many rows
+    passed the gate, or −1 when no beam had a usable row (then nothing ran)."""
     n_beams = beams.size
+    end_sigma = params[P_END_SIGMA]
     innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))
     c0_index, h_c0, variance = np.empty(n_beams, np.int64), np.empty(n_beams), np.empty(n_beams)
     alpha_index, h_alpha = np.empty(n_beams, np.int64), np.empty(n_beams)
     end_room, xi_grad = np.empty(n_beams), np.empty((n_beams, 4))
     if end_sigma > 0.0:
         steady = np.empty(n_beams, np.bool_)
+        near, _, _ = _scan_model(mean, real, index, n, params, switches, step)
         steady_beams(
-            mean, cov, angles, beams, assigned, reach, variate, order, shape, lo, hi, boxes,
-            max_range, min_sine, n_lm, end_sigma, steady,
+            mean, cov, angles, beams, assigned, params[P_REACH], index[VARIATE, :n],
+            index[ORDER, :n], shape[:n], real[LO, :n], real[HI, :n], near, params[P_MAX_RANGE],
+            params[P_MIN_SINE], n, end_sigma, steady,
         )  # fmt: skip
         beams = beams[steady]
-    k = beam_rows(
-        mean[0], mean[1], mean[2], angles, ranges, beams, reach, variate, order, shape, lo, hi,
-        mean[3 : 3 + n_lm], boxes, max_range, min_sine, range_var, model_var,
-        shape_follows_pose, pivot, xi_var, turn_var, fit_half, fit_inverse, n_fit, alpha_base,
+    k = _beam_rows_of(
+        mean, angles, ranges, beams, real, index, shape, n, params, switches, fit_inverse, step,
         innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance, end_room, xi_grad,
     )  # fmt: skip
     if k > 0 and end_sigma > 0.0:
@@ -1172,9 +1285,10 @@ def update_scan(
         k = w
     if k == 0:
         return -1
-    share_landmark_error(c0_index[:k], variance[:k], range_var)
+    share_landmark_error(c0_index[:k], variance[:k], params[P_RANGE_VAR])
     accepted, nis = np.empty(k, np.bool_), np.empty(k)
+    consider_from = 3 + n if switches[S_ROTATION_STATES] else mean.size
     return update_sparse(
         mean, cov, innovation[:k], h_pose[:k], c0_index[:k], h_c0[:k], alpha_index[:k],
-        h_alpha[:k], variance[:k], gate, consider_from, accepted, nis,
+        h_alpha[:k], variance[:k], params[P_GATE], consider_from, accepted, nis,
     )  # fmt: skip

@@ -1,11 +1,11 @@
 """The landmark table of one robot's map (:class:`LandmarkTable`), kept in state order.
 
 :class:`~polyslam_env.slam.robot.PolySlam` keeps its whole map here (the EKF state holds only
-the c0s): stable ids, each landmark's shape and extent as a
-:class:`~polyslam_env.slam.polynomial.Polynomial`, and the same as arrays for the hot path
-(association, ray casting, the shape coupling of the update, the merge check). Rebuilding the
-arrays from the polynomials every step would cost O(n) Python work; the table changes one row
-when the map changes (append, remove, new extent).
+the c0s): stable ids, each landmark's shape, extent and scalars as the columns of field-major
+buffers (:mod:`~polyslam_env.slam.columns`), which the compiled step reads and writes whole
+(association, ray casting, the shape coupling of the update, the merge check), and each
+landmark as an immutable :class:`~polyslam_env.slam.polynomial.Polynomial`, built when read.
+The table changes one column when the map changes (append, remove, new extent).
 
 It also keeps a conservative η range of each shape over its extent, so that a landmark's
 axis-aligned bounding box follows from its current c0 in O(1). A beam can only hit, and a
@@ -17,15 +17,33 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, NamedTuple, Protocol
+from typing import NamedTuple, Protocol, overload
 
 import numpy as np
 
-from polyslam_env.slam import kernels
+from polyslam_env.slam import kernels, map_kernels
+from polyslam_env.slam.columns import (
+    CHANGED_AT,
+    ETA_HI,
+    ETA_LO,
+    EV_HI,
+    EV_LO,
+    FIT_HALF,
+    HI,
+    ID,
+    LO,
+    MODEL_VAR,
+    N_INDEX,
+    N_REAL,
+    ORDER,
+    PIVOT,
+    RECEIVED,
+    SIDE,
+    STAMP,
+    VARIATE,
+    XI_VAR,
+)
 from polyslam_env.slam.polynomial import Polynomial
-
-if TYPE_CHECKING:
-    from polyslam_env.slam.fitting import StoredPoint
 
 #: m, how far a landmark's curve may reach past the outermost beam hits that support it: 2.5 ×
 #: the 2 cm range noise (a hit's own position along the wall is uncertain by about that).
@@ -160,20 +178,16 @@ def shape_range(shape: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray
 
     Interval arithmetic on the Taylor expansion about the middle m of the extent, with half
     width h: B(m + u) = Σ_k T_k u^k, so |B − T_0| ≤ Σ_{k≥1} |T_k| h^k. Never too narrow (the
-    box tests rely on that); loose only by the curvature terms of short segments.
+    box tests rely on that); loose only by the curvature terms of short segments. Compiled
+    row by row (:func:`~polyslam_env.slam.map_kernels.eta_range`).
     """
-    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)  # (n,)
     shape = np.ascontiguousarray(shape, dtype=float)
     if shape.shape[1] > kernels.MAX_ORDER + 1:
         raise ValueError(f"shape order {shape.shape[1] - 1} above {kernels.MAX_ORDER}")
-    taylor = np.empty_like(shape)  # (n, M+1)
+    out = np.empty((len(shape), 2))
     for i in range(len(shape)):
-        kernels.taylor_shift(shape[i], shape.shape[1] - 1, float(mid[i]), taylor[i])
-    powers = half[:, None] ** np.arange(shape.shape[1])  # (n, M+1)
-    spread = (np.abs(taylor[:, 1:]) * powers[:, 1:]).sum(axis=1)
-    # a relative pad absorbs the rounding of T_0 and of the exact values this bounds
-    pad = spread * 1e-9 + 1e-9 * (1.0 + np.abs(taylor[:, 0]))
-    return np.stack([taylor[:, 0] - spread - pad, taylor[:, 0] + spread + pad], axis=-1)
+        out[i] = map_kernels.eta_range(shape[i], float(lo[i]), float(hi[i]))
+    return out
 
 
 class LandmarkRow(NamedTuple):
@@ -199,43 +213,40 @@ def _own_order(shape: np.ndarray) -> tuple[float, ...]:
 class LandmarkTable:
     """One robot's map: every landmark's id, shape, extent and scalars, row i = state 3 + i.
 
-    The single record of the map (the EKF state holds only the c0s): ``ids`` (stable
-    integers, row i's c0 at state index 3 + i), ``polys`` (shape and extent as an immutable
-    :class:`Polynomial`: a change is a new object, so readers can tell by identity; its own
-    c0 is the fit's, the current one is in the state), ``changed_at`` (the step the landmark
-    was created, refit or merged), ``qbad`` (the points it approximates badly, by id; the
-    association fills them), and the same shapes as arrays for the hot path, changed one
-    row at a time: ``shape`` rows [0, b_1, …, b_M] zero-padded to the largest order so far,
-    ``variate``, ``lo``/``hi``, ``eta_range`` (bounds on B over the extent, for the boxes),
-    ``pivot`` (ξ of the centroid the landmark was fitted around), ``xi_var`` (the pose
-    variance along ξ when it was made), ``model_var`` (its fit variance beyond the range
-    noise), ``side`` (the face its beams saw, see ``merging``) and ``fit_half`` (half the
-    extent it was fitted over; see PolySlam).
+    The single record of the map (the EKF state holds only the c0s), kept as field-major
+    buffers (STYLE habit 21; :mod:`~polyslam_env.slam.columns` names the fields): ``real``
+    (N_REAL, capacity) — extent ``lo``/``hi``, ``eta_range`` (bounds on B over the extent, for
+    the boxes), ``evidence`` (the ξ-interval of the hits that support it), ``pivot`` (ξ of the
+    centroid it was fitted around), ``xi_var`` (the pose variance along ξ when it was made),
+    ``model_var`` (its fit variance beyond the range noise), ``fit_half`` (half the extent it
+    was fitted over; see PolySlam); ``index`` (N_INDEX, capacity) — its stable ``id``,
+    ``variate``, own ``order``, ``side`` (the face its beams saw, see ``merging``),
+    ``changed_at`` (the step it was created, refit or merged), ``stamp`` (bumped whenever
+    its shape or extent changes) and ``received`` (it holds a received landmark's data);
+    and ``shape_buffer`` (capacity, M+1), rows [0, b_1, …, b_M] zero-padded to the largest
+    order so far. The first ``n`` columns are in use; the named properties (``lo``,
+    ``variate``, ``shape``, …) are views of them. The compiled step
+    writes the extents in place (:mod:`~polyslam_env.slam.map_kernels`); appends and removals
+    shift whole columns.
 
-    Arrays are replaced, never written in place, so a :class:`PackedPolynomials` handed out
-    earlier stays valid; ``ids`` is changed in place (readers may hold it).
+    ``ids`` (a list, changed in place: readers may hold it) mirrors the id field; ``polys[i]``
+    is landmark i's shape and extent as an immutable :class:`Polynomial` (its own c0 is the
+    fit's, the current one is in the state), built when read after a change: a change gives a
+    new object, so readers can tell by identity. ``version`` moves with every change, for
+    caches built on the table (:meth:`boxes`).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, capacity: int = 16) -> None:
         self.ids: list[int] = []  # (n,) stable ids in state order
-        self.polys: list[Polynomial] = []  # (n,) shape and extent
-        self.changed_at: list[int] = []  # (n,) step created, refit or merged
-        self.qbad: dict[int, list[StoredPoint]] = {}  # id → its badly approximated points
-        self.variate = np.zeros(0, dtype=np.int64)  # (n,)
-        self.order = np.zeros(0, dtype=np.int64)  # (n,) each shape's own order
-        self.shape = np.zeros((0, 2))  # (n, M+1)
-        self.lo = np.zeros(0)  # (n,)
-        self.hi = np.zeros(0)  # (n,)
-        self.eta_range = np.zeros((0, 2))  # (n, 2) bounds on B over the extent (no c0)
-        self.pivot = np.zeros(0)  # (n,)
-        self.xi_var = np.zeros(0)  # (n,)
-        self.model_var = np.zeros(0)  # (n,)
-        self.fit_half = np.zeros(0)  # (n,) half the extent it was fitted over
-        self.side = np.zeros(0, dtype=int)  # (n,) face seen: +1 from +η, −1 from −η, 0 unknown
-        self.evidence = np.zeros((0, 2))  # (n, 2) ξ-interval of the hits supporting it
+        self.real = np.zeros((N_REAL, capacity))
+        self.index = np.zeros((N_INDEX, capacity), dtype=np.int64)
+        self.shape_buffer = np.zeros((capacity, 2))  # (capacity, M+1)
         self.shapes = ShapesView(self)
+        self.polys = PolynomialsView(self)
         self.version = 0  # bumped by every change, for caches built on the table
         self._next_id = 0
+        self._built: list[Polynomial] = []  # the last Polynomial built for each row
+        self._built_stamp: list[int] = []  # … and the stamp it was built at
         self._row_of: dict[int, int] | None = None  # id → row, rebuilt after append/remove
         self._packed: PackedPolynomials | None = None
         self._rows: list[LandmarkRow] | None = None
@@ -247,6 +258,72 @@ class LandmarkTable:
 
     def __contains__(self, landmark_id: object) -> bool:
         return landmark_id in self._rows_by_id()
+
+    # -- the fields, as views of the rows in use ----------------------------------------------
+    @property
+    def buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(real, index, shape_buffer), whole, as the kernels take them with ``len(table)``."""
+        return self.real, self.index, self.shape_buffer
+
+    @property
+    def lo(self) -> np.ndarray:  # (n,) extent on ξ
+        return self.real[LO, : len(self.ids)]
+
+    @property
+    def hi(self) -> np.ndarray:  # (n,)
+        return self.real[HI, : len(self.ids)]
+
+    @property
+    def eta_range(self) -> np.ndarray:  # (n, 2) bounds on B over the extent (no c0)
+        return self.real[ETA_LO : ETA_HI + 1, : len(self.ids)].T
+
+    @property
+    def evidence(self) -> np.ndarray:  # (n, 2) ξ-interval of the hits supporting it
+        return self.real[EV_LO : EV_HI + 1, : len(self.ids)].T
+
+    @property
+    def pivot(self) -> np.ndarray:  # (n,)
+        return self.real[PIVOT, : len(self.ids)]
+
+    @property
+    def xi_var(self) -> np.ndarray:  # (n,)
+        return self.real[XI_VAR, : len(self.ids)]
+
+    @property
+    def model_var(self) -> np.ndarray:  # (n,)
+        return self.real[MODEL_VAR, : len(self.ids)]
+
+    @property
+    def fit_half(self) -> np.ndarray:  # (n,)
+        return self.real[FIT_HALF, : len(self.ids)]
+
+    @property
+    def variate(self) -> np.ndarray:  # (n,) int64, 1 or 2
+        return self.index[VARIATE, : len(self.ids)]
+
+    @property
+    def order(self) -> np.ndarray:  # (n,) int64 each shape's own order
+        return self.index[ORDER, : len(self.ids)]
+
+    @property
+    def side(self) -> np.ndarray:  # (n,) int64 face seen: +1 from +η, −1 from −η, 0 unknown
+        return self.index[SIDE, : len(self.ids)]
+
+    @property
+    def changed_at(self) -> np.ndarray:  # (n,) int64 step created, refit or merged
+        return self.index[CHANGED_AT, : len(self.ids)]
+
+    @property
+    def received(self) -> np.ndarray:  # (n,) int64 1: holds a received landmark's data
+        return self.index[RECEIVED, : len(self.ids)]
+
+    @property
+    def stamp(self) -> np.ndarray:  # (n,) int64 moves with every change of shape or extent
+        return self.index[STAMP, : len(self.ids)]
+
+    @property
+    def shape(self) -> np.ndarray:  # (n, M+1) [0, b_1, …, b_M]
+        return self.shape_buffer[: len(self.ids)]
 
     # -- ids --------------------------------------------------------------------------------
     def index_of(self, landmark_id: int) -> int:
@@ -273,94 +350,93 @@ class LandmarkTable:
         step: int = 0,
         side: int = 0,
         evidence: tuple[float, float] | None = None,
+        received: bool = False,
     ) -> int:
         """Add a landmark at the end (its c0 was appended to the state); returns its new id.
 
         ``evidence`` (default: the extent) is the ξ-interval of the hits that support it; the
         extent must lie within it ± :data:`EXTENT_MARGIN` (the caller clips, see
-        :func:`clip_to_evidence`)."""
+        :func:`clip_to_evidence`); ``received``: it holds a received landmark's data."""
         landmark_id = self._next_id
         self._next_id += 1
-        self.ids.append(landmark_id)
-        self.polys.append(poly)
-        self.changed_at.append(step)
-        self.qbad[landmark_id] = []
-        width = max(self.shape.shape[1], poly.order + 1)
-        row = np.zeros((1, width))  # (1, M+1)
-        row[0, 1 : poly.order + 1] = poly.shape
-        shape = np.zeros((len(self), width))
-        shape[:-1, : self.shape.shape[1]] = self.shape
-        shape[-1] = row[0]
-        self.shape = shape
-        self.variate = np.append(self.variate, poly.variate)
-        self.order = np.append(self.order, len(_own_order(row[0])) - 1)
-        self.lo = np.append(self.lo, poly.lo)
-        self.hi = np.append(self.hi, poly.hi)
-        rng = shape_range(row, np.array([poly.lo]), np.array([poly.hi]))  # (1, 2)
-        self.eta_range = np.concatenate([self.eta_range, rng])
-        self.pivot = np.append(self.pivot, pivot)
-        self.xi_var = np.append(self.xi_var, xi_var)
-        self.model_var = np.append(self.model_var, model_var)
-        self.fit_half = np.append(self.fit_half, fit_half)
-        self.side = np.append(self.side, int(side))
+        i = len(self.ids)
+        self._make_room(i + 1, poly.order + 1)
+        shape = self.shape_buffer[i]
+        shape[:] = 0.0
+        shape[1 : poly.order + 1] = poly.shape
         ev = (poly.lo, poly.hi) if evidence is None else evidence
-        self.evidence = np.concatenate([self.evidence, np.array([ev], dtype=float)])
+        real, index = self.real, self.index
+        real[LO, i], real[HI, i] = poly.lo, poly.hi
+        real[ETA_LO, i], real[ETA_HI, i] = map_kernels.eta_range(shape, poly.lo, poly.hi)
+        real[EV_LO, i], real[EV_HI, i] = ev
+        real[PIVOT, i], real[XI_VAR, i] = pivot, xi_var
+        real[MODEL_VAR, i], real[FIT_HALF, i] = model_var, fit_half
+        index[ID, i], index[VARIATE, i] = landmark_id, poly.variate
+        index[ORDER, i] = len(_own_order(shape)) - 1
+        index[SIDE, i], index[CHANGED_AT, i], index[STAMP, i] = int(side), step, 0
+        index[RECEIVED, i] = int(received)
+        self.ids.append(landmark_id)
+        self._built.append(poly)
+        self._built_stamp.append(0)
         self._changed(ids=True)
         return landmark_id
 
+    def _make_room(self, rows: int, width: int) -> None:
+        """Buffers for at least ``rows`` landmarks and shapes ``width`` coefficients wide."""
+        capacity, old_width = self.shape_buffer.shape
+        if rows <= capacity and width <= old_width:
+            return
+        size = max(rows, 2 * capacity) if rows > capacity else capacity
+        n = len(self.ids)
+        real, index = np.zeros((N_REAL, size)), np.zeros((N_INDEX, size), dtype=np.int64)
+        real[:, :n], index[:, :n] = self.real[:, :n], self.index[:, :n]
+        shape = np.zeros((size, max(width, old_width)))
+        shape[:n, :old_width] = self.shape_buffer[:n]
+        self.real, self.index, self.shape_buffer = real, index, shape
+
     def remove(self, index: int) -> int:
-        """Drop row ``index`` (its c0 left the state); returns its id."""
+        """Drop row ``index`` (its c0 left the state); returns its id. The rows after it move
+        up one."""
+        n = len(self.ids)
         landmark_id = self.ids.pop(index)
-        del self.polys[index]
-        del self.changed_at[index]
-        del self.qbad[landmark_id]
-        names = ("variate", "order", "shape", "lo", "hi", "eta_range", "pivot", "xi_var")
-        for name in (*names, "model_var", "fit_half", "side", "evidence"):
-            setattr(self, name, np.delete(getattr(self, name), index, axis=0))
+        del self._built[index], self._built_stamp[index]
+        self.real[:, index : n - 1] = self.real[:, index + 1 : n]
+        self.index[:, index : n - 1] = self.index[:, index + 1 : n]
+        self.shape_buffer[index : n - 1] = self.shape_buffer[index + 1 : n]
         self._changed(ids=True)
         return landmark_id
 
     def extend_to_hit(self, index: int, xi: float) -> None:
         """Stretch landmark ``index``'s extent and evidence to a supporting hit at ``xi``."""
-        ev_lo, ev_hi = self.evidence[index]
-        self.evidence = self.evidence.copy()
-        self.evidence[index] = min(ev_lo, xi), max(ev_hi, xi)
-        poly = self.polys[index]
-        self.set_extent(index, min(poly.lo, xi), max(poly.hi, xi))
+        map_kernels.extend_to_hit(*self.buffers, index, float(xi))
+        self._changed(ids=False)
 
     def set_extent(self, index: int, lo: float, hi: float) -> None:
         """New extent [lo, hi] of landmark ``index`` (same shape)."""
-        poly = self.polys[index]
-        self.polys[index] = Polynomial(poly.variate, poly.coeffs, lo, hi)
-        self.lo, self.hi = self.lo.copy(), self.hi.copy()
-        self.lo[index], self.hi[index] = lo, hi
-        self._reshaped(index)
+        map_kernels.set_extent(*self.buffers, index, float(lo), float(hi))
+        self._changed(ids=False)
 
     def set_shape(self, index: int, poly: Polynomial) -> None:
         """New shape of landmark ``index`` (same variate, extent and order at most the
         table's widest, e.g. a line turned by a link's estimate of its turn)."""
-        if poly.variate != self.variate[index] or (poly.lo, poly.hi) != (
-            self.lo[index],
-            self.hi[index],
+        if poly.variate != self.index[VARIATE, index] or (poly.lo, poly.hi) != (
+            self.real[LO, index],
+            self.real[HI, index],
         ):
             raise ValueError("set_shape: the variate and extent must stay")
-        if poly.order + 1 > self.shape.shape[1]:
+        if poly.order + 1 > self.shape_buffer.shape[1]:
             raise ValueError(f"set_shape: order {poly.order} above the table's")
-        self.polys[index] = poly
-        shape, order = self.shape.copy(), self.order.copy()
-        shape[index] = 0.0
-        shape[index, 1 : poly.order + 1] = poly.shape
-        order[index] = len(_own_order(shape[index])) - 1
-        self.shape, self.order = shape, order
-        self._reshaped(index)
+        shape = self.shape_buffer[index]
+        shape[:] = 0.0
+        shape[1 : poly.order + 1] = poly.shape
+        self.index[ORDER, index] = len(_own_order(shape)) - 1
+        map_kernels.set_extent(*self.buffers, index, poly.lo, poly.hi)  # η range, stamp
+        self._built[index] = poly
+        self._built_stamp[index] = int(self.index[STAMP, index])
+        self._changed(ids=False)
 
-    def _reshaped(self, index: int) -> None:
-        """Landmark ``index``'s shape or extent changed: its η range again, caches dropped."""
-        rng = shape_range(
-            self.shape[index : index + 1], self.lo[index : index + 1], self.hi[index : index + 1]
-        )
-        self.eta_range = self.eta_range.copy()
-        self.eta_range[index] = rng[0]
+    def extents_changed(self) -> None:
+        """The compiled step stretched extents in place: drop the caches built on them."""
         self._changed(ids=False)
 
     def _changed(self, ids: bool) -> None:
@@ -371,18 +447,32 @@ class LandmarkTable:
         self.version += 1
 
     # -- views --------------------------------------------------------------------------------
+    def poly(self, index: int) -> Polynomial:
+        """Landmark ``index``'s shape and extent (its fit's c0; the current one is in the
+        state), the same object until the landmark changes."""
+        stamp = int(self.index[STAMP, index])
+        if self._built_stamp[index] != stamp:
+            old = self._built[index]
+            self._built[index] = Polynomial(
+                old.variate, old.coeffs, float(self.real[LO, index]), float(self.real[HI, index])
+            )
+            self._built_stamp[index] = stamp
+        return self._built[index]
+
     def polynomials(self, c0s: Sequence[float] | np.ndarray) -> list[Polynomial]:
         """Every landmark with its c0 from ``c0s`` (n,), in state order."""
-        return [p.with_c0(c) for p, c in zip(self.polys, c0s, strict=True)]
+        return [self.poly(i).with_c0(c) for i, c in enumerate(c0s)]
 
     def packed(self) -> PackedPolynomials:
-        """The shapes as arrays (cached until the next change)."""
+        """The shapes as arrays (copies, cached until the next change: they stay valid)."""
         if self._packed is None:
-            self._packed = PackedPolynomials(self.variate, self.shape, self.lo, self.hi)
+            self._packed = PackedPolynomials(
+                self.variate.copy(), self.shape.copy(), self.lo.copy(), self.hi.copy()
+            )
         return self._packed
 
     def arrays(self) -> ShapeArrays:
-        """The shapes as the kernels take them (the table's own arrays, no copy)."""
+        """The shapes as the kernels take them (views of the table's buffers, no copy)."""
         return ShapeArrays(self.variate, self.order, self.shape, self.lo, self.hi)
 
     def rows(self) -> list[LandmarkRow]:
@@ -426,6 +516,28 @@ class LandmarkTable:
         return boxes_near(self.boxes(c0s), box, distance)
 
 
+class PolynomialsView(Sequence[Polynomial]):
+    """Row → shape-and-extent sequence over a :class:`LandmarkTable` (``table.polys``)."""
+
+    def __init__(self, table: LandmarkTable) -> None:
+        self._table = table
+
+    @overload
+    def __getitem__(self, i: int) -> Polynomial: ...
+    @overload
+    def __getitem__(self, i: slice) -> list[Polynomial]: ...
+    def __getitem__(self, i: int | slice) -> Polynomial | list[Polynomial]:
+        n = len(self._table)
+        if isinstance(i, slice):
+            return [self._table.poly(k) for k in range(n)[i]]
+        if not -n <= i < n:
+            raise IndexError(f"landmark row {i} out of range ({n} landmarks)")
+        return self._table.poly(i % n if i < 0 else i)
+
+    def __len__(self) -> int:
+        return len(self._table)
+
+
 class ShapesView(Mapping[int, Polynomial]):
     """Read-only id → shape-and-extent mapping over a :class:`LandmarkTable` (state order)."""
 
@@ -433,7 +545,7 @@ class ShapesView(Mapping[int, Polynomial]):
         self._table = table
 
     def __getitem__(self, landmark_id: int) -> Polynomial:
-        return self._table.polys[self._table.index_of(landmark_id)]
+        return self._table.poly(self._table.index_of(landmark_id))
 
     def __iter__(self) -> Iterator[int]:
         return iter(list(self._table.ids))

@@ -42,12 +42,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from polyslam_env.slam.association import GAP_SPLIT, nearest_by_error
+from polyslam_env.slam import map_kernels
+from polyslam_env.slam.association import GAP_SPLIT
 from polyslam_env.slam.fitting import PointSet, concat, polynomial_points
-from polyslam_env.slam.landmarks import pack
+from polyslam_env.slam.map_kernels import MEASURED
 from polyslam_env.slam.polynomial import Polynomial
 
-_SAMPLES = 64  # samples of p2 used to project it on p's axis
 #: m, largest gap between the nearer end points of two pieces that may be joined into one
 #: landmark: the gap below which points along a wall are sampling, not a doorway — the same
 #: threshold a cluster fit is cut at (``association.GAP_SPLIT``), so a join never bridges
@@ -62,50 +62,12 @@ JOIN_ANGLE_DEG = 10.0
 THIN_WALL = 0.05
 
 
-def overlap_interval(poly: Polynomial, other: Polynomial) -> tuple[float, float, bool] | None:
-    """Overlap [a, b] on ``poly``'s ξ axis of ``other`` projected there, and whether one
-    includes the other; None when the projections are disjoint."""
-    xi_other = poly.from_xy(other.equally_spaced(_SAMPLES))[0]  # (S,)
-    lo2, hi2 = float(xi_other.min()), float(xi_other.max())
-    a, b = max(poly.lo, lo2), min(poly.hi, hi2)
-    if b < a:
-        return None
-    included = (poly.lo <= lo2 and hi2 <= poly.hi) or (lo2 <= poly.lo and poly.hi <= hi2)
-    return a, b, included
-
-
-def merge_gamma(poly: Polynomial, other: Polynomial, a: float, b: float) -> tuple[float, float]:
-    """(γ, angle): two-way RMS approximation error and tangent angle (rad) over ξ ∈ [a, b] of p.
-
-    γ = max(RMS error of ``other`` on m+1 equally spaced points of ``poly`` in the overlap,
-    RMS error of ``poly`` on up to m+1 equally spaced samples of ``other`` projecting there);
-    the angle is between the curves' tangents at the middle of their overlapping parts.
-    """
-    m = poly.order
-    on_p = poly.equally_spaced(m + 1, a, b)  # (m+1, 2)
-    gamma_p = _rms(_errors(on_p, other))
-    xi_o = np.linspace(other.lo, other.hi, _SAMPLES)
-    samples = other.points_at(xi_o)  # (S, 2)
-    xi_s = poly.from_xy(samples)[0]
-    inside = np.flatnonzero((xi_s >= a) & (xi_s <= b))
-    if len(inside) == 0:
-        inside = np.arange(_SAMPLES)
-    pick = inside[np.unique(np.linspace(0, len(inside) - 1, m + 1).round().astype(int))]
-    gamma_o = _rms(_errors(samples[pick], poly))
+def merge_angle(poly: Polynomial, other: Polynomial, a: float, b: float, xi_other: float) -> float:
+    """Angle (rad) between the tangents of ``poly`` at the middle of the overlap [a, b] and of
+    ``other`` at ``xi_other`` (the middle of its samples there: ``map_kernels.merge_test``)."""
     t_p = unit_tangent(poly, 0.5 * (a + b))
-    t_o = unit_tangent(other, float(xi_o[inside[len(inside) // 2]]))
-    angle = float(np.arccos(min(abs(float(t_p @ t_o)), 1.0)))
-    return max(gamma_p, gamma_o), angle
-
-
-def _errors(points: np.ndarray, poly: Polynomial) -> np.ndarray:  # (k,)
-    """The approximation error of each point (k, 2) by ``poly`` (``nearest_by_error``)."""
-    rows = pack([poly]).rows()
-    return np.array([eps for _, eps in nearest_by_error(points.tolist(), [0], rows, [poly.c0])])
-
-
-def _rms(values: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(values**2)))
+    t_o = unit_tangent(other, xi_other)
+    return float(np.arccos(min(abs(float(t_p @ t_o)), 1.0)))
 
 
 def unit_tangent(poly: Polynomial, xi: float) -> np.ndarray:
@@ -177,6 +139,7 @@ def choose_merge(
     :func:`join_gamma` accepts them (their γ is that function's offset).
     """
     p = new_poly.with_c0(new_c0)
+    found = np.empty(4)  # merge_test's a, b, γ and the other's tangent ξ
     best: MergeChoice | None = None
     best_gamma = gamma_max
     for j, (p2, c02) in enumerate(zip(polys, c0s, strict=True)):
@@ -186,15 +149,18 @@ def choose_merge(
         side = 0 if sides is None else int(sides[j])
         opposite = new_side * side < 0 and _faces_opposite(p, new_side, other, side)
         limit = min(best_gamma, THIN_WALL) if opposite else best_gamma
-        overlap = overlap_interval(p, other)
+        measured = map_kernels.merge_test(
+            p.variate, p.coeffs, p.lo, p.hi, other.variate, other.coeffs, other.lo, other.hi,
+            min_overlap, found,
+        )  # fmt: skip
         gamma: float | None = None
         joined = False
-        if overlap is not None:
-            a, b, included = overlap
-            if included or b - a >= min_overlap:
-                g, angle = merge_gamma(p, other, a, b)
-                if np.degrees(angle) <= max_angle_deg:
-                    gamma = g
+        # the tangents' angle decides only whether γ counts: not needed when it could not win
+        # and no join would be tried instead
+        if measured == MEASURED and (found[2] < limit or join_gap is not None):
+            a, b, g, xi_other = found.tolist()
+            if np.degrees(merge_angle(p, other, a, b, xi_other)) <= max_angle_deg:
+                gamma = g
         if gamma is None and join_gap is not None:
             gamma, joined = join_gamma(p, other, join_gap), True
         if gamma is not None and gamma < limit:

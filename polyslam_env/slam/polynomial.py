@@ -10,6 +10,7 @@ shape ``b`` and extent here.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -98,9 +99,17 @@ class Polynomial:
         return self.points_at(np.array([self.lo, self.hi]))
 
     def with_c0(self, c0: float) -> Polynomial:
+        """The same shape and extent with ``c0`` (validated already but for the new c0: the
+        SLAM asks for one per landmark and use)."""
+        if not math.isfinite(c0):
+            raise ValueError("polynomial coefficients and extent must be finite")
         coeffs = self.coeffs.copy()
         coeffs[0] = c0
-        return Polynomial(self.variate, coeffs, self.lo, self.hi)
+        out = object.__new__(Polynomial)
+        for name, value in (("variate", self.variate), ("coeffs", coeffs), ("lo", self.lo),
+                            ("hi", self.hi)):  # fmt: skip
+            object.__setattr__(out, name, value)
+        return out
 
     # -- sampling ---------------------------------------------------------------------------
     def sample_arclength(self, step: float = 0.01, dense: int = 512) -> np.ndarray:
@@ -133,9 +142,22 @@ def polyval(
     x: np.ndarray | float, coeffs: np.ndarray | Sequence[float], derivative: int = 0
 ) -> np.ndarray:
     """Σ_j coeffs[j] x^j (increasing powers) at any array ``x``, or its ``derivative``-th
-    derivative: numpy's ``polyval`` (of ``polyder``), the reference for the other forms."""
-    c = np.polynomial.polynomial.polyder(coeffs, derivative) if derivative else coeffs
-    return np.asarray(np.polynomial.polynomial.polyval(x, c))
+    derivative: the operations of numpy's ``polyval`` (of ``polyder``: the derivative's
+    coefficients j·c_j, then Horner's scheme from the top, ``c[-1] + x·0`` first), without
+    their per-call checks, so every value is bit-identical to theirs (tested); the reference
+    for the other forms."""
+    c = np.array(coeffs, dtype=float, ndmin=1)
+    if derivative >= len(c):
+        c = c[:1] * 0
+    else:
+        for _ in range(derivative):
+            c = c[1:] * np.arange(1, len(c))
+    if isinstance(x, tuple | list):
+        x = np.asarray(x)
+    value = c[-1] + x * 0
+    for i in range(2, len(c) + 1):
+        value = c[-i] + value * x
+    return np.asarray(value)
 
 
 def polyval_rows(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:

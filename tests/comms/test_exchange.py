@@ -568,6 +568,26 @@ def _far_wall_error(align: bool) -> tuple[float | None, RendezvousExchange]:
     return float(np.mean(np.abs(pts[:, 1] + 2.0))), ex
 
 
+def test_exchange__provenance_follows_the_receivers_merges_exactly() -> None:
+    """A received wall (from robot 1) merged with the receiver's own piece of it: the merged
+    landmark holds robot 1's data; a wall the receiver maps at the corner meanwhile, within
+    γ_M of where the received one was, holds none (it descends from nothing received)."""
+    exchange = RendezvousExchange(ChannelConfig(), 2, np.random.default_rng(0), 0.05, 0.02)
+    receiver = _slam(np.zeros(3))
+    wall = np.column_stack([np.linspace(0.0, 2.0, 21), np.full(21, 1.0)])
+    received_id = _add_wall(receiver, wall, np.zeros(3))
+    exchange._sources[0][received_id] = frozenset({1})
+    own = np.column_stack([np.linspace(1.6, 3.0, 15), np.full(15, 1.0)])  # overlaps it
+    merged_id = _add_wall(receiver, own, np.zeros(3))
+    assert receiver.maintenance.merge_into_map(merged_id) == 1
+    corner = np.column_stack([np.full(11, -0.1), np.linspace(1.0, 2.0, 11)])  # x¹ = −0.1
+    corner_id = _add_wall(receiver, corner, np.zeros(3))
+    assert receiver.n_landmarks == 2 and corner_id in receiver.landmark_ids
+    heir = receiver.lineage.events[-2].landmark_id  # the merge, then the corner's insert
+    exchange._follow_lineage(0, receiver)
+    assert exchange._sources[0] == {heir: frozenset({1})}
+
+
 def test_exchange__far_wall_too_uncertain_is_not_taken() -> None:
     """The camera alone fixes the heading to ~1.4° (σ): 3 m from the meeting that is ~7 cm
     along the far wall's normal, beyond ρ_min / RECEIVED_SIGMAS = 2.7 cm, so the far wall is

@@ -114,3 +114,33 @@ def test_every_study_has_its_page_with_one_section() -> None:
         page = (ROOT / "docs" / "results" / study.page).read_text()
         assert page.count(f"<!-- BEGIN generated: {name} -->") == 1
         assert page.count(f"<!-- END generated: {name} -->") == 1
+
+
+def test_render_mblcc__seeds_markdown_tables_and_the_orderings() -> None:
+    from polyslam_env.apps.reproduce_mblcc import run_one, summarise
+    from tests.apps.test_reproduce_mblcc import SMALL
+
+    summary = json.loads(json.dumps(summarise([run_one(SMALL, seed=s) for s in range(2)])))
+    text, headline = tables.render_mblcc([summary])
+    assert text.startswith("| robot | column | pose error (m) | landmark error (m) |")
+    assert "| r3 | shared_map_motion_proposal |" in text
+    held = sum(v for v in summary["checks"].values() if isinstance(v, bool))
+    assert headline == f"{held} of 10 of the seed's orderings hold (2 runs)"
+
+
+def test_render_alignment__one_block_per_protocol_in_the_given_order() -> None:
+    from polyslam_env.apps.reproduce_alignment import (
+        AlignmentReproduceConfig,
+        protocol_config,
+        reproduce,
+        summarise,
+    )
+
+    data = []
+    for protocol in ("seed", "guarded"):
+        cfg = protocol_config(protocol, AlignmentReproduceConfig(runs=1))
+        data.append(json.loads(json.dumps(summarise(cfg, reproduce(cfg, workers=1)))))
+    text, headline = tables.render_alignment(data)
+    assert text.index("**seed protocol** (1 runs)") < text.index("**guarded protocol** (1 runs)")
+    assert text.count("| landmarks both maps hold |") == 2
+    assert headline.startswith("seed: ") and "; guarded: " in headline

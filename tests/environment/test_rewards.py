@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import copy
-import dataclasses
 
 import numpy as np
 import pytest
@@ -153,7 +152,7 @@ def test_map_error_term__worse_map_negative_better_positive_unchanged_zero(
     assert _map_error_term(state, monkeypatch, 0.0, _CHANGED) == pytest.approx(-worse, abs=1e-12)
     # A step without a structural map change is not re-evaluated: exactly 0 …
     assert _map_error_term(state, monkeypatch, 0.3, None) == 0.0
-    no_change = dataclasses.replace(_CHANGED, created=0)
+    no_change = _CHANGED._replace(created=0)
     assert _map_error_term(state, monkeypatch, 0.3, no_change) == 0.0
     # … and re-evaluating an unchanged map gives exactly 0 as well.
     _map_error_term(state, monkeypatch, 0.1, _CHANGED)
@@ -169,7 +168,7 @@ def test_map_error_term__a_step_whose_only_change_is_a_link_is_re_evaluated(
 
     state = _fresh_state()
     _map_error_term(state, monkeypatch, 0.0, _CHANGED)
-    only_linked = dataclasses.replace(_CHANGED, created=0, linked=1)
+    only_linked = _CHANGED._replace(created=0, linked=1)
     worse = _map_error_term(state, monkeypatch, 0.2, only_linked)
     assert -0.2 * (_LENGTH + MAPPING_STEP) - 1e-12 <= worse <= -0.2 * _LENGTH
 

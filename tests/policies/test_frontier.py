@@ -107,9 +107,10 @@ def test_free_start__leads_out_of_a_corner_without_nearing_the_walls() -> None:
     assert not passable[obst].any()
 
 
+@pytest.mark.parametrize("policy", ["frontier", "frontier_team"])
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_frontier__team_covers_80_percent_of_a_generated_map_within_a_stated_budget(
-    seed: int,
+    seed: int, policy: str
 ) -> None:
     # Budget from a hard bound: a step's beams mark at most n_beams · (r_max/res + 1) cells
     # of res², so 3 robots need at least T = 0.8 · A / (3 · that) steps for 80 % of the free
@@ -129,7 +130,7 @@ def test_frontier__team_covers_80_percent_of_a_generated_map_within_a_stated_bud
         coverage_target=0.8,
         world__range_sensor__angles_deg=[90.0 - 22.5 * i for i in range(9)],
     )
-    team = make_team("frontier", env)
+    team = make_team(policy, env)
     obs, _ = env.reset(seed=seed)
     team.reset(seed)
     state = env.episode
@@ -180,6 +181,7 @@ def _open_room_policy(**kwargs: Any) -> FrontierPolicy:
     m.occ[rows[1] + 1, cols[0] - 1 : cols[1] + 2] = True
     m.occ[rows[0] - 1 : rows[1] + 2, cols[0] - 1] = True
     m.occ[rows[0] - 1 : rows[1] + 2, cols[1] + 1] = True
+    m.rebuild()  # the grids were written directly: bring the clearance and frontier along
     return policy
 
 

@@ -20,7 +20,7 @@ import functools
 import math
 from collections.abc import Sequence
 from math import comb
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -603,6 +603,23 @@ def update_sparse(
     return int(ok.sum())
 
 
+def joseph_full(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray) -> None:
+    """P⁺ = P − (K Wᵀ + W Kᵀ) over the whole upper triangle, mirrored: the loop
+    ``kernels.joseph_blocks`` replaced (in Python floats, the same order of operations)."""
+    count, n = kt.shape
+    for i in range(n):
+        part = [0.0] * (n - i)
+        for q in range(count):
+            k_i, w_i = float(kt[q, i]), float(wt[q, i])
+            for j in range(n - i):
+                part[j] += k_i * float(wt[q, i + j]) + w_i * float(kt[q, i + j])
+        for j in range(n - i):
+            cov[i, i + j] -= part[j]
+    for i in range(n):
+        for j in range(i):
+            cov[i, j] = cov[j, i]
+
+
 def update_scan(
     mean: np.ndarray,
     cov: np.ndarray,
@@ -610,33 +627,37 @@ def update_scan(
     ranges: np.ndarray,
     beams: np.ndarray,
     assigned: np.ndarray,
-    *args: Any,
+    real: np.ndarray,
+    index: np.ndarray,
+    shape: np.ndarray,
+    n: int,
+    params: np.ndarray,
+    switches: np.ndarray,
+    fit_inverse: np.ndarray,
+    step: int,
 ) -> int:
     """``kernels.update_scan`` with the numpy update (:func:`update_sparse_inplace`) in place
     of the compiled one and :func:`xi_variances` for ``kernels.ends_in_doubt``, to stand in
-    for it (``args``: reach … n_fit, gate, n_lm, alpha_base, consider_from, end_sigma). It
-    does not choose beams as ``kernels.steady_beams`` does (``assigned`` is not read): where
-    it stands in, no beam hits another landmark than its own or misses it from a sigma
-    point."""
-    from polyslam_env.slam import kernels
+    for it. It does not choose beams as ``kernels.steady_beams`` does (``assigned`` is not
+    read): where it stands in, no beam hits another landmark than its own or misses it from a
+    sigma point."""
+    from polyslam_env.slam import columns, kernels
 
-    *map_args, gate, n_lm, alpha_base, consider_from, end_sigma = args
-    reach, variate, order, shape, lo, hi, boxes, *model = map_args
     k = beams.size
     rows = (
         np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k),
         np.empty(k, dtype=np.int64), np.empty(k), np.empty(k), np.empty(k), np.empty((k, 4)),
     )  # fmt: skip
-    x, y, theta = float(mean[0]), float(mean[1]), float(mean[2])
-    used = kernels.beam_rows(
-        x, y, theta, angles, ranges, beams, reach, variate, order, shape, lo, hi,
-        mean[3 : 3 + n_lm], boxes, *model, alpha_base, *rows,
+    used = kernels._beam_rows_of(
+        mean, angles, ranges, beams, real, index, shape, n, params, switches, fit_inverse, step,
+        *rows,
     )  # fmt: skip
     if used == 0:
         return -1
     innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance, room, grad = (
         column[:used] for column in rows
     )
+    end_sigma = params[columns.P_END_SIGMA]
     if end_sigma > 0.0:
         keep = room >= end_sigma * np.sqrt(
             xi_variances(cov, h_pose, c0_index, h_c0, alpha_index, h_alpha, grad)
@@ -646,10 +667,12 @@ def update_scan(
         innovation, h_pose, c0_index = innovation[keep], h_pose[keep], c0_index[keep]
         h_c0, alpha_index, h_alpha = h_c0[keep], alpha_index[keep], h_alpha[keep]
         variance = variance[keep]
-    variance = share_landmark_error(c0_index, variance, model[2])
+    variance = share_landmark_error(c0_index, variance, params[columns.P_RANGE_VAR])
+    consider_from = 3 + n if switches[columns.S_ROTATION_STATES] else mean.size
     accepted, _ = update_sparse_inplace(
-        mean, cov, innovation, h_pose, c0_index, h_c0, variance, gate_value=gate,
-        alpha_index=alpha_index, h_alpha=h_alpha, consider_from=consider_from,
+        mean, cov, innovation, h_pose, c0_index, h_c0, variance,
+        gate_value=params[columns.P_GATE], alpha_index=alpha_index, h_alpha=h_alpha,
+        consider_from=consider_from,
     )  # fmt: skip
     return int(accepted.sum())
 

@@ -12,7 +12,6 @@ from hypothesis import strategies as st
 
 from polyslam_env.slam.fitting import (
     PointSet,
-    StoredPoint,
     beam_points,
     centroid_xi,
     choose_variate,
@@ -23,6 +22,7 @@ from polyslam_env.slam.fitting import (
     stored_points,
 )
 from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.stored import PointArrays
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 
 POSE_COV = np.diag([0.01**2, 0.01**2, 0.005**2])
@@ -152,7 +152,7 @@ def test_fit_polynomial__jacobians_from_stored_cluster_points_match_finite_diffe
     wall, angles = wall_for(variate)
     n_state = 4
     rng = np.random.default_rng(7)
-    stored: list[StoredPoint] = []
+    steps: list[PointArrays] = []
     pose = np.array([0.0, 0.0, 0.0])
     for step in range(3):  # points seen from three successive poses
         pose = (
@@ -161,7 +161,8 @@ def test_fit_polynomial__jacobians_from_stored_cluster_points_match_finite_diffe
             else pose + np.array([0.05, 0.1, 0.02])
         )
         ranges = wall_ranges(pose, angles, wall) + rng.normal(0, SIGMA_R, len(angles))
-        stored += store_beams(pose, POSE_COV * (1 + step), ranges, angles, SIGMA_R, step)
+        steps.append(store_beams(pose, POSE_COV * (1 + step), ranges, angles, SIGMA_R, step))
+    stored = PointArrays(*(np.concatenate(column) for column in zip(*steps, strict=True)))
     anchor = pose + np.array([0.02, -0.01, 0.01])  # the current estimate
     fit = fit_polynomial(stored_points(stored, anchor, n_state), 3)
     assert fit.poly.variate == variate

@@ -17,12 +17,12 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from polyslam_env.apps.benchmark import make_inputs, make_slam, make_walls
-from polyslam_env.slam import ekf, kernels
+from polyslam_env.slam import ekf, kernels, step_kernels
 from polyslam_env.slam.association import nearest_by_error
 from polyslam_env.slam.landmarks import LandmarkTable, boxes_near
+from polyslam_env.slam.maintenance import fit_inverse_table as _fit_inverse_table
 from polyslam_env.slam.measurement import cast
 from polyslam_env.slam.polynomial import Polynomial
-from polyslam_env.slam.robot import _fit_inverse_table
 from tests.slam import reference_floats as ref
 from tests.slam.test_ekf import assert_symmetric_psd, random_spd
 from tests.slam.test_reference import beam_sets, brute_force_range, polynomials, poses
@@ -357,6 +357,23 @@ def test_update_sparse__with_rotation_states__equals_numpy_oracle(
         np.testing.assert_array_equal(got_cov[block, block], cov[block, block])
 
 
+@pytest.mark.parametrize(("n_state", "consider_from"), [(31, 17), (31, 31), (31, 3), (8, 5)])
+def test_joseph_blocks__bit_identical_to_the_full_update(n_state: int, consider_from: int) -> None:
+    """Leaving the considered block out and the cross block's zero products out changes no
+    bit: K's considered rows are exact zeros."""
+    rng = np.random.default_rng(n_state + consider_from)
+    cov = random_spd(rng, n_state, 0.01)
+    if consider_from < n_state:  # a signed zero in the considered block keeps its sign
+        cov[consider_from, consider_from] = -0.0
+    kt, wt = rng.normal(size=(5, n_state)), rng.normal(size=(5, n_state))
+    kt[:, consider_from:] = 0.0
+    wt[:, 2] = -0.0  # signed zeros in W must not leak through either
+    want, got = cov.copy(), cov.copy()
+    ref.joseph_full(want, kt, wt)
+    kernels.joseph_blocks(got, kt, wt, consider_from)
+    assert want.tobytes() == got.tobytes()
+
+
 def test_slam_steps__compiled_update_tracks_numpy_update_over_a_short_horizon(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -369,6 +386,8 @@ def test_slam_steps__compiled_update_tracks_numpy_update_over_a_short_horizon(
     compiled = make_slam(walls)
     for odometry, ranges in inputs:
         compiled.step(odometry, ranges)
+    # the step's second call run as Python, with the numpy update in place of the compiled one
+    monkeypatch.setattr(step_kernels, "finish_step", step_kernels.finish_step.py_func)
     monkeypatch.setattr(kernels, "update_scan", ref.update_scan)
     numpy_run = make_slam(walls)
     for odometry, ranges in inputs:

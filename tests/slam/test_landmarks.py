@@ -9,10 +9,10 @@ import pytest
 
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.ekf import predict, predict_inplace, spectral_norm_sym
-from polyslam_env.slam.fitting import Fit, StoredPoint
+from polyslam_env.slam.fitting import Fit
 from polyslam_env.slam.landmarks import LandmarkTable, PackedPolynomials, shape_range
 from polyslam_env.slam.polynomial import Polynomial
-from polyslam_env.slam.robot import PolySlam, _carry
+from polyslam_env.slam.robot import PolySlam
 from tests.slam.reference import (
     approximation_error,
     expected_ranges_and_jacobian,
@@ -94,16 +94,40 @@ def test_landmark_table__ids_stay_stable_through_removals() -> None:
     table = LandmarkTable()
     a, b, c = (table.append(p, 0.0, 0.0, 0.0, 1.0, step=k) for k, p in enumerate(polys))
     assert [table.state_index(x) for x in (a, b, c)] == [3, 4, 5]
-    table.qbad[a].append(StoredPoint(np.zeros(2), np.ones(2), 0.02, 1.0, np.zeros(3), 0, 0))
     assert table.remove(table.index_of(a)) == a
     assert table.ids == [b, c] and table.state_index(c) == 4 and a not in table
-    assert list(table.qbad) == [b, c] and table.changed_at == [1, 2]
+    assert table.changed_at.tolist() == [1, 2]
     d = table.append(polys[0], 0.0, 0.0, 0.0, 1.0, step=7)
     assert d not in (a, b, c) and table.index_of(d) == 2
     assert dict(table.shapes) == {b: polys[1], c: polys[2], d: polys[0]}
     before = table.shapes[b]
     table.set_extent(0, before.lo - 1.0, before.hi)
     assert table.shapes[b] is not before and table.shapes[b].lo == before.lo - 1.0
+
+
+def test_landmark_table__polynomials_are_new_objects_only_when_a_row_changes() -> None:
+    polys = random_polys(np.random.default_rng(6), 3)
+    table = arrays_of(polys)
+    first = [table.polys[i] for i in range(3)]
+    assert all(table.polys[i] is first[i] for i in range(3))  # unchanged: the same objects
+    table.extend_to_hit(1, polys[1].hi + 0.5)
+    assert table.polys[0] is first[0] and table.polys[2] is first[2]
+    assert table.polys[1] is not first[1] and table.polys[1].hi == polys[1].hi + 0.5
+    np.testing.assert_array_equal(table.polys[1].coeffs, polys[1].coeffs)
+    table.remove(0)
+    assert table.polys[1] is first[2]  # removal moves the rows, not the objects
+
+
+def test_landmark_table__grows_past_its_capacity_and_wider_shapes() -> None:
+    rng = np.random.default_rng(9)
+    polys = random_polys(rng, 40)
+    polys[30] = Polynomial(1, np.array([0.5, 0.1, 0.0, 0.0, 0.0, 0.02]), -1.0, 1.0)  # order 5
+    table = LandmarkTable(capacity=2)
+    for p in polys:
+        table.append(p, 0.0, 0.0, 0.0, 1.0)
+    assert len(table) == 40 and table.shape.shape == (40, 6)
+    assert_packed_equal(table.packed(), PackedPolynomials.from_polynomials(polys))
+    np.testing.assert_array_equal(table.eta_range, arrays_of(polys).eta_range)
 
 
 def test_landmark_table__packed_views_stay_valid_after_changes() -> None:
@@ -194,19 +218,6 @@ def test_spectral_norm_sym__matches_svd_norm() -> None:
 
 
 # -- PolySlam helpers ----------------------------------------------------------------------------
-def test_carry__moves_points_rigidly_with_the_pose_correction() -> None:
-    before, after = np.array([1.0, 2.0, 0.3]), np.array([1.05, 1.9, 0.35])
-    point = StoredPoint(np.array([2.0, 2.5]), np.array([0.0, 1.0]), 0.02, 3.0, before.copy(), 1, 4)
-    (moved,) = _carry([point], before, after)
-    d = after[2] - before[2]
-    rot = np.array([[np.cos(d), -np.sin(d)], [np.sin(d), np.cos(d)]])
-    # rounding of a 2×2 rotation of metre-sized vectors
-    np.testing.assert_allclose(moved.xy, after[:2] + rot @ (point.xy - before[:2]), atol=1e-15)
-    np.testing.assert_allclose(moved.direction, rot @ point.direction, atol=1e-15)
-    np.testing.assert_allclose(moved.pose, after, atol=1e-15)
-    assert (moved.beam, moved.step, moved.sigma, moved.weight) == (1, 4, 0.02, 3.0)
-
-
 def _slam_with_walls() -> PolySlam:
     slam = PolySlam(SlamConfig(), BEAMS, 2.0)
     for wall in (

@@ -202,13 +202,13 @@ def _wall_errors(
             continue
         offset, direction = truth[poly.variate]
         xi = float(np.mean(slam.table.evidence[i]))
-        pts = polynomial_points(poly, 3 + i, 1.0, 1, xi, xi, n, slam._turn_of(i))
+        pts = polynomial_points(poly, 3 + i, 1.0, 1, xi, xi, n, slam.maintenance.turn_of(i))
         eta = 1 if poly.variate == 1 else 0
         rows.append(pts.d_state[0, eta] - float(poly.slope(xi)) * pts.d_state[0, 1 - eta])
         errors.append(float(poly.value(xi)) - offset)
         if directions:
             turn = np.zeros(n)
-            turn[slam._turn_index(i)] = 1.0
+            turn[slam.layout.turn_index(i, slam.n_landmarks)] = 1.0
             rows.append(turn)
             errors.append(line_angle(poly) - direction)
     J = np.array(rows)
@@ -249,7 +249,7 @@ def test_link__is_never_made_twice_within_a_group() -> None:
     slam, *_ = drive(DOORS, straight(8.0), 1)
     mean, cov = slam.mean.copy(), slam.cov.copy()
     for lid in slam.landmark_ids:
-        assert slam._link_walls(lid) == 0
+        assert slam.walls.link_walls(lid) == 0
     np.testing.assert_array_equal(slam.mean, mean)
     np.testing.assert_array_equal(slam.cov, cov)
 
@@ -369,7 +369,7 @@ def test_square_walls__the_corner_walls_are_tied_once() -> None:
         assert len(set(slam.direction_groups.values())) == 1, (seed, slam.direction_groups)
         mean, cov = slam.mean.copy(), slam.cov.copy()
         for lid in slam.landmark_ids:
-            assert slam._square_wall(lid) == 0
+            assert slam.walls.square_wall(lid) == 0
         np.testing.assert_array_equal(slam.mean, mean)
         np.testing.assert_array_equal(slam.cov, cov)
         off, *_ = drive(CORNER, CORNER_DRIVE, seed, SlamConfig(square_walls=False))

@@ -4,18 +4,22 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from polyslam_env.slam import map_kernels
 from polyslam_env.slam.fitting import PointSet, centroid_xi, fit_polynomial, turn_gradient
 from polyslam_env.slam.merging import (
     JOIN_GAP,
     THIN_WALL,
     face_normal,
     find_merge,
+    merge_angle,
     merge_points,
-    overlap_interval,
 )
 from polyslam_env.slam.polynomial import Polynomial
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
+from tests.slam.reference_merging import merge_gamma, overlap_interval
 
 GAMMA_M = 0.35  # paper value
 
@@ -229,7 +233,7 @@ def test_fit__a_shape_curving_away_between_its_points_is_refused() -> None:
         xy = np.column_stack([xi, curvature * (xi - 0.17) ** 2])
         n = len(xy)
         ps = PointSet(xy, np.zeros((n, 2, 3)), np.zeros((n, 2, 0)), np.zeros((0, 0)), np.ones(n))
-        fit = slam._fit(ps)
+        fit = slam.maintenance.fit(ps)
         assert (fit is not None) == accepted, curvature
         steep = fit_polynomial(ps, 3, 1).poly.max_slope()
         assert (steep <= MAX_SLOPE) == accepted
@@ -293,3 +297,39 @@ def test_turn_gradient__residual_variance_is_the_least_squares_turn_variance(var
         expected /= (1.0 + fit.poly.coeffs[1] ** 2) ** 2
         assert var == pytest.approx(expected, rel=1e-9, abs=1e-18)
         assert (var > 1e-12) == (offset > 0)  # 1 cm: ~6e-7 rad²; one line: rounding only
+
+
+# a wall piece: either variate, order 1 to 5 (trailing zeros too), up to 2 m long, possibly a
+# single point; shifted copies and pieces of other walls alike
+merge_polys = st.builds(
+    lambda v, c, lo, w: Polynomial(v, np.array(c), lo, lo + w),
+    st.sampled_from([1, 2]),
+    st.lists(st.floats(-1.0, 1.0), min_size=2, max_size=6)
+    | st.lists(st.sampled_from([0.0, 0.5, -0.25]), min_size=2, max_size=4),
+    st.floats(-2.0, 2.0),
+    st.floats(0.0, 2.0) | st.just(0.0),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(p=merge_polys, other=merge_polys, min_overlap=st.sampled_from([0.0, 0.1, 0.5]))
+def test_merge_test__the_same_floats_as_the_readable_version(
+    p: Polynomial, other: Polynomial, min_overlap: float
+) -> None:
+    found = np.full(4, np.nan)
+    got = map_kernels.merge_test(
+        p.variate, p.coeffs, p.lo, p.hi, other.variate, other.coeffs, other.lo, other.hi,
+        min_overlap, found,
+    )  # fmt: skip
+    overlap = overlap_interval(p, other)
+    if overlap is None:
+        assert got == map_kernels.DISJOINT
+        return
+    a, b, included = overlap
+    if not (included or b - a >= min_overlap):
+        assert got == map_kernels.SHORT_OVERLAP
+        return
+    gamma, angle = merge_gamma(p, other, a, b)
+    assert got == map_kernels.MEASURED
+    assert found[:3].tolist() == [a, b, gamma]
+    assert merge_angle(p, other, a, b, float(found[3])) == angle

@@ -67,3 +67,23 @@ def test_taylor_shift__expands_about_x0(coeffs: list[float], x0: float, u: float
     oracle = taylor_at(padded, np.array([x0]))[0]
     np.testing.assert_array_equal(taylor_shift(padded[0].tolist(), x0), oracle)
     assert taylor == reference_floats.taylor_shift(coeffs, x0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    coeffs=st.lists(st.floats(-5.0, 5.0), min_size=1, max_size=7),
+    x=st.lists(st.floats(-4.0, 4.0), min_size=1, max_size=5),
+    derivative=st.integers(0, 7),
+)
+def test_polyval__bit_identical_to_numpys(
+    coeffs: list[float], x: list[float], derivative: int
+) -> None:
+    # polyval repeats numpy's operations without their checks: the very same floats, for a
+    # scalar, a list and an array, any derivative (one past the order gives numpy's zero)
+    c = np.array(coeffs)
+    want = np.polynomial.polynomial.polyder(c, derivative) if derivative else c
+    for at in (x[0], x, np.array(x)):
+        expected = np.polynomial.polynomial.polyval(at, want)
+        got = polyval(at, c, derivative)
+        np.testing.assert_array_equal(got, expected, strict=True)
+        assert np.signbit(got).tolist() == np.signbit(expected).tolist()

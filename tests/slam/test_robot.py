@@ -11,6 +11,8 @@ from polyslam_env.apps.simulate import simulate, wall_follow_controller
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.metrics.episode import RobotRun
 from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.fitting import Fit
+from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.maps import load_map
@@ -143,12 +145,18 @@ def test_divergence__covariance_beyond_k_p0_is_flagged_not_silent() -> None:
 
 
 def test_divergence__most_screened_beams_outliers_are_flagged() -> None:
-    """The innovation screen: 7 outliers among the last 10 screened beams flag; 6 do not."""
+    """The innovation screen: 7 outliers among the last 10 screened beams flag; 6 do not. One
+    beam ahead on a mapped wall 1 m away; a reading of 0.3 m is a gross outlier (its NIS is
+    far past the gate), the true 1 m is not."""
     slam = PolySlam(SlamConfig(), np.radians([0.0]), 2.0)
-    slam._screen.extend([False] * 4 + [True] * 6)  # a run of gross outliers: not yet
-    assert not slam._is_diverging()
-    slam._screen.append(True)  # seven of the last ten
-    assert slam._is_diverging()
+    wall = Polynomial(2, np.array([1.0, 0.0, 0.0, 0.0]), -1.0, 1.0)  # x¹ = 1
+    gx = np.zeros((1, 3))
+    gx[0, 0] = 1.0
+    slam.insert_landmark(Fit(wall, 1.0, gx, np.ones((1, 1)), np.eye(1) * 1e-4, 0.01, 1))
+    readings = [1.0] * 4 + [0.3] * 6  # a run of gross outliers: not yet
+    flags = [slam.step(np.zeros(3), np.array([r])).diverging for r in readings]
+    assert not any(flags)
+    assert slam.step(np.zeros(3), np.array([0.3])).diverging  # seven of the last ten
 
 
 def test_divergence__healthy_run_is_not_flagged() -> None:

@@ -19,8 +19,9 @@ from polyslam_env.slam import kernels
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.fitting import Fit
 from polyslam_env.slam.landmarks import LandmarkTable
+from polyslam_env.slam.maintenance import fit_inverse_table as _fit_inverse_table
 from polyslam_env.slam.polynomial import Polynomial
-from polyslam_env.slam.robot import PolySlam, _fit_inverse_table
+from polyslam_env.slam.robot import PolySlam
 from tests.slam.finite_differences import FD_RTOL, fd_jacobian
 from tests.slam.test_ekf import assert_symmetric_psd, random_spd
 
@@ -180,7 +181,7 @@ def test_merged_landmark__with_weights_its_rotation_is_the_length_weighted_mean_
     before the merge), and the layout stays [pose, c0 × n, α × n]."""
     config = SlamConfig(merge_turn="weights")
     slam, before = _two_pieces(config)
-    assert slam._merge_once(slam.landmark_ids[1]) is not None and slam.n_landmarks == 1
+    assert slam.maintenance.merge_once(slam.landmark_ids[1]) is not None and slam.n_landmarks == 1
     w_a = 2.0**3 / (2.0**3 + 1.0**3)  # the 2 m piece weighs 8/9, the 1 m one 1/9
     weights = np.array([w_a, 1.0 - w_a])  # over (α_a, α_b): state 5, 6 before
     assert slam.mean.shape == (5,)  # [pose, c0, α]
@@ -214,7 +215,7 @@ def test_merged_landmark__its_rotation_is_the_merged_fits_direction() -> None:
 
     # central differences: FD_STEP and FD_RTOL's stated truncation and round-off margins
     g = fd_jacobian(direction, np.zeros(4))
-    assert slam._merge_once(slam.landmark_ids[1]) is not None and slam.n_landmarks == 1
+    assert slam.maintenance.merge_once(slam.landmark_ids[1]) is not None and slam.n_landmarks == 1
     assert slam.mean.shape == (5,)
     np.testing.assert_allclose(slam.cov[4, :3], g @ before[3:7, :3], rtol=FD_RTOL, atol=1e-15)
     assert slam.cov[4, 4] == pytest.approx(g @ before[3:7, 3:7] @ g, rel=FD_RTOL)
@@ -237,7 +238,7 @@ def test_merged_landmark__turns_about_the_weighted_centroid_of_its_points() -> N
     slam.cov[3, 3] += 1e-6  # a: certain
     slam.cov[4, 4] += 1e-3  # b: vague
     w_a, w_b = 1.0 / slam.cov[3, 3], 1.0 / slam.cov[4, 4]
-    assert slam._merge_once(slam.landmark_ids[1]) is not None and slam.n_landmarks == 1
+    assert slam.maintenance.merge_once(slam.landmark_ids[1]) is not None and slam.n_landmarks == 1
     expected = (w_a * 1.0 + w_b * 2.6) / (w_a + w_b)  # each piece's points centre on its middle
     assert slam.table.pivot[0] == pytest.approx(expected, rel=1e-9)
     assert slam.table.pivot[0] < 0.5 * (0.0 + 3.1) - 0.3
@@ -255,6 +256,6 @@ def test_received_landmark__its_rotation_is_the_given_turn_not_the_heading() -> 
     poly = WALLS[0]
     slam.insert_landmark(_fit(poly, 3), merge=False, turn=(g, v))
     np.testing.assert_allclose(slam.cov[4, :3], g @ slam.cov[:3, :3], rtol=1e-12)
-    fit_var = slam._rotation_fit_var(poly)
+    fit_var = slam.maintenance.rotation_fit_var(poly)
     assert slam.cov[4, 4] == pytest.approx(g @ slam.cov[:3, :3] @ g + v + fit_var, rel=1e-12)
     assert_symmetric_psd(slam.cov)

@@ -16,12 +16,26 @@ the transform ``T = (t_x, t_y, θ)`` that takes map B's frame into map A's
   correspondences (within th2) and the SVD solve until the correspondences stop changing;
 * ``imp_icp`` — ICP from three initial estimates; the one with the most supports wins.
 
-Every aligner's estimate is then refined by :func:`refine` — least squares over the
-supporting correspondences that drops outliers (residuals beyond 3 robust standard
-deviations, or beyond th2) until the set is stable — which also gives the transform's
-covariance from the residuals. An aligner **declines** (returns an :class:`Alignment` with
-``transform`` None and the reason) when fewer than ``min_support`` correspondences support
-it: a wrong merge is worse than none.
+Every aligner's estimate is then refined by least squares that drops outliers (residuals
+beyond 3 robust standard deviations) until the set is stable, which also gives the
+transform's covariance from the residuals. ``AlignConfig.refinement`` says over which
+correspondences:
+
+* ``nearest`` (default, :func:`refine`): the nearest-neighbour supports of the current
+  transform (within th2), found again at every iteration. Every aligner that lands near the
+  right transform then ends on the same answer, whatever correspondences it found;
+* ``own`` (:func:`refine_own`, the seed's §6): the correspondences the aligner itself found
+  (RANSAC's supports of its best hypothesis, SVD's geometrically consistent descriptor
+  matches, ICP's final nearest neighbours), never re-paired.
+
+``AlignConfig.declines`` says when an aligner **declines** (returns an :class:`Alignment`
+with ``transform`` None and the reason):
+
+* ``guarded`` (default): any aligner, when fewer than ``min_support`` refined
+  correspondences support it, or fewer than a wrong transform collects by chance on maps
+  that dense (:func:`chance_supports`). A wrong merge is worse than none;
+* ``seed``: only RANSAC, when its best hypothesis has fewer than ``min_support`` supports
+  (the seed's min = 20). The other aligners answer whenever they can compute a transform.
 
 **Oriented features** (corners of wall maps, :mod:`polyslam_env.slam.corners`) carry a heading
 that turns with the map, and descriptors that tell kinds of corner apart rather than
@@ -47,12 +61,14 @@ import numpy as np
 import scipy.stats
 from scipy.spatial import cKDTree
 
-from polyslam_env.core.config import Config, check_positive
+from polyslam_env.core.config import Config, check_choice, check_positive
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.core.geometry import rotation, wrap_angle, wrap_scalar
 
 __all__ = [
     "ALIGNERS",
+    "DECLINES",
+    "REFINEMENTS",
     "AlignConfig",
     "Alignment",
     "FeatureMap",
@@ -62,6 +78,7 @@ __all__ = [
     "imp_icp",
     "ransac",
     "refine",
+    "refine_own",
     "rigid_fit",
     "svd",
     "transform_from_pairs",
@@ -76,6 +93,10 @@ Score = Callable[[np.ndarray], float]
 #: Probability that a wrong transform collects the supports an accepted one needs (see
 #: :func:`chance_supports`).
 CHANCE_P = 1e-6
+#: Which correspondences the least-squares refinement runs over (see the module docstring).
+REFINEMENTS: tuple[str, ...] = ("nearest", "own")
+#: When an aligner declines (see the module docstring).
+DECLINES: tuple[str, ...] = ("guarded", "seed")
 
 
 @dataclass(frozen=True)
@@ -98,8 +119,12 @@ class AlignConfig(Config):
     # by one period matches nearly as many corners as the true one, and only a clear margin
     # says which is true. 1.5: the best must beat any rival by half again its supports.
     ambiguity_ratio: float = 1.5
+    refinement: str = "nearest"  # "nearest" (re-paired supports) or "own" (the seed's)
+    declines: str = "guarded"  # "guarded" (every aligner, chance level) or "seed"
 
     def validate(self) -> None:
+        check_choice("alignment.refinement", self.refinement, REFINEMENTS)
+        check_choice("alignment.declines", self.declines, DECLINES)
         for name in ("descriptor_threshold", "geometric_threshold", "support_threshold"):
             check_positive(f"alignment.{name}", getattr(self, name))
         check_positive("alignment.outlier_sigmas", self.outlier_sigmas)
@@ -160,7 +185,8 @@ class Alignment:
     inliers: int  # correspondences that support the final transform
     candidates: int  # descriptor matches the aligner started from
     reason: str = ""  # why it declined ("" when it did not)
-    raw: np.ndarray | None = None  # (3,) the aligner's own estimate, before :func:`refine`
+    raw: np.ndarray | None = None  # (3,) the aligner's own estimate, before the refinement
+    pairs: np.ndarray | None = None  # (k, 2) (i in A, j in B) the refinement kept
 
     @property
     def accepted(self) -> bool:
@@ -370,7 +396,7 @@ def _ransac_oriented(
             f" {values[best]:.3g} (ambiguity_ratio {cfg.ambiguity_ratio:g})",
             transform,
         )
-    return _answer("ransac", a, b, transform, matches, cfg)
+    return _answer("ransac", a, b, transform, _supports(transform, tree, a, b, cfg), matches, cfg)
 
 
 def _oriented_hypothesis(a: FeatureMap, b: FeatureMap, match: np.ndarray) -> np.ndarray:
@@ -402,17 +428,55 @@ def refine(
         if len(pairs) < 3:
             break
         transform = rigid_fit(a.positions[pairs[:, 0]], b.positions[pairs[:, 1]])
-        res = a.positions[pairs[:, 0]] - _apply(transform, b.positions[pairs[:, 1]])  # (k, 2)
-        limit = cfg.outlier_sigmas * 1.4826 * float(np.median(np.abs(res))) + 1e-9
+        limit = _outlier_limit(_residuals(a, b, transform, pairs), cfg)
         near = _supports(transform, tree, a, b, cfg)
-        res = a.positions[near[:, 0]] - _apply(transform, b.positions[near[:, 1]])
-        new_pairs = near[np.all(np.abs(res) <= limit, axis=1)]
+        new_pairs = near[np.all(np.abs(_residuals(a, b, transform, near)) <= limit, axis=1)]
         if np.array_equal(new_pairs, pairs):
             break
         pairs = new_pairs
     if len(pairs) >= 3:
         transform = rigid_fit(a.positions[pairs[:, 0]], b.positions[pairs[:, 1]])
     return transform, _covariance(a, b, transform, pairs), pairs
+
+
+def refine_own(
+    a: FeatureMap, b: FeatureMap, transform: np.ndarray, pairs: np.ndarray, cfg: AlignConfig
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares refinement over the aligner's own correspondences ``pairs`` (k, 2) (the
+    seed's §6: "the set of correspondences and this estimate are used as the input of a least
+    squares minimization that eliminates outliers"); never re-paired.
+
+    From the aligner's estimate ``transform``: keep the pairs whose residuals are within
+    ``outlier_sigmas`` robust standard deviations of those kept so far (all, at first), fit
+    them, and repeat until the kept set stops changing. Returns (transform, covariance,
+    kept pairs) as :func:`refine` does; fewer than 2 pairs leave the estimate as it is.
+    """
+    kept = pairs
+    for _ in range(cfg.icp_max_iterations):
+        if len(kept) < 2:
+            break
+        limit = _outlier_limit(_residuals(a, b, transform, kept), cfg)
+        new = pairs[np.all(np.abs(_residuals(a, b, transform, pairs)) <= limit, axis=1)]
+        if len(new) < 2:
+            break
+        transform = rigid_fit(a.positions[new[:, 0]], b.positions[new[:, 1]])
+        if np.array_equal(new, kept):
+            break
+        kept = new
+    return transform, _covariance(a, b, transform, kept), kept
+
+
+def _residuals(
+    a: FeatureMap, b: FeatureMap, transform: np.ndarray, pairs: np.ndarray
+) -> np.ndarray:
+    """A − T(B) (k, 2) over pairs (k, 2) (i in A, j in B)."""
+    return a.positions[pairs[:, 0]] - _apply(transform, b.positions[pairs[:, 1]])
+
+
+def _outlier_limit(res: np.ndarray, cfg: AlignConfig) -> float:
+    """``outlier_sigmas`` robust standard deviations of residuals (k, 2): 1.4826 × their
+    median absolute value per coordinate, plus a nanometre for rounding."""
+    return cfg.outlier_sigmas * 1.4826 * float(np.median(np.abs(res))) + 1e-9
 
 
 def _covariance(
@@ -444,40 +508,56 @@ def _answer(
     a: FeatureMap,
     b: FeatureMap,
     transform: np.ndarray | None,
+    own: np.ndarray,
     matches: np.ndarray,
     cfg: AlignConfig,
 ) -> Alignment:
+    """An aligner's estimate ``transform`` and its own correspondences ``own`` (k, 2) through
+    the refinement and the decline rule ``cfg`` names."""
     if transform is None:
         return Alignment(method, None, None, 0, len(matches), "no geometrically consistent pair")
     raw = transform.copy()
     raw[2] = wrap_scalar(float(raw[2]))
-    refined, cov, pairs = refine(a, b, transform, cfg)
-    needed = max(cfg.min_support, chance_supports(a, b, cfg))
-    if len(pairs) < needed:
+    if cfg.refinement == "own":
+        refined, cov, pairs = refine_own(a, b, transform, own, cfg)
+    else:
+        refined, cov, pairs = refine(a, b, transform, cfg)
+    if cfg.declines == "seed":
+        needed = cfg.min_support if method == "ransac" else 0
+        support = len(own)  # RANSAC's supports of its best hypothesis (step d)
+        rule = f"min_support {cfg.min_support} of the seed's RANSAC"
+    else:
+        needed = max(cfg.min_support, chance_supports(a, b, cfg))
+        support = len(pairs)
+        rule = f"min_support {cfg.min_support}, or what a wrong transform reaches by chance"
+    if support < needed:
         return Alignment(
             method,
             None,
             None,
             len(pairs),
             len(matches),
-            f"{len(pairs)} supports < {needed} needed (min_support {cfg.min_support},"
-            " or what a wrong transform reaches by chance)",
+            f"{support} supports < {needed} needed ({rule})",
             raw,
+            pairs,
         )
     refined = refined.copy()
     refined[2] = wrap_scalar(float(refined[2]))
-    return Alignment(method, refined, cov, len(pairs), len(matches), "", raw)
+    return Alignment(method, refined, cov, len(pairs), len(matches), "", raw, pairs)
 
 
 def _too_few(method: str, matches: np.ndarray, cfg: AlignConfig) -> Alignment | None:
-    if len(matches) < max(2, cfg.min_support):
+    """Decline before aligning: fewer descriptor matches than ``min_support`` (guarded), or
+    than the two any transform needs (seed)."""
+    needed = 2 if cfg.declines == "seed" else max(2, cfg.min_support)
+    if len(matches) < needed:
         return Alignment(
             method,
             None,
             None,
             0,
             len(matches),
-            f"{len(matches)} descriptor matches < min_support {cfg.min_support}",
+            f"{len(matches)} descriptor matches < {needed} needed",
         )
     return None
 
@@ -491,9 +571,10 @@ def ransac(
     veto: Veto | None = None,
     score: Score | None = None,
 ) -> Alignment:
-    """RANSAC over descriptor matches (seed §5.1), then :func:`refine`. Over oriented
-    features every candidate is a hypothesis, ranked by ``score``; ``veto`` may refuse some,
-    and an ambiguous answer is declined (:func:`_ransac_oriented`)."""
+    """RANSAC over descriptor matches (seed §5.1), then the refinement; its own
+    correspondences are its best hypothesis' supports. Over oriented features every candidate
+    is a hypothesis, ranked by ``score``; ``veto`` may refuse some, and an ambiguous answer is
+    declined (:func:`_ransac_oriented`)."""
     cfg = cfg or AlignConfig()
     matches = candidate_matches(a, b, cfg.descriptor_threshold)
     if (declined := _too_few("ransac", matches, cfg)) is not None:
@@ -501,7 +582,7 @@ def ransac(
     tree = cKDTree(a.positions)
     if a.oriented and b.oriented:
         return _ransac_oriented(a, b, matches, tree, cfg, veto, score)
-    best, best_support = None, -1
+    best, best_supports = None, np.zeros((0, 2), dtype=int)
     for _ in range(cfg.iterations):
         k, m = rng.choice(len(matches), size=2, replace=False)
         (ia, jb), (ia2, jb2) = matches[k], matches[m]
@@ -509,18 +590,18 @@ def ransac(
         if ia == ia2 or jb == jb2 or not _geometric_ok(pa, pb, cfg.geometric_threshold):
             continue
         hypothesis = transform_from_pairs(pa, pb)
-        support = len(_supports(hypothesis, tree, a, b, cfg))
-        if support > best_support:
-            best, best_support = hypothesis, support
-    return _answer("ransac", a, b, best, matches, cfg)
+        supports = _supports(hypothesis, tree, a, b, cfg)
+        if best is None or len(supports) > len(best_supports):
+            best, best_supports = hypothesis, supports
+    return _answer("ransac", a, b, best, best_supports, matches, cfg)
 
 
 def svd(
     a: FeatureMap, b: FeatureMap, rng: np.random.Generator, cfg: AlignConfig | None = None
 ) -> Alignment:
     """One least-squares solve over the descriptor matches that are geometrically consistent
-    with most other matches (seed §5.2), then :func:`refine`. ``rng`` is unused (kept so
-    every aligner has the same signature)."""
+    with most other matches (seed §5.2; they are its own correspondences), then the
+    refinement. ``rng`` is unused (kept so every aligner has the same signature)."""
     del rng
     cfg = cfg or AlignConfig()
     matches = candidate_matches(a, b, cfg.descriptor_threshold)
@@ -531,36 +612,42 @@ def svd(
     db = np.linalg.norm(pb[:, None] - pb[None], axis=-1)
     votes = (np.abs(da - db) < cfg.geometric_threshold).sum(axis=1) - 1  # minus itself
     consistent = votes > 0.5 * (len(matches) - 1)
-    if consistent.sum() < 2:
-        return _answer("svd", a, b, None, matches, cfg)
-    return _answer("svd", a, b, rigid_fit(pa[consistent], pb[consistent]), matches, cfg)
+    own = matches[consistent]
+    if len(own) < 2:
+        return _answer("svd", a, b, None, own, matches, cfg)
+    return _answer("svd", a, b, rigid_fit(pa[consistent], pb[consistent]), own, matches, cfg)
 
 
-def _icp_from(a: FeatureMap, b: FeatureMap, start: np.ndarray, cfg: AlignConfig) -> np.ndarray:
+def _icp_from(
+    a: FeatureMap, b: FeatureMap, start: np.ndarray, cfg: AlignConfig
+) -> tuple[np.ndarray, np.ndarray]:
     """ICP from ``start``: nearest-neighbour correspondences within th2 and the rigid fit,
-    alternated until the correspondences stop changing (seed §5.3)."""
+    alternated until the correspondences stop changing (seed §5.3). Returns the transform and
+    the correspondences (k, 2) it was fitted to (none if it never moved from ``start``)."""
     tree = cKDTree(a.positions)
-    transform, pairs = start, None
-    for _ in range(cfg.icp_max_iterations):
+    transform, pairs = start, np.zeros((0, 2), dtype=int)
+    for k in range(cfg.icp_max_iterations):
         new = _supports(transform, tree, a, b, cfg)
-        if len(new) < 2 or (pairs is not None and np.array_equal(new, pairs)):
+        if len(new) < 2 or (k > 0 and np.array_equal(new, pairs)):
             break
         pairs = new
         transform = rigid_fit(a.positions[pairs[:, 0]], b.positions[pairs[:, 1]])
-    return transform
+    return transform, pairs
 
 
 def icp(
     a: FeatureMap, b: FeatureMap, rng: np.random.Generator, cfg: AlignConfig | None = None
 ) -> Alignment:
-    """ICP from one RANSAC-style initial estimate (seed §5.3), then :func:`refine`."""
+    """ICP from one RANSAC-style initial estimate (seed §5.3), then the refinement; its own
+    correspondences are its final nearest neighbours."""
     cfg = cfg or AlignConfig()
     matches = candidate_matches(a, b, cfg.descriptor_threshold)
     if (declined := _too_few("icp", matches, cfg)) is not None:
         return declined
     start = _random_hypothesis(a, b, matches, cfg, rng)
-    result = None if start is None else _icp_from(a, b, start, cfg)
-    return _answer("icp", a, b, result, matches, cfg)
+    if start is None:
+        return _answer("icp", a, b, None, np.zeros((0, 2), dtype=int), matches, cfg)
+    return _answer("icp", a, b, *_icp_from(a, b, start, cfg), matches, cfg)
 
 
 def imp_icp(
@@ -572,16 +659,16 @@ def imp_icp(
     if (declined := _too_few("imp_icp", matches, cfg)) is not None:
         return declined
     tree = cKDTree(a.positions)
-    best, best_support = None, -1
+    best, best_pairs, best_support = None, np.zeros((0, 2), dtype=int), -1
     for _ in range(cfg.imp_icp_starts):
         start = _random_hypothesis(a, b, matches, cfg, rng)
         if start is None:
             continue
-        result = _icp_from(a, b, start, cfg)
+        result, pairs = _icp_from(a, b, start, cfg)
         support = len(_supports(result, tree, a, b, cfg))
         if support > best_support:
-            best, best_support = result, support
-    return _answer("imp_icp", a, b, best, matches, cfg)
+            best, best_pairs, best_support = result, pairs, support
+    return _answer("imp_icp", a, b, best, best_pairs, matches, cfg)
 
 
 ALIGNERS = {"ransac": ransac, "svd": svd, "icp": icp, "imp_icp": imp_icp}

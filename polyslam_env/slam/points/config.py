@@ -13,6 +13,14 @@ differential drives: the measured increment in the robot frame with per-period n
 The three per-robot algorithms differ only in two switches, so one class runs all of them:
 ``em_move`` (EM-FastSLAM's move before resampling) and ``consensus_step`` ε (MBLCC's
 landmark consensus; 0 means no consensus). :func:`algorithm_config` sets them by name.
+``em_passes`` repeats the move within a sweep (the seed calls the move an iteration of the
+EM method and gives no count; it runs one).
+
+``proposal`` picks where a sweep draws each particle's pose from: ``fastslam2`` (the seed's,
+the motion prediction updated by an EKF step with the re-observed landmarks) or ``motion``
+(the motion prediction alone, FastSLAM 1.0's; the weight is then the measurement
+likelihood). The shared-map baseline runs with either (the seed does not say which proposal
+its ref. [10] used).
 """
 
 from __future__ import annotations
@@ -20,13 +28,21 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from polyslam_env.core.config import Config, check_non_negative, check_positive, check_range
+from polyslam_env.core.config import (
+    Config,
+    check_choice,
+    check_non_negative,
+    check_positive,
+    check_range,
+)
 from polyslam_env.core.errors import ConfigError
 
 #: The per-robot algorithms and their switches (em_move, consensus on).
 ALGORITHMS: tuple[str, ...] = ("fastslam2", "em_fastslam", "mblcc")
 #: The motion models (see :mod:`polyslam_env.slam.points.models`).
 MOTION_MODELS: tuple[str, ...] = ("car", "odometry")
+#: Where a sweep draws the particles' poses from (see the module docstring).
+PROPOSALS: tuple[str, ...] = ("fastslam2", "motion")
 
 
 @dataclass(frozen=True)
@@ -37,6 +53,8 @@ class PointSlamConfig(Config):
     resample_fraction: float = 0.75  # resample when N_eff < fraction · N
     em_move: bool = False  # EM-FastSLAM's attraction-repulsion move (eqs. 4, 7, SPEC §8)
     em_mobility: tuple[float, float, float] = (0.008, 0.005, 0.001)  # R: m, m, rad
+    em_passes: int = 1  # attraction-repulsion moves per sweep, each followed by eq. 3
+    proposal: str = "fastslam2"  # "fastslam2" (EKF-updated) or "motion" (FastSLAM 1.0's)
     consensus_step: float = 0.0  # ε of eq. 12; 0 = independent filters
     sigma_v: float = 0.3  # m/s, speed control noise σ_V
     sigma_g_deg: float = 3.0  # steering control noise σ_G
@@ -54,6 +72,9 @@ class PointSlamConfig(Config):
         check_range("resample_fraction", self.resample_fraction, 0.0, 1.0)
         for i, r in enumerate(self.em_mobility):
             check_non_negative(f"em_mobility[{i}]", r)
+        if self.em_passes < 1:
+            raise ConfigError(f"em_passes: must be >= 1, got {self.em_passes}")
+        check_choice("proposal", self.proposal, PROPOSALS)
         check_range("consensus_step", self.consensus_step, 0.0, 1.0)
         check_non_negative("sigma_v", self.sigma_v)
         check_non_negative("sigma_g_deg", self.sigma_g_deg)

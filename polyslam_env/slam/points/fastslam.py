@@ -4,10 +4,11 @@ One sensor sweep (:func:`sweep`) follows the seed's steps in order:
 
 1. predict each particle's pose Gaussian through the controls since the last sweep;
 2. build FastSLAM 2.0's proposal by an EKF update of that Gaussian with every re-observed
-   landmark, and draw each particle's pose from it;
+   landmark (or, with ``proposal: motion``, keep the prediction itself: FastSLAM 1.0's
+   proposal), and draw each particle's pose from it;
 3. weight by eq. 3 (likelihood × motion prior / proposal), normalise;
 4. EM-FastSLAM only: the attraction-repulsion move (``em``), then eq. 3 again at the moved
-   poses;
+   poses; ``em_passes`` times;
 5. take the pose estimate (weighted mean and covariance), then resample (systematic) when
    N_eff < 0.75 N;
 6. update the landmark EKFs from the final poses (eqs. 9–13), MBLCC adding ε Σ_n (μ^n − μ)
@@ -20,6 +21,7 @@ sweeps and implements :class:`~polyslam_env.slam.points.interface.PointSlamBacke
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -32,6 +34,17 @@ from polyslam_env.slam.points.interface import LandmarkMap, LandmarkMessage, Poi
 Neighbours = tuple[np.ndarray, np.ndarray]  # Σ_n μ^n (m, 2), count (m,) per re-observed landmark
 
 
+class SweepResult(NamedTuple):
+    """What one :func:`sweep` leaves: the new weights and estimate, and for diagnostics the
+    effective sample size before resampling and each particle's parent."""
+
+    log_weights: np.ndarray  # (N,) normalised
+    best: int  # the particle that had the largest weight before resampling (after it)
+    estimate: tuple[np.ndarray, np.ndarray]  # robot's pose mean (3,), cov (3, 3)
+    effective_size: float  # N_eff of the weights the resampling decision saw
+    parents: np.ndarray  # (N,) int: particle k descends from particle parents[k] of before
+
+
 def sweep(
     blocks: Sequence[pt.PoseBlock],
     active: int,
@@ -42,13 +55,11 @@ def sweep(
     config: PointSlamConfig,
     rng: np.random.Generator,
     neighbours: Neighbours | None = None,
-) -> tuple[np.ndarray, int, tuple[np.ndarray, np.ndarray]]:
+) -> SweepResult:
     """One FastSLAM step of robot ``active`` on particles whose other pose blocks (robots
-    sharing the map) are resampled along. Returns the new log weights, the index of the
-    particle that had the largest weight before resampling (after it), and the robot's pose
-    estimate (mean (3,), cov (3, 3)) from the weighted particles before resampling: the same
-    mean in expectation, without the resampling's noise, and a spread that resampling a few
-    particles down to copies of one would zero."""
+    sharing the map) are resampled along. The robot's pose estimate comes from the weighted
+    particles before resampling: the same mean in expectation, without the resampling's
+    noise, and a spread that resampling a few particles down to copies of one would zero."""
     block = blocks[active]
     noise = np.diag(np.square(config.measurement_sigmas))
     width = models.control_width(config)
@@ -59,12 +70,15 @@ def sweep(
     lm_means, lm_covs = landmarks.means[:, slots], landmarks.covs[:, slots]
 
     prior = (block.poses, block.covs)
-    prop = pt.proposal(*prior, lm_means, lm_covs, z_known, noise) if known.any() else prior
+    optimal = config.proposal == "fastslam2" and known.any()
+    prop = pt.proposal(*prior, lm_means, lm_covs, z_known, noise) if optimal else prior
     x = pt.sample(rng, *prop)
     weights = pt.normalise(log_w + pt.log_weight(x, prior, prop, lm_means, lm_covs, z_known, noise))
     if config.em_move and known.any():
-        moved = em_move(rng, x, np.exp(weights), np.asarray(config.em_mobility))
-        if moved is not x:
+        for _ in range(config.em_passes):
+            moved = em_move(rng, x, np.exp(weights), np.asarray(config.em_mobility))
+            if moved is x:  # equal weights: every further pass would stand still too
+                break
             x = moved
             inc = pt.log_weight(x, prior, prop, lm_means, lm_covs, z_known, noise)
             weights = pt.normalise(log_w + inc)
@@ -73,13 +87,15 @@ def sweep(
 
     best = int(np.argmax(weights))
     n = len(weights)
-    if pt.effective_size(weights) < config.resample_fraction * n:
-        index = pt.systematic_resample(rng, weights)
+    ess = pt.effective_size(weights)
+    parents = np.arange(n)
+    if ess < config.resample_fraction * n:
+        parents = pt.systematic_resample(rng, weights)
         for b in blocks:
-            b.take(index)
-        landmarks.take(index)
+            b.take(parents)
+        landmarks.take(parents)
         weights = np.full(n, -np.log(n))
-        best = int(np.flatnonzero(index == best)[0])
+        best = int(np.flatnonzero(parents == best)[0])
 
     if known.any():
         means, covs = pt.update_landmarks(
@@ -94,7 +110,7 @@ def sweep(
         landmarks.means[:, slots], landmarks.covs[:, slots] = means, covs
     if not known.all():
         landmarks.add(meas.ids[~known], *pt.init_landmarks(block.poses, meas.z[~known], noise))
-    return weights, best, estimate
+    return SweepResult(weights, best, estimate, ess, parents)
 
 
 def gather_neighbours(ids: np.ndarray, messages: Sequence[LandmarkMessage]) -> Neighbours:
@@ -136,6 +152,7 @@ class PointFastSlam:
         self._best = 0
         self._last_ids = np.zeros(0, dtype=np.int64)
         self._inbox: list[LandmarkMessage] = []
+        self.last_sweep: SweepResult | None = None  # diagnostics of the latest step
 
     def step(self, controls: np.ndarray, measurements: PointMeasurements) -> None:
         neighbours = None
@@ -144,7 +161,7 @@ class PointFastSlam:
                 np.array([i for i in measurements.ids if int(i) in self.map.slots], np.int64),
                 self._inbox,
             )
-        self.log_weights, self._best, self._estimate = sweep(
+        self.last_sweep = sweep(
             [self.poses],
             0,
             self.map,
@@ -155,6 +172,7 @@ class PointFastSlam:
             self._rng,
             neighbours,
         )
+        self.log_weights, self._best, self._estimate = self.last_sweep[:3]
         self._last_ids = measurements.ids.copy()
         self._inbox = []
 
@@ -163,6 +181,14 @@ class PointFastSlam:
 
     def landmarks(self) -> LandmarkMap:
         means, covs = pt.map_estimate(self.map, self.log_weights)
+        return LandmarkMap(np.array(self.map.ids, dtype=np.int64), means, covs)
+
+    def best_landmarks(self) -> LandmarkMap:
+        """The map of the particle that had the largest weight at the last sweep (the
+        "most probable map" seed 004 aligns), rather than the weighted mixture."""
+        m = len(self.map.ids)
+        means = self.map.means[self._best, :m].copy()
+        covs = self.map.covs[self._best, :m].copy()
         return LandmarkMap(np.array(self.map.ids, dtype=np.int64), means, covs)
 
     def export_message(self) -> LandmarkMessage:

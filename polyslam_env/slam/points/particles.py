@@ -8,6 +8,7 @@ particles have seen the same landmarks, so the id → slot table is shared.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -232,6 +233,18 @@ def systematic_resample(rng: np.random.Generator, log_w: np.ndarray) -> np.ndarr
     cum[-1] = 1.0
     pointers = (rng.random() + np.arange(n)) / n
     return np.searchsorted(cum, pointers, side="right").astype(np.int64)
+
+
+def surviving_ancestors(parents: Sequence[np.ndarray], start: int, stop: int) -> int:
+    """How many of the particles present after step ``start`` still have descendants after
+    step ``stop`` (> ``start``), given each step's ``parents`` (N,) (particle k after step s
+    descends from particle parents[s][k] before it; ``arange`` when nothing was resampled).
+    N when resampling has lost no history in between, 1 when every particle descends from
+    one: the trajectory (and map) hypotheses the filter still holds from that far back."""
+    index = np.arange(len(parents[stop]))
+    for s in range(stop, start, -1):
+        index = parents[s][index]
+    return len(np.unique(index))
 
 
 def pose_estimate(poses: np.ndarray, log_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

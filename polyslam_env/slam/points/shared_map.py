@@ -4,9 +4,11 @@ particle filter over the *joint* team trajectory and *one shared map*.
 
 Each particle holds every robot's pose and a single set of landmark EKFs; every robot's
 controls and sweeps update its own pose block (FastSLAM 2.0 proposal, as for the per-robot
-filters) and the shared landmarks, and resampling copies whole particles (all poses and the
-map together). With known starting poses Howard's time-reversed replay of the past is not
-needed: all data enter as they arrive. It is a centralised estimator: communication is not
+filters, or with ``proposal: motion`` the motion model's: the seed does not say which its
+ref. [10] used) and the shared landmarks, and resampling copies whole particles (all poses
+and the map together), so every robot's sweep may resample every robot's trajectory. With
+known starting poses Howard's time-reversed replay of the past is not needed: all data enter
+as they arrive. It is a centralised estimator: communication is not
 modelled (every robot's data reach the filter at once), so export/import exchange nothing.
 """
 
@@ -18,7 +20,7 @@ import numpy as np
 
 from polyslam_env.slam.points import particles as pt
 from polyslam_env.slam.points.config import PointSlamConfig
-from polyslam_env.slam.points.fastslam import sweep
+from polyslam_env.slam.points.fastslam import SweepResult, sweep
 from polyslam_env.slam.points.interface import LandmarkMap, LandmarkMessage, PointMeasurements
 
 
@@ -35,14 +37,19 @@ class SharedMapFastSlam:
         self.map = pt.LandmarkBlock(n)
         self.log_weights = np.full(n, -np.log(n))
         self.estimates = [pt.pose_estimate(b.poses, self.log_weights) for b in self.poses]
+        self.last_sweep: SweepResult | None = None  # diagnostics of the latest robot's step
 
     def robot(self, index: int) -> SharedMapRobot:
         return SharedMapRobot(self, index)
 
     def step_robot(self, index: int, controls: np.ndarray, meas: PointMeasurements) -> None:
         """Robot ``index``'s controls and sweep into the joint filter."""
-        self.log_weights, _, self.estimates[index] = sweep(
+        self.last_sweep = sweep(
             self.poses, index, self.map, self.log_weights, controls, meas, self.config, self._rng
+        )
+        self.log_weights, self.estimates[index] = (
+            self.last_sweep.log_weights,
+            self.last_sweep.estimate,
         )
 
 
@@ -55,6 +62,11 @@ class SharedMapRobot:
 
     def step(self, controls: np.ndarray, measurements: PointMeasurements) -> None:
         self.team.step_robot(self.robot_id, controls, measurements)
+
+    @property
+    def last_sweep(self) -> SweepResult | None:
+        """The joint filter's latest step, whichever robot's it was."""
+        return self.team.last_sweep
 
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
         mean, cov = self.team.estimates[self.robot_id]

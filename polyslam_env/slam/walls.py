@@ -1,0 +1,245 @@
+"""The wall graph of one robot's map: pieces of one wall linked across gaps, walls tied square
+(:class:`WallGraph`; the geometry and the rows are :mod:`~polyslam_env.slam.links`').
+
+Two partitions of the landmarks: *wall groups* (pieces linked across gaps, directly or through
+others, or merged from linked pieces) and *direction groups* (walls tied square or parallel,
+as pieces of one wall are). A fact may be used once: pieces of one wall group are never
+linked again among themselves, and each square tie joins two direction groups. The graph
+follows the map's lineage (:mod:`~polyslam_env.slam.lineage`): a new landmark starts its own
+groups, a refit or merge inherits its parents' (joined), a removed landmark leaves.
+
+``link_age`` steps after a landmark is created, refit or merged, :meth:`WallGraph.link_changed`
+links it to the straight pieces of its wall across gaps and ties it square, each a
+pseudo-measurement update that estimates the two lines' turns and turns the stored lines by
+them (:meth:`WallGraph.update_pair`). Received landmarks take no part
+(:mod:`~polyslam_env.slam.links` says why).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from polyslam_env.slam import ekf
+from polyslam_env.slam.landmarks import EXTENT_MARGIN
+from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED, LineageEvent
+from polyslam_env.slam.links import evidence_gap, line_angle, link_rows, off_square, turned_line
+
+if TYPE_CHECKING:
+    from polyslam_env.slam.robot import PolySlam
+
+
+class WallGraph:
+    """Wall and direction groups of one :class:`~polyslam_env.slam.robot.PolySlam`'s
+    landmarks, and the links and square ties between them (module docstring)."""
+
+    def __init__(self, slam: PolySlam) -> None:
+        self.slam = slam
+        self.config = slam.config
+        self.wall_of: dict[int, int] = {}  # landmark id → its wall group
+        self.direction_of: dict[int, int] = {}  # landmark id → its direction group
+        slam.lineage.listen(self.follow)
+
+    def follow(self, event: LineageEvent) -> None:
+        """Keep the groups with a lineage event: a new landmark starts its own; a refit or
+        merge puts its parents' groups into its own (what they share is in the state now,
+        and must not be used again) and they leave; a removed landmark leaves."""
+        landmark_id = event.landmark_id
+        if event.kind == REMOVED:
+            self.wall_of.pop(landmark_id, None)
+            self.direction_of.pop(landmark_id, None)
+            return
+        self.wall_of[landmark_id] = landmark_id
+        self.direction_of[landmark_id] = landmark_id
+        if event.kind in (REPLACED, MERGED):
+            for parent in event.parents:
+                self.join_walls(landmark_id, parent)
+                self.wall_of.pop(parent, None)
+                self.direction_of.pop(parent, None)
+
+    def join_walls(self, keep: int, other: int) -> None:
+        """Put landmark ``other``'s wall group into landmark ``keep``'s (a link or a merge),
+        and so their direction groups (one wall is parallel to itself)."""
+        join_groups(self.wall_of, keep, other)
+        join_groups(self.direction_of, keep, other)
+
+    # -- links and square ties --------------------------------------------------------------
+    def link_changed(self) -> int:
+        """Link the landmarks created, refit or merged ``config.link_age`` steps ago to the
+        straight pieces of their walls across gaps (:meth:`link_walls`) and tie them square
+        (:meth:`square_wall`); a linked landmark is then checked for merges again (pieces a
+        few cm apart that no join fit could explain may now be one polynomial). Returns the
+        number of links and ties."""
+        cfg, slam = self.config, self.slam
+        if cfg.link_gap <= 0.0 and not cfg.square_walls:
+            return 0
+        table = slam.table
+        made_at = slam.step_count - cfg.link_age
+        fresh = [table.ids[j] for j in np.flatnonzero(table.changed_at == made_at).tolist()]
+        links = 0
+        for landmark_id in fresh:
+            made = self.link_walls(landmark_id) + self.square_wall(landmark_id)
+            if made:
+                links += made
+                slam.maintenance.merge_into_map(landmark_id)
+        return links
+
+    def link_walls(self, landmark_id: int) -> int:
+        """Link a straight landmark to every straight piece of another wall group, made at
+        least ``config.link_age`` steps ago, whose evidence lies at most ``config.link_gap``
+        from its own along their common axis, nearest first, when the collinearity
+        pseudo-measurement passes its χ²(2) gate (:mod:`~polyslam_env.slam.links`); returns
+        the number of links made."""
+        cfg, slam = self.config, self.slam
+        table, maintenance = slam.table, slam.maintenance
+        if cfg.link_gap <= 0.0 or landmark_id not in table:
+            return 0
+        idx = table.index_of(landmark_id)
+        if table.received[idx] or table.order[idx] != 1:
+            return 0
+        evidence = maintenance.evidence(idx)
+        reach = cfg.link_gap * (1.0 + 1e-9) + EXTENT_MARGIN
+        candidates = []
+        matured = slam.step_count - cfg.link_age  # partners at least as old (link_changed)
+        for j in table.near(maintenance.box(idx), slam.c0s, reach).tolist():
+            if j == idx or table.variate[j] != table.variate[idx] or table.order[j] != 1:
+                continue
+            if table.changed_at[j] > matured or table.received[j]:
+                continue
+            gap = evidence_gap(evidence, maintenance.evidence(j))
+            if -2.0 * EXTENT_MARGIN <= gap <= cfg.link_gap:
+                candidates.append((gap, table.ids[j]))
+        links = 0
+        for _, other_id in sorted(candidates):
+            if self.wall_of[other_id] != self.wall_of[landmark_id]:
+                links += self.link_pair(landmark_id, other_id)
+        return links
+
+    def link_pair(self, first: int, second: int) -> bool:
+        """The collinearity update of two straight landmarks (rows at the middle of each one's
+        evidence, noise each fit's variance beyond the range noise plus
+        ``config.wall_straightness``²), estimating their two turns (:meth:`update_pair`);
+        whether it passed the gate and was applied."""
+        slam = self.slam
+        table, maintenance = slam.table, slam.maintenance
+        i, j = table.index_of(first), table.index_of(second)
+        xis = np.array([0.5 * sum(maintenance.evidence(i)), 0.5 * sum(maintenance.evidence(j))])
+        if self.direction_of[first] == self.direction_of[second]:
+            xis = xis.mean(keepdims=True)  # parallel already: only the offset is new
+        residual, H = link_rows(
+            maintenance.polynomial(i), 3 + i, maintenance.turn_of(i),
+            maintenance.polynomial(j), 3 + j, maintenance.turn_of(j),
+            xis, slam.mean.size,
+        )  # fmt: skip
+        r = float(table.model_var[i] + table.model_var[j]) + self.config.wall_straightness**2
+        if not self.update_pair(i, j, -residual, H, r * np.eye(xis.size)):
+            return False
+        self.join_walls(first, second)
+        return True
+
+    def square_wall(self, landmark_id: int) -> int:
+        """Tie straight landmark ``landmark_id`` in direction to the straight landmark of
+        another direction group, made at least ``config.link_age`` steps ago, whose angle to
+        it the state knows best, by the pseudo-measurement that their angle is a multiple of
+        90° (:func:`~polyslam_env.slam.links.off_square`), noise ``config.wall_squareness_deg``²
+        plus each fit's direction variance beyond the range noise, gated by χ²(1); estimates
+        the two lines' turns as a link does. Needs ``config.square_walls`` and rotation
+        states; received landmarks take no part. Returns 1 if tied, else 0."""
+        cfg, slam = self.config, self.slam
+        table = slam.table
+        if not cfg.square_walls or not cfg.rotation_states or landmark_id not in table:
+            return 0
+        i = table.index_of(landmark_id)
+        if table.received[i] or table.order[i] != 1 or not self.long_enough(i):
+            return 0
+        group = self.direction_of[landmark_id]
+        matured = slam.step_count - cfg.link_age
+        others = np.array(
+            [
+                j
+                for j, (lid, at) in enumerate(zip(table.ids, table.changed_at, strict=True))
+                if table.order[j] == 1
+                and at <= matured
+                and not table.received[j]
+                and self.direction_of[lid] != group
+                and self.long_enough(j)
+            ],
+            dtype=np.int64,
+        )
+        if others.size == 0:
+            return 0
+        n = len(table)
+        turn_index = slam.layout.turn_index
+        t_i, t_others = turn_index(i, n), turn_index(0, n) + others
+        cov = slam.cov
+        relative = cov[t_i, t_i] + cov[t_others, t_others] - 2.0 * cov[t_i, t_others]
+        j = int(others[int(np.argmin(relative))])
+        t_j = turn_index(j, n)
+        angle = line_angle(table.polys[i]) + slam.mean[t_i]
+        angle -= line_angle(table.polys[j]) + slam.mean[t_j]
+        H = np.zeros((1, slam.mean.size))
+        H[0, t_i], H[0, t_j] = 1.0, -1.0
+        r = math.radians(cfg.wall_squareness_deg) ** 2 + sum(
+            float(table.model_var[k]) / float(table.fit_half[k]) ** 2 for k in (i, j)
+        )
+        if not self.update_pair(i, j, np.array([-off_square(angle)]), H, np.array([[r]])):
+            return 0
+        join_groups(self.direction_of, landmark_id, table.ids[j])
+        return 1
+
+    def update_pair(
+        self, i: int, j: int, innovation: np.ndarray, H: np.ndarray, R: np.ndarray
+    ) -> bool:
+        """A pseudo-measurement tying straight landmarks ``i`` and ``j`` (rows):
+        :func:`~polyslam_env.slam.ekf.update_rows` with every turn but the two lines' own
+        considered, then both stored lines turned by their estimates (:meth:`apply_turn`) and
+        the stored points carried with the pose; whether it passed its gate and was applied."""
+        slam, cfg = self.slam, self.config
+        considered = None
+        n = len(slam.table)
+        if cfg.rotation_states:  # every turn but the two lines' own
+            turns = slam.layout.turn_index(0, n) + np.arange(n)
+            considered = np.delete(turns, [i, j])
+        result = ekf.update_rows(slam.mean, slam.cov, innovation, H, R, cfg.gate_prob, considered)
+        if result is None:
+            return False
+        before = slam.mean[:3].copy()
+        slam.mean, slam.cov, _ = result
+        if cfg.rotation_states:
+            for k in (i, j):
+                self.apply_turn(k)
+        slam.state_moved(before)
+        return True
+
+    def apply_turn(self, row: int) -> None:
+        """Turn straight landmark ``row``'s stored line by its estimated turn α̂ about its
+        pivot and reset α̂ to 0: an error-state reset. Turns about one point add, and the
+        offset at the pivot stays (:func:`~polyslam_env.slam.links.turned_line`), so the
+        errors keep their meaning and the covariance stays."""
+        slam = self.slam
+        t = slam.layout.turn_index(row, len(slam.table))
+        line = turned_line(
+            slam.maintenance.polynomial(row), float(slam.table.pivot[row]), slam.mean[t]
+        )
+        slam.mean[3 + row], slam.mean[t] = line.c0, 0.0
+        slam.table.set_shape(row, line)
+
+    def long_enough(self, row: int) -> bool:
+        """Whether landmark ``row`` is long enough to update the pose (``min_update_extent``)."""
+        floor = self.config.min_update_extent
+        if floor <= 0.0:
+            return True
+        table = self.slam.table
+        return bool(table.hi[row] - table.lo[row] >= floor)
+
+
+def join_groups(group_of: dict[int, int], keep: int, other: int) -> None:
+    """Put landmark ``other``'s group of ``group_of`` into landmark ``keep``'s."""
+    target, source = group_of[keep], group_of[other]
+    if target == source:
+        return
+    for lid, group in group_of.items():
+        if group == source:
+            group_of[lid] = target

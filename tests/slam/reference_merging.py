@@ -1,0 +1,69 @@
+"""The merge test's geometry as readable numpy (the oracle of ``map_kernels.merge_test``):
+the overlap of two polynomials on the first one's axis and their two-way RMS error γ there,
+as ``slam/merging.py`` computed them before the test was compiled."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polyslam_env.slam import kernels
+from polyslam_env.slam.landmarks import own_orders
+from polyslam_env.slam.merging import unit_tangent
+from polyslam_env.slam.polynomial import Polynomial
+
+_SAMPLES = 64  # samples of p2 used to project it on p's axis
+
+
+def overlap_interval(poly: Polynomial, other: Polynomial) -> tuple[float, float, bool] | None:
+    """Overlap [a, b] on ``poly``'s ξ axis of ``other`` projected there, and whether one
+    includes the other; None when the projections are disjoint."""
+    xi_other = poly.from_xy(other.equally_spaced(_SAMPLES))[0]  # (S,)
+    lo2, hi2 = float(xi_other.min()), float(xi_other.max())
+    a, b = max(poly.lo, lo2), min(poly.hi, hi2)
+    if b < a:
+        return None
+    included = (poly.lo <= lo2 and hi2 <= poly.hi) or (lo2 <= poly.lo and poly.hi <= hi2)
+    return a, b, included
+
+
+def merge_gamma(poly: Polynomial, other: Polynomial, a: float, b: float) -> tuple[float, float]:
+    """(γ, angle): two-way RMS approximation error and tangent angle (rad) over ξ ∈ [a, b] of p.
+
+    γ = max(RMS error of ``other`` on m+1 equally spaced points of ``poly`` in the overlap,
+    RMS error of ``poly`` on up to m+1 equally spaced samples of ``other`` projecting there);
+    the angle is between the curves' tangents at the middle of their overlapping parts.
+    """
+    m = poly.order
+    on_p = poly.equally_spaced(m + 1, a, b)  # (m+1, 2)
+    gamma_p = _rms(_errors(on_p, other))
+    xi_o = np.linspace(other.lo, other.hi, _SAMPLES)
+    samples = other.points_at(xi_o)  # (S, 2)
+    xi_s = poly.from_xy(samples)[0]
+    inside = np.flatnonzero((xi_s >= a) & (xi_s <= b))
+    if len(inside) == 0:
+        inside = np.arange(_SAMPLES)
+    pick = inside[np.unique(np.linspace(0, len(inside) - 1, m + 1).round().astype(int))]
+    gamma_o = _rms(_errors(samples[pick], poly))
+    t_p = unit_tangent(poly, 0.5 * (a + b))
+    t_o = unit_tangent(other, float(xi_o[inside[len(inside) // 2]]))
+    angle = float(np.arccos(min(abs(float(t_p @ t_o)), 1.0)))
+    return max(gamma_p, gamma_o), angle
+
+
+def _errors(points: np.ndarray, poly: Polynomial) -> np.ndarray:  # (k,)
+    """The approximation error of each point (k, 2) by ``poly`` (the association's
+    ``kernels.nearest_by_error`` with ``poly`` the one candidate)."""
+    shape = np.zeros((1, poly.order + 1))
+    shape[0, 1:] = poly.coeffs[1:]
+    order = own_orders(shape)
+    xy = np.ascontiguousarray(points, dtype=float)
+    best, errors = np.empty(len(xy), dtype=np.int64), np.empty(len(xy))
+    kernels.nearest_by_error(
+        xy, np.zeros(1, dtype=np.int64), np.array([poly.variate], dtype=np.int64), order, shape,
+        np.array([poly.lo]), np.array([poly.hi]), np.array([poly.c0]), False, best, errors,
+    )  # fmt: skip
+    return errors
+
+
+def _rms(values: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(values**2)))
