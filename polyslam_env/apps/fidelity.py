@@ -20,6 +20,7 @@ episode of a setting's lowest ``map_precision`` (:func:`worst_robots`) again and
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -33,21 +34,26 @@ from policies.base import PolicyError, make_team, policy_factory, policy_names
 from polyslam_env.apps.jobs import Runner, run_jobs, runner_of
 from polyslam_env.apps.rollout import EpisodeResult, evaluate_episode, run_episode
 from polyslam_env.core.config import Config, check_range, parse_overrides
-from polyslam_env.core.errors import ConfigError
+from polyslam_env.core.errors import ConfigError, MapFileError
 from polyslam_env.environment.config import GENERATOR_PREFIX, EnvConfig
 from polyslam_env.environment.parallel import PolySlamParallelEnv, parallel_env
 from polyslam_env.metrics.mapping import count_interval, expected_precision
 from polyslam_env.metrics.pose import nees_band
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.generators import GENERATORS
+from polyslam_env.world.grid import free_space_grid
+from polyslam_env.world.maps import load_map, resolve_map_path
 
 __all__ = [
     "DEFAULT_MAPS",
+    "REFERENCE_AREA",
     "ROBOT_KEYS",
     "TARGETS",
     "FidelityConfig",
+    "area_steps",
     "checks_from_table",
     "episode_config",
+    "map_label",
     "markdown",
     "misses",
     "nees_excess",
@@ -106,7 +112,8 @@ PER_ROBOT_CHECKS: dict[str, tuple[str, bool, float]] = {
 class FidelityConfig(Config):
     """What :func:`run_fidelity` runs (the CLI's flags)."""
 
-    maps: tuple[str, ...] = DEFAULT_MAPS  # layout generator names
+    #: layout generator names, built-in map names or map files (an imported building)
+    maps: tuple[str, ...] = DEFAULT_MAPS
     seeds: int = 10  # seeds first_seed … first_seed + seeds − 1 per map
     first_seed: int = 0
     robots: int = 3
@@ -117,15 +124,16 @@ class FidelityConfig(Config):
     env_set: tuple[str, ...] = ()
     #: the policy's keyword arguments, ``KEY=VALUE`` with YAML values (``gain=visible``)
     policy_set: tuple[str, ...] = ()
+    #: a fixed map (built-in or file) runs :func:`area_steps` steps, generators ``steps``
+    area_budget: bool = True
 
     def validate(self) -> None:
         if not self.maps:
             raise ConfigError("maps: at least one map is needed")
-        for name in self.maps:
-            if name not in GENERATORS:
-                raise ConfigError(
-                    f"maps: {name!r} is not a layout generator; valid: {', '.join(GENERATORS)}"
-                )
+        labels = [map_label(name) for name in self.maps]  # a bad name: its ConfigError
+        for label in labels:
+            if labels.count(label) > 1:
+                raise ConfigError(f"maps: two maps are labelled {label!r}; rename one file")
         check_range("seeds", self.seeds, 1, 100_000)
         check_range("first_seed", self.first_seed, 0, 2**31)
         check_range("robots", self.robots, 1, 64)
@@ -139,6 +147,17 @@ class FidelityConfig(Config):
                 f"policy: {self.policy!r} needs a checkpoint; fidelity runs scripted policies"
             )
         EnvConfig().replace(**self.env_overrides())  # a bad field or value: its ConfigError
+
+    def entry(self, label: str) -> str:
+        """The ``maps`` entry whose table label is ``label``."""
+        return next(name for name in self.maps if map_label(name) == label)
+
+    def steps_for(self, name: str) -> int:
+        """Steps of an episode on map ``name``: ``steps`` for a generator (and with
+        ``area_budget`` off), else :func:`area_steps` of its free area."""
+        if name in GENERATORS or not self.area_budget:
+            return self.steps
+        return area_steps(self.steps, free_space_grid(load_map(name), AREA_RESOLUTION).free_area)
 
     def env_overrides(self) -> dict[str, Any]:
         """``env_set`` as ``Config.replace`` keywords (``slam__merge_turn="weights"``)."""
@@ -160,6 +179,37 @@ class FidelityConfig(Config):
             env.close()
 
 
+#: m², the free area ``steps`` are meant for on a fixed map: about the office floor's (the
+#: default generator's free area is 302–312 m² on seeds 0–5, and a frontier team of 3 covers
+#: it fully within 1,000 steps).
+REFERENCE_AREA = 300.0
+#: m, the raster the free area is measured on (the coverage grid's default resolution).
+AREA_RESOLUTION = 0.1
+
+
+def area_steps(steps: int, free_area: float) -> int:
+    """The step budget of a fixed map of ``free_area`` m²: ``steps`` per
+    :data:`REFERENCE_AREA` m², never fewer than ``steps``, rounded up to a hundred. A team
+    sweeps about the same area per step anywhere, so a floor twice the size gets twice the
+    steps."""
+    return max(steps, math.ceil(steps * free_area / REFERENCE_AREA / 100) * 100)
+
+
+def map_label(name: str) -> str:
+    """The table label of a ``maps`` entry: a generator's name, a built-in map's name, or a
+    map file's stem; ConfigError when ``name`` is none of them."""
+    if name in GENERATORS:
+        return name
+    try:
+        path = resolve_map_path(name)
+    except MapFileError:
+        raise ConfigError(
+            f"maps: {name!r} is neither a layout generator ({', '.join(GENERATORS)}) nor a"
+            " built-in map or map file"
+        ) from None
+    return path.stem
+
+
 def has_initial_error() -> bool:
     """Whether this version's EnvConfig has ``initial_error`` (added by issue 14)."""
     return "initial_error" in EnvConfig.__dataclass_fields__
@@ -170,9 +220,9 @@ def episode_config(config: FidelityConfig, name: str, exchange: bool) -> dict[st
     on where supported, the default channel or none; ``env_set``'s ``channel.*`` fields set
     the exchange-on setting's channel (the other has none)."""
     fields: dict[str, Any] = {
-        "map": GENERATOR_PREFIX + name,
+        "map": GENERATOR_PREFIX + name if name in GENERATORS else str(resolve_map_path(name)),
         "num_robots": config.robots,
-        "max_steps": config.steps,
+        "max_steps": config.steps_for(name),
         "coverage_target": None,
     }
     if not exchange:
@@ -226,20 +276,24 @@ def run_fidelity(
         for name in config.maps
         for setting in SETTINGS
     }
+    labels = {name: map_label(name) for name in config.maps}
     config.check_policy()
     kwargs = config.policy_kwargs()
     jobs = [(configs[name, setting], config.policy, kwargs, seed) for name, setting, seed in keys]
     start = time.perf_counter()
     results = run_jobs(_run_job, jobs, workers, progress, seed_of=lambda job: job[3])
     grouped: dict[str, dict[str, list[EpisodeResult]]] = {
-        name: {s: [] for s in SETTINGS} for name in config.maps
+        labels[name]: {s: [] for s in SETTINGS} for name in config.maps
     }
     for (name, setting, _), result in zip(keys, results, strict=True):
         if result is not None:
-            grouped[name][setting].append(result)
+            grouped[labels[name]][setting].append(result)
     summary = summarise(grouped)
     summary["settings"] = {
         **config.to_dict(),
+        "steps_per_map": {
+            labels[name]: configs[name, SETTINGS[0]]["max_steps"] for name in config.maps
+        },
         "seed_list": seeds,
         "initial_error": has_initial_error(),
         "coverage_target": None,
@@ -272,7 +326,7 @@ def picture(config: FidelityConfig, worst: Mapping[str, Any], path: str | Path) 
     its ``map_precision`` in this run, which equals ``worst["value"]``."""
     from polyslam_env.render.plots import plot_map_errors  # matplotlib: only when drawing
 
-    fields = episode_config(config, worst["map"], worst["setting"] == "exchange_on")
+    fields = episode_config(config, config.entry(worst["map"]), worst["setting"] == "exchange_on")
     env = parallel_env(EnvConfig.from_dict(fields))
     try:
         result = run_episode(
@@ -418,8 +472,14 @@ def markdown(summary: Mapping[str, Any]) -> str:
             " per-robot metrics over robots × seeds, coverage (team) over seeds."
         )
         lines.append("")
+    per_map = settings.get("steps_per_map", {})
     for name, by_setting in summary["table"].items():
-        lines += [f"### {name}", "", "| metric | exchange on | exchange off |", "|---|---|---|"]
+        steps = per_map.get(name, settings.get("steps"))
+        if steps is not None and steps != settings.get("steps"):
+            lines += [f"### {name} ({steps} steps: the budget of its free area)"]
+        else:
+            lines += [f"### {name}"]
+        lines += ["", "| metric | exchange on | exchange off |", "|---|---|---|"]
         for key in (*ROBOT_KEYS, "coverage"):
             cells = [_cell(by_setting[s][key]) for s in SETTINGS]
             lines.append(f"| {key} | {cells[0]} | {cells[1]} |")

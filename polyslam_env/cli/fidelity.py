@@ -12,7 +12,8 @@ def register(sub: Any) -> None:
     parser = sub.add_parser(
         "fidelity",
         help="SLAM fidelity on large generated maps: targets checked, exchange on vs off",
-        description="For each layout generator in --maps and each of --seeds seeds, run a"
+        description="For each map in --maps (a layout generator, or a fixed map: built-in or"
+        " a map file, e.g. an imported building) and each of --seeds seeds, run a"
         " team of --policy (default: frontier) with initial error (where the env supports"
         " it) for --steps steps, with the map exchange on and off on the same seeds; print a"
         " table per map (per robot nu_mean, map_precision, completeness_seen, duplicates,"
@@ -24,7 +25,8 @@ def register(sub: Any) -> None:
     parser.add_argument(
         "--maps",
         default="office_floor,warehouse,loop",
-        help="comma list of layout generators (default: office_floor,warehouse,loop)",
+        help="comma list of layout generators, built-in maps or map files (an imported"
+        " building; labelled by its file name) (default: office_floor,warehouse,loop)",
     )
     parser.add_argument("--seeds", type=int, default=10, help="seeds per map (default: 10)")
     parser.add_argument("--seed", type=int, default=0, help="first seed (default: 0)")
@@ -50,6 +52,12 @@ def register(sub: Any) -> None:
         default=[],
         metavar="KEY=VALUE",
         help="keyword arguments of the policy, YAML values (e.g. gain=visible)",
+    )
+    parser.add_argument(
+        "--fixed-steps",
+        action="store_true",
+        help="run --steps on fixed maps too; by default a built-in map or map file runs"
+        " --steps per 300 m² of its free area (at least --steps, rounded up to 100)",
     )
     add_study_arguments(parser, "1")
     parser.add_argument("--out", default="out/fidelity", help="output folder (out/fidelity)")
@@ -88,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
         policy=args.policy,
         env_set=tuple(args.set),
         policy_set=tuple(args.policy_set),
+        area_budget=not args.fixed_steps,
     )
     runner = study_runner(args, args.out, 1, "fidelity")
     out = args.out

@@ -55,6 +55,36 @@ def draw_layout(ax, layout: Layout) -> None:  # type: ignore[no-untyped-def]
     ax.set_aspect("equal")
 
 
+def plot_layouts(
+    layouts: Sequence[tuple[str, Layout]], path: str | Path, dpi: int = 80, columns: int = 3
+) -> Path:
+    """Layouts (title, layout) side by side: walls black, pillars, start poses as red
+    arrows; axes in metres."""
+    plt = _pyplot()
+    n = len(layouts)
+    cols = min(columns, n)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(5.0 * cols, 4.2 * rows), squeeze=False)
+    for ax, (title, layout) in zip(axes.ravel(), layouts, strict=False):
+        for wall in layout.walls:
+            ax.plot(wall[:, 0], wall[:, 1], color="k", lw=0.8)
+        for x, y, r in layout.pillars:
+            ax.add_patch(plt.Circle((x, y), r, color="k"))
+        for x, y, th in layout.start_poses:
+            ax.annotate("", xy=(x + 0.8 * np.cos(th), y + 0.8 * np.sin(th)), xytext=(x, y),
+                        arrowprops={"arrowstyle": "->", "color": "tab:red", "lw": 1.2})  # fmt: skip
+            ax.plot(x, y, "o", color="tab:red", ms=3)
+        x0, y0, x1, y1 = layout.bounds
+        ax.set_xlim(x0 - 0.5, x1 + 0.5)
+        ax.set_ylim(y0 - 0.5, y1 + 0.5)
+        ax.set_aspect("equal")
+        ax.set_title(title, fontsize=9)
+        ax.tick_params(labelsize=7)
+    for ax in axes.ravel()[n:]:
+        ax.axis("off")
+    return _save(plt, fig, path, dpi)
+
+
 def draw_robot_map(ax, run, color: str = "tab:green") -> None:  # type: ignore[no-untyped-def]
     """One robot's polynomials, true path and estimated path, in the absolute frame, placed
     by the robot's true start (as the map metrics place them: the frame's offset from the

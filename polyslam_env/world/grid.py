@@ -122,6 +122,29 @@ def is_connected(grid: FreeGrid) -> bool:
     return label_components(grid)[1] == 1
 
 
+def connected_up_to_slivers(grid: FreeGrid, max_cells: int = 2) -> bool:
+    """Whether the free cells form one 4-connected component, up to raster slivers: other
+    components of at most ``max_cells`` cells that touch the largest one diagonally.
+
+    Where two walls meet at an angle to the raster, a cell just beyond the inflation from
+    both can have its only free neighbour on the diagonal: a separate 4-component of one or
+    two cells although the robot's centre reaches it through the corner's free wedge. A
+    region the robot really cannot reach (behind a door narrower than the robot) is a room
+    of free cells, not a sliver touching the rest at a corner."""
+    labels, count = label_components(grid)
+    if count <= 1:
+        return count == 1
+    sizes = np.bincount(labels.ravel())[1:]  # (count,)
+    main = int(np.argmax(sizes)) + 1
+    near = ndimage.binary_dilation(labels == main, structure=np.ones((3, 3), dtype=bool))
+    for k in range(1, count + 1):
+        if k == main:
+            continue
+        if sizes[k - 1] > max_cells or not near[labels == k].all():
+            return False
+    return True
+
+
 def component_at(grid: FreeGrid, points: np.ndarray) -> np.ndarray:
     """Component label (…,) of the cell holding each point; 0 when blocked or off the grid."""
     labels, _ = label_components(grid)

@@ -133,10 +133,14 @@ def layout_to_dict(layout: Layout) -> dict[str, Any]:
     return out
 
 
+def map_text(layout: Layout) -> str:
+    """A layout as the text of a map file in the documented schema (YAML)."""
+    return yaml.safe_dump(layout_to_dict(layout), default_flow_style=None, sort_keys=False)
+
+
 def save_map(layout: Layout, path: str | Path) -> None:
     """Write a layout as a map file in the documented schema."""
-    text = yaml.safe_dump(layout_to_dict(layout), default_flow_style=None, sort_keys=False)
-    Path(path).write_text(text, encoding="utf-8")
+    Path(path).write_text(map_text(layout), encoding="utf-8")
 
 
 def _points(raw: Any, field: str, dim: int, fail: Any, *, min_count: int) -> np.ndarray:

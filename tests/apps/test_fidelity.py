@@ -5,15 +5,19 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from polyslam_env.apps.fidelity import (
+    REFERENCE_AREA,
     ROBOT_KEYS,
     SETTINGS,
     TARGETS,
     FidelityConfig,
+    area_steps,
     checks_from_table,
     episode_config,
+    map_label,
     markdown,
     misses,
     nees_checks,
@@ -30,6 +34,9 @@ from polyslam_env.apps.rollout import EpisodeResult
 from polyslam_env.cli.main import main
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.environment.config import EnvConfig
+from polyslam_env.world.generators import make_generator
+from polyslam_env.world.grid import free_space_grid
+from polyslam_env.world.maps import load_map, save_map
 
 TINY = FidelityConfig(maps=("loop",), seeds=1, robots=2, steps=6)
 
@@ -355,3 +362,35 @@ def test_picture__replays_the_worst_robots_episode(summary: dict, tmp_path: Path
         path = tmp_path / f"{worst['setting']}.png"
         assert picture(TINY, worst, path) == worst["value"]
         assert path.stat().st_size > 0
+
+
+def test_area_steps__steps_per_reference_area_rounded_up_to_a_hundred_never_fewer() -> None:
+    assert area_steps(1000, 0.5 * REFERENCE_AREA) == 1000  # never fewer than --steps
+    assert area_steps(1000, REFERENCE_AREA) == 1000
+    assert area_steps(1000, REFERENCE_AREA + 1.0) == 1100  # 1003.3 rounded up
+    assert area_steps(1000, 3 * REFERENCE_AREA) == 3000
+
+
+def test_fidelity__a_map_file_runs_labelled_by_its_stem_with_its_areas_budget(
+    tmp_path: Path,
+) -> None:
+    layout = make_generator("loop")(np.random.default_rng(0))
+    path = tmp_path / "my_floor.yaml"
+    save_map(layout, path)
+    config = FidelityConfig(maps=("loop", str(path)), seeds=1, robots=2, steps=100)
+    assert map_label(str(path)) == "my_floor" and config.entry("my_floor") == str(path)
+    area = free_space_grid(layout, 0.1).free_area
+    assert config.steps_for(str(path)) == area_steps(100, area)
+    assert config.steps_for("loop") == 100  # generators: --steps
+    assert config.replace(area_budget=False).steps_for(str(path)) == 100
+    fields = episode_config(config, str(path), exchange=True)
+    assert np.array_equal(load_map(fields["map"]).segments, layout.segments)
+    with pytest.raises(ConfigError, match="two maps are labelled 'my_floor'"):
+        other = tmp_path / "b"
+        other.mkdir()
+        save_map(layout, other / "my_floor.yaml")
+        FidelityConfig(maps=(str(path), str(other / "my_floor.yaml")))
+    tiny = config.replace(maps=(str(path),), steps=4, area_budget=False)
+    summary = run_fidelity(tiny)
+    assert set(summary["table"]) == {"my_floor"}
+    assert summary["settings"]["steps_per_map"] == {"my_floor": 4}

@@ -187,7 +187,8 @@ def test_make_generator__passes_parameters() -> None:
 def test_make_generator__unknown_name_lists_valid_names() -> None:
     with pytest.raises(
         ValueError,
-        match=r"'maze'.*valid names: cave, loop, office_floor, pillar_hall, rooms, warehouse",
+        match=r"'maze'.*valid names: angled_floor, cave, cave_system, curved_floor, loop,"
+        r" office_floor, pillar_hall, rooms, warehouse",
     ):
         make_generator("maze")
 
