@@ -199,8 +199,11 @@ def render_learning(data: Sequence[Any]) -> tuple[str, str]:
     for report in data:
         for policy, stats in report["comparison"].items():
             c, s = stats["coverage"], stats["steps_to_90"]
-            reached = f"{s['mean']:.0f} ± {s['std']:.0f} ({s['reached']:.0f}/{s['episodes']:.0f})"
-            if not s["reached"]:
+            if s["reached"]:
+                reached = (
+                    f"{s['mean']:.0f} ± {s['std']:.0f} ({s['reached']:.0f}/{s['episodes']:.0f})"
+                )
+            else:  # no episode reached 90 %: no mean, no spread
                 reached = f"never (0/{s['episodes']:.0f})"
             lines.append(
                 f"| {report['map']} | {policy} | {c['mean']:.3f} ± {c['std']:.3f} | {reached} |"

@@ -45,20 +45,24 @@ def test_blas_threads__restores_after_an_error() -> None:
     assert _blas_threads_now() == before
 
 
-def test_slam_step__runs_with_the_configured_blas_threads(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+def test_slam_step__changes_its_map_with_the_configured_blas_threads(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """The step's BLAS calls are the map changes' products (the compiled calls use none): a
+    first scan of a wall 2 m ahead creates a landmark, with BLAS on ``blas_threads``."""
     seen: list[list[int]] = []
-    original = PolySlam._step
+    original = PolySlam._change_map
 
-    def spy(self: PolySlam, odometry: np.ndarray, ranges: np.ndarray):  # type: ignore[no-untyped-def]
+    def spy(self: PolySlam, rho: float, fresh: int):  # type: ignore[no-untyped-def]
         seen.append(_blas_threads_now())
-        return original(self, odometry, ranges)
+        return original(self, rho, fresh)
 
-    monkeypatch.setattr(PolySlam, "_step", spy)
+    monkeypatch.setattr(PolySlam, "_change_map", spy)
     before = _blas_threads_now()
-    slam = PolySlam(SlamConfig(), np.zeros(1), 2.0)
-    slam.step(np.zeros(3), np.array([1.0]))
-    assert seen[-1] == [1] * len(before)
-    loose = PolySlam(SlamConfig(blas_threads=0), np.zeros(1), 2.0)
-    loose.step(np.zeros(3), np.array([1.0]))
-    assert seen[-1] == before
+    angles = np.linspace(-0.6, 0.6, 17)
+    wall = 2.0 / np.cos(angles)  # ranges to a wall 2 m ahead
+    slam = PolySlam(SlamConfig(), angles, 4.0)
+    slam.step(np.zeros(3), wall)
+    assert slam.n_landmarks == 1 and seen[-1] == [1] * len(before)
+    loose = PolySlam(SlamConfig(blas_threads=0), angles, 4.0)
+    loose.step(np.zeros(3), wall)
+    assert len(seen) == 2 and seen[-1] == before
     assert _blas_threads_now() == before

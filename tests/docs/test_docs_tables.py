@@ -144,3 +144,31 @@ def test_render_alignment__one_block_per_protocol_in_the_given_order() -> None:
     assert text.index("**seed protocol** (1 runs)") < text.index("**guarded protocol** (1 runs)")
     assert text.count("| landmarks both maps hold |") == 2
     assert headline.startswith("seed: ") and "; guarded: " in headline
+
+
+def test_render_learning__a_policy_that_never_reaches_90_percent_says_never() -> None:
+    never = {"mean": None, "std": None, "min": None, "max": None, "reached": 0.0, "episodes": 10.0}
+    reached = {
+        "mean": 200.0,
+        "std": 20.0,
+        "min": 180.0,
+        "max": 220.0,
+        "reached": 7.0,
+        "episodes": 10.0,
+    }
+    stats = {
+        "coverage": {"mean": 0.9, "std": 0.05},
+        "nu_mean": {"mean": 0.01},
+        "bytes_sent": {"mean": 10.0},
+    }
+    report = {
+        "map": "generator:warehouse",
+        "comparison": {
+            "frontier": {**stats, "steps_to_90": reached},
+            "random": {**stats, "steps_to_90": never},
+        },
+    }
+    text, headline = tables.render_learning([report])
+    assert "| generator:warehouse | frontier | 0.900 ± 0.050 | 200 ± 20 (7/10) |" in text
+    assert "| generator:warehouse | random | 0.900 ± 0.050 | never (0/10) |" in text
+    assert headline == "team coverage on held-out layouts: frontier 0.900, random 0.900"
