@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     header = (
         "# Versions the golden episodes were recorded with (tests/test_golden.py): the closure\n"
         f"# of polyslam[{','.join(extras)}] as installed; regenerate with\n"
-        "# `python .ci/freeze_constraints.py` (docs/notes/tests.md).\n"
+        "# `python .ci/freeze_constraints.py` (docs/design/testing.md).\n"
     )
     args.out.write_text(header + "\n".join(lines) + "\n")
     print(f"{args.out}: {len(lines)} packages", file=sys.stderr)

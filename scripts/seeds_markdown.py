@@ -1,4 +1,4 @@
-"""The Markdown tables of docs/notes/seeds.md, from the summaries the reproductions write.
+"""The Markdown tables of the seed 003 and 004 results pages, from the reproductions' summaries.
 
 Usage::
 

@@ -85,7 +85,7 @@ SECTIONS = (
 )
 #: Training env steps per second over MPE simple_spread steps per second on this branch's base
 #: (commit d0c6831), the "today" of issue 41's training target (≥ 3× today's): see
-#: docs/notes/envstep.md for the run that measured it.
+#: docs/design/compiled-env.md for the run that measured it.
 TRAIN_TODAY_MPE = 0.0
 #: The targets: (issues, name, goal, True when the figure must be at most the goal).
 TARGETS: tuple[tuple[str, str, float, bool], ...] = (

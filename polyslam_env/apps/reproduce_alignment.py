@@ -147,7 +147,7 @@ class AlignmentReproduceConfig(Config):
 
 #: The protocols' settings: FastSLAM particles, map, descriptor confusion (and the sweep
 #: beside it), refinement and decline rule. ``seed``'s confusion 0.25 is a stated, untuned
-#: choice (the seed gives no wrong-match rate; see docs/notes/seeds.md), and the sweep
+#: choice (the seed gives no wrong-match rate; see docs/results/alignment.md), and the sweep
 #: shows what other rates do.
 PROTOCOLS: dict[str, dict[str, Any]] = {
     "guarded": {
