@@ -56,6 +56,7 @@ class _Recorder:
 
     def __init__(self, team: Any) -> None:
         self.team, self.actions = team, []  # type: ignore[var-annotated]
+        self.policies = team.policies  # their metrics go into the episode's results
 
     def reset(self, seed: int | None = None) -> None:
         self.team.reset(seed)
@@ -71,6 +72,7 @@ class _Replay:
 
     def __init__(self, actions: list[Any]) -> None:
         self.actions, self.k = actions, 0
+        self.policies: dict[str, Any] = {}  # no policy runs: no policy metrics
 
     def reset(self, seed: int | None = None) -> None:
         self.k = 0
