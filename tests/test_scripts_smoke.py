@@ -41,10 +41,13 @@ PRINTING = [
     (["floor_before_after.py", "--tree", ".", "--first", "2", "--last", "4"], "env calls"),
     (["landmark_consistency.py", "--seeds", "1", "--robots", "1", "--steps", "40"], "c0_nees"),
     (["nees_episodes.py", "--runs", "1", "--steps", "20"], "seed 0: final NEES frame"),
+    (["nees_start_draw.py", "--seeds", "3", "--steps", "20", "--robots", "2"], '"slope_ci_t"'),
     (["physics_substeps.py", "--substeps", "20,10", "--steps", "40", "--generators", "rooms"],
      "calls per world step"),
     (["seif_fusion_nees.py", "--episodes", "1", "--steps", "20"], "NEES"),
     (["slam_table.py", "--seeds", "1", "--workers", "1"], "paper Table 1:"),
+    (["train_throughput.py", "--tree", ".", "--timesteps", "64", "--repeats", "1"],
+     "CPU ms/env step"),
     (["vec_lockstep.py", "--steps", "10"], "2 processes / one:"),
 ]  # fmt: skip
 
