@@ -115,7 +115,8 @@ def render_mblcc(data: Sequence[Any]) -> tuple[str, str]:
     checks = [v for v in summary["checks"].values() if isinstance(v, bool)]
     return (
         text,
-        f"{sum(checks)} of {len(checks)} of the seed's orderings hold ({summary['runs']} runs)",
+        f"{sum(checks)} of {len(checks)} checks of the seed's orderings hold for every robot at"
+        f" once ({summary['runs']} runs; the page says which hold in part)",
     )
 
 

@@ -125,7 +125,10 @@ def test_render_mblcc__seeds_markdown_tables_and_the_orderings() -> None:
     assert text.startswith("| robot | column | pose error (m) | landmark error (m) |")
     assert "| r3 | shared_map_motion_proposal |" in text
     held = sum(v for v in summary["checks"].values() if isinstance(v, bool))
-    assert headline == f"{held} of 10 of the seed's orderings hold (2 runs)"
+    assert headline == (
+        f"{held} of 10 checks of the seed's orderings hold for every robot at once"
+        " (2 runs; the page says which hold in part)"
+    )
 
 
 def test_render_alignment__one_block_per_protocol_in_the_given_order() -> None:
