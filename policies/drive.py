@@ -134,9 +134,16 @@ class DriveGuide(FrontierPolicy):
         out[len(beams) :] = rest
         return out
 
-    def acted(self, unit: np.ndarray) -> None:
-        """Remember the action taken (unit box, (2,)) for the next features."""
-        self._previous = np.clip(np.asarray(unit, dtype=float).reshape(2), -1.0, 1.0)
+    def acted(self, unit: np.ndarray) -> np.ndarray:  # (2,) float32
+        """Take the action ``unit`` (2,) on the unit box (clipped to it): remember it for the
+        next features, and return the physical (v, ω) it drives, ``low + (a + 1)/2 · (high −
+        low)`` of the robot's action space (as :class:`~polyslam_env.environment.vector.
+        FixedAgents` maps it)."""
+        a = np.clip(np.asarray(unit, dtype=float).reshape(2), -1.0, 1.0)
+        self._previous = a
+        space = self.context.action_space
+        low, high = space.low.astype(float), space.high.astype(float)  # (2,)
+        return (low + 0.5 * (a + 1.0) * (high - low)).astype(np.float32)
 
     def act(self, observation: Any, rng: np.random.Generator) -> Any:
         raise NotImplementedError("DriveGuide does not drive; DrivePolicy does")
@@ -177,14 +184,10 @@ class DrivePolicy(DriveGuide):
                 " and a (v, ω) box)"
             )
         super().__init__(context, **guide)
-        act = context.action_space
-        self._low, self._high = act.low.astype(float), act.high.astype(float)  # (2,)
 
     def act(self, observation: Any, rng: np.random.Generator) -> Any:
         self.observe(observation)
-        unit = self.unit_action(self.features(), rng)
-        self.acted(unit)
-        return (self._low + 0.5 * (unit + 1.0) * (self._high - self._low)).astype(np.float32)
+        return self.acted(self.unit_action(self.features(), rng))
 
     def unit_action(self, features: np.ndarray, rng: np.random.Generator) -> np.ndarray:  # (2,)
         """The network's action on the unit box for ``features``."""

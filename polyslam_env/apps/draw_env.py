@@ -11,7 +11,7 @@ on. Subclasses set the spaces and translate actions and observations
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -21,8 +21,9 @@ from pettingzoo import ParallelEnv
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import PolySlamParallelEnv, parallel_env
+from polyslam_env.environment.vector import Step
 
-__all__ = ["MapDrawEnv"]
+__all__ = ["MapDrawEnv", "Step"]
 
 
 class MapDrawEnv(ParallelEnv[str, np.ndarray, Any]):
@@ -80,6 +81,27 @@ class MapDrawEnv(ParallelEnv[str, np.ndarray, Any]):
         obs, infos = self.env.reset(seed=self.episode_seed, options=options)
         self.agents = self.possible_agents[:]
         return obs, {a: infos.get(a, {}) for a in self.agents}
+
+    def finish(
+        self,
+        features: Callable[[str], np.ndarray],
+        rewards: dict[str, float],
+        term: dict[str, Any],
+        trunc: dict[str, Any],
+        infos: dict[str, Any],
+    ) -> Step:
+        """A step's return for every agent of this step, from the last env step's flags and
+        infos: ``features(agent)`` while the episode goes on, zeros once it is over (then no
+        agent is left)."""
+        over = not self.env.agents
+        zeros = np.zeros(self._obs_space.shape, np.float32)
+        out = {a: zeros if over else features(a) for a in self.agents}
+        terminated = {a: bool(term.get(a, False)) for a in self.agents}
+        truncated = {a: bool(trunc.get(a, False)) for a in self.agents}
+        infos = {a: infos.get(a, {}) for a in self.agents}
+        if over:
+            self.agents = []
+        return out, rewards, terminated, truncated, infos
 
     def close(self) -> None:
         for env in self.envs:

@@ -29,7 +29,7 @@ from gymnasium import spaces
 
 from policies.base import PolicyContext
 from policies.drive import DriveGuide, feature_size
-from polyslam_env.apps.draw_env import MapDrawEnv
+from polyslam_env.apps.draw_env import MapDrawEnv, Step
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.environment.config import EnvConfig
 
@@ -81,23 +81,11 @@ class DriveEnv(MapDrawEnv):
             features[a] = guides[a].features()
         return features, infos
 
-    def step(
-        self, actions: Mapping[str, Any]
-    ) -> tuple[
-        dict[str, np.ndarray],
-        dict[str, float],
-        dict[str, bool],
-        dict[str, bool],
-        dict[str, dict[str, Any]],
-    ]:
+    def step(self, actions: Mapping[str, Any]) -> Step:
         env, guides = self.env, self.guides[self._current]
         physical = {}
         for a in self.agents:
-            unit = np.clip(np.asarray(actions[a], dtype=float).reshape(2), -1.0, 1.0)
-            guides[a].acted(unit)
-            ctx = guides[a].context
-            low, high = ctx.action_space.low.astype(float), ctx.action_space.high.astype(float)
-            physical[a] = (low + 0.5 * (unit + 1.0) * (high - low)).astype(np.float32)
+            physical[a] = guides[a].acted(np.asarray(actions[a], dtype=float))
         total = dict.fromkeys(self.agents, 0.0)
         for _ in range(self.repeat):
             obs, rew, term, trunc, infos = env.step({a: physical[a] for a in env.agents})
@@ -108,13 +96,4 @@ class DriveEnv(MapDrawEnv):
             for a in env.agents:
                 guides[a].observe(obs[a])
                 total[a] += self.progress * guides[a].progress()
-        features = {
-            a: guides[a].features() if env.agents else np.zeros(self._obs_space.shape, np.float32)
-            for a in self.agents
-        }
-        terminated = {a: bool(term.get(a, False)) for a in self.agents}
-        truncated = {a: bool(trunc.get(a, False)) for a in self.agents}
-        infos = {a: infos.get(a, {}) for a in self.agents}
-        if not env.agents:
-            self.agents = []
-        return features, total, terminated, truncated, infos
+        return self.finish(lambda a: guides[a].features(), total, term, trunc, infos)

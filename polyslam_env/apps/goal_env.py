@@ -27,7 +27,7 @@ from gymnasium import spaces
 
 from policies.base import PolicyContext
 from policies.goals import CANDIDATES, GoalPolicy, feature_size
-from polyslam_env.apps.draw_env import MapDrawEnv
+from polyslam_env.apps.draw_env import MapDrawEnv, Step
 from polyslam_env.environment.config import EnvConfig
 
 __all__ = ["GoalChoiceEnv"]
@@ -65,15 +65,7 @@ class GoalChoiceEnv(MapDrawEnv):
             features[a] = team[a].features()
         return features, infos
 
-    def step(
-        self, actions: Mapping[str, Any]
-    ) -> tuple[
-        dict[str, np.ndarray],
-        dict[str, float],
-        dict[str, bool],
-        dict[str, bool],
-        dict[str, dict[str, Any]],
-    ]:
+    def step(self, actions: Mapping[str, Any]) -> Step:
         env, team = self.env, self.teams[self._current]
         for a in self.agents:
             team[a].commit(int(actions[a]))
@@ -87,13 +79,4 @@ class GoalChoiceEnv(MapDrawEnv):
             due = [team[a].observe(obs[a]) for a in env.agents]
             if all(due):
                 break
-        features = {
-            a: team[a].features() if env.agents else np.zeros(feature_size(), np.float32)
-            for a in self.agents
-        }
-        terminated = {a: bool(term.get(a, False)) for a in self.agents}
-        truncated = {a: bool(trunc.get(a, False)) for a in self.agents}
-        infos = {a: infos.get(a, {}) for a in self.agents}
-        if not env.agents:
-            self.agents = []
-        return features, total, terminated, truncated, infos
+        return self.finish(lambda a: team[a].features(), total, term, trunc, infos)
