@@ -29,8 +29,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from gymnasium import spaces
 
-from policies.base import CheckpointError, PolicyContext
+from policies.base import CheckpointError, PolicyContext, PolicyError
 from policies.frontier import FrontierPolicy
 
 __all__ = [
@@ -142,6 +143,7 @@ class DriveGuide(FrontierPolicy):
         a = np.clip(np.asarray(unit, dtype=float).reshape(2), -1.0, 1.0)
         self._previous = a
         space = self.context.action_space
+        assert isinstance(space, spaces.Box)  # DrivePolicy and DriveEnv refuse discrete actions
         low, high = space.low.astype(float), space.high.astype(float)  # (2,)
         return (low + 0.5 * (a + 1.0) * (high - low)).astype(np.float32)
 
@@ -173,6 +175,8 @@ class DrivePolicy(DriveGuide):
     ) -> None:
         from policies.ppo import load_checkpoint
 
+        if not isinstance(context.action_space, spaces.Box):
+            raise PolicyError("ppo_drive: needs continuous actions (action.mode: continuous)")
         self.model = load_checkpoint(checkpoint)
         self.deterministic = deterministic
         shape = self.model.observation_space.shape

@@ -94,6 +94,7 @@ class MapDrawEnv(ParallelEnv[str, np.ndarray, Any]):
         infos: ``features(agent)`` while the episode goes on, zeros once it is over (then no
         agent is left)."""
         over = not self.env.agents
+        assert self._obs_space.shape is not None  # a Box
         zeros = np.zeros(self._obs_space.shape, np.float32)
         out = {a: zeros if over else features(a) for a in self.agents}
         terminated = {a: bool(term.get(a, False)) for a in self.agents}

@@ -4,6 +4,7 @@ refused with one line."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -17,12 +18,12 @@ from polyslam_env.environment.config import EnvConfig
 SMALL = {"map": "generator:office_floor", "num_robots": 2, "max_steps": 24, "slam_enabled": False}
 
 
-def _tiny_model(env: object, path: Path) -> Path:
+def _tiny_model(env: DriveEnv, path: Path) -> Path:
     from stable_baselines3 import PPO
 
     from polyslam_env.environment.vector import vectorise
 
-    venv = vectorise(env, 1)  # type: ignore[arg-type]
+    venv = vectorise(env, 1)
     PPO("MlpPolicy", venv, n_steps=8, batch_size=8, seed=0, policy_kwargs={"net_arch": [8]}).save(
         path
     )
@@ -37,6 +38,7 @@ def test_ppo_drive__plays_the_training_envs_episode(tmp_path: Path) -> None:
     cfg = EnvConfig.from_dict(SMALL)
     ckpt = _tiny_model(DriveEnv([cfg]), tmp_path / "drive.zip")
     train = DriveEnv([cfg], progress=0.0)
+    obs: Any
     obs, _ = train.reset(seed=5)
     policy = DrivePolicy(PolicyContext.from_env(train.env, "robot_0"), ckpt)
     rng = np.random.default_rng(0)
