@@ -80,10 +80,13 @@ class Polynomial:
         return float(np.max(np.abs(self.slope(np.array(at)))))
 
     def to_xy(self, xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
-        """(ξ, η) pairs to (x¹, x²) points, shape (…, 2)."""
-        if self.variate == 1:
-            return np.stack([xi, eta], axis=-1)
-        return np.stack([eta, xi], axis=-1)
+        """(ξ, η) pairs to (x¹, x²) points, shape (…, 2) (``np.stack`` on the last axis)."""
+        xi, eta = np.asarray(xi), np.asarray(eta)
+        if xi.shape != eta.shape:
+            raise ValueError(f"to_xy: ξ {xi.shape} and η {eta.shape} must have the same shape")
+        out = np.empty((*xi.shape, 2), dtype=np.result_type(xi, eta))
+        out[..., 0], out[..., 1] = (xi, eta) if self.variate == 1 else (eta, xi)
+        return out
 
     def from_xy(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(x¹, x²) points to (ξ, η)."""

@@ -16,6 +16,7 @@ from polyslam_env.slam.merging import (
     find_merge,
     merge_angle,
     merge_points,
+    unit_tangent,
 )
 from polyslam_env.slam.polynomial import Polynomial
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
@@ -232,6 +233,17 @@ def test_max_slope__bit_identical_to_numpys_polynomial_functions() -> None:
         lo = float(rng.uniform(-2.0, 1.0))
         poly = Polynomial(1 + k % 2, coeffs, lo, lo + float(rng.uniform(0.01, 3.0)))
         assert poly.max_slope() == max_slope(poly)
+
+
+def test_unit_tangent__same_floats_as_numpys_norm() -> None:
+    """The tangent divided by its length as ``np.linalg.norm`` computes it, bit for bit."""
+    rng = np.random.default_rng(8)
+    for k in range(200):
+        poly = Polynomial(1 + k % 2, rng.normal(0.0, 2.0, 4), -1.0, 1.0)
+        xi = float(rng.uniform(-1.0, 1.0))
+        slope = float(poly.slope(xi))
+        t = np.array([1.0, slope]) if poly.variate == 1 else np.array([slope, 1.0])
+        assert unit_tangent(poly, xi).tobytes() == (t / np.linalg.norm(t)).tobytes()
 
 
 def test_fit__a_shape_curving_away_between_its_points_is_refused() -> None:
