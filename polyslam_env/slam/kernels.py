@@ -375,13 +375,14 @@ def cast_into(
     roots (:func:`real_roots`); a root counts when 0 < s ≤ 1 and its ξ lies in [lo, hi], the
     first minimum in (candidate, root) order wins, then one guarded Newton polish. A beam
     whose segment passes farther than BOX_MARGIN from a candidate's box is not solved
-    against it (it cannot hit it).
+    against it (it cannot hit it), and its Taylor coefficients are made only once a beam meets
+    its box.
     """
     width = shape.shape[1]
     _cast_with(
         x, y, theta, angles, candidates, variate, order, shape, lo, hi, c0s, boxes, max_range,
         t_out, landmark, slope_out, denom_out, xi_out, np.empty((candidates.size, width)),
-        np.empty(width), np.empty(width), np.empty(width),
+        np.empty(width), np.empty(width), np.empty(width), np.empty(candidates.size, np.bool_),
     )  # fmt: skip
 
 
@@ -409,12 +410,11 @@ def _cast_with(
     coeffs: np.ndarray,  # (M+1,) scratch
     best_coeffs: np.ndarray,  # (M+1,) scratch
     roots: np.ndarray,  # (M+1,) scratch
+    shifted: np.ndarray,  # (≥ K,) bool scratch
 ) -> None:
     """:func:`cast_into` with its scratch arrays given (a caller casting many times)."""
     n_beams, n_cand = angles.size, candidates.size
-    for k in range(n_cand):
-        j = candidates[k]
-        taylor_shift(shape[j], order[j], x if variate[j] == 1 else y, taylors[k])
+    shifted[:n_cand] = False  # a candidate's Taylor coefficients, made when a beam meets its box
     t_out[:] = math.inf
     landmark[:] = -1
     slope_out[:] = math.nan
@@ -429,6 +429,9 @@ def _cast_with(
             j = candidates[k]
             if not _meets_box(x, y, cos * max_range, sin * max_range, boxes[j]):
                 continue
+            if not shifted[k]:
+                taylor_shift(shape[j], order[j], x if variate[j] == 1 else y, taylors[k])
+                shifted[k] = True
             if variate[j] == 1:
                 xi0, eta0, dxi, deta = x, y, cos, sin
             else:
@@ -704,7 +707,7 @@ def steady_beams(
     moved = boxes.copy()  # a sigma point's c0 moves its landmark's curve, and its box, along η
     width = shape.shape[1]  # the casts' scratch, made once for the 8 casts of every beam
     taylors, coeffs, best_coeffs = np.empty((n_lm, width)), np.empty(width), np.empty(width)
-    roots = np.empty(width)
+    roots, shifted = np.empty(width), np.empty(n_lm, np.bool_)
     sigma = np.empty((8, 4))  # per sigma point: x, y, θ and the c0 shift
     near_any = np.empty(n_lm, dtype=np.int64)  # the landmarks in reach of any sigma point
     near_one = np.empty(n_lm, dtype=np.int64)  # those in reach of one
@@ -761,7 +764,7 @@ def steady_beams(
                     _cast_with(
                         xs, ys, ths, one, near_one[:n_one], variate, order, shape, lo, hi, c0s,
                         moved, max_range, t1, landmark1, slope1, denom1, xi1, taylors, coeffs,
-                        best_coeffs, roots,
+                        best_coeffs, roots, shifted,
                     )  # fmt: skip
                     c0s[j] = mean[3 + j]
                     moved[j, eta], moved[j, eta + 1] = boxes[j, eta], boxes[j, eta + 1]
