@@ -115,6 +115,10 @@ class TrainConfig(Config):
     # control: goals or drive: every episode picks one of these maps (env.map when empty); its
     # layout seed lies below EVAL_SEED, so evaluation seeds are layouts never trained on
     maps: tuple[str, ...] = ()
+    # a checkpoint to start from instead of a new network (fine-tuning, e.g. with other reward
+    # weights); its network and PPO settings are kept (the ppo section is not used), its step
+    # count is not: timesteps counts this run's steps only
+    init: str = ""
 
     def validate(self) -> None:
         for name in (
@@ -391,19 +395,34 @@ def _make_venv(cfg: TrainConfig) -> Any:
 
 
 def _make_model(cfg: TrainConfig, venv: Any, out: Path, resume: bool) -> Any:
-    """A new PPO, or the newest readable checkpoint under ``out`` when resuming."""
+    """A new PPO, the checkpoint ``cfg.init`` (its step count reset to 0), or the newest
+    readable checkpoint under ``out`` when resuming."""
     from stable_baselines3 import PPO
 
     tb = str(out / "tb")
-    if not resume:
-        return PPO(
-            "MlpPolicy", venv, seed=cfg.seed, tensorboard_log=tb, verbose=0, **cfg.ppo.sb3_kwargs()
-        )
-    _, path = newest_good_checkpoint(out / "checkpoints")
+    if resume:
+        _, path = newest_good_checkpoint(out / "checkpoints")
+        return _load_model(path, venv, tb, "--resume")
+    if cfg.init:
+        if not Path(cfg.init).is_file():
+            raise PolyslamError(f"init: no checkpoint file {cfg.init}")
+        model = _load_model(Path(cfg.init), venv, tb, "init")
+        model.num_timesteps = 0
+        model.set_random_seed(cfg.seed)
+        return model
+    return PPO(
+        "MlpPolicy", venv, seed=cfg.seed, tensorboard_log=tb, verbose=0, **cfg.ppo.sb3_kwargs()
+    )
+
+
+def _load_model(path: Path, venv: Any, tb: str, what: str) -> Any:
+    """The PPO checkpoint at ``path`` on ``venv``; one line if its observations do not fit."""
+    from stable_baselines3 import PPO
+
     model = PPO.load(path, env=venv, device="cpu", tensorboard_log=tb)
     if model.observation_space.shape != venv.observation_space.shape:
         raise PolyslamError(
-            f"--resume: {path} expects observations of shape"
+            f"{what}: {path} expects observations of shape"
             f" {model.observation_space.shape}, the configured env gives"
             f" {venv.observation_space.shape}"
         )

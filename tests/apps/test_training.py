@@ -269,6 +269,14 @@ def test_shipped_drive_config__loads() -> None:
     assert {c.map for c in cfg.env_configs()} == {"generator:office_floor", "generator:warehouse"}
 
 
+def test_shipped_careful_config__loads() -> None:
+    # fine-tuned from the shipped driver, with SLAM on (the map_error term needs a map) and
+    # the map_error weight on
+    cfg = TrainConfig.from_yaml(configs_dir() / "train_careful.yaml")
+    assert cfg.control == "drive" and cfg.env.slam_enabled and cfg.env.reward.map_error > 0
+    assert Path(cfg.init).name == "ppo_drive.zip"
+
+
 @pytest.mark.parametrize(
     ("top", "match"),
     [
@@ -334,6 +342,22 @@ def test_cli_train__drive_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
 
     env = parallel_env(TrainConfig.from_yaml(path).env)
     assert isinstance(make_policy("ppo_drive", env, "robot_0", checkpoint=ckpt), DrivePolicy)
+    # init: a run that starts from that checkpoint keeps its network (16 wide, not this
+    # config's 8) and counts its own steps from 0 (two rollouts of 64, not one more after the
+    # 64 of its start); a missing init file is named in one line
+    tuned = tmp_path / "tuned"
+    ppo = {"n_steps": 16, "batch_size": 32, "n_epochs": 1, "net_arch": [8]}
+    path = _tiny_config(tmp_path, control="drive", init=str(ckpt), timesteps=128, ppo=ppo)
+    assert main(["train", "--config", str(path), "--out", str(tuned), "--quiet"]) == 0
+    steps, tuned_ckpt = checkpoints(tuned / "checkpoints")[-1]
+    from stable_baselines3 import PPO
+
+    assert steps == 128 and PPO.load(tuned_ckpt).policy.net_arch == [16]
+    capsys.readouterr()
+    path = _tiny_config(tmp_path, control="drive", init=str(tmp_path / "gone.zip"))
+    assert main(["train", "--config", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "init" in err and "gone.zip" in err and "\n" not in err
 
 
 def test_cli_train__goals_on_rllib_exits_2_with_one_line(
