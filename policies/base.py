@@ -194,6 +194,7 @@ POLICIES: dict[str, PolicyFactory | str] = {
     "random": "policies.scripted:RandomPolicy",
     "ppo": "policies.ppo:make_ppo",
     "ppo_drive": "policies.drive:make_ppo_drive",
+    "ppo_careful": "policies.drive:make_ppo_careful",
 }
 
 

@@ -36,16 +36,19 @@ from policies.frontier import FrontierPolicy
 
 __all__ = [
     "FEATURES",
+    "SHIPPED_CAREFUL",
     "SHIPPED_DRIVE",
     "DriveGuide",
     "DrivePolicy",
     "feature_size",
+    "make_ppo_careful",
     "make_ppo_drive",
 ]
 
 #: The driving network shipped with the package (docs/results/learning.md says how it was
 #: trained: ``polyslam train --config configs/train_drive.yaml``).
 SHIPPED_DRIVE = Path(__file__).resolve().parent / "checkpoints" / "ppo_drive.zip"
+SHIPPED_CAREFUL = SHIPPED_DRIVE.with_name("ppo_careful.zip")
 
 #: Features after the beams, in order.
 FEATURES = (
@@ -211,15 +214,31 @@ def make_ppo_drive(
     context: PolicyContext, checkpoint: str | Path | None = None, deterministic: bool = True
 ) -> DrivePolicy:
     """The policy ``ppo_drive`` of ``checkpoint`` (the shipped one when None)."""
-    if checkpoint is None:
-        if not SHIPPED_DRIVE.is_file():
-            raise CheckpointError(
-                f"ppo_drive: no checkpoint given and the shipped one is missing"
-                f" ({SHIPPED_DRIVE}); pass --checkpoint FILE (one written by polyslam train"
-                " with control: drive)"
-            )
-        checkpoint = SHIPPED_DRIVE
-    return DrivePolicy(context, checkpoint, deterministic)
+    return DrivePolicy(context, _checkpoint("ppo_drive", SHIPPED_DRIVE, checkpoint), deterministic)
+
+
+def make_ppo_careful(
+    context: PolicyContext, checkpoint: str | Path | None = None, deterministic: bool = True
+) -> DrivePolicy:
+    """The policy ``ppo_careful`` (``ppo_drive`` fine-tuned with the ``map_error`` term) of
+    ``checkpoint`` (the shipped one when None)."""
+    return DrivePolicy(
+        context, _checkpoint("ppo_careful", SHIPPED_CAREFUL, checkpoint), deterministic
+    )
+
+
+def _checkpoint(name: str, shipped: Path, checkpoint: str | Path | None) -> str | Path:
+    """``checkpoint``, or the shipped one of policy ``name`` when None (one line if missing)."""
+    if checkpoint is not None:
+        return checkpoint
+    if not shipped.is_file():
+        raise CheckpointError(
+            f"{name}: no checkpoint given and the shipped one is missing"
+            f" ({shipped}); pass --checkpoint FILE (one written by polyslam train"
+            " with control: drive)"
+        )
+    return shipped
 
 
 make_ppo_drive.takes_checkpoint = True  # type: ignore[attr-defined]
+make_ppo_careful.takes_checkpoint = True  # type: ignore[attr-defined]

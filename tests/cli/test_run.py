@@ -159,14 +159,15 @@ def test_run__ppo_without_a_usable_checkpoint_exits_2_with_one_line(
     assert "missing.zip" in _one_line_error(capsys)
 
 
-@pytest.mark.parametrize("policy", ["ppo", "ppo_drive"])
+@pytest.mark.parametrize("policy", ["ppo", "ppo_drive", "ppo_careful"])
 def test_run_and_evaluate__the_shipped_ppo_needs_no_checkpoint_flag(
     policy: str, tmp_path: Path
 ) -> None:
-    from policies.drive import SHIPPED_DRIVE
+    from policies.drive import SHIPPED_CAREFUL, SHIPPED_DRIVE
     from policies.ppo import SHIPPED
 
-    assert (SHIPPED if policy == "ppo" else SHIPPED_DRIVE).is_file()
+    shipped = {"ppo": SHIPPED, "ppo_drive": SHIPPED_DRIVE, "ppo_careful": SHIPPED_CAREFUL}
+    assert shipped[policy].is_file()
     large = ["--map", "generator:warehouse", "--steps", "40", "--seed", "10000"]
     assert main(["run", "--policy", policy, *large, "--out", str(tmp_path)]) == 0
     report = tmp_path / "eval.json"
