@@ -6,7 +6,8 @@ per map), and prints, pooled over all their episodes:
 * each policy's team coverage, team overlap and ``nu_mean`` (the robots' mean), and the last
   policy's ratio to the first (the baseline) and points above ``random`` (if it ran);
 * the paired differences last − first per seed, with a 95 % t interval, of team coverage at
-  the end and at step 200, overlap, ``nu_mean`` and steps to 90 % (an episode that never
+  the end and at step 200, overlap, ``nu_mean``, ``map_precision`` (the robots' mean), bytes
+  sent (the team's sum) and steps to 90 % (an episode that never
   reached 90 % counts as its step limit + 1, a censored value: the count of such episodes is
   printed with it);
 * when the last policy is ``ppo``: on the same maps and seeds, the team coverage when the slot
@@ -98,6 +99,8 @@ def main() -> None:
     cov: dict[str, list[float]] = {p: [] for p in names}
     overlap: dict[str, list[float]] = {p: [] for p in names}
     nu: dict[str, list[float]] = {p: [] for p in names}
+    precision: dict[str, list[float]] = {p: [] for p in names}
+    sent: dict[str, list[float]] = {p: [] for p in names}
     at200: dict[str, list[float]] = {p: [] for p in names}
     steps90: dict[str, list[float]] = {p: [] for p in names}
     never: dict[str, int] = dict.fromkeys(names, 0)
@@ -114,6 +117,8 @@ def main() -> None:
                 overlap[p].append(float(e["team"]["overlap"]))
                 robots = [r for r in e["robots"].values() if r.get("has_map", 1.0)]
                 nu[p].append(float(np.mean([r["nu_mean"] for r in robots])))
+                precision[p].append(float(np.mean([r["map_precision"] for r in robots])))
+                sent[p].append(float(sum(r["bytes_sent"] for r in e["robots"].values())))
                 series = e["coverage"]  # per step; an episode that ended early stays there
                 at200[p].append(float(series[min(AT_STEP, len(series)) - 1]))
                 reached = e["team"]["steps_to_90"]
@@ -136,6 +141,8 @@ def main() -> None:
         (f"coverage at step {AT_STEP}", at200),
         ("overlap", overlap),
         ("nu_mean", nu),
+        ("map_precision", precision),
+        ("bytes sent", sent),
         ("steps to 90 %", steps90),
     ):
         diff = np.array(values[last]) - np.array(values[base])

@@ -1,0 +1,108 @@
+"""The coverage / map error / bytes trade-off of policies, as a figure (issue 44 item 3).
+
+Each ``--point LABEL POLICY FILE...`` is one point: the episodes of ``POLICY`` in the
+``polyslam evaluate --json`` FILEs (one per map), pooled: mean team coverage at the end against
+the mean of the robots' ``nu_mean`` (left panel) and against the team's bytes sent (right),
+with 95 % t intervals of the means as error bars. The points no other point beats on both
+axes of a panel (more coverage and less ν, or less bytes) are joined: the Pareto front. The
+numbers are printed as well.
+
+    python scripts/pareto.py --out docs/img/pareto.png \\
+        --point "ppo_drive (map_error 0)" ppo_drive office.json warehouse.json \\
+        --point "ppo_careful (map_error 100)" ppo_careful office.json warehouse.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+from scipy import stats
+
+
+def _episodes(policy: str, files: list[str]) -> dict[str, np.ndarray]:
+    """Per episode of ``policy`` in ``files``: team coverage, robots' mean ``nu_mean``, bytes."""
+    cov, nu, sent = [], [], []
+    for path in files:
+        report = json.load(open(path))
+        if policy not in report["episodes"]:
+            raise SystemExit(f"{path}: no episodes of policy {policy!r}")
+        for e in report["episodes"][policy]:
+            robots = e["robots"].values()
+            cov.append(float(e["team"]["coverage"]))
+            nu.append(float(np.mean([r["nu_mean"] for r in robots if r.get("has_map", 1.0)])))
+            sent.append(float(sum(r["bytes_sent"] for r in robots)))
+    return {"coverage": np.array(cov), "nu_mean": np.array(nu), "bytes": np.array(sent)}
+
+
+def _half_width(x: np.ndarray) -> float:
+    """Half-width of the 95 % t interval of the mean of ``x``."""
+    return float(stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / np.sqrt(len(x)))
+
+
+def _front(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Indices of the points no other point beats (lower x and higher y), by x."""
+    keep = [
+        i
+        for i in range(len(x))
+        if not any(
+            (x[j] <= x[i]) & (y[j] >= y[i]) & ((x[j] < x[i]) | (y[j] > y[i])) for j in range(len(x))
+        )
+    ]
+    return np.array(sorted(keep, key=lambda i: x[i]), dtype=int)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--point",
+        nargs="+",
+        action="append",
+        required=True,
+        metavar="LABEL POLICY FILE",
+        help="a point: its label, the policy, and the evaluate --json files (repeatable)",
+    )
+    parser.add_argument("--out", default="pareto.png", help="figure file (default pareto.png)")
+    args = parser.parse_args()
+    labels, data = [], []
+    for point in args.point:
+        if len(point) < 3:
+            raise SystemExit(f"--point {' '.join(point)}: needs LABEL POLICY FILE...")
+        labels.append(point[0])
+        data.append(_episodes(point[1], point[2:]))
+    import matplotlib.pyplot as plt
+
+    cov = np.array([d["coverage"].mean() for d in data])
+    cov_err = np.array([_half_width(d["coverage"]) for d in data])
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    for ax, key, xlabel in (
+        (axes[0], "nu_mean", "nu_mean (m, robots' mean)"),
+        (axes[1], "bytes", "bytes sent (team, per episode)"),
+    ):
+        x = np.array([d[key].mean() for d in data])
+        x_err = np.array([_half_width(d[key]) for d in data])
+        for i, label in enumerate(labels):
+            ax.errorbar(
+                x[i], cov[i], xerr=x_err[i], yerr=cov_err[i], fmt="o", capsize=3, label=label
+            )
+        front = _front(x, cov)
+        ax.plot(x[front], cov[front], "k--", lw=0.8, label="Pareto front")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("team coverage at episode end")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.savefig(args.out, dpi=110)
+    for i, label in enumerate(labels):
+        d = data[i]
+        print(
+            f"{label}: coverage {cov[i]:.3f} ± {cov_err[i]:.3f}, nu_mean"
+            f" {d['nu_mean'].mean():.4f} ± {_half_width(d['nu_mean']):.4f} m, bytes"
+            f" {d['bytes'].mean():.0f} ± {_half_width(d['bytes']):.0f}"
+            f" ({len(d['coverage'])} episodes)"
+        )
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
