@@ -5,7 +5,8 @@ Each ``--point LABEL POLICY FILE...`` is one point: the episodes of ``POLICY`` i
 the mean of the robots' ``nu_mean`` (left panel) and against the team's bytes sent (right),
 with 95 % t intervals of the means as error bars. The points no other point beats on both
 axes of a panel (more coverage and less ν, or less bytes) are joined: the Pareto front. The
-numbers are printed as well.
+numbers are printed as well, and each point's differences to the first point paired by map and
+seed (95 % t intervals). A FILE holds one policy (``evaluate --policy P``) or several.
 
     python scripts/pareto.py --out docs/img/pareto.png \\
         --point "ppo_drive (map_error 0)" ppo_drive office.json warehouse.json \\
@@ -20,20 +21,39 @@ import json
 import numpy as np
 from scipy import stats
 
+#: The measures per episode, in the order printed.
+MEASURES = ("coverage", "nu_mean", "map_precision", "bytes")
+
 
 def _episodes(policy: str, files: list[str]) -> dict[str, np.ndarray]:
-    """Per episode of ``policy`` in ``files``: team coverage, robots' mean ``nu_mean``, bytes."""
-    cov, nu, sent = [], [], []
+    """Per episode of ``policy`` in ``files``, ordered by map and seed: team coverage, the
+    robots' mean ``nu_mean`` and ``map_precision``, the team's bytes sent."""
+    rows = []
     for path in files:
         report = json.load(open(path))
-        if policy not in report["episodes"]:
+        episodes = report["episodes"]
+        if "policy" in report:  # one policy's file
+            episodes = {report["policy"]: episodes}
+        if policy not in episodes:
             raise SystemExit(f"{path}: no episodes of policy {policy!r}")
-        for e in report["episodes"][policy]:
-            robots = e["robots"].values()
-            cov.append(float(e["team"]["coverage"]))
-            nu.append(float(np.mean([r["nu_mean"] for r in robots if r.get("has_map", 1.0)])))
-            sent.append(float(sum(r["bytes_sent"] for r in robots)))
-    return {"coverage": np.array(cov), "nu_mean": np.array(nu), "bytes": np.array(sent)}
+        for e in episodes[policy]:
+            robots = list(e["robots"].values())
+            mapped = [r for r in robots if r.get("has_map", 1.0)]
+            rows.append(
+                (
+                    report["map"],
+                    int(e["seed"]),
+                    float(e["team"]["coverage"]),
+                    float(np.mean([r["nu_mean"] for r in mapped])),
+                    float(np.mean([r["map_precision"] for r in mapped])),
+                    float(sum(r["bytes_sent"] for r in robots)),
+                )
+            )
+    rows.sort(key=lambda r: (r[0], r[1]))
+    columns = list(zip(*rows, strict=True))
+    out = {name: np.array(columns[k + 2]) for k, name in enumerate(MEASURES)}
+    out["key"] = np.array([f"{m}#{s}" for m, s, *_ in rows])
+    return out
 
 
 def _half_width(x: np.ndarray) -> float:
@@ -98,9 +118,20 @@ def main() -> None:
         print(
             f"{label}: coverage {cov[i]:.3f} ± {cov_err[i]:.3f}, nu_mean"
             f" {d['nu_mean'].mean():.4f} ± {_half_width(d['nu_mean']):.4f} m, bytes"
-            f" {d['bytes'].mean():.0f} ± {_half_width(d['bytes']):.0f}"
+            f" {d['bytes'].mean():.0f} ± {_half_width(d['bytes']):.0f}, map_precision"
+            f" {d['map_precision'].mean():.3f}"
             f" ({len(d['coverage'])} episodes)"
         )
+    for i, label in enumerate(labels[1:], start=1):
+        if not np.array_equal(data[i]["key"], data[0]["key"]):
+            print(f"{label}: not the same maps and seeds as {labels[0]}, not paired")
+            continue
+        paired = ", ".join(
+            f"{name} {d.mean():+.4g} ± {_half_width(d):.2g}"
+            for name in MEASURES
+            for d in [data[i][name] - data[0][name]]
+        )
+        print(f"{label} − {labels[0]}, paired by map and seed (95 % t): {paired}")
     print(f"wrote {args.out}")
 
 
