@@ -96,12 +96,12 @@ def main() -> None:
     cov = np.array([d["coverage"].mean() for d in data])
     cov_err = np.array([_half_width(d["coverage"]) for d in data])
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
-    for ax, key, xlabel in (
-        (axes[0], "nu_mean", "nu_mean (m, robots' mean)"),
-        (axes[1], "bytes", "bytes sent (team, per episode)"),
+    for ax, key, scale, xlabel in (
+        (axes[0], "nu_mean", 1000.0, "nu_mean (mm, robots' mean)"),
+        (axes[1], "bytes", 1.0, "bytes sent (team, per episode)"),
     ):
-        x = np.array([d[key].mean() for d in data])
-        x_err = np.array([_half_width(d[key]) for d in data])
+        x = scale * np.array([d[key].mean() for d in data])
+        x_err = scale * np.array([_half_width(d[key]) for d in data])
         for i, label in enumerate(labels):
             ax.errorbar(
                 x[i], cov[i], xerr=x_err[i], yerr=cov_err[i], fmt="o", capsize=3, label=label

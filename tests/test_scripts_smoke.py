@@ -78,6 +78,11 @@ def test_learned_policy_report__reads_an_evaluate_json(tmp_path: Path) -> None:
          "--json", str(path))  # fmt: skip
     assert path.exists()
     assert _run("scripts/learned_policy_report.py", str(path), "--workers", "1").strip()
+    # the Pareto figure of two of its policies, paired on the same episode
+    figure = tmp_path / "pareto.png"
+    out = _run("scripts/pareto.py", "--out", str(figure), "--point", "F", "frontier", str(path),
+               "--point", "R", "random", str(path))  # fmt: skip
+    assert figure.stat().st_size > 0 and "R − F, paired" in out
 
 
 @pytest.mark.slow
