@@ -34,10 +34,11 @@ def wrap_remainder(angle: Any) -> Any:
     """Angles (a float or an array) wrapped to [−π, π] by the exact IEEE remainder (no rounding
     of small angles, unlike :func:`wrap_angle`, which maps 1e-20 to 0); numpy has no IEEE
     remainder, so arrays go element by element through :func:`math.remainder`."""
-    if np.ndim(angle) == 0:
+    a = np.asarray(angle, dtype=float)
+    if a.ndim == 0:
         return math.remainder(angle, 2.0 * math.pi)
-    flat = [math.remainder(a, 2.0 * math.pi) for a in np.asarray(angle, dtype=float).ravel()]
-    return np.array(flat).reshape(np.shape(angle))
+    flat = [math.remainder(x, 2.0 * math.pi) for x in a.ravel().tolist()]
+    return np.array(flat).reshape(a.shape)
 
 
 @njit
