@@ -398,9 +398,19 @@ def received_point_set(
         xy=xy,
         d_state=d_state,
         d_noise=d_noise,
-        noise_cov=scipy.linalg.block_diag([[record.c0_var]], noise_cov) / RECEIVED_CI_WEIGHT,
+        noise_cov=_with_c0_variance(record.c0_var, noise_cov) / RECEIVED_CI_WEIGHT,
         weights=np.ones(n_pts),
     )
+
+
+def _with_c0_variance(c0_var: float, noise_cov: np.ndarray) -> np.ndarray:
+    """The block diagonal [[c0_var, 0], [0, noise_cov]] (as ``scipy.linalg.block_diag``,
+    which costs ~100 µs a call in its argument handling, once per received record)."""
+    k = len(noise_cov)
+    out = np.zeros((1 + k, 1 + k))
+    out[0, 0] = c0_var
+    out[1:, 1:] = noise_cov
+    return out
 
 
 def chain_points(poly: Polynomial, chord_tol: float, spacing: float) -> np.ndarray:
@@ -1058,20 +1068,20 @@ class RendezvousExchange:
         self._follow_lineage(r, slam)
         t, d_state, d_noise, noise_cov = transform
         cov_t = d_noise @ noise_cov @ d_noise.T
-        if self.config.align_maps and message.records:
-            t, cov_t = self._align(slam, message, t, cov_t, sender)
+        seen = self._seen[r]
+        fresh = [rec for rec in message.records if not _held(rec, r, seen)]
+        self.skipped[r] += len(message.records) - len(fresh)  # no transform, no refit
+        if self.config.align_maps and fresh:
+            # on the new versions only: a held copy would pull T back to its meeting's error
+            t, cov_t = self._align(slam, r, fresh, t, cov_t, sender)
         limit = slam.config.rho_min / RECEIVED_SIGMAS
         # a received wall is turned from the truth by the transform's turn (its part through
         # the receiver's pose, and the rest's variance), not by the receiver's heading alone
         turn = (np.asarray(d_state, dtype=float)[2, :3].copy(), float(cov_t[2, 2]))
         received: list[Polynomial] = []
         ids: list[int] = []
-        seen = self._seen[r]
-        for record in message.records:
+        for record in fresh:
             version = _version(record)
-            if version[0] == r or version in seen:
-                self.skipped[r] += 1  # held already: no transform, no refit
-                continue
             seen.add(version)
             pts = received_point_set(
                 record, t, d_state, d_noise, noise_cov, slam.mean.size, self.chord_tol,
@@ -1094,7 +1104,8 @@ class RendezvousExchange:
     def _align(
         self,
         slam: PolySlam,
-        message: PolynomialMessage,
+        r: int,
+        records: Sequence[PolynomialRecord],
         t: np.ndarray,
         cov_t: np.ndarray,
         sender: int,
@@ -1105,36 +1116,34 @@ class RendezvousExchange:
         to that meeting's error); one (chain, wall) pair weighs as one offset whose variance
         is the range noise's plus both landmarks' normal variances (the sender's from its
         record, the receiver's from its state: :func:`normal_variance`)."""
-        sources = self._sources[message.header.receiver]
+        sources = self._sources[r]
         anchors = [
             (poly, normal_variance(poly, slam.c0_variance(lid)))
             for lid, poly in zip(slam.table.ids, slam.polynomials(), strict=True)
             if sender not in sources.get(lid, ())
         ]
-        chains = [
-            chain_points(rec.polynomial, self.chord_tol, self.spacing) for rec in message.records
-        ]
+        chains = [chain_points(rec.polynomial, self.chord_tol, self.spacing) for rec in records]
         refined, cov_refined = refine_transform(
             t,
             cov_t,
             chains,
             [poly for poly, _ in anchors],
             slam.config.range_sigma,
-            chain_var=[normal_variance(rec.polynomial, rec.c0_var) for rec in message.records],
+            chain_var=[normal_variance(rec.polynomial, rec.c0_var) for rec in records],
             wall_var=[var for _, var in anchors],
             restarts=self.config.align_restarts,
         )
         if not np.array_equal(refined, t) and self._off_square(
-            slam, message, t, refined, cov_refined
+            slam, records, t, refined, cov_refined
         ):
-            self.off_square[message.header.receiver] += 1
+            self.off_square[r] += 1
             return t, cov_t
         return refined, cov_refined
 
     @staticmethod
     def _off_square(
         slam: PolySlam,
-        message: PolynomialMessage,
+        records: Sequence[PolynomialRecord],
         t: np.ndarray,
         refined: np.ndarray,
         cov_refined: np.ndarray,
@@ -1152,7 +1161,7 @@ class RendezvousExchange:
             return False
         polys = slam.polynomials()
         held = [k for k, poly in enumerate(polys) if is_straight_wall(poly)]
-        sent = straight_walls([rec.polynomial for rec in message.records])
+        sent = straight_walls([rec.polynomial for rec in records])
         if not held or not sent:
             return False
         k = max(held, key=lambda k: polys[k].hi - polys[k].lo)  # the longest
@@ -1341,6 +1350,12 @@ def _on_state(fit: Fit, n_state: int) -> Fit:
     gx = np.zeros((1, n_state))
     gx[:, :3] = fit.Gx[:, :3]
     return Fit(fit.poly, fit.c0, gx, fit.Gy, fit.V, fit.rms, fit.order)
+
+
+def _held(record: PolynomialRecord, r: int, seen: set[tuple[int, int]]) -> bool:
+    """Whether receiver r holds a record's version: its own making, or one it integrated."""
+    version = _version(record)
+    return version[0] == r or version in seen
 
 
 def _version(record: PolynomialRecord) -> tuple[int, int]:
