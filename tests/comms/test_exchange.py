@@ -555,6 +555,7 @@ def test_exchange__integration_per_meeting_does_not_grow_with_meetings_on_a_fixe
         assert slam.n_landmarks == 4
         assert ex.refits[r] <= 3  # one chain per version it did not hold (no trims: disjoint)
     assert per_cycle[0] == 4 * 3 and per_cycle[1:] == [0, 0]
+    assert sum(ex.fused) == 4 * 3  # one piece fused per version and receiver, in cycle 1
     # what was received twice (forwarded, or sent by its origin after a forward) was skipped
     received = sum(ex.counters(r)["polynomials_received"] for r in range(4))
     assert sum(ex.skipped) == received - sum(ex.refits) > 0
