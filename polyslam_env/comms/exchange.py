@@ -46,7 +46,8 @@ variance of their offset along the curve's normal (:func:`normal_variance`):
   and merges) are removed from the state before the piece is inserted;
 * rule 3: the piece is inserted with :meth:`PolySlam.insert_landmark`, whose merge check fuses
   it with an overlapping landmark made of independent data (own beams, or a third robot's).
-  Chains of provenance through a third robot are not tracked.
+  Through a third robot only unchanged copies keep their provenance ("Versions" below): a
+  copy the third robot merged with its own data is its own new version.
 
 **Wire frame.** A message on the channel is ``encode(message)`` (``messages.py``) followed by
 an exchange trailer: the sender's pose variances σ²_x, σ²_y, σ²_θ (3 floats of the message's
