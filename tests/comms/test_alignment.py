@@ -255,8 +255,6 @@ def test_off_square__refuses_a_refined_turn_beyond_3_sigma_of_the_square_one() -
     20° + k·90° (+ the receiver's wall's own direction). A refined turn 2.9 σ from it is kept,
     3.1 σ is refused, σ² the refined turn's variance plus twice the receiver's wall's turn
     variance; with ``square_walls`` off nothing is refused."""
-    from types import SimpleNamespace
-
     from polyslam_env.comms.exchange import RendezvousExchange
     from polyslam_env.comms.messages import PolynomialRecord
     from polyslam_env.slam.config import SlamConfig
@@ -272,12 +270,12 @@ def test_off_square__refuses_a_refined_turn_beyond_3_sigma_of_the_square_one() -
     turn = len(slam.table) + 3 + k
     cov = np.diag([1e-4, 1e-4, math.radians(0.15) ** 2])
     sigma = math.sqrt(cov[2, 2] + 2.0 * slam.cov[turn, turn])
-    message = SimpleNamespace(records=(PolynomialRecord(1, _straight(-20.0, 3.0), 1e-4),))
+    records = (PolynomialRecord(1, _straight(-20.0, 3.0), 1e-4),)
     camera = np.array([1.0, 2.0, math.radians(21.0)])
     for factor, refused in ((0.0, False), (2.9, False), (3.1, True), (-3.1, True)):
         refined = np.array([1.0, 2.0, square + factor * sigma])
-        got = RendezvousExchange._off_square(slam, message, camera, refined, cov)
+        got = RendezvousExchange._off_square(slam, records, camera, refined, cov)
         assert got is refused, factor
     slam.config = SlamConfig(square_walls=False)
     refined = np.array([1.0, 2.0, square + 5.0 * sigma])
-    assert not RendezvousExchange._off_square(slam, message, camera, refined, cov)
+    assert not RendezvousExchange._off_square(slam, records, camera, refined, cov)
