@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -215,9 +216,13 @@ class SlamConfig(Config):
         """Whether each landmark's shape rotation is a state (``shape_rotation``)."""
         return self.shape_follows_pose and self.shape_rotation != "heading"
 
-    @property
+    @cached_property
     def p0(self) -> np.ndarray:  # (3, 3)
-        return np.diag(np.square(self.p0_sigma))
+        """The start-error covariance diag(p0_sigma²), built once (read every step by every
+        robot) and read-only, so no caller can change it for the others."""
+        p0 = np.diag(np.square(self.p0_sigma))
+        p0.flags.writeable = False
+        return p0
 
     @property
     def odom_cov(self) -> np.ndarray:  # (3, 3)
