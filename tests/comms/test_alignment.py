@@ -281,3 +281,39 @@ def test_off_square__refuses_a_refined_turn_beyond_3_sigma_of_the_square_one() -
     slam.config = SlamConfig(square_walls=False)
     refined = np.array([1.0, 2.0, square + 5.0 * sigma])
     assert not RendezvousExchange._off_square(slam, message, camera, refined, cov)
+
+
+@pytest.mark.parametrize(
+    "square_evidence",
+    [True, pytest.param(False, marks=pytest.mark.xfail(strict=True, reason="rule forced on"))],
+)
+def test_off_square__on_an_angled_floor_keeps_a_refined_turn_that_is_not_square(
+    square_evidence: bool,
+) -> None:
+    """A receiver whose map holds a wall clearly at 30° (the angled room of
+    tests/slam/test_links.py) is not on a rectilinear floor, so the refined turn is not
+    judged by the square one: one 5 σ from it is kept. With the rule forced on
+    (``square_evidence`` off) it is refused, although nothing says the sender's walls are
+    square to the receiver's."""
+    from types import SimpleNamespace
+
+    from polyslam_env.comms.exchange import RendezvousExchange
+    from polyslam_env.comms.messages import PolynomialRecord
+    from polyslam_env.slam.config import SlamConfig
+    from tests.slam.test_links import ANGLED_ROOM, CORNER_DRIVE
+    from tests.slam.test_map_building import drive
+
+    slam, *_ = drive(ANGLED_ROOM, CORNER_DRIVE, 0)
+    assert not slam.walls.rectilinear()
+    slam.config = SlamConfig(square_evidence=square_evidence)
+    lengths = [p.hi - p.lo for p in slam.polynomials()]
+    k = int(np.argmax(lengths))
+    wall = slam.polynomials()[k]
+    square = math.radians(20.0) + math.atan(float(wall.coeffs[1]))
+    turn = len(slam.table) + 3 + k
+    cov = np.diag([1e-4, 1e-4, math.radians(0.15) ** 2])
+    sigma = math.sqrt(cov[2, 2] + 2.0 * slam.cov[turn, turn])
+    message = SimpleNamespace(records=(PolynomialRecord(1, _straight(-20.0, 3.0), 1e-4),))
+    camera = np.array([1.0, 2.0, math.radians(21.0)])
+    refined = np.array([1.0, 2.0, square + 5.0 * sigma])
+    assert not RendezvousExchange._off_square(slam, message, camera, refined, cov)
