@@ -149,8 +149,10 @@ class SlamConfig(Config):
     square_walls: bool = True
     # tie walls square only while the robot's own confident straight walls say its floor is
     # rectilinear (links.rectilinear: square to one of them in all but a tenth of their
-    # length); False: whenever the χ² gate passes (the rule forced on, as before)
-    square_evidence: bool = True
+    # length); False: whenever the χ² gate passes (as before). Off by default: on the traced
+    # Willow office it turned the ties off and its maps fell from 0.84–0.89 to 0.46–0.67
+    # map_precision (docs/results/floors.md); on for angled, curved and cave floors
+    square_evidence: bool = False
     # degrees, how far a real wall may be from square to the others (the square link's noise
     # beyond the fits'): 1 mm per metre, as wall_straightness
     wall_squareness_deg: float = 0.057

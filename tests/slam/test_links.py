@@ -518,7 +518,7 @@ def test_square_walls__on_a_rectilinear_floor_the_evidence_lets_the_tie_through(
     walls[1] = [[3.3, -3.0], [3.3, -0.3]]
     walls[2] = [[0.1, -0.35], [2.3, -0.35]]
     for seed in range(5):
-        slam, *_ = drive(walls, CORNER_DRIVE, seed)
+        slam, *_ = drive(walls, CORNER_DRIVE, seed, SlamConfig(square_evidence=True))
         assert slam.walls.rectilinear(), seed
         groups = slam.direction_groups
         variates = {lid: slam.shapes[lid].variate for lid in slam.landmark_ids}
