@@ -193,6 +193,7 @@ POLICIES: dict[str, PolicyFactory | str] = {
     "wall_follow": "policies.scripted:WallFollowPolicy",
     "random": "policies.scripted:RandomPolicy",
     "ppo": "policies.ppo:make_ppo",
+    "ppo_drive": "policies.drive:make_ppo_drive",
 }
 
 

@@ -191,7 +191,8 @@ def render_speed(data: Sequence[Any]) -> tuple[str, str]:
 
 
 def render_learning(data: Sequence[Any]) -> tuple[str, str]:
-    """``polyslam evaluate --policy frontier,frontier_team,random,ppo --json`` on each map."""
+    """``polyslam evaluate --policy frontier,frontier_team,random,ppo,ppo_drive --json`` on
+    each map."""
     lines = [
         "| map | policy | team coverage | steps to 90 % | `nu_mean` (m) | bytes sent |",
         "|---|---|---|---|---|---|",
@@ -262,10 +263,10 @@ STUDIES: dict[str, Study] = {
         "learning.md",
         "Learning",
         (
-            "polyslam evaluate --policy frontier,frontier_team,random,ppo"
-            " --map generator:office_floor --seed 10000 --episodes 10 --json {out}/office.json",
-            "polyslam evaluate --policy frontier,frontier_team,random,ppo"
-            " --map generator:warehouse --seed 10000 --episodes 10 --json {out}/warehouse.json",
+            "polyslam evaluate --policy frontier,frontier_team,random,ppo,ppo_drive"
+            " --map generator:office_floor --seed 10000 --episodes 20 --json {out}/office.json",
+            "polyslam evaluate --policy frontier,frontier_team,random,ppo,ppo_drive"
+            " --map generator:warehouse --seed 10000 --episodes 20 --json {out}/warehouse.json",
         ),
         ("office.json", "warehouse.json"),
         render_learning,

@@ -5,7 +5,10 @@ per map), and prints, pooled over all their episodes:
 
 * each policy's team coverage, team overlap and ``nu_mean`` (the robots' mean), and the last
   policy's ratio to the first (the baseline) and points above ``random`` (if it ran);
-* the paired differences last − first per seed, with a 95 % t interval;
+* the paired differences last − first per seed, with a 95 % t interval, of team coverage at
+  the end and at step 200, overlap, ``nu_mean`` and steps to 90 % (an episode that never
+  reached 90 % counts as its step limit + 1, a censored value: the count of such episodes is
+  printed with it);
 * when the last policy is ``ppo``: on the same maps and seeds, the team coverage when the slot
   is chosen uniformly at random among the candidates (what the network's training adds), and
   how often the network picks each slot.
@@ -32,6 +35,8 @@ from policies.base import PolicyContext, make_policy
 from policies.goals import CANDIDATES, FEATURES, GoalPolicy
 
 POLICIES = ("frontier", "random", "ppo")
+#: The step of the "coverage at step" comparison (issue 44: team coverage at 200 steps).
+AT_STEP = 200
 
 
 class UniformGoals(GoalPolicy):
@@ -93,6 +98,9 @@ def main() -> None:
     cov: dict[str, list[float]] = {p: [] for p in names}
     overlap: dict[str, list[float]] = {p: [] for p in names}
     nu: dict[str, list[float]] = {p: [] for p in names}
+    at200: dict[str, list[float]] = {p: [] for p in names}
+    steps90: dict[str, list[float]] = {p: [] for p in names}
+    never: dict[str, int] = dict.fromkeys(names, 0)
     jobs = []
     for path in args.files:
         report = json.load(open(path))
@@ -106,6 +114,11 @@ def main() -> None:
                 overlap[p].append(float(e["team"]["overlap"]))
                 robots = [r for r in e["robots"].values() if r.get("has_map", 1.0)]
                 nu[p].append(float(np.mean([r["nu_mean"] for r in robots])))
+                series = e["coverage"]  # per step; an episode that ended early stays there
+                at200[p].append(float(series[min(AT_STEP, len(series)) - 1]))
+                reached = e["team"]["steps_to_90"]
+                never[p] += reached is None
+                steps90[p].append(float(e["steps"] + 1 if reached is None else reached))
         jobs += [(config, int(s), kind) for s in report["seeds"] for kind in ("uniform", "ppo")]
     for p in names:
         print(
@@ -118,12 +131,23 @@ def main() -> None:
         ratio += f"; {last} − random {100 * (np.mean(cov[last]) - np.mean(cov['random'])):+.1f}"
         ratio += " points"
     print(ratio)
-    for name, values in (("coverage", cov), ("overlap", overlap), ("nu_mean", nu)):
+    for name, values in (
+        ("coverage", cov),
+        (f"coverage at step {AT_STEP}", at200),
+        ("overlap", overlap),
+        ("nu_mean", nu),
+        ("steps to 90 %", steps90),
+    ):
         diff = np.array(values[last]) - np.array(values[base])
+        relative = 100 * diff.mean() / np.mean(values[base])
         print(
             f"{last} − {base} {name}, paired by seed: {diff.mean():+.4f} ± {_interval(diff):.4f}"
-            " (95 % t interval)"
+            f" (95 % t interval; {relative:+.1f} %)"
         )
+    print(
+        f"never reached 90 % (counted as the step limit + 1): {base} {never[base]},"
+        f" {last} {never[last]} of {len(cov[base])}"
+    )
     if last != "ppo":
         return
     with Pool(args.workers) as pool:

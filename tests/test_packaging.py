@@ -38,4 +38,5 @@ def test_pyproject__ships_maps_and_paths() -> None:
 def test_pyproject__ships_the_learned_policy() -> None:
     data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
     assert "checkpoints/*.zip" in data["package-data"]["policies"]
-    assert (ROOT / "policies" / "checkpoints" / "ppo_goals.zip").is_file()
+    for name in ("ppo_goals.zip", "ppo_drive.zip"):
+        assert (ROOT / "policies" / "checkpoints" / name).is_file()

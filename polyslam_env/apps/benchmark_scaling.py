@@ -114,7 +114,9 @@ def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str
     grows as maps fill and robots meet, so the figure is the mean over the whole horizon, next
     to the median step), and the ratio of each mean to the first size's. ``messages`` and
     ``polynomials`` count what the exchange applied (in the last episode): integrating them is
-    the part of the step that grows with the number of meetings, not with the team size."""
+    the part of the step that grows with the number of meetings, not with the team size;
+    ``skipped`` of those polynomials were versions their receiver held (no transform, no
+    refit), ``refits`` counts the received chains refitted."""
     from polyslam_env.environment.parallel import parallel_env
 
     rows = []
@@ -138,6 +140,9 @@ def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str
                 "max_ms": 1e3 * float(np.max(times)),
                 "messages": len(history),  # applied in the last episode
                 "polynomials": sum(d.n_polynomials for d in history),
+                # of those, skipped as versions held; received chains refitted
+                "skipped": sum(exchange.skipped) if exchange is not None else 0,
+                "refits": sum(exchange.refits) if exchange is not None else 0,
             }
         )
     for r in rows:

@@ -104,16 +104,27 @@ class TrainConfig(Config):
     checkpoint_every: int = 10_000  # timesteps between checkpoints
     eval_episodes: int = 3  # final evaluation episodes (trained policy and random)
     torch_threads: int = 1  # torch intra-op threads (small MLPs: more threads only add overhead)
-    # what the network controls: "velocity", the (v, ω) of every step; "goals", which of the
-    # frontier planner's candidate goals to drive to every decide_every steps (policies.goals)
-    control: Literal["velocity", "goals"] = "velocity"
+    # what the network controls: "velocity", the (v, ω) of every step from the env's own
+    # observation; "goals", which of the frontier planner's candidate goals to drive to every
+    # decide_every steps (policies.goals); "drive", the (v, ω) of every step from the features
+    # of its own map's planner (policies.drive, apps.drive_env)
+    control: Literal["velocity", "goals", "drive"] = "velocity"
     decide_every: int = 8  # steps per decision (control: goals)
-    # control: goals: every episode picks one of these maps (env.map when empty); its layout
-    # seed lies below EVAL_SEED, so evaluation seeds are layouts never trained on
+    repeat: int = 1  # env steps per action (control: drive; action repeat)
+    progress: float = 1.0  # weight of the shaping term progress, per metre (control: drive)
+    # control: goals or drive: every episode picks one of these maps (env.map when empty); its
+    # layout seed lies below EVAL_SEED, so evaluation seeds are layouts never trained on
     maps: tuple[str, ...] = ()
 
     def validate(self) -> None:
-        for name in ("timesteps", "num_envs", "checkpoint_every", "torch_threads", "decide_every"):
+        for name in (
+            "timesteps",
+            "num_envs",
+            "checkpoint_every",
+            "torch_threads",
+            "decide_every",
+            "repeat",
+        ):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name}: must be >= 1, got {getattr(self, name)!r}")
         for name in ("num_cpus", "eval_episodes"):
@@ -129,10 +140,15 @@ class TrainConfig(Config):
                 f"env.action.mode: must be 'continuous' for PPO training, got"
                 f" {self.env.action.mode!r}"
             )
-        if self.control not in ("velocity", "goals"):
-            raise ConfigError(f"control: must be 'velocity' or 'goals', got {self.control!r}")
-        if self.maps and self.control != "goals":
-            raise ConfigError("maps: only with control: goals (velocity training uses env.map)")
+        if self.control not in ("velocity", "goals", "drive"):
+            raise ConfigError(
+                f"control: must be 'velocity', 'goals' or 'drive', got {self.control!r}"
+            )
+        if self.maps and self.control == "velocity":
+            raise ConfigError(
+                "maps: only with control: goals or drive (velocity training uses env.map)"
+            )
+        check_range("progress", self.progress, 0.0, 1e6)
 
     @property
     def slots(self) -> int:
@@ -357,7 +373,8 @@ def _metrics_callback(num_robots: int) -> Any:
 
 def _make_venv(cfg: TrainConfig) -> Any:
     """The SB3 vectorised env of ``cfg``: robot slots of the env itself (``control:
-    velocity``) or of the goal-choice env (``control: goals``)."""
+    velocity``), of the goal-choice env (``control: goals``) or of the driving env
+    (``control: drive``)."""
     from polyslam_env.environment.vector import make_vec_env, vectorise
 
     if cfg.control == "goals":
@@ -365,6 +382,11 @@ def _make_venv(cfg: TrainConfig) -> Any:
 
         team = GoalChoiceEnv(cfg.env_configs(), cfg.decide_every, seed_limit=EVAL_SEED)
         return vectorise(team, cfg.num_envs, num_cpus=cfg.num_cpus, seed=cfg.seed)
+    if cfg.control == "drive":
+        from polyslam_env.apps.drive_env import DriveEnv
+
+        drive = DriveEnv(cfg.env_configs(), cfg.repeat, cfg.progress, seed_limit=EVAL_SEED)
+        return vectorise(drive, cfg.num_envs, num_cpus=cfg.num_cpus, seed=cfg.seed)
     return make_vec_env(cfg.env, cfg.num_envs, num_cpus=cfg.num_cpus, seed=cfg.seed)
 
 
@@ -477,18 +499,21 @@ def evaluate_coverage(
 
 
 def final_evaluation(cfg: TrainConfig, checkpoint: Path, timesteps: int) -> dict[str, Any]:
-    """The trained policy vs the registered ``random`` policy (and ``frontier``, whose goals
-    a ``control: goals`` network chooses among) on the same seeded episodes of ``cfg.env``."""
+    """The trained policy (``ppo``, or ``ppo_drive`` for ``control: drive``) vs the registered
+    ``random`` policy (and ``frontier``, whose goals a ``control: goals`` network chooses among
+    and whose planner guides a ``control: drive`` one) on the same seeded episodes of
+    ``cfg.env``."""
     start = time.perf_counter()
+    name = "ppo_drive" if cfg.control == "drive" else "ppo"
     report = {
         "checkpoint": str(checkpoint),
         "timesteps": timesteps,
         "episodes": cfg.eval_episodes,
         "seeds": [EVAL_SEED + k for k in range(cfg.eval_episodes)],
-        "ppo": evaluate_coverage(cfg.env, "ppo", cfg.eval_episodes, checkpoint=checkpoint),
+        "ppo": evaluate_coverage(cfg.env, name, cfg.eval_episodes, checkpoint=checkpoint),
         "random": evaluate_coverage(cfg.env, "random", cfg.eval_episodes),
     }
-    if cfg.control == "goals":
+    if cfg.control in ("goals", "drive"):
         report["frontier"] = evaluate_coverage(cfg.env, "frontier", cfg.eval_episodes)
     report["eval_time_s"] = time.perf_counter() - start
     return report

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
+import scipy.linalg.lapack
 import scipy.special
 
 from polyslam_env.core.geometry import rotation
@@ -319,6 +320,25 @@ def _distinct_count(xi: np.ndarray, scale: float) -> int:
     return 1 + int(np.count_nonzero(np.diff(sorted_xi) > 1e-9 * scale))
 
 
+def solve_upper(r: np.ndarray, rhs: np.ndarray, transposed: bool = False) -> np.ndarray:
+    """x with R x = rhs (Rᵀ x = rhs when ``transposed``), R (n, n) upper triangular float64:
+    ``scipy.linalg.solve_triangular``'s LAPACK call (``dtrtrs``, on Rᵀ as a lower triangle
+    when R is C-ordered), the same bits, without its ~50 Python calls of argument handling
+    (a fit solves 2–5 times). Non-finite input and a singular R raise as it does."""
+    if not (np.isfinite(r).all() and np.isfinite(rhs).all()):
+        raise ValueError("array must not contain infs or NaNs")
+    trans = 1 if transposed else 0
+    if r.flags.f_contiguous:
+        x, info = scipy.linalg.lapack.dtrtrs(r, rhs, lower=0, trans=trans)
+    else:
+        x, info = scipy.linalg.lapack.dtrtrs(r.T, rhs, lower=1, trans=1 - trans)
+    if info > 0:
+        raise np.linalg.LinAlgError(f"singular matrix: resolution failed at diagonal {info - 1}")
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}-th argument of internal trtrs")
+    return np.asarray(x)
+
+
 def _weighted_qr(
     xi_s: np.ndarray, sqrt_w: np.ndarray, order: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
@@ -352,7 +372,7 @@ def select_order(
         a_mat, q, r, m_eff = _weighted_qr(xi / scale, sqrt_w, m)
         if m_eff < m or n_pts <= m + 1:
             return max(m_eff, 1)
-        coef = scipy.linalg.solve_triangular(r, q.T @ (sqrt_w * eta))
+        coef = solve_upper(r, q.T @ (sqrt_w * eta))
         resid = eta - a_mat @ coef
         rss = float(resid @ resid)
         if noise_var > 0:
@@ -405,7 +425,7 @@ def fit_polynomial(
         noise_var = max(float(np.trace(points.noise_cov)) / points.n_points, min_noise_var)
         m = select_order(xi, eta, w, m, noise_var)
     a_mat, q, r, m = _weighted_qr(xi / scale, np.sqrt(w), m)
-    a_s = scipy.linalg.solve_triangular(r, q.T @ (np.sqrt(w) * eta))  # scaled coefficients
+    a_s = solve_upper(r, q.T @ (np.sqrt(w) * eta))  # scaled coefficients
     resid = eta - a_mat @ a_s  # (N,)
     if shape_fixed:
         slope = (
@@ -445,7 +465,7 @@ def _coefficient_gradient(
     """(N, 2): ∂(eᵀa_s)/∂ξ_i and ∂(eᵀa_s)/∂η_i of a linear function e (m+1,) of the scaled
     coefficients a_s, from the normal equations (see :func:`fit_polynomial`)."""
     # eᵀM⁻¹ = eᵀR⁻¹R⁻ᵀ, from two triangular solves
-    row = scipy.linalg.solve_triangular(r, scipy.linalg.solve_triangular(r, e, trans="T"))
+    row = solve_upper(r, solve_upper(r, e, transposed=True))
     powers = np.arange(m + 1)
     # d/dξ of (ξ/s)^j = j (ξ/s)^(j−1) / s
     d_a = np.zeros_like(a_mat)

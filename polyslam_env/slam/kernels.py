@@ -375,17 +375,46 @@ def cast_into(
     roots (:func:`real_roots`); a root counts when 0 < s ≤ 1 and its ξ lies in [lo, hi], the
     first minimum in (candidate, root) order wins, then one guarded Newton polish. A beam
     whose segment passes farther than BOX_MARGIN from a candidate's box is not solved
-    against it (it cannot hit it).
+    against it (it cannot hit it), and its Taylor coefficients are made only once a beam meets
+    its box.
     """
-    n_beams, n_cand = angles.size, candidates.size
     width = shape.shape[1]
-    taylors = np.empty((n_cand, width))
-    for k in range(n_cand):
-        j = candidates[k]
-        taylor_shift(shape[j], order[j], x if variate[j] == 1 else y, taylors[k])
-    coeffs = np.empty(width)
-    best_coeffs = np.empty(width)
-    roots = np.empty(width)
+    _cast_with(
+        x, y, theta, angles, candidates, variate, order, shape, lo, hi, c0s, boxes, max_range,
+        t_out, landmark, slope_out, denom_out, xi_out, np.empty((candidates.size, width)),
+        np.empty(width), np.empty(width), np.empty(width), np.empty(candidates.size, np.bool_),
+    )  # fmt: skip
+
+
+@njit
+def _cast_with(
+    x: float,
+    y: float,
+    theta: float,
+    angles: np.ndarray,
+    candidates: np.ndarray,
+    variate: np.ndarray,
+    order: np.ndarray,
+    shape: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    c0s: np.ndarray,
+    boxes: np.ndarray,
+    max_range: float,
+    t_out: np.ndarray,
+    landmark: np.ndarray,
+    slope_out: np.ndarray,
+    denom_out: np.ndarray,
+    xi_out: np.ndarray,
+    taylors: np.ndarray,  # (≥ K, M+1) scratch
+    coeffs: np.ndarray,  # (M+1,) scratch
+    best_coeffs: np.ndarray,  # (M+1,) scratch
+    roots: np.ndarray,  # (M+1,) scratch
+    shifted: np.ndarray,  # (≥ K,) bool scratch
+) -> None:
+    """:func:`cast_into` with its scratch arrays given (a caller casting many times)."""
+    n_beams, n_cand = angles.size, candidates.size
+    shifted[:n_cand] = False  # a candidate's Taylor coefficients, made when a beam meets its box
     t_out[:] = math.inf
     landmark[:] = -1
     slope_out[:] = math.nan
@@ -400,6 +429,9 @@ def cast_into(
             j = candidates[k]
             if not _meets_box(x, y, cos * max_range, sin * max_range, boxes[j]):
                 continue
+            if not shifted[k]:
+                taylor_shift(shape[j], order[j], x if variate[j] == 1 else y, taylors[k])
+                shifted[k] = True
             if variate[j] == 1:
                 xi0, eta0, dxi, deta = x, y, cos, sin
             else:
@@ -673,6 +705,13 @@ def steady_beams(
     joint, factor = np.empty((4, 4)), np.empty((4, 4))
     index = np.empty(4, dtype=np.int64)
     moved = boxes.copy()  # a sigma point's c0 moves its landmark's curve, and its box, along η
+    width = shape.shape[1]  # the casts' scratch, made once for the 8 casts of every beam
+    taylors, coeffs, best_coeffs = np.empty((n_lm, width)), np.empty(width), np.empty(width)
+    roots, shifted = np.empty(width), np.empty(n_lm, np.bool_)
+    sigma = np.empty((8, 4))  # per sigma point: x, y, θ and the c0 shift
+    near_any = np.empty(n_lm, dtype=np.int64)  # the landmarks in reach of any sigma point
+    near_one = np.empty(n_lm, dtype=np.int64)  # those in reach of one
+    limit = reach * reach
     kept = 0
     for b in range(n_beams):
         j = landmark[b]
@@ -685,20 +724,47 @@ def steady_beams(
             if _cholesky4(joint, factor):
                 one[0] = angle[b]
                 eta = 2 if variate[j] == 1 else 0  # the box's (min, max) columns of η
+                x_lo, x_hi, y_lo, y_hi = math.inf, -math.inf, math.inf, -math.inf
+                eta_lo, eta_hi = math.inf, -math.inf
                 for column in range(8):
                     sign = spread if column < 4 else -spread
                     a = column % 4
-                    xs = x + sign * factor[0, a]
-                    ys = y + sign * factor[1, a]
-                    ths = theta + sign * factor[2, a]
+                    xs, ys = x + sign * factor[0, a], y + sign * factor[1, a]
                     shift = sign * factor[3, a]
+                    sigma[column, 0], sigma[column, 1] = xs, ys
+                    sigma[column, 2], sigma[column, 3] = theta + sign * factor[2, a], shift
+                    x_lo, x_hi = _min(x_lo, xs), _max(x_hi, xs)
+                    y_lo, y_hi = _min(y_lo, ys), _max(y_hi, ys)
+                    eta_lo = _min(eta_lo, boxes[j, eta] + shift)
+                    eta_hi = _max(eta_hi, boxes[j, eta + 1] + shift)
+                # boxes_near of every sigma point looks only among the landmarks in reach of
+                # their hull (j's box spanning all its shifts): a superset (rounding is
+                # monotone), filtered per point by the same test, so the same ascending set
+                moved[j, eta], moved[j, eta + 1] = eta_lo, eta_hi
+                n_any = 0
+                for i in range(n_lm):
+                    if _box_within(moved, i, x_lo, x_hi, y_lo, y_hi, limit):
+                        near_any[n_any] = i
+                        n_any += 1
+                for column in range(8):
+                    xs, ys, ths, shift = (
+                        sigma[column, 0],
+                        sigma[column, 1],
+                        sigma[column, 2],
+                        sigma[column, 3],
+                    )
                     c0s[j] = mean[3 + j] + shift
                     moved[j, eta] = boxes[j, eta] + shift
                     moved[j, eta + 1] = boxes[j, eta + 1] + shift
-                    cast_into(
-                        xs, ys, ths, one, boxes_near(moved, np.array([xs, xs, ys, ys]), reach),
-                        variate, order, shape, lo, hi, c0s, moved, max_range,
-                        t1, landmark1, slope1, denom1, xi1,
+                    n_one = 0
+                    for q in range(n_any):
+                        if _box_within(moved, near_any[q], xs, xs, ys, ys, limit):
+                            near_one[n_one] = near_any[q]
+                            n_one += 1
+                    _cast_with(
+                        xs, ys, ths, one, near_one[:n_one], variate, order, shape, lo, hi, c0s,
+                        moved, max_range, t1, landmark1, slope1, denom1, xi1, taylors, coeffs,
+                        best_coeffs, roots, shifted,
                     )  # fmt: skip
                     c0s[j] = mean[3 + j]
                     moved[j, eta], moved[j, eta + 1] = boxes[j, eta], boxes[j, eta + 1]
@@ -829,12 +895,20 @@ def boxes_near(boxes: np.ndarray, box: np.ndarray, distance: float) -> np.ndarra
     count = 0
     limit = distance * distance
     for i in range(n):
-        gap_x = _maximum(_maximum(boxes[i, 0] - box[1], box[0] - boxes[i, 1]), 0.0)
-        gap_y = _maximum(_maximum(boxes[i, 2] - box[3], box[2] - boxes[i, 3]), 0.0)
-        if gap_x * gap_x + gap_y * gap_y <= limit:
+        if _box_within(boxes, i, box[0], box[1], box[2], box[3], limit):
             out[count] = i
             count += 1
     return out[:count]
+
+
+@njit
+def _box_within(
+    boxes: np.ndarray, i: int, x_lo: float, x_hi: float, y_lo: float, y_hi: float, limit: float
+) -> bool:
+    """Whether ``boxes[i]`` lies within √``limit`` of the box (x_lo, x_hi, y_lo, y_hi)."""
+    gap_x = _maximum(_maximum(boxes[i, 0] - x_hi, x_lo - boxes[i, 1]), 0.0)
+    gap_y = _maximum(_maximum(boxes[i, 2] - y_hi, y_lo - boxes[i, 3]), 0.0)
+    return gap_x * gap_x + gap_y * gap_y <= limit
 
 
 # -- EKF ------------------------------------------------------------------------------------------
@@ -931,25 +1005,44 @@ def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from
     a considered column j ≥ c takes K_i·W_j alone, and the considered block (i, j ≥ c) does
     not change at all: each of its entries would subtract an exact zero (a running sum that
     starts at +0 and adds ±0 stays +0), so the result is the same bits as the full update's
-    (tested against it). Then the lower triangle mirrors the changed upper one."""
+    (tested against it). Then the lower triangle mirrors the changed upper one.
+
+    Each row is one pass over P's row per row of K, the first starting the sum and the last
+    subtracting it: the same operations, in the same order, as summing into a zeroed row and
+    subtracting it after (``tests/slam/reference_floats.joseph_full``)."""
     count, n = kt.shape
     c = min(max(consider_from, 0), n)
-    acc = np.empty(n)  # row i of K Wᵀ + W Kᵀ from the diagonal on
+    acc = np.empty(n)  # row i of K Wᵀ + W Kᵀ from the diagonal on, summed over K's rows q
+    last = count - 1
     for i in range(c):
-        m = n - i  # slices from the diagonal: loops from 0 vectorise
-        inner = c - i  # the estimated columns
-        part = acc[:m]
-        part[:] = 0.0
-        for q in range(count):
+        m, inner = n - i, c - i
+        # the estimated and the cross columns as separate slices, each loop from 0: written
+        # as one loop over j with a bound between, LLVM left it scalar (2.6× slower)
+        estimated, cross = acc[:inner], acc[inner:m]
+        row_estimated, row_cross = cov[i, i:c], cov[i, c:]
+        for q in range(count):  # the sum starts at +0 and the last term goes with P's row
             k_i, w_i = kt[q, i], wt[q, i]
-            k_row, w_row = kt[q, i:], wt[q, i:]
+            k_row, w_row, w_cross = kt[q, i:c], wt[q, i:c], wt[q, c:]
+            if q == 0:
+                for j in range(inner):
+                    estimated[j] = 0.0 + (k_i * w_row[j] + w_i * k_row[j])
+                for j in range(n - c):
+                    cross[j] = 0.0 + k_i * w_cross[j]
+            if 0 < q < last:
+                for j in range(inner):
+                    estimated[j] += k_i * w_row[j] + w_i * k_row[j]
+                for j in range(n - c):
+                    cross[j] += k_i * w_cross[j]
+            if q == last and q > 0:
+                for j in range(inner):
+                    row_estimated[j] -= estimated[j] + (k_i * w_row[j] + w_i * k_row[j])
+                for j in range(n - c):
+                    row_cross[j] -= cross[j] + k_i * w_cross[j]
+        if count == 1:
             for j in range(inner):
-                part[j] += k_i * w_row[j] + w_i * k_row[j]
-            for j in range(inner, m):
-                part[j] += k_i * w_row[j]
-        row = cov[i, i:]
-        for j in range(m):
-            row[j] -= part[j]
+                row_estimated[j] -= estimated[j]
+            for j in range(n - c):
+                row_cross[j] -= cross[j]
     for i in range(n):  # mirror (the considered block's triangles are equal and unchanged)
         for j in range(min(i, c)):
             cov[i, j] = cov[j, i]

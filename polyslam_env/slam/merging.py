@@ -37,6 +37,7 @@ one curve at this sensor's resolution (2.5 σ of the 2 cm range noise), while th
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -74,7 +75,7 @@ def unit_tangent(poly: Polynomial, xi: float) -> np.ndarray:
     """(2,) unit tangent of the curve at ξ, in (x¹, x²)."""
     slope = float(poly.slope(xi))
     t = np.array([1.0, slope]) if poly.variate == 1 else np.array([slope, 1.0])
-    return np.asarray(t / np.linalg.norm(t))
+    return t / math.sqrt(t.dot(t))  # np.linalg.norm's own arithmetic, without its checks
 
 
 class MergeChoice(NamedTuple):

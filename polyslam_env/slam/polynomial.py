@@ -62,18 +62,31 @@ class Polynomial:
 
     def max_slope(self) -> float:
         """max |dη/dξ| over the extent [lo, hi], exactly: at an end or where the slope turns
-        (a real root of p'' inside the extent), for any order."""
-        curvature = P.polytrim(P.polyder(self.coeffs, 2))
-        turns = P.polyroots(curvature) if len(curvature) > 1 else np.zeros(0)
-        real = turns.real[np.abs(turns.imag) <= 1e-9 * np.maximum(1.0, np.abs(turns.real))]
-        inside = real[(real > self.lo) & (real < self.hi)]
-        return float(np.max(np.abs(self.slope(np.concatenate([[self.lo, self.hi], inside])))))
+        (a real root of p'' inside the extent), for any order. Up to cubics in plain floats
+        (p'' = 2b₂ + 6b₃ξ: one turn at most), the same operations as numpy's ``polyder``,
+        ``polytrim`` and ``polyroots`` (checked against them in the tests)."""
+        at = [self.lo, self.hi]
+        if self.coeffs.size == 4:
+            rate = 2 * (3 * float(self.coeffs[3]))  # p'' = 2b₂ + rate·ξ
+            if rate != 0.0:
+                turn = -(2 * float(self.coeffs[2])) / rate
+                if self.lo < turn < self.hi:
+                    at.append(turn)
+        elif self.coeffs.size > 4:
+            curvature = P.polytrim(P.polyder(self.coeffs, 2))
+            turns = P.polyroots(curvature) if len(curvature) > 1 else np.zeros(0)
+            real = turns.real[np.abs(turns.imag) <= 1e-9 * np.maximum(1.0, np.abs(turns.real))]
+            at.extend(real[(real > self.lo) & (real < self.hi)].tolist())
+        return float(np.max(np.abs(self.slope(np.array(at)))))
 
     def to_xy(self, xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
-        """(ξ, η) pairs to (x¹, x²) points, shape (…, 2)."""
-        if self.variate == 1:
-            return np.stack([xi, eta], axis=-1)
-        return np.stack([eta, xi], axis=-1)
+        """(ξ, η) pairs to (x¹, x²) points, shape (…, 2) (``np.stack`` on the last axis)."""
+        xi, eta = np.asarray(xi), np.asarray(eta)
+        if xi.shape != eta.shape:
+            raise ValueError(f"to_xy: ξ {xi.shape} and η {eta.shape} must have the same shape")
+        out = np.empty((*xi.shape, 2), dtype=np.result_type(xi, eta))
+        out[..., 0], out[..., 1] = (xi, eta) if self.variate == 1 else (eta, xi)
+        return out
 
     def from_xy(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(x¹, x²) points to (ξ, η)."""

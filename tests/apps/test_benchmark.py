@@ -355,6 +355,8 @@ def _stats(median: float, low: float, high: float) -> dict[str, float]:
                 "ratio_to_first": 199.6,
                 "messages": 1290,
                 "polynomials": 16170,
+                "skipped": 12345,
+                "refits": 99999,
             },
         ),
         ("memory", {"episode": 5, "steps": 200, "peak_mb": 1234.5, "rss_mb": 1200.1}),

@@ -263,9 +263,20 @@ def test_shipped_goals_config__loads() -> None:
     assert {c.map for c in cfg.env_configs()} == {"generator:office_floor", "generator:warehouse"}
 
 
+def test_shipped_drive_config__loads() -> None:
+    cfg = TrainConfig.from_yaml(configs_dir() / "train_drive.yaml")
+    assert cfg.control == "drive" and cfg.progress > 0 and not cfg.env.slam_enabled
+    assert {c.map for c in cfg.env_configs()} == {"generator:office_floor", "generator:warehouse"}
+
+
 @pytest.mark.parametrize(
     ("top", "match"),
-    [({"control": "legs"}, "control"), ({"maps": ["generator:loop"]}, "maps: only with")],
+    [
+        ({"control": "legs"}, "control"),
+        ({"maps": ["generator:loop"]}, "maps: only with"),
+        ({"control": "drive", "progress": -1.0}, "progress"),
+        ({"control": "drive", "repeat": 0}, "repeat"),
+    ],
 )
 def test_train_config__bad_control_and_maps_are_named(
     tmp_path: Path, top: dict[str, Any], match: str
@@ -307,6 +318,22 @@ def test_cli_train__goals_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
     tiny = parallel_env(TrainConfig.from_yaml(path).env)
     ckpt = checkpoints(velocity / "checkpoints")[-1][1]
     assert isinstance(make_policy("ppo", tiny, "robot_0", checkpoint=ckpt), PPOPolicy)
+
+
+def test_cli_train__drive_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # control: drive: trains, evaluates against random and frontier, and the checkpoint
+    # plays as ppo_drive
+    path = _tiny_config(tmp_path, control="drive", repeat=2, timesteps=64, checkpoint_every=32)
+    out = tmp_path / "out"
+    assert main(["train", "--config", str(path), "--out", str(out), "--quiet"]) == 0
+    assert "frontier" in capsys.readouterr().out
+    report = json.loads((out / "final_eval.json").read_text())
+    assert {"ppo", "random", "frontier"} <= set(report)
+    _, ckpt = checkpoints(out / "checkpoints")[-1]
+    from policies.drive import DrivePolicy
+
+    env = parallel_env(TrainConfig.from_yaml(path).env)
+    assert isinstance(make_policy("ppo_drive", env, "robot_0", checkpoint=ckpt), DrivePolicy)
 
 
 def test_cli_train__goals_on_rllib_exits_2_with_one_line(

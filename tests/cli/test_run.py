@@ -159,14 +159,18 @@ def test_run__ppo_without_a_usable_checkpoint_exits_2_with_one_line(
     assert "missing.zip" in _one_line_error(capsys)
 
 
-def test_run_and_evaluate__the_shipped_ppo_needs_no_checkpoint_flag(tmp_path: Path) -> None:
+@pytest.mark.parametrize("policy", ["ppo", "ppo_drive"])
+def test_run_and_evaluate__the_shipped_ppo_needs_no_checkpoint_flag(
+    policy: str, tmp_path: Path
+) -> None:
+    from policies.drive import SHIPPED_DRIVE
     from policies.ppo import SHIPPED
 
-    assert SHIPPED.is_file()
+    assert (SHIPPED if policy == "ppo" else SHIPPED_DRIVE).is_file()
     large = ["--map", "generator:warehouse", "--steps", "40", "--seed", "10000"]
-    assert main(["run", "--policy", "ppo", *large, "--out", str(tmp_path)]) == 0
+    assert main(["run", "--policy", policy, *large, "--out", str(tmp_path)]) == 0
     report = tmp_path / "eval.json"
-    args = ["evaluate", "--policy", "ppo", *large, "--episodes", "1", "--quiet"]
+    args = ["evaluate", "--policy", policy, *large, "--episodes", "1", "--quiet"]
     assert main([*args, "--json", str(report)]) == 0
     assert json.loads(report.read_text())["summary"]["team"]["coverage"]["mean"] > 0
 

@@ -1,10 +1,13 @@
 """The merge test's geometry as readable numpy (the oracle of ``map_kernels.merge_test``):
 the overlap of two polynomials on the first one's axis and their two-way RMS error γ there,
-as ``slam/merging.py`` computed them before the test was compiled."""
+as ``slam/merging.py`` computed them before the test was compiled; and a polynomial's
+steepest slope as numpy's polynomial functions find it (the oracle of
+``Polynomial.max_slope``)."""
 
 from __future__ import annotations
 
 import numpy as np
+import numpy.polynomial.polynomial as P
 
 from polyslam_env.slam import kernels
 from polyslam_env.slam.landmarks import own_orders
@@ -67,3 +70,13 @@ def _errors(points: np.ndarray, poly: Polynomial) -> np.ndarray:  # (k,)
 
 def _rms(values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(values**2)))
+
+
+def max_slope(poly: Polynomial) -> float:
+    """``Polynomial.max_slope`` as numpy's polynomial functions compute it, for any order:
+    the slope at the ends and at the real roots of p'' inside the extent."""
+    curvature = P.polytrim(P.polyder(poly.coeffs, 2))
+    turns = P.polyroots(curvature) if len(curvature) > 1 else np.zeros(0)
+    real = turns.real[np.abs(turns.imag) <= 1e-9 * np.maximum(1.0, np.abs(turns.real))]
+    inside = real[(real > poly.lo) & (real < poly.hi)]
+    return float(np.max(np.abs(poly.slope(np.concatenate([[poly.lo, poly.hi], inside])))))

@@ -7,6 +7,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+import scipy.linalg
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -18,6 +19,7 @@ from polyslam_env.slam.fitting import (
     concat,
     fit_polynomial,
     polynomial_points,
+    solve_upper,
     store_beams,
     stored_points,
 )
@@ -357,3 +359,21 @@ def test_fit_polynomial__shape_fixed_jacobians_match_offset_finite_differences(
     np.testing.assert_allclose(
         fit.Gy[0], fd_jacobian(of_noise, np.zeros(len(stored))), rtol=FD_RTOL, atol=FD_ATOL
     )
+
+
+@pytest.mark.parametrize("transposed", [False, True])
+@pytest.mark.parametrize("order", ["C", "F"])
+def test_solve_upper__bit_identical_to_scipy_solve_triangular(transposed: bool, order: str) -> None:
+    """The fits' triangular solves give scipy's floats exactly (R from a QR, as the fits make
+    it, in either memory order; one and several right-hand sides), and fail as it does."""
+    rng = np.random.default_rng(7)
+    for size in (1, 2, 4, 6):
+        r = np.linalg.qr(rng.normal(size=(12, size)))[1]
+        r = np.asfortranarray(r) if order == "F" else np.ascontiguousarray(r)
+        for rhs in (rng.normal(size=size), rng.normal(size=(size, 3))):
+            want = scipy.linalg.solve_triangular(r, rhs, trans="T" if transposed else 0)
+            assert solve_upper(r, rhs, transposed).tobytes() == want.tobytes()
+    with pytest.raises(ValueError, match="infs or NaNs"):
+        solve_upper(np.eye(2), np.array([1.0, math.nan]))
+    with pytest.raises(np.linalg.LinAlgError, match="singular"):
+        solve_upper(np.diag([1.0, 0.0]), np.ones(2))

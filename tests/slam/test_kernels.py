@@ -357,15 +357,21 @@ def test_update_sparse__with_rotation_states__equals_numpy_oracle(
         np.testing.assert_array_equal(got_cov[block, block], cov[block, block])
 
 
-@pytest.mark.parametrize(("n_state", "consider_from"), [(31, 17), (31, 31), (31, 3), (8, 5)])
-def test_joseph_blocks__bit_identical_to_the_full_update(n_state: int, consider_from: int) -> None:
+@pytest.mark.parametrize(
+    ("n_state", "consider_from", "rows"),
+    [(31, 17, 5), (31, 31, 5), (31, 3, 5), (8, 5, 5), (31, 17, 1), (31, 17, 2), (31, 17, 8)],
+)
+def test_joseph_blocks__bit_identical_to_the_full_update(
+    n_state: int, consider_from: int, rows: int
+) -> None:
     """Leaving the considered block out and the cross block's zero products out changes no
-    bit: K's considered rows are exact zeros."""
-    rng = np.random.default_rng(n_state + consider_from)
+    bit: K's considered rows are exact zeros (and with 1, 2, 5 or 8 rows of K, the first and
+    last of which are summed in their own passes)."""
+    rng = np.random.default_rng(n_state + consider_from + rows)
     cov = random_spd(rng, n_state, 0.01)
     if consider_from < n_state:  # a signed zero in the considered block keeps its sign
         cov[consider_from, consider_from] = -0.0
-    kt, wt = rng.normal(size=(5, n_state)), rng.normal(size=(5, n_state))
+    kt, wt = rng.normal(size=(rows, n_state)), rng.normal(size=(rows, n_state))
     kt[:, consider_from:] = 0.0
     wt[:, 2] = -0.0  # signed zeros in W must not leak through either
     want, got = cov.copy(), cov.copy()

@@ -16,10 +16,11 @@ from polyslam_env.slam.merging import (
     find_merge,
     merge_angle,
     merge_points,
+    unit_tangent,
 )
 from polyslam_env.slam.polynomial import Polynomial
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
-from tests.slam.reference_merging import merge_gamma, overlap_interval
+from tests.slam.reference_merging import max_slope, merge_gamma, overlap_interval
 
 GAMMA_M = 0.35  # paper value
 
@@ -216,6 +217,33 @@ def test_max_slope__exact_against_dense_sampling() -> None:
         dense = np.abs(poly.slope(np.linspace(poly.lo, poly.hi, 20001))).max()
         assert poly.max_slope() == pytest.approx(dense, abs=1e-3)
         assert poly.max_slope() >= dense - 1e-12
+
+
+def test_max_slope__bit_identical_to_numpys_polynomial_functions() -> None:
+    """Lines, parabolas, cubics (a turn inside the extent, outside, none: b₃ = 0, and
+    b₂ = 0) and the orders 4 and 5 give the same float as polyder, polytrim and polyroots."""
+    rng = np.random.default_rng(6)
+    for k in range(400):
+        order = 1 + k % 5
+        coeffs = rng.normal(0.0, 2.0, order + 1)
+        if k % 7 == 0 and order >= 3:
+            coeffs[3] = 0.0
+        if k % 11 == 0 and order >= 2:
+            coeffs[2] = 0.0
+        lo = float(rng.uniform(-2.0, 1.0))
+        poly = Polynomial(1 + k % 2, coeffs, lo, lo + float(rng.uniform(0.01, 3.0)))
+        assert poly.max_slope() == max_slope(poly)
+
+
+def test_unit_tangent__same_floats_as_numpys_norm() -> None:
+    """The tangent divided by its length as ``np.linalg.norm`` computes it, bit for bit."""
+    rng = np.random.default_rng(8)
+    for k in range(200):
+        poly = Polynomial(1 + k % 2, rng.normal(0.0, 2.0, 4), -1.0, 1.0)
+        xi = float(rng.uniform(-1.0, 1.0))
+        slope = float(poly.slope(xi))
+        t = np.array([1.0, slope]) if poly.variate == 1 else np.array([slope, 1.0])
+        assert unit_tangent(poly, xi).tobytes() == (t / np.linalg.norm(t)).tobytes()
 
 
 def test_fit__a_shape_curving_away_between_its_points_is_refused() -> None:

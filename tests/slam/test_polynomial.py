@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from numpy.polynomial import Polynomial as NpPoly
 
 from polyslam_env.slam import kernels
-from polyslam_env.slam.polynomial import polyval, polyval_rows
+from polyslam_env.slam.polynomial import Polynomial, polyval, polyval_rows
 from tests.slam import reference_floats
 from tests.slam.reference import taylor_at
 
@@ -87,3 +87,17 @@ def test_polyval__bit_identical_to_numpys(
         got = polyval(at, c, derivative)
         np.testing.assert_array_equal(got, expected, strict=True)
         assert np.signbit(got).tolist() == np.signbit(expected).tolist()
+
+
+@pytest.mark.parametrize("variate", [1, 2])
+def test_to_xy__same_as_numpy_stack(variate: int) -> None:
+    """(ξ, η) to (x¹, x²) as ``np.stack`` on the last axis puts them, for 0-d, 1-d and 2-d
+    arrays; different shapes are refused in one line."""
+    rng = np.random.default_rng(variate)
+    poly = Polynomial(variate, np.array([0.5, 0.1, 0.0, 0.0]), -1.0, 1.0)
+    for shape in ((), (5,), (3, 4)):
+        xi, eta = rng.normal(size=shape), rng.normal(size=shape)
+        pair = [xi, eta] if variate == 1 else [eta, xi]
+        np.testing.assert_array_equal(poly.to_xy(xi, eta), np.stack(pair, axis=-1))
+    with pytest.raises(ValueError, match="same shape"):
+        poly.to_xy(np.zeros(3), np.zeros(4))
