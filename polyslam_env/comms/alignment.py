@@ -30,7 +30,7 @@ import numpy as np
 
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.fitting import J_ROT
-from polyslam_env.slam.links import line_angle, off_square
+from polyslam_env.slam.links import SQUARE_MIN_LENGTH, line_angle, off_square
 from polyslam_env.slam.polynomial import Polynomial
 
 #: χ²₃ 99 % quantile: a correction of T further than this (in Σ_T's metric) is refused, and
@@ -174,12 +174,6 @@ def _refine_from(
     # down (Förstner & Wrobel's σ̂₀², capped below at 1)
     factor = max(1.0, float(weight @ (residual * residual)) / len(counts))
     return t, factor * 0.5 * (posterior + posterior.T)
-
-
-#: Straight walls shorter than this (m) give no direction to :func:`square_turn`: a short
-#: piece's fitted direction is loose (a degree or more), and a round column's arc fitted as a
-#: line has none; 1 m as for the alignment's other length floors.
-SQUARE_MIN_LENGTH = 1.0
 
 
 def is_straight_wall(poly: Polynomial, min_length: float = SQUARE_MIN_LENGTH) -> bool:

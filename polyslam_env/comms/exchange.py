@@ -1156,9 +1156,13 @@ class RendezvousExchange:
         walls are taken to know their directions as well; its record carries no turn). The
         refinement then matched the walls to the wrong ones: on the warehouse's shelf rows one
         was 4.2° off the truth where the camera was 1.4° off, with a posterior σ of 0.15°
-        (README "SLAM on large floor plans")."""
+        (README "SLAM on large floor plans"). Like the ties, only where the receiver's own
+        map says its floor is rectilinear (``SlamConfig.square_evidence``;
+        :meth:`~polyslam_env.slam.walls.WallGraph.rectilinear`)."""
         cfg = slam.config
         if not (cfg.square_walls and cfg.rotation_states):
+            return False
+        if cfg.square_evidence and not slam.walls.rectilinear():
             return False
         polys = slam.polynomials()
         held = [k for k, poly in enumerate(polys) if is_straight_wall(poly)]
