@@ -249,13 +249,14 @@ def _first_step_seconds(cache_dir: str, config: dict[str, Any]) -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
-def bench_compile(repeats: int = 1) -> dict[str, Any]:
+def bench_compile(repeats: int = 1, slam: bool = True) -> dict[str, Any]:
     """Import + first env reset + first step in a fresh process with an empty numba cache
     (``cold``: every kernel the step uses compiles) and then with that cache filled (``warm``:
     kernels load from disk), in seconds (the warm figure is the median of ``repeats``); the
     compile cost is their difference. ``cached_files`` counts numba's index files left in the
-    cache (one per cached kernel's source file and function)."""
-    config = _env_config()
+    cache (one per cached kernel's source file and function). ``slam=False`` times the env
+    without SLAM (``slam_enabled`` in the result says which)."""
+    config = {**_env_config(), "slam_enabled": slam}
     with tempfile.TemporaryDirectory(prefix="polyslam-numba-bench-") as cache:
         cold = _first_step_seconds(cache, config)
         warm = [_first_step_seconds(cache, config) for _ in range(max(repeats, 1))]
@@ -266,6 +267,7 @@ def bench_compile(repeats: int = 1) -> dict[str, Any]:
         "warm_s": warm_s,
         "compile_s": cold - warm_s,
         "cached_files": len(index),
+        "slam_enabled": slam,
     }
 
 
