@@ -138,6 +138,18 @@ def test_slam__imports_alone_without_world_env_or_physics() -> None:
     assert result.returncode == 0, result.stdout + result.stderr
 
 
+def test_env__imports_without_scipy_stats() -> None:
+    """Importing the env (what every worker process of ``reproduce``, ``fidelity`` or a
+    vectorised env does first) does not load ``scipy.stats``: about a second of each
+    process's start. Import it inside the functions that need it."""
+    code = (
+        "import sys, polyslam_env.environment.parallel, polyslam_env.apps.reproduce;"
+        "sys.exit(1 if 'scipy.stats' in sys.modules else 0)"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
 # -- no import circles ----------------------------------------------------------------------------
 def _module(path: Path, root: Path) -> str:
     """The dotted name of a source file under ``root`` (a package's ``__init__`` is the

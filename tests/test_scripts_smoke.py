@@ -37,6 +37,8 @@ def _run(*args: str, cwd: Path = ROOT) -> str:
 PRINTING = [
     (["divergence_rates.py", "--seeds", "1"], "healthy (80 steps): flag fired in"),
     (["bench_team_act.py", "--steps", "2", "4", "--compare", "."], "this tree "),
+    (["env_stage_calls.py", "--env", "noslam", "--first", "2", "--last", "6"],
+     "Python calls per env step"),
     (["exchange_bytes.py"], "polynomials"),
     (["floor_before_after.py", "--tree", ".", "--first", "2", "--last", "4"], "env calls"),
     (["landmark_consistency.py", "--seeds", "1", "--robots", "1", "--steps", "40"], "c0_nees"),

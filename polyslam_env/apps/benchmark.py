@@ -211,7 +211,7 @@ def _system_sections(
         for row in mem["episodes"]:
             _emit(report, "memory", row)
     if "compile" in wanted:
-        out["compile"] = _emit(report, "compile", system.bench_compile())
+        out["compile"] = _emit(report, "compile", system.bench_compile(slam=plan.compile_slam))
     if workers:
         rows = system.bench_workers(workers, plan.env_steps, plan.repeats, seed)
         out["workers"] = [_emit(report, "workers", r) for r in rows]

@@ -151,6 +151,9 @@ class Plan:
     floor_steps: tuple[int, int] = (100, 400)  # the floor episode: measured steps first…last
     reproduce_runs: int = 100  # runs of the reproduction (0: skip it)
     train_timesteps: int = 1536  # timesteps of the training run (0: skip it)
+    # the compile figure's env: with SLAM (every kernel a user's first step compiles, ~70 s
+    # cold) or without it (a tenth of the kernels: ``tiny`` only exercises the code)
+    compile_slam: bool = True
 
 
 #: ``quick`` runs in a few minutes and leaves out the reproduction and the training run,
@@ -164,7 +167,7 @@ PLANS = {
     "tiny": Plan(repeats=2, slam_warmup=1, slam_steps=3, world_steps=2, env_steps=3, vec_steps=2,
                  mpe_steps=5, team_steps=2, memory_episodes=2, memory_steps=3, profile_steps=2,
                  slam_sizes=(10, 30), robot_counts=(1, 3), team_sizes=(2, 3),
-                 floor_steps=(2, 5), reproduce_runs=2, train_timesteps=0),
+                 floor_steps=(2, 5), reproduce_runs=2, train_timesteps=0, compile_slam=False),
 }  # fmt: skip
 
 

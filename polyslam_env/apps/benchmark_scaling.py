@@ -114,7 +114,9 @@ def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str
     grows as maps fill and robots meet, so the figure is the mean over the whole horizon, next
     to the median step), and the ratio of each mean to the first size's. ``messages`` and
     ``polynomials`` count what the exchange applied (in the last episode): integrating them is
-    the part of the step that grows with the number of meetings, not with the team size."""
+    the part of the step that grows with the number of meetings, not with the team size;
+    ``skipped`` of those polynomials were versions their receiver held (no transform, no
+    refit), ``refits`` counts the received chains refitted."""
     from polyslam_env.environment.parallel import parallel_env
 
     rows = []
@@ -138,6 +140,9 @@ def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str
                 "max_ms": 1e3 * float(np.max(times)),
                 "messages": len(history),  # applied in the last episode
                 "polynomials": sum(d.n_polynomials for d in history),
+                # of those, skipped as versions held; received chains refitted
+                "skipped": sum(exchange.skipped) if exchange is not None else 0,
+                "refits": sum(exchange.refits) if exchange is not None else 0,
             }
         )
     for r in rows:
@@ -244,13 +249,14 @@ def _first_step_seconds(cache_dir: str, config: dict[str, Any]) -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
-def bench_compile(repeats: int = 1) -> dict[str, Any]:
+def bench_compile(repeats: int = 1, slam: bool = True) -> dict[str, Any]:
     """Import + first env reset + first step in a fresh process with an empty numba cache
     (``cold``: every kernel the step uses compiles) and then with that cache filled (``warm``:
     kernels load from disk), in seconds (the warm figure is the median of ``repeats``); the
     compile cost is their difference. ``cached_files`` counts numba's index files left in the
-    cache (one per cached kernel's source file and function)."""
-    config = _env_config()
+    cache (one per cached kernel's source file and function). ``slam=False`` times the env
+    without SLAM (``slam_enabled`` in the result says which)."""
+    config = {**_env_config(), "slam_enabled": slam}
     with tempfile.TemporaryDirectory(prefix="polyslam-numba-bench-") as cache:
         cold = _first_step_seconds(cache, config)
         warm = [_first_step_seconds(cache, config) for _ in range(max(repeats, 1))]
@@ -261,6 +267,7 @@ def bench_compile(repeats: int = 1) -> dict[str, Any]:
         "warm_s": warm_s,
         "compile_s": cold - warm_s,
         "cached_files": len(index),
+        "slam_enabled": slam,
     }
 
 

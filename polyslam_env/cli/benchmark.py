@@ -33,7 +33,7 @@ COLUMNS = {
     "backends": [("slam.backend", 25), ("steps/s", 9), ("IQR", 9), ("min–max", 17),
                  ("× no SLAM", 9)],
     "team": [("robots", 9), ("steps", 6), ("mean ms", 9), ("median ms", 9), ("max ms", 9),
-             ("× first", 8), ("messages", 8), ("polys", 6)],
+             ("× first", 8), ("messages", 8), ("polys", 6), ("skipped", 7), ("refits", 6)],
     "memory": [("episode", 9), ("steps", 6), ("peak MB", 9), ("RSS MB", 9)],
     "compile": [("cold s", 9), ("warm s", 9), ("compile s", 9), ("cached", 7)],
     "workers": [("processes", 9), ("steps/s each", 12), ("total", 9), ("× one", 7)],
@@ -80,7 +80,8 @@ TITLES = {
     "backends": "env steps per second per slam.backend (3 robots, generator:pillar_hall, pillar"
     " sensor on, vector obs)",
     "team": "env step vs team size (generator:rooms, exchange on, no coverage end;"
-    " messages and polynomials the exchange applied)",
+    " messages and polynomials the exchange applied, polynomials skipped as held, chains"
+    " refitted)",
     "memory": "RSS of one env (3 robots, full SLAM) in a fresh process, after each episode",
     "compile": "first env reset + step in a fresh process: empty numba cache vs warm cache",
     "workers": "env steps per second with N processes, each stepping its own env (full SLAM)",
@@ -273,7 +274,8 @@ def _opt(value: float | None, digits: int = 2) -> str:
 def _team_row(r: dict[str, Any]) -> str:
     cells = [str(r["robots"]), str(r["steps"]), f"{r['mean_ms']:.1f}", f"{r['median_ms']:.1f}",
              f"{r['max_ms']:.1f}", f"{r['ratio_to_first']:.1f}", str(r["messages"]),
-             str(r["polynomials"])]  # fmt: skip
+             str(r["polynomials"]), str(r.get("skipped", "n/a")),
+             str(r.get("refits", "n/a"))]  # fmt: skip
     return _columns("team", cells)
 
 

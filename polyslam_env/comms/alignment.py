@@ -30,7 +30,7 @@ import numpy as np
 
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.fitting import J_ROT
-from polyslam_env.slam.links import line_angle, off_square
+from polyslam_env.slam.links import SQUARE_MIN_LENGTH, line_angle, off_square
 from polyslam_env.slam.polynomial import Polynomial
 
 #: χ²₃ 99 % quantile: a correction of T further than this (in Σ_T's metric) is refused, and
@@ -176,12 +176,6 @@ def _refine_from(
     return t, factor * 0.5 * (posterior + posterior.T)
 
 
-#: Straight walls shorter than this (m) give no direction to :func:`square_turn`: a short
-#: piece's fitted direction is loose (a degree or more), and a round column's arc fitted as a
-#: line has none; 1 m as for the alignment's other length floors.
-SQUARE_MIN_LENGTH = 1.0
-
-
 def is_straight_wall(poly: Polynomial, min_length: float = SQUARE_MIN_LENGTH) -> bool:
     """Whether ``poly`` is straight (no coefficient past the slope) and at least
     ``min_length`` long along ξ."""
@@ -246,18 +240,20 @@ def _match(
     cos_max = np.cos(np.radians(MAX_ANGLE_DEG))
     for w, poly in enumerate(walls):
         xi, eta = poly.from_xy(p)
-        inside = (xi >= poly.lo) & (xi <= poly.hi)
-        if not inside.any():
+        (at,) = np.nonzero((xi >= poly.lo) & (xi <= poly.hi))  # inside its extent
+        if not len(at):
             continue
+        xi, eta = xi[at], eta[at]  # the rest, point by point, only where it can pair
         slope = poly.slope(xi)
-        normal = poly.normals(xi)  # (N, 2)
+        normal = poly.normals(xi)  # (n, 2)
         r = (eta - poly.value(xi)) / np.sqrt(1.0 + slope * slope)
-        g = np.einsum("ni,nij->nj", normal, dp_dt)  # (N, 3) ∂r/∂T
-        pred = np.sqrt(np.einsum("ni,ij,nj->n", g, cov_t, g) + point_var + wall_var[w])
-        parallel = np.abs(np.einsum("ni,ni->n", normal, tangents)) <= np.sqrt(1 - cos_max**2)
+        g = np.einsum("ni,nij->nj", normal, dp_dt[at])  # (n, 3) ∂r/∂T
+        pred = np.sqrt(np.einsum("ni,ij,nj->n", g, cov_t, g) + point_var[at] + wall_var[w])
+        parallel = np.abs(np.einsum("ni,ni->n", normal, tangents[at])) <= np.sqrt(1 - cos_max**2)
         score = np.abs(r) / pred
-        ok = inside & parallel & (score <= GATE_SIGMAS) & (score < best)
-        best[ok], residual[ok], grad[ok], wall_of[ok] = score[ok], r[ok], g[ok], w
+        ok = parallel & (score <= GATE_SIGMAS) & (score < best[at])
+        rows = at[ok]
+        best[rows], residual[rows], grad[rows], wall_of[rows] = score[ok], r[ok], g[ok], w
     keep = wall_of >= 0
     if not keep.any():
         return None

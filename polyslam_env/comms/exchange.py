@@ -46,7 +46,8 @@ variance of their offset along the curve's normal (:func:`normal_variance`):
   and merges) are removed from the state before the piece is inserted;
 * rule 3: the piece is inserted with :meth:`PolySlam.insert_landmark`, whose merge check fuses
   it with an overlapping landmark made of independent data (own beams, or a third robot's).
-  Chains of provenance through a third robot are not tracked.
+  Through a third robot only unchanged copies keep their provenance ("Versions" below): a
+  copy the third robot merged with its own data is its own new version.
 
 **Wire frame.** A message on the channel is ``encode(message)`` (``messages.py``) followed by
 an exchange trailer: the sender's pose variances σ²_x, σ²_y, σ²_θ (3 floats of the message's
@@ -71,11 +72,26 @@ the transform's Jacobian is taken w.r.t. the *current* pose (identity chain when
 **Bookkeeping.** Per ordered pair (sender, receiver): the sender's SLAM step at their last
 meeting; only landmarks with ``changed_at`` after it are sent. Landmarks inserted from a
 message get ``changed_at`` = the receiver's step, so they are not sent back at the same
-meeting; an inserted landmark that was *not* merged is also remembered as known to its
-sender and never echoed back to it later (a merged one carries the receiver's own data and
-is sent). Landmarks of a message that expires (``max_age``) are sent again at the next
+meeting. Landmarks of a message that expires (``max_age``) are sent again at the next
 meeting of that pair. Nothing is applied twice: every delivery is checked against the set of
 applied message ids.
+
+**Versions.** Every record names the version it carries: (origin robot, landmark id in the
+origin's map), unique because the SLAM never reuses an id and a refit or merge makes a new
+one (``slam/lineage.py``). A landmark the receiver inserted unchanged (not merged) is a copy
+of that version and is forwarded under it; anything the receiver refits or merges is its
+own new version. So a wall that travels along a chain of meetings keeps its name, and
+
+* a receiver skips, before any transform or refit, a record of its own making (an echo
+  through a third robot) or of a version it has integrated before (a forwarded copy of what
+  it got directly, or the other way round): the integration of received walls is bounded by
+  the number of versions made on the floor, not by the number of meetings
+  (:attr:`RendezvousExchange.skipped`, :attr:`RendezvousExchange.refits`);
+* a sender does not send a version its peer made, one it delivered to that peer before (the
+  channel acknowledges deliveries; a lost message is sent again), or one the peer sent it.
+
+A skipped version's points are not taken again from a later copy (its transform may be
+better): the same information is never fused twice, and the first copy is the one kept.
 
 **Other payloads.** With ``payload="points"`` (beam hits since the last meeting) or
 ``"grid"`` (occupancy raster of the sender's whole map), the receiver decodes the message
@@ -383,9 +399,19 @@ def received_point_set(
         xy=xy,
         d_state=d_state,
         d_noise=d_noise,
-        noise_cov=scipy.linalg.block_diag([[record.c0_var]], noise_cov) / RECEIVED_CI_WEIGHT,
+        noise_cov=_with_c0_variance(record.c0_var, noise_cov) / RECEIVED_CI_WEIGHT,
         weights=np.ones(n_pts),
     )
+
+
+def _with_c0_variance(c0_var: float, noise_cov: np.ndarray) -> np.ndarray:
+    """The block diagonal [[c0_var, 0], [0, noise_cov]] (as ``scipy.linalg.block_diag``,
+    which costs ~100 µs a call in its argument handling, once per received record)."""
+    k = len(noise_cov)
+    out = np.zeros((1 + k, 1 + k))
+    out[0, 0] = c0_var
+    out[1:, 1:] = noise_cov
+    return out
 
 
 def chain_points(poly: Polynomial, chord_tol: float, spacing: float) -> np.ndarray:
@@ -546,9 +572,9 @@ class RendezvousExchange:
             raise ValueError("alignment mode needs align_rng (RANSAC's and ICP's draws)")
         self._align_rng = align_rng
         self.scan_logs = [ScanLog(max_range) for _ in range(num_robots)]
-        # alignment mode: every wall a receiver has been sent by each sender (newest version
-        # per landmark id, sender frame), fused or not: what the free-space test checks
-        self._heard: dict[tuple[int, int], dict[int, Polynomial]] = {}
+        # alignment mode: every wall a receiver has been sent by each sender (per version,
+        # sender frame), fused or not: what the free-space test checks
+        self._heard: dict[tuple[int, int], dict[tuple[int, int], Polynomial]] = {}
         # alignment mode: where each robot's beams have been, to veto wrong alignments
         self.free_space = (
             [FreeSpace(FREE_RESOLUTION, FREE_MARGIN, max_range) for _ in range(num_robots)]
@@ -563,7 +589,12 @@ class RendezvousExchange:
         self._max_range = float(max_range)
         self._last_meeting: dict[tuple[int, int], int] = {}  # (s, r) → s's SLAM step
         self._last_log: dict[tuple[int, int], int] = {}  # (s, r) → s's scan-log length
-        self._known: list[dict[int, set[int]]] = [{} for _ in range(num_robots)]
+        # versions (origin robot, its landmark id; messages.py): per robot, its landmarks that
+        # are unchanged copies of a received version; per receiver, the versions it has
+        # integrated; per ordered pair (s, r), the versions s knows r holds
+        self._copies: list[dict[int, tuple[int, int]]] = [{} for _ in range(num_robots)]
+        self._seen: list[set[tuple[int, int]]] = [set() for _ in range(num_robots)]
+        self._peer_holds: dict[tuple[int, int], set[tuple[int, int]]] = {}
         self._resend: dict[tuple[int, int], set[int]] = {}  # expired landmark ids per pair
         self._sent_ids: dict[int, tuple[int, int, tuple[int, ...]]] = {}  # msg → s, r, ids
         self._sightings: dict[tuple[int, int, int], _Sighting] = {}  # (r, s, step) → r's view
@@ -579,6 +610,9 @@ class RendezvousExchange:
         self.superseded = [0] * num_robots  # landmarks replaced by a newer version (rule 2)
         self.dropped_points = [0] * num_robots  # received points too uncertain to keep
         self.off_square = [0] * num_robots  # refined transforms refused as off square (_align)
+        self.skipped = [0] * num_robots  # received records of versions already held, skipped
+        self.refits = [0] * num_robots  # received chains refitted (refit_pieces calls)
+        self.fused = [0] * num_robots  # refitted pieces fused (_fuse calls)
         self._rendezvous = [0] * num_robots
         self._polys_sent = [0] * num_robots
         self._polys_received = [0] * num_robots
@@ -698,6 +732,7 @@ class RendezvousExchange:
             "messages_pending": self.channel.pending(sender=i),
             "polynomials_sent": self._polys_sent[i],
             "polynomials_received": self._polys_received[i],
+            "polynomials_skipped": self.skipped[i],
             "received_points_dropped": self.dropped_points[i],
             "refinements_off_square": self.off_square[i],
             "alignments_attempted": sum(a.receiver == i for a in self.alignments),
@@ -742,13 +777,24 @@ class RendezvousExchange:
             out.append((s, r, len(payload)))
         return out
 
+    def version(self, robot: int, landmark_id: int) -> tuple[int, int]:
+        """The version (origin robot, landmark id in its map) a robot's landmark holds: that of
+        the received record it is an unchanged copy of, else its own (robot, id)."""
+        return self._copies[robot].get(landmark_id, (robot, landmark_id))
+
     def _landmarks_to_send(self, s: int, r: int, slam: PolySlam) -> tuple[int, ...]:
+        """s's landmarks changed since it last met r (or lost on the way to r), but for the
+        versions s knows r holds: r's own, those acknowledged (delivered) to r, those r sent."""
         since = self._last_meeting.get((s, r), -1)
         wanted = set(slam.changed_since(since)) | self._resend.pop((s, r), set())
-        known = self._known[s]
-        return tuple(
-            lid for lid in slam.landmark_ids if lid in wanted and r not in known.get(lid, ())
-        )
+        holds = self._peer_holds.get((s, r), set())
+        out = []
+        for lid in slam.landmark_ids:
+            if lid in wanted:
+                origin, _ = tag = self.version(s, lid)
+                if origin != r and tag not in holds:
+                    out.append(lid)
+        return tuple(out)
 
     def _build(
         self,
@@ -769,7 +815,13 @@ class RendezvousExchange:
         polys = slam.polynomials()
         index = {lid: n for n, lid in enumerate(slam.landmark_ids)}
         records = tuple(
-            PolynomialRecord(lid, polys[index[lid]], max(slam.c0_variance(lid), 0.0)) for lid in ids
+            PolynomialRecord(
+                self.version(s, lid)[1],
+                polys[index[lid]],
+                max(slam.c0_variance(lid), 0.0),
+                self.version(s, lid)[0],
+            )
+            for lid in ids
         )
         since_log = self._last_log.get((s, r), 0)
         self._last_meeting[(s, r)] = slam.step_count
@@ -859,7 +911,7 @@ class RendezvousExchange:
                 mine = self._feature_map(r, slams, features)
                 near = (message.header.pose[:2], sighting.pose[:2])
                 heard = self._heard.setdefault((s, r), {})
-                heard.update((rec.landmark_id, rec.polynomial) for rec in message.records)
+                heard.update((_version(rec), rec.polynomial) for rec in message.records)
                 walls = list(heard.values())
                 transform = self._aligned_transform(delivered, mine, theirs, near, walls, slams[r])
                 if transform is None and sent_ids is not None:
@@ -869,6 +921,9 @@ class RendezvousExchange:
                 transform = self._transform(slams[r].pose, sighting, message.header, pose_var)
             if transform is not None:
                 received, ids = self._integrate(slams[r], message, transform, s)
+                versions = {_version(rec) for rec in message.records}
+                self._peer_holds.setdefault((s, r), set()).update(versions)  # acknowledged
+                self._peer_holds.setdefault((r, s), set()).update(versions)  # s sent them
             self._polys_received[r] += n_records
         return DeliveredMessage(
             delivered.msg_id,
@@ -1014,15 +1069,21 @@ class RendezvousExchange:
         self._follow_lineage(r, slam)
         t, d_state, d_noise, noise_cov = transform
         cov_t = d_noise @ noise_cov @ d_noise.T
-        if self.config.align_maps and message.records:
-            t, cov_t = self._align(slam, message, t, cov_t, sender)
+        seen = self._seen[r]
+        fresh = [rec for rec in message.records if not _held(rec, r, seen)]
+        self.skipped[r] += len(message.records) - len(fresh)  # no transform, no refit
+        if self.config.align_maps and fresh:
+            # on the new versions only: a held copy would pull T back to its meeting's error
+            t, cov_t = self._align(slam, r, fresh, t, cov_t, sender)
         limit = slam.config.rho_min / RECEIVED_SIGMAS
         # a received wall is turned from the truth by the transform's turn (its part through
         # the receiver's pose, and the rest's variance), not by the receiver's heading alone
         turn = (np.asarray(d_state, dtype=float)[2, :3].copy(), float(cov_t[2, 2]))
         received: list[Polynomial] = []
         ids: list[int] = []
-        for record in message.records:
+        for record in fresh:
+            version = _version(record)
+            seen.add(version)
             pts = received_point_set(
                 record, t, d_state, d_noise, noise_cov, slam.mean.size, self.chord_tol,
                 self.spacing,
@@ -1031,17 +1092,21 @@ class RendezvousExchange:
                                           self.spacing) <= limit  # fmt: skip
             self.dropped_points[r] += int(np.count_nonzero(~sure))
             for rows in uncovered_runs(sure, pts.xy, slam.config.merge_min_overlap):
-                for piece, fit in refit_pieces(
-                    _subset(pts, rows), self.order, self.auto_order, self.refit_tol
-                ):
+                for piece, fit in self._refit(r, _subset(pts, rows)):
                     received.append(fit.poly)
-                    ids += self._fuse(slam, piece, fit, sender, r, 0, turn)
+                    ids += self._fuse(slam, piece, fit, (sender, version), r, 0, turn)
         return received, ids
+
+    def _refit(self, r: int, points: PointSet) -> list[tuple[PointSet, Fit]]:
+        """:func:`refit_pieces` with the exchange's fit settings, counted in :attr:`refits`."""
+        self.refits[r] += 1
+        return refit_pieces(points, self.order, self.auto_order, self.refit_tol)
 
     def _align(
         self,
         slam: PolySlam,
-        message: PolynomialMessage,
+        r: int,
+        records: Sequence[PolynomialRecord],
         t: np.ndarray,
         cov_t: np.ndarray,
         sender: int,
@@ -1052,36 +1117,34 @@ class RendezvousExchange:
         to that meeting's error); one (chain, wall) pair weighs as one offset whose variance
         is the range noise's plus both landmarks' normal variances (the sender's from its
         record, the receiver's from its state: :func:`normal_variance`)."""
-        sources = self._sources[message.header.receiver]
+        sources = self._sources[r]
         anchors = [
             (poly, normal_variance(poly, slam.c0_variance(lid)))
             for lid, poly in zip(slam.table.ids, slam.polynomials(), strict=True)
             if sender not in sources.get(lid, ())
         ]
-        chains = [
-            chain_points(rec.polynomial, self.chord_tol, self.spacing) for rec in message.records
-        ]
+        chains = [chain_points(rec.polynomial, self.chord_tol, self.spacing) for rec in records]
         refined, cov_refined = refine_transform(
             t,
             cov_t,
             chains,
             [poly for poly, _ in anchors],
             slam.config.range_sigma,
-            chain_var=[normal_variance(rec.polynomial, rec.c0_var) for rec in message.records],
+            chain_var=[normal_variance(rec.polynomial, rec.c0_var) for rec in records],
             wall_var=[var for _, var in anchors],
             restarts=self.config.align_restarts,
         )
         if not np.array_equal(refined, t) and self._off_square(
-            slam, message, t, refined, cov_refined
+            slam, records, t, refined, cov_refined
         ):
-            self.off_square[message.header.receiver] += 1
+            self.off_square[r] += 1
             return t, cov_t
         return refined, cov_refined
 
     @staticmethod
     def _off_square(
         slam: PolySlam,
-        message: PolynomialMessage,
+        records: Sequence[PolynomialRecord],
         t: np.ndarray,
         refined: np.ndarray,
         cov_refined: np.ndarray,
@@ -1093,13 +1156,17 @@ class RendezvousExchange:
         walls are taken to know their directions as well; its record carries no turn). The
         refinement then matched the walls to the wrong ones: on the warehouse's shelf rows one
         was 4.2° off the truth where the camera was 1.4° off, with a posterior σ of 0.15°
-        (README "SLAM on large floor plans")."""
+        (README "SLAM on large floor plans"). Like the ties, only where the receiver's own
+        map says its floor is rectilinear (``SlamConfig.square_evidence``;
+        :meth:`~polyslam_env.slam.walls.WallGraph.rectilinear`)."""
         cfg = slam.config
         if not (cfg.square_walls and cfg.rotation_states):
             return False
+        if cfg.square_evidence and not slam.walls.rectilinear():
+            return False
         polys = slam.polynomials()
         held = [k for k, poly in enumerate(polys) if is_straight_wall(poly)]
-        sent = straight_walls([rec.polynomial for rec in message.records])
+        sent = straight_walls([rec.polynomial for rec in records])
         if not held or not sent:
             return False
         k = max(held, key=lambda k: polys[k].hi - polys[k].lo)  # the longest
@@ -1114,13 +1181,14 @@ class RendezvousExchange:
         slam: PolySlam,
         points: PointSet,
         fit: Fit,
-        sender: int,
+        origin: tuple[int, tuple[int, int]],
         r: int,
         depth: int,
         turn: tuple[np.ndarray, float] | None = None,
     ) -> list[int]:
         """Fuse one received piece into receiver r's map; returns the ids that hold it.
-        ``turn``: the transform's turn (:meth:`PolySlam.insert_landmark`).
+        ``origin``: the sender and the record's version; ``turn``: the transform's turn
+        (:meth:`PolySlam.insert_landmark`).
 
         Rule 1 (keep the better): where a landmark of the same wall (PolySlam's merge test)
         has a normal-offset variance no larger than the piece's, the piece's points it covers
@@ -1130,6 +1198,8 @@ class RendezvousExchange:
         :meth:`PolySlam.insert_landmark`, whose merge check fuses it with an overlapping
         landmark built from independent (own or third-party) data.
         """
+        self.fused[r] += 1
+        sender, version = origin
         fit = _on_state(fit, slam.mean.size)
         cfg = slam.config
         var = normal_variance(fit.poly, _c0_variance(fit, slam.cov))
@@ -1146,10 +1216,8 @@ class RendezvousExchange:
             return [
                 lid
                 for rows in uncovered_runs(keep, points.xy, cfg.merge_min_overlap)
-                for piece, sub in refit_pieces(
-                    _subset(points, rows), self.order, self.auto_order, self.refit_tol
-                )
-                for lid in self._fuse(slam, piece, sub, sender, r, depth + 1, turn)
+                for piece, sub in self._refit(r, _subset(points, rows))
+                for lid in self._fuse(slam, piece, sub, origin, r, depth + 1, turn)
             ]
         sources = self._sources[r]
         for lid in walls:
@@ -1162,16 +1230,20 @@ class RendezvousExchange:
         sources[events[0].landmark_id] = frozenset({sender})  # the inserted piece
         self._follow_lineage(r, slam)  # its merges carry this sender with their partners'
         if not any(event.kind == MERGED for event in events):
-            # a pure copy of the sender's landmark: never echo it back
-            self._known[r].setdefault(lid, set()).add(sender)
+            # an unchanged copy of the sent version: forwarded under it, never echoed back
+            self._copies[r][lid] = version
         return [lid]
 
     def _follow_lineage(self, r: int, slam: PolySlam) -> None:
         """Carry the provenance of receiver r's landmarks over the changes its SLAM made
         since the last call (:mod:`~polyslam_env.slam.lineage`): a refit or merge holds the
         senders of its parents, a removed landmark none; O(changes), exactly."""
-        sources = self._sources[r]
+        sources, copies = self._sources[r], self._copies[r]
         for event in slam.lineage.since(self._lineage_at[r]):
+            for parent in event.parents:
+                copies.pop(parent, None)  # its heir holds this robot's own version
+            if event.kind == REMOVED:
+                copies.pop(event.landmark_id, None)
             if event.kind in (REPLACED, MERGED):
                 inherited = [sources.pop(p) for p in event.parents if p in sources]
                 if inherited:
@@ -1283,6 +1355,18 @@ def _on_state(fit: Fit, n_state: int) -> Fit:
     gx = np.zeros((1, n_state))
     gx[:, :3] = fit.Gx[:, :3]
     return Fit(fit.poly, fit.c0, gx, fit.Gy, fit.V, fit.rms, fit.order)
+
+
+def _held(record: PolynomialRecord, r: int, seen: set[tuple[int, int]]) -> bool:
+    """Whether receiver r holds a record's version: its own making, or one it integrated."""
+    version = _version(record)
+    return version[0] == r or version in seen
+
+
+def _version(record: PolynomialRecord) -> tuple[int, int]:
+    """A received record's version: (origin robot, landmark id in its map)."""
+    assert record.origin is not None  # decoded records always name it
+    return record.origin, record.landmark_id
 
 
 def _kind_name(message: Message) -> str:

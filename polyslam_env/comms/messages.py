@@ -20,15 +20,16 @@ Byte layout (all little-endian; ``F`` = 4 bytes for float32, 8 for float64)::
     8           4           sequence number                                    uint32
     12          3F          sender pose estimate x, y, θ                       float
     12+3F       F           sender's bearing to the receiver (rad)             float
-    payload, kind 1 (polynomials): 2 + Σ_i (6 + (m_i + 4) F) bytes
+    payload, kind 1 (polynomials): 2 + Σ_i (8 + (m_i + 4) F) bytes
     +0          2           number of records n                                uint16
     per record
-    +0          4           landmark id                                        uint32
-    +4          1           variate flag (1 or 2)                              uint8
-    +5          1           order m (>= 1)                                     uint8
-    +6          (m+1)F      coefficients c0, b1 … bm                           float
-    +6+(m+1)F   F           variance of c0                                     float
-    +6+(m+2)F   2F          extent lo, hi                                      float
+    +0          4           landmark id in its origin robot's map              uint32
+    +4          2           origin robot (whose map made this version)         uint16
+    +6          1           variate flag (1 or 2)                              uint8
+    +7          1           order m (>= 1)                                     uint8
+    +8          (m+1)F      coefficients c0, b1 … bm                           float
+    +8+(m+1)F   F           variance of c0                                     float
+    +8+(m+2)F   2F          extent lo, hi                                      float
     payload, kind 2 (points): 4 + 2NF bytes
     +0          4           number of points N                                 uint32
     +4          2NF         x0, y0, x1, y1, …                                  float
@@ -43,8 +44,15 @@ Byte layout (all little-endian; ``F`` = 4 bytes for float32, 8 for float64)::
     trailer (4 bytes)
     end-4       4           CRC-32 (zlib) of every preceding byte              uint32
 
-So a polynomial message with orders m_i is ``12 + 4F + 2 + Σ(6 + (m_i + 4)F) + 4`` bytes:
-68 bytes for one cubic in float32, 112 in float64. :func:`decode` rejects a wrong magic,
+So a polynomial message with orders m_i is ``12 + 4F + 2 + Σ(8 + (m_i + 4)F) + 4`` bytes:
+70 bytes for one cubic in float32, 114 in float64.
+
+A record's **origin** (robot, landmark id) names one version of a wall: the SLAM never reuses
+a landmark id, and a refit or merge makes a new one (``slam/lineage.py``), so the pair is the
+version. A robot forwarding a wall it received unchanged sends it under its origin's pair, so
+a receiver that already holds that version (or a sender that knows its peer does) skips it
+before any transform or refit (``comms/exchange.py``, "Versions"). Format version 2 added the
+origin (version 1 records had the sender's id only). :func:`decode` rejects a wrong magic,
 version, kind, width, length or checksum with a ``ValueError``; it never returns a partial
 message. Grid cell ``[r, c]`` covers ``origin + resolution · ([c, c+1] × [r, r+1])``.
 """
@@ -63,7 +71,7 @@ from polyslam_env.slam.polynomial import Polynomial
 Precision = Literal["float32", "float64"]
 
 MAGIC = 0x50
-VERSION = 1
+VERSION = 2
 KIND_POLYNOMIALS = 1
 KIND_POINTS = 2
 KIND_GRID = 3
@@ -71,6 +79,7 @@ CELL_UNKNOWN, CELL_FREE, CELL_OCCUPIED = 0, 1, 2
 
 _HEAD = struct.Struct("<BBBBHHI")  # magic, version, kind, width, sender, receiver, seq
 _CRC = struct.Struct("<I")
+_RECORD = struct.Struct("<IHBB")  # landmark id, origin robot, variate, order
 _WIDTH = {"float32": 4, "float64": 8}
 _DTYPE: dict[int, np.dtype[np.floating]] = {4: np.dtype("<f4"), 8: np.dtype("<f8")}
 
@@ -91,11 +100,14 @@ class Header:
 
 @dataclass(frozen=True, eq=False)
 class PolynomialRecord:
-    """One landmark as sent: its id, geometry (shape, c0 and extent) and c0 variance."""
+    """One landmark as sent: its version (origin robot and landmark id in that robot's map),
+    geometry (shape, c0 and extent) and c0 variance. ``origin`` None: the sender's own
+    landmark (encoded as the header's sender; a decoded record always names it)."""
 
     landmark_id: int
     polynomial: Polynomial
     c0_var: float
+    origin: int | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,14 +167,16 @@ def _seal(body: bytes) -> bytes:
     return body + _CRC.pack(zlib.crc32(body))
 
 
-def _record_bytes(rec: PolynomialRecord, width: int) -> bytes:
+def _record_bytes(rec: PolynomialRecord, sender: int, width: int) -> bytes:
     poly = rec.polynomial
+    origin = sender if rec.origin is None else rec.origin
     _check_uint("landmark_id", rec.landmark_id, 32)
+    _check_uint("origin", origin, 16)
     if not 1 <= poly.order <= 255:
         raise ValueError(f"polynomial order must be in 1..255, got {poly.order}")
     if not (np.isfinite(rec.c0_var) and rec.c0_var >= 0):
         raise ValueError(f"c0_var must be finite and >= 0, got {rec.c0_var!r}")
-    head = struct.pack("<IBB", rec.landmark_id, poly.variate, poly.order)
+    head = _RECORD.pack(rec.landmark_id, origin, poly.variate, poly.order)
     floats = [*poly.coeffs, rec.c0_var, poly.lo, poly.hi]
     return head + _floats(floats, width, f"landmark {rec.landmark_id}")
 
@@ -172,7 +186,7 @@ def encode_polynomials(msg: PolynomialMessage, precision: Precision = "float64")
     width = _width(precision)
     _check_uint("number of records", len(msg.records), 16)
     body = [_header_bytes(msg.header, KIND_POLYNOMIALS, width), struct.pack("<H", len(msg.records))]
-    body += [_record_bytes(rec, width) for rec in msg.records]
+    body += [_record_bytes(rec, msg.header.sender, width) for rec in msg.records]
     return _seal(b"".join(body))
 
 
@@ -305,14 +319,15 @@ def _parse_polynomials(reader: _Reader, header: Header) -> PolynomialMessage:
 
 
 def _parse_record(reader: _Reader, index: int) -> PolynomialRecord:
-    landmark_id, variate, order = reader.unpack("<IBB", f"record {index}")
+    landmark_id, origin, variate, order = reader.unpack(_RECORD.format, f"record {index}")
     if variate not in (1, 2) or order < 1:
         raise ValueError(f"corrupt record {index}: variate {variate}, order {order}")
     values = reader.floats(order + 4, f"record {index}")
     coeffs, c0_var, lo, hi = values[: order + 1], values[-3], values[-2], values[-1]
     if c0_var < 0 or hi < lo:
         raise ValueError(f"corrupt record {index}: c0 variance {c0_var}, extent [{lo}, {hi}]")
-    return PolynomialRecord(int(landmark_id), Polynomial(variate, coeffs, lo, hi), float(c0_var))
+    poly = Polynomial(variate, coeffs, lo, hi)
+    return PolynomialRecord(int(landmark_id), poly, float(c0_var), int(origin))
 
 
 def _parse_points(reader: _Reader, header: Header) -> PointsMessage:

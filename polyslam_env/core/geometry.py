@@ -34,10 +34,11 @@ def wrap_remainder(angle: Any) -> Any:
     """Angles (a float or an array) wrapped to [−π, π] by the exact IEEE remainder (no rounding
     of small angles, unlike :func:`wrap_angle`, which maps 1e-20 to 0); numpy has no IEEE
     remainder, so arrays go element by element through :func:`math.remainder`."""
-    if np.ndim(angle) == 0:
+    a = np.asarray(angle, dtype=float)
+    if a.ndim == 0:
         return math.remainder(angle, 2.0 * math.pi)
-    flat = [math.remainder(a, 2.0 * math.pi) for a in np.asarray(angle, dtype=float).ravel()]
-    return np.array(flat).reshape(np.shape(angle))
+    flat = [math.remainder(x, 2.0 * math.pi) for x in a.ravel().tolist()]
+    return np.array(flat).reshape(a.shape)
 
 
 @njit
@@ -83,6 +84,17 @@ def symmetric_eigvals3(a: np.ndarray) -> tuple[float, float, float]:
 
 
 # -- SE(2) ----------------------------------------------------------------------------------------
+def _columns(first: Any, *rest: Any) -> np.ndarray:  # (…, k)
+    """``np.stack([first, *rest], axis=-1)`` of float arrays (or scalars) of ``first``'s shape,
+    written into one new array: the same values without ``np.stack``'s dozen Python-level
+    calls (these run several times per env step)."""
+    out = np.empty((*np.asarray(first).shape, 1 + len(rest)))
+    out[..., 0] = first
+    for k, column in enumerate(rest, 1):
+        out[..., k] = column
+    return out
+
+
 def _poses(pose: np.ndarray) -> np.ndarray:  # (…, 3)
     p = np.asarray(pose, dtype=float)
     if p.ndim == 0 or p.shape[-1] != 3:
@@ -107,7 +119,7 @@ def beam_endpoints(origins: np.ndarray, angles: np.ndarray, ranges: np.ndarray) 
     """End points (…, 2) of beams from ``origins`` (…, 2) along absolute ``angles`` (…) over
     ``ranges`` (…): ``origin + r·(cos φ, sin φ)``, broadcast (an inf or NaN range gives a
     non-finite end point)."""
-    direction = np.stack([np.cos(angles), np.sin(angles)], axis=-1)  # (…, 2)
+    direction = _columns(np.cos(angles), np.sin(angles))  # (…, 2)
     return np.asarray(origins + np.asarray(ranges)[..., None] * direction)
 
 
@@ -116,9 +128,8 @@ def transform_points(points: np.ndarray, pose: np.ndarray) -> np.ndarray:  # (�
     the parent: ``(x + c·p₀ − s·p₁, y + s·p₀ + c·p₁)``."""
     c, s = np.cos(pose[2]), np.sin(pose[2])
     p = np.asarray(points, dtype=float)
-    return np.stack(
-        [pose[0] + c * p[..., 0] - s * p[..., 1], pose[1] + s * p[..., 0] + c * p[..., 1]],
-        axis=-1,
+    return _columns(
+        pose[0] + c * p[..., 0] - s * p[..., 1], pose[1] + s * p[..., 0] + c * p[..., 1]
     )
 
 
@@ -132,7 +143,7 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:  # (…, 3)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
-    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
+    return _columns(x, y, wrap_angle(a[..., 2] + b[..., 2]))
 
 
 def compose_with_jacobians(
@@ -152,7 +163,7 @@ def inverse(a: np.ndarray) -> np.ndarray:  # (…, 3)
     a = _poses(a)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x, y = a[..., 0], a[..., 1]
-    return np.stack([-c * x - s * y, s * x - c * y, wrap_angle(-a[..., 2])], axis=-1)
+    return _columns(-c * x - s * y, s * x - c * y, wrap_angle(-a[..., 2]))
 
 
 def inverse_with_jacobian(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -176,7 +187,7 @@ def between(
     a, b = _poses(a), _poses(b)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
-    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap(b[..., 2] - a[..., 2])], axis=-1)
+    return _columns(c * dx + s * dy, -s * dx + c * dy, wrap(b[..., 2] - a[..., 2]))
 
 
 def compose_inverse(a: np.ndarray, b: np.ndarray) -> np.ndarray:  # (…, 3)
@@ -190,7 +201,7 @@ def compose_inverse(a: np.ndarray, b: np.ndarray) -> np.ndarray:  # (…, 3)
     c, s = np.cos(theta), np.sin(theta)
     x = a[..., 0] - (c * b[..., 0] - s * b[..., 1])
     y = a[..., 1] - (s * b[..., 0] + c * b[..., 1])
-    return np.stack([x, y, theta], axis=-1)
+    return _columns(x, y, theta)
 
 
 def transform_covariance(covs: np.ndarray, pose: np.ndarray) -> np.ndarray:  # (…, 3, 3)

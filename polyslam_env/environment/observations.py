@@ -175,6 +175,7 @@ class MapSampler:
         self._points = np.zeros((0, 2))  # (M, 2) all points at the cached c0s
         self._owner = np.zeros(0, dtype=np.intp)  # (M,) landmark (state order) of each point
         self._axis = np.zeros(0, dtype=np.intp)  # (M,) the dependent coordinate (0 or 1)
+        self._rows = np.zeros(0, dtype=np.intp)  # (M,) 0 … M − 1
 
     def _rebuild(self, slam: PolySlam) -> None:
         """Resample the landmarks whose stamp moved; keep the others' points."""
@@ -183,7 +184,7 @@ class MapSampler:
         c0s = slam.c0s
         entries = list(map(self._entries.get, ids))
         stale = [e is None or e[0] != stamp for e, stamp in zip(entries, stamps, strict=True)]
-        rows = np.flatnonzero(stale)
+        rows = np.array(stale, dtype=bool).nonzero()[0]
         if len(rows):
             coeffs = table.shape.copy()  # (n, M+1) [0, b_1, …]: c0 from the state
             coeffs[:, 0] = c0s
@@ -197,11 +198,12 @@ class MapSampler:
         done: list[tuple[int, float, np.ndarray, int, int]] = entries  # type: ignore[assignment]
         self._entries = dict(zip(ids, done, strict=True))
         self._table, self._version = table, table.version
-        counts = [e[4] for e in done]
+        counts = np.array([e[4] for e in done], dtype=np.intp)
         self._c0 = np.array([e[1] for e in done])
         self._points = np.concatenate([e[2] for e in done]) if done else np.zeros((0, 2))
-        self._owner = np.repeat(np.arange(len(done)), counts)
-        self._axis = np.repeat(np.array([e[3] for e in done], dtype=np.intp), counts)
+        self._owner = np.arange(len(done)).repeat(counts)
+        self._axis = np.array([e[3] for e in done], dtype=np.intp).repeat(counts)
+        self._rows = np.arange(len(self._points))
 
     def points(self, slam: PolySlam) -> np.ndarray:  # (M, 2)
         """All map points of ``slam`` in its frame."""
@@ -211,7 +213,7 @@ class MapSampler:
         out = self._points.copy()
         if len(out):
             shift = (slam.c0s - self._c0)[self._owner]  # (M,)
-            out[np.arange(len(out)), self._axis] += shift
+            out[self._rows, self._axis] += shift
         return out
 
 

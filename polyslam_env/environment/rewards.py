@@ -11,6 +11,7 @@ completeness, map error and bytes sent) is done by the stages
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -64,9 +65,13 @@ def reward_terms(
     }
 
 
+#: The weights of :data:`REWARD_TERMS` of a ``RewardConfig``, in that order, in one call.
+_weights = operator.attrgetter(*REWARD_TERMS)
+
+
 def combine(terms: Mapping[str, Mapping[str, float]], weights: RewardConfig) -> dict[str, float]:
     """Σ weight · term per agent; the team mean for everyone in shared mode."""
-    w = {name: getattr(weights, name) for name in REWARD_TERMS}  # looked up once per step
+    w = dict(zip(REWARD_TERMS, _weights(weights), strict=True))  # looked up once per step
     rewards = {
         agent: float(sum([w[name] * value for name, value in t.items()]))
         for agent, t in terms.items()

@@ -177,7 +177,7 @@ def record(
     ranges = np.where(ok, sensing.true_ranges, 0.0)  # no inf · cos: no NaN, no warning
     ends = beam_endpoints(poses[:, None, :2], phi, ranges)  # (N, B, 2)
     of = np.asarray(robots, dtype=np.int64)  # (J,) slot → world robot
-    slots = np.flatnonzero(world.active[of])  # (K,)
+    slots = world.active[of].nonzero()[0]  # (K,)
     if not len(slots):
         return
     live = of[slots]  # (K,) their robots
@@ -187,7 +187,7 @@ def record(
     est, cov = estimates
     history.record(
         slots, poses[live], est[slots], cov[slots], ends[live][seen],
-        np.repeat(slots, seen.sum(axis=1)), times[slots], collided[live], diverging[slots],
+        slots.repeat(seen.sum(axis=1)), times[slots], collided[live], diverging[slots],
     )  # fmt: skip
 
 
@@ -203,8 +203,9 @@ def exchange(state: EpisodeState) -> ExchangeStep | None:
     SLAMs): the mutual sightings for rendering, then the team SLAM's exchange; the robots of
     each new rendezvous count it and remember its step."""
     seen = state.sensing.camera.seen  # (N, N)
-    i_idx, j_idx = np.nonzero(np.triu(seen & seen.T, k=1))
-    state.links = list(zip(i_idx.tolist(), j_idx.tolist(), strict=True))
+    i_idx, j_idx = (seen & seen.T).nonzero()  # row by row, as np.triu(…, k=1) then nonzero
+    upper = i_idx < j_idx
+    state.links = list(zip(i_idx[upper].tolist(), j_idx[upper].tolist(), strict=True))
     out = state.slam.exchange(state.step_count, state.world, state.sensing)
     if out is None:
         return None
@@ -245,10 +246,10 @@ def observe(
         sweep_beliefs(grids, poses[sweeping], state.angles, state.sensing.ranges[sweeping])
     if not robots:
         return {}
-    stds = np.sqrt(np.maximum(np.diagonal(covs[robots], axis1=1, axis2=2), 0.0))  # (K, 3)
+    stds = np.sqrt(np.maximum(covs[robots].diagonal(axis1=1, axis2=2), 0.0))  # (K, 3)
     maps = [state.slam.map_points(i) for i in robots]
     starts = np.zeros(len(robots) + 1, dtype=np.int64)
-    starts[1:] = np.cumsum([len(m) for m in maps])
+    starts[1:] = np.array([len(m) for m in maps], dtype=np.int64).cumsum()
     camera = state.sensing.camera
     last = state.last_rendezvous[robots]
     team = TeamView(

@@ -98,31 +98,42 @@ def sample_arclength_batch(polys: MapLike, step: float, dense: int = 512) -> lis
     return [points[a:b] for a, b in itertools.pairwise(bounds)]
 
 
-def map_points(polys: MapLike, start_pose: np.ndarray, step: float = 0.01) -> list[np.ndarray]:
-    """Each polynomial's points every ``step`` of arc length, in the absolute frame: (n_q, 2)."""
+def _placed(polys: MapLike, start_pose: np.ndarray, step: float) -> tuple[np.ndarray, list[int]]:
+    """Every polynomial's points every ``step`` of arc length, in the absolute frame, as one
+    array (M, 2), and where each polynomial's points start (n + 1,); (0, 2) and [0] for an
+    empty map. One transform for all points (it is pointwise, so the same numbers as one per
+    polynomial)."""
     x0 = _check_pose(start_pose)
     shapes = MapShapes.of(polys)
     if not len(shapes):
-        return []
+        return np.zeros((0, 2)), [0]
     own, starts = sample_shapes(shapes, step)
-    # One transform for all points (it is pointwise, so the same numbers as one per polynomial).
-    return np.split(transform_points(own, x0), starts[1:-1])
+    return transform_points(own, x0), starts.tolist()
+
+
+def _pieces(values: np.ndarray, starts: list[int]) -> list[np.ndarray]:
+    """``values`` cut at ``starts`` (n + 1,): one piece per polynomial (views, as ``np.split``
+    gives, without its Python-level calls per piece)."""
+    return [values[a:b] for a, b in itertools.pairwise(starts)]
+
+
+def map_points(polys: MapLike, start_pose: np.ndarray, step: float = 0.01) -> list[np.ndarray]:
+    """Each polynomial's points every ``step`` of arc length, in the absolute frame: (n_q, 2)."""
+    points, starts = _placed(polys, start_pose, step)
+    return _pieces(points, starts)
 
 
 def map_distances(
-    polys: Sequence[Polynomial], start_pose: np.ndarray, layout: Layout, step: float = 0.01
+    polys: MapLike, start_pose: np.ndarray, layout: Layout, step: float = 0.01
 ) -> list[np.ndarray]:
     """Per polynomial, δ (n_q,): distance of each arc-length sample to the true boundary."""
-    pts = map_points(polys, start_pose, step)
-    if not pts:
+    points, starts = _placed(polys, start_pose, step)
+    if len(starts) == 1:
         return []
-    d = distance_to_boundary(np.vstack(pts), layout)
-    return np.split(d, np.cumsum([len(p) for p in pts])[:-1])
+    return _pieces(distance_to_boundary(points, layout), starts)
 
 
-def nu(
-    polys: Sequence[Polynomial], start_pose: np.ndarray, layout: Layout, step: float = 0.01
-) -> float:
+def nu(polys: MapLike, start_pose: np.ndarray, layout: Layout, step: float = 0.01) -> float:
     """ν_j = (1/n_j) Σ_q Σ_i δ_{q,i}, the paper's form (a sum per polynomial, so it grows with
     polynomial length and the sampling step matters). 0.0 for an empty map: the paper's sum is
     empty; use :func:`completeness` so that mapping nothing is not rewarded."""
@@ -130,9 +141,7 @@ def nu(
     return float(np.mean([d.sum() for d in ds])) if ds else 0.0
 
 
-def nu_mean(
-    polys: Sequence[Polynomial], start_pose: np.ndarray, layout: Layout, step: float = 0.01
-) -> float:
+def nu_mean(polys: MapLike, start_pose: np.ndarray, layout: Layout, step: float = 0.01) -> float:
     """Mean δ over all map points (metres), the map placed by ``start_pose`` (see the module
     docstring for which pose). 0.0 for an empty map (no points, no error): report
     :func:`has_map` beside it."""
@@ -140,13 +149,13 @@ def nu_mean(
     return float(np.concatenate(ds).mean()) if ds else 0.0
 
 
-def has_map(polys: Sequence[Polynomial]) -> float:
+def has_map(polys: MapLike) -> float:
     """1.0 if the map holds at least one polynomial, else 0.0 (the flag beside the metrics)."""
     return 1.0 if len(polys) else 0.0
 
 
 def map_error_length(
-    polys: Sequence[Polynomial], start_pose: np.ndarray, layout: Layout, step: float = 0.01
+    polys: MapLike, start_pose: np.ndarray, layout: Layout, step: float = 0.01
 ) -> float:
     """∫ δ ds over the map (m²): each arc-length sample's δ times ``step``. It is ``nu_mean``
     times the mapped length, so it grows with wrong map and is not lowered by deleting map
@@ -156,7 +165,7 @@ def map_error_length(
 
 
 def map_precision(
-    polys: Sequence[Polynomial],
+    polys: MapLike,
     start_pose: np.ndarray,
     layout: Layout,
     tol: float = 0.05,
@@ -245,7 +254,7 @@ def seen_boundary(
 
 
 def completeness_seen(
-    polys: Sequence[Polynomial],
+    polys: MapLike,
     start_pose: np.ndarray,
     layout: Layout,
     hit_points_abs: np.ndarray,
@@ -258,10 +267,10 @@ def completeness_seen(
     is empty or nothing was seen."""
     bpts, weights = seen_boundary(layout, hit_points_abs, radius, step)
     total = float(weights.sum())
-    pts = map_points(polys, start_pose, step)
-    if not pts or total == 0.0:
+    points, starts = _placed(polys, start_pose, step)
+    if len(starts) == 1 or total == 0.0:
         return 0.0
-    d, _ = cKDTree(np.vstack(pts)).query(bpts, k=1, distance_upper_bound=tol)
+    d, _ = cKDTree(points).query(bpts, k=1, distance_upper_bound=tol)
     return float(weights[np.isfinite(d)].sum()) / total
 
 
@@ -272,7 +281,7 @@ DUPLICATE_TOL, DUPLICATE_ANGLE = 0.10, np.deg2rad(10.0)
 
 
 def duplicates(
-    polys: Sequence[Polynomial],
+    polys: MapLike,
     tol: float = DUPLICATE_TOL,
     angle: float = DUPLICATE_ANGLE,
     step: float = 0.01,
@@ -287,8 +296,9 @@ def duplicates(
     if not own:
         return 0.0
     pts = np.vstack(own)  # (M, 2)
-    owner = np.repeat(np.arange(len(own)), [len(p) for p in own])  # (M,)
-    tangent = np.vstack([np.gradient(p, axis=0) if len(p) > 1 else np.zeros((1, 2)) for p in own])
+    counts = np.array([len(p) for p in own])
+    owner = np.repeat(np.arange(len(own)), counts)  # (M,)
+    tangent = _tangents(pts, counts)
     norm = np.linalg.norm(tangent, axis=1, keepdims=True)  # 0: a zero-extent polynomial
     tangent = np.divide(tangent, norm, out=np.zeros_like(tangent), where=norm > 0)
     pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")  # (P, 2)
@@ -300,6 +310,22 @@ def duplicates(
     marked = np.zeros(len(pts), dtype=bool)
     marked[pairs.ravel()] = True
     return float(np.count_nonzero(marked)) / len(pts)
+
+
+def _tangents(points: np.ndarray, counts: np.ndarray) -> np.ndarray:  # (M, 2)
+    """``np.gradient(p, axis=0)`` of each polynomial's points p (``counts`` (n,) ≥ 1 rows each,
+    one after the other in ``points`` (M, 2)), zeros for a single point, computed for all at
+    once with numpy's own formulas (central differences / 2 inside, one-sided at the ends), so
+    the same numbers without a ``gradient`` call per polynomial."""
+    out = np.zeros_like(points)
+    out[1:-1] = (points[2:] - points[:-2]) / 2.0  # rows at a polynomial's ends are redone below
+    ends = np.cumsum(counts)
+    long = counts > 1
+    first, last = (ends - counts)[long], ends[long] - 1
+    out[first] = points[first + 1] - points[first]
+    out[last] = points[last] - points[last - 1]
+    out[(ends - 1)[~long]] = 0.0
+    return out
 
 
 def _covered_fraction(points: np.ndarray, layout: Layout, tol: float, step: float) -> float:
@@ -317,7 +343,7 @@ def _covered_fraction(points: np.ndarray, layout: Layout, tol: float, step: floa
 
 
 def completeness(
-    polys: Sequence[Polynomial],
+    polys: MapLike,
     start_pose: np.ndarray,
     layout: Layout,
     tol: float = 0.05,
@@ -328,8 +354,7 @@ def completeness(
     Both the boundary and the polynomials are sampled every ``step``; a boundary piece counts
     when its centre is within ``tol`` of a polynomial sample (so within tol ± step/2).
     """
-    pts = map_points(polys, start_pose, step)
-    return _covered_fraction(np.vstack(pts) if pts else np.zeros((0, 2)), layout, tol, step)
+    return _covered_fraction(_placed(polys, start_pose, step)[0], layout, tol, step)
 
 
 def completeness_and_error(

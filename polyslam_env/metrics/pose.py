@@ -10,7 +10,6 @@ absolute frame before they are compared with ground truth: ``x_abs = x0 + R(θ0)
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import chi2
 
 from polyslam_env.core.geometry import (
     compose,
@@ -139,6 +138,8 @@ def nees_band(dof: int = 3, runs: int = 1, prob: float = 0.95) -> tuple[float, f
     """
     if dof < 1 or runs < 1 or not 0.0 < prob < 1.0:
         raise ValueError(f"need dof >= 1, runs >= 1, 0 < prob < 1; got {dof}, {runs}, {prob}")
+    from scipy.stats import chi2  # here: importing scipy.stats takes ~1 s, every process
+
     n = dof * runs
     lo = float(chi2.ppf((1.0 - prob) / 2.0, n)) / runs
     hi = float(chi2.ppf((1.0 + prob) / 2.0, n)) / runs

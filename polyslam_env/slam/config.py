@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -147,6 +148,12 @@ class SlamConfig(Config):
     # their angle's distance from the nearest multiple of 90° passes (links.py); False: never
     # (paper; set it for walls at other angles)
     square_walls: bool = True
+    # tie walls square only while the robot's own confident straight walls say its floor is
+    # rectilinear (links.rectilinear: square to one of them in all but a tenth of their
+    # length); False: whenever the χ² gate passes (as before). Off by default: on the traced
+    # Willow office it turned the ties off and its maps fell from 0.84–0.89 to 0.46–0.67
+    # map_precision (docs/results/floors.md); on for angled, curved and cave floors
+    square_evidence: bool = False
     # degrees, how far a real wall may be from square to the others (the square link's noise
     # beyond the fits'): 1 mm per metre, as wall_straightness
     wall_squareness_deg: float = 0.057
@@ -194,10 +201,11 @@ class SlamConfig(Config):
             raise ConfigError(f"slam.link_age: must be an integer >= 0, got {self.link_age!r}")
         check_positive("slam.wall_straightness", self.wall_straightness)
         check_positive("slam.wall_squareness_deg", self.wall_squareness_deg)
-        if not isinstance(self.square_walls, bool):
-            raise ConfigError(
-                f"slam.square_walls: must be true or false, got {self.square_walls!r}"
-            )
+        for name in ("square_walls", "square_evidence"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(
+                    f"slam.{name}: must be true or false, got {getattr(self, name)!r}"
+                )
         check_range("slam.update_spacing_deg", self.update_spacing_deg, 0.0, 360.0)
         check_non_negative("slam.odom_sigma_xy", self.odom_sigma_xy)
         check_non_negative("slam.odom_sigma_theta_deg", self.odom_sigma_theta_deg)
@@ -215,9 +223,13 @@ class SlamConfig(Config):
         """Whether each landmark's shape rotation is a state (``shape_rotation``)."""
         return self.shape_follows_pose and self.shape_rotation != "heading"
 
-    @property
+    @cached_property
     def p0(self) -> np.ndarray:  # (3, 3)
-        return np.diag(np.square(self.p0_sigma))
+        """The start-error covariance diag(p0_sigma²), built once (read every step by every
+        robot) and read-only, so no caller can change it for the others."""
+        p0 = np.diag(np.square(self.p0_sigma))
+        p0.flags.writeable = False
+        return p0
 
     @property
     def odom_cov(self) -> np.ndarray:  # (3, 3)

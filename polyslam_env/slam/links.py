@@ -58,6 +58,22 @@ update estimates the two turns as a link does. Tied walls (and linked or merged 
 wall is parallel to itself) form a direction group, and each tie joins two groups, so no
 angle is used twice; a link between pieces already in one direction group then uses one row
 (their offsets at the middle between them), not two.
+
+**Only on a rectilinear floor** (``SlamConfig.square_evidence``). The gate alone cannot tell a
+wall 1° off square from a square one whose direction is known to 1°: where walls run at
+any angle (an angled wing, a cave's straight stretches, turned furniture), a wall near square
+is not likely to be *exactly* square, and a tie would turn it onto the wrong direction with
+a variance that claims otherwise. So a tie is made only while the robot's own map says its
+floor is rectilinear (:func:`rectilinear`): its confident straight walls (own, at least
+``SQUARE_MIN_LENGTH`` long, ``link_age`` steps old: a pillar's arc fitted as a line has no
+direction to count) are square to one of them, within the χ² gate of a tie between them, in
+all but ``SQUARE_CLUTTER`` of their length. Every such wall is evidence for or against: on
+the generators' axis-parallel floors each is square to the others and the rule works as
+before, while clearly angled walls beyond the clutter share turn it off for as long as they
+are in the map. A robot with fewer than three confident walls has no evidence either way
+(two are one pair, which the tie's gate judges), and the tie's own gate decides, as before
+(the first walls of an angled floor may still be tied when they pass it; from the first
+clearly angled confident walls on, none is).
 """
 
 from __future__ import annotations
@@ -67,6 +83,7 @@ import math
 import numpy as np
 
 from polyslam_env.core.geometry import rotation
+from polyslam_env.slam.ekf import chi2_1dof_quantile
 from polyslam_env.slam.fitting import polynomial_points
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -142,3 +159,40 @@ def turned_line(poly: Polynomial, pivot: float, angle: float) -> Polynomial:
     coeffs = np.zeros_like(poly.coeffs)
     coeffs[0], coeffs[1] = eta_c - new_slope * pivot, new_slope
     return Polynomial(poly.variate, coeffs, poly.lo, poly.hi)
+
+
+#: m: straight walls at least this long give a direction to the exchange's square check
+#: (comms/alignment.py ``square_turn``): a short
+#: piece's fitted direction is loose (a degree or more), and a round column's arc fitted as a
+#: line (0.24–0.4 m) has none.
+SQUARE_MIN_LENGTH = 1.0
+#: Share of the confident straight walls' length that may be off square on a floor still
+#: taken as rectilinear: turned furniture or a traced building's clutter among square walls
+#: (a design choice, stated: one wall in ten of an otherwise square floor). An angled wing or
+#: a cave's straight stretches hold more, and then no wall is tied.
+SQUARE_CLUTTER = 0.1
+
+
+def rectilinear(
+    directions: np.ndarray, relative_var: np.ndarray, lengths: np.ndarray, gate_prob: float
+) -> bool:
+    """Whether straight walls of ``directions`` (n,) (rad), variances of their pairwise
+    differences ``relative_var`` (n, n) (rad², the state's var(α_i − α_j) plus each fit's
+    direction variance and the squareness noise, as a tie's innovation) and ``lengths`` (n,)
+    (m) are the walls of a rectilinear floor: the walls square to one of them (itself
+    included) hold all but :data:`SQUARE_CLUTTER` of the total length. A wall is square to
+    the reference when its angle to it is within the χ²(1) gate from a multiple of 90°, at
+    ``gate_prob`` for the n − 1 walls judged together (Bonferroni: each at 1 − (1 −
+    ``gate_prob``)/(n − 1)), so that a square floor's walls are all judged square with that
+    probability. Fewer than three walls are no evidence (True): two are one pair, which the
+    tie's own gate judges."""
+    n = directions.size
+    if n < 3:
+        return True
+    difference = directions[:, None] - directions[None, :]
+    quarter = 0.5 * math.pi
+    off = difference - quarter * np.round(difference / quarter)  # off_square, elementwise
+    gate = chi2_1dof_quantile(1.0 - (1.0 - gate_prob) / (n - 1))
+    square = off**2 <= gate * relative_var
+    support = square.astype(float) @ lengths  # per reference wall: the length square to it
+    return bool(support.max() >= (1.0 - SQUARE_CLUTTER) * lengths.sum())

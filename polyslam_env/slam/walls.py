@@ -25,7 +25,15 @@ import numpy as np
 from polyslam_env.slam import ekf
 from polyslam_env.slam.landmarks import EXTENT_MARGIN
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED, LineageEvent
-from polyslam_env.slam.links import evidence_gap, line_angle, link_rows, off_square, turned_line
+from polyslam_env.slam.links import (
+    SQUARE_MIN_LENGTH,
+    evidence_gap,
+    line_angle,
+    link_rows,
+    off_square,
+    rectilinear,
+    turned_line,
+)
 
 if TYPE_CHECKING:
     from polyslam_env.slam.robot import PolySlam
@@ -145,11 +153,14 @@ class WallGraph:
         it the state knows best, by the pseudo-measurement that their angle is a multiple of
         90° (:func:`~polyslam_env.slam.links.off_square`), noise ``config.wall_squareness_deg``²
         plus each fit's direction variance beyond the range noise, gated by χ²(1); estimates
-        the two lines' turns as a link does. Needs ``config.square_walls`` and rotation
-        states; received landmarks take no part. Returns 1 if tied, else 0."""
+        the two lines' turns as a link does. Needs ``config.square_walls``, rotation
+        states and (with ``config.square_evidence``) a rectilinear floor
+        (:meth:`rectilinear`); received landmarks take no part. Returns 1 if tied, else 0."""
         cfg, slam = self.config, self.slam
         table = slam.table
         if not cfg.square_walls or not cfg.rotation_states or landmark_id not in table:
+            return 0
+        if cfg.square_evidence and not self.rectilinear():
             return 0
         i = table.index_of(landmark_id)
         if table.received[i] or table.order[i] != 1 or not self.long_enough(i):
@@ -188,6 +199,39 @@ class WallGraph:
             return 0
         join_groups(self.direction_of, landmark_id, table.ids[j])
         return 1
+
+    def rectilinear(self) -> bool:
+        """Whether this robot's own map says its floor is rectilinear
+        (:func:`~polyslam_env.slam.links.rectilinear`): its confident straight walls (own,
+        ``config.link_age`` steps old, ``SQUARE_MIN_LENGTH`` long) are the evidence, each
+        pair's relative direction variance that of a tie (the state's var(α_i − α_j) plus
+        each fit's direction variance and ``config.wall_squareness_deg``²). Needs rotation
+        states (False without)."""
+        cfg, slam = self.config, self.slam
+        table = slam.table
+        if not cfg.rotation_states:
+            return False
+        matured = slam.step_count - cfg.link_age
+        rows = np.array(
+            [
+                j
+                for j in range(len(table))
+                if table.order[j] == 1
+                and not table.received[j]
+                and table.changed_at[j] <= matured
+                and table.hi[j] - table.lo[j] >= SQUARE_MIN_LENGTH
+            ],
+            dtype=np.int64,
+        )
+        turns = slam.layout.turn_index(0, len(table)) + rows
+        directions = np.array([line_angle(table.polys[j]) for j in rows.tolist()])
+        directions += slam.mean[turns]
+        fit = table.model_var[rows] / table.fit_half[rows] ** 2
+        own = np.diag(slam.cov)[turns] + fit + 0.5 * math.radians(cfg.wall_squareness_deg) ** 2
+        block = slam.cov[np.ix_(turns, turns)]
+        relative = own[:, None] + own[None, :] - 2.0 * block
+        lengths = table.hi[rows] - table.lo[rows]
+        return rectilinear(directions, relative, lengths, cfg.gate_prob)
 
     def update_pair(
         self, i: int, j: int, innovation: np.ndarray, H: np.ndarray, R: np.ndarray

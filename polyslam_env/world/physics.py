@@ -286,7 +286,7 @@ class World:
         if not np.isfinite(cmd).all():
             i = int(np.argmax(~np.isfinite(cmd).all(axis=1)))
             raise ValueError(f"commands[{i}] (robot_{i}): not finite, got {tuple(cmd[i])}")
-        out = np.clip(cmd, self._cmd_lo, self._cmd_hi)  # per column
+        out = cmd.clip(self._cmd_lo, self._cmd_hi)  # per column (np.clip without its wrappers)
         if not self.active.all():
             out[~self.active] = 0.0
         return out
@@ -357,7 +357,7 @@ class World:
         kernels.guard_violations(
             start, end, self.active, wall_gap, pillar_gap, *self._walls, self.pillars, bad
         )
-        for i in np.flatnonzero(bad).tolist():
+        for i in bad.nonzero()[0].tolist():
             end[i] = start[i]
             chipmunk.cpBodySetPosition(self._bodies_c[i], (float(start[i, 0]), float(start[i, 1])))
             self._touched[i] = True

@@ -235,6 +235,7 @@ def test_benchmark_command__quick_json_has_every_section(
     assert all(r["peak_mb"] > 0 for r in memory["episodes"])
     assert {"cold_s", "warm_s", "compile_s", "cached_files"} <= set(data["compile"])
     assert data["compile"]["cold_s"] > 0 and data["compile"]["warm_s"] > 0
+    assert data["compile"]["slam_enabled"] is False  # tiny: the no-SLAM env's kernels only
     assert len(data["targets"]) == len(benchmark.TARGETS)
     machine = data["machine"]
     assert machine["cpus"] >= 1 and machine["numpy"] and machine["blas"]
@@ -355,6 +356,8 @@ def _stats(median: float, low: float, high: float) -> dict[str, float]:
                 "ratio_to_first": 199.6,
                 "messages": 1290,
                 "polynomials": 16170,
+                "skipped": 12345,
+                "refits": 99999,
             },
         ),
         ("memory", {"episode": 5, "steps": 200, "peak_mb": 1234.5, "rss_mb": 1200.1}),

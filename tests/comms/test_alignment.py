@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -249,21 +250,17 @@ def test_square_turn__is_the_turn_that_squares_the_sent_walls_nearest_the_camera
     assert alignment.square_turn(sent, [], 0.0) is None
 
 
-def test_off_square__refuses_a_refined_turn_beyond_3_sigma_of_the_square_one() -> None:
-    """A receiver that mapped a room's corner (its longest straight wall runs along x) and a
-    message whose straight wall runs at −20° in the sender's frame: the square turns are
-    20° + k·90° (+ the receiver's wall's own direction). A refined turn 2.9 σ from it is kept,
-    3.1 σ is refused, σ² the refined turn's variance plus twice the receiver's wall's turn
-    variance; with ``square_walls`` off nothing is refused."""
-    from types import SimpleNamespace
-
-    from polyslam_env.comms.exchange import RendezvousExchange
+def _square_check(walls: np.ndarray) -> tuple[Any, tuple[Any, ...], np.ndarray, float, float]:
+    """A receiver that drove the corner drive among ``walls`` (its longest straight wall runs
+    along x) and a message's records whose straight wall runs at −20° in the sender's frame:
+    the receiver, the records, the refined transform's covariance, the square turn (20° + the
+    receiver's wall's own direction) and σ, the refined turn's σ plus twice the receiver's
+    wall's turn variance."""
     from polyslam_env.comms.messages import PolynomialRecord
-    from polyslam_env.slam.config import SlamConfig
-    from tests.slam.test_links import CORNER, CORNER_DRIVE
+    from tests.slam.test_links import CORNER_DRIVE
     from tests.slam.test_map_building import drive
 
-    slam, *_ = drive(CORNER, CORNER_DRIVE, 0)
+    slam, *_ = drive(walls, CORNER_DRIVE, 0)
     lengths = [p.hi - p.lo for p in slam.polynomials()]
     k = int(np.argmax(lengths))
     wall = slam.polynomials()[k]
@@ -272,12 +269,49 @@ def test_off_square__refuses_a_refined_turn_beyond_3_sigma_of_the_square_one() -
     turn = len(slam.table) + 3 + k
     cov = np.diag([1e-4, 1e-4, math.radians(0.15) ** 2])
     sigma = math.sqrt(cov[2, 2] + 2.0 * slam.cov[turn, turn])
-    message = SimpleNamespace(records=(PolynomialRecord(1, _straight(-20.0, 3.0), 1e-4),))
+    records = (PolynomialRecord(1, _straight(-20.0, 3.0), 1e-4),)
+    return slam, records, cov, square, sigma
+
+
+def test_off_square__refuses_a_refined_turn_beyond_3_sigma_of_the_square_one() -> None:
+    """A receiver that mapped a room's corner and a message whose straight wall runs at −20°
+    (:func:`_square_check`): the square turns are 20° + k·90° (+ the receiver's wall's own
+    direction). A refined turn 2.9 σ from it is kept, 3.1 σ is refused; with
+    ``square_walls`` off nothing is refused."""
+    from polyslam_env.comms.exchange import RendezvousExchange
+    from polyslam_env.slam.config import SlamConfig
+    from tests.slam.test_links import CORNER
+
+    slam, records, cov, square, sigma = _square_check(CORNER)
     camera = np.array([1.0, 2.0, math.radians(21.0)])
     for factor, refused in ((0.0, False), (2.9, False), (3.1, True), (-3.1, True)):
         refined = np.array([1.0, 2.0, square + factor * sigma])
-        got = RendezvousExchange._off_square(slam, message, camera, refined, cov)
+        got = RendezvousExchange._off_square(slam, records, camera, refined, cov)
         assert got is refused, factor
     slam.config = SlamConfig(square_walls=False)
     refined = np.array([1.0, 2.0, square + 5.0 * sigma])
-    assert not RendezvousExchange._off_square(slam, message, camera, refined, cov)
+    assert not RendezvousExchange._off_square(slam, records, camera, refined, cov)
+
+
+@pytest.mark.parametrize(
+    "square_evidence",
+    [True, pytest.param(False, marks=pytest.mark.xfail(strict=True, reason="rule forced on"))],
+)
+def test_off_square__on_an_angled_floor_keeps_a_refined_turn_that_is_not_square(
+    square_evidence: bool,
+) -> None:
+    """A receiver whose map holds a wall clearly at 30° (the angled room of
+    tests/slam/test_links.py) is not on a rectilinear floor, so the refined turn is not
+    judged by the square one: one 5 σ from it is kept. With the rule forced on
+    (``square_evidence`` off) it is refused, although nothing says the sender's walls are
+    square to the receiver's."""
+    from polyslam_env.comms.exchange import RendezvousExchange
+    from polyslam_env.slam.config import SlamConfig
+    from tests.slam.test_links import ANGLED_ROOM
+
+    slam, records, cov, square, sigma = _square_check(ANGLED_ROOM)
+    assert not slam.walls.rectilinear()
+    slam.config = SlamConfig(square_evidence=square_evidence)
+    camera = np.array([1.0, 2.0, math.radians(21.0)])
+    refined = np.array([1.0, 2.0, square + 5.0 * sigma])
+    assert not RendezvousExchange._off_square(slam, records, camera, refined, cov)

@@ -483,9 +483,9 @@ def _snapshot(receiver: PolySlam) -> tuple[np.ndarray, np.ndarray, list[int]]:
 
 
 def test_exchange__receiving_the_same_landmark_twice_changes_nothing() -> None:
-    """The sender's wall is marked changed without changing (as a refreshed extent would) and
-    sent again at the next meeting: the receiver finds its copy already held (equal variance:
-    rule 1) and its state stays bit-identical — the variance is not reduced twice."""
+    """The sender's wall is marked changed without changing (as a refreshed extent would): the
+    receiver acknowledged that version at the first meeting, so it is not sent again, and the
+    receiver's state stays bit-identical — the variance is not reduced twice."""
     sender, receiver, p_s, p_r = _two_robot_setup()
     ex = _exchange()
     slams, active, view, apart = [sender, receiver], np.ones(2, bool), _mutual(p_s, p_r), [[], []]
@@ -497,11 +497,68 @@ def test_exchange__receiving_the_same_landmark_twice_changes_nothing() -> None:
         slam.step_count = k
     sender.table.changed_at[0] = k  # the same wall, marked changed
     again = ex.step(k, slams, view, active)
-    assert {d.sender: d.n_polynomials for d in again.delivered} == {0: 1, 1: 0}
+    assert {d.sender: d.n_polynomials for d in again.delivered} == {0: 0, 1: 0}
     mean, cov, ids = once
     assert receiver.landmark_ids == ids
     np.testing.assert_array_equal(receiver.mean, mean)
     np.testing.assert_array_equal(receiver.cov, cov)
+
+
+# Four robots on a 1 m square (every pair within the channel's 1.5 m), each holding one wall
+# of its own, in a frame shared by all (start frames equal): a fixed floor.
+TEAM_POSES = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, np.pi], [1.0, 1.0, np.pi], [0.0, 1.0, 0.0]])
+TEAM_WALLS = [
+    np.stack([np.linspace(-1.0, 2.0, 30), np.full(30, -1.5)], 1),
+    np.stack([np.full(30, 2.5), np.linspace(-1.0, 2.0, 30)], 1),
+    np.stack([np.linspace(-1.0, 2.0, 30), np.full(30, 2.5)], 1),
+    np.stack([np.full(30, -1.5), np.linspace(-1.0, 2.0, 30)], 1),
+]
+
+
+def _team_meetings(cycles: int) -> tuple[RendezvousExchange, list[PolySlam], list[int]]:
+    """The four robots meet pair by pair, every pair once per cycle (each meeting alone in
+    view, long enough apart to count as a new one); returns the exchange, the SLAMs and the
+    refits done in each cycle."""
+    lenient = SlamConfig(rho_min=SlamConfig().rho_max)  # every received point kept
+    slams = [_slam(pose, lenient) for pose in TEAM_POSES]
+    for slam, wall in zip(slams, TEAM_WALLS, strict=True):
+        slam.cov[:2, :2] = np.eye(2) * 0.05**2
+        _add_wall(slam, wall, np.zeros(3))
+    ex = RendezvousExchange(
+        ChannelConfig(), 4, np.random.default_rng(3), WCFG.camera.sigma_d,
+        WCFG.camera.sigma_bearing,
+    )  # fmt: skip
+    pairs = [(0, 1), (1, 2), (2, 3), (0, 2), (1, 3), (0, 3)]  # a wall travels along chains
+    k, per_cycle = 0, []
+    for _ in range(cycles):
+        before = sum(ex.refits)
+        for i, j in pairs:
+            k += ex.config.meeting_interval
+            for slam in slams:
+                slam.step_count = k
+            view: list[list[Det]] = [[] for _ in range(4)]
+            view[i] = [_sighting(TEAM_POSES[i], TEAM_POSES[j], j)]
+            view[j] = [_sighting(TEAM_POSES[j], TEAM_POSES[i], i)]
+            assert ex.step(k, slams, view, np.ones(4, bool)).new_rendezvous == ((i, j),)
+            ex.step(k + 1, slams, [[] for _ in range(4)], np.ones(4, bool))
+        per_cycle.append(sum(ex.refits) - before)
+    return ex, slams, per_cycle
+
+
+def test_exchange__integration_per_meeting_does_not_grow_with_meetings_on_a_fixed_floor() -> None:
+    """Every robot's wall reaches every other robot, directly or forwarded by a third, and
+    each receiver refits each version at most once: a forwarded copy or an echo of a version
+    it holds is skipped before any transform or refit. So once every robot holds every wall,
+    more meetings refit nothing (the work is bounded by the versions, not the meetings)."""
+    ex, slams, per_cycle = _team_meetings(cycles=3)
+    for r, slam in enumerate(slams):  # its own wall and one copy of each of the three others
+        assert slam.n_landmarks == 4
+        assert ex.refits[r] <= 3  # one chain per version it did not hold (no trims: disjoint)
+    assert per_cycle[0] == 4 * 3 and per_cycle[1:] == [0, 0]
+    assert sum(ex.fused) == 4 * 3  # one piece fused per version and receiver, in cycle 1
+    # what was received twice (forwarded, or sent by its origin after a forward) was skipped
+    received = sum(ex.counters(r)["polynomials_received"] for r in range(4))
+    assert sum(ex.skipped) == received - sum(ex.refits) > 0
 
 
 def test_exchange__received_wall_never_replaces_a_better_own_one() -> None:

@@ -235,3 +235,17 @@ def test_completeness_and_error__the_two_metrics_bit_for_bit(count: int) -> None
         M.completeness(polys, pose, layout, tol=0.05, step=0.05),
         M.map_error_length(polys, pose, layout, step=0.05),
     )
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_tangents__numpy_gradient_of_each_polynomial_bit_for_bit(seed: int) -> None:
+    """``duplicates``' tangents of all polynomials at once are ``np.gradient`` of each (zeros for a
+    single point), the same floats."""
+    from polyslam_env.metrics.mapping import _tangents
+
+    rng = np.random.default_rng(seed)
+    for _ in range(50):
+        counts = rng.integers(1, 7, size=rng.integers(1, 6))
+        own = [rng.normal(size=(c, 2)) * 10 for c in counts]
+        want = [np.gradient(p, axis=0) if len(p) > 1 else np.zeros((1, 2)) for p in own]
+        assert np.array_equal(_tangents(np.vstack(own), counts), np.vstack(want))

@@ -6,7 +6,10 @@ from __future__ import annotations
 import numpy as np
 
 import polyslam_env
+from policies.base import make_team
+from polyslam_env.apps.rollout import run_episode
 from polyslam_env.core.geometry import between, compose, wrap_remainder
+from polyslam_env.environment.parallel import PolySlamParallelEnv
 from polyslam_env.metrics.episode import RobotRun, nees_relative, start_nees
 from polyslam_env.metrics.pose import nees_band
 from polyslam_env.slam.config import SlamConfig
@@ -78,3 +81,28 @@ def test_start_nees__of_the_envs_start_draws_is_chi2_3() -> None:
     assert standard_normal_failures(np.concatenate(whitened)) == []
     lo, hi = nees_band(3, len(values), 0.99)
     assert lo <= np.mean(values) <= hi
+
+
+def test_nees_relative__subtracts_exactly_the_start_share_the_report_added() -> None:
+    """With the exchange on (a frontier team of 3 on the paper map meets within 150 steps),
+    the covariance ``nees_rel`` uses at every step of every robot (the reported one minus
+    J P0 Jᵀ at the reported estimate) is the filter's own ``pose_cov_relative`` of that step,
+    to rounding: the exchange changes the filter's P_S, never the start share, so ``nees_rel``
+    rising with the exchange is the filter's (its P_S after fusing received walls), not the
+    metric's over-subtraction (docs/results/floors.md)."""
+    env = polyslam_env.parallel_env(map="paper", max_steps=150, initial_error=True)
+    own: list[list[np.ndarray]] = [[], [], []]
+
+    def record(env: PolySlamParallelEnv) -> None:
+        assert env.episode is not None
+        if env.episode.step_count > 0:
+            for i, slam in enumerate(env.episode.slams):
+                own[i].append(slam.pose_cov_relative.copy())
+
+    result = run_episode(env, make_team("frontier", env), 3, on_step=record)
+    assert sum(m["rendezvous"] for m in result.robots.values()) > 0
+    assert env.episode is not None
+    p0 = SlamConfig().p0
+    for i, history in enumerate(env.episode.histories):
+        subtracted = history.cov[1:] - np.array([start_error_cov(e, p0) for e in history.est[1:]])
+        np.testing.assert_allclose(subtracted, np.array(own[i]), rtol=0.0, atol=1e-12)

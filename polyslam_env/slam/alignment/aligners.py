@@ -58,7 +58,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.stats
 from scipy.spatial import cKDTree
 
 from polyslam_env.core.config import Config, check_choice, check_positive
@@ -278,6 +277,8 @@ def chance_supports(a: FeatureMap, b: FeatureMap, cfg: AlignConfig) -> int:
     p = min(1.0, len(a) * math.pi * th2 * th2 / area)
     if a.oriented and b.oriented:  # and its heading, uniform under a wrong transform
         p *= min(1.0, math.radians(cfg.heading_threshold_deg) / math.pi)
+    import scipy.stats  # here: importing it takes ~1 s, and most runs never align
+
     return int(scipy.stats.binom.ppf(1.0 - CHANCE_P, len(b), p)) + 1
 
 

@@ -8,7 +8,13 @@ import numpy as np
 from polyslam_env.core.geometry import between, wrap_remainder
 from polyslam_env.slam.points import PointMeasurements
 from polyslam_env.slam.points.seif import PointSeif
-from polyslam_env.slam.points.seif_fusion import InformationMap, find_fusion, fuse
+from polyslam_env.slam.points.seif_fusion import (
+    CHI2_2DOF_99,
+    FusionConfig,
+    InformationMap,
+    find_fusion,
+    fuse,
+)
 from polyslam_env.world.kinematic import simulate_episode
 from tests.slam.points.test_seif import WORLD, _filter_config
 
@@ -61,3 +67,12 @@ def test_fuse__collapsing_adds_information_and_keeps_every_other_landmark() -> N
         # Σ_fused ≤ Σ_A in the PSD order
         assert np.linalg.eigvalsh(cov_a[i] - cov_f[i]).min() >= -1e-12
     np.testing.assert_array_equal(fused.information, fused.information.T)
+
+
+def test_fusion_gate__is_scipy_stats_chi2_quantile_bit_for_bit() -> None:
+    """The gate is computed without importing scipy.stats (a second of every process's
+    start); it must be the very number scipy.stats gives, or fusion decisions would move."""
+    import scipy.stats
+
+    assert CHI2_2DOF_99 == float(scipy.stats.chi2.ppf(0.99, 2))
+    assert FusionConfig().gate == CHI2_2DOF_99 and FusionConfig().gain == 0.5 * CHI2_2DOF_99
