@@ -27,16 +27,19 @@ from policies.goals import CANDIDATES, GoalPolicy, feature_size
 
 __all__ = [
     "SHIPPED",
+    "SHIPPED_GOALS",
     "CheckpointError",
     "LearnedGoalPolicy",
     "PPOPolicy",
     "load_checkpoint",
     "make_ppo",
+    "make_ppo_goals",
 ]
 
 #: The learned goal-choice policy shipped with the package (docs/results/learning.md says how
 #: it was trained: ``polyslam train --config configs/train_goals.yaml``).
-SHIPPED = Path(__file__).resolve().parent / "checkpoints" / "ppo_goals.zip"
+SHIPPED_GOALS = Path(__file__).resolve().parent / "checkpoints" / "ppo_goals.zip"
+SHIPPED = SHIPPED_GOALS
 
 #: Loaded models by (resolved path, modification time): robots of a team share one network.
 _CACHE: dict[tuple[str, int], Any] = {}
@@ -66,21 +69,66 @@ def make_ppo(
     context: PolicyContext, checkpoint: str | Path | None = None, deterministic: bool = True
 ) -> Policy:
     """The ``ppo`` policy of ``checkpoint`` (the shipped one when None), of the kind its
-    action space says (module doc)."""
-    if checkpoint is None:
-        if not SHIPPED.is_file():
-            raise CheckpointError(
-                f"ppo: no checkpoint given and the shipped one is missing ({SHIPPED});"
-                " pass --checkpoint FILE (one written by polyslam train)"
-            )
-        checkpoint = SHIPPED
-    model = load_checkpoint(checkpoint)
-    if isinstance(model.action_space, spaces.Discrete):
+    spaces say (module doc)."""
+    checkpoint = _shipped("ppo", SHIPPED) if checkpoint is None else checkpoint
+    kind = _kind(context, checkpoint)
+    if kind == "goals":
         return LearnedGoalPolicy(context, checkpoint, deterministic)
+    if kind == "drive":
+        from policies.drive import TeamDrivePolicy
+
+        return TeamDrivePolicy(context, checkpoint, deterministic)
     return PPOPolicy(context, checkpoint, deterministic)
 
 
+def _ppo_team(
+    contexts: list[PolicyContext], checkpoint: str | Path | None = None, deterministic: bool = True
+) -> dict[str, Policy]:
+    """The ``ppo`` policies of a whole team: a driving network's guides share one radio."""
+    checkpoint = _shipped("ppo", SHIPPED) if checkpoint is None else checkpoint
+    if contexts and _kind(contexts[0], checkpoint) == "drive":
+        from policies.drive import drive_team
+
+        return dict(drive_team(contexts, checkpoint, deterministic))
+    return {c.agent: make_ppo(c, checkpoint, deterministic) for c in contexts}
+
+
+def make_ppo_goals(
+    context: PolicyContext, checkpoint: str | Path | None = None, deterministic: bool = True
+) -> LearnedGoalPolicy:
+    """The policy ``ppo_goals``: the goal-choice network of ``checkpoint`` (the shipped
+    ``ppo_goals.zip`` when None)."""
+    checkpoint = _shipped("ppo_goals", SHIPPED_GOALS) if checkpoint is None else checkpoint
+    return LearnedGoalPolicy(context, checkpoint, deterministic)
+
+
 make_ppo.takes_checkpoint = True  # type: ignore[attr-defined]
+make_ppo.team = _ppo_team  # type: ignore[attr-defined]
+make_ppo_goals.takes_checkpoint = True  # type: ignore[attr-defined]
+
+
+def _shipped(name: str, shipped: Path) -> Path:
+    """The shipped checkpoint of policy ``name`` (one line if it is missing)."""
+    if not shipped.is_file():
+        raise CheckpointError(
+            f"{name}: no checkpoint given and the shipped one is missing ({shipped});"
+            " pass --checkpoint FILE (one written by polyslam train)"
+        )
+    return shipped
+
+
+def _kind(context: PolicyContext, checkpoint: str | Path) -> str:
+    """What the network of ``checkpoint`` controls: ``goals`` (a ``Discrete`` action),
+    ``drive`` (the driving features of :mod:`policies.drive` in, (v, ω) out) or ``velocity``
+    (the env's own observation in)."""
+    from policies.drive import feature_size as drive_features
+
+    model = load_checkpoint(checkpoint)
+    if isinstance(model.action_space, spaces.Discrete):
+        return "goals"
+    if model.observation_space.shape == (drive_features(len(context.beam_angles)),):
+        return "drive"
+    return "velocity"
 
 
 class LearnedGoalPolicy(GoalPolicy):
