@@ -1,14 +1,21 @@
 """``ppo``: a policy trained with Stable-Baselines3 PPO and parameter sharing.
 
 The same network acts for every robot, each on its own observation. Checkpoints are SB3 ``.zip``
-files written by ``polyslam train``, of one of two kinds, told apart by their action space:
+files written by ``polyslam train``, of one of three kinds, told apart by their spaces:
 
+* ``control: drive`` (the driving features of :mod:`policies.drive` in, (v, ω) out):
+  :class:`policies.drive.TeamDrivePolicy`, the network driving the wheels along the path of a
+  ``frontier_team`` guide (the team's robots share a radio: :func:`policies.drive.drive_team`).
+  The package ships one (:data:`SHIPPED`, the network of ``ppo_drive``), used when no
+  checkpoint is given (docs/results/learning.md: it beats both frontier policies on steps to
+  90 %).
 * ``control: goals`` (a ``Discrete`` action): :class:`LearnedGoalPolicy`, the frontier planner
   of :class:`policies.goals.GoalPolicy` with the goal among its candidates picked by the
-  network every ``decide_every`` steps. The package ships one (:data:`SHIPPED`), used when no
-  checkpoint is given.
-* ``control: velocity`` (a ``Box``): :class:`PPOPolicy`, the network's (v, ω) on the unit box of
-  :class:`polyslam_env.environment.vector.FixedAgents`, mapped to the env's physical limits.
+  network every ``decide_every`` steps. The package ships one (:data:`SHIPPED_GOALS`), the
+  policy ``ppo_goals`` (``ppo`` until the driving network replaced it).
+* ``control: velocity`` (a ``Box`` over the env's own observation): :class:`PPOPolicy`, the
+  network's (v, ω) on the unit box of :class:`polyslam_env.environment.vector.FixedAgents`,
+  mapped to the env's physical limits.
 
 torch and SB3 are imported when a checkpoint is loaded, not before.
 """
@@ -23,6 +30,7 @@ import numpy as np
 from gymnasium import spaces
 
 from policies.base import CheckpointError, Policy, PolicyContext
+from policies.drive import SHIPPED_DRIVE
 from policies.goals import CANDIDATES, GoalPolicy, feature_size
 
 __all__ = [
@@ -39,7 +47,8 @@ __all__ = [
 #: The learned goal-choice policy shipped with the package (docs/results/learning.md says how
 #: it was trained: ``polyslam train --config configs/train_goals.yaml``).
 SHIPPED_GOALS = Path(__file__).resolve().parent / "checkpoints" / "ppo_goals.zip"
-SHIPPED = SHIPPED_GOALS
+#: The network behind ``ppo`` when no checkpoint is given: the shipped driving network.
+SHIPPED = SHIPPED_DRIVE
 
 #: Loaded models by (resolved path, modification time): robots of a team share one network.
 _CACHE: dict[tuple[str, int], Any] = {}
