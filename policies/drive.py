@@ -33,6 +33,7 @@ from gymnasium import spaces
 
 from policies.base import CheckpointError, PolicyContext, PolicyError
 from policies.frontier import FrontierPolicy
+from policies.loading import load_checkpoint
 from policies.radio import Radio
 from policies.team import TeamFrontierPolicy
 
@@ -196,8 +197,6 @@ class DrivePolicy(DriveGuide):
         deterministic: bool = True,
         **guide: Any,
     ) -> None:
-        from policies.ppo import load_checkpoint
-
         if not isinstance(context.action_space, spaces.Box):
             raise PolicyError("ppo_drive: needs continuous actions (action.mode: continuous)")
         self.model = load_checkpoint(checkpoint)

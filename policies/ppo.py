@@ -22,7 +22,6 @@ torch and SB3 are imported when a checkpoint is loaded, not before.
 
 from __future__ import annotations
 
-import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -30,8 +29,10 @@ import numpy as np
 from gymnasium import spaces
 
 from policies.base import CheckpointError, Policy, PolicyContext
-from policies.drive import SHIPPED_DRIVE
+from policies.drive import SHIPPED_DRIVE, TeamDrivePolicy, drive_team
+from policies.drive import feature_size as drive_features
 from policies.goals import CANDIDATES, GoalPolicy, feature_size
+from policies.loading import load_checkpoint
 
 __all__ = [
     "SHIPPED",
@@ -50,29 +51,6 @@ SHIPPED_GOALS = Path(__file__).resolve().parent / "checkpoints" / "ppo_goals.zip
 #: The network behind ``ppo`` when no checkpoint is given: the shipped driving network.
 SHIPPED = SHIPPED_DRIVE
 
-#: Loaded models by (resolved path, modification time): robots of a team share one network.
-_CACHE: dict[tuple[str, int], Any] = {}
-
-
-def load_checkpoint(path: str | Path) -> Any:
-    """The SB3 PPO model in ``path`` (cached); :class:`CheckpointError` if missing or corrupt."""
-    path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"checkpoint {str(path)!r}: no such file")
-    key = (str(path.resolve()), path.stat().st_mtime_ns)
-    if key not in _CACHE:
-        if not zipfile.is_zipfile(path):
-            raise CheckpointError(f"checkpoint {str(path)!r}: not an SB3 .zip file")
-        from stable_baselines3 import PPO
-
-        try:
-            _CACHE[key] = PPO.load(path, device="cpu")
-        except Exception as err:  # SB3 raises many kinds on a damaged archive
-            raise CheckpointError(
-                f"checkpoint {str(path)!r}: cannot load ({type(err).__name__}: {err})"
-            ) from None
-    return _CACHE[key]
-
 
 def make_ppo(
     context: PolicyContext, checkpoint: str | Path | None = None, deterministic: bool = True
@@ -84,8 +62,6 @@ def make_ppo(
     if kind == "goals":
         return LearnedGoalPolicy(context, checkpoint, deterministic)
     if kind == "drive":
-        from policies.drive import TeamDrivePolicy
-
         return TeamDrivePolicy(context, checkpoint, deterministic)
     return PPOPolicy(context, checkpoint, deterministic)
 
@@ -96,8 +72,6 @@ def _ppo_team(
     """The ``ppo`` policies of a whole team: a driving network's guides share one radio."""
     checkpoint = _shipped("ppo", SHIPPED) if checkpoint is None else checkpoint
     if contexts and _kind(contexts[0], checkpoint) == "drive":
-        from policies.drive import drive_team
-
         return dict(drive_team(contexts, checkpoint, deterministic))
     return {c.agent: make_ppo(c, checkpoint, deterministic) for c in contexts}
 
@@ -130,8 +104,6 @@ def _kind(context: PolicyContext, checkpoint: str | Path) -> str:
     """What the network of ``checkpoint`` controls: ``goals`` (a ``Discrete`` action),
     ``drive`` (the driving features of :mod:`policies.drive` in, (v, ω) out) or ``velocity``
     (the env's own observation in)."""
-    from policies.drive import feature_size as drive_features
-
     model = load_checkpoint(checkpoint)
     if isinstance(model.action_space, spaces.Discrete):
         return "goals"
