@@ -31,6 +31,7 @@ import numpy as np
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.fitting import J_ROT
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH, line_angle, off_square
+from polyslam_env.slam.map_kernels import eta_range
 from polyslam_env.slam.polynomial import Polynomial
 
 #: χ²₃ 99 % quantile: a correction of T further than this (in Σ_T's metric) is refused, and
@@ -145,12 +146,15 @@ def _refine_from(
         raise ValueError("chain_var and wall_var need one variance per chain and per wall")
     point_var = sigma * sigma + var_c[chain_of]  # (N,) before the wall's share
     tangents_q = np.vstack([_tangents(c) for c in chains])  # (N, 2) sender frame
+    reach = wall_reach(walls, var_w, cov_t, point_var, q)
+    starts = np.cumsum([0] + [len(c) for c in chains])
     t = np.array(start, dtype=float)
     info = info_prior
     for _ in range(iterations):
         p, dp_dt = frame_points(q, t)
         tangents = tangents_q @ rotation(t[2]).T
-        match = _match(p, dp_dt, tangents, walls, cov_t, point_var, var_w)
+        near = _near_chains(reach, p, starts)
+        match = _match(p, dp_dt, tangents, walls, cov_t, point_var, var_w, near)
         if match is None:
             return None
         residual, grad, wall, keep = match  # (M,), (M, 3), (M,), (N,)
@@ -226,24 +230,30 @@ def _match(
     cov_t: np.ndarray,
     point_var: np.ndarray,
     wall_var: np.ndarray,
+    near: Sequence[np.ndarray | slice] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """Per point (N, 2) the wall it pairs with (smallest normalised normal distance within
     the gate, same direction, inside the extent; a pair's offset variance is the point's
     ``point_var`` (N,) plus the wall's ``wall_var``): for the M points that pair, residuals
     (M,), their gradients w.r.t. T (M, 3) and wall indices (M,), and which points pair (N,)
-    bool; None if none does."""
+    bool; None if none does. ``near[w]`` (:func:`_near_chains`): the rows of ``p`` that can
+    pair with wall w (default: all); the others cannot, so leaving them out changes nothing."""
     n_pts = len(p)
     best = np.full(n_pts, np.inf)  # normalised |r|
     residual = np.zeros(n_pts)
     grad = np.zeros((n_pts, 3))
     wall_of = np.full(n_pts, -1)
     cos_max = np.cos(np.radians(MAX_ANGLE_DEG))
+    every = np.arange(n_pts)
     for w, poly in enumerate(walls):
-        xi, eta = poly.from_xy(p)
-        (at,) = np.nonzero((xi >= poly.lo) & (xi <= poly.hi))  # inside its extent
+        rows = every if near is None else every[near[w]]
+        if not len(rows):
+            continue
+        xi, eta = poly.from_xy(p[rows])
+        at = rows[(xi >= poly.lo) & (xi <= poly.hi)]  # inside its extent
         if not len(at):
             continue
-        xi, eta = xi[at], eta[at]  # the rest, point by point, only where it can pair
+        xi, eta = poly.from_xy(p[at])  # the rest, point by point, only where it can pair
         slope = poly.slope(xi)
         normal = poly.normals(xi)  # (n, 2)
         r = (eta - poly.value(xi)) / np.sqrt(1.0 + slope * slope)
@@ -258,3 +268,54 @@ def _match(
     if not keep.any():
         return None
     return residual[keep], grad[keep], wall_of[keep], keep
+
+
+def wall_reach(
+    walls: Sequence[Polynomial],
+    wall_var: np.ndarray,
+    cov_t: np.ndarray,
+    point_var: np.ndarray,
+    q: np.ndarray,
+) -> np.ndarray:
+    """(W, 4) boxes [x_lo, x_hi, y_lo, y_hi], each holding every place where a point can pair
+    with that wall in :func:`_match`: inside its extent (ξ ∈ [lo, hi]) and within the gate,
+    |r| ≤ GATE_SIGMAS·pred with r the η offset over √(1 + B'²). Bounds: pred² = gᵀΣ_T g +
+    point_var + wall_var with g = nᵀ ∂p/∂T = (n_x, n_y, nᵀJR q), so |g|² ≤ 1 + |q|² and
+    gᵀΣ_T g ≤ tr(Σ_T)(1 + max |q|²); the η offset is at most |r| √(1 + max B'²) (the slope's
+    exact maximum over the extent); B over the extent lies in
+    :func:`~polyslam_env.slam.map_kernels.eta_range` (interval arithmetic, padded), and 1e-9 m
+    more covers the rounding of c0 + B."""
+    worst = float(np.trace(cov_t)) * (1.0 + float(np.max(np.sum(q * q, axis=1), initial=0.0)))
+    worst += float(np.max(point_var, initial=0.0))
+    out = np.empty((len(walls), 4))
+    for w, poly in enumerate(walls):
+        shape = poly.coeffs.copy()
+        shape[0] = 0.0
+        b_lo, b_hi = eta_range(shape, poly.lo, poly.hi)
+        slope = poly.max_slope()
+        reach = GATE_SIGMAS * np.sqrt((worst + wall_var[w]) * (1.0 + slope * slope)) + 1e-9
+        eta = (poly.c0 + b_lo - reach, poly.c0 + b_hi + reach)
+        box = (poly.lo, poly.hi, *eta) if poly.variate == 1 else (*eta, poly.lo, poly.hi)
+        out[w] = box
+    return out
+
+
+def _near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> list[np.ndarray | slice]:
+    """Per wall, the rows of ``p`` (chains of points, chain k at rows starts[k]:starts[k+1])
+    of the chains whose bounding box meets the wall's ``reach`` box (:func:`wall_reach`): only
+    they can pair with it."""
+    first = starts[:-1]
+    lo, hi = np.minimum.reduceat(p, first, axis=0), np.maximum.reduceat(p, first, axis=0)
+    meets = (
+        (lo[None, :, 0] <= reach[:, 1, None]) & (hi[None, :, 0] >= reach[:, 0, None])
+        & (lo[None, :, 1] <= reach[:, 3, None]) & (hi[None, :, 1] >= reach[:, 2, None])
+    )  # (W, K)  # fmt: skip
+    out: list[np.ndarray | slice] = []
+    for row in meets:
+        if row.all():
+            out.append(slice(None))
+        else:
+            chains = np.flatnonzero(row)
+            out.append(np.concatenate([np.arange(starts[k], starts[k + 1]) for k in chains])
+                       if len(chains) else slice(0, 0))  # fmt: skip
+    return out

@@ -315,3 +315,38 @@ def test_off_square__on_an_angled_floor_keeps_a_refined_turn_that_is_not_square(
     camera = np.array([1.0, 2.0, math.radians(21.0)])
     refined = np.array([1.0, 2.0, square + 5.0 * sigma])
     assert not RendezvousExchange._off_square(slam, records, camera, refined, cov)
+
+
+def test_match__walls_out_of_reach_leave_out_no_pair() -> None:
+    """The reach boxes (``wall_reach``) only drop rows that cannot pair: ``_match`` on the
+    rows ``_near_chains`` keeps gives bit for bit what it gives on every row, on random walls
+    and short chains (tight boxes) with a prior wide enough that the gate reaches far: the
+    bound at a tenth of its size drops pairing points here."""
+    rng = np.random.default_rng(7)
+    dropped = 0
+    for _ in range(40):
+        walls = []
+        for _ in range(6):
+            coeffs = [*rng.normal(0, 2, 2), *rng.normal(0, 0.1, 2)]
+            lo, hi = sorted(rng.uniform(-3, 3, 2))
+            walls.append(Polynomial(int(rng.integers(1, 3)), coeffs, lo, hi))
+        chains = [transform_points(w.sample_arclength(0.05), inverse(T_TRUE)) for w in walls]
+        chains = [c + rng.normal(0, 0.05, c.shape) + rng.normal(0, 0.2, 2) for c in chains[:4]]
+        chains = [c[k : k + 3] for c in chains for k in range(0, len(c), 3)]  # tight boxes
+        cov_t = COV_T * rng.uniform(0.5, 20.0)
+        q = np.vstack(chains)
+        starts = np.cumsum([0] + [len(c) for c in chains])
+        point_var = np.full(len(q), 0.02**2)
+        wall_var = rng.uniform(0, 0.05**2, len(walls))
+        p, dp_dt = frame_points(q, T_TRUE + rng.normal(0, 0.05, 3))
+        tangents = np.vstack([alignment._tangents(c) for c in chains])
+        args = (p, dp_dt, tangents, walls, cov_t, point_var, wall_var)
+        reach = alignment.wall_reach(walls, wall_var, cov_t, point_var, q)
+        near = alignment._near_chains(reach, p, starts)
+        dropped += sum(len(p) - len(np.arange(len(p))[rows]) for rows in near)
+        every, kept = alignment._match(*args), alignment._match(*args, near)
+        assert (every is None) == (kept is None)
+        if every is not None and kept is not None:
+            for a, b in zip(every, kept, strict=True):
+                np.testing.assert_array_equal(a, b)
+    assert dropped > 0  # the boxes did leave rows out
