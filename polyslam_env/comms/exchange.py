@@ -1084,10 +1084,10 @@ class RendezvousExchange:
         for record in fresh:
             version = _version(record)
             seen.add(version)
+            # on the pose columns only (the rest are zeros): _fuse sizes G_x to the state
             pts = received_point_set(
-                record, t, d_state, d_noise, noise_cov, slam.mean.size, self.chord_tol,
-                self.spacing,
-            )  # fmt: skip
+                record, t, d_state, d_noise, noise_cov, 3, self.chord_tol, self.spacing
+            )
             sure = transform_normal_sigma(record.polynomial, t, cov_t, self.chord_tol,
                                           self.spacing) <= limit  # fmt: skip
             self.dropped_points[r] += int(np.count_nonzero(~sure))
