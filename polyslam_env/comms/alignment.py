@@ -28,6 +28,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from polyslam_env.comms.kernels import match_walls
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.fitting import J_ROT
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH, line_angle, off_square
@@ -153,8 +154,8 @@ def _refine_from(
     for _ in range(iterations):
         p, dp_dt = frame_points(q, t)
         tangents = tangents_q @ rotation(t[2]).T
-        near = _near_chains(reach, p, starts)
-        match = _match(p, dp_dt, tangents, walls, cov_t, point_var, var_w, near)
+        meets = _near_chains(reach, p, starts)
+        match = _match(p, dp_dt, tangents, walls, cov_t, point_var, var_w, meets, starts)
         if match is None:
             return None
         residual, grad, wall, keep = match  # (M,), (M, 3), (M,), (N,)
@@ -230,40 +231,31 @@ def _match(
     cov_t: np.ndarray,
     point_var: np.ndarray,
     wall_var: np.ndarray,
-    near: Sequence[np.ndarray | slice] | None = None,
+    meets: np.ndarray | None = None,
+    starts: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """Per point (N, 2) the wall it pairs with (smallest normalised normal distance within
     the gate, same direction, inside the extent; a pair's offset variance is the point's
     ``point_var`` (N,) plus the wall's ``wall_var``): for the M points that pair, residuals
     (M,), their gradients w.r.t. T (M, 3) and wall indices (M,), and which points pair (N,)
-    bool; None if none does. ``near[w]`` (:func:`_near_chains`): the rows of ``p`` that can
-    pair with wall w (default: all); the others cannot, so leaving them out changes nothing."""
-    n_pts = len(p)
-    best = np.full(n_pts, np.inf)  # normalised |r|
-    residual = np.zeros(n_pts)
-    grad = np.zeros((n_pts, 3))
-    wall_of = np.full(n_pts, -1)
-    cos_max = np.cos(np.radians(MAX_ANGLE_DEG))
-    every = np.arange(n_pts)
+    bool; None if none does. ``meets`` (W, K) (:func:`_near_chains`): which chains (rows
+    ``starts[k]:starts[k+1]`` of ``p``) can pair with each wall (default: one chain, every
+    wall); the others cannot, so leaving them out changes nothing. Compiled:
+    :func:`~polyslam_env.comms.kernels.match_walls`."""
+    if meets is None or starts is None:
+        meets, starts = np.ones((len(walls), 1), dtype=bool), np.array([0, len(p)])
+    width = max((poly.order + 1 for poly in walls), default=2)
+    coeffs = np.zeros((len(walls), width))
     for w, poly in enumerate(walls):
-        rows = every if near is None else every[near[w]]
-        if not len(rows):
-            continue
-        xi, eta = poly.from_xy(p[rows])
-        at = rows[(xi >= poly.lo) & (xi <= poly.hi)]  # inside its extent
-        if not len(at):
-            continue
-        xi, eta = poly.from_xy(p[at])  # the rest, point by point, only where it can pair
-        slope = poly.slope(xi)
-        normal = poly.normals(xi)  # (n, 2)
-        r = (eta - poly.value(xi)) / np.sqrt(1.0 + slope * slope)
-        g = np.einsum("ni,nij->nj", normal, dp_dt[at])  # (n, 3) ∂r/∂T
-        pred = np.sqrt(np.einsum("ni,ij,nj->n", g, cov_t, g) + point_var[at] + wall_var[w])
-        parallel = np.abs(np.einsum("ni,ni->n", normal, tangents[at])) <= np.sqrt(1 - cos_max**2)
-        score = np.abs(r) / pred
-        ok = parallel & (score <= GATE_SIGMAS) & (score < best[at])
-        rows = at[ok]
-        best[rows], residual[rows], grad[rows], wall_of[rows] = score[ok], r[ok], g[ok], w
+        coeffs[w, : poly.order + 1] = poly.coeffs
+    variate = np.array([poly.variate for poly in walls], dtype=np.int64)
+    extent = np.array([(poly.lo, poly.hi) for poly in walls], dtype=float).reshape(-1, 2)
+    sin_max = float(np.sqrt(1 - np.cos(np.radians(MAX_ANGLE_DEG)) ** 2))
+    _, residual, grad, wall_of = match_walls(
+        p, dp_dt, tangents, variate, coeffs, extent, cov_t, point_var,
+        np.asarray(wall_var, dtype=float), meets, np.asarray(starts, dtype=np.int64),
+        GATE_SIGMAS, sin_max,
+    )  # fmt: skip
     keep = wall_of >= 0
     if not keep.any():
         return None
@@ -300,22 +292,12 @@ def wall_reach(
     return out
 
 
-def _near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> list[np.ndarray | slice]:
-    """Per wall, the rows of ``p`` (chains of points, chain k at rows starts[k]:starts[k+1])
-    of the chains whose bounding box meets the wall's ``reach`` box (:func:`wall_reach`): only
-    they can pair with it."""
+def _near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(W, K) whether chain k of ``p`` (rows starts[k]:starts[k+1]) has a bounding box that
+    meets wall w's ``reach`` box (:func:`wall_reach`): only those chains can pair with it."""
     first = starts[:-1]
     lo, hi = np.minimum.reduceat(p, first, axis=0), np.maximum.reduceat(p, first, axis=0)
-    meets = (
+    return np.asarray(
         (lo[None, :, 0] <= reach[:, 1, None]) & (hi[None, :, 0] >= reach[:, 0, None])
         & (lo[None, :, 1] <= reach[:, 3, None]) & (hi[None, :, 1] >= reach[:, 2, None])
-    )  # (W, K)  # fmt: skip
-    out: list[np.ndarray | slice] = []
-    for row in meets:
-        if row.all():
-            out.append(slice(None))
-        else:
-            chains = np.flatnonzero(row)
-            out.append(np.concatenate([np.arange(starts[k], starts[k + 1]) for k in chains])
-                       if len(chains) else slice(0, 0))  # fmt: skip
-    return out
+    )  # fmt: skip
