@@ -193,6 +193,7 @@ POLICIES: dict[str, PolicyFactory | str] = {
     "wall_follow": "policies.scripted:WallFollowPolicy",
     "random": "policies.scripted:RandomPolicy",
     "ppo": "policies.ppo:make_ppo",
+    "ppo_goals": "policies.ppo:make_ppo_goals",
     "ppo_drive": "policies.drive:make_ppo_drive",
     "ppo_careful": "policies.drive:make_ppo_careful",
 }
@@ -270,11 +271,14 @@ def make_team(name: str, env: Any, **kwargs: Any) -> TeamPolicy:
     """The same policy ``name`` for every agent of ``env``. A factory with a ``team``
     attribute makes the whole team at once, ``factory.team(contexts, **kwargs)`` → ``{agent:
     policy}`` (team-mates that share something, e.g. ``frontier_team``'s radio)."""
-    build_team = getattr(policy_factory(name), "team", None)
+    factory = policy_factory(name)
+    build_team = getattr(factory, "team", None)
     if build_team is None:
         return TeamPolicy({a: make_policy(name, env, a, **kwargs) for a in env.possible_agents})
     checkpoint = kwargs.pop("checkpoint", None)
     if checkpoint is not None:
-        raise PolicyError(f"policy {name!r} takes no checkpoint, got {checkpoint!r}")
+        if not getattr(factory, "takes_checkpoint", False):
+            raise PolicyError(f"policy {name!r} takes no checkpoint, got {checkpoint!r}")
+        kwargs["checkpoint"] = checkpoint
     contexts = [PolicyContext.from_env(env, a) for a in env.possible_agents]
     return TeamPolicy(build_team(contexts, **kwargs))

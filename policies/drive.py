@@ -33,6 +33,9 @@ from gymnasium import spaces
 
 from policies.base import CheckpointError, PolicyContext, PolicyError
 from policies.frontier import FrontierPolicy
+from policies.loading import load_checkpoint
+from policies.radio import Radio
+from policies.team import TeamFrontierPolicy
 
 __all__ = [
     "FEATURES",
@@ -40,6 +43,8 @@ __all__ = [
     "SHIPPED_DRIVE",
     "DriveGuide",
     "DrivePolicy",
+    "TeamDriveGuide",
+    "TeamDrivePolicy",
     "feature_size",
     "make_ppo_careful",
     "make_ppo_drive",
@@ -96,13 +101,14 @@ class DriveGuide(FrontierPolicy):
         self._ranges = np.full(len(self.context.beam_angles), np.inf)
         self._previous = np.zeros(2)
         self._progress = 0.0
+        self._detections = np.zeros((0, 2))
 
     def observe(self, observation: Any) -> None:
         """Fold ``observation`` into the own map, measure the progress along the old path,
         replan if due."""
         before, path = self._pose, self.path
         pose, ranges, detections = self._sense(observation)
-        self._pose, self._ranges = pose, ranges
+        self._pose, self._ranges, self._detections = pose, ranges, detections
         self._progress = 0.0
         if path is not None and self._step > 1:
             gained = remaining(path, before[0], before[1]) - remaining(path, pose[0], pose[1])
@@ -154,6 +160,21 @@ class DriveGuide(FrontierPolicy):
         raise NotImplementedError("DriveGuide does not drive; DrivePolicy does")
 
 
+class TeamDriveGuide(DriveGuide, TeamFrontierPolicy):
+    """The guide of ``frontier_team`` (:mod:`policies.team`): a :class:`DriveGuide` whose
+    planner also discounts the frontiers near the goals its team-mates announced over a mutual
+    sighting, and that announces its own goal while it sees a team-mate. ``radio`` is the
+    team's shared :class:`~policies.radio.Radio`; other keywords are
+    :class:`~policies.team.TeamFrontierPolicy`'s and :class:`DriveGuide`'s. The features are
+    :class:`DriveGuide`'s: only the path they point along changes."""
+
+    def observe(self, observation: Any) -> None:
+        """:meth:`DriveGuide.observe` (which hears the team-mates' messages and replans), then
+        announce the goal (the frontier team's step, without its controller)."""
+        super().observe(observation)
+        self._announce(self._pose, self._detections)
+
+
 def _ahead(path: np.ndarray, pose: np.ndarray, reach: float) -> np.ndarray:  # (2,)
     """The first waypoint of ``path`` (P, 2), from the one nearest ``pose`` on, at least
     ``reach`` m from it (the last when none is)."""
@@ -176,8 +197,6 @@ class DrivePolicy(DriveGuide):
         deterministic: bool = True,
         **guide: Any,
     ) -> None:
-        from policies.ppo import load_checkpoint
-
         if not isinstance(context.action_space, spaces.Box):
             raise PolicyError("ppo_drive: needs continuous actions (action.mode: continuous)")
         self.model = load_checkpoint(checkpoint)
@@ -208,6 +227,19 @@ class DrivePolicy(DriveGuide):
                 return np.clip(mean, -1.0, 1.0)
             std = dist.stddev.numpy().reshape(-1).astype(float)
         return np.clip(mean + std * rng.standard_normal(2), -1.0, 1.0)
+
+
+class TeamDrivePolicy(DrivePolicy, TeamDriveGuide):
+    """A driving network behind a :class:`TeamDriveGuide` (the policy ``ppo``'s driver; a
+    team built with :func:`drive_team` shares one radio)."""
+
+
+def drive_team(
+    contexts: list[PolicyContext], checkpoint: str | Path, deterministic: bool = True
+) -> dict[str, TeamDrivePolicy]:
+    """The :class:`TeamDrivePolicy` of every robot of a team, sharing one radio."""
+    radio = Radio(len(contexts))
+    return {c.agent: TeamDrivePolicy(c, checkpoint, deterministic, radio=radio) for c in contexts}
 
 
 def make_ppo_drive(

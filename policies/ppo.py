@@ -1,21 +1,27 @@
 """``ppo``: a policy trained with Stable-Baselines3 PPO and parameter sharing.
 
 The same network acts for every robot, each on its own observation. Checkpoints are SB3 ``.zip``
-files written by ``polyslam train``, of one of two kinds, told apart by their action space:
+files written by ``polyslam train``, of one of three kinds, told apart by their spaces:
 
+* ``control: drive`` (the driving features of :mod:`policies.drive` in, (v, ω) out):
+  :class:`policies.drive.TeamDrivePolicy`, the network driving the wheels along the path of a
+  ``frontier_team`` guide (the team's robots share a radio: :func:`policies.drive.drive_team`).
+  The package ships one (:data:`SHIPPED`, the network of ``ppo_drive``), used when no
+  checkpoint is given (docs/results/learning.md: it beats both frontier policies on steps to
+  90 %).
 * ``control: goals`` (a ``Discrete`` action): :class:`LearnedGoalPolicy`, the frontier planner
   of :class:`policies.goals.GoalPolicy` with the goal among its candidates picked by the
-  network every ``decide_every`` steps. The package ships one (:data:`SHIPPED`), used when no
-  checkpoint is given.
-* ``control: velocity`` (a ``Box``): :class:`PPOPolicy`, the network's (v, ω) on the unit box of
-  :class:`polyslam_env.environment.vector.FixedAgents`, mapped to the env's physical limits.
+  network every ``decide_every`` steps. The package ships one (:data:`SHIPPED_GOALS`), the
+  policy ``ppo_goals`` (``ppo`` until the driving network replaced it).
+* ``control: velocity`` (a ``Box`` over the env's own observation): :class:`PPOPolicy`, the
+  network's (v, ω) on the unit box of :class:`polyslam_env.environment.vector.FixedAgents`,
+  mapped to the env's physical limits.
 
 torch and SB3 are imported when a checkpoint is loaded, not before.
 """
 
 from __future__ import annotations
 
-import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -23,64 +29,87 @@ import numpy as np
 from gymnasium import spaces
 
 from policies.base import CheckpointError, Policy, PolicyContext
+from policies.drive import SHIPPED_DRIVE, TeamDrivePolicy, drive_team
+from policies.drive import feature_size as drive_features
 from policies.goals import CANDIDATES, GoalPolicy, feature_size
+from policies.loading import load_checkpoint
 
 __all__ = [
     "SHIPPED",
+    "SHIPPED_GOALS",
     "CheckpointError",
     "LearnedGoalPolicy",
     "PPOPolicy",
     "load_checkpoint",
     "make_ppo",
+    "make_ppo_goals",
 ]
 
 #: The learned goal-choice policy shipped with the package (docs/results/learning.md says how
 #: it was trained: ``polyslam train --config configs/train_goals.yaml``).
-SHIPPED = Path(__file__).resolve().parent / "checkpoints" / "ppo_goals.zip"
-
-#: Loaded models by (resolved path, modification time): robots of a team share one network.
-_CACHE: dict[tuple[str, int], Any] = {}
-
-
-def load_checkpoint(path: str | Path) -> Any:
-    """The SB3 PPO model in ``path`` (cached); :class:`CheckpointError` if missing or corrupt."""
-    path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"checkpoint {str(path)!r}: no such file")
-    key = (str(path.resolve()), path.stat().st_mtime_ns)
-    if key not in _CACHE:
-        if not zipfile.is_zipfile(path):
-            raise CheckpointError(f"checkpoint {str(path)!r}: not an SB3 .zip file")
-        from stable_baselines3 import PPO
-
-        try:
-            _CACHE[key] = PPO.load(path, device="cpu")
-        except Exception as err:  # SB3 raises many kinds on a damaged archive
-            raise CheckpointError(
-                f"checkpoint {str(path)!r}: cannot load ({type(err).__name__}: {err})"
-            ) from None
-    return _CACHE[key]
+SHIPPED_GOALS = Path(__file__).resolve().parent / "checkpoints" / "ppo_goals.zip"
+#: The network behind ``ppo`` when no checkpoint is given: the shipped driving network.
+SHIPPED = SHIPPED_DRIVE
 
 
 def make_ppo(
     context: PolicyContext, checkpoint: str | Path | None = None, deterministic: bool = True
 ) -> Policy:
     """The ``ppo`` policy of ``checkpoint`` (the shipped one when None), of the kind its
-    action space says (module doc)."""
-    if checkpoint is None:
-        if not SHIPPED.is_file():
-            raise CheckpointError(
-                f"ppo: no checkpoint given and the shipped one is missing ({SHIPPED});"
-                " pass --checkpoint FILE (one written by polyslam train)"
-            )
-        checkpoint = SHIPPED
-    model = load_checkpoint(checkpoint)
-    if isinstance(model.action_space, spaces.Discrete):
+    spaces say (module doc)."""
+    checkpoint = _shipped("ppo", SHIPPED) if checkpoint is None else checkpoint
+    kind = _kind(context, checkpoint)
+    if kind == "goals":
         return LearnedGoalPolicy(context, checkpoint, deterministic)
+    if kind == "drive":
+        return TeamDrivePolicy(context, checkpoint, deterministic)
     return PPOPolicy(context, checkpoint, deterministic)
 
 
+def _ppo_team(
+    contexts: list[PolicyContext], checkpoint: str | Path | None = None, deterministic: bool = True
+) -> dict[str, Policy]:
+    """The ``ppo`` policies of a whole team: a driving network's guides share one radio."""
+    checkpoint = _shipped("ppo", SHIPPED) if checkpoint is None else checkpoint
+    if contexts and _kind(contexts[0], checkpoint) == "drive":
+        return dict(drive_team(contexts, checkpoint, deterministic))
+    return {c.agent: make_ppo(c, checkpoint, deterministic) for c in contexts}
+
+
+def make_ppo_goals(
+    context: PolicyContext, checkpoint: str | Path | None = None, deterministic: bool = True
+) -> LearnedGoalPolicy:
+    """The policy ``ppo_goals``: the goal-choice network of ``checkpoint`` (the shipped
+    ``ppo_goals.zip`` when None)."""
+    checkpoint = _shipped("ppo_goals", SHIPPED_GOALS) if checkpoint is None else checkpoint
+    return LearnedGoalPolicy(context, checkpoint, deterministic)
+
+
 make_ppo.takes_checkpoint = True  # type: ignore[attr-defined]
+make_ppo.team = _ppo_team  # type: ignore[attr-defined]
+make_ppo_goals.takes_checkpoint = True  # type: ignore[attr-defined]
+
+
+def _shipped(name: str, shipped: Path) -> Path:
+    """The shipped checkpoint of policy ``name`` (one line if it is missing)."""
+    if not shipped.is_file():
+        raise CheckpointError(
+            f"{name}: no checkpoint given and the shipped one is missing ({shipped});"
+            " pass --checkpoint FILE (one written by polyslam train)"
+        )
+    return shipped
+
+
+def _kind(context: PolicyContext, checkpoint: str | Path) -> str:
+    """What the network of ``checkpoint`` controls: ``goals`` (a ``Discrete`` action),
+    ``drive`` (the driving features of :mod:`policies.drive` in, (v, ω) out) or ``velocity``
+    (the env's own observation in)."""
+    model = load_checkpoint(checkpoint)
+    if isinstance(model.action_space, spaces.Discrete):
+        return "goals"
+    if model.observation_space.shape == (drive_features(len(context.beam_angles)),):
+        return "drive"
+    return "velocity"
 
 
 class LearnedGoalPolicy(GoalPolicy):

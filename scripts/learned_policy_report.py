@@ -10,9 +10,9 @@ per map), and prints, pooled over all their episodes:
   sent (the team's sum) and steps to 90 % (an episode that never
   reached 90 % counts as its step limit + 1, a censored value: the count of such episodes is
   printed with it);
-* when the last policy is ``ppo``: on the same maps and seeds, the team coverage when the slot
-  is chosen uniformly at random among the candidates (what the network's training adds), and
-  how often the network picks each slot.
+* when the last policy is ``ppo_goals`` (the goal-choice network): on the same maps and
+  seeds, the team coverage when the slot is chosen uniformly at random among the candidates
+  (what the network's training adds), and how often the network picks each slot.
 
     polyslam evaluate --policy frontier,random,ppo --map generator:office_floor --seed 10000 \\
         --episodes 10 --json office.json
@@ -59,7 +59,7 @@ def _episode(job: tuple[dict[str, Any], int, str]) -> tuple[float, list[int]]:
         if kind == "uniform":
             team[a] = UniformGoals(PolicyContext.from_env(env, a))
         else:
-            policy = make_policy("ppo", env, a)
+            policy = make_policy("ppo_goals", env, a)
             assert isinstance(policy, GoalPolicy)
             team[a] = policy
         team[a].reset(seed)
@@ -155,7 +155,7 @@ def main() -> None:
         f"never reached 90 % (counted as the step limit + 1): {base} {never[base]},"
         f" {last} {never[last]} of {len(cov[base])}"
     )
-    if last != "ppo":
+    if last != "ppo_goals":
         return
     with Pool(args.workers) as pool:
         results = pool.map(_episode, jobs)
@@ -169,7 +169,7 @@ def main() -> None:
     total = sum(slots.values())
     print(f"uniform slot choice: team coverage {np.mean(uniform):.3f} ± {np.std(uniform):.3f}")
     share = ", ".join(f"slot {k}: {v / total:.2f}" for k, v in sorted(slots.items()))
-    print(f"ppo's choices over {total} decisions: {share}")
+    print(f"ppo_goals' choices over {total} decisions: {share}")
 
 
 if __name__ == "__main__":

@@ -12,7 +12,9 @@ The reward of a step is the env's reward summed over those steps plus the named 
 ``progress`` × the metres gained along the path the guide had planned before each step
 (:meth:`~policies.drive.DriveGuide.progress`): the network is paid for following its own
 planner's path as well as for the area it sweeps. ``progress = 0`` trains on the env's reward
-alone. Infos are the last env step's (so the end-of-episode metrics reach the training logs).
+alone. With ``team`` the guides are :class:`~policies.drive.TeamDriveGuide`'s, sharing a
+radio per team (``frontier_team``'s goal messages and discount). Infos are the last env
+step's (so the end-of-episode metrics reach the training logs).
 
 The same :class:`DriveGuide` code runs here and behind ``polyslam run --policy ppo_drive``
 (:class:`~policies.drive.DrivePolicy`), in the same order (observe → features → act), so the
@@ -28,7 +30,8 @@ import numpy as np
 from gymnasium import spaces
 
 from policies.base import PolicyContext
-from policies.drive import DriveGuide, feature_size
+from policies.drive import DriveGuide, TeamDriveGuide, feature_size
+from policies.radio import Radio
 from polyslam_env.apps.draw_env import MapDrawEnv, Step
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.environment.config import EnvConfig
@@ -47,6 +50,7 @@ class DriveEnv(MapDrawEnv):
         repeat: int = 1,
         progress: float = 1.0,
         seed_limit: int = 10_000,
+        team: bool = False,
     ) -> None:
         if repeat < 1:
             raise ConfigError(f"drive training: repeat must be >= 1, got {repeat!r}")
@@ -56,10 +60,8 @@ class DriveEnv(MapDrawEnv):
         act_space = spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
         super().__init__(configs, act_space, act_space, seed_limit, what="drive training")
         self.repeat, self.progress = int(repeat), float(progress)
-        self.guides = [
-            {a: DriveGuide(PolicyContext.from_env(env, a)) for a in self.possible_agents}
-            for env in self.envs
-        ]
+        self.team = bool(team)
+        self.guides = [self._guides(env) for env in self.envs]
         sizes = {
             feature_size(len(g.context.beam_angles)) for team in self.guides for g in team.values()
         }
@@ -68,6 +70,14 @@ class DriveEnv(MapDrawEnv):
                 f"drive training: every map needs the same beams, got {sizes} features"
             )
         self._obs_space = spaces.Box(-1.0, 1.0, (sizes.pop(),), dtype=np.float32)
+
+    def _guides(self, env: Any) -> dict[str, DriveGuide]:
+        """The guide of every robot of ``env`` (``team``: sharing one radio)."""
+        contexts = [PolicyContext.from_env(env, a) for a in self.possible_agents]
+        if not self.team:
+            return {c.agent: DriveGuide(c) for c in contexts}
+        radio = Radio(len(contexts))
+        return {c.agent: TeamDriveGuide(c, radio=radio) for c in contexts}
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None

@@ -112,6 +112,9 @@ class TrainConfig(Config):
     decide_every: int = 8  # steps per decision (control: goals)
     repeat: int = 1  # env steps per action (control: drive; action repeat)
     progress: float = 1.0  # weight of the shaping term progress, per metre (control: drive)
+    # control: drive: the guide is frontier_team's (goals announced over mutual sightings
+    # discount the planner's utility; policies.drive.TeamDriveGuide), as behind --policy ppo
+    team: bool = False
     # control: goals or drive: every episode picks one of these maps (env.map when empty); its
     # layout seed lies below EVAL_SEED, so evaluation seeds are layouts never trained on
     maps: tuple[str, ...] = ()
@@ -153,6 +156,8 @@ class TrainConfig(Config):
                 "maps: only with control: goals or drive (velocity training uses env.map)"
             )
         check_range("progress", self.progress, 0.0, 1e6)
+        if self.team and self.control != "drive":
+            raise ConfigError(f"team: only with control: drive, got control: {self.control}")
 
     @property
     def slots(self) -> int:
@@ -389,7 +394,9 @@ def _make_venv(cfg: TrainConfig) -> Any:
     if cfg.control == "drive":
         from polyslam_env.apps.drive_env import DriveEnv
 
-        drive = DriveEnv(cfg.env_configs(), cfg.repeat, cfg.progress, seed_limit=EVAL_SEED)
+        drive = DriveEnv(
+            cfg.env_configs(), cfg.repeat, cfg.progress, seed_limit=EVAL_SEED, team=cfg.team
+        )
         return vectorise(drive, cfg.num_envs, num_cpus=cfg.num_cpus, seed=cfg.seed)
     return make_vec_env(cfg.env, cfg.num_envs, num_cpus=cfg.num_cpus, seed=cfg.seed)
 
@@ -523,7 +530,7 @@ def final_evaluation(cfg: TrainConfig, checkpoint: Path, timesteps: int) -> dict
     and whose planner guides a ``control: drive`` one) on the same seeded episodes of
     ``cfg.env``."""
     start = time.perf_counter()
-    name = "ppo_drive" if cfg.control == "drive" else "ppo"
+    name = "ppo_drive" if cfg.control == "drive" and not cfg.team else "ppo"
     report = {
         "checkpoint": str(checkpoint),
         "timesteps": timesteps,

@@ -277,6 +277,12 @@ def test_shipped_careful_config__loads() -> None:
     assert Path(cfg.init).name == "ppo_drive.zip"
 
 
+def test_shipped_ppo_config__loads() -> None:
+    # the network behind --policy ppo: fine-tuned from the shipped driver behind team guides
+    cfg = TrainConfig.from_yaml(configs_dir() / "train_ppo_drive_team.yaml")
+    assert cfg.control == "drive" and cfg.team and Path(cfg.init).name == "ppo_drive.zip"
+
+
 @pytest.mark.parametrize(
     ("top", "match"),
     [
@@ -284,6 +290,7 @@ def test_shipped_careful_config__loads() -> None:
         ({"maps": ["generator:loop"]}, "maps: only with"),
         ({"control": "drive", "progress": -1.0}, "progress"),
         ({"control": "drive", "repeat": 0}, "repeat"),
+        ({"control": "goals", "team": True}, "team: only with control: drive"),
     ],
 )
 def test_train_config__bad_control_and_maps_are_named(

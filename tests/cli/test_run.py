@@ -159,14 +159,19 @@ def test_run__ppo_without_a_usable_checkpoint_exits_2_with_one_line(
     assert "missing.zip" in _one_line_error(capsys)
 
 
-@pytest.mark.parametrize("policy", ["ppo", "ppo_drive", "ppo_careful"])
+@pytest.mark.parametrize("policy", ["ppo", "ppo_goals", "ppo_drive", "ppo_careful"])
 def test_run_and_evaluate__the_shipped_ppo_needs_no_checkpoint_flag(
     policy: str, tmp_path: Path
 ) -> None:
     from policies.drive import SHIPPED_CAREFUL, SHIPPED_DRIVE
-    from policies.ppo import SHIPPED
+    from policies.ppo import SHIPPED, SHIPPED_GOALS
 
-    shipped = {"ppo": SHIPPED, "ppo_drive": SHIPPED_DRIVE, "ppo_careful": SHIPPED_CAREFUL}
+    shipped = {
+        "ppo": SHIPPED,
+        "ppo_goals": SHIPPED_GOALS,
+        "ppo_drive": SHIPPED_DRIVE,
+        "ppo_careful": SHIPPED_CAREFUL,
+    }
     assert shipped[policy].is_file()
     large = ["--map", "generator:warehouse", "--steps", "40", "--seed", "10000"]
     assert main(["run", "--policy", policy, *large, "--out", str(tmp_path)]) == 0

@@ -107,7 +107,13 @@ def _corridor_team() -> tuple[TeamFrontierPolicy, TeamFrontierPolicy]:
     first, second = team.policies.values()
     assert isinstance(first, TeamFrontierPolicy) and isinstance(second, TeamFrontierPolicy)
     assert first.radio is second.radio
-    for policy in (first, second):
+    corridor_maps(first, second)
+    return first, second
+
+
+def corridor_maps(*policies: TeamFrontierPolicy) -> None:
+    """Give each of ``policies`` the corridor own map of :func:`_corridor_team`."""
+    for policy in policies:
         m = policy.map
         rows, cols = m.cells(np.array([[-3.0, -0.8], [3.0, 0.8]]))
         m.free[rows[0] : rows[1] + 1, cols[0] : cols[1] + 1] = True
@@ -116,7 +122,6 @@ def _corridor_team() -> tuple[TeamFrontierPolicy, TeamFrontierPolicy]:
         posts = m.cells(np.array([[-6.0, 0.0], [6.0, 0.0]]))
         m.occ[posts] = True
         m.rebuild()
-    return first, second
 
 
 def test_second_robot__goes_elsewhere_because_of_the_first_robots_announced_goal() -> None:
