@@ -33,7 +33,7 @@ SHAPE_ROTATIONS: tuple[str, ...] = ("heading", "considered")
 #: How a merged landmark's turn is made (``SlamConfig.merge_turn``).
 MERGE_TURNS: tuple[str, ...] = ("fit", "weights")
 #: Whose own error is bounded over the updates it enters (``SlamConfig.reuse_bound``).
-REUSE_BOUNDS: tuple[str, ...] = ("off", "curved", "all")
+REUSE_BOUNDS: tuple[str, ...] = ("none", "curved", "all")
 
 
 @dataclass(frozen=True)
@@ -118,7 +118,7 @@ class SlamConfig(Config):
     # u-th update its beams enter weighs that part u(u+1) times (Σ 1/(u(u+1)) = 1, so by
     # Cauchy–Schwarz the weights bound the error's share over all its updates;
     # kernels.reuse_factors). "curved": landmarks of order ≥ 2 (a line's shape is its c0 and
-    # α, both states); "all": lines too (their misfit on jagged walls); "off": fresh each step
+    # α, both states); "all": lines too (their misfit on jagged walls); "none": fresh each step
     reuse_bound: str = "curved"
     join_pieces: bool = True  # join end-to-end pieces of one wall (merging.py; paper: False)
     stretch_ends: bool = True  # a hit just past an end stretches it (association; paper: False)
@@ -268,7 +268,7 @@ PRESETS: dict[str, SlamConfig] = {
         link_gap=0.0,
         square_walls=False,
         shape_rotation="heading",
-        reuse_bound="off",
+        reuse_bound="none",
     )
 }
 

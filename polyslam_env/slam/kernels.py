@@ -1330,7 +1330,7 @@ def reuse_factors(index: np.ndarray, n: int, mode: int, out: np.ndarray) -> None
     """Per landmark row, the weight of its own error's share in this update (``out`` (n,)):
     u(u + 1) for the u-th update its beams enter since its shape was fitted (``index[USES]``
     counts the earlier ones), 1 where ``mode`` leaves it out (``SlamConfig.reuse_bound``: 0
-    "off" every landmark, 1 "curved" the lines, 2 "all" none).
+    "none" every landmark, 1 "curved" the lines, 2 "all" none).
 
     A landmark's misfit and frozen shape are one error e(ξ) every beam on it sees, in every
     update until it is refitted. For weights λ_u > 0 with Σ_u λ_u ≤ 1, Cauchy–Schwarz gives

@@ -628,7 +628,7 @@ def test_reuse_factors__bound_one_frozen_error_over_all_the_updates_it_enters() 
     (u(u + 1) in the u-th) the diagonal s²·w_u bounds it (PSD difference) for every U, and
     with share_landmark_error's n rows per update too; counting each update as fresh noise
     (weights 1, as before ``slam.reuse_bound``) does not, from U = 2 on. Lines are left alone
-    under "curved", nothing under "off"."""
+    under "curved", nothing under "none"."""
     s2 = 1e-4
     index = np.zeros((N_INDEX, 3), dtype=np.int64)
     index[ORDER] = [1, 2, 3]
@@ -644,4 +644,4 @@ def test_reuse_factors__bound_one_frozen_error_over_all_the_updates_it_enters() 
             gap = s2 * np.diag(fresh) - s2 * np.ones((w.size, w.size))
             assert (np.linalg.eigvalsh(gap)[0] < 0) == (updates > 1)
     assert np.all(_weights_over_updates(index.copy(), 2, 5)[:, 0] > 1.0)  # "all": lines too
-    np.testing.assert_array_equal(_weights_over_updates(index.copy(), 0, 5), 1.0)  # "off"
+    np.testing.assert_array_equal(_weights_over_updates(index.copy(), 0, 5), 1.0)  # "none"
