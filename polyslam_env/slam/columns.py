@@ -33,7 +33,8 @@ SIDE = 3  # face its beams saw: +1 from +η, −1 from −η, 0 unknown
 CHANGED_AT = 4  # step it was created, refit or merged
 STAMP = 5  # bumped whenever its shape or extent changes (lazy Polynomial views)
 RECEIVED = 6  # 1: it holds a received landmark (never linked nor tied square)
-N_INDEX = 7
+USES = 7  # updates its beams entered since its shape was fitted (kernels.reuse_factors)
+N_INDEX = 8
 
 # -- stored beam points: real fields -------------------------------------------------------------
 X = 0  # frame-0 position
@@ -103,7 +104,8 @@ S_N_FIT = 7  # ε_Z + 1: the points a landmark is born from (its frozen shape's 
 S_LINK_AGE = 8  # steps after a landmark changed that its links are sought
 S_LINKS = 9  # 1 when links or square ties are on
 S_SCREEN_ALARM = 10  # outliers among the screen's window that raise the alarm
-N_SWITCHES = 11
+S_REUSE_BOUND = 11  # whose own error is bounded over updates: 0 none, 1 curved, 2 all (REUSE_*)
+N_SWITCHES = 12
 
 # -- per beam (a (2, B) float64 ``beams`` model, an (N_PER_BEAM, B) int64 output) ----------------
 B_ANGLE = 0  # the beam's angle in the robot frame

@@ -32,6 +32,8 @@ BACKENDS: tuple[str, ...] = (
 SHAPE_ROTATIONS: tuple[str, ...] = ("heading", "considered")
 #: How a merged landmark's turn is made (``SlamConfig.merge_turn``).
 MERGE_TURNS: tuple[str, ...] = ("fit", "weights")
+#: Whose own error is bounded over the updates it enters (``SlamConfig.reuse_bound``).
+REUSE_BOUNDS: tuple[str, ...] = ("none", "curved", "all")
 
 
 @dataclass(frozen=True)
@@ -111,6 +113,13 @@ class SlamConfig(Config):
     # length-weighted mean of the pieces' turns (their offsets' share left out: α comes out
     # underconfident, and the maps' own expected precision several times too pessimistic)
     merge_turn: str = "fit"
+    # A landmark's own error beyond c0 and α (its fit's misfit and frozen shape) is one error
+    # for every beam on it in every update until it is refitted, not new noise each step: the
+    # u-th update its beams enter weighs that part u(u+1) times (Σ 1/(u(u+1)) = 1, so by
+    # Cauchy–Schwarz the weights bound the error's share over all its updates;
+    # kernels.reuse_factors). "curved": landmarks of order ≥ 2 (a line's shape is its c0 and
+    # α, both states); "all": lines too (their misfit on jagged walls); "none": fresh each step
+    reuse_bound: str = "curved"
     join_pieces: bool = True  # join end-to-end pieces of one wall (merging.py; paper: False)
     stretch_ends: bool = True  # a hit just past an end stretches it (association; paper: False)
     # beams whose hit lies within this many σ (of its place along the curve) of a landmark's
@@ -217,6 +226,7 @@ class SlamConfig(Config):
         check_choice("slam.backend", self.backend, BACKENDS)
         check_choice("slam.shape_rotation", self.shape_rotation, SHAPE_ROTATIONS)
         check_choice("slam.merge_turn", self.merge_turn, MERGE_TURNS)
+        check_choice("slam.reuse_bound", self.reuse_bound, REUSE_BOUNDS)
 
     @property
     def rotation_states(self) -> bool:
@@ -258,6 +268,7 @@ PRESETS: dict[str, SlamConfig] = {
         link_gap=0.0,
         square_walls=False,
         shape_rotation="heading",
+        reuse_bound="none",
     )
 }
 

@@ -46,8 +46,10 @@ from polyslam_env.slam.columns import (
     P_TURN_VAR_PER_STEP,
     PIVOT,
     S_N_FIT,
+    S_REUSE_BOUND,
     S_ROTATION_STATES,
     S_SHAPE_FOLLOWS_POSE,
+    USES,
     VARIATE,
     XI_VAR,
 )
@@ -1295,6 +1297,7 @@ def share_landmark_error(
     c0_index: np.ndarray,  # (k,) int64: each row's c0 state index
     variance: np.ndarray,  # (k,) each row's own R diagonal, written in place
     range_var: float,  # σ² of the range noise, the part no two beams share
+    reuse: np.ndarray,  # (n,) per landmark row: its shared part's weight (reuse_factors)
 ) -> None:
     """Make the R diagonal of one update's rows bound their joint errors.
 
@@ -1303,7 +1306,9 @@ def share_landmark_error(
     correlated: σ_r² I + s sᵀ. For n rows with shared errors s_i·z, Cauchy–Schwarz gives
     (Σ s_i x_i)² ≤ n Σ s_i² x_i², so the diagonal σ_r² + n s_i² bounds that covariance from
     above, and the diagonal update stays conservative however many beams hit one landmark.
-    Rows on different landmarks are independent and keep their own n."""
+    Rows on different landmarks are independent and keep their own n. The same error comes
+    back in every later update on that landmark: ``reuse`` (1: none) multiplies the shared
+    part further, so that it is bounded over the updates too (:func:`reuse_factors`)."""
     k = c0_index.size
     if k == 0:
         return
@@ -1315,8 +1320,43 @@ def share_landmark_error(
         count[c0_index[i]] += 1
     for i in range(k):
         n = count[c0_index[i]]
-        if n > 1:
-            variance[i] = range_var + n * (variance[i] - range_var)
+        weight = reuse[c0_index[i] - 3]
+        if n > 1 or weight != 1.0:
+            variance[i] = range_var + (n * weight) * (variance[i] - range_var)
+
+
+@njit
+def reuse_factors(index: np.ndarray, n: int, mode: int, out: np.ndarray) -> None:
+    """Per landmark row, the weight of its own error's share in this update (``out`` (n,)):
+    u(u + 1) for the u-th update its beams enter since its shape was fitted (``index[USES]``
+    counts the earlier ones), 1 where ``mode`` leaves it out (``SlamConfig.reuse_bound``: 0
+    "none" every landmark, 1 "curved" the lines, 2 "all" none).
+
+    A landmark's misfit and frozen shape are one error e(ξ) every beam on it sees, in every
+    update until it is refitted. For weights λ_u > 0 with Σ_u λ_u ≤ 1, Cauchy–Schwarz gives
+    (Σ_u x_u e_u)² ≤ Σ_u x_u² e_u² / λ_u, so rows whose shared variance is s²/λ_u in the
+    u-th update bound that error's covariance over *all* of them, however many there will
+    be. λ_u = 1/(u(u + 1)) sums to exactly 1. Counting each step as fresh noise (1 each
+    time) let a curved cave wall's frozen curvature feed the heading step after step: the
+    heading error grew to 4–5 σ while σ shrank (docs/notes/floors.md, Round 3). Within one
+    update the n rows on a landmark share it as well (:func:`share_landmark_error`)."""
+    for j in range(n):
+        weight = 1.0
+        if mode == 2 or (mode == 1 and index[ORDER, j] >= 2):
+            u = float(index[USES, j] + 1)
+            weight = u * (u + 1.0)
+        out[j] = weight
+
+
+@njit
+def count_uses(index: np.ndarray, n: int, c0_index: np.ndarray, accepted: np.ndarray) -> None:
+    """Add one to ``index[USES]`` of each landmark with a row among the ``accepted`` ones."""
+    counted = np.zeros(n, np.bool_)
+    for i in range(c0_index.size):
+        j = c0_index[i] - 3
+        if accepted[i] and not counted[j]:
+            counted[j] = True
+            index[USES, j] += 1
 
 
 @njit
@@ -1378,10 +1418,14 @@ def update_scan(
         k = w
     if k == 0:
         return -1
-    share_landmark_error(c0_index[:k], variance[:k], params[P_RANGE_VAR])
+    reuse = np.empty(n)
+    reuse_factors(index, n, switches[S_REUSE_BOUND], reuse)
+    share_landmark_error(c0_index[:k], variance[:k], params[P_RANGE_VAR], reuse)
     accepted, nis = np.empty(k, np.bool_), np.empty(k)
     consider_from = 3 + n if switches[S_ROTATION_STATES] else mean.size
-    return update_sparse(
+    used = update_sparse(
         mean, cov, innovation[:k], h_pose[:k], c0_index[:k], h_c0[:k], alpha_index[:k],
         h_alpha[:k], variance[:k], params[P_GATE], consider_from, accepted, nis,
     )  # fmt: skip
+    count_uses(index, n, c0_index[:k], accepted)
+    return used

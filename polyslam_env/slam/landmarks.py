@@ -40,6 +40,7 @@ from polyslam_env.slam.columns import (
     RECEIVED,
     SIDE,
     STAMP,
+    USES,
     VARIATE,
     XI_VAR,
 )
@@ -374,7 +375,7 @@ class LandmarkTable:
         index[ID, i], index[VARIATE, i] = landmark_id, poly.variate
         index[ORDER, i] = len(_own_order(shape)) - 1
         index[SIDE, i], index[CHANGED_AT, i], index[STAMP, i] = int(side), step, 0
-        index[RECEIVED, i] = int(received)
+        index[RECEIVED, i], index[USES, i] = int(received), 0
         self.ids.append(landmark_id)
         self._built.append(poly)
         self._built_stamp.append(0)

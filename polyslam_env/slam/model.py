@@ -11,7 +11,7 @@ import numpy as np
 
 from polyslam_env.slam import columns as col
 from polyslam_env.slam import ekf
-from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.config import REUSE_BOUNDS, SlamConfig
 from polyslam_env.slam.divergence import screen_alarm
 
 #: Slack (m) added to box distances when selecting the landmarks a beam can reach: covers
@@ -76,6 +76,7 @@ def step_model(config: SlamConfig, beam_angles: np.ndarray, max_range: float) ->
     s[col.S_LINK_AGE] = config.link_age
     s[col.S_LINKS] = config.link_gap > 0.0 or config.square_walls
     s[col.S_SCREEN_ALARM] = screen_alarm(config)
+    s[col.S_REUSE_BOUND] = REUSE_BOUNDS.index(config.reuse_bound)
     angles = np.asarray(beam_angles, dtype=float).reshape(-1)
     beams = np.zeros((col.N_BEAM_MODEL, angles.size))
     beams[col.B_ANGLE] = angles

@@ -92,6 +92,7 @@ def test_env_config__slam_preset_replaces_slam_and_conflicts_with_custom_slam() 
         link_gap=0.0,
         square_walls=False,
         shape_rotation="heading",
+        reuse_bound="none",
     )
     with pytest.raises(ConfigError, match="slam_preset"):
         EnvConfig(slam=SlamConfig(rho_min=0.05), slam_preset="paper")

@@ -667,13 +667,15 @@ def update_scan(
         innovation, h_pose, c0_index = innovation[keep], h_pose[keep], c0_index[keep]
         h_c0, alpha_index, h_alpha = h_c0[keep], alpha_index[keep], h_alpha[keep]
         variance = variance[keep]
-    variance = share_landmark_error(c0_index, variance, params[columns.P_RANGE_VAR])
+    reuse = reuse_factors(index[:, :n], switches[columns.S_REUSE_BOUND])
+    variance = share_landmark_error(c0_index, variance, params[columns.P_RANGE_VAR], reuse)
     consider_from = 3 + n if switches[columns.S_ROTATION_STATES] else mean.size
     accepted, _ = update_sparse_inplace(
         mean, cov, innovation, h_pose, c0_index, h_c0, variance,
         gate_value=params[columns.P_GATE], alpha_index=alpha_index, h_alpha=h_alpha,
         consider_from=consider_from,
     )  # fmt: skip
+    index[columns.USES, np.unique(c0_index[accepted]) - 3] += 1
     return int(accepted.sum())
 
 
@@ -698,12 +700,26 @@ def xi_variances(
 
 
 def share_landmark_error(
-    c0_index: np.ndarray, variance: np.ndarray, range_var: float
+    c0_index: np.ndarray, variance: np.ndarray, range_var: float, reuse: np.ndarray | None = None
 ) -> np.ndarray:  # (k,)
     """The R diagonal that bounds the joint errors of one update's rows: the part of each
-    row's variance beyond the range noise, shared by the n rows on its landmark, times n."""
+    row's variance beyond the range noise, shared by the n rows on its landmark, times n and
+    times its landmark's ``reuse`` weight (default 1: none)."""
     n = np.bincount(c0_index)[c0_index]
-    return np.where(n > 1, range_var + n * (variance - range_var), variance)
+    weight = np.ones(c0_index.size) if reuse is None else np.asarray(reuse)[c0_index - 3]
+    return np.where(
+        (n > 1) | (weight != 1.0), range_var + (n * weight) * (variance - range_var), variance
+    )
+
+
+def reuse_factors(index: np.ndarray, mode: int) -> np.ndarray:  # (n,)
+    """Per landmark (columns of ``index``), u(u + 1) for its u-th update since its fit
+    (u = uses + 1) where ``mode`` (0 off, 1 curved, 2 all) bounds it, else 1."""
+    from polyslam_env.slam import columns
+
+    u = index[columns.USES].astype(float) + 1.0
+    bounded = np.full(u.size, mode == 2) | ((mode == 1) & (index[columns.ORDER] >= 2))
+    return np.where(bounded, u * (u + 1.0), 1.0)
 
 
 def normalised_innovations(

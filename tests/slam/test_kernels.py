@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from polyslam_env.apps.benchmark import make_inputs, make_slam, make_walls
 from polyslam_env.slam import ekf, kernels, step_kernels
 from polyslam_env.slam.association import nearest_by_error
+from polyslam_env.slam.columns import N_INDEX, ORDER, USES
 from polyslam_env.slam.landmarks import LandmarkTable, boxes_near
 from polyslam_env.slam.maintenance import fit_inverse_table as _fit_inverse_table
 from polyslam_env.slam.measurement import cast
@@ -444,7 +445,7 @@ def test_share_landmark_error__matches_oracle_and_bounds_the_joint_covariance() 
         shared = rng.uniform(0.0, 5e-4, k)
         own = noise + shared
         got = own.copy()
-        kernels.share_landmark_error(c0_index, got, noise)
+        kernels.share_landmark_error(c0_index, got, noise, np.ones(8))
         np.testing.assert_allclose(got, ref.share_landmark_error(c0_index, own, noise), rtol=1e-15)
         for lm in np.unique(c0_index):
             on = c0_index == lm
@@ -607,3 +608,40 @@ def test_beam_rows__xi_gradient_equals_finite_differences(variate: int) -> None:
         assert len(plus) == len(minus) == used
         numeric = (np.array(plus) - np.array(minus)) / (2 * eps)
         np.testing.assert_allclose(analytic[:, a], numeric, rtol=1e-6, atol=1e-6)
+
+
+def _weights_over_updates(index: np.ndarray, mode: int, updates: int) -> np.ndarray:
+    """(updates, n): each landmark's ``reuse_factors`` weight in updates 1 … ``updates``, its
+    uses counted between them as ``update_scan`` counts them (one per update it enters)."""
+    rows = []
+    for _ in range(updates):
+        out = np.empty(index.shape[1])
+        kernels.reuse_factors(index, index.shape[1], mode, out)
+        rows.append(out)
+        index[USES] += 1
+    return np.array(rows)
+
+
+def test_reuse_factors__bound_one_frozen_error_over_all_the_updates_it_enters() -> None:
+    """A landmark's own error e (variance s²) is the same in every update its beams enter:
+    over U updates the rows' errors have covariance s² 11ᵀ. With the kernel's weights
+    (u(u + 1) in the u-th) the diagonal s²·w_u bounds it (PSD difference) for every U, and
+    with share_landmark_error's n rows per update too; counting each update as fresh noise
+    (weights 1, as before ``slam.reuse_bound``) does not, from U = 2 on. Lines are left alone
+    under "curved", nothing under "none"."""
+    s2 = 1e-4
+    index = np.zeros((N_INDEX, 3), dtype=np.int64)
+    index[ORDER] = [1, 2, 3]
+    weights = _weights_over_updates(index.copy(), 1, 60)  # "curved"
+    np.testing.assert_array_equal(weights[:, 0], 1.0)
+    np.testing.assert_array_equal(weights[:, 1], weights[:, 2])
+    for updates in (1, 2, 5, 60):
+        for per_update in (1, 3):  # rows on the landmark in each update
+            w = np.repeat(weights[:updates, 1], per_update) * per_update
+            gap = s2 * np.diag(w) - s2 * np.ones((w.size, w.size))
+            assert np.linalg.eigvalsh(gap)[0] >= -1e-12 * s2 * w.max(), (updates, per_update)
+            fresh = np.full(w.size, float(per_update))  # every update fresh noise
+            gap = s2 * np.diag(fresh) - s2 * np.ones((w.size, w.size))
+            assert (np.linalg.eigvalsh(gap)[0] < 0) == (updates > 1)
+    assert np.all(_weights_over_updates(index.copy(), 2, 5)[:, 0] > 1.0)  # "all": lines too
+    np.testing.assert_array_equal(_weights_over_updates(index.copy(), 0, 5), 1.0)  # "none"
