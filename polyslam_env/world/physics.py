@@ -22,7 +22,7 @@ at every reset), the robot bodies and the sensors. Design choices (the spec is s
   ``v_max · dt / substeps`` (one sub-step at full speed) and ``collision_slop`` equals it: a
   contact starts up to a skin before the true circles touch and blocks further approach, but is
   never pushed apart unless the true shapes overlap. Robots thus never overlap walls, pillars or
-  each other, and stop between 0 and one skin (1.5 cm by default) short of them.
+  each other, and stop between 0 and one skin (3 cm by default: 10 sub-steps) short of them.
 * ``collided`` means a contact pushed on the robot during the step (non-zero impulse): a robot
   driving into a wall or another robot, or being pushed; gliding past within the skin is not.
 * A guard checks every control step that no robot centre crossed a wall and that no robot
