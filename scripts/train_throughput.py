@@ -19,53 +19,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
-import subprocess
 import sys
-import tempfile
-import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
-import yaml
 
-#: Runs the CLI of whichever ``polyslam_env`` is first on ``PYTHONPATH``.
-CLI = "import sys; from polyslam_env.cli.main import main; sys.exit(main(sys.argv[1:]))"
-
-
-def short_config(tree: Path, timesteps: int, folder: Path) -> tuple[Path, dict[str, Any]]:
-    """``tree``'s ``configs/train_goals.yaml`` cut to ``timesteps``, written into ``folder``."""
-    config = yaml.safe_load((tree / "configs" / "train_goals.yaml").read_text())
-    config.update(timesteps=timesteps, eval_episodes=0, checkpoint_every=10 * timesteps)
-    path = folder / "train_goals_short.yaml"
-    path.write_text(yaml.safe_dump(config, sort_keys=False))
-    return path, config
-
-
-def run(tree: Path, timesteps: int) -> dict[str, float]:
-    """One shortened training run from ``tree``: wall and CPU seconds, env steps."""
-    with tempfile.TemporaryDirectory(prefix="polyslam-train-throughput-") as tmp:
-        folder = Path(tmp)
-        path, config = short_config(tree, timesteps, folder)
-        env = {**os.environ, "PYTHONPATH": str(tree), "SDL_VIDEODRIVER": "dummy"}
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        start = time.perf_counter()
-        subprocess.run(
-            [sys.executable, "-c", CLI, "train", "--config", str(path), "--out",
-             str(folder / "out"), "--quiet"],
-            cwd=tree, env=env, check=True, stdout=subprocess.DEVNULL,
-        )  # fmt: skip
-        seconds = time.perf_counter() - start
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    env_steps = timesteps * config["decide_every"] / config["env"]["num_robots"]
-    return {
-        "seconds": seconds,
-        "env_steps": env_steps,
-        "env_steps_per_s": env_steps / seconds,
-        "cpu_ms_per_env_step": 1e3 * cpu / env_steps,
-    }
+from polyslam_env.apps.benchmark_system import train_in_tree
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -81,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     for k in range(args.repeats):
         for tree in trees:
             print(f"repeat {k + 1}/{args.repeats}: {tree}", file=sys.stderr, flush=True)
-            runs[str(tree)].append(run(tree, args.timesteps))
+            runs[str(tree)].append(train_in_tree(tree, args.timesteps))
     first = None
     print(f"{'tree':<40} {'env steps/s':>11} {'CPU ms/env step':>15} {'× first':>8}")
     for tree in trees:

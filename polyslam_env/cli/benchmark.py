@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 #: The columns of each section's table: (heading, width); the first column of ``env`` is
@@ -149,6 +150,13 @@ def register(sub: Any) -> None:
         " 3-robot paper env, 'team' the 20-robot generated-map env of the team rows, 'noslam'"
         " the 3-robot env with slam_enabled=False (alone: only that)",
     )
+    parser.add_argument(
+        "--train-baseline",
+        metavar="TREE",
+        type=Path,
+        help="also run the train row from this source tree (e.g. a checkout of issue 41's"
+        " 'today', main at d0c6831) and give this tree's env steps/s over it, same run",
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of maps and actions")
     # Hidden: a few steps per figure, only to exercise the command (tests).
     parser.add_argument("--tiny", action="store_true", help=argparse.SUPPRESS)
@@ -170,6 +178,7 @@ def run(args: argparse.Namespace) -> int:
         report=printer,
         workers=args.processes or (),
         profile=args.profile,
+        train_baseline=args.train_baseline,
     )
     print()
     print(_format_targets(results["targets"]))

@@ -142,7 +142,7 @@ class WorldConfig(Config):
     """The simulated world: control period, physics sub-steps, robots and sensors."""
 
     dt: float = 1.0  # s, control period T (paper: 1 s)
-    substeps: int = 20  # physics sub-steps per control period
+    substeps: int = 10  # physics sub-steps per control period (the skin: v_max·dt/substeps)
     wall_radius: float = 0.005  # m, half thickness of the wall segments
     robot: RobotConfig = field(default_factory=RobotConfig)
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
@@ -155,14 +155,16 @@ class WorldConfig(Config):
         if self.substeps < 1:
             raise ConfigError(f"substeps: must be >= 1, got {self.substeps!r}")
         check_non_negative("wall_radius", self.wall_radius)
-        # A sub-step must not move a robot more than a third of its radius, or a fast robot
-        # could tunnel through a thin wall between two collision checks.
+        # The contact skin is one sub-step at v_max (world.physics): a contact starts when the
+        # skinned circles touch, so no sub-step carries a robot into an obstacle, whatever its
+        # length. The skin is also how far short of an obstacle (or of another robot's skin) a
+        # robot may stop, a gap the sensors see; keep it at most half a radius.
         step = self.robot.v_max * self.dt / self.substeps
-        if step > self.robot.radius / 3:
-            need = math.ceil(3 * self.robot.v_max * self.dt / self.robot.radius)
+        if step > self.robot.radius / 2:
+            need = math.ceil(2 * self.robot.v_max * self.dt / self.robot.radius)
             raise ConfigError(
-                f"substeps: {self.substeps} sub-steps move a robot {step:.3f} m each at v_max,"
-                f" more than radius/3; use at least {need}"
+                f"substeps: {self.substeps} sub-steps move a robot {step:.3f} m each at v_max"
+                f" (the contact skin), more than radius/2; use at least {need}"
             )
 
 

@@ -22,9 +22,14 @@ at every reset), the robot bodies and the sensors. Design choices (the spec is s
   ``v_max · dt / substeps`` (one sub-step at full speed) and ``collision_slop`` equals it: a
   contact starts up to a skin before the true circles touch and blocks further approach, but is
   never pushed apart unless the true shapes overlap. Robots thus never overlap walls, pillars or
-  each other, and stop between 0 and one skin (1.5 cm by default) short of them.
-* ``collided`` means a contact pushed on the robot during the step (non-zero impulse): a robot
-  driving into a wall or another robot, or being pushed; gliding past within the skin is not.
+  each other, and stop between 0 and one skin (3 cm by default: 10 sub-steps) short of them.
+* ``collided`` means a contact pushed on the robot during the step: a robot driving into a wall
+  or another robot, or being pushed; gliding past within the skin is not. It is read from the
+  motion, not from a contact callback (chipmunk calling Python at every contact of every
+  sub-step cost ~10 Python calls each): a free robot lands on its commanded chords to round-off
+  (damping 0, the drive force gives the velocity exactly), and any contact impulse changes a
+  velocity and so the end position; a robot whose end differs from its free end by more than
+  ``PUSH_TOLERANCE`` was pushed.
 * A guard checks every control step that no robot centre crossed a wall and that no robot
   overlaps one by more than ``GUARD_TOLERANCE``; a violation puts the robot back where the step
   started, marks it collided and counts it in ``guard_reverts``. The only case seen: a robot
@@ -49,13 +54,11 @@ at every reset), the robot bodies and the sensors. Design choices (the spec is s
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pymunk
-from pymunk._chipmunk_cffi import ffi
 from pymunk._chipmunk_cffi import lib as chipmunk
 
 from polyslam_env.core.errors import MapFileError
@@ -74,6 +77,10 @@ SOLVER_ITERATIONS = 40
 OVERLAP_CORRECTION = 0.5
 #: Overlap of the true shapes (beyond the skin) that the guard tolerates, m.
 GUARD_TOLERANCE = 1e-3
+#: Distance from its free end beyond which a robot counts as pushed, m: 1 nm, ~10^5 times the
+#: round-off of summing a control step's sub-steps in another order at building scale (~1e-14 m
+#: at 100 m), ~10^-7 of a sub-step.
+PUSH_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -126,7 +133,7 @@ class World:
         self._h = config.dt / config.substeps  # s, one physics sub-step
         self._v = [0.0] * num_robots  # commanded speed of each robot this control step
         self._w = [0.0] * num_robots  # commanded turn rate
-        self._touched = np.zeros(num_robots, dtype=bool)  # (N,), set by the contact callback
+        self._touched = np.zeros(num_robots, dtype=bool)  # (N,), pushed this step (module doc)
         self._pose = self._start_poses(start_poses)  # (N, 3), θ unwrapped like pymunk's
         self._wrapped = self._pose  # (N, 3): _wrapped_of with θ wrapped (see ``poses``)
         self._wrapped_of: np.ndarray | None = None
@@ -138,13 +145,11 @@ class World:
         """Chipmunk's pointers of the space and the robot bodies (see the module doc)."""
         self._space_c = self.space._space  # cpSpace*
         self._bodies_c = [b._body for b in self.bodies]  # cpBody* of each robot
-        self._robot_of = {b: i for i, b in enumerate(self._bodies_c)}  # pointers hash by address
-        self._arbiter_bodies = (ffi.new("cpBody *[1]"), ffi.new("cpBody *[1]"))
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickled without the C pointers (pymunk pickles the space and bodies)."""
         state = self.__dict__.copy()
-        for name in ("_space_c", "_bodies_c", "_robot_of", "_arbiter_bodies"):
+        for name in ("_space_c", "_bodies_c"):
             del state[name]
         return state
 
@@ -204,7 +209,6 @@ class World:
             circ = pymunk.Circle(static, rad, (x, y))
             circ.friction, circ.elasticity = 0.0, 0.0
             space.add(circ)
-        space.on_collision(post_solve=self._on_contact)
         return space
 
     def _add_robot(self, pose: np.ndarray) -> pymunk.Body:
@@ -216,20 +220,6 @@ class World:
         shape.friction, shape.elasticity = 0.0, 0.0
         self.space.add(body, shape)
         return body
-
-    def _on_contact(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
-        """Mark the robots of a contact that pushed (pymunk calls this after solving). Reads
-        the arbiter through chipmunk directly: ``arbiter.total_impulse.length`` and
-        ``arbiter.shapes`` cost several objects per call, at every contact of every sub-step."""
-        j = chipmunk.cpArbiterTotalImpulse(arbiter._arbiter)
-        if math.sqrt(j.x**2 + j.y**2) <= 0.0:  # as Vec2d.length
-            return
-        a, b = self._arbiter_bodies
-        chipmunk.cpArbiterGetBodies(arbiter._arbiter, a, b)
-        for body in (a[0], b[0]):
-            i = self._robot_of.get(body)
-            if i is not None:
-                self._touched[i] = True
 
     # -- state ------------------------------------------------------------------------------
     @property
@@ -299,7 +289,6 @@ class World:
         """
         cmd = self.clip_commands(commands)
         start = self._pose
-        self._touched[:] = False
         scale = None if slip is None else np.asarray(slip, dtype=float)  # (N,)
         end = self._integrate(cmd if scale is None else cmd * scale[:, None])
         self._pose = self._guard(start, end)
@@ -309,7 +298,7 @@ class World:
         return StepResult(
             odometry=reported + noise,
             true_odometry=true_odo,
-            collided=self._touched.copy(),
+            collided=self._touched,  # a new array every step
             commands=cmd,
         )
 
@@ -321,7 +310,8 @@ class World:
         in the last one is applied here by hand: each period moves by exactly ``substeps``
         solved sub-steps and turns by exactly ``ω dt``. Each sub-step moves along the chord of
         its arc (mid-step heading, speed × sinc(ω h / 2)), so a free robot lands exactly on the
-        unicycle arc; force m·v/h gives velocity v (damping 0).
+        unicycle arc; force m·v/h gives velocity v (damping 0). Sets ``_touched``: the robots
+        whose end is off their free end (module doc).
         """
         n, h = self.config.substeps, self._h
         th0 = self._pose[:, 2]  # (N,)
@@ -344,6 +334,9 @@ class World:
                 chipmunk.cpBodySetVelocity(body, (0.0, 0.0))
             p = chipmunk.cpBodyGetPosition(body)
             end[i, 0], end[i, 1] = p.x, p.y
+        # Free motion: the sum of the sub-steps' velocities f·h/m, each held for h.
+        off = end[:, :2] - self._pose[:, :2] - force.sum(axis=1) * (h * h / self.config.robot.mass)
+        self._touched = (off * off).sum(axis=1) > PUSH_TOLERANCE**2
         return end
 
     def _guard(self, start: np.ndarray, end: np.ndarray) -> np.ndarray:

@@ -139,23 +139,37 @@ def test_targets__met_flags_and_missing_figures() -> None:
         ("41", "floor Python calls per env step", True),
         ("41", "floor Python calls per team act", False),
         ("41", "reproduce --runs 100, s", True),
-        ("41", "train env steps/s over MPE, × today", None),  # not measured
+        ("41", "train env steps/s, × today (--train-baseline)", None),  # not measured
     ]
     assert rows[7]["measured"] == pytest.approx(11.0, rel=1e-12)
 
 
 def test_train_row__its_ratios_to_mpe_and_to_today(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The training row's env steps/s over the same run's MPE rate, and that over today's
-    ratio (:data:`~polyslam_env.apps.benchmark.TRAIN_TODAY_MPE`)."""
+    """The training row's env steps/s over the same run's MPE rate; over the baseline tree's
+    (``--train-baseline``), both trees run as ``polyslam train`` processes, same run."""
     from polyslam_env.apps import benchmark_system
 
-    monkeypatch.setattr(benchmark_system, "bench_train", lambda t: {"env_steps_per_s": 30.0})
-    monkeypatch.setattr(benchmark, "TRAIN_TODAY_MPE", 0.002)
+    rates = {"base": 10.0}
+
+    def fake_run(tree: Path, timesteps: int, config: str) -> dict[str, Any]:
+        rate = rates.get(Path(tree).name, 30.0)
+        return {"timesteps": timesteps, "env_steps": 512.0, "seconds": 512.0 / rate,
+                "env_steps_per_s": rate, "cpu_ms_per_env_step": 1.0}  # fmt: skip
+
+    monkeypatch.setattr(benchmark_system, "train_in_tree", fake_run)
     out: dict[str, Any] = {}
     plan = benchmark.PLANS["full"]
-    benchmark._command_sections(out, plan, {"train"}, lambda s, r: None, 5000.0)
+    benchmark._command_sections(out, plan, {"train"}, lambda s, r: None, 5000.0, Path("base"))
     assert out["train"]["ratio_to_mpe"] == pytest.approx(30.0 / 5000.0, rel=1e-12)
     assert out["train"]["ratio_to_today"] == pytest.approx(3.0, rel=1e-12)
+    assert out["train"]["baseline"]["env_steps_per_s"] == 10.0
+
+
+def test_train_in_tree__a_tree_without_the_config_is_a_one_line_error(tmp_path: Path) -> None:
+    from polyslam_env.apps.benchmark_system import train_in_tree
+
+    with pytest.raises(FileNotFoundError, match="train_goals.yaml"):
+        train_in_tree(tmp_path, 8)
 
 
 def test_targets__reproduce_counts_only_with_100_runs() -> None:

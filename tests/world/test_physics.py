@@ -10,15 +10,18 @@ import pytest
 from polyslam_env.core.errors import MapFileError
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.world.config import WorldConfig
+from polyslam_env.world.generators import GENERATORS
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.maps import load_map
 from polyslam_env.world.physics import World
+from tests.scripts_module import load_script
 
 CFG = WorldConfig()
 R = CFG.robot.radius
 # Overlap allowed by the checks below: the skin rules out first-impact overlap, what is left is
 # the iterative solver's residual when a robot is wedged, measured at < 0.1 mm; 1 mm is 10× that.
 TOL = 1e-3
+physics_substeps = load_script("physics_substeps")
 
 
 def box_layout(w: float, h: float, interior: list[np.ndarray] | None = None) -> Layout:
@@ -118,7 +121,7 @@ def test_step__head_on_robots_stop_at_contact() -> None:
         hit |= world.step(np.array([[0.3, 0.0], [0.3, 0.0]])).collided
     p = world.poses
     gap = p[1, 0] - p[0, 0]
-    # They meet in the middle; the skin (one sub-step, 1.5 cm each) stops them at most 3 cm early.
+    # They meet in the middle; the skin (one sub-step each) stops them at most two skins early.
     assert 2 * R - TOL <= gap <= 2 * R + 2 * world.skin + TOL
     assert abs(p[0, 0] + p[1, 0] - 3.0) < 1e-9  # symmetric: equal and opposite to round-off
     assert hit.all()
@@ -158,7 +161,7 @@ def test_step__free_motion_follows_the_unicycle_arc(v: float, w: float) -> None:
         if w == 0
         else np.array([v / w * math.sin(w * dt), v / w * (1 - math.cos(w * dt)), w * dt])
     )
-    # Sub-steps follow the arc's chords exactly: only round-off over 20 sub-steps remains.
+    # Sub-steps follow the arc's chords exactly: only round-off over the sub-steps remains.
     np.testing.assert_allclose(odo, exact, atol=1e-12)
 
 
@@ -252,3 +255,23 @@ def test_odometry__noise_has_the_configured_covariance() -> None:
     off = cov[~np.eye(3, dtype=bool)]
     assert np.all(np.abs(off) < 5 / math.sqrt(n))
     assert np.all(np.abs(e.mean(axis=0) / sig) < 5 / math.sqrt(n))  # unbiased
+
+
+#: Every generator but cave_system and curved_floor, whose layouts take seconds to build (their
+#: chains of short segments are the cave's, which stays); all nine are in the 10^5-step study.
+QUICK_GENERATORS = [name for name in GENERATORS if name not in ("cave_system", "curved_floor")]
+
+
+@pytest.mark.parametrize("generator", QUICK_GENERATORS)
+def test_default_substeps__no_robot_through_or_into_anything_on_the_generators(
+    generator: str,
+) -> None:
+    # The default sub-step count on a layout of the generator, 4 robots driving seeded random
+    # held commands, every step checked by brute force before the guard: the study of
+    # scripts/physics_substeps.py (10^5 steps on every generator) cut to one short episode.
+    row = physics_substeps.drive(generator, CFG.substeps, 100, 4, 100, seed=1)
+    broken = {k: row[k] for k in ("through", "wall_overlap", "pillar_overlap", "robot_overlap")}
+    assert broken == dict.fromkeys(broken, 0)
+    assert row["after_guard"] == 0
+    # A robot that moved less than half its commanded chord was blocked by a push: counted.
+    assert row["pushes_counted"] in (None, 1.0)
