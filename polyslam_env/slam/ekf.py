@@ -269,12 +269,15 @@ def augment(
 def remove(
     mean: np.ndarray, cov: np.ndarray, indices: np.ndarray | list[int] | int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Drop the landmark state entries at ``indices`` (state indices ≥ 3) and their rows/cols."""
-    drop = np.atleast_1d(np.asarray(indices, dtype=int))
-    if drop.size and (drop.min() < 3 or drop.max() >= mean.size):
+    """Drop the landmark state entries at ``indices`` (state indices ≥ 3) and their rows/cols
+    (a map change's: a handful of array calls, not ``np.setdiff1d`` / ``np.ix_``)."""
+    drop = np.asarray(indices, dtype=np.intp).reshape(-1)
+    if ((drop < 3) | (drop >= mean.size)).any():
         raise ValueError(f"landmark state indices must lie in [3, {mean.size}), got {drop}")
-    keep = np.setdiff1d(np.arange(mean.size), drop)
-    return mean[keep], cov[np.ix_(keep, keep)]
+    keep = np.ones(mean.size, dtype=bool)
+    keep[drop] = False
+    rows = keep.nonzero()[0]
+    return mean[rows], cov.take(rows, axis=0).take(rows, axis=1)
 
 
 # -- divergence and consistency ------------------------------------------------------------------
