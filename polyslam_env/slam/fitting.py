@@ -242,7 +242,7 @@ def polynomial_points(
         )
     if not c0_var > 0:
         raise ValueError(f"c0_var must be > 0, got {c0_var}")
-    xy = poly.equally_spaced(n, lo, hi)  # (n, 2)
+    xy = map_kernels.equally_spaced(poly.coeffs, poly.variate, float(lo), float(hi), n)  # (n, 2)
     d_state = np.zeros((n, 2, n_state))
     d_state[:, 1 if poly.variate == 1 else 0, c0_index] = 1.0
     if turn is not None:
