@@ -38,6 +38,7 @@ from polyslam_env.core.geometry import between, transform_points, wrap_remainder
 from polyslam_env.metrics.mapping import MapShapes, map_points
 from polyslam_env.slam.backends import PointSlamRobot, make_point_slams
 from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.ekf import start_error_covs
 from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam, SlamStepInfo
@@ -150,14 +151,23 @@ class NoSlam(TeamSlam):
 
 class _Filters(TeamSlam):
     """A team of per-robot filters that each report ``pose``, ``pose_cov``,
-    ``pose_cov_relative``, ``diverging`` and ``polynomials()``."""
+    ``pose_cov_relative``, ``diverging`` and ``polynomials()``, all with the start-error
+    covariance ``p0`` (3, 3)."""
 
-    def __init__(self, robots: Sequence[PolySlam | PointSlamRobot]) -> None:
+    def __init__(self, robots: Sequence[PolySlam | PointSlamRobot], p0: np.ndarray) -> None:
         self.robots = list(robots)
+        self.p0 = p0
 
     def estimates(self, world: World, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each robot's ``pose`` and ``pose_cov`` (P_S + J P0 Jᵀ), the start errors' share of
+        the team in one call (:func:`~polyslam_env.slam.ekf.start_error_covs`)."""
+        poses, relative = self._relative()
+        return poses, relative + start_error_covs(poses, self.p0)
+
+    def _relative(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each robot's pose (N, 3) and its filter's own covariance P_S (N, 3, 3)."""
         robots = self.robots
-        return np.array([r.pose for r in robots]), np.array([r.pose_cov for r in robots])
+        return np.array([r.pose for r in robots]), np.array([r.pose_cov_relative for r in robots])
 
     def polynomials(self, i: int) -> list[Polynomial] | None:
         return self.robots[i].polynomials()
@@ -176,12 +186,13 @@ class PolynomialTeam(_Filters):
     def __init__(
         self,
         robots: Sequence[PolySlam],
+        p0: np.ndarray,
         exchange: RendezvousExchange | None,
         samplers: Sequence[MapSampler],
         angles: np.ndarray,
         features: Sequence[FeatureBook] = (),
     ) -> None:
-        super().__init__(robots)
+        super().__init__(robots, p0)
         self.slams = list(robots)
         self.map_exchange = exchange
         self.samplers = list(samplers)
@@ -193,6 +204,11 @@ class PolynomialTeam(_Filters):
     ) -> list[SlamStepInfo | None]:
         robots = range(len(self.slams))
         return run_slam(self.slams, robots, active, odometry, sensing.ranges)
+
+    def _relative(self) -> tuple[np.ndarray, np.ndarray]:
+        """The filters' pose (N, 3) and P_S (N, 3, 3) read from their states (no copy each)."""
+        slams = self.slams
+        return np.array([s.mean[:3] for s in slams]), np.array([s.cov[:3, :3] for s in slams])
 
     def exchange(self, step: int, world: World, sensing: Sensing) -> ExchangeStep | None:
         """Place the pillars each active robot sees in its feature book (alignment mode on
@@ -243,10 +259,11 @@ class PointTeam(_Filters):
     def __init__(
         self,
         robots: Sequence[PointSlamRobot],
+        p0: np.ndarray,
         consensus: ConsensusExchange | None = None,
         fusion: SeifMapExchange | None = None,
     ) -> None:
-        super().__init__(robots)
+        super().__init__(robots, p0)
         self.points = list(robots)
         self.consensus = consensus
         self.fusion = fusion
@@ -345,7 +362,7 @@ def make_team_slam(
             exchange = make_exchange(
                 channel, n, rngs["channel"], wc, config.slam, rngs["alignment"]
             )
-        return PolynomialTeam(slams, exchange, samplers(), angles, features)
+        return PolynomialTeam(slams, config.slam.p0, exchange, samplers(), angles, features)
     sigmas = (sensor.sigma_range, sensor.sigma_bearing_deg)
     ids = sensor.identities
     points = make_point_slams(config.slam, sigmas, rngs["particles"], start_poses, ids)
@@ -354,7 +371,7 @@ def make_team_slam(
         consensus = ConsensusExchange(channel, start_poses, rngs["channel"])
     if channel is not None and channel.mode == "alignment" and config.slam.backend == "seif":
         fusion = SeifMapExchange(channel, n, rngs["channel"], rngs["alignment"])
-    return PointTeam(points, consensus, fusion)
+    return PointTeam(points, config.slam.p0, consensus, fusion)
 
 
 def make_exchange(

@@ -28,6 +28,7 @@ from polyslam_env.core import raster
 from polyslam_env.environment import kernels
 from polyslam_env.environment.config import EnvConfig, ObservationConfig
 from polyslam_env.metrics.mapping import MapShapes, sample_shapes
+from polyslam_env.slam import columns as col
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.sensors import Detection
 
@@ -169,41 +170,61 @@ class MapSampler:
         self.step = float(step)
         self._table: object | None = None  # the table the cache was built on
         self._version = -1  # its version then
-        #: landmark id → (its stamp, c0 when sampled, points (k, 2), dependent axis, k)
-        self._entries: dict[int, tuple[int, float, np.ndarray, int, int]] = {}
-        self._c0 = np.zeros(0)  # (n,) c0 of each landmark when its points were sampled
+        # Per landmark of the cache (its row then), the points' pool they live in and where:
+        self._row_of: dict[int, int] = {}  # landmark id → row
+        self._stamp = np.zeros(0, dtype=np.int64)  # (n,) its stamp when sampled
+        self._c0 = np.zeros(0)  # (n,) its c0 when sampled
+        self._dependent = np.zeros(0, dtype=np.intp)  # (n,) its dependent coordinate (0 or 1)
+        self._start = np.zeros(0, dtype=np.intp)  # (n,) its first point in _points
+        self._count = np.zeros(0, dtype=np.intp)  # (n,) its number of points
         self._points = np.zeros((0, 2))  # (M, 2) all points at the cached c0s
         self._owner = np.zeros(0, dtype=np.intp)  # (M,) landmark (state order) of each point
         self._axis = np.zeros(0, dtype=np.intp)  # (M,) the dependent coordinate (0 or 1)
         self._rows = np.zeros(0, dtype=np.intp)  # (M,) 0 … M − 1
 
     def _rebuild(self, slam: PolySlam) -> None:
-        """Resample the landmarks whose stamp moved; keep the others' points."""
+        """Resample the landmarks whose stamp moved (or that are new), keep the others'
+        points, and lay them out in state order: a handful of array operations, whatever the
+        number of landmarks."""
         table = slam.table
-        ids, stamps = list(table.ids), table.stamp.tolist()
-        c0s = slam.c0s
-        entries = list(map(self._entries.get, ids))
-        stale = [e is None or e[0] != stamp for e, stamp in zip(entries, stamps, strict=True)]
-        rows = np.array(stale, dtype=bool).nonzero()[0]
+        ids = table.ids
+        n = len(ids)
+        real, index, shape = table.buffers  # the table's columns (capacity ≥ n), read whole
+        stamps, c0s = index[col.STAMP, :n], slam.mean[3 : 3 + n]  # (n,) each
+        rows_then = map(self._row_of.get, ids, itertools.repeat(-1, n))
+        old = np.fromiter(rows_then, np.intp, n)  # (n,) row in the cache, −1: new
+        kept = old >= 0
+        stale = ~kept
+        stale[kept] = self._stamp[old[kept]] != stamps[kept]
+        kept &= ~stale
+        start, count = np.empty(n, dtype=np.intp), np.empty(n, dtype=np.intp)
+        c0, dependent = np.empty(n), np.empty(n, dtype=np.intp)
+        pool = self._points
+        rows = stale.nonzero()[0]
         if len(rows):
-            coeffs = table.shape.copy()  # (n, M+1) [0, b_1, …]: c0 from the state
+            coeffs = shape[:n].copy()  # (n, M+1) [0, b_1, …]: c0 from the state
             coeffs[:, 0] = c0s
-            fresh = MapShapes(table.variate, coeffs, table.lo, table.hi)
+            fresh = MapShapes(index[col.VARIATE, :n], coeffs, real[col.LO, :n], real[col.HI, :n])
             points, starts = sample_shapes(fresh, self.step, rows)
-            bounds, variates, c0_list = starts.tolist(), table.variate.tolist(), c0s.tolist()
-            for q, r in enumerate(rows.tolist()):
-                a, b = bounds[q], bounds[q + 1]
-                axis = 1 if variates[r] == 1 else 0
-                entries[r] = (stamps[r], c0_list[r], points[a:b], axis, b - a)
-        done: list[tuple[int, float, np.ndarray, int, int]] = entries  # type: ignore[assignment]
-        self._entries = dict(zip(ids, done, strict=True))
+            start[rows] = starts[:-1] + len(pool)
+            count[rows] = starts[1:] - starts[:-1]
+            c0[rows] = c0s[rows]
+            dependent[rows] = fresh.variate[rows] == 1
+            pool = np.concatenate((pool, points))
+        was = old[kept]
+        start[kept], count[kept] = self._start[was], self._count[was]
+        c0[kept], dependent[kept] = self._c0[was], self._dependent[was]
+        ends = count.cumsum()
+        first = ends - count  # (n,) where each landmark's points go
+        total = int(ends[-1]) if n else 0
+        self._rows = np.arange(total)
+        self._points = pool[self._rows + (start - first).repeat(count)]
+        self._owner = np.arange(n).repeat(count)
+        self._axis = dependent.repeat(count)
+        self._row_of = dict(zip(ids, range(n), strict=True))
+        self._stamp, self._c0, self._dependent = stamps.copy(), c0, dependent
+        self._start, self._count = first, count
         self._table, self._version = table, table.version
-        counts = np.array([e[4] for e in done], dtype=np.intp)
-        self._c0 = np.array([e[1] for e in done])
-        self._points = np.concatenate([e[2] for e in done]) if done else np.zeros((0, 2))
-        self._owner = np.arange(len(done)).repeat(counts)
-        self._axis = np.array([e[3] for e in done], dtype=np.intp).repeat(counts)
-        self._rows = np.arange(len(self._points))
 
     def points(self, slam: PolySlam) -> np.ndarray:  # (M, 2)
         """All map points of ``slam`` in its frame."""

@@ -26,7 +26,7 @@ import numpy as np
 from polyslam_env import metrics
 from polyslam_env.core.geometry import between
 from polyslam_env.metrics.mapping import MapShapes
-from polyslam_env.slam.ekf import start_error_cov
+from polyslam_env.slam.ekf import start_error_covs
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
 
@@ -184,13 +184,13 @@ def map_metrics(
 def nees_relative(run: RobotRun) -> float:
     """Mean NEES of the filter itself: the estimate against the true pose seen from the
     robot's **true** start, with the covariance minus the start error's share J P0 Jᵀ
-    (:func:`~polyslam_env.slam.ekf.start_error_cov`), i.e. the filter's own P_S. Unlike
+    (:func:`~polyslam_env.slam.ekf.start_error_covs`), i.e. the filter's own P_S. Unlike
     ``nees``, it does not carry the robot's unobservable start offset e₀ᵀP0⁻¹e₀ ~ χ²(3) for the
     whole episode. Step 0 is left out (P_S = 0 there: the start is known exactly in that
     frame). Without ``p0`` (no start-error model) it equals ``nees``."""
     if run.p0 is None or len(run.est_poses) < 2:
         return metrics.nees(run.true_poses, run.est_poses, run.est_covs, run.start_pose)
-    covs = run.est_covs[1:] - np.array([start_error_cov(e, run.p0) for e in run.est_poses[1:]])
+    covs = run.est_covs[1:] - start_error_covs(run.est_poses[1:], run.p0)
     return metrics.nees(run.true_poses[1:], run.est_poses[1:], covs, run.true_poses[0])
 
 

@@ -25,12 +25,13 @@ entries and the landmark table's rows. It never touches the EKF.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from polyslam_env.slam import kernels
+from polyslam_env.slam import fit_kernels, kernels
 from polyslam_env.slam.fitting import (
     MAX_SLOPE,
     Fit,
@@ -157,8 +158,8 @@ def fit_cluster(
     """
     xy = np.ascontiguousarray(points.xy, dtype=float)  # (N, 2)
     tol = line_tol if line_tol is not None else max(3.0 * max(points.sigma.tolist()), 0.01)
-    mask = _select_wall(xy, tol, min_second, np.radians(corner_angle_deg))
-    mask = _largest_run(xy, mask, max_gap)
+    gap = GAP_SPLIT if max_gap is None else max_gap
+    mask = fit_kernels.wall_mask(xy, tol, min_second, math.radians(corner_angle_deg), gap)
     if np.count_nonzero(mask) >= min(order + 2, len(points)) and np.count_nonzero(mask) >= 2:
         used = points.subset(mask)
         fit = fit_polynomial(
@@ -172,75 +173,3 @@ def fit_cluster(
         if fit.rms <= max_rms and fit.poly.max_slope() <= MAX_SLOPE:
             return ClusterFit(fit, used, points.subset(~mask))
     return ClusterFit(None, points.subset(np.zeros(len(points), dtype=bool)), points)
-
-
-def _largest_run(xy: np.ndarray, mask: np.ndarray, max_gap: float | None) -> np.ndarray:
-    """``mask`` (N,) restricted to the largest run of its points without a gap > ``max_gap``
-    along their principal direction (step 3b of :func:`fit_cluster`)."""
-    gap = GAP_SPLIT if max_gap is None else max_gap
-    chosen = np.flatnonzero(mask)
-    if len(chosen) < 2:
-        return mask
-    along = xy[chosen] @ _tls_direction(xy[chosen])  # (k,)
-    order = np.argsort(along, kind="stable")
-    cuts = np.flatnonzero(np.diff(along[order]) > gap) + 1
-    if len(cuts) == 0:
-        return mask
-    runs = np.split(order, cuts)
-    best = max(runs, key=len)  # first of the longest on ties
-    out = np.zeros_like(mask)
-    out[chosen[best]] = True
-    return out
-
-
-def _select_wall(xy: np.ndarray, tol: float, min_second: int, corner_angle: float) -> np.ndarray:
-    """(N,) mask of the points of one wall (steps 1–3 of :func:`fit_cluster`)."""
-    dir_on, dist_on = _dominant_line(xy, tol)
-    off = dist_on > tol
-    if np.count_nonzero(off) < min_second:
-        return ~off
-    dir_off, dist_off_sub = _dominant_line(xy[off], tol)
-    if np.count_nonzero(dist_off_sub <= tol) < min_second:
-        return np.ones(len(xy), dtype=bool)  # no second straight wall: one curved wall
-    dist_off = _line_distances(xy[off][dist_off_sub <= tol], dir_off, xy)
-    angle = np.arccos(min(abs(float(dir_on @ dir_off)), 1.0))
-    if angle < corner_angle:
-        return np.ones(len(xy), dtype=bool)  # a gentle bend, not a corner
-    return np.asarray((dist_on <= dist_off) & (dist_on <= tol))
-
-
-def _line_distances(fit_xy: np.ndarray, direction: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """Perpendicular distances (N,) of ``xy`` to the line along ``direction`` through the
-    centroid of ``fit_xy``."""
-    normal = np.array([-direction[1], direction[0]])
-    return np.abs((xy - fit_xy.mean(axis=0)) @ normal)
-
-
-def _tls_direction(xy: np.ndarray) -> np.ndarray:
-    """(2,) unit direction of the total-least-squares line through the points."""
-    return np.asarray(np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)[2][0])
-
-
-def _dominant_line(xy: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
-    """The line best supported by the points: its direction (2,) and all distances (N,) to it.
-
-    Candidates are the lines through every pair of points (clusters hold ~ε_Z points); the
-    score is the truncated quadratic Σ min(d², tol²) (MSAC), which prefers a tight wall over
-    a diagonal band through both arms of a corner that merely counts more points within
-    ``tol``. The winner is refined by total least squares on its inliers.
-    """
-    n_pts = len(xy)
-    i, j = np.triu_indices(n_pts, k=1)
-    chord = xy[j] - xy[i]  # (L, 2)
-    length = np.linalg.norm(chord, axis=1)
-    keep = length > 1e-9
-    if n_pts < 3 or not keep.any():
-        direction = _tls_direction(xy) if n_pts >= 2 else np.array([1.0, 0.0])
-        return direction, _line_distances(xy, direction, xy)
-    i, chord, length = i[keep], chord[keep], length[keep]
-    normal = np.stack([-chord[:, 1], chord[:, 0]], axis=1) / length[:, None]  # (L, 2)
-    dist = np.abs(np.einsum("lc,lnc->ln", normal, xy[None, :, :] - xy[i][:, None, :]))
-    best = int(np.argmin((np.minimum(dist, tol) ** 2).sum(axis=1)))  # first on ties
-    inliers = xy[dist[best] <= tol]
-    direction = _tls_direction(inliers)
-    return direction, _line_distances(inliers, direction, xy)

@@ -95,10 +95,24 @@ def start_error_cov(pose: np.ndarray, p0: np.ndarray) -> np.ndarray:  # (3, 3)
     Cov = J P0 Jᵀ + P_S with J = ∂(e₀ ⊕ x)/∂e₀ at e₀ = 0 = [[1, 0, −y], [0, 1, x], [0, 0, 1]]
     (a start heading error swings the pose about the start).
     """
-    x, y = float(pose[0]), float(pose[1])
-    J = np.array([[1.0, 0.0, -y], [0.0, 1.0, x], [0.0, 0.0, 1.0]])
-    out: np.ndarray = J @ np.asarray(p0, dtype=float) @ J.T
-    return _symmetrise(out)
+    out: np.ndarray = start_error_covs(np.asarray(pose, dtype=float)[None], p0)[0]
+    return out
+
+
+def start_error_covs(poses: np.ndarray, p0: np.ndarray) -> np.ndarray:  # (K, 3, 3)
+    """:func:`start_error_cov` of each pose (K, ≥2) (x, y first) in one go: a stack of J, the
+    products J P0 Jᵀ as one matmul over the stack (numpy runs each (3, 3) product of a stack
+    as it runs a lone one, so the same floats) and the symmetrised result."""
+    poses = np.asarray(poses, dtype=float)
+    J = np.zeros((poses.shape[0], 3, 3))  # (K, 3, 3)
+    J[:, _DIAGONAL, _DIAGONAL] = 1.0
+    J[:, 0, 2] = -poses[:, 1]
+    J[:, 1, 2] = poses[:, 0]
+    out: np.ndarray = J @ np.asarray(p0, dtype=float) @ J.mT
+    return 0.5 * (out + out.mT)
+
+
+_DIAGONAL = np.arange(3)
 
 
 # -- update -------------------------------------------------------------------------------------
@@ -255,12 +269,15 @@ def augment(
 def remove(
     mean: np.ndarray, cov: np.ndarray, indices: np.ndarray | list[int] | int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Drop the landmark state entries at ``indices`` (state indices ≥ 3) and their rows/cols."""
-    drop = np.atleast_1d(np.asarray(indices, dtype=int))
-    if drop.size and (drop.min() < 3 or drop.max() >= mean.size):
+    """Drop the landmark state entries at ``indices`` (state indices ≥ 3) and their rows/cols
+    (a map change's: a handful of array calls, not ``np.setdiff1d`` / ``np.ix_``)."""
+    drop = np.asarray(indices, dtype=np.intp).reshape(-1)
+    if ((drop < 3) | (drop >= mean.size)).any():
         raise ValueError(f"landmark state indices must lie in [3, {mean.size}), got {drop}")
-    keep = np.setdiff1d(np.arange(mean.size), drop)
-    return mean[keep], cov[np.ix_(keep, keep)]
+    keep = np.ones(mean.size, dtype=bool)
+    keep[drop] = False
+    rows = keep.nonzero()[0]
+    return mean[rows], cov.take(rows, axis=0).take(rows, axis=1)
 
 
 # -- divergence and consistency ------------------------------------------------------------------

@@ -21,14 +21,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
-import scipy.linalg.lapack
 import scipy.special
 
 from polyslam_env.core.geometry import rotation
-from polyslam_env.slam import map_kernels
+from polyslam_env.slam import fit_kernels, map_kernels
 from polyslam_env.slam.columns import N_POINT_REAL, PTH, PX, SIGMA, UX, UY, WEIGHT, X, Y
-from polyslam_env.slam.polynomial import Polynomial, polyval
+from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.stored import PointArrays
 
 # d/dθ of R(θ) v is J R(θ) v
@@ -83,6 +81,10 @@ class Fit:
     V: np.ndarray  # (k, k) noise covariance
     rms: float  # unweighted RMS of the η residuals (m)
     order: int  # order actually fitted (≤ requested; higher coefficients are zero)
+    #: (m+1, m+1) R of √W̃ A, A's columns (ξ/scale)^j and W̃ the weights over their largest:
+    #: AᵀW̃A = RᵀR on the scaled coefficients a_j·scale^j (None: not from a fit)
+    r_factor: np.ndarray | None = None
+    scale: float = 1.0  # the abscissae's scale in the design (max |ξ|)
 
 
 # -- point constructors ------------------------------------------------------------------
@@ -240,7 +242,7 @@ def polynomial_points(
         )
     if not c0_var > 0:
         raise ValueError(f"c0_var must be > 0, got {c0_var}")
-    xy = poly.equally_spaced(n, lo, hi)  # (n, 2)
+    xy = map_kernels.equally_spaced(poly.coeffs, poly.variate, float(lo), float(hi), n)  # (n, 2)
     d_state = np.zeros((n, 2, n_state))
     d_state[:, 1 if poly.variate == 1 else 0, c0_index] = 1.0
     if turn is not None:
@@ -267,24 +269,26 @@ def concat(*pointsets: PointSet) -> PointSet:
         raise ValueError("all point sets must share the state size")
     k_total = sum(ps.n_noise for ps in pointsets)
     d_noise = np.zeros((sum(ps.n_points for ps in pointsets), 2, k_total))
+    noise_cov = np.zeros((k_total, k_total))  # block diagonal
     row = col = 0
     for ps in pointsets:
-        d_noise[row : row + ps.n_points, :, col : col + ps.n_noise] = ps.d_noise
-        row, col = row + ps.n_points, col + ps.n_noise
+        n_points, n_noise = ps.xy.shape[0], ps.noise_cov.shape[0]
+        d_noise[row : row + n_points, :, col : col + n_noise] = ps.d_noise
+        noise_cov[col : col + n_noise, col : col + n_noise] = ps.noise_cov
+        row, col = row + n_points, col + n_noise
     return PointSet(
         xy=np.concatenate([ps.xy for ps in pointsets]),
         d_state=np.concatenate([ps.d_state for ps in pointsets]),
         d_noise=d_noise,
-        noise_cov=scipy.linalg.block_diag(*[ps.noise_cov for ps in pointsets]).reshape(
-            k_total, k_total
-        ),
+        noise_cov=noise_cov,
         weights=np.concatenate([ps.weights for ps in pointsets]),
     )
 
 
 # -- fitting --------------------------------------------------------------------------------
 #: Steepest tangent |dη/dξ| a landmark's shape may have anywhere on its extent: tan 75°. The
-#: variate is the points' principal direction (:func:`choose_variate`), so a wall's mean
+#: variate is the points' principal direction
+#: (:func:`~polyslam_env.slam.fit_kernels.principal_variate`), so a wall's mean
 #: tangent lies within 45° of its ξ axis, and a corner is split before it is fitted; a shape
 #: turning further than 75° from the axis is a fit curving away between tight groups of
 #: points. Found on a merge of two short arcs of one round pillar: a parabola 0.34 m long on
@@ -292,96 +296,23 @@ def concat(*pointsets: PointSet) -> PointSet:
 MAX_SLOPE = float(np.tan(np.radians(75.0)))
 
 
-def choose_variate(xy: np.ndarray, weights: np.ndarray | None = None) -> int:
-    """1 if the weighted principal direction is closer to x¹ (|dx| ≥ |dy|), else 2."""
-    pts = np.asarray(xy, dtype=float)
-    w = np.ones(len(pts)) if weights is None else np.asarray(weights, dtype=float)
-    centred = pts - (w @ pts) / w.sum()
-    cov = (centred * w[:, None]).T @ centred  # (2, 2)
-    direction = np.linalg.eigh(cov)[1][:, -1]
-    return 1 if abs(direction[0]) >= abs(direction[1]) else 2
-
-
 def _split(xy: np.ndarray, variate: int) -> tuple[np.ndarray, np.ndarray]:
     """(ξ, η) of points for the given variate."""
     return (xy[:, 0], xy[:, 1]) if variate == 1 else (xy[:, 1], xy[:, 0])
 
 
-def _scaled(points: PointSet, variate: int) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
-    """(ξ, η, scale, w) of a fit: the abscissae are scaled by max|ξ| in the design, and the
-    weights by their largest (a fit is invariant to a common weight factor)."""
-    xi, eta = _split(points.xy, variate)
-    return xi, eta, max(float(np.abs(xi).max()), 1e-9), points.weights / points.weights.max()
+def order_limits(n_points: int, order: int, noise_var: float) -> np.ndarray:  # (order,)
+    """The residual sum of squares below which order m = 1 … ``order`` is accepted (the order
+    selection of :func:`fit_polynomial`): the 99 % χ² quantile with N − m − 1 dof times the
+    points' noise variance, or, without noise (points sampled on polynomials), N · 1e-8
+    (0.1 mm RMS). Orders without a positive dof are never tested against theirs."""
+    if noise_var > 0:
+        dof = n_points - 1 - np.arange(1, order + 1)
+        return np.asarray(scipy.special.chdtri(np.maximum(dof, 1), 0.01) * noise_var)
+    return np.full(order, n_points * 1e-8)
 
 
-def _distinct_count(xi: np.ndarray, scale: float) -> int:
-    """Number of distinct abscissae, up to a relative tolerance of 1e-9."""
-    sorted_xi = np.sort(xi)
-    return 1 + int(np.count_nonzero(np.diff(sorted_xi) > 1e-9 * scale))
-
-
-def solve_upper(r: np.ndarray, rhs: np.ndarray, transposed: bool = False) -> np.ndarray:
-    """x with R x = rhs (Rᵀ x = rhs when ``transposed``), R (n, n) upper triangular float64:
-    ``scipy.linalg.solve_triangular``'s LAPACK call (``dtrtrs``, on Rᵀ as a lower triangle
-    when R is C-ordered), the same bits, without its ~50 Python calls of argument handling
-    (a fit solves 2–5 times). Non-finite input and a singular R raise as it does."""
-    if not (np.isfinite(r).all() and np.isfinite(rhs).all()):
-        raise ValueError("array must not contain infs or NaNs")
-    trans = 1 if transposed else 0
-    if r.flags.f_contiguous:
-        x, info = scipy.linalg.lapack.dtrtrs(r, rhs, lower=0, trans=trans)
-    else:
-        x, info = scipy.linalg.lapack.dtrtrs(r.T, rhs, lower=1, trans=1 - trans)
-    if info > 0:
-        raise np.linalg.LinAlgError(f"singular matrix: resolution failed at diagonal {info - 1}")
-    if info < 0:
-        raise ValueError(f"illegal value in {-info}-th argument of internal trtrs")
-    return np.asarray(x)
-
-
-def _weighted_qr(
-    xi_s: np.ndarray, sqrt_w: np.ndarray, order: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """QR of √W A on scaled abscissae, lowering the order until it has full rank."""
-    while True:
-        a_mat = np.vander(xi_s, order + 1, increasing=True)  # (N, m+1)
-        q, r = np.linalg.qr(sqrt_w[:, None] * a_mat)
-        diag = np.abs(np.diag(r))
-        if order == 0 or diag.min() > 1e-10 * diag.max():
-            return a_mat, q, r, order
-        order -= 1
-
-
-def select_order(
-    xi: np.ndarray, eta: np.ndarray, w: np.ndarray, max_order: int, noise_var: float = 0.0
-) -> int:
-    """The lowest order in 1..max_order whose residuals the point noise explains.
-
-    The paper's m is the *largest* order a segment may take: a cubic through a dozen points
-    with 2 cm noise over half a metre of straight wall has slopes that are pure noise, and
-    those slopes enter ∂h/∂x and ∂h/∂θ, making the pose look observable where it is not (an
-    overconfident filter). With a known per-point noise variance, order m is accepted when
-    its residual sum of squares is below the 99 % χ² quantile with N − m − 1 dof times the
-    variance. Without noise (points sampled on polynomials) the lowest order that fits to
-    0.1 mm RMS is taken.
-    """
-    n_pts = len(xi)
-    scale = max(float(np.abs(xi).max()), 1e-9)
-    sqrt_w = np.sqrt(w / w.max())
-    for m in range(1, max_order + 1):
-        a_mat, q, r, m_eff = _weighted_qr(xi / scale, sqrt_w, m)
-        if m_eff < m or n_pts <= m + 1:
-            return max(m_eff, 1)
-        coef = solve_upper(r, q.T @ (sqrt_w * eta))
-        resid = eta - a_mat @ coef
-        rss = float(resid @ resid)
-        if noise_var > 0:
-            limit = float(scipy.special.chdtri(n_pts - m - 1, 0.01)) * noise_var
-        else:
-            limit = n_pts * 1e-8
-        if rss <= limit:
-            return m
-    return max_order
+_NO_LIMITS = np.zeros(0)
 
 
 def fit_polynomial(
@@ -392,13 +323,15 @@ def fit_polynomial(
     auto_order: bool = False,
     min_noise_var: float = 0.0,
 ) -> Fit:
-    """Weighted LMS polynomial a = (AᵀWA)⁻¹AᵀWη, with ∂c0/∂X and ∂c0/∂noise.
+    """Weighted LMS polynomial a = (AᵀWA)⁻¹AᵀWη, with ∂c0/∂X and ∂c0/∂noise, in one compiled
+    call (:func:`~polyslam_env.slam.fit_kernels.fit_points`).
 
     The variate is chosen by direction unless given; the extent is [min ξ, max ξ]. With fewer
     distinct ξ than order+1 (or a rank-deficient design) the order is lowered and the missing
     coefficients are zero, so the result always has ``order + 1`` coefficients. Columns are
-    scaled by max|ξ| and solved by QR, never by forming (AᵀWA)⁻¹. Derivatives of c0 = a_0
-    (M = AᵀWA, r_i the residual, A_i' = d/dξ of row A_i):
+    scaled by max|ξ| and solved by QR, never by forming (AᵀWA)⁻¹; the fit keeps R
+    (:attr:`Fit.r_factor`) so a caller can form the coefficients' covariance. Derivatives of
+    c0 = a_0 (M = AᵀWA, r_i the residual, A_i' = d/dξ of row A_i):
     ∂a/∂η_i = M⁻¹A_iᵀ w_i and ∂a/∂ξ_i = M⁻¹[w_i A_i'ᵀ r_i − w_i A_iᵀ (A_i' a)];
     G_x = Σ_i ∂c0/∂π_i ∂π_i/∂X and G_y likewise. The weights are treated as constants.
 
@@ -408,74 +341,47 @@ def fit_polynomial(
     c0 is a rigid offset of a fixed shape; the full derivative also carries the change of
     shape extrapolated to ξ = 0, which is huge for a segment far from the origin.
 
-    ``auto_order=True`` fits the order :func:`select_order` picks (at most ``order``), with
-    the points' mean noise variance, floored at ``min_noise_var``: points sampled on
-    polynomials (merges, refits) carry no noise of their own, but their polynomials came from
-    noisy ranges, and a 1 cm disagreement between two segments of one straight wall must
-    not buy a cubic whose spurious curvature then makes the pose look observable.
+    ``auto_order=True`` fits the lowest order in 1 … ``order`` whose residuals the point noise
+    explains (:func:`order_limits`), with the points' mean noise variance, floored at
+    ``min_noise_var``. The paper's m is the *largest* order a segment may take: a cubic through
+    a dozen points with 2 cm noise over half a metre of straight wall has slopes that are pure
+    noise, and those slopes enter ∂h/∂x and ∂h/∂θ, making the pose look observable where it is
+    not (an overconfident filter). Points sampled on polynomials (merges, refits) carry no
+    noise of their own, but their polynomials came from noisy ranges, and a 1 cm disagreement
+    between two segments of one straight wall must not buy a cubic whose spurious curvature
+    then makes the pose look observable.
     """
-    if points.n_points == 0:
+    n_points = points.n_points
+    if n_points == 0:
         raise ValueError("cannot fit a polynomial to zero points")
     if order < 1:
         raise ValueError(f"order must be >= 1, got {order}")
-    var = choose_variate(points.xy, points.weights) if variate is None else variate
-    xi, eta, scale, w = _scaled(points, var)
-    m = min(order, _distinct_count(xi, max(scale, 1.0)) - 1)
-    if auto_order and m > 1:
-        noise_var = max(float(np.trace(points.noise_cov)) / points.n_points, min_noise_var)
-        m = select_order(xi, eta, w, m, noise_var)
-    a_mat, q, r, m = _weighted_qr(xi / scale, np.sqrt(w), m)
-    a_s = solve_upper(r, q.T @ (np.sqrt(w) * eta))  # scaled coefficients
-    resid = eta - a_mat @ a_s  # (N,)
-    if shape_fixed:
-        slope = (
-            polyval(xi, a_s / scale ** np.arange(m + 1), derivative=1)
-            if m > 0
-            else np.zeros_like(xi)
-        )
-        dc0 = np.stack([-w * slope, w], axis=-1) / w.sum()  # (N, 2) in (ξ, η)
-    else:
-        e0 = np.zeros(m + 1)
-        e0[0] = 1.0
-        dc0 = _coefficient_gradient(e0, scale, w, a_mat, r, a_s, resid, m)
-    dc0_xy = dc0 if var == 1 else dc0[:, ::-1]
-    coeffs = np.zeros(order + 1)
-    coeffs[: m + 1] = a_s / scale ** np.arange(m + 1)
+    limits = _NO_LIMITS
+    if auto_order:
+        noise_var = max(float(points.noise_cov.trace()) / n_points, min_noise_var)
+        limits = order_limits(n_points, order, noise_var)
+    var, m, coeffs, lo, hi, rms, gx, gy, r, scale = fit_kernels.fit_points(
+        points.xy, points.weights, points.d_state, points.d_noise, order,
+        0 if variate is None else variate, shape_fixed, auto_order, limits,
+    )  # fmt: skip
     return Fit(
-        poly=Polynomial(var, coeffs, float(xi.min()), float(xi.max())),
+        poly=Polynomial(var, coeffs, lo, hi),
         c0=float(coeffs[0]),
-        Gx=np.einsum("nj,njs->s", dc0_xy, points.d_state)[None, :],
-        Gy=np.einsum("nj,njk->k", dc0_xy, points.d_noise)[None, :],
+        Gx=gx[None, :],
+        Gy=gy[None, :],
         V=points.noise_cov,
-        rms=float(np.sqrt(np.mean(resid**2))),
+        rms=rms,
         order=m,
+        r_factor=r,
+        scale=scale,
     )
 
 
-def _coefficient_gradient(
-    e: np.ndarray,
-    scale: float,
-    w: np.ndarray,
-    a_mat: np.ndarray,
-    r: np.ndarray,
-    a_s: np.ndarray,
-    resid: np.ndarray,
-    m: int,
-) -> np.ndarray:
-    """(N, 2): ∂(eᵀa_s)/∂ξ_i and ∂(eᵀa_s)/∂η_i of a linear function e (m+1,) of the scaled
-    coefficients a_s, from the normal equations (see :func:`fit_polynomial`)."""
-    # eᵀM⁻¹ = eᵀR⁻¹R⁻ᵀ, from two triangular solves
-    row = solve_upper(r, solve_upper(r, e, transposed=True))
-    powers = np.arange(m + 1)
-    # d/dξ of (ξ/s)^j = j (ξ/s)^(j−1) / s
-    d_a = np.zeros_like(a_mat)
-    d_a[:, 1:] = powers[1:] * a_mat[:, :-1] / scale  # (N, m+1)
-    slope = d_a @ a_s  # (N,) dη/dξ at each point
-    q_a = a_mat @ row  # (N,) eᵀ M⁻¹ A_iᵀ
-    q_da = d_a @ row  # (N,) eᵀ M⁻¹ A_i'ᵀ
-    d_eta = w * q_a
-    d_xi = w * (q_da * resid - q_a * slope)
-    return np.stack([d_xi, d_eta], axis=-1)
+def _scaled(points: PointSet, variate: int) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """(ξ, η, scale, w) of a fit: the abscissae are scaled by max|ξ| in the design, and the
+    weights by their largest (a fit is invariant to a common weight factor)."""
+    xi, eta = _split(points.xy, variate)
+    return xi, eta, max(float(np.abs(xi).max()), 1e-9), points.weights / points.weights.max()
 
 
 def turn_gradient(points: PointSet, fit: Fit, pivot: float) -> tuple[np.ndarray, float]:
@@ -494,13 +400,13 @@ def turn_gradient(points: PointSet, fit: Fit, pivot: float) -> tuple[np.ndarray,
     variance of the turn for that scatter."""
     poly = fit.poly
     xi, eta, scale, w = _scaled(points, poly.variate)
-    a_mat, _, r, m = _weighted_qr(xi / scale, np.sqrt(w), fit.order)
+    a_mat, _, r, m = fit_kernels.weighted_qr(xi / scale, np.sqrt(w), fit.order)
     a_s = poly.coeffs[: m + 1] * scale ** np.arange(m + 1)
     resid = eta - a_mat @ a_s
     e = np.zeros(m + 1)  # p'(ξ_p) = Σ_k k a_s[k] (ξ_p/s)^(k−1) / s
     e[1:] = np.arange(1, m + 1) * (pivot / scale) ** np.arange(m) / scale
     slope = float(poly.slope(pivot))
-    d = _coefficient_gradient(e, scale, w, a_mat, r, a_s, resid, m) / (1.0 + slope * slope)
+    d = fit_kernels.coefficient_gradient(e, scale, w, a_mat, r, a_s, resid) / (1.0 + slope**2)
     d_xy = d if poly.variate == 1 else d[:, ::-1]
     sign = 1.0 if poly.variate == 1 else -1.0  # α turns counter-clockwise in (x¹, x²)
     residual_var = fit.rms**2 * float(np.sum(d[:, 1] ** 2))

@@ -206,6 +206,21 @@ def _linspace(start: float, stop: float, num: int, out: np.ndarray) -> None:
 
 
 @njit
+def equally_spaced(c: np.ndarray, variate: int, lo: float, hi: float, n: int) -> np.ndarray:
+    """``n`` points (n, 2) of the curve with coefficients ``c`` equally spaced in ξ over
+    [lo, hi]: ``Polynomial.points_at(np.linspace(lo, hi, n))``, the same floats, in one call
+    (the SLAM samples landmarks so for every merge and link)."""
+    xi = np.empty(n)
+    if n == 1:
+        xi[0] = lo
+    elif n > 1:
+        _linspace(lo, hi, n, xi)
+    out = np.empty((n, 2))
+    _on_curve(c, variate, xi, out)
+    return out
+
+
+@njit
 def _on_curve(c: np.ndarray, variate: int, xi: np.ndarray, out: np.ndarray) -> None:
     """Points (n, 2) of the curve with coefficients ``c`` at ``xi`` (``Polynomial.points_at``;
     Horner in polyval's order: the same floats)."""

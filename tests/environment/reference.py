@@ -17,6 +17,8 @@ from polyslam_env.environment.observations import (
     ObservationEncoder,
     RobotView,
 )
+from polyslam_env.metrics.mapping import MapShapes, sample_shapes
+from polyslam_env.slam.robot import PolySlam
 from tests.core.reference import point_cells
 
 
@@ -97,3 +99,51 @@ def vector(
         min(view.step / t, 1.0),
     ]
     return out
+
+
+class MapSamplerOracle:
+    """The readable :class:`~polyslam_env.environment.observations.MapSampler`: a dict of
+    landmark id → (stamp, c0 when sampled, points, dependent axis, count), resampled per stale
+    landmark and concatenated in state order (the sampler's layout before it kept arrays)."""
+
+    def __init__(self, step: float) -> None:
+        self.step = float(step)
+        self._version = -1
+        self._entries: dict[int, tuple[int, float, np.ndarray, int, int]] = {}
+        self._c0 = np.zeros(0)
+        self._points = np.zeros((0, 2))
+        self._owner = np.zeros(0, dtype=np.intp)
+        self._axis = np.zeros(0, dtype=np.intp)
+
+    def _rebuild(self, slam: PolySlam) -> None:
+        table = slam.table
+        ids, stamps = list(table.ids), table.stamp.tolist()
+        c0s = slam.c0s
+        entries = [self._entries.get(i) for i in ids]
+        stale = [e is None or e[0] != stamp for e, stamp in zip(entries, stamps, strict=True)]
+        rows = np.array(stale, dtype=bool).nonzero()[0]
+        if len(rows):
+            coeffs = table.shape.copy()
+            coeffs[:, 0] = c0s
+            fresh = MapShapes(table.variate, coeffs, table.lo, table.hi)
+            points, starts = sample_shapes(fresh, self.step, rows)
+            for q, r in enumerate(rows):
+                a, b = starts[q], starts[q + 1]
+                axis = 1 if table.variate[r] == 1 else 0
+                entries[r] = (stamps[r], float(c0s[r]), points[a:b], axis, b - a)
+        done: list[tuple[int, float, np.ndarray, int, int]] = entries  # type: ignore[assignment]
+        self._entries = dict(zip(ids, done, strict=True))
+        self._version = table.version
+        counts = np.array([e[4] for e in done], dtype=np.intp)
+        self._c0 = np.array([e[1] for e in done])
+        self._points = np.concatenate([e[2] for e in done]) if done else np.zeros((0, 2))
+        self._owner = np.arange(len(done)).repeat(counts)
+        self._axis = np.array([e[3] for e in done], dtype=np.intp).repeat(counts)
+
+    def points(self, slam: PolySlam) -> np.ndarray:  # (M, 2)
+        if slam.table.version != self._version:
+            self._rebuild(slam)
+        out = self._points.copy()
+        shift = (slam.c0s - self._c0)[self._owner]
+        out[np.arange(len(out)), self._axis] += shift
+        return out

@@ -10,9 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from polyslam_env.core.errors import ConfigError
-from polyslam_env.environment.config import MIN_POSE_SCALE, ObservationConfig
+from polyslam_env.environment.config import MIN_POSE_SCALE, EnvConfig, ObservationConfig
 from polyslam_env.environment.observations import BeliefGrid, belief_grids, sweep_beliefs
-from polyslam_env.environment.parallel import parallel_env
+from polyslam_env.environment.parallel import PolySlamParallelEnv, parallel_env
+from tests.environment.reference import MapSamplerOracle
 
 
 def _brute_force_sweep(
@@ -161,3 +162,25 @@ def test_observation_config__a_derived_grid_too_large_is_a_one_line_error() -> N
     assert "\n" not in str(err.value)
     with pytest.raises(ConfigError, match=r"observation\.belief_size"):
         ObservationConfig(belief_size=500.0)
+
+
+def test_map_sampler__points_equal_the_readable_per_landmark_cache_bit_for_bit() -> None:
+    """The sampler's arrays against :class:`~tests.environment.reference.MapSamplerOracle`
+    (a dict per landmark) after every step of a seeded episode with landmarks created,
+    refit, extended and merged away (asserted: the test must see rows vanish)."""
+    env = PolySlamParallelEnv(EnvConfig.from_dict({"max_steps": 300}))
+    env.reset(seed=3)
+    rng = np.random.default_rng(3)
+    team = env.episode.slam
+    oracles = [MapSamplerOracle(s.step) for s in team.samplers]  # type: ignore[attr-defined]
+    seen = [set[int]() for _ in oracles]
+    vanished = 0
+    while env.agents:
+        env.step({a: rng.uniform([0.2, -1.0], [1.0, 1.0]) for a in env.agents})
+        for i, oracle in enumerate(oracles):
+            slam = team.robots[i]
+            np.testing.assert_array_equal(team.map_points(i), oracle.points(slam))
+            ids = set(slam.table.ids)
+            vanished += len(seen[i] - ids)
+            seen[i] = ids
+    assert vanished > 0

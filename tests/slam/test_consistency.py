@@ -12,7 +12,7 @@ import pytest
 
 from polyslam_env.core.geometry import compose
 from polyslam_env.slam.config import SlamConfig
-from polyslam_env.slam.ekf import predict, predict_inplace, start_error_cov
+from polyslam_env.slam.ekf import predict, predict_inplace, start_error_cov, start_error_covs
 from polyslam_env.slam.robot import PolySlam
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 from tests.slam.reference import motion_jacobians, predict_dense
@@ -71,6 +71,21 @@ def test_start_error_cov__is_the_composition_jacobian_times_p0(pose: tuple[float
         [fd_jacobian(lambda e, k=k: float(compose(e, x)[k]), np.zeros(3)) for k in range(3)]
     ).T
     np.testing.assert_allclose(start_error_cov(x, P0), J @ P0 @ J.T, rtol=FD_RTOL, atol=FD_ATOL)
+
+
+def test_start_error_covs__each_pose_as_the_readable_product_bit_for_bit() -> None:
+    """The batched J P0 Jᵀ against the lone 2-D product of each pose (the formula the single
+    pose had before), on random poses and full (not diagonal) P0s: the same floats."""
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        a = rng.normal(size=(3, 3))
+        p0, poses = a @ a.T, rng.normal(scale=20.0, size=(6, 3))
+        got = start_error_covs(poses, p0)
+        for pose, cov in zip(poses, got, strict=True):
+            J = np.array([[1.0, 0.0, -pose[1]], [0.0, 1.0, pose[0]], [0.0, 0.0, 1.0]])
+            product = J @ p0 @ J.T
+            np.testing.assert_array_equal(cov, 0.5 * (product + product.T))
+            np.testing.assert_array_equal(start_error_cov(pose, p0), cov)
 
 
 def test_start_error_cov__matches_monte_carlo_of_the_start_offset() -> None:

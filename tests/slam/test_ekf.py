@@ -263,6 +263,11 @@ def test_remove__undoes_augment_and_moves_a_copied_landmark() -> None:
     order = [0, 1, 2, 3, 5, 6, 7, 4]
     np.testing.assert_array_equal(moved[0], mean[order])
     np.testing.assert_allclose(moved[1], cov[np.ix_(order, order)], atol=1e-15)  # e4·P·e4
+    two = remove(mean, cov, [6, 3])  # several at once, in any order: the rest as they were
+    rest = [0, 1, 2, 4, 5, 7]
+    np.testing.assert_array_equal(two[0], mean[rest])
+    np.testing.assert_array_equal(two[1], cov[np.ix_(rest, rest)])
+    assert two[1].flags.c_contiguous
     with pytest.raises(ValueError, match="landmark state indices"):
         remove(mean, cov, [2])
 

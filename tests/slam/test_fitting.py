@@ -7,19 +7,17 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
-import scipy.linalg
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from polyslam_env.slam.fit_kernels import principal_variate
 from polyslam_env.slam.fitting import (
     PointSet,
     beam_points,
     centroid_xi,
-    choose_variate,
     concat,
     fit_polynomial,
     polynomial_points,
-    solve_upper,
     store_beams,
     stored_points,
 )
@@ -317,7 +315,7 @@ def test_fit_polynomial__single_point() -> None:
 
 @settings(max_examples=60, deadline=None)
 @given(angle=st.floats(0.0, 2 * np.pi), length=st.floats(0.2, 3.0))
-def test_choose_variate__follows_the_principal_direction(angle: float, length: float) -> None:
+def test_principal_variate__follows_the_principal_direction(angle: float, length: float) -> None:
     d = np.array([np.cos(angle), np.sin(angle)])
     wiggle = 0.001  # m, lateral
     # the wiggle tilts the points' principal direction by up to ~2·wiggle/length rad, and
@@ -326,7 +324,7 @@ def test_choose_variate__follows_the_principal_direction(angle: float, length: f
         return
     pts = np.array([1.0, -2.0]) + np.linspace(0, length, 9)[:, None] * d
     pts += wiggle * np.array([-d[1], d[0]]) * np.sin(np.arange(9))[:, None]
-    assert choose_variate(pts) == (1 if abs(d[0]) > abs(d[1]) else 2)
+    assert principal_variate(pts, np.ones(9)) == (1 if abs(d[0]) > abs(d[1]) else 2)
 
 
 @pytest.mark.parametrize("variate", [1, 2])
@@ -359,21 +357,3 @@ def test_fit_polynomial__shape_fixed_jacobians_match_offset_finite_differences(
     np.testing.assert_allclose(
         fit.Gy[0], fd_jacobian(of_noise, np.zeros(len(stored))), rtol=FD_RTOL, atol=FD_ATOL
     )
-
-
-@pytest.mark.parametrize("transposed", [False, True])
-@pytest.mark.parametrize("order", ["C", "F"])
-def test_solve_upper__bit_identical_to_scipy_solve_triangular(transposed: bool, order: str) -> None:
-    """The fits' triangular solves give scipy's floats exactly (R from a QR, as the fits make
-    it, in either memory order; one and several right-hand sides), and fail as it does."""
-    rng = np.random.default_rng(7)
-    for size in (1, 2, 4, 6):
-        r = np.linalg.qr(rng.normal(size=(12, size)))[1]
-        r = np.asfortranarray(r) if order == "F" else np.ascontiguousarray(r)
-        for rhs in (rng.normal(size=size), rng.normal(size=(size, 3))):
-            want = scipy.linalg.solve_triangular(r, rhs, trans="T" if transposed else 0)
-            assert solve_upper(r, rhs, transposed).tobytes() == want.tobytes()
-    with pytest.raises(ValueError, match="infs or NaNs"):
-        solve_upper(np.eye(2), np.array([1.0, math.nan]))
-    with pytest.raises(np.linalg.LinAlgError, match="singular"):
-        solve_upper(np.diag([1.0, 0.0]), np.ones(2))

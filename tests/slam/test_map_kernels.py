@@ -72,3 +72,18 @@ def test_prediction_weight__floors_an_exact_pose() -> None:
     assert map_kernels.prediction_weight(np.zeros((3, 3))) == pytest.approx(1e12)
     cov = np.diag([4e-4, 1e-4, 1e-6])
     assert map_kernels.prediction_weight(cov) == 1.0 / 4e-4
+
+
+def test_equally_spaced__bit_identical_to_points_at_of_linspace() -> None:
+    """Random shapes of order 1–3 in either variate, extents including a point: the
+    compiled samples are ``Polynomial.points_at(np.linspace(lo, hi, n))`` exactly."""
+    rng = np.random.default_rng(21)
+    for _ in range(300):
+        order, variate = int(rng.integers(1, 4)), int(rng.integers(1, 3))
+        lo = float(rng.normal(scale=5.0))
+        hi = lo if rng.random() < 0.1 else lo + float(rng.exponential(2.0))
+        poly = Polynomial(variate, rng.normal(size=order + 1), lo, hi)
+        for n in (1, 2, 5, 12):
+            want = poly.points_at(np.linspace(lo, hi, n))
+            got = map_kernels.equally_spaced(poly.coeffs, variate, lo, hi, n)
+            assert got.tobytes() == want.tobytes()

@@ -1,0 +1,146 @@
+"""The compiled fit (:mod:`polyslam_env.slam.fit_kernels` through
+:func:`~polyslam_env.slam.fitting.fit_polynomial` and ``turn_gradient``) and the cluster's wall
+mask against the readable numpy versions they replaced (``tests/slam/reference_fitting.py``).
+
+Both solve the same least-squares problem with backward-stable Householder QR, but numba's QR
+goes through scipy's LAPACK and the triangular solves and contractions are loops, so the last
+bits differ. The bound: a backward-stable least-squares solution moves by ≲ c·ε·κ² relative
+(κ = cond(√W A), the κ² from the residual term; Higham, *Accuracy and Stability*, §20.1), and
+the gradients carry one more solve with M = RᵀR (κ² again). With c = 1e3 (the design's size and
+the products around the solve) the tolerance is 1e3·ε·κ⁴ relative to each quantity's own scale,
+κ computed per case. Orders and variates must be equal (a case at the order test's or the
+variate's threshold could go either way; none of these seeded cases is).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from polyslam_env.slam.fit_kernels import wall_mask
+from polyslam_env.slam.fitting import PointSet, fit_polynomial, turn_gradient
+from polyslam_env.slam.map_kernels import GAP_SPLIT
+from tests.slam import reference_fitting as reference
+
+EPS = np.finfo(float).eps
+
+
+def _case(rng: np.random.Generator) -> PointSet:
+    """A noisy curved wall of 4–30 points, anywhere, any direction, random weights and
+    random derivatives (the fit only contracts them)."""
+    n = int(rng.integers(4, 31))
+    t = rng.uniform(-1.0, 1.0, n) * rng.uniform(0.2, 3.0)
+    angle, centre = rng.uniform(0.0, np.pi), rng.normal(scale=5.0, size=2)
+    bend = rng.uniform(-0.2, 0.2) * t**2
+    xy = centre + np.column_stack(
+        [np.cos(angle) * t - np.sin(angle) * bend, np.sin(angle) * t + np.cos(angle) * bend]
+    )
+    xy += rng.normal(scale=0.01, size=(n, 2))
+    return PointSet(
+        xy, rng.normal(size=(n, 2, 7)), rng.normal(size=(n, 2, n)), np.eye(n) * 4e-4,
+        rng.uniform(0.5, 2.0, n),
+    )  # fmt: skip
+
+
+def _tolerance(points: PointSet, variate: int, order: int) -> float:
+    """1e3·ε·κ⁴ of the fit's weighted design (module docstring)."""
+    xi = points.xy[:, 0] if variate == 1 else points.xy[:, 1]
+    scale = max(np.abs(xi).max(), 1e-9)
+    w = points.weights / points.weights.max()
+    design = np.sqrt(w)[:, None] * np.vander(xi / scale, order + 1, increasing=True)
+    return float(1e3 * EPS * np.linalg.cond(design) ** 4)
+
+
+def _close(got: np.ndarray, want: np.ndarray, tol: float) -> bool:
+    return bool(np.abs(got - want).max() <= tol * max(np.abs(want).max(), 1.0))
+
+
+@pytest.mark.parametrize("shape_fixed", [True, False])
+@pytest.mark.parametrize("auto_order", [True, False])
+def test_fit_polynomial__matches_the_numpy_fit_within_its_conditioning(
+    shape_fixed: bool, auto_order: bool
+) -> None:
+    rng = np.random.default_rng(11)
+    for _ in range(150):
+        points = _case(rng)
+        got = fit_polynomial(points, 3, None, shape_fixed, auto_order, 4e-4)
+        want = reference.fit_polynomial(points, 3, None, shape_fixed, auto_order, 4e-4)
+        assert (got.poly.variate, got.order) == (want.poly.variate, want.order)
+        tol = _tolerance(points, want.poly.variate, want.order)
+        assert _close(got.poly.coeffs, want.poly.coeffs, tol)
+        assert (got.poly.lo, got.poly.hi) == (want.poly.lo, want.poly.hi)  # min / max of ξ
+        assert _close(got.Gx, want.Gx, tol) and _close(got.Gy, want.Gy, tol)
+        eta_scale = np.abs(points.xy).max()
+        assert abs(got.rms - want.rms) <= tol * eta_scale
+        # the R factor: RᵀR is the normal matrix of the scaled, weight-normalised design
+        xi = points.xy[:, 0] if want.poly.variate == 1 else points.xy[:, 1]
+        w = points.weights / points.weights.max()
+        a_mat = np.vander(xi / got.scale, got.order + 1, increasing=True)
+        assert got.r_factor is not None
+        np.testing.assert_allclose(
+            got.r_factor.T @ got.r_factor, a_mat.T @ (w[:, None] * a_mat), rtol=tol, atol=tol
+        )
+
+
+def test_fit_polynomial__orders_it_lowers_as_the_numpy_fit() -> None:
+    """Too few distinct abscissae and a single point: the same lowered orders and values."""
+    xy = np.array([[1.0, 0.2], [1.0, 0.4], [1.0, 0.9], [2.0, 0.5]])
+    for n in (1, 3, 4):
+        points = PointSet(
+            xy[:n], np.zeros((n, 2, 3)), np.zeros((n, 2, 0)), np.zeros((0, 0)), np.ones(n)
+        )
+        for variate in (None, 1):
+            got = fit_polynomial(points, 3, variate)
+            want = reference.fit_polynomial(points, 3, variate)
+            assert (got.poly.variate, got.order) == (want.poly.variate, want.order)
+            np.testing.assert_allclose(got.poly.coeffs, want.poly.coeffs, rtol=0, atol=1e-12)
+
+
+def test_turn_gradient__matches_the_numpy_gradient_within_its_conditioning() -> None:
+    rng = np.random.default_rng(12)
+    for _ in range(60):
+        points = _case(rng)
+        fit = reference.fit_polynomial(points, 3, None, True, True, 4e-4)
+        pivot = float(np.mean(points.xy[:, 0 if fit.poly.variate == 1 else 1]))
+        got, got_var = turn_gradient(points, fit, pivot)
+        want, want_var = reference.turn_gradient(points, fit, pivot)
+        tol = _tolerance(points, fit.poly.variate, fit.order)
+        assert _close(got, want, tol)
+        assert abs(got_var - want_var) <= tol * max(want_var, 1e-12)
+
+
+def _cluster(rng: np.random.Generator) -> np.ndarray:
+    """8–20 noisy points of a straight wall, a corner (either arm longer), a bent wall or a
+    wall with a doorway gap, anywhere, any direction, shuffled as clusters come."""
+    n = int(rng.integers(8, 21))
+    kind = rng.integers(4)
+    t = np.sort(rng.uniform(0.0, 0.4, n))
+    local = np.column_stack([t, np.zeros(n)])
+    if kind == 1:  # a corner: the last points turn by 60–120°
+        k = int(rng.integers(3, n - 3))
+        turn = rng.uniform(np.pi / 3, 2 * np.pi / 3)
+        s = t[k:] - t[k]
+        local[k:] = local[k] + np.column_stack([np.cos(turn) * s, np.sin(turn) * s])
+    elif kind == 2:  # bent by 10–20° over the cluster
+        local[:, 1] = rng.uniform(0.2, 0.4) * t**2
+    elif kind == 3:  # a gap of 0.6–1 m after some of the points
+        local[int(rng.integers(2, n - 2)) :, 0] += rng.uniform(0.6, 1.0)
+    angle = rng.uniform(0.0, 2 * np.pi)
+    c, s_ = np.cos(angle), np.sin(angle)
+    xy = local @ np.array([[c, s_], [-s_, c]]) + rng.normal(scale=4.0, size=2)
+    xy += rng.normal(scale=0.01, size=xy.shape)
+    return np.ascontiguousarray(xy[rng.permutation(n)])
+
+
+def test_wall_mask__the_same_points_as_the_numpy_split() -> None:
+    """Straight, cornered, bent and gapped clusters: the same mask exactly (the MSAC scores
+    and gaps differ by rounding only, far below the seeded cases' margins)."""
+    rng = np.random.default_rng(13)
+    kept = set()
+    for _ in range(200):
+        xy = _cluster(rng)
+        got = wall_mask(xy, 0.03, 3, np.radians(30.0), GAP_SPLIT)
+        want = reference.wall_mask(xy, 0.03, 3, np.radians(30.0), GAP_SPLIT)
+        np.testing.assert_array_equal(got, want)
+        kept.add(int(want.sum()) == len(xy))
+    assert kept == {True, False}  # some clusters split, some kept whole
