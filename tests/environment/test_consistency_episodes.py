@@ -81,13 +81,14 @@ def _run(map_name: str, steps: int, seed: int) -> tuple[float, float, float]:
     return _nees(e_frame, slam.pose_cov), _nees(e_rel, slam.pose_cov_relative), worst
 
 
-#: Known misses of the check in the frame, reported to the lead (issue 45): the final NEES in
-#: the frame sits low on every map — the covariance with the start offset's share J P0 Jᵀ is
-#: too large for the errors (seeds 0–29: log-mean 0.22 office, 0.40 warehouse, 0.35 pillar
-#: hall against χ²(3)'s 0.73; medians 1.55 and 1.95 on the first two against 2.37), while
-#: the relative NEES is χ²(3)-like (0.77 office, 0.96 warehouse). Only the office's falls out
-#: of the band; it must keep failing until the filter is fixed (then this entry goes).
-FRAME_MISSES = {"generator:office_floor": "final NEES in the frame underconfident (log-mean 0.22)"}
+#: Known misses of the check in the frame (issue 45): the final NEES in the frame sits low on
+#: every map — the covariance with the start offset's share J P0 Jᵀ is too large for the
+#: errors, while the relative NEES is χ²(3)-like. Seeds 0–29 on merged main at stop 51
+#: (10 physics sub-steps, compiled cluster fit, reuse bound): frame log-means 0.35 office,
+#: 0.43 warehouse, 0.39 pillar hall against χ²(3)'s 0.73 (band 0.25–1.16); relative 0.80,
+#: 1.05, 1.06. The office's, 0.22 before, now falls inside the band: its entry went. A map
+#: whose frame NEES is known to miss goes here and must keep failing until the filter is fixed.
+FRAME_MISSES: dict[str, str] = {}
 
 
 @pytest.mark.slow
