@@ -720,7 +720,7 @@ def steady_beams(
             index[0], index[1], index[2], index[3] = 0, 1, 2, 3 + j
             for r in range(4):
                 for c in range(4):
-                    joint[r, c] = cov[index[r], index[c]]
+                    joint[r, c] = cov[min(index[r], index[c]), max(index[r], index[c])]
             if _cholesky4(joint, factor):
                 one[0] = angle[b]
                 eta = 2 if variate[j] == 1 else 0  # the box's (min, max) columns of η
@@ -1001,11 +1001,13 @@ def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from
     """P⁺ = P − (K Wᵀ + W Kᵀ) in place, ``kt`` = Kᵀ and ``wt`` = Wᵀ (k, n), whose columns
     from ``consider_from`` on are K's considered rows: zero (:func:`update_sparse`).
 
-    Written: the upper triangle of the estimated rows i < c and its mirror, and the cross
-    block's upper copy (i < c ≤ j), which takes K_i·W_j alone. Not written: the considered
-    block (i, j ≥ c), which does not change at all (each entry would subtract an exact zero:
-    a running sum that starts at +0 and adds ±0 stays +0), and the cross block's lower copy
-    (i ≥ c > j), left as it was: :func:`mirror_cross` completes P when a reader needs it.
+    Written: the upper triangle of the estimated rows i < c (the pose block whole), and the
+    cross block's upper copy (i < c ≤ j), which takes K_i·W_j alone. Not written: the
+    considered block (i, j ≥ c), which does not change at all (each entry would subtract an
+    exact zero: a running sum that starts at +0 and adds ±0 stays +0), and the lower copies
+    of the rest (j < min(i, c) but in the pose block), left as they were: their mirror is a
+    strided copy of half of what changed, and :func:`mirror_lower` does it when a reader
+    needs all of P.
     What is written is the same bits as the full update's (tested against it).
 
     Each entry's sum runs over K's rows in order from +0 and is then subtracted from P
@@ -1068,25 +1070,26 @@ def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from
                 for j in range(n - c):
                     cross[j] = (cross[j] + k0 * wc0[j]) + k1 * wc1[j]
             q += 2
-    for i in range(c):  # mirror the estimated block
+    for i in range(min(3, c)):  # the pose block whole (its readers take it as a matrix)
         for j in range(i):
             cov[i, j] = cov[j, i]
 
 
 @njit
-def mirror_cross(cov: np.ndarray, consider_from: int) -> None:
-    """The cross block's lower copy (rows from ``consider_from`` on, the columns before) from
-    its upper one: what :func:`joseph_blocks` leaves for the reader that needs all of P."""
+def mirror_lower(cov: np.ndarray, consider_from: int) -> None:
+    """P's lower triangle below the estimated rows' and the cross block's upper copy (rows
+    i, columns j < min(i, ``consider_from``)): what :func:`joseph_blocks` leaves for the
+    reader that needs all of P."""
     n = cov.shape[0]
-    for i in range(max(consider_from, 0), n):
-        for j in range(min(consider_from, n)):
+    for i in range(n):
+        for j in range(min(i, consider_from)):
             cov[i, j] = cov[j, i]
 
 
 @njit
 def update_sparse(
     mean: np.ndarray,  # (3+n,) written in place
-    cov: np.ndarray,  # (3+n, 3+n) symmetric but the cross block's lower copy, in place
+    cov: np.ndarray,  # (3+n, 3+n) its upper triangle and pose block, written in place
     innovation: np.ndarray,  # (k,)
     h_pose: np.ndarray,  # (k, 3)
     c0_index: np.ndarray,  # (k,) state index of each row's c0
@@ -1114,9 +1117,9 @@ def update_sparse(
       the cross block takes one product instead of two): with the n turns of n landmarks
       considered it does about half the work of the full (3 + 2n)² update, and the result
       is the same bits as the full one (tested).
-    * The cross block's lower copy (rows from ``consider_from`` on, the columns before) is
-      neither read nor written (:func:`joseph_blocks`): its mirror, a strided copy of a
-      third of P, waits for a reader that needs all of P (:func:`mirror_cross`;
+    * Only P's upper triangle (and its pose block whole) is read and written
+      (:func:`joseph_blocks`): the lower copy's mirror, a strided copy of half of what
+      changed, waits for a reader that needs all of P (:func:`mirror_lower`;
       ``ekf.update_sparse_inplace`` and ``PolySlam.cov`` call it).
 
     Not bit-identical to the numpy version it replaced (BLAS's fused products and the
@@ -1126,10 +1129,12 @@ def update_sparse(
     pht = np.empty((k, n))  # row i: column i of P Hᵀ
     for i in range(k):
         c, h0, h1, h2, hc = c0_index[i], h_pose[i, 0], h_pose[i, 1], h_pose[i, 2], h_c0[i]
-        for a in range(n):
+        for a in range(c):  # P's row c from its upper triangle (the lower copy may wait)
+            pht[i, a] = cov[0, a] * h0 + cov[1, a] * h1 + cov[2, a] * h2 + cov[a, c] * hc
+        for a in range(c, n):
             pht[i, a] = cov[0, a] * h0 + cov[1, a] * h1 + cov[2, a] * h2 + cov[c, a] * hc
         g = alpha_index[i]
-        if g >= 0:  # P's row g from its upper triangle (its cross block's lower copy may wait)
+        if g >= 0:  # P's row g from its upper triangle (the lower copy may wait)
             ha = h_alpha[i]
             for a in range(min(g, consider_from)):
                 pht[i, a] += cov[a, g] * ha

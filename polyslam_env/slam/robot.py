@@ -150,7 +150,7 @@ class PolySlam:
         self.max_range = float(max_range)
         self.mean = np.zeros(3)  # (3+n,) relative to the true start (see class docstring)
         self._cov = np.zeros((3, 3))  # (3+n, 3+n) ditto: the true start is known exactly
-        # the considered rows from here on wait for their cross block's lower copy (cov)
+        # P's lower triangle waits for its copy from the upper one, before this column (cov)
         self._mirror_from: int | None = None
         self.table = LandmarkTable()  # the map: ids, shapes, extents, … in state order
         self.points = StoredPoints()  # the clusters' and Q_bad sets' beam points
@@ -175,12 +175,11 @@ class PolySlam:
 
     @property
     def cov(self) -> np.ndarray:  # (3+n, 3+n)
-        """The state's covariance, symmetric. The compiled update writes the turns' cross
-        block (rows α, columns pose and c0) in its upper copy only
-        (``kernels.joseph_blocks``); the lower one is mirrored here, on the first read after
-        an update, not on every step."""
+        """The state's covariance, symmetric. The compiled update writes P's upper triangle
+        and its pose block only (``kernels.joseph_blocks``); the lower triangle is mirrored
+        here, on the first read after an update, not on every step."""
         if self._mirror_from is not None:
-            kernels.mirror_cross(self._cov, self._mirror_from)
+            kernels.mirror_lower(self._cov, self._mirror_from)
             self._mirror_from = None
         return self._cov
 
@@ -342,8 +341,9 @@ class PolySlam:
             values,
         )  # fmt: skip
         used = int(status[ST_USED])
-        if used > 0 and self.config.rotation_states:  # kernels.update_scan's consider_from
-            self._mirror_from = 3 + len(table)
+        if used > 0:  # kernels.update_scan's consider_from
+            considered = self.config.rotation_states
+            self._mirror_from = 3 + len(table) if considered else self._cov.shape[0]
         if used >= 0:  # the update ran
             self.state_moved(values[V_BEFORE : V_BEFORE + 3] if used else None)
         self.divergence_f = float(values[V_F])

@@ -367,8 +367,9 @@ def test_joseph_blocks__bit_identical_to_the_full_update(
 ) -> None:
     """Leaving the considered block out and the cross block's zero products out changes no
     bit: K's considered rows are exact zeros; nor does summing K's rows four and two per pass
-    (1 to 9 rows: every mix of the passes). The cross block's lower copy is neither read nor
-    written (nan there stays nan and reaches nothing) until :func:`kernels.mirror_cross`."""
+    (1 to 9 rows: every mix of the passes). The lower triangle (but the pose block) is neither
+    read nor written (nan there stays nan and reaches nothing) until
+    :func:`kernels.mirror_lower`."""
     rng = np.random.default_rng(n_state + consider_from + rows)
     cov = random_spd(rng, n_state, 0.01)
     if consider_from < n_state:  # a signed zero in the considered block keeps its sign
@@ -378,10 +379,13 @@ def test_joseph_blocks__bit_identical_to_the_full_update(
     wt[:, 2] = -0.0  # signed zeros in W must not leak through either
     want, got = cov.copy(), cov.copy()
     ref.joseph_full(want, kt, wt)
-    got[consider_from:, :consider_from] = np.nan  # stale: the kernel must not read it
+    stale = np.tril(np.ones(got.shape, dtype=bool), -1)  # the lower triangle
+    stale[:, consider_from:] = False  # but the considered block's
+    stale[:3, :3] = False  # and the pose block's
+    got[stale] = np.nan  # the kernel must not read it
     kernels.joseph_blocks(got, kt, wt, consider_from)
-    assert np.isnan(got[consider_from:, :consider_from]).all()
-    kernels.mirror_cross(got, consider_from)
+    assert np.isnan(got[stale]).all()
+    kernels.mirror_lower(got, consider_from)
     assert want.tobytes() == got.tobytes()
 
 

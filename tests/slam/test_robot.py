@@ -50,8 +50,8 @@ def test_step__covariance_symmetric_psd_and_state_consistent_over_long_run() -> 
 
 
 def test_cov__mirrored_when_read_the_same_episode_bit_for_bit_as_read_every_step() -> None:
-    """The update writes the turns' cross block in its upper copy only and ``cov`` mirrors it
-    on the first read: a filter whose ``cov`` is never read during 60 steps (30 landmarks,
+    """The update writes P's upper triangle (and pose block) only and ``cov`` mirrors it on
+    the first read: a filter whose ``cov`` is never read during 60 steps (30 landmarks,
     turns considered, every beam updating) ends in the same bits as one read every step,
     so no kernel reads the copy that waits."""
     rng = np.random.default_rng(7)
