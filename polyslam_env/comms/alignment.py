@@ -28,9 +28,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from polyslam_env.comms.kernels import match_walls
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.fitting import J_ROT
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH, line_angle, off_square
+from polyslam_env.slam.map_kernels import eta_range
 from polyslam_env.slam.polynomial import Polynomial
 
 #: χ²₃ 99 % quantile: a correction of T further than this (in Σ_T's metric) is refused, and
@@ -145,12 +147,15 @@ def _refine_from(
         raise ValueError("chain_var and wall_var need one variance per chain and per wall")
     point_var = sigma * sigma + var_c[chain_of]  # (N,) before the wall's share
     tangents_q = np.vstack([_tangents(c) for c in chains])  # (N, 2) sender frame
+    reach = wall_reach(walls, var_w, cov_t, point_var, q)
+    starts = np.cumsum([0] + [len(c) for c in chains])
     t = np.array(start, dtype=float)
     info = info_prior
     for _ in range(iterations):
         p, dp_dt = frame_points(q, t)
         tangents = tangents_q @ rotation(t[2]).T
-        match = _match(p, dp_dt, tangents, walls, cov_t, point_var, var_w)
+        meets = _near_chains(reach, p, starts)
+        match = _match(p, dp_dt, tangents, walls, cov_t, point_var, var_w, meets, starts)
         if match is None:
             return None
         residual, grad, wall, keep = match  # (M,), (M, 3), (M,), (N,)
@@ -226,35 +231,73 @@ def _match(
     cov_t: np.ndarray,
     point_var: np.ndarray,
     wall_var: np.ndarray,
+    meets: np.ndarray | None = None,
+    starts: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """Per point (N, 2) the wall it pairs with (smallest normalised normal distance within
     the gate, same direction, inside the extent; a pair's offset variance is the point's
     ``point_var`` (N,) plus the wall's ``wall_var``): for the M points that pair, residuals
     (M,), their gradients w.r.t. T (M, 3) and wall indices (M,), and which points pair (N,)
-    bool; None if none does."""
-    n_pts = len(p)
-    best = np.full(n_pts, np.inf)  # normalised |r|
-    residual = np.zeros(n_pts)
-    grad = np.zeros((n_pts, 3))
-    wall_of = np.full(n_pts, -1)
-    cos_max = np.cos(np.radians(MAX_ANGLE_DEG))
+    bool; None if none does. ``meets`` (W, K) (:func:`_near_chains`): which chains (rows
+    ``starts[k]:starts[k+1]`` of ``p``) can pair with each wall (default: one chain, every
+    wall); the others cannot, so leaving them out changes nothing. Compiled:
+    :func:`~polyslam_env.comms.kernels.match_walls`."""
+    if meets is None or starts is None:
+        meets, starts = np.ones((len(walls), 1), dtype=bool), np.array([0, len(p)])
+    width = max((poly.order + 1 for poly in walls), default=2)
+    coeffs = np.zeros((len(walls), width))
     for w, poly in enumerate(walls):
-        xi, eta = poly.from_xy(p)
-        (at,) = np.nonzero((xi >= poly.lo) & (xi <= poly.hi))  # inside its extent
-        if not len(at):
-            continue
-        xi, eta = xi[at], eta[at]  # the rest, point by point, only where it can pair
-        slope = poly.slope(xi)
-        normal = poly.normals(xi)  # (n, 2)
-        r = (eta - poly.value(xi)) / np.sqrt(1.0 + slope * slope)
-        g = np.einsum("ni,nij->nj", normal, dp_dt[at])  # (n, 3) ∂r/∂T
-        pred = np.sqrt(np.einsum("ni,ij,nj->n", g, cov_t, g) + point_var[at] + wall_var[w])
-        parallel = np.abs(np.einsum("ni,ni->n", normal, tangents[at])) <= np.sqrt(1 - cos_max**2)
-        score = np.abs(r) / pred
-        ok = parallel & (score <= GATE_SIGMAS) & (score < best[at])
-        rows = at[ok]
-        best[rows], residual[rows], grad[rows], wall_of[rows] = score[ok], r[ok], g[ok], w
+        coeffs[w, : poly.order + 1] = poly.coeffs
+    variate = np.array([poly.variate for poly in walls], dtype=np.int64)
+    extent = np.array([(poly.lo, poly.hi) for poly in walls], dtype=float).reshape(-1, 2)
+    sin_max = float(np.sqrt(1 - np.cos(np.radians(MAX_ANGLE_DEG)) ** 2))
+    _, residual, grad, wall_of = match_walls(
+        p, dp_dt, tangents, variate, coeffs, extent, cov_t, point_var,
+        np.asarray(wall_var, dtype=float), meets, np.asarray(starts, dtype=np.int64),
+        GATE_SIGMAS, sin_max,
+    )  # fmt: skip
     keep = wall_of >= 0
     if not keep.any():
         return None
     return residual[keep], grad[keep], wall_of[keep], keep
+
+
+def wall_reach(
+    walls: Sequence[Polynomial],
+    wall_var: np.ndarray,
+    cov_t: np.ndarray,
+    point_var: np.ndarray,
+    q: np.ndarray,
+) -> np.ndarray:
+    """(W, 4) boxes [x_lo, x_hi, y_lo, y_hi], each holding every place where a point can pair
+    with that wall in :func:`_match`: inside its extent (ξ ∈ [lo, hi]) and within the gate,
+    |r| ≤ GATE_SIGMAS·pred with r the η offset over √(1 + B'²). Bounds: pred² = gᵀΣ_T g +
+    point_var + wall_var with g = nᵀ ∂p/∂T = (n_x, n_y, nᵀJR q), so |g|² ≤ 1 + |q|² and
+    gᵀΣ_T g ≤ tr(Σ_T)(1 + max |q|²); the η offset is at most |r| √(1 + max B'²) (the slope's
+    exact maximum over the extent); B over the extent lies in
+    :func:`~polyslam_env.slam.map_kernels.eta_range` (interval arithmetic, padded), and 1e-9 m
+    more covers the rounding of c0 + B."""
+    worst = float(np.trace(cov_t)) * (1.0 + float(np.max(np.sum(q * q, axis=1), initial=0.0)))
+    worst += float(np.max(point_var, initial=0.0))
+    out = np.empty((len(walls), 4))
+    for w, poly in enumerate(walls):
+        shape = poly.coeffs.copy()
+        shape[0] = 0.0
+        b_lo, b_hi = eta_range(shape, poly.lo, poly.hi)
+        slope = poly.max_slope()
+        reach = GATE_SIGMAS * np.sqrt((worst + wall_var[w]) * (1.0 + slope * slope)) + 1e-9
+        eta = (poly.c0 + b_lo - reach, poly.c0 + b_hi + reach)
+        box = (poly.lo, poly.hi, *eta) if poly.variate == 1 else (*eta, poly.lo, poly.hi)
+        out[w] = box
+    return out
+
+
+def _near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(W, K) whether chain k of ``p`` (rows starts[k]:starts[k+1]) has a bounding box that
+    meets wall w's ``reach`` box (:func:`wall_reach`): only those chains can pair with it."""
+    first = starts[:-1]
+    lo, hi = np.minimum.reduceat(p, first, axis=0), np.maximum.reduceat(p, first, axis=0)
+    return np.asarray(
+        (lo[None, :, 0] <= reach[:, 1, None]) & (hi[None, :, 0] >= reach[:, 0, None])
+        & (lo[None, :, 1] <= reach[:, 3, None]) & (hi[None, :, 1] >= reach[:, 2, None])
+    )  # fmt: skip

@@ -592,9 +592,17 @@ class RendezvousExchange:
         # versions (origin robot, its landmark id; messages.py): per robot, its landmarks that
         # are unchanged copies of a received version; per receiver, the versions it has
         # integrated; per ordered pair (s, r), the versions s knows r holds
-        self._copies: list[dict[int, tuple[int, int]]] = [{} for _ in range(num_robots)]
-        self._seen: list[set[tuple[int, int]]] = [set() for _ in range(num_robots)]
-        self._peer_holds: dict[tuple[int, int], set[tuple[int, int]]] = {}
+        self._copies: list[dict[int, tuple[tuple[int, int], int]]] = [
+            {} for _ in range(num_robots)
+        ]  # landmark id → (version, revision) it is an unchanged copy of
+        # per receiver, each version it integrated → the highest revision integrated; per
+        # ordered pair (s, r), each version s knows r holds → its revision
+        self._seen: list[dict[tuple[int, int], int]] = [{} for _ in range(num_robots)]
+        self._peer_holds: dict[tuple[int, int], dict[tuple[int, int], int]] = {}
+        # per robot, its own versions' revisions (absent: 0) and each landmark's extent (lo,
+        # hi) when its version or revision was made (:meth:`_revise`)
+        self._revision: list[dict[int, int]] = [{} for _ in range(num_robots)]
+        self._extent_at: list[dict[int, tuple[float, float]]] = [{} for _ in range(num_robots)]
         self._resend: dict[tuple[int, int], set[int]] = {}  # expired landmark ids per pair
         self._sent_ids: dict[int, tuple[int, int, tuple[int, ...]]] = {}  # msg → s, r, ids
         self._sightings: dict[tuple[int, int, int], _Sighting] = {}  # (r, s, step) → r's view
@@ -780,20 +788,50 @@ class RendezvousExchange:
     def version(self, robot: int, landmark_id: int) -> tuple[int, int]:
         """The version (origin robot, landmark id in its map) a robot's landmark holds: that of
         the received record it is an unchanged copy of, else its own (robot, id)."""
-        return self._copies[robot].get(landmark_id, (robot, landmark_id))
+        copy = self._copies[robot].get(landmark_id)
+        return (robot, landmark_id) if copy is None else copy[0]
+
+    def revision(self, robot: int, landmark_id: int) -> int:
+        """The revision of the version a robot's landmark holds (:meth:`_revise`)."""
+        copy = self._copies[robot].get(landmark_id)
+        return self._revision[robot].get(landmark_id, 0) if copy is None else copy[1]
+
+    def _revise(self, robot: int, landmark_id: int, lo: float, hi: float, grow: float) -> None:
+        """Bump the revision of a robot's own landmark whose SLAM stretched its extent in place
+        (ids are kept) by at least ``grow`` (m, ``merge_min_overlap``) at an end since its
+        last revision: a receiver takes no uncovered run shorter than that (:meth:`_fuse`),
+        so a smaller stretch would be sent for nothing. A copy of a received version that the
+        robot's own beams stretched so is its own version from then on."""
+        extent = self._extent_at[robot]
+        was = extent.get(landmark_id)
+        if was is None:
+            extent[landmark_id] = (lo, hi)
+        elif was[0] - lo >= grow or hi - was[1] >= grow:
+            extent[landmark_id] = (lo, hi)
+            if self._copies[robot].pop(landmark_id, None) is None:
+                revisions = self._revision[robot]
+                revisions[landmark_id] = revisions.get(landmark_id, 0) + 1
 
     def _landmarks_to_send(self, s: int, r: int, slam: PolySlam) -> tuple[int, ...]:
         """s's landmarks changed since it last met r (or lost on the way to r), but for the
-        versions s knows r holds: r's own, those acknowledged (delivered) to r, those r sent."""
+        versions s knows r holds: r's own, those acknowledged (delivered) to r, those r sent;
+        and those r holds at an older revision (stretched since: :meth:`_revise`)."""
         since = self._last_meeting.get((s, r), -1)
         wanted = set(slam.changed_since(since)) | self._resend.pop((s, r), set())
-        holds = self._peer_holds.get((s, r), set())
+        holds = self._peer_holds.get((s, r), {})
+        grow = slam.config.merge_min_overlap
+        table = slam.table
         out = []
-        for lid in slam.landmark_ids:
-            if lid in wanted:
-                origin, _ = tag = self.version(s, lid)
-                if origin != r and tag not in holds:
-                    out.append(lid)
+        for lid, lo, hi in zip(table.ids, table.lo.tolist(), table.hi.tolist(), strict=True):
+            self._revise(s, lid, lo, hi, grow)
+            origin, _ = tag = self.version(s, lid)
+            if origin == r:
+                continue
+            held = holds.get(tag)
+            if (lid in wanted and held is None) or (
+                held is not None and held < self.revision(s, lid)
+            ):
+                out.append(lid)
         return tuple(out)
 
     def _build(
@@ -820,6 +858,7 @@ class RendezvousExchange:
                 polys[index[lid]],
                 max(slam.c0_variance(lid), 0.0),
                 self.version(s, lid)[0],
+                self.revision(s, lid),
             )
             for lid in ids
         )
@@ -921,9 +960,11 @@ class RendezvousExchange:
                 transform = self._transform(slams[r].pose, sighting, message.header, pose_var)
             if transform is not None:
                 received, ids = self._integrate(slams[r], message, transform, s)
-                versions = {_version(rec) for rec in message.records}
-                self._peer_holds.setdefault((s, r), set()).update(versions)  # acknowledged
-                self._peer_holds.setdefault((r, s), set()).update(versions)  # s sent them
+                for pair in ((s, r), (r, s)):  # acknowledged to s; s sent them to r
+                    holds = self._peer_holds.setdefault(pair, {})
+                    for rec in message.records:
+                        version = _version(rec)
+                        holds[version] = max(holds.get(version, 0), rec.revision)
             self._polys_received[r] += n_records
         return DeliveredMessage(
             delivered.msg_id,
@@ -1083,18 +1124,20 @@ class RendezvousExchange:
         ids: list[int] = []
         for record in fresh:
             version = _version(record)
-            seen.add(version)
+            seen[version] = record.revision
+            # on the pose columns only (the rest are zeros): _fuse sizes G_x to the state
             pts = received_point_set(
-                record, t, d_state, d_noise, noise_cov, slam.mean.size, self.chord_tol,
-                self.spacing,
-            )  # fmt: skip
+                record, t, d_state, d_noise, noise_cov, 3, self.chord_tol, self.spacing
+            )
             sure = transform_normal_sigma(record.polynomial, t, cov_t, self.chord_tol,
                                           self.spacing) <= limit  # fmt: skip
             self.dropped_points[r] += int(np.count_nonzero(~sure))
             for rows in uncovered_runs(sure, pts.xy, slam.config.merge_min_overlap):
                 for piece, fit in self._refit(r, _subset(pts, rows)):
                     received.append(fit.poly)
-                    ids += self._fuse(slam, piece, fit, (sender, version), r, 0, turn)
+                    ids += self._fuse(
+                        slam, piece, fit, (sender, version, record.revision), r, 0, turn
+                    )
         return received, ids
 
     def _refit(self, r: int, points: PointSet) -> list[tuple[PointSet, Fit]]:
@@ -1181,14 +1224,14 @@ class RendezvousExchange:
         slam: PolySlam,
         points: PointSet,
         fit: Fit,
-        origin: tuple[int, tuple[int, int]],
+        origin: tuple[int, tuple[int, int], int],
         r: int,
         depth: int,
         turn: tuple[np.ndarray, float] | None = None,
     ) -> list[int]:
         """Fuse one received piece into receiver r's map; returns the ids that hold it.
-        ``origin``: the sender and the record's version; ``turn``: the transform's turn
-        (:meth:`PolySlam.insert_landmark`).
+        ``origin``: the sender, the record's version and its revision; ``turn``: the
+        transform's turn (:meth:`PolySlam.insert_landmark`).
 
         Rule 1 (keep the better): where a landmark of the same wall (PolySlam's merge test)
         has a normal-offset variance no larger than the piece's, the piece's points it covers
@@ -1199,7 +1242,7 @@ class RendezvousExchange:
         landmark built from independent (own or third-party) data.
         """
         self.fused[r] += 1
-        sender, version = origin
+        sender, version, revision = origin
         fit = _on_state(fit, slam.mean.size)
         cfg = slam.config
         var = normal_variance(fit.poly, _c0_variance(fit, slam.cov))
@@ -1231,19 +1274,21 @@ class RendezvousExchange:
         self._follow_lineage(r, slam)  # its merges carry this sender with their partners'
         if not any(event.kind == MERGED for event in events):
             # an unchanged copy of the sent version: forwarded under it, never echoed back
-            self._copies[r][lid] = version
+            self._copies[r][lid] = (version, revision)
+            row = slam.table.index_of(lid)
+            self._extent_at[r][lid] = (float(slam.table.lo[row]), float(slam.table.hi[row]))
         return [lid]
 
     def _follow_lineage(self, r: int, slam: PolySlam) -> None:
         """Carry the provenance of receiver r's landmarks over the changes its SLAM made
         since the last call (:mod:`~polyslam_env.slam.lineage`): a refit or merge holds the
         senders of its parents, a removed landmark none; O(changes), exactly."""
-        sources, copies = self._sources[r], self._copies[r]
+        sources, copies, extent = self._sources[r], self._copies[r], self._extent_at[r]
         for event in slam.lineage.since(self._lineage_at[r]):
-            for parent in event.parents:
-                copies.pop(parent, None)  # its heir holds this robot's own version
-            if event.kind == REMOVED:
-                copies.pop(event.landmark_id, None)
+            for gone in (*event.parents, *((event.landmark_id,) if event.kind == REMOVED else ())):
+                copies.pop(gone, None)  # a parent's heir holds this robot's own version
+                extent.pop(gone, None)
+                self._revision[r].pop(gone, None)
             if event.kind in (REPLACED, MERGED):
                 inherited = [sources.pop(p) for p in event.parents if p in sources]
                 if inherited:
@@ -1357,10 +1402,11 @@ def _on_state(fit: Fit, n_state: int) -> Fit:
     return Fit(fit.poly, fit.c0, gx, fit.Gy, fit.V, fit.rms, fit.order)
 
 
-def _held(record: PolynomialRecord, r: int, seen: set[tuple[int, int]]) -> bool:
-    """Whether receiver r holds a record's version: its own making, or one it integrated."""
+def _held(record: PolynomialRecord, r: int, seen: dict[tuple[int, int], int]) -> bool:
+    """Whether receiver r holds a record's version: its own making, or one it integrated at
+    this revision or a later one."""
     version = _version(record)
-    return version[0] == r or version in seen
+    return version[0] == r or seen.get(version, -1) >= record.revision
 
 
 def _version(record: PolynomialRecord) -> tuple[int, int]:

@@ -12,7 +12,7 @@ Byte layout (all little-endian; ``F`` = 4 bytes for float32, 8 for float64)::
     ---------   ---------   -------------------------------------------------------------
     header (12 + 4F bytes)
     0           1           magic 0x50 ('P')                                   uint8
-    1           1           format version = 1                                 uint8
+    1           1           format version = 3                                 uint8
     2           1           payload kind: 1 polynomials, 2 points, 3 grid      uint8
     3           1           float width F: 4 or 8                              uint8
     4           2           sender id                                          uint16
@@ -20,16 +20,17 @@ Byte layout (all little-endian; ``F`` = 4 bytes for float32, 8 for float64)::
     8           4           sequence number                                    uint32
     12          3F          sender pose estimate x, y, θ                       float
     12+3F       F           sender's bearing to the receiver (rad)             float
-    payload, kind 1 (polynomials): 2 + Σ_i (8 + (m_i + 4) F) bytes
+    payload, kind 1 (polynomials): 2 + Σ_i (10 + (m_i + 4) F) bytes
     +0          2           number of records n                                uint16
     per record
     +0          4           landmark id in its origin robot's map              uint32
     +4          2           origin robot (whose map made this version)         uint16
-    +6          1           variate flag (1 or 2)                              uint8
-    +7          1           order m (>= 1)                                     uint8
-    +8          (m+1)F      coefficients c0, b1 … bm                           float
-    +8+(m+1)F   F           variance of c0                                     float
-    +8+(m+2)F   2F          extent lo, hi                                      float
+    +6          2           revision (the origin's extent stretches of it)     uint16
+    +8          1           variate flag (1 or 2)                              uint8
+    +9          1           order m (>= 1)                                     uint8
+    +10         (m+1)F      coefficients c0, b1 … bm                           float
+    +10+(m+1)F  F           variance of c0                                     float
+    +10+(m+2)F  2F          extent lo, hi                                      float
     payload, kind 2 (points): 4 + 2NF bytes
     +0          4           number of points N                                 uint32
     +4          2NF         x0, y0, x1, y1, …                                  float
@@ -44,17 +45,22 @@ Byte layout (all little-endian; ``F`` = 4 bytes for float32, 8 for float64)::
     trailer (4 bytes)
     end-4       4           CRC-32 (zlib) of every preceding byte              uint32
 
-So a polynomial message with orders m_i is ``12 + 4F + 2 + Σ(8 + (m_i + 4)F) + 4`` bytes:
-70 bytes for one cubic in float32, 114 in float64.
+So a polynomial message with orders m_i is ``12 + 4F + 2 + Σ(10 + (m_i + 4)F) + 4`` bytes:
+72 bytes for one cubic in float32, 116 in float64.
 
 A record's **origin** (robot, landmark id) names one version of a wall: the SLAM never reuses
 a landmark id, and a refit or merge makes a new one (``slam/lineage.py``), so the pair is the
 version. A robot forwarding a wall it received unchanged sends it under its origin's pair, so
 a receiver that already holds that version (or a sender that knows its peer does) skips it
-before any transform or refit (``comms/exchange.py``, "Versions"). Format version 2 added the
-origin (version 1 records had the sender's id only). :func:`decode` rejects a wrong magic,
-version, kind, width, length or checksum with a ``ValueError``; it never returns a partial
-message. Grid cell ``[r, c]`` covers ``origin + resolution · ([c, c+1] × [r, r+1])``.
+before any transform or refit (``comms/exchange.py``, "Versions"). A landmark keeps its id
+when its SLAM stretches its extent in place (a hit just past an end), so the record also
+carries a **revision**: the origin bumps it when the extent has grown by at least
+``merge_min_overlap`` since the last revision, and a peer holding an older revision takes the
+newer one (the stretch; the part it holds is dropped as covered). Format version 2 added the
+origin (version 1 records had the sender's id only), version 3 the revision. :func:`decode`
+rejects a wrong magic, version, kind, width, length or checksum with a ``ValueError``; it
+never returns a partial message. Grid cell ``[r, c]`` covers
+``origin + resolution · ([c, c+1] × [r, r+1])``.
 """
 
 from __future__ import annotations
@@ -71,7 +77,7 @@ from polyslam_env.slam.polynomial import Polynomial
 Precision = Literal["float32", "float64"]
 
 MAGIC = 0x50
-VERSION = 2
+VERSION = 3
 KIND_POLYNOMIALS = 1
 KIND_POINTS = 2
 KIND_GRID = 3
@@ -79,7 +85,7 @@ CELL_UNKNOWN, CELL_FREE, CELL_OCCUPIED = 0, 1, 2
 
 _HEAD = struct.Struct("<BBBBHHI")  # magic, version, kind, width, sender, receiver, seq
 _CRC = struct.Struct("<I")
-_RECORD = struct.Struct("<IHBB")  # landmark id, origin robot, variate, order
+_RECORD = struct.Struct("<IHHBB")  # landmark id, origin robot, revision, variate, order
 _WIDTH = {"float32": 4, "float64": 8}
 _DTYPE: dict[int, np.dtype[np.floating]] = {4: np.dtype("<f4"), 8: np.dtype("<f8")}
 
@@ -100,14 +106,16 @@ class Header:
 
 @dataclass(frozen=True, eq=False)
 class PolynomialRecord:
-    """One landmark as sent: its version (origin robot and landmark id in that robot's map),
-    geometry (shape, c0 and extent) and c0 variance. ``origin`` None: the sender's own
-    landmark (encoded as the header's sender; a decoded record always names it)."""
+    """One landmark as sent: its version (origin robot and landmark id in that robot's map)
+    and the version's revision (its extent stretches), geometry (shape, c0 and extent) and c0
+    variance. ``origin`` None: the sender's own landmark (encoded as the header's sender; a
+    decoded record always names it)."""
 
     landmark_id: int
     polynomial: Polynomial
     c0_var: float
     origin: int | None = None
+    revision: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -172,11 +180,12 @@ def _record_bytes(rec: PolynomialRecord, sender: int, width: int) -> bytes:
     origin = sender if rec.origin is None else rec.origin
     _check_uint("landmark_id", rec.landmark_id, 32)
     _check_uint("origin", origin, 16)
+    _check_uint("revision", rec.revision, 16)
     if not 1 <= poly.order <= 255:
         raise ValueError(f"polynomial order must be in 1..255, got {poly.order}")
     if not (np.isfinite(rec.c0_var) and rec.c0_var >= 0):
         raise ValueError(f"c0_var must be finite and >= 0, got {rec.c0_var!r}")
-    head = _RECORD.pack(rec.landmark_id, origin, poly.variate, poly.order)
+    head = _RECORD.pack(rec.landmark_id, origin, rec.revision, poly.variate, poly.order)
     floats = [*poly.coeffs, rec.c0_var, poly.lo, poly.hi]
     return head + _floats(floats, width, f"landmark {rec.landmark_id}")
 
@@ -319,7 +328,7 @@ def _parse_polynomials(reader: _Reader, header: Header) -> PolynomialMessage:
 
 
 def _parse_record(reader: _Reader, index: int) -> PolynomialRecord:
-    landmark_id, origin, variate, order = reader.unpack(_RECORD.format, f"record {index}")
+    landmark_id, origin, revision, variate, order = reader.unpack(_RECORD.format, f"record {index}")
     if variate not in (1, 2) or order < 1:
         raise ValueError(f"corrupt record {index}: variate {variate}, order {order}")
     values = reader.floats(order + 4, f"record {index}")
@@ -327,7 +336,7 @@ def _parse_record(reader: _Reader, index: int) -> PolynomialRecord:
     if c0_var < 0 or hi < lo:
         raise ValueError(f"corrupt record {index}: c0 variance {c0_var}, extent [{lo}, {hi}]")
     poly = Polynomial(variate, coeffs, lo, hi)
-    return PolynomialRecord(int(landmark_id), poly, float(c0_var), int(origin))
+    return PolynomialRecord(int(landmark_id), poly, float(c0_var), int(origin), int(revision))
 
 
 def _parse_points(reader: _Reader, header: Header) -> PointsMessage:

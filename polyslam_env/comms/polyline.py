@@ -62,8 +62,39 @@ def _initial_knots(poly: Polynomial, sagitta: float) -> np.ndarray:
 
 def _chord_errors(poly: Polynomial, xi: np.ndarray) -> np.ndarray:
     """Largest distance (V-1,) from the curve between consecutive knots to their chord."""
-    perp = np.array([_max_perpendicular(poly, a, b) for a, b in itertools.pairwise(xi)])
+    if poly.order <= 3:
+        perp = _max_perpendicular_cubic(poly, xi)
+    else:
+        perp = np.array([_max_perpendicular(poly, a, b) for a, b in itertools.pairwise(xi)])
     return np.maximum(perp, _sampled_segment_distance(poly, xi))
+
+
+def _max_perpendicular_cubic(poly: Polynomial, xi: np.ndarray) -> np.ndarray:
+    """:func:`_max_perpendicular` of every chord (V-1,) at once, for orders up to 3: e'(ξ) =
+    p'(ξ) − s is at most quadratic, so its roots are the quadratic formula's (the stable form,
+    q = −(b + sign(b)√D)/2, roots q/a and c/q) instead of a companion matrix per chord; the
+    leading coefficients are trimmed as there (negligible next to the largest: dropped)."""
+    c = np.zeros(4)
+    c[: poly.order + 1] = poly.coeffs
+    a, b = xi[:-1], xi[1:]
+    ya, yb = poly.value(a), poly.value(b)
+    s = (yb - ya) / (b - a)
+    d0, d1, d2 = c[1] - s, 2.0 * c[2], 3.0 * c[3]  # e' = d0 + d1 ξ + d2 ξ², per chord
+    big = 1e-12 * np.maximum(np.maximum(np.abs(d0), abs(d1)), abs(d2))
+    quad = abs(d2) > big
+    line = ~quad & (abs(d1) > big)
+    roots = np.full((len(a), 2), np.nan)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        disc = d1 * d1 - 4.0 * d2 * d0
+        real = quad & (disc >= 0.0)
+        q = -0.5 * (d1 + np.copysign(np.sqrt(np.where(real, disc, 0.0)), d1))
+        roots[:, 0] = np.where(real, q / d2, np.nan)
+        roots[:, 1] = np.where(real & (q != 0.0), d0 / q, roots[:, 0])
+        roots[line, 0] = -d0[line] / d1
+    inside = (roots > a[:, None]) & (roots < b[:, None])
+    crit = np.where(inside, roots, a[:, None])  # a: zero error, as no critical point
+    err = poly.value(crit) - (ya[:, None] + s[:, None] * (crit - a[:, None]))
+    return np.asarray(np.max(np.abs(err), axis=1) / np.hypot(1.0, s))
 
 
 def _max_perpendicular(poly: Polynomial, a: float, b: float) -> float:

@@ -315,3 +315,77 @@ def test_off_square__on_an_angled_floor_keeps_a_refined_turn_that_is_not_square(
     camera = np.array([1.0, 2.0, math.radians(21.0)])
     refined = np.array([1.0, 2.0, square + 5.0 * sigma])
     assert not RendezvousExchange._off_square(slam, records, camera, refined, cov)
+
+
+def _match_oracle(
+    p: np.ndarray,
+    dp_dt: np.ndarray,
+    tangents: np.ndarray,
+    walls: list[Polynomial],
+    cov_t: np.ndarray,
+    point_var: np.ndarray,
+    wall_var: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """``alignment._match`` in numpy, wall by wall over every point (what the compiled
+    ``comms.kernels.match_walls`` replaced)."""
+    n_pts = len(p)
+    best = np.full(n_pts, np.inf)
+    residual, grad, wall_of = np.zeros(n_pts), np.zeros((n_pts, 3)), np.full(n_pts, -1)
+    cos_max = np.cos(np.radians(alignment.MAX_ANGLE_DEG))
+    for w, poly in enumerate(walls):
+        xi, eta = poly.from_xy(p)
+        (at,) = np.nonzero((xi >= poly.lo) & (xi <= poly.hi))
+        if not len(at):
+            continue
+        xi, eta = xi[at], eta[at]
+        slope = poly.slope(xi)
+        normal = poly.normals(xi)
+        r = (eta - poly.value(xi)) / np.sqrt(1.0 + slope * slope)
+        g = np.einsum("ni,nij->nj", normal, dp_dt[at])
+        pred = np.sqrt(np.einsum("ni,ij,nj->n", g, cov_t, g) + point_var[at] + wall_var[w])
+        parallel = np.abs(np.einsum("ni,ni->n", normal, tangents[at])) <= np.sqrt(1 - cos_max**2)
+        score = np.abs(r) / pred
+        ok = parallel & (score <= alignment.GATE_SIGMAS) & (score < best[at])
+        rows = at[ok]
+        best[rows], residual[rows], grad[rows], wall_of[rows] = score[ok], r[ok], g[ok], w
+    keep = wall_of >= 0
+    if not keep.any():
+        return None
+    return residual[keep], grad[keep], wall_of[keep], keep
+
+
+def test_match__compiled_with_reach_boxes_is_the_numpy_pairing_bit_for_bit() -> None:
+    """The compiled pairing (``_match``), on every chain and on the chains within each wall's
+    reach (``wall_reach``, ``_near_chains``), against the numpy oracle over every point, bit
+    for bit, on random walls and short chains (tight boxes) with a prior wide enough that the
+    gate reaches far: the reach bound at a tenth of its size drops pairing points here."""
+    rng = np.random.default_rng(7)
+    left_out = paired = 0
+    for _ in range(40):
+        walls = []
+        for _ in range(6):
+            coeffs = [*rng.normal(0, 2, 2), *rng.normal(0, 0.1, int(rng.integers(0, 3)))]
+            lo, hi = sorted(rng.uniform(-3, 3, 2))
+            walls.append(Polynomial(int(rng.integers(1, 3)), coeffs, lo, hi))
+        chains = [transform_points(w.sample_arclength(0.05), inverse(T_TRUE)) for w in walls]
+        chains = [c + rng.normal(0, 0.05, c.shape) + rng.normal(0, 0.2, 2) for c in chains[:4]]
+        chains = [c[k : k + 3] for c in chains for k in range(0, len(c), 3)]  # tight boxes
+        cov_t = COV_T * rng.uniform(0.5, 20.0)
+        q = np.vstack(chains)
+        starts = np.cumsum([0] + [len(c) for c in chains])
+        point_var = np.full(len(q), 0.02**2)
+        wall_var = rng.uniform(0, 0.05**2, len(walls))
+        p, dp_dt = frame_points(q, T_TRUE + rng.normal(0, 0.05, 3))
+        tangents = np.vstack([alignment._tangents(c) for c in chains])
+        args = (p, dp_dt, tangents, walls, cov_t, point_var, wall_var)
+        reach = alignment.wall_reach(walls, wall_var, cov_t, point_var, q)
+        meets = alignment._near_chains(reach, p, starts)
+        left_out += int(meets.size - meets.sum())
+        oracle = _match_oracle(*args)
+        for out in (alignment._match(*args), alignment._match(*args, meets, starts)):
+            assert (oracle is None) == (out is None)
+            if oracle is not None and out is not None:
+                paired += len(oracle[0])
+                for a, b in zip(oracle, out, strict=True):
+                    np.testing.assert_array_equal(a, b)
+    assert left_out > 0 and paired > 0  # the boxes did leave chains out; points did pair

@@ -18,6 +18,7 @@ from polyslam_env.comms.exchange import (
     RECEIVED_CI_WEIGHT,
     RendezvousExchange,
     chain_points,
+    covered_points,
     frame_message,
     map_transform,
     normal_variance,
@@ -805,3 +806,37 @@ def test_chain_points__cache_changes_no_exchange(monkeypatch: pytest.MonkeyPatch
         assert [p.coeffs.tobytes() for p in a.polynomials] == [
             p.coeffs.tobytes() for p in b.polynomials
         ]
+
+
+def test_exchange__a_wall_stretched_in_place_reaches_a_peer_holding_it_shorter() -> None:
+    """A hit just past a wall's end stretches its extent in place: the landmark keeps its id
+    (so the version's name), and its changed_at (no new fit). The receiver, holding the
+    shorter wall, must still get the longer one at the next meeting: the stretch bumps the
+    version's revision. Without it the sender sent nothing and the stretch never arrived."""
+    sender, receiver, p_s, p_r = _two_robot_setup()
+    ex = _exchange()
+    slams, active, view, apart = [sender, receiver], np.ones(2, bool), _mutual(p_s, p_r), [[], []]
+    ex.step(0, slams, view, active)
+    ex.step(1, slams, apart, active)
+    wall = sender.polynomials()[0]  # x ∈ [−0.5, 1.2] of WALL's curve
+    longer = wall.hi + 0.4
+    sender.table.extend_to_hit(0, longer)
+    k = ex.config.meeting_interval
+    for slam in slams:
+        slam.step_count = k
+    stretch = wall.points_at(np.linspace(wall.hi + 0.15, longer - 0.01, 8))  # past the old end
+
+    def covered() -> bool:  # within 2 cm of the receiver's walls (the chain and refit tols)
+        return bool(covered_points(stretch, receiver.polynomials(), 0.02).all())
+
+    assert not covered()
+    again = ex.step(k, slams, view, active)
+    assert {d.sender: d.n_polynomials for d in again.delivered} == {0: 1, 1: 0}
+    assert covered()
+    # the same revision is not sent again, and a stretch below merge_min_overlap is none
+    sender.table.extend_to_hit(0, longer + 0.5 * sender.config.merge_min_overlap)
+    ex.step(k + 1, slams, apart, active)
+    for slam in slams:
+        slam.step_count = 2 * k
+    third = ex.step(2 * k, slams, view, active)
+    assert {d.sender: d.n_polynomials for d in third.delivered} == {0: 0, 1: 0}

@@ -47,7 +47,8 @@ def _records(rng: np.random.Generator, orders: list[int]) -> tuple[PolynomialRec
         poly = Polynomial(int(rng.integers(1, 3)), rng.normal(0, 1, m + 1), lo, lo + 1.5)
         lid = int(rng.integers(0, 2**32)) if i else 7
         origin = int(rng.integers(0, 2**16)) if i % 2 else None  # forwarded / the sender's own
-        out.append(PolynomialRecord(lid, poly, 1e-4 * (i + 1), origin))
+        revision = int(rng.integers(0, 2**16)) if i % 3 else 0
+        out.append(PolynomialRecord(lid, poly, 1e-4 * (i + 1), origin, revision))
     return tuple(out)
 
 
@@ -68,6 +69,7 @@ def _assert_poly_messages(a: PolynomialMessage, b: PolynomialMessage, rtol: floa
     for ra, rb in zip(a.records, b.records, strict=True):
         pa, pb = ra.polynomial, rb.polynomial
         assert (ra.landmark_id, pa.variate, pa.order) == (rb.landmark_id, pb.variate, pb.order)
+        assert ra.revision == rb.revision
         origin = a.header.sender if ra.origin is None else ra.origin
         assert rb.origin == origin  # a decoded record always names its version's origin
         np.testing.assert_allclose(pa.coeffs, pb.coeffs, rtol=rtol, atol=0)
@@ -78,7 +80,7 @@ def _assert_poly_messages(a: PolynomialMessage, b: PolynomialMessage, rtol: floa
 
 def _poly_size(orders: list[int], width: int) -> int:
     """The size formula written in the messages module docstring."""
-    return 12 + 4 * width + 2 + sum(8 + (m + 4) * width for m in orders) + 4
+    return 12 + 4 * width + 2 + sum(10 + (m + 4) * width for m in orders) + 4
 
 
 @pytest.mark.parametrize("orders", [[], [3], [1, 2, 3, 4, 5], [3] * 20])
@@ -112,8 +114,8 @@ def test_polynomial_message__size_matches_documented_layout(
 
 def test_polynomial_message__one_cubic_sizes_quoted_in_docstring() -> None:
     msg = _poly_message(3, [3])
-    assert len(encode(msg, "float32")) == 70
-    assert len(encode(msg, "float64")) == 114
+    assert len(encode(msg, "float32")) == 72
+    assert len(encode(msg, "float64")) == 116
 
 
 @pytest.mark.parametrize("precision,width", [("float32", 4), ("float64", 8)])
@@ -200,7 +202,8 @@ def test_decode__trailing_bytes_rejected() -> None:
 
 def test_decode__bad_variate_rejected() -> None:
     body = bytearray(encode(_poly_message(10, [3]), "float64")[:-4])
-    body[44 + 2 + 4 + 2] = 3  # first record's variate flag: header 12+4F, count 2, id 4, origin 2
+    # the first record's variate flag: header 12+4F, count 2, id 4, origin 2, revision 2
+    body[44 + 2 + 4 + 2 + 2] = 3
     with pytest.raises(ValueError, match="variate"):
         decode(_reseal(bytes(body)))
 
