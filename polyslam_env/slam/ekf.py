@@ -174,6 +174,7 @@ def update_sparse_inplace(
     gate = chi2_1dof_quantile(gate_prob)
     consider = n if consider_from is None else int(consider_from)
     kernels.update_sparse(mean, cov, nu, hp, idx, hc, ai, ha, rv, gate, consider, accepted, nis)
+    kernels.mirror_lower(cov, consider)  # the lower triangle's copy: P symmetric again
     return accepted, nis
 
 

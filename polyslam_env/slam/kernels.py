@@ -722,7 +722,7 @@ def steady_beams(
             index[0], index[1], index[2], index[3] = 0, 1, 2, 3 + j
             for r in range(4):
                 for c in range(4):
-                    joint[r, c] = cov[index[r], index[c]]
+                    joint[r, c] = cov[min(index[r], index[c]), max(index[r], index[c])]
             if _cholesky4(joint, factor):
                 one[0] = angle[b]
                 eta = 2 if variate[j] == 1 else 0  # the box's (min, max) columns of η
@@ -818,8 +818,8 @@ def ends_in_doubt(
         var = 0.0
         for a in range(m):
             inner = 0.0
-            for b in range(m):
-                inner += cov[idx[a], idx[b]] * jac[b]
+            for b in range(m):  # P's upper triangle (joseph_blocks: the lower copy may wait)
+                inner += cov[min(idx[a], idx[b]), max(idx[a], idx[b])] * jac[b]
             var += jac[a] * inner
         keep[i] = end_room[i] >= end_sigma * math.sqrt(_max(var, 0.0))
         if keep[i]:
@@ -1003,57 +1003,95 @@ def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from
     """P⁺ = P − (K Wᵀ + W Kᵀ) in place, ``kt`` = Kᵀ and ``wt`` = Wᵀ (k, n), whose columns
     from ``consider_from`` on are K's considered rows: zero (:func:`update_sparse`).
 
-    The upper triangle row by row from the diagonal, in blocks: on the estimated rows i < c
-    a considered column j ≥ c takes K_i·W_j alone, and the considered block (i, j ≥ c) does
-    not change at all: each of its entries would subtract an exact zero (a running sum that
-    starts at +0 and adds ±0 stays +0), so the result is the same bits as the full update's
-    (tested against it). Then the lower triangle mirrors the changed upper one.
+    Written: the upper triangle of the estimated rows i < c (the pose block whole), and the
+    cross block's upper copy (i < c ≤ j), which takes K_i·W_j alone. Not written: the
+    considered block (i, j ≥ c), which does not change at all (each entry would subtract an
+    exact zero: a running sum that starts at +0 and adds ±0 stays +0), and the lower copies
+    of the rest (j < min(i, c) but in the pose block), left as they were: their mirror is a
+    strided copy of half of what changed, and :func:`mirror_lower` does it when a reader
+    needs all of P.
+    What is written is the same bits as the full update's (tested against it).
 
-    Each row is one pass over P's row per row of K, the first starting the sum and the last
-    subtracting it: the same operations, in the same order, as summing into a zeroed row and
-    subtracting it after (``tests/slam/reference_floats.joseph_full``)."""
+    Each entry's sum runs over K's rows in order from +0 and is then subtracted from P
+    (``tests/slam/reference_floats.joseph_full``); the rows of K are taken four (then two)
+    per pass over P's row, summed in that order inside one loop, the last pass subtracting:
+    fewer passes over the row than one per row of K, the same operations in the same order.
+    """
     count, n = kt.shape
     c = min(max(consider_from, 0), n)
-    acc = np.empty(n)  # row i of K Wᵀ + W Kᵀ from the diagonal on, summed over K's rows q
-    last = count - 1
+    acc = np.zeros(n)  # row i of K Wᵀ + W Kᵀ from the diagonal on, summed over K's rows
     for i in range(c):
-        m, inner = n - i, c - i
+        inner = c - i
         # the estimated and the cross columns as separate slices, each loop from 0: written
         # as one loop over j with a bound between, LLVM left it scalar (2.6× slower)
-        estimated, cross = acc[:inner], acc[inner:m]
+        estimated, cross = acc[:inner], acc[inner : n - i]
         row_estimated, row_cross = cov[i, i:c], cov[i, c:]
-        for q in range(count):  # the sum starts at +0 and the last term goes with P's row
-            k_i, w_i = kt[q, i], wt[q, i]
-            k_row, w_row, w_cross = kt[q, i:c], wt[q, i:c], wt[q, c:]
-            if q == 0:
-                for j in range(inner):
-                    estimated[j] = 0.0 + (k_i * w_row[j] + w_i * k_row[j])
-                for j in range(n - c):
-                    cross[j] = 0.0 + k_i * w_cross[j]
-            if 0 < q < last:
-                for j in range(inner):
-                    estimated[j] += k_i * w_row[j] + w_i * k_row[j]
-                for j in range(n - c):
-                    cross[j] += k_i * w_cross[j]
-            if q == last and q > 0:
-                for j in range(inner):
-                    row_estimated[j] -= estimated[j] + (k_i * w_row[j] + w_i * k_row[j])
-                for j in range(n - c):
-                    row_cross[j] -= cross[j] + k_i * w_cross[j]
-        if count == 1:
+        estimated[:] = 0.0
+        cross[:] = 0.0
+        q = 0
+        while q + 4 < count:  # four rows of K into the sums
+            k0, k1, k2, k3 = kt[q, i], kt[q + 1, i], kt[q + 2, i], kt[q + 3, i]
+            w0, w1, w2, w3 = wt[q, i], wt[q + 1, i], wt[q + 2, i], wt[q + 3, i]
+            kr0, kr1, kr2, kr3 = kt[q, i:c], kt[q + 1, i:c], kt[q + 2, i:c], kt[q + 3, i:c]
+            wr0, wr1, wr2, wr3 = wt[q, i:c], wt[q + 1, i:c], wt[q + 2, i:c], wt[q + 3, i:c]
             for j in range(inner):
-                row_estimated[j] -= estimated[j]
+                s = estimated[j] + (k0 * wr0[j] + w0 * kr0[j])
+                s = s + (k1 * wr1[j] + w1 * kr1[j])
+                s = s + (k2 * wr2[j] + w2 * kr2[j])
+                estimated[j] = s + (k3 * wr3[j] + w3 * kr3[j])
+            wc0, wc1, wc2, wc3 = wt[q, c:], wt[q + 1, c:], wt[q + 2, c:], wt[q + 3, c:]
             for j in range(n - c):
-                row_cross[j] -= cross[j]
-    for i in range(n):  # mirror (the considered block's triangles are equal and unchanged)
-        for j in range(min(i, c)):
+                cross[j] = (((cross[j] + k0 * wc0[j]) + k1 * wc1[j]) + k2 * wc2[j]) + k3 * wc3[j]
+            q += 4
+        while q < count:  # two rows into the sums, or the last one or two, subtracting
+            k0, w0, kr0, wr0, wc0 = kt[q, i], wt[q, i], kt[q, i:c], wt[q, i:c], wt[q, c:]
+            if q + 1 == count:
+                for j in range(inner):
+                    row_estimated[j] -= estimated[j] + (k0 * wr0[j] + w0 * kr0[j])
+                for j in range(n - c):
+                    row_cross[j] -= cross[j] + k0 * wc0[j]
+                q += 1
+                continue
+            k1, w1, kr1, wr1, wc1 = (
+                kt[q + 1, i],
+                wt[q + 1, i],
+                kt[q + 1, i:c],
+                wt[q + 1, i:c],
+                wt[q + 1, c:],
+            )
+            if q + 2 == count:
+                for j in range(inner):
+                    s = estimated[j] + (k0 * wr0[j] + w0 * kr0[j])
+                    row_estimated[j] -= s + (k1 * wr1[j] + w1 * kr1[j])
+                for j in range(n - c):
+                    row_cross[j] -= (cross[j] + k0 * wc0[j]) + k1 * wc1[j]
+            else:
+                for j in range(inner):
+                    s = estimated[j] + (k0 * wr0[j] + w0 * kr0[j])
+                    estimated[j] = s + (k1 * wr1[j] + w1 * kr1[j])
+                for j in range(n - c):
+                    cross[j] = (cross[j] + k0 * wc0[j]) + k1 * wc1[j]
+            q += 2
+    for i in range(min(3, c)):  # the pose block whole (its readers take it as a matrix)
+        for j in range(i):
+            cov[i, j] = cov[j, i]
+
+
+@njit
+def mirror_lower(cov: np.ndarray, consider_from: int) -> None:
+    """P's lower triangle below the estimated rows' and the cross block's upper copy (rows
+    i, columns j < min(i, ``consider_from``)): what :func:`joseph_blocks` leaves for the
+    reader that needs all of P."""
+    n = cov.shape[0]
+    for i in range(n):
+        for j in range(min(i, consider_from)):
             cov[i, j] = cov[j, i]
 
 
 @njit
 def update_sparse(
     mean: np.ndarray,  # (3+n,) written in place
-    cov: np.ndarray,  # (3+n, 3+n) symmetric, written in place
+    cov: np.ndarray,  # (3+n, 3+n) its upper triangle and pose block, written in place
     innovation: np.ndarray,  # (k,)
     h_pose: np.ndarray,  # (k, 3)
     c0_index: np.ndarray,  # (k,) state index of each row's c0
@@ -1081,6 +1119,10 @@ def update_sparse(
       the cross block takes one product instead of two): with the n turns of n landmarks
       considered it does about half the work of the full (3 + 2n)² update, and the result
       is the same bits as the full one (tested).
+    * Only P's upper triangle (and its pose block whole) is read and written
+      (:func:`joseph_blocks`): the lower copy's mirror, a strided copy of half of what
+      changed, waits for a reader that needs all of P (:func:`mirror_lower`;
+      ``ekf.update_sparse_inplace`` and ``PolySlam.cov`` call it).
 
     Not bit-identical to the numpy version it replaced (BLAS's fused products and the
     Z₊Z₊ᵀ − Z₋Z₋ᵀ split of its syrk): equal to rounding, checked against it in the tests.
@@ -1089,12 +1131,16 @@ def update_sparse(
     pht = np.empty((k, n))  # row i: column i of P Hᵀ
     for i in range(k):
         c, h0, h1, h2, hc = c0_index[i], h_pose[i, 0], h_pose[i, 1], h_pose[i, 2], h_c0[i]
-        for a in range(n):
+        for a in range(c):  # P's row c from its upper triangle (the lower copy may wait)
+            pht[i, a] = cov[0, a] * h0 + cov[1, a] * h1 + cov[2, a] * h2 + cov[a, c] * hc
+        for a in range(c, n):
             pht[i, a] = cov[0, a] * h0 + cov[1, a] * h1 + cov[2, a] * h2 + cov[c, a] * hc
         g = alpha_index[i]
-        if g >= 0:
+        if g >= 0:  # P's row g from its upper triangle (the lower copy may wait)
             ha = h_alpha[i]
-            for a in range(n):
+            for a in range(min(g, consider_from)):
+                pht[i, a] += cov[a, g] * ha
+            for a in range(min(g, consider_from), n):
                 pht[i, a] += cov[g, a] * ha
     accepted[:] = False
     count = 0

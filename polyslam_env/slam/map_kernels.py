@@ -532,7 +532,7 @@ def _continues_past_end(
     lever = xi - real[PIVOT, j]
     if switches[S_ROTATION_STATES]:
         a = 3 + n + j
-        turn_var = cov[a, a] + cov[2, 2] - 2.0 * cov[a, 2]
+        turn_var = cov[a, a] + cov[2, 2] - 2.0 * cov[2, a]  # P's upper copy
     else:  # the frozen-shape model: the fit's slope error and the heading's walk since the fit
         age = float(step) - float(index[CHANGED_AT, j])
         turn_var = rotation_fit_var(

@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from polyslam_env.core.blas import blas_threads
-from polyslam_env.slam import ekf, step_kernels
+from polyslam_env.slam import ekf, kernels, step_kernels
 from polyslam_env.slam.columns import (
     G_REQUEST,
     G_ROW,
@@ -149,7 +149,9 @@ class PolySlam:
         self._model = step_model(config, self.beam_angles, max_range)  # the compiled step's
         self.max_range = float(max_range)
         self.mean = np.zeros(3)  # (3+n,) relative to the true start (see class docstring)
-        self.cov = np.zeros((3, 3))  # (3+n, 3+n) ditto: the true start is known exactly
+        self._cov = np.zeros((3, 3))  # (3+n, 3+n) ditto: the true start is known exactly
+        # P's lower triangle waits for its copy from the upper one, before this column (cov)
+        self._mirror_from: int | None = None
         self.table = LandmarkTable()  # the map: ids, shapes, extents, … in state order
         self.points = StoredPoints()  # the clusters' and Q_bad sets' beam points
         self.layout = StateLayout(config.rotation_states)
@@ -171,6 +173,21 @@ class PolySlam:
         self._fit_width = 0
         self._inverse = np.zeros((1, 1, 1))
 
+    @property
+    def cov(self) -> np.ndarray:  # (3+n, 3+n)
+        """The state's covariance, symmetric. The compiled update writes P's upper triangle
+        and its pose block only (``kernels.joseph_blocks``); the lower triangle is mirrored
+        here, on the first read after an update, not on every step."""
+        if self._mirror_from is not None:
+            kernels.mirror_lower(self._cov, self._mirror_from)
+            self._mirror_from = None
+        return self._cov
+
+    @cov.setter
+    def cov(self, value: np.ndarray) -> None:
+        self._cov = value
+        self._mirror_from = None
+
     # -- read-only views ------------------------------------------------------------------
     @property
     def pose(self) -> np.ndarray:  # (3,)
@@ -182,13 +199,13 @@ class PolySlam:
         """Covariance of :attr:`pose` as an estimate of the pose in the robot's frame: the
         filter's P_S plus the unobservable start error's J P0 Jᵀ
         (:func:`~polyslam_env.slam.ekf.start_error_cov`)."""
-        return self.cov[:3, :3] + ekf.start_error_cov(self.mean, self.config.p0)
+        return self._cov[:3, :3] + ekf.start_error_cov(self.mean, self.config.p0)
 
     @property
     def pose_cov_relative(self) -> np.ndarray:  # (3, 3)
         """The filter's P_S: the pose's covariance relative to the robot's true start, the
         frame its map lives in (what a map exchange must use)."""
-        return self.cov[:3, :3].copy()
+        return self._cov[:3, :3].copy()
 
     @property
     def landmark_ids(self) -> list[int]:
@@ -236,14 +253,14 @@ class PolySlam:
 
     def c0_variance(self, landmark_id: int) -> float:
         k = self.table.state_index(landmark_id)
-        return float(self.cov[k, k])
+        return float(self._cov[k, k])
 
     def turn_variance(self, landmark_id: int) -> float:
         """Variance (rad²) of the landmark's turn α (needs rotation states)."""
         if not self.config.rotation_states:
             raise ValueError("turn_variance: this filter has no turn states (shape_rotation)")
         k = self.layout.turn_index(self.table.index_of(landmark_id), len(self.table))
-        return float(self.cov[k, k])
+        return float(self._cov[k, k])
 
     def map_error_jacobian(self, spacing: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
         """How the state's errors move the map: at points every ``spacing`` m of ξ along
@@ -290,18 +307,18 @@ class PolySlam:
         fit_inverse, n = self._fit_inverse(), len(table)
         if self.profile is None:
             step_kernels.begin_step(
-                self.mean, self.cov, odometry, ranges, model.beams, real, index, shape, n, preal,
+                self.mean, self._cov, odometry, ranges, model.beams, real, index, shape, n, preal,
                 pindex, counters, model.params, model.switches, fit_inverse, self.step_count,
                 per_beam, status, values,
             )  # fmt: skip
         else:
             step_kernels.predict_step(
-                self.mean, self.cov, odometry, ranges, model.beams, real, index, shape, n,
+                self.mean, self._cov, odometry, ranges, model.beams, real, index, shape, n,
                 model.params, model.switches, fit_inverse, self.step_count, status, values,
             )  # fmt: skip
             lap = self._lap("predict", lap)
             step_kernels.associate_step(
-                self.mean, self.cov, ranges, model.beams, real, index, shape, n, preal, pindex,
+                self.mean, self._cov, ranges, model.beams, real, index, shape, n, preal, pindex,
                 counters, model.params, model.switches, fit_inverse, self.step_count, per_beam,
                 status, values,
             )  # fmt: skip
@@ -319,16 +336,19 @@ class PolySlam:
 
         real, index, shape = table.buffers  # (the map changes may have grown them)
         step_kernels.finish_step(
-            self.mean, self.cov, ranges, model.beams, real, index, shape, len(table),
+            self.mean, self._cov, ranges, model.beams, real, index, shape, len(table),
             model.params, model.switches, self._fit_inverse(), self.step_count, per_beam, status,
             values,
         )  # fmt: skip
         used = int(status[ST_USED])
+        if used > 0:  # kernels.update_scan's consider_from
+            considered = self.config.rotation_states
+            self._mirror_from = 3 + len(table) if considered else self._cov.shape[0]
         if used >= 0:  # the update ran
             self.state_moved(values[V_BEFORE : V_BEFORE + 3] if used else None)
         self.divergence_f = float(values[V_F])
         self.diverging = bool(
-            (status[ST_PAPER_TEST] and beyond_k_p0(self.cov, self.config))
+            (status[ST_PAPER_TEST] and beyond_k_p0(self._cov, self.config))
             or status[ST_OUTLIERS] >= model.switches[S_SCREEN_ALARM]
         )
         if self.profile is not None:

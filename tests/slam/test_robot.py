@@ -7,6 +7,7 @@ import functools
 import numpy as np
 
 from polyslam_env import metrics
+from polyslam_env.apps.benchmark import make_inputs, make_slam, make_walls
 from polyslam_env.apps.simulate import simulate, wall_follow_controller
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.metrics.episode import RobotRun
@@ -40,11 +41,30 @@ def test_step__covariance_symmetric_psd_and_state_consistent_over_long_run() -> 
         info = slam.step(result.odometry[0], scans[0])
         created += info.created
         _assert_symmetric_psd(slam.cov)
+        assert (slam.cov == slam.cov.T).all()  # exactly: the update mirrors, never recomputes
         # pose, one c0 per landmark, one shape rotation per landmark (at rest: 0)
         assert slam.mean.shape == (3 + 2 * slam.n_landmarks,)
         assert not slam.mean[3 + slam.n_landmarks :].any()
         assert len(slam.shapes) == slam.n_landmarks == len(slam.landmark_ids)
     assert created >= 5  # the run did build a map: the checks above covered augmentations
+
+
+def test_cov__mirrored_when_read_the_same_episode_bit_for_bit_as_read_every_step() -> None:
+    """The update writes P's upper triangle (and pose block) only and ``cov`` mirrors it on
+    the first read: a filter whose ``cov`` is never read during 60 steps (30 landmarks,
+    turns considered, every beam updating) ends in the same bits as one read every step,
+    so no kernel reads the copy that waits."""
+    rng = np.random.default_rng(7)
+    walls = make_walls(30, rng)
+    inputs = make_inputs(walls, 60, rng)
+    read, unread = make_slam(walls), make_slam(walls)
+    assert read.config.rotation_states
+    for odometry, ranges in inputs:
+        read.step(odometry, ranges)
+        assert (read.cov == read.cov.T).all()
+        unread.step(odometry, ranges)
+    assert unread.mean.tobytes() == read.mean.tobytes()
+    assert unread.cov.tobytes() == read.cov.tobytes()
 
 
 def test_map__wall_following_on_curved_cave__accurate_and_complete() -> None:
