@@ -44,8 +44,10 @@ def test_nees__whole_episodes_of_each_family__inside_the_log_nees_band(name: str
     so the mean of its log over the runs lies in the exact two-sided 99 % band of the mean of
     RUNS log χ²(3) values (``tests.stats.log_chi2_mean_band``: the final NEES is heavy-tailed,
     its log is not). The mutant reporting half the covariance (every NEES doubled) falls out.
-    A filter told its range noise is 3× smaller than the world's fails here on every family
-    (docs/notes/floortests.md)."""
+    A filter whose odometry is 2× noisier than it believes fails on every family; over 140
+    seeds the curved corridor's log-mean is 1.195, above its 140-run band [0.513, 0.934]: the
+    filter is ~1.5× overconfident once it drives back over the curved walls it mapped, which
+    30 runs catch with probability ~0.46 only (docs/notes/floortests.md)."""
     final = np.array([e.final_nees for e in episodes(name, RUNS)])
     lo, hi = log_chi2_mean_band(3, RUNS, ALPHA)
     got = log_mean(final)
