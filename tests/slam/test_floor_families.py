@@ -42,8 +42,10 @@ def test_nees__whole_episodes_of_each_family__inside_the_log_nees_band(name: str
     """RUNS seeded episodes of one family, initial error drawn from P0: the final pose NEES
     relative to the true start against the filter's own P_S is χ²(3) for a consistent filter,
     so the mean of its log over the runs lies in the exact two-sided 99 % band of the mean of
-    RUNS log χ²(3) values (``tests.stats.log_chi2_mean_band``: the final NEES is heavy-tailed,
-    its log is not). The mutant reporting half the covariance (every NEES doubled) falls out.
+    RUNS log χ²(3) values (``tests.stats.log_chi2_mean_band``: log χ²(3) = log 2 + log G with
+    G ~ Gamma(3/2), the mean of n independent ones has the characteristic function φ(t/n)ⁿ,
+    inverted exactly; the final NEES is heavy-tailed, its log is not, so one bad run moves the
+    statistic little). The mutant reporting half the covariance (every NEES doubled) falls out.
     A filter whose odometry is 2× noisier than it believes fails on every family; over 140
     seeds the curved corridor's log-mean is 1.195, above its 140-run band [0.513, 0.934]: the
     filter is ~1.5× overconfident once it drives back over the curved walls it mapped, which
