@@ -7,15 +7,17 @@ open chamber), the world exactly the filter's model, so what the tests find is t
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
 import scipy.stats
 
 from polyslam_env import metrics
-from polyslam_env.core.geometry import compose_inverse, wrap_remainder
+from polyslam_env.core.geometry import compose, compose_inverse, wrap_remainder
 from polyslam_env.metrics.episode import nees_relative, start_nees
 from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.world.layout import Layout, point_segment_distance
 from tests.scripts_module import load_script
 from tests.slam.floor_families import (
     FAMILIES,
@@ -58,6 +60,54 @@ def test_nees__whole_episodes_of_each_family__inside_the_log_nees_band(name: str
         f" (median {np.median(final):.2f}, χ²(3)'s 2.37)"
     )
     assert not lo <= log_mean(2.0 * final) <= hi, "no power on these runs"
+
+
+#: Found by the test below (reported to the lead): a curved landmark's point lies 2.2–2.4 σ
+#: (rms) off the true wall by its own covariance. The state holds c0 and the turn α; the fit's
+#: estimation error in c2, c3 is in no state (``PolySlam.map_error_jacobian``: "what no state
+#: holds is not in it"), and on curved walls it dominates. Seeds 0–29: χ²/dof 5.58 on curved
+#: (449 points), 4.73 on cave (489); straight walls 0.81 (angled), 1.06 (the open chamber).
+CURVED_MAP = "a curved landmark's frozen shape error (c2, c3) is in no state: maps overconfident"
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "angled",
+        pytest.param("curved", marks=pytest.mark.xfail(strict=True, reason=CURVED_MAP)),
+        pytest.param("cave", marks=pytest.mark.xfail(strict=True, reason=CURVED_MAP)),
+    ],
+)
+def test_map__each_landmark_lies_where_its_covariance_says(name: str) -> None:
+    """The map's own uncertainty (issue 42: a curved wall's uncertainty covers its error): at
+    the middle of each landmark's evidence, its distance to the true wall (placed by the true
+    start, the filter's frame) against the filter's variance of its normal offset there
+    (``PolySlam.map_error_jacobian``'s row, J P Jᵀ); summed over the RUNS runs of the family
+    test (one point a landmark: points of one landmark share its c0 and α), χ² with one dof a
+    landmark, two-sided 99 % band. Landmarks further than 0.2 m from every wall are left out
+    (none in these runs; a wrong association is not what this checks)."""
+    floor = FAMILIES[name]
+    segments = Layout(name, floor.walls).segments
+    total, dof = 0.0, 0
+    for e in episodes(name, RUNS):
+        slam, start = e.slam, e.run.true_poses[0]
+        _, rows = slam.map_error_jacobian()
+        first = 0
+        for i, poly in enumerate(slam.polynomials()):
+            n = max(2, math.ceil((poly.hi - poly.lo) / 0.02) + 1)  # map_error_jacobian's points
+            xi = np.linspace(poly.lo, poly.hi, n)
+            k = int(np.argmin(np.abs(xi - float(np.mean(slam.table.evidence[i])))))
+            row = rows[first + k]
+            first += n
+            point = compose(start, np.r_[poly.points_at(xi[k : k + 1])[0], 0.0])[:2]
+            distance = float(point_segment_distance(point, segments).min())
+            if distance > 0.2:
+                continue
+            total += distance**2 / float(row @ slam.cov @ row)
+            dof += 1
+    assert first == len(rows)
+    lo, hi = scipy.stats.chi2.ppf([0.005, 0.995], dof)
+    assert lo <= total <= hi, (name, total, dof, lo, hi)
 
 
 def _runs() -> list[Episode]:
