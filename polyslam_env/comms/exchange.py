@@ -1388,11 +1388,14 @@ def covered_points(xy: np.ndarray, polys: Sequence[Polynomial], reach: float) ->
 def uncovered_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> list[slice]:
     """Maximal runs of consecutive ``keep`` points (N,) of a chain (N, 2) whose length along
     the chain is at least ``min_length`` (m)."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(int), [0]])))
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(int), [0]]))).tolist()
+    if not edges:
+        return []
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=1)  # (N-1,) each row's own norm
     runs = []
     for a, b in zip(edges[::2], edges[1::2], strict=True):
-        if float(np.linalg.norm(np.diff(xy[a:b], axis=0), axis=1).sum()) >= min_length:
-            runs.append(slice(int(a), int(b)))
+        if float(step[a : b - 1].sum()) >= min_length:  # the run's own steps, summed alone
+            runs.append(slice(a, b))
     return runs
 
 
