@@ -23,7 +23,10 @@ PIVOT = 6  # ξ its shape turns about (and its c0 measures the offset at)
 XI_VAR = 7  # pose variance along ξ when it was made
 MODEL_VAR = 8  # fit variance beyond the range noise
 FIT_HALF = 9  # half the extent it was fitted over
-N_REAL = 10
+# the slope s̄ its c0 moves by when its whole shape shifts along ξ (c0 changes by −s̄·δξ: the
+# fit's points' weighted mean slope); nan where no shift of the pose's makes it (received)
+SHIFT_SLOPE = 10
+N_REAL = 11
 
 # -- the landmark table: integer fields ----------------------------------------------------------
 ID = 0  # stable id
@@ -105,7 +108,8 @@ S_LINK_AGE = 8  # steps after a landmark changed that its links are sought
 S_LINKS = 9  # 1 when links or square ties are on
 S_SCREEN_ALARM = 10  # outliers among the screen's window that raise the alarm
 S_REUSE_BOUND = 11  # whose own error is bounded over updates: 0 none, 1 curved, 2 all (REUSE_*)
-N_SWITCHES = 12
+S_SHIFT_WITH_POSE = 12  # 1: a frozen shape's shift along ξ is the current pose's error along ξ
+N_SWITCHES = 13
 
 # -- per beam (a (2, B) float64 ``beams`` model, an (N_PER_BEAM, B) int64 output) ----------------
 B_ANGLE = 0  # the beam's angle in the robot frame

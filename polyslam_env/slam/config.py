@@ -34,6 +34,8 @@ SHAPE_ROTATIONS: tuple[str, ...] = ("heading", "considered")
 MERGE_TURNS: tuple[str, ...] = ("fit", "weights")
 #: Whose own error is bounded over the updates it enters (``SlamConfig.reuse_bound``).
 REUSE_BOUNDS: tuple[str, ...] = ("none", "curved", "all")
+#: What a frozen curved shape's shift along its axis is taken to be (``SlamConfig.shape_shift``).
+SHAPE_SHIFTS: tuple[str, ...] = ("noise", "pose")
 
 
 @dataclass(frozen=True)
@@ -120,6 +122,15 @@ class SlamConfig(Config):
     # kernels.reuse_factors). "curved": landmarks of order ≥ 2 (a line's shape is its c0 and
     # α, both states); "all": lines too (their misfit on jagged walls); "none": fresh each step
     reuse_bound: str = "curved"
+    # A curved shape is frozen shifted along its axis ξ by the pose's error along ξ when it was
+    # fitted (c0 carries the shift only where the shape turns about, its pivot). "pose": that
+    # shift is taken to be the *current* pose's error along ξ (the beam's ∂h/∂ξ uses the
+    # shape's slope at its pivot, not at the hit), and its drift since the fit goes into R;
+    # "noise" (the paper preset): the shift is noise in R, independent of the pose, so the
+    # curve's change of slope between its pivot and each hit told the filter where the robot
+    # is along ξ, information a shape placed by that same pose does not hold
+    # (docs/notes/floors.md, Round 4)
+    shape_shift: str = "noise"
     join_pieces: bool = True  # join end-to-end pieces of one wall (merging.py; paper: False)
     stretch_ends: bool = True  # a hit just past an end stretches it (association; paper: False)
     # beams whose hit lies within this many σ (of its place along the curve) of a landmark's
@@ -227,6 +238,7 @@ class SlamConfig(Config):
         check_choice("slam.shape_rotation", self.shape_rotation, SHAPE_ROTATIONS)
         check_choice("slam.merge_turn", self.merge_turn, MERGE_TURNS)
         check_choice("slam.reuse_bound", self.reuse_bound, REUSE_BOUNDS)
+        check_choice("slam.shape_shift", self.shape_shift, SHAPE_SHIFTS)
 
     @property
     def rotation_states(self) -> bool:
@@ -269,6 +281,7 @@ PRESETS: dict[str, SlamConfig] = {
         square_walls=False,
         shape_rotation="heading",
         reuse_bound="none",
+        shape_shift="noise",
     )
 }
 

@@ -49,6 +49,8 @@ from polyslam_env.slam.columns import (
     S_REUSE_BOUND,
     S_ROTATION_STATES,
     S_SHAPE_FOLLOWS_POSE,
+    S_SHIFT_WITH_POSE,
+    SHIFT_SLOPE,
     USES,
     VARIATE,
     XI_VAR,
@@ -524,8 +526,10 @@ def beam_rows(
     range_var: float,  # σ² of the range noise
     model_var: np.ndarray,  # (n,) fit variance beyond the noise
     shape_follows_pose: bool,
+    shift_with_pose: bool,  # a frozen shape's shift along ξ is the current pose's error along ξ
     pivot: np.ndarray,  # (n,)
     xi_var: np.ndarray,  # (n,)
+    shift_slope: np.ndarray,  # (n,) ∂c0/∂(its shape's shift along ξ), negated; nan: unknown
     turn_var: np.ndarray,  # (n,) variance of the heading change since the shape was fitted
     fit_half: np.ndarray,  # (n,)
     fit_inverse: np.ndarray,  # (M+1, M+1, M+1): (AᵀA)⁻¹ of order o in [o, :o+1, :o+1]
@@ -578,12 +582,19 @@ def beam_rows(
         d_eta, d_xi = (cos, -sin) if v1 else (-sin, cos)  # d(dη)/dφ, d(dξ)/dφ
         h_theta = -t[b] * (d_eta - b_slope * d_xi) * inv_d
         var = range_var + model_var[j] * (inv_d * inv_d)
-        h_rot = 0.0
+        h_rot, h_xi = 0.0, slope_d
         if shape_follows_pose:
             m = order[j]
             value, b_slope_at = horner(shape[j], m, xi[b], shape[j, 0])
             value_c, slope_c = horner(shape[j], m, pivot[j], shape[j, 0])
-            shift = (b_slope_at - slope_c) * inv_d
+            carried = shift_slope[j]  # the slope c0 moves by per shift along ξ (nan: unknown)
+            if shift_with_pose and not math.isnan(carried):
+                # the shape moved with the pose along ξ: c0 carries −carried·δξ, the pose's
+                # own error along ξ the rest of the curve's move at the hit
+                shift = (b_slope_at - carried) * inv_d
+                h_xi -= shift
+            else:
+                shift = (b_slope_at - slope_c) * inv_d
             extra = shift * shift * xi_var[j]
             scaled = (xi[b] - pivot[j]) / fit_half[j]
             in_state = alpha_base >= 0
@@ -599,9 +610,9 @@ def beam_rows(
             var += extra
         innovation[k] = ranges[beams[b]] - t[b]
         if v1:
-            h_pose[k, 0], h_pose[k, 1] = slope_d, -inv_d
+            h_pose[k, 0], h_pose[k, 1] = h_xi, -inv_d
         else:
-            h_pose[k, 0], h_pose[k, 1] = -inv_d, slope_d
+            h_pose[k, 0], h_pose[k, 1] = -inv_d, h_xi
         h_pose[k, 2] = h_theta
         c0_index[k] = 3 + j
         h_c0[k] = inv_d
@@ -1290,9 +1301,10 @@ def _beam_rows_of(
         mean[0], mean[1], mean[2], angles, ranges, beams, params[P_REACH], index[VARIATE, :n],
         index[ORDER, :n], shape[:n], real[LO, :n], real[HI, :n], mean[3 : 3 + n], near,
         params[P_MAX_RANGE], params[P_MIN_SINE], params[P_RANGE_VAR], real[MODEL_VAR, :n],
-        switches[S_SHAPE_FOLLOWS_POSE] != 0, real[PIVOT, :n], real[XI_VAR, :n], turn_var,
-        real[FIT_HALF, :n], fit_inverse, switches[S_N_FIT], alpha_base, innovation, h_pose,
-        c0_index, h_c0, alpha_index, h_alpha, variance, end_room, xi_grad,
+        switches[S_SHAPE_FOLLOWS_POSE] != 0, switches[S_SHIFT_WITH_POSE] != 0, real[PIVOT, :n],
+        real[XI_VAR, :n], real[SHIFT_SLOPE, :n], turn_var, real[FIT_HALF, :n], fit_inverse,
+        switches[S_N_FIT], alpha_base, innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha,
+        variance, end_room, xi_grad,
     )  # fmt: skip
 
 

@@ -15,6 +15,7 @@ selects them without changing what the exact tests downstream decide.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple, Protocol, overload
@@ -38,6 +39,7 @@ from polyslam_env.slam.columns import (
     ORDER,
     PIVOT,
     RECEIVED,
+    SHIFT_SLOPE,
     SIDE,
     STAMP,
     USES,
@@ -291,6 +293,10 @@ class LandmarkTable:
         return self.real[XI_VAR, : len(self.ids)]
 
     @property
+    def shift_slope(self) -> np.ndarray:  # (n,)
+        return self.real[SHIFT_SLOPE, : len(self.ids)]
+
+    @property
     def model_var(self) -> np.ndarray:  # (n,)
         return self.real[MODEL_VAR, : len(self.ids)]
 
@@ -352,6 +358,7 @@ class LandmarkTable:
         side: int = 0,
         evidence: tuple[float, float] | None = None,
         received: bool = False,
+        shift_slope: float = math.nan,
     ) -> int:
         """Add a landmark at the end (its c0 was appended to the state); returns its new id.
 
@@ -372,6 +379,7 @@ class LandmarkTable:
         real[EV_LO, i], real[EV_HI, i] = ev
         real[PIVOT, i], real[XI_VAR, i] = pivot, xi_var
         real[MODEL_VAR, i], real[FIT_HALF, i] = model_var, fit_half
+        real[SHIFT_SLOPE, i] = shift_slope
         index[ID, i], index[VARIATE, i] = landmark_id, poly.variate
         index[ORDER, i] = len(_own_order(shape)) - 1
         index[SIDE, i], index[CHANGED_AT, i], index[STAMP, i] = int(side), step, 0

@@ -11,6 +11,7 @@ between the step's two compiled calls.
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -92,6 +93,7 @@ class MapMaintenance:
         poly = clip_to_evidence(fit.poly, evidence)
         clone = cfg.rotation_states and source.gradient is None  # its fit's own slope error
         fit_var = self.rotation_fit_var(poly) if clone else 0.0
+        shift_slope = math.nan if received else self.shift_slope(fit, n)
         slam.mean, slam.cov = slam.layout.add(slam.mean, slam.cov, n, fit, source, fit_var)
         return slam.table.append(
             poly,
@@ -103,7 +105,21 @@ class MapMaintenance:
             side=side,
             evidence=evidence,
             received=received,
+            shift_slope=shift_slope,
         )
+
+    def shift_slope(self, fit: Fit, n: int) -> float:
+        """The slope s̄ a new landmark's c0 moves by when the pose's error shifts its points
+        along ξ (c0 changes by −s̄·δξ; ``SlamConfig.shape_shift``): from its G_x, the pose's
+        column along ξ and, through the old landmarks it was fitted on (a refit, a merge),
+        each one's own s̄ (they were shifted by the same error); nan when one of those has
+        none."""
+        gx = fit.Gx[0]
+        slope = -float(gx[0 if fit.poly.variate == 1 else 1])
+        table = self.slam.table
+        for row in np.flatnonzero(gx[3 : 3 + n]).tolist():
+            slope += float(gx[3 + row]) * float(table.shift_slope[row])
+        return slope
 
     def drop(self, landmark_id: int) -> None:
         """Take a landmark out of the state, the table and the stored points (a

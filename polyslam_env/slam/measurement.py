@@ -198,8 +198,10 @@ def range_rows(
         float(range_var),
         np.zeros(n),  # model_var
         False,  # shape_follows_pose
+        False,  # shift_with_pose
         np.zeros(n),  # pivot
         np.zeros(n),  # xi_var
+        np.full(n, np.nan),  # shift_slope
         np.zeros(n),  # turn_var
         np.ones(n),  # fit_half
         np.zeros((width, width, width)),

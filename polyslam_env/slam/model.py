@@ -77,6 +77,7 @@ def step_model(config: SlamConfig, beam_angles: np.ndarray, max_range: float) ->
     s[col.S_LINKS] = config.link_gap > 0.0 or config.square_walls
     s[col.S_SCREEN_ALARM] = screen_alarm(config)
     s[col.S_REUSE_BOUND] = REUSE_BOUNDS.index(config.reuse_bound)
+    s[col.S_SHIFT_WITH_POSE] = config.shape_shift == "pose"
     angles = np.asarray(beam_angles, dtype=float).reshape(-1)
     beams = np.zeros((col.N_BEAM_MODEL, angles.size))
     beams[col.B_ANGLE] = angles

@@ -191,9 +191,9 @@ def test_beam_rows__bit_identical_to_oracle(
     )  # fmt: skip
     used = kernels.beam_rows(
         x, y, theta, beams, ranges, subset, reach, *table.arrays(), c0s, boxes, 2.5,
-        model.min_sine, model.range_sigma**2, table.model_var, follows, table.pivot,
-        table.xi_var, turn_var, table.fit_half, _fit_inverse_table(model.eps_z + 1, width - 1),
-        model.eps_z + 1, alpha_base, *got,
+        model.min_sine, model.range_sigma**2, table.model_var, follows, False, table.pivot,
+        table.xi_var, table.shift_slope, turn_var, table.fit_half,
+        _fit_inverse_table(model.eps_z + 1, width - 1), model.eps_z + 1, alpha_base, *got,
     )  # fmt: skip
     if want is None:
         assert used == 0
@@ -483,7 +483,7 @@ def _rows_of(
     used = kernels.beam_rows(
         *pose.tolist(), angles, np.zeros(k), np.arange(k), math.inf, *table.arrays(), c0s,
         table.boxes(c0s), 10.0, math.sin(math.radians(10.0)), 4e-4, table.model_var, follows,
-        table.pivot, table.xi_var, np.zeros(len(table)), table.fit_half,
+        False, table.pivot, table.xi_var, table.shift_slope, np.zeros(len(table)), table.fit_half,
         _fit_inverse_table(16, table.shape.shape[1] - 1), 16, alpha_base, *rows,
     )  # fmt: skip
     return used, rows
