@@ -28,7 +28,7 @@ from scipy import ndimage
 from policies.base import PolicyContext, PolicyError
 from policies.frontier import FrontierPolicy, Search
 
-__all__ = ["CANDIDATES", "FEATURES", "GLOBALS", "GoalPolicy", "feature_size"]
+__all__ = ["CANDIDATES", "FEATURES", "GLOBALS", "GoalPolicy", "feature_size", "region_best"]
 
 #: Candidate slots per decision.
 CANDIDATES = 6
@@ -59,6 +59,20 @@ _SIGHTING_STEPS = 150
 def feature_size() -> int:
     """Length of the feature vector."""
     return CANDIDATES * len(FEATURES) + len(GLOBALS)
+
+
+def region_best(labels: np.ndarray, values: np.ndarray) -> tuple[list[int], list[float]]:
+    """The flat index and value of the best cell of each region ``1 … labels.max()`` of
+    ``labels`` (M,) (0: no region; every label present, as ``ndimage.label`` numbers them):
+    its largest value in ``values`` (M,), the first in index order among ties. Sorts only the
+    regions' cells, not the whole grid as ``ndimage.maximum_position`` does (whose unstable
+    sort also leaves ties to chance)."""
+    cells = np.flatnonzero(labels)  # (C,) ascending
+    region = labels[cells]
+    order = np.lexsort((-values[cells], region))  # by region, best first; stable: index order
+    _, first = np.unique(region[order], return_index=True)  # (n,) each region's first row
+    best = cells[order[first]]
+    return best.tolist(), values[best].tolist()
 
 
 class GoalPolicy(FrontierPolicy):
@@ -154,13 +168,12 @@ class GoalPolicy(FrontierPolicy):
         if n == 0:
             return 0, []
         flat_l = labels.reshape(-1)
-        best = ndimage.maximum_position(search.utility, labels, index=np.arange(1, n + 1))
         sizes = np.bincount(flat_l, minlength=n + 1)[1:]  # (n,)
         order = []
-        for k, (r, c) in enumerate(best):
-            u = float(search.utility[r, c])
+        cells, best = region_best(flat_l, search.utility.reshape(-1))
+        for k, (flat, u) in enumerate(zip(cells, best, strict=True)):
             if math.isfinite(u):
-                order.append((-u, int(r) * labels.shape[1] + int(c), k))
+                order.append((-u, flat, k))
         order.sort()  # best utility first, then row-major: slot 0 is search.best()
         rows = []
         top = -order[0][0] if order else 1.0

@@ -11,7 +11,8 @@
   × ``decide_every`` / ``num_robots``. With a ``baseline`` source tree (``polyslam benchmark
   --train-baseline TREE``, e.g. issue 41's "today", ``main`` at d0c6831) both trees run the
   same cut config as ``polyslam train`` processes (:func:`train_in_tree`), baseline first, and
-  the row carries this tree's env steps/s over the baseline's, measured in the same run.
+  the row carries this tree's env steps/s over the baseline's, measured in the same run, and
+  the baseline's CPU time per env step (process and workers) over this tree's.
 """
 
 from __future__ import annotations
@@ -97,6 +98,9 @@ def bench_train(
             "cpu_ms_per_env_step": here["cpu_ms_per_env_step"],
             "baseline": today,
             "ratio_to_today": here["env_steps_per_s"] / today["env_steps_per_s"],
+            # CPU per env step of the baseline over this tree's: steadier than the wall-clock
+            # ratio on a loaded machine (a busy core slows both trees' wall clocks unevenly)
+            "cpu_ratio_to_today": today["cpu_ms_per_env_step"] / here["cpu_ms_per_env_step"],
         }
     from polyslam_env.apps.training import TrainConfig, train
     from polyslam_env.core.resources import configs_dir

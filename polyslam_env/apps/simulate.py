@@ -28,6 +28,7 @@ from polyslam_env.environment import stages
 from polyslam_env.metrics.episode import COMMS_METRICS, RobotRun, TeamHistory, robot_metrics
 from polyslam_env.scenarios.paths import builtin_paths, load_paths
 from polyslam_env.slam.config import SlamConfig, slam_preset
+from polyslam_env.slam.ekf import start_error_covs
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.config import WorldConfig, paper_world_config
 from polyslam_env.world.layout import Layout
@@ -194,7 +195,9 @@ def simulate(
         if ex is not None:
             delivered = stages.exchange_maps(ex, k, slams, world.active, sensing, angles)
             log += _delivered_log(delivered)
-        estimates = np.array([s.pose for s in every]), np.array([s.pose_cov for s in every])
+        poses = np.array([s.pose for s in every])  # each pose_cov, the team's in one call
+        covs = np.array([s.pose_cov_relative for s in every]) + start_error_covs(poses, scfg.p0)
+        estimates = poses, covs
         stages.record(history, robots, world, sensing, estimates, infos, result.collided)
         if progress is not None:
             progress(k)

@@ -115,6 +115,7 @@ import numpy as np
 import scipy.linalg
 from scipy.spatial import cKDTree
 
+from polyslam_env.comms import polyline
 from polyslam_env.comms.alignment import (
     frame_points,
     is_straight_wall,
@@ -135,7 +136,6 @@ from polyslam_env.comms.messages import (
     encode,
 )
 from polyslam_env.comms.payloads import ScanLog, occupancy_grid
-from polyslam_env.comms.polyline import piecewise_linear, polyline_points
 from polyslam_env.comms.relative_pose import (
     frame_transform_with_jacobian,
     relative_pose,
@@ -153,7 +153,7 @@ from polyslam_env.slam.corners import wall_corners
 from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED
-from polyslam_env.slam.merging import find_merge
+from polyslam_env.slam.merging import MERGE_ANGLE_DEG, measured_gamma
 from polyslam_env.slam.polynomial import Polynomial
 
 if TYPE_CHECKING:
@@ -380,11 +380,28 @@ def received_point_set(
     after an alignment the transform's own error (K = 3). The point set's noise is
     [sender's c0 ; those K].
     """
-    poly = record.polynomial
-    q = chain_points(poly, chord_tol, spacing)  # (N, 2) sender frame
-    rot = rotation(transform[2])
+    q = chain_points(record.polynomial, chord_tol, spacing)  # (N, 2) sender frame
     xy, dp_dt = frame_points(q, transform)  # (N, 2), (N, 2, 3) ∂p/∂T
-    n_pts = len(q)
+    return _point_set(
+        record, transform, xy, dp_dt, d_transform_state, d_transform_noise, noise_cov, n_state
+    )
+
+
+def _point_set(
+    record: PolynomialRecord,
+    transform: np.ndarray,
+    xy: np.ndarray,
+    dp_dt: np.ndarray,
+    d_transform_state: np.ndarray,
+    d_transform_noise: np.ndarray,
+    noise_cov: np.ndarray,
+    n_state: int,
+) -> PointSet:
+    """:func:`received_point_set` from the chain's points ``xy`` (N, 2) in the receiver's
+    frame and their ∂p/∂T ``dp_dt`` (N, 2, 3) (:func:`frame_points`)."""
+    poly = record.polynomial
+    rot = rotation(transform[2])
+    n_pts = len(xy)
     d_state = np.zeros((n_pts, 2, n_state))
     d_state[:, :, :3] = dp_dt @ d_transform_state
     eta_axis = np.array([0.0, 1.0]) if poly.variate == 1 else np.array([1.0, 0.0])
@@ -419,13 +436,14 @@ def chain_points(poly: Polynomial, chord_tol: float, spacing: float) -> np.ndarr
     (chord error ≤ ``chord_tol``), in its own frame; read-only.
 
     Integrating a record asks for its chain three times (the points, their normal sigma, the
-    alignment), and a chain takes ~0.6 ms; the last :data:`_CHAIN_CACHE_SIZE` chains are kept,
-    keyed by the polynomial's exact contents, so every caller gets the very same points.
+    alignment; a chain is one compiled call, ~0.1 ms); the last :data:`_CHAIN_CACHE_SIZE`
+    chains are kept, keyed by the polynomial's exact contents, so every caller gets the very
+    same points.
     """
     key = (poly.variate, poly.coeffs.tobytes(), poly.lo, poly.hi, chord_tol, spacing)
     q = _CHAIN_CACHE.pop(key, None)
     if q is None:
-        q = polyline_points(piecewise_linear(poly, chord_tol), spacing)
+        q = polyline.chain_points(poly, chord_tol, spacing)
         q.setflags(write=False)
     _CHAIN_CACHE[key] = q  # (re)inserted last: the most recently used
     while len(_CHAIN_CACHE) > _CHAIN_CACHE_SIZE:
@@ -1125,12 +1143,12 @@ class RendezvousExchange:
         for record in fresh:
             version = _version(record)
             seen[version] = record.revision
-            # on the pose columns only (the rest are zeros): _fuse sizes G_x to the state
-            pts = received_point_set(
-                record, t, d_state, d_noise, noise_cov, 3, self.chord_tol, self.spacing
-            )
-            sure = transform_normal_sigma(record.polynomial, t, cov_t, self.chord_tol,
-                                          self.spacing) <= limit  # fmt: skip
+            # received_point_set and transform_normal_sigma on one chain and one ∂p/∂T; on
+            # the pose columns only (the rest are zeros): _fuse sizes G_x to the state
+            q = chain_points(record.polynomial, self.chord_tol, self.spacing)
+            xy, dp_dt = frame_points(q, t)
+            pts = _point_set(record, t, xy, dp_dt, d_state, d_noise, noise_cov, 3)
+            sure = _normal_sigma(q, t, dp_dt, cov_t) <= limit
             self.dropped_points[r] += int(np.count_nonzero(~sure))
             for rows in uncovered_runs(sure, pts.xy, slam.config.merge_min_overlap):
                 for piece, fit in self._refit(r, _subset(pts, rows)):
@@ -1161,9 +1179,10 @@ class RendezvousExchange:
         is the range noise's plus both landmarks' normal variances (the sender's from its
         record, the receiver's from its state: :func:`normal_variance`)."""
         sources = self._sources[r]
+        polys = slam.polynomials()
         anchors = [
             (poly, normal_variance(poly, slam.c0_variance(lid)))
-            for lid, poly in zip(slam.table.ids, slam.polynomials(), strict=True)
+            for lid, poly in zip(slam.table.ids, polys, strict=True)
             if sender not in sources.get(lid, ())
         ]
         chains = [chain_points(rec.polynomial, self.chord_tol, self.spacing) for rec in records]
@@ -1178,7 +1197,7 @@ class RendezvousExchange:
             restarts=self.config.align_restarts,
         )
         if not np.array_equal(refined, t) and self._off_square(
-            slam, records, t, refined, cov_refined
+            slam, polys, records, t, refined, cov_refined
         ):
             self.off_square[r] += 1
             return t, cov_t
@@ -1187,14 +1206,16 @@ class RendezvousExchange:
     @staticmethod
     def _off_square(
         slam: PolySlam,
+        polys: Sequence[Polynomial],
         records: Sequence[PolynomialRecord],
         t: np.ndarray,
         refined: np.ndarray,
         cov_refined: np.ndarray,
     ) -> bool:
         """Whether the refined transform turns the sender's straight walls off square to the
-        receiver's (``SlamConfig.square_walls``; :func:`~polyslam_env.comms.alignment.
-        square_turn`) by more than :data:`SQUARE_SIGMAS` σ: σ² is the refined turn's variance
+        receiver's (``polys``, ``slam.polynomials()``; ``SlamConfig.square_walls``;
+        :func:`~polyslam_env.comms.alignment.square_turn`) by more than
+        :data:`SQUARE_SIGMAS` σ: σ² is the refined turn's variance
         plus twice the turn variance of the receiver's longest straight wall (the sender's
         walls are taken to know their directions as well; its record carries no turn). The
         refinement then matched the walls to the wrong ones: on the warehouse's shelf rows one
@@ -1207,7 +1228,6 @@ class RendezvousExchange:
             return False
         if cfg.square_evidence and not slam.walls.rectilinear():
             return False
-        polys = slam.polynomials()
         held = [k for k, poly in enumerate(polys) if is_straight_wall(poly)]
         sent = straight_walls([rec.polynomial for rec in records])
         if not held or not sent:
@@ -1328,6 +1348,14 @@ def transform_normal_sigma(
     covariance ``cov_t`` (3, 3) causes, in the receiver's frame."""
     q = chain_points(poly, chord_tol, spacing)
     _, dp_dt = frame_points(q, transform)  # (N, 2, 3)
+    return _normal_sigma(q, transform, dp_dt, cov_t)
+
+
+def _normal_sigma(
+    q: np.ndarray, transform: np.ndarray, dp_dt: np.ndarray, cov_t: np.ndarray
+) -> np.ndarray:
+    """:func:`transform_normal_sigma` from the chain ``q`` (N, 2, sender frame) and its
+    points' ∂p/∂T ``dp_dt`` (N, 2, 3)."""
     d = np.gradient(q, axis=0) if len(q) > 1 else np.array([[1.0, 0.0]])
     d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
     normal = np.stack([-d[:, 1], d[:, 0]], axis=1) @ rotation(float(transform[2])).T  # (N, 2)
@@ -1360,29 +1388,34 @@ def covered_points(xy: np.ndarray, polys: Sequence[Polynomial], reach: float) ->
 def uncovered_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> list[slice]:
     """Maximal runs of consecutive ``keep`` points (N,) of a chain (N, 2) whose length along
     the chain is at least ``min_length`` (m)."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(int), [0]])))
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(int), [0]]))).tolist()
+    if not edges:
+        return []
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=1)  # (N-1,) each row's own norm
     runs = []
     for a, b in zip(edges[::2], edges[1::2], strict=True):
-        if float(np.linalg.norm(np.diff(xy[a:b], axis=0), axis=1).sum()) >= min_length:
-            runs.append(slice(int(a), int(b)))
+        if float(step[a : b - 1].sum()) >= min_length:  # the run's own steps, summed alone
+            runs.append(slice(a, b))
     return runs
 
 
 def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
-    """Ids of the landmarks PolySlam's merge test (:func:`find_merge`) pairs with ``poly``."""
+    """Ids of the landmarks PolySlam's merge test pairs with ``poly`` one by one
+    (:func:`~polyslam_env.slam.merging.measured_gamma`, as ``find_merge`` with one
+    candidate)."""
     cfg = slam.config
     c0s = slam.c0s
     xy = poly.equally_spaced(_BOX_SAMPLES)
     box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
-    out = []
-    for j in slam.table.near(box, c0s, cfg.gamma_max).tolist():
-        other = slam.table.polys[j]
-        match = find_merge(
-            poly, poly.c0, [other], [float(c0s[j])], cfg.gamma_max, cfg.merge_min_overlap
-        )
-        if match is not None:
-            out.append(slam.table.ids[j])
-    return out
+    found = np.empty(4)
+    return [
+        slam.table.ids[j]
+        for j in slam.table.near(box, c0s, cfg.gamma_max).tolist()
+        if measured_gamma(
+            poly, slam.table.polys[j].with_c0(float(c0s[j])), cfg.gamma_max,
+            cfg.merge_min_overlap, MERGE_ANGLE_DEG, found,
+        ) is not None
+    ]  # fmt: skip
 
 
 def _c0_variance(fit: Fit, cov: np.ndarray) -> float:

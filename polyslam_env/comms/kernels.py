@@ -86,3 +86,179 @@ def match_walls(
                     best[i], residual[i], wall_of[i] = score, r, w
                     grad[i, 0], grad[i, 1], grad[i, 2] = g[0], g[1], g[2]
     return best, residual, grad, wall_of
+
+
+# -- the chain of a received polynomial (comms/polyline.py, orders ≤ 3) -------------------------
+@njit
+def _derivative(coeffs: np.ndarray, derivative: int) -> np.ndarray:
+    """The coefficients ``slam.polynomial.polyval`` evaluates for a ``derivative``: j·c_j
+    that many times (``c[:1]·0`` past the order), for :func:`_horner`."""
+    c = coeffs.copy()
+    if derivative >= c.size:
+        return c[:1] * 0.0
+    for _ in range(derivative):
+        c = c[1:] * np.arange(1, c.size).astype(np.float64)
+    return c
+
+
+@njit
+def _linspace(start: float, stop: float, num: int) -> np.ndarray:
+    """``np.linspace(start, stop, num)`` in its operations (i·step + start, the last = stop;
+    a zero step as (i/div)·delta + start)."""
+    out = np.empty(num)
+    div = num - 1
+    delta = stop - start
+    if div > 0:
+        step = delta / div
+        for i in range(num):
+            out[i] = (float(i) / div * delta if step == 0.0 else float(i) * step) + start
+        out[num - 1] = stop
+    else:
+        for i in range(num):
+            out[i] = float(i) * delta + start
+    return out
+
+
+@njit
+def _point(variate: int, xi: float, eta: float) -> tuple[float, float]:
+    return (xi, eta) if variate == 1 else (eta, xi)
+
+
+@njit
+def _initial_knots(variate: int, coeffs: np.ndarray, lo: float, hi: float, sagitta: float,
+                   dense: int) -> np.ndarray:  # fmt: skip
+    """``polyline._initial_knots``: ξ knots spaced so each chord's sagitta κL²/8 is about
+    ``sagitta``."""
+    xi = _linspace(lo, hi, dense)
+    density = np.empty(dense)
+    first, second = _derivative(coeffs, 1), _derivative(coeffs, 2)
+    for i in range(dense):
+        d1 = _horner(first, xi[i])
+        d2 = _horner(second, xi[i])
+        speed = math.sqrt(1.0 + d1 * d1)
+        kappa = abs(d2) / math.pow(speed, 3.0)  # as numpy's speed**3
+        density[i] = math.sqrt(kappa / (8.0 * sagitta)) * speed
+    cum = np.zeros(dense)
+    for i in range(1, dense):
+        cum[i] = cum[i - 1] + 0.5 * (density[i] + density[i - 1]) * (xi[i] - xi[i - 1])
+    total = cum[dense - 1]
+    n = max(math.ceil(total), 1)
+    if total <= 0:
+        out = np.empty(2)
+        out[0], out[1] = lo, hi
+        return out
+    knots = np.interp(_linspace(0.0, total, n + 1), cum, xi)
+    knots[0], knots[-1] = lo, hi
+    return knots
+
+
+@njit
+def _chord_error(variate: int, coeffs: np.ndarray, c: np.ndarray, a: float, b: float,
+                 samples: np.ndarray) -> float:  # fmt: skip
+    """Largest distance from the curve on [a, b] to its chord: ``_max_perpendicular_cubic``
+    (the critical points of the vertical error, closed form) against ``_sampled_segment_
+    distance`` (``samples``: the interior fractions of the chord, end effects); ``c`` is
+    ``coeffs`` zero-padded to a cubic's four."""
+    ya, yb = _horner(coeffs, a), _horner(coeffs, b)
+    s = (yb - ya) / (b - a)
+    d0, d1, d2 = c[1] - s, 2.0 * c[2], 3.0 * c[3]
+    big = 1e-12 * max(max(abs(d0), abs(d1)), abs(d2))
+    quad = abs(d2) > big
+    line = not quad and abs(d1) > big
+    r0, r1 = np.nan, np.nan
+    if quad:
+        disc = d1 * d1 - 4.0 * d2 * d0
+        if disc >= 0.0:
+            q = -0.5 * (d1 + math.copysign(math.sqrt(disc), d1))
+            r0 = q / d2
+            r1 = d0 / q if q != 0.0 else r0
+    elif line:
+        r0 = -d0 / d1
+    worst = 0.0
+    for k in range(2):
+        root = r0 if k == 0 else r1
+        crit = root if (root > a and root < b) else a  # a: zero error, as no critical point
+        err = abs(_horner(coeffs, crit) - (ya + s * (crit - a)))
+        worst = err if k == 0 else max(worst, err)
+    perp = worst / math.hypot(1.0, s)
+    # the sampled check: curve points against the chord segment
+    sx, sy = _point(variate, a, ya)
+    ex, ey = _point(variate, b, yb)
+    abx, aby = ex - sx, ey - sy
+    denom = max(abx * abx + aby * aby, 1e-300)
+    far = 0.0
+    for k in range(samples.size):
+        xi = a + (b - a) * samples[k]
+        px, py = _point(variate, xi, _horner(coeffs, xi))
+        u = min(max(((px - sx) * abx + (py - sy) * aby) / denom, 0.0), 1.0)
+        dx, dy = px - (sx + u * abx), py - (sy + u * aby)
+        dist = math.sqrt(dx * dx + dy * dy)
+        far = dist if k == 0 else max(far, dist)
+    return max(perp, far)
+
+
+@njit
+def chain(variate: int, coeffs: np.ndarray, lo: float, hi: float, chord_tol: float,
+          sagitta: float, dense: int, check_samples: int, spacing: float,
+          max_vertices: int) -> np.ndarray:  # fmt: skip
+    """``polyline_points(piecewise_linear(poly, chord_tol), spacing)`` for orders ≤ 3 in one
+    call: the chain's points (N, 2) every ``spacing`` or less, bit for bit (the numpy version
+    is the oracle in ``tests/comms/test_polyline.py``). ``sagitta``, ``dense`` and
+    ``check_samples`` are ``polyline``'s aim × tolerance, curvature grid and chord samples."""
+    if hi == lo:
+        xi = np.empty(2)
+        xi[0], xi[1] = lo, hi
+    else:
+        xi = _initial_knots(variate, coeffs, lo, hi, sagitta, dense)
+        samples = _linspace(0.0, 1.0, check_samples)[1:-1]
+        padded = np.zeros(4)
+        padded[: coeffs.size] = coeffs
+        while True:
+            bad = np.zeros(xi.size - 1, dtype=np.bool_)
+            n_bad = 0
+            for i in range(xi.size - 1):
+                bad[i] = (
+                    _chord_error(variate, coeffs, padded, xi[i], xi[i + 1], samples) > chord_tol
+                )
+                n_bad += bad[i]
+            if n_bad == 0:
+                break
+            finer = np.empty(xi.size + n_bad)
+            k = 0
+            for i in range(xi.size):
+                finer[k] = xi[i]
+                k += 1
+                if i < xi.size - 1 and bad[i]:
+                    finer[k] = 0.5 * (xi[i] + xi[i + 1])
+                    k += 1
+            xi = finer
+            if xi.size > max_vertices:
+                raise RuntimeError("piecewise_linear: more vertices needed than allowed")
+    # polyline_points: the vertices, those after a zero-length chord dropped, by arc length
+    n_v = xi.size
+    vx, vy = np.empty(n_v), np.empty(n_v)
+    arc = np.empty(n_v)
+    vx[0], vy[0] = _point(variate, xi[0], _horner(coeffs, xi[0]))
+    arc[0] = 0.0
+    kept = 1
+    last_x, last_y = vx[0], vy[0]  # the previous vertex, kept or not
+    for i in range(1, n_v):
+        px, py = _point(variate, xi[i], _horner(coeffs, xi[i]))
+        dx, dy = px - last_x, py - last_y
+        seg = math.sqrt(dx * dx + dy * dy)
+        last_x, last_y = px, py
+        if seg > 0:
+            vx[kept], vy[kept] = px, py
+            arc[kept] = arc[kept - 1] + seg
+            kept += 1
+    if arc[kept - 1] == 0:
+        out = np.empty((1, 2))
+        out[0, 0], out[0, 1] = vx[0], vy[0]
+        return out
+    total = arc[kept - 1]
+    n = math.ceil(total / spacing) + 1
+    targets = _linspace(0.0, total, n)
+    out = np.empty((n, 2))
+    out[:, 0] = np.interp(targets, arc[:kept], vx[:kept])
+    out[:, 1] = np.interp(targets, arc[:kept], vy[:kept])
+    return out

@@ -18,6 +18,7 @@ import itertools
 import numpy as np
 from numpy.polynomial import polynomial as npoly
 
+from polyslam_env.comms import kernels
 from polyslam_env.slam.polynomial import Polynomial, polyval
 
 _AIM = 0.8  # fraction of the tolerance the curvature-based placement aims at
@@ -26,10 +27,30 @@ _CHECK_SAMPLES = 17  # samples per chord for the distance-to-segment check
 _MAX_VERTICES = 100_000  # guard against runaway subdivision
 
 
+def chain_points(poly: Polynomial, chord_tol: float, spacing: float) -> np.ndarray:
+    """``polyline_points(piecewise_linear(poly, chord_tol), spacing)``: points (N, 2) every
+    ``spacing`` (m) or less along the chain of ``poly``. Orders up to 3 in one compiled call
+    (:func:`~polyslam_env.comms.kernels.chain`, bit for bit the same points), higher orders
+    by the numpy functions below."""
+    if poly.order > 3:
+        return polyline_points(piecewise_linear(poly, chord_tol), spacing)
+    _check_positive("chord_tol", chord_tol)
+    _check_positive("spacing", spacing)
+    out: np.ndarray = kernels.chain(
+        poly.variate, poly.coeffs, float(poly.lo), float(poly.hi), float(chord_tol),
+        _AIM * chord_tol, _DENSE, _CHECK_SAMPLES, float(spacing), _MAX_VERTICES,
+    )  # fmt: skip
+    return out
+
+
+def _check_positive(name: str, value: float) -> None:
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be > 0, got {value!r}")
+
+
 def piecewise_linear(poly: Polynomial, chord_tol: float = 0.005) -> np.ndarray:
     """Vertices (V, 2), V >= 2, on ``poly`` with every chord within ``chord_tol`` of the curve."""
-    if not (np.isfinite(chord_tol) and chord_tol > 0):
-        raise ValueError(f"chord_tol must be > 0, got {chord_tol!r}")
+    _check_positive("chord_tol", chord_tol)
     if poly.hi == poly.lo:
         return poly.points_at(np.array([poly.lo, poly.hi]))
     xi = _initial_knots(poly, _AIM * chord_tol)
@@ -133,8 +154,7 @@ def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray
 
 def polyline_points(vertices: np.ndarray, spacing: float) -> np.ndarray:
     """Points (n, 2) equally spaced along the chain, both ends included, gaps <= ``spacing``."""
-    if not (np.isfinite(spacing) and spacing > 0):
-        raise ValueError(f"spacing must be > 0, got {spacing!r}")
+    _check_positive("spacing", spacing)
     v = np.asarray(vertices, dtype=float).reshape(-1, 2)
     if len(v) == 0:
         raise ValueError("a polyline needs at least one vertex")

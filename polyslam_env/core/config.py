@@ -26,6 +26,7 @@ from typing import Any, TypeVar, get_args, get_origin, get_type_hints
 import yaml
 
 from polyslam_env.core.errors import ConfigError
+from polyslam_env.core.io import parse_yaml
 
 C = TypeVar("C", bound="Config")
 
@@ -77,7 +78,7 @@ class Config:
         except UnicodeDecodeError:
             raise ConfigError(f"{path}: not a YAML text file (not UTF-8 text)") from None
         try:
-            data = yaml.safe_load(text)
+            data = parse_yaml(text)
         except yaml.YAMLError as err:
             raise ConfigError(f"{path}: not valid YAML: {err}") from None
         try:

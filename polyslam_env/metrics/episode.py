@@ -25,7 +25,7 @@ import numpy as np
 
 from polyslam_env import metrics
 from polyslam_env.core.geometry import between
-from polyslam_env.metrics.mapping import MapShapes
+from polyslam_env.metrics.mapping import MapShapes, map_quality
 from polyslam_env.slam.ekf import start_error_covs
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
@@ -169,16 +169,7 @@ def map_metrics(
     :mod:`polyslam_env.metrics.mapping`). ``hit_points`` (H, 2) are its true beam hits. An empty
     map gives the stated values with ``has_map`` 0.0."""
     shapes = MapShapes.of(polys)  # packed once for all the metrics (the same numbers)
-    return {
-        "nu": metrics.nu(shapes, true_start, layout),
-        "nu_mean": metrics.nu_mean(shapes, true_start, layout),
-        "nu_mean_abs": metrics.nu_mean(shapes, frame, layout),
-        "completeness": metrics.completeness(shapes, true_start, layout),
-        "completeness_seen": metrics.completeness_seen(shapes, true_start, layout, hit_points),
-        "map_precision": metrics.map_precision(shapes, true_start, layout),
-        "duplicates": metrics.duplicates(shapes),
-        "has_map": metrics.has_map(shapes),
-    }
+    return map_quality(shapes, true_start, frame, hit_points, layout)
 
 
 def nees_relative(run: RobotRun) -> float:

@@ -127,7 +127,11 @@ def map_distances(
     polys: MapLike, start_pose: np.ndarray, layout: Layout, step: float = 0.01
 ) -> list[np.ndarray]:
     """Per polynomial, δ (n_q,): distance of each arc-length sample to the true boundary."""
-    points, starts = _placed(polys, start_pose, step)
+    return _distances(*_placed(polys, start_pose, step), layout)
+
+
+def _distances(points: np.ndarray, starts: list[int], layout: Layout) -> list[np.ndarray]:
+    """:func:`map_distances` of the placed samples (:func:`_placed`)."""
     if len(starts) == 1:
         return []
     return _pieces(distance_to_boundary(points, layout), starts)
@@ -137,7 +141,11 @@ def nu(polys: MapLike, start_pose: np.ndarray, layout: Layout, step: float = 0.0
     """ν_j = (1/n_j) Σ_q Σ_i δ_{q,i}, the paper's form (a sum per polynomial, so it grows with
     polynomial length and the sampling step matters). 0.0 for an empty map: the paper's sum is
     empty; use :func:`completeness` so that mapping nothing is not rewarded."""
-    ds = map_distances(polys, start_pose, layout, step)
+    return _nu(map_distances(polys, start_pose, layout, step))
+
+
+def _nu(ds: list[np.ndarray]) -> float:
+    """:func:`nu` of the map's distances ``ds`` (:func:`map_distances`)."""
     return float(np.mean([d.sum() for d in ds])) if ds else 0.0
 
 
@@ -145,7 +153,11 @@ def nu_mean(polys: MapLike, start_pose: np.ndarray, layout: Layout, step: float 
     """Mean δ over all map points (metres), the map placed by ``start_pose`` (see the module
     docstring for which pose). 0.0 for an empty map (no points, no error): report
     :func:`has_map` beside it."""
-    ds = map_distances(polys, start_pose, layout, step)
+    return _nu_mean(map_distances(polys, start_pose, layout, step))
+
+
+def _nu_mean(ds: list[np.ndarray]) -> float:
+    """:func:`nu_mean` of the map's distances ``ds`` (:func:`map_distances`)."""
     return float(np.concatenate(ds).mean()) if ds else 0.0
 
 
@@ -174,7 +186,11 @@ def map_precision(
     """Fraction of the map's arc length (its samples every ``step``) within ``tol`` of a true
     wall: the mirror of :func:`completeness`, lowered by spurious and runaway polynomials.
     1.0 for an empty map (nothing wrong mapped; report :func:`has_map` beside it)."""
-    ds = map_distances(polys, start_pose, layout, step)
+    return _precision(map_distances(polys, start_pose, layout, step), tol)
+
+
+def _precision(ds: list[np.ndarray], tol: float) -> float:
+    """:func:`map_precision` of the map's distances ``ds`` (:func:`map_distances`)."""
     if not ds:
         return 1.0
     d = np.concatenate(ds)
@@ -265,9 +281,23 @@ def completeness_seen(
     """:func:`completeness` over only the boundary the robot's beams hit: the seen length
     (:func:`seen_boundary`) within ``tol`` of the map, over the seen length. 0.0 when the map
     is empty or nothing was seen."""
+    return _completeness_seen(
+        *_placed(polys, start_pose, step), layout, hit_points_abs, radius, tol, step
+    )
+
+
+def _completeness_seen(
+    points: np.ndarray,
+    starts: list[int],
+    layout: Layout,
+    hit_points_abs: np.ndarray,
+    radius: float,
+    tol: float,
+    step: float,
+) -> float:
+    """:func:`completeness_seen` of the placed samples (:func:`_placed`)."""
     bpts, weights = seen_boundary(layout, hit_points_abs, radius, step)
     total = float(weights.sum())
-    points, starts = _placed(polys, start_pose, step)
     if len(starts) == 1 or total == 0.0:
         return 0.0
     d, _ = cKDTree(points).query(bpts, k=1, distance_upper_bound=tol)
@@ -355,6 +385,37 @@ def completeness(
     when its centre is within ``tol`` of a polynomial sample (so within tol ± step/2).
     """
     return _covered_fraction(_placed(polys, start_pose, step)[0], layout, tol, step)
+
+
+def map_quality(
+    polys: MapLike,
+    start_pose: np.ndarray,
+    frame: np.ndarray,
+    hit_points_abs: np.ndarray,
+    layout: Layout,
+) -> dict[str, float]:
+    """``nu``, ``nu_mean``, ``completeness``, ``completeness_seen``, ``map_precision`` (their
+    defaults) of the map placed by ``start_pose``, ``nu_mean_abs`` (:func:`nu_mean` placed by
+    ``frame``), ``duplicates`` and ``has_map``: the same numbers as those functions, from one
+    sampling, one placing and one distance query of the map (each function alone samples and
+    places it again; the distances were computed four times)."""
+    step, tol = 0.01, 0.05
+    points, starts = _placed(polys, start_pose, step)
+    ds = _distances(points, starts, layout)
+    frame = np.asarray(frame, dtype=float)
+    same = np.array_equal(frame, np.asarray(start_pose, dtype=float))
+    return {
+        "nu": _nu(ds),
+        "nu_mean": _nu_mean(ds),
+        "nu_mean_abs": _nu_mean(ds) if same else nu_mean(polys, frame, layout, step),
+        "completeness": _covered_fraction(points, layout, tol, step),
+        "completeness_seen": _completeness_seen(
+            points, starts, layout, hit_points_abs, SEEN_RADIUS, tol, step
+        ),
+        "map_precision": _precision(ds, tol),
+        "duplicates": duplicates(polys),
+        "has_map": has_map(polys),
+    }
 
 
 def completeness_and_error(

@@ -29,6 +29,7 @@ import numpy as np
 import yaml
 
 from polyslam_env.core.errors import ConfigError
+from polyslam_env.core.io import parse_yaml
 from polyslam_env.core.resources import builtin_names, configs_dir, resolve_file
 
 KEYS = ("name", "map", "dt", "robots")
@@ -87,7 +88,7 @@ def load_paths(name_or_path: str | Path) -> Paths:
     """Load and validate a paths file, or built-in paths by name."""
     path = resolve_paths_file(name_or_path)
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))  # JSON is a subset of YAML
+        data = parse_yaml(path.read_text(encoding="utf-8"))  # JSON is a subset of YAML
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
         raise ConfigError(f"{path}: cannot read paths file ({err})") from None
     return paths_from_dict(data, source=str(path))

@@ -55,6 +55,8 @@ from polyslam_env.slam.polynomial import Polynomial
 #: what a fit would have split. Pieces of one wall re-observed after a few cm of drift start
 #: a little past the old end (the points between went to a cluster), ~0.15 m in the tests.
 JOIN_GAP = GAP_SPLIT
+#: degrees: tangents of two overlapping pieces of one wall agree within this (the merge test).
+MERGE_ANGLE_DEG = 30.0
 #: degrees: tangents of two pieces joined end to end must agree within this (the
 #: ``duplicates`` metric's notion of parallel, SPEC §5).
 JOIN_ANGLE_DEG = 10.0
@@ -93,7 +95,7 @@ def find_merge(
     c0s: Sequence[float] | np.ndarray,
     gamma_max: float,
     min_overlap: float = 0.1,
-    max_angle_deg: float = 30.0,
+    max_angle_deg: float = MERGE_ANGLE_DEG,
     exclude: int | None = None,
     *,
     new_side: int = 0,
@@ -124,7 +126,7 @@ def choose_merge(
     c0s: Sequence[float] | np.ndarray,
     gamma_max: float,
     min_overlap: float = 0.1,
-    max_angle_deg: float = 30.0,
+    max_angle_deg: float = MERGE_ANGLE_DEG,
     exclude: int | None = None,
     *,
     new_side: int = 0,
@@ -150,23 +152,38 @@ def choose_merge(
         side = 0 if sides is None else int(sides[j])
         opposite = new_side * side < 0 and _faces_opposite(p, new_side, other, side)
         limit = min(best_gamma, THIN_WALL) if opposite else best_gamma
-        measured = map_kernels.merge_test(
-            p.variate, p.coeffs, p.lo, p.hi, other.variate, other.coeffs, other.lo, other.hi,
-            min_overlap, found,
-        )  # fmt: skip
-        gamma: float | None = None
-        joined = False
         # the tangents' angle decides only whether γ counts: not needed when it could not win
         # and no join would be tried instead
-        if measured == MEASURED and (found[2] < limit or join_gap is not None):
-            a, b, g, xi_other = found.tolist()
-            if np.degrees(merge_angle(p, other, a, b, xi_other)) <= max_angle_deg:
-                gamma = g
+        below = None if join_gap is not None else limit
+        gamma = measured_gamma(p, other, below, min_overlap, max_angle_deg, found)
+        joined = False
         if gamma is None and join_gap is not None:
             gamma, joined = join_gamma(p, other, join_gap), True
         if gamma is not None and gamma < limit:
             best, best_gamma = MergeChoice(j, gamma, joined), gamma
     return best
+
+
+def measured_gamma(
+    p: Polynomial,
+    other: Polynomial,
+    limit: float | None,
+    min_overlap: float,
+    max_angle_deg: float,
+    found: np.ndarray,
+) -> float | None:
+    """γ of ``other`` against ``p`` (both with their c0) where they overlap by at least
+    ``min_overlap`` (``map_kernels.merge_test``), if it is below ``limit`` (None: any) and
+    their tangents there agree within ``max_angle_deg``; else None. ``found`` (4,) is
+    merge_test's scratch (a, b, γ, the other's tangent ξ)."""
+    measured = map_kernels.merge_test(
+        p.variate, p.coeffs, p.lo, p.hi, other.variate, other.coeffs, other.lo, other.hi,
+        min_overlap, found,
+    )  # fmt: skip
+    if measured != MEASURED or not (limit is None or found[2] < limit):
+        return None
+    a, b, g, xi_other = found.tolist()
+    return g if np.degrees(merge_angle(p, other, a, b, xi_other)) <= max_angle_deg else None
 
 
 def join_gamma(poly: Polynomial, other: Polynomial, max_gap: float) -> float | None:

@@ -159,6 +159,8 @@ def polyval(
     coefficients j·c_j, then Horner's scheme from the top, ``c[-1] + x·0`` first), without
     their per-call checks, so every value is bit-identical to theirs (tested); the reference
     for the other forms."""
+    if isinstance(x, float):  # a Python or numpy float: the same operations on floats
+        return np.asarray(_polyval_float(x, coeffs, derivative))
     c = np.array(coeffs, dtype=float, ndmin=1)
     if derivative >= len(c):
         c = c[:1] * 0
@@ -171,6 +173,25 @@ def polyval(
     for i in range(2, len(c) + 1):
         value = c[-i] + value * x
     return np.asarray(value)
+
+
+def _polyval_float(x: float, coeffs: np.ndarray | Sequence[float], derivative: int) -> float:
+    """:func:`polyval` at one float in Python floats (IEEE doubles, as numpy's): j·c_j per
+    derivative (``c0·0`` past the order), then Horner from ``c[-1] + x·0``; a fraction of the
+    array form's time, which the SLAM's and the exchange's scalar calls add up to."""
+    c = np.array(coeffs, dtype=float, ndmin=1).tolist()
+    n = len(c)
+    if derivative >= n:
+        c, n = [c[0] * 0], 1
+    else:
+        for _ in range(derivative):  # in place: no comprehension per call
+            for j in range(1, n):
+                c[j - 1] = c[j] * j
+            n -= 1
+    value = c[n - 1] + x * 0
+    for i in range(2, n + 1):
+        value = c[n - i] + value * x
+    return value
 
 
 def polyval_rows(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -29,6 +29,7 @@ import numpy as np
 import yaml
 
 from polyslam_env.core.errors import MapFileError
+from polyslam_env.core.io import parse_yaml
 from polyslam_env.core.resources import builtin_names, maps_dir, resolve_file
 from polyslam_env.world.layout import Layout
 
@@ -58,7 +59,7 @@ def load_map(name_or_path: str | Path, *, robot_radius: float = DEFAULT_START_CL
     except (OSError, UnicodeDecodeError) as err:
         raise MapFileError(f"{path}: cannot read map file ({err})") from None
     try:
-        data = yaml.safe_load(text)  # JSON is a subset of YAML
+        data = parse_yaml(text)  # JSON is a subset of YAML
     except yaml.YAMLError as err:
         raise MapFileError(f"{path}: not valid YAML/JSON: {err}") from None
     return layout_from_dict(

@@ -41,6 +41,7 @@ import numpy as np
 import yaml
 
 from polyslam_env.core.errors import MapFileError
+from polyslam_env.core.io import parse_yaml
 
 __all__ = ["FREE", "MODES", "OCCUPIED", "UNKNOWN", "OccupancyGrid", "read_map_yaml"]
 
@@ -84,7 +85,7 @@ def read_map_yaml(path: str | Path) -> OccupancyGrid:
     except (OSError, UnicodeDecodeError) as err:
         raise MapFileError(f"{path}: cannot read the map YAML ({_reason(err)})") from None
     try:
-        data = yaml.safe_load(text)
+        data = parse_yaml(text)
     except yaml.YAMLError as err:
         raise MapFileError(f"{path}: not valid YAML ({_one_line(str(err))})") from None
     if not isinstance(data, dict):

@@ -149,12 +149,13 @@ def test_train_row__its_ratios_to_mpe_and_to_today(monkeypatch: pytest.MonkeyPat
     (``--train-baseline``), both trees run as ``polyslam train`` processes, same run."""
     from polyslam_env.apps import benchmark_system
 
-    rates = {"base": 10.0}
+    rates, cpus = {"base": 10.0}, {"base": 4.0}
 
     def fake_run(tree: Path, timesteps: int, config: str) -> dict[str, Any]:
         rate = rates.get(Path(tree).name, 30.0)
         return {"timesteps": timesteps, "env_steps": 512.0, "seconds": 512.0 / rate,
-                "env_steps_per_s": rate, "cpu_ms_per_env_step": 1.0}  # fmt: skip
+                "env_steps_per_s": rate,
+                "cpu_ms_per_env_step": cpus.get(Path(tree).name, 1.6)}  # fmt: skip
 
     monkeypatch.setattr(benchmark_system, "train_in_tree", fake_run)
     out: dict[str, Any] = {}
@@ -162,6 +163,7 @@ def test_train_row__its_ratios_to_mpe_and_to_today(monkeypatch: pytest.MonkeyPat
     benchmark._command_sections(out, plan, {"train"}, lambda s, r: None, 5000.0, Path("base"))
     assert out["train"]["ratio_to_mpe"] == pytest.approx(30.0 / 5000.0, rel=1e-12)
     assert out["train"]["ratio_to_today"] == pytest.approx(3.0, rel=1e-12)
+    assert out["train"]["cpu_ratio_to_today"] == pytest.approx(4.0 / 1.6, rel=1e-12)
     assert out["train"]["baseline"]["env_steps_per_s"] == 10.0
 
 

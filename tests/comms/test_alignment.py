@@ -286,11 +286,15 @@ def test_off_square__refuses_a_refined_turn_beyond_3_sigma_of_the_square_one() -
     camera = np.array([1.0, 2.0, math.radians(21.0)])
     for factor, refused in ((0.0, False), (2.9, False), (3.1, True), (-3.1, True)):
         refined = np.array([1.0, 2.0, square + factor * sigma])
-        got = RendezvousExchange._off_square(slam, records, camera, refined, cov)
+        got = RendezvousExchange._off_square(
+            slam, slam.polynomials(), records, camera, refined, cov
+        )
         assert got is refused, factor
     slam.config = SlamConfig(square_walls=False)
     refined = np.array([1.0, 2.0, square + 5.0 * sigma])
-    assert not RendezvousExchange._off_square(slam, records, camera, refined, cov)
+    assert not RendezvousExchange._off_square(
+        slam, slam.polynomials(), records, camera, refined, cov
+    )
 
 
 @pytest.mark.parametrize(
@@ -314,7 +318,9 @@ def test_off_square__on_an_angled_floor_keeps_a_refined_turn_that_is_not_square(
     slam.config = SlamConfig(square_evidence=square_evidence)
     camera = np.array([1.0, 2.0, math.radians(21.0)])
     refined = np.array([1.0, 2.0, square + 5.0 * sigma])
-    assert not RendezvousExchange._off_square(slam, records, camera, refined, cov)
+    assert not RendezvousExchange._off_square(
+        slam, slam.polynomials(), records, camera, refined, cov
+    )
 
 
 def _match_oracle(

@@ -24,6 +24,7 @@ from polyslam_env.comms.exchange import (
     normal_variance,
     received_point_set,
     transform_normal_sigma,
+    uncovered_runs,
     unframe_message,
 )
 from polyslam_env.comms.messages import Header, PolynomialMessage, PolynomialRecord, encode
@@ -840,3 +841,29 @@ def test_exchange__a_wall_stretched_in_place_reaches_a_peer_holding_it_shorter()
         slam.step_count = 2 * k
     third = ex.step(2 * k, slams, view, active)
     assert {d.sender: d.n_polynomials for d in third.delivered} == {0: 0, 1: 0}
+
+
+def test_uncovered_runs__each_run_as_its_own_chain_measures_it() -> None:
+    """The maximal runs of kept points at least ``min_length`` long, each run's length the sum
+    of its own steps, bit for bit as the run cut out and measured alone (the oracle), on
+    random masks over random chains from 1 to 400 points (runs past numpy's 8- and 128-term
+    blocks of pairwise summation), lengths at the threshold included."""
+    rng = np.random.default_rng(20)
+
+    def oracle(keep: np.ndarray, xy: np.ndarray, min_length: float) -> list[slice]:
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(int), [0]])))
+        return [
+            slice(int(a), int(b))
+            for a, b in zip(edges[::2], edges[1::2], strict=True)
+            if float(np.linalg.norm(np.diff(xy[a:b], axis=0), axis=1).sum()) >= min_length
+        ]
+
+    for _ in range(300):
+        n = int(rng.integers(1, 400))
+        xy = np.cumsum(rng.normal(0.0, 0.03, (n, 2)), axis=0)
+        keep = rng.random(n) < rng.choice([0.3, 0.9, 1.0])
+        want = oracle(keep, xy, 0.0)
+        lengths = [float(np.linalg.norm(np.diff(xy[r], axis=0), axis=1).sum()) for r in want]
+        for min_length in (0.1, *lengths[:3]):  # a run exactly at the threshold is kept
+            assert uncovered_runs(keep, xy, min_length) == oracle(keep, xy, min_length)
+    assert uncovered_runs(np.zeros(4, dtype=bool), np.zeros((4, 2)), 0.1) == []

@@ -1,4 +1,4 @@
-"""Atomic result files."""
+"""Atomic result files; YAML read with libyaml."""
 
 from __future__ import annotations
 
@@ -7,9 +7,11 @@ import os
 from pathlib import Path
 
 import pytest
+import yaml
 
 from polyslam_env.core.errors import OutputError
-from polyslam_env.core.io import write_atomic, write_json
+from polyslam_env.core.io import parse_yaml, write_atomic, write_json
+from polyslam_env.core.resources import configs_dir
 
 
 def test_write_json__nan_becomes_null_and_file_is_readable_by_others(tmp_path: Path) -> None:
@@ -58,3 +60,16 @@ def test_write_atomic__folder_or_path_under_a_file_is_an_output_error(tmp_path: 
         write_atomic(tmp_path / "folder", "data")
     with pytest.raises(OutputError, match="cannot write"):
         write_atomic(tmp_path / "file" / "r.json", "data")
+
+
+def test_parse_yaml__same_data_as_safe_load_on_every_shipped_file() -> None:
+    files = sorted(configs_dir().rglob("*.yaml"))
+    assert len(files) > 10  # configs, maps and paths
+    for path in files:
+        text = path.read_text(encoding="utf-8")
+        assert parse_yaml(text) == yaml.safe_load(text), path
+
+
+def test_parse_yaml__bad_yaml_raises_yaml_error() -> None:
+    with pytest.raises(yaml.YAMLError):
+        parse_yaml("a: [1, 2")

@@ -237,6 +237,29 @@ def test_completeness_and_error__the_two_metrics_bit_for_bit(count: int) -> None
     )
 
 
+@pytest.mark.parametrize(("count", "offset"), [(0, False), (1, False), (7, False), (7, True)])
+def test_map_quality__every_metric_bit_for_bit_as_its_own_function(
+    count: int, offset: bool
+) -> None:
+    # one sampling, placing and distance query for all: the same floats as each function
+    rng = np.random.default_rng(count)
+    layout, pose = square_room(), np.array([0.05, 0.1, -0.03])
+    frame = pose + np.array([0.02, -0.01, 0.004]) if offset else pose.copy()
+    polys = _random_map(rng, count)
+    hits = rng.uniform(-0.1, SIDE + 0.1, (60, 2))
+    hits[::7] = np.inf  # no return
+    assert M.map_quality(polys, pose, frame, hits, layout) == {
+        "nu": M.nu(polys, pose, layout),
+        "nu_mean": M.nu_mean(polys, pose, layout),
+        "nu_mean_abs": M.nu_mean(polys, frame, layout),
+        "completeness": M.completeness(polys, pose, layout),
+        "completeness_seen": M.completeness_seen(polys, pose, layout, hits),
+        "map_precision": M.map_precision(polys, pose, layout),
+        "duplicates": M.duplicates(polys),
+        "has_map": M.has_map(polys),
+    }
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_tangents__numpy_gradient_of_each_polynomial_bit_for_bit(seed: int) -> None:
     """``duplicates``' tangents of all polynomials at once are ``np.gradient`` of each (zeros for a

@@ -66,7 +66,7 @@ def test_start_nees__of_the_envs_start_draws_is_chi2_3() -> None:
     not fit is rare: 5 cm starts with clearance to spare)."""
     p0 = SlamConfig().p0
     chol = np.linalg.cholesky(p0)
-    env = polyslam_env.parallel_env(map="generator:office_floor", num_robots=3, max_steps=1)
+    env = polyslam_env.parallel_env(map="paper", num_robots=3, max_steps=1)  # no generation
     values, whitened = [], []
     for seed in range(40):
         env.reset(seed=seed)

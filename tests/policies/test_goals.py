@@ -12,7 +12,7 @@ import pytest
 import polyslam_env
 from policies.base import PolicyContext, PolicyError
 from policies.frontier import Search
-from policies.goals import CANDIDATES, FEATURES, GLOBALS, GoalPolicy, feature_size
+from policies.goals import CANDIDATES, FEATURES, GLOBALS, GoalPolicy, feature_size, region_best
 
 OFFICE = {"map": "generator:office_floor", "num_robots": 3, "max_steps": 400}
 
@@ -158,3 +158,21 @@ def test_goals__decide_every_must_be_positive() -> None:
     env = polyslam_env.parallel_env(**OFFICE)
     with pytest.raises(PolicyError, match="decide_every"):
         GoalPolicy(PolicyContext.from_env(env, "robot_0"), decide_every=0)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_region_best__each_regions_largest_value_first_among_ties_as_brute_force(
+    seed: int,
+) -> None:
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 8))
+    labels = rng.integers(0, n + 1, 300)
+    labels[:n] = np.arange(1, n + 1)  # every label present, as ndimage.label numbers them
+    # few distinct values, so most regions have ties at their best; -inf as off-candidate cells
+    values = rng.choice([-np.inf, 0.1, 0.2, 0.3], 300)
+    flat, best = region_best(labels, values)
+    for k in range(1, n + 1):
+        cells = np.flatnonzero(labels == k)
+        top = values[cells].max()
+        assert flat[k - 1] == next(int(c) for c in cells if values[c] == top)
+        assert best[k - 1] == top

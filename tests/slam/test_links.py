@@ -196,10 +196,13 @@ def test_doorways__the_pieces_of_one_wall_are_linked_into_one_group() -> None:
 
 
 def _wall_errors(
-    slam: PolySlam, truth: dict[int, tuple[float, float]], directions: bool = False
+    slam: PolySlam,
+    truth: dict[int, tuple[float, float]] | Callable[[Polynomial], tuple[float, float] | None],
+    directions: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each landmark's offset error at the middle of its evidence against its variate's true
-    wall, ``truth[variate]`` = (offset, direction) (the robot's frame is the world's), with
+    wall, ``truth[variate]`` = (offset, direction) (the robot's frame is the world's; or
+    ``truth(polynomial)``, None for a landmark to leave out), with
     ``directions`` also each straight landmark's direction error (``line_angle``; it moves
     with the landmark's turn α alone) and only straight landmarks; and their covariance by the
     filter (offset rows as :func:`link_rows`' for one curve)."""
@@ -208,7 +211,10 @@ def _wall_errors(
     for i, poly in enumerate(slam.polynomials()):
         if directions and slam.table.order[i] != 1:
             continue
-        offset, direction = truth[poly.variate]
+        wall = truth(poly) if callable(truth) else truth[poly.variate]
+        if wall is None:
+            continue
+        offset, direction = wall
         xi = float(np.mean(slam.table.evidence[i]))
         pts = polynomial_points(poly, 3 + i, 1.0, 1, xi, xi, n, slam.maintenance.turn_of(i))
         eta = 1 if poly.variate == 1 else 0

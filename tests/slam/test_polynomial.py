@@ -79,10 +79,11 @@ def test_polyval__bit_identical_to_numpys(
     coeffs: list[float], x: list[float], derivative: int
 ) -> None:
     # polyval repeats numpy's operations without their checks: the very same floats, for a
-    # scalar, a list and an array, any derivative (one past the order gives numpy's zero)
+    # scalar (a Python or a numpy float: polyval's float path), a list and an array, any
+    # derivative (one past the order gives numpy's zero)
     c = np.array(coeffs)
     want = np.polynomial.polynomial.polyder(c, derivative) if derivative else c
-    for at in (x[0], x, np.array(x)):
+    for at in (x[0], np.float64(x[0]), x, np.array(x)):
         expected = np.polynomial.polynomial.polyval(at, want)
         got = polyval(at, c, derivative)
         np.testing.assert_array_equal(got, expected, strict=True)
