@@ -23,16 +23,17 @@ reasons. SuperSuit's ``concat_vec_envs_v1`` seeds worker ``i`` with ``seed + i``
 ``k``-th env copy with that plus ``k``: with more copies than workers two copies got the same
 seed (4 copies on 2 workers: ``s, s+1, s+1, s+2``), and so the same maps and layouts for the
 whole run. Here copy ``k`` gets ``seed + k`` with any number of workers (:class:`_Copies`), as
-in one process. And each worker plays one step of a copy as soon as it is forked
-(:func:`_worker_copies`), so that it loads its compiled kernels while the parent builds the
-model (PPO's build imports ``torch._dynamo``, seconds) instead of at the first reset, when the
-parent waits for it; the seeded reset that follows starts the episode afresh. SuperSuit's
+in one process. And each worker plays one step of a copy in a thread as soon as it is built
+(:meth:`_Copies.warm`), so that it loads its compiled kernels while the parent builds the model
+(PPO's build imports ``torch._dynamo``, seconds) instead of at the first reset, when the parent
+waits for it; the seeded reset that follows starts the episode afresh. SuperSuit's
 constructor also built one more copy in the parent only to read its metadata.
 """
 
 from __future__ import annotations
 
 import functools
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -250,23 +251,61 @@ def vectorise(
 class _Copies(ConcatVecEnv):
     """One worker's env copies, ``first`` … of all: a seeded reset gives copy ``first + k`` the
     seed ``seed + first + k`` (module doc). ``ProcConcatVec`` hands worker ``i`` the seed
-    ``seed + i``, so ``offset = first − i``."""
+    ``seed + i``, so ``offset = first − i``.
+
+    :meth:`warm` resets and steps the first copy once (zero actions) in a thread, so that the
+    worker loads its compiled kernels while it waits for its first instruction; every method
+    that touches the copies waits for that thread first (and raises what it raised)."""
 
     def __init__(self, copies: list[Callable[[], Any]], offset: int) -> None:
         super().__init__(copies)
         self.offset = offset
+        self._warming: threading.Thread | None = None
+        self._warm_error: BaseException | None = None
+
+    def warm(self) -> None:
+        """Start the first copy's warm-up step (class doc)."""
+
+        def play() -> None:
+            try:
+                first = self.vec_envs[0]
+                first.reset(seed=0)
+                first.step(create_empty_array(first.action_space, n=first.num_envs))
+            except BaseException as error:  # raised again by the next call that waits
+                self._warm_error = error
+
+        self._warming = threading.Thread(target=play, name="polyslam-warm-up", daemon=True)
+        self._warming.start()
+
+    def _ready(self) -> None:
+        if self._warming is not None:
+            self._warming.join()
+            self._warming = None
+            if self._warm_error is not None:
+                raise self._warm_error
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+        self._ready()
         return super().reset(seed=None if seed is None else seed + self.offset, options=options)
+
+    def step(self, actions: Any) -> Any:
+        self._ready()
+        return super().step(actions)
+
+    def render(self) -> Any:
+        self._ready()
+        return super().render()
+
+    def close(self) -> None:
+        self._ready()
+        super().close()
 
 
 def _worker_copies(markov: Any, count: int, offset: int) -> _Copies:
-    """In a worker process: ``count`` copies of ``markov``, the first reset and stepped once
-    with zero actions (its kernels loaded: module doc)."""
+    """In a worker process: ``count`` copies of ``markov``, the first warming up (its kernels
+    loaded while the parent builds the model: module doc)."""
     copies = _Copies(vec_env_args(markov, count)[0], offset)  # SuperSuit's own copies
-    first = copies.vec_envs[0]
-    first.reset(seed=0)
-    first.step(create_empty_array(first.action_space, n=first.num_envs))
+    copies.warm()
     return copies
 
 
