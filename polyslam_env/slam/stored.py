@@ -202,17 +202,24 @@ class StoredPoints:
         n = len(self)
         if n == 0:
             return
-        index = self.index
-        order = np.lexsort((index[RANK, :n], index[OWNER, :n], index[KIND, :n]))
         bx, by, dtheta = float(before[0]), float(before[1]), float(after[2] - before[2])
         ax, ay = float(after[0]), float(after[1])
         c, s = math.cos(dtheta), math.sin(dtheta)
-        rows = np.ascontiguousarray(self.real[X : PTH + 1, order].T)  # (n, 7)
-        rows = rows - np.array([bx, by, 0.0, 0.0, bx, by, 0.0])
-        motion = np.zeros((7, 7))  # Rᵀ on xy, direction and pose xy (row vectors times Rᵀ)
-        motion[0, :2] = motion[2, 2:4] = motion[4, 4:6] = c, s
-        motion[1, :2] = motion[3, 2:4] = motion[5, 4:6] = -s, c
-        motion[6, 6] = 1.0
+        # One row per point, in storage order: the product computes each row alone (BLAS's
+        # gemm runs the same multiply-adds for a row wherever it sits), so no sorting.
+        rows = np.ascontiguousarray(self.real[X : PTH + 1, :n].T)  # (n, 7)
+        rows -= (bx, by, 0.0, 0.0, bx, by, 0.0)
+        motion = np.array(
+            [  # Rᵀ on xy, direction and pose xy (row vectors times Rᵀ)
+                [c, s, 0.0, 0.0, 0.0, 0.0, 0.0],
+                [-s, c, 0.0, 0.0, 0.0, 0.0, 0.0],
+                [0.0, 0.0, c, s, 0.0, 0.0, 0.0],
+                [0.0, 0.0, -s, c, 0.0, 0.0, 0.0],
+                [0.0, 0.0, 0.0, 0.0, c, s, 0.0],
+                [0.0, 0.0, 0.0, 0.0, -s, c, 0.0],
+                [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+            ]
+        )
         rows = rows @ motion
-        rows += np.array([ax, ay, 0.0, 0.0, ax, ay, dtheta])
-        self.real[X : PTH + 1, order] = rows.T
+        rows += (ax, ay, 0.0, 0.0, ax, ay, dtheta)
+        self.real[X : PTH + 1, :n] = rows.T
