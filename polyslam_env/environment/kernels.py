@@ -1,5 +1,5 @@
-"""Compiled kernels of the observations: the egocentric local map's occupied and free cells,
-and the vector observation's parts.
+"""Compiled kernels of the observations: the robots' map points shifted by their c0s, the
+egocentric local map's occupied and free cells, and the vector observation's parts.
 
 Plain loops compiled by :func:`polyslam_env.core.jit.njit`, with the same float operations in
 the same order as the numpy version they replaced (the oracle in
@@ -16,6 +16,26 @@ import numpy as np
 
 from polyslam_env.core.jit import njit
 from polyslam_env.core.raster import cell_id
+
+
+@njit
+def shifted_points(
+    points: np.ndarray,
+    owner: np.ndarray,
+    axis: np.ndarray,
+    mean: np.ndarray,
+    c0: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """A map sampler's cached ``points`` (M, 2) at the c0s they were sampled with, ``c0`` (n,),
+    moved to the c0s of the state ``mean`` (its ``3 + o`` entry for landmark o), written into
+    ``out`` (M, 2): point m's dependent coordinate ``axis[m]`` (0 or 1) of landmark
+    ``owner[m]`` gains ``mean[3 + o] − c0[o]`` (as ``points[m, axis] + (c0s − c0)[owner]``)."""
+    for m in range(points.shape[0]):
+        o = owner[m]
+        out[m, 0] = points[m, 0]
+        out[m, 1] = points[m, 1]
+        out[m, axis[m]] += mean[3 + o] - c0[o]
 
 
 @njit

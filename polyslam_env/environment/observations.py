@@ -226,15 +226,23 @@ class MapSampler:
         self._start, self._count = first, count
         self._table, self._version = table, table.version
 
-    def points(self, slam: PolySlam) -> np.ndarray:  # (M, 2)
-        """All map points of ``slam`` in its frame."""
+    def count(self, slam: PolySlam) -> int:
+        """How many points :meth:`points` of ``slam`` gives (resampling first if the map's
+        table changed)."""
         table = slam.table
         if table is not self._table or table.version != self._version:
             self._rebuild(slam)
-        out = self._points.copy()
-        if len(out):
-            shift = (slam.c0s - self._c0)[self._owner]  # (M,)
-            out[self._rows, self._axis] += shift
+        return len(self._points)
+
+    def write(self, slam: PolySlam, out: np.ndarray) -> None:
+        """:meth:`points` of ``slam`` written into ``out`` (:meth:`count`, 2), which must be
+        called first (its resampling is not repeated here)."""
+        kernels.shifted_points(self._points, self._owner, self._axis, slam.mean, self._c0, out)
+
+    def points(self, slam: PolySlam) -> np.ndarray:  # (M, 2)
+        """All map points of ``slam`` in its frame."""
+        out = np.empty((self.count(slam), 2))
+        self.write(slam, out)
         return out
 
 

@@ -246,25 +246,26 @@ def observe(
         sweep_beliefs(grids, poses[sweeping], state.angles, state.sensing.ranges[sweeping])
     if not robots:
         return {}
-    stds = np.sqrt(np.maximum(covs[robots].diagonal(axis1=1, axis2=2), 0.0))  # (K, 3)
-    maps = [state.slam.map_points(i) for i in robots]
-    starts = np.zeros(len(robots) + 1, dtype=np.int64)
-    starts[1:] = np.array([len(m) for m in maps], dtype=np.int64).cumsum()
+    # every robot acting (the usual case): views of the team's arrays, not copies
+    every = robots == list(range(len(active)))
+    pick: slice | list[int] = slice(None) if every else robots
+    stds = np.sqrt(np.maximum(covs[pick].diagonal(axis1=1, axis2=2), 0.0))  # (K, 3)
+    map_points, starts = state.slam.team_map_points(robots)
     camera = state.sensing.camera
-    last = state.last_rendezvous[robots]
+    last = state.last_rendezvous[pick]
     team = TeamView(
-        ranges=state.sensing.ranges[robots],
-        poses=poses[robots],
+        ranges=state.sensing.ranges[pick],
+        poses=poses[pick],
         pose_stds=stds,
-        map_points=np.concatenate(maps),
+        map_points=map_points,
         map_starts=starts,
         belief=state.beliefs[0],  # a team's grids are rows of one stack (belief_grids)
-        belief_rows=np.asarray(robots, dtype=np.int64),
-        seen=camera.seen[robots],
-        distance=camera.distance[robots],
-        bearing=camera.bearing[robots],
+        belief_rows=np.array(robots, dtype=np.int64),
+        seen=camera.seen[pick],
+        distance=camera.distance[pick],
+        bearing=camera.bearing[pick],
         since=np.where(last == NEVER, NEVER, state.step_count - last),
-        rendezvous=state.rendezvous[robots],
+        rendezvous=state.rendezvous[pick],
         step=np.full(len(robots), state.step_count, dtype=np.int64),
     )
     return dict(zip(acting, encoder.encode_team(team), strict=True))
