@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from polyslam_env.slam import map_kernels
 from polyslam_env.slam.columns import (
     BEAM,
     CLUSTER,
@@ -202,12 +203,15 @@ class StoredPoints:
         n = len(self)
         if n == 0:
             return
-        bx, by, dtheta = float(before[0]), float(before[1]), float(after[2] - before[2])
-        ax, ay = float(after[0]), float(after[1])
+        dtheta = float(after[2] - before[2])
         c, s = math.cos(dtheta), math.sin(dtheta)
-        # One row per point, in storage order: the product computes each row alone (BLAS's
-        # gemm runs the same multiply-adds for a row wherever it sits), so no sorting.
-        rows = np.ascontiguousarray(self.real[X : PTH + 1, :n].T)  # (n, 7)
+        if n > 1:  # as numpy's (n, 7) × (7, 7) product computed it (BLAS gemm), compiled
+            map_kernels.carry_points(self.real, n, before, after, c, s)
+            return
+        # A lone point: numpy's product of one row is BLAS's gemv, which rounds differently
+        # from gemm's chain of fused multiply-adds; kept as it was.
+        bx, by, ax, ay = float(before[0]), float(before[1]), float(after[0]), float(after[1])
+        rows = np.ascontiguousarray(self.real[X : PTH + 1, :n].T)  # (1, 7)
         rows -= (bx, by, 0.0, 0.0, bx, by, 0.0)
         motion = np.array(
             [  # Rᵀ on xy, direction and pose xy (row vectors times Rᵀ)
