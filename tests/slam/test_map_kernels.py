@@ -5,7 +5,6 @@ bit (``tests/slam/reference_association.py``; the association itself is checked 
 from __future__ import annotations
 
 import math
-from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -17,6 +16,7 @@ from polyslam_env.slam import map_kernels
 from polyslam_env.slam.maintenance import fit_inverse_table as _fit_inverse_table
 from polyslam_env.slam.polynomial import Polynomial
 from tests.slam import reference_association as oracle
+from tests.slam import reference_floats as oracle_floats
 
 
 def test_symmetric_eigvals3__bit_identical_to_python_floats() -> None:
@@ -92,18 +92,6 @@ def test_equally_spaced__bit_identical_to_points_at_of_linspace() -> None:
             assert got.tobytes() == want.tobytes()
 
 
-def _fma_exact(a: float, b: float, c: float) -> float:
-    """a·b + c rounded once (IEEE 754): exact rationals, and an exact zero signed as IEEE's
-    sum of a zero product and a zero addend is (−0 only for −0 + −0)."""
-    exact = Fraction(a) * Fraction(b) + Fraction(c)
-    if exact != 0:
-        return float(exact)
-    if (a == 0.0 or b == 0.0) and c == 0.0:
-        negative = math.copysign(1.0, a) * math.copysign(1.0, b) < 0 and math.copysign(1.0, c) < 0
-        return -0.0 if negative else 0.0
-    return 0.0  # non-zero terms cancelling exactly: +0 when rounding to nearest
-
-
 def _carry_exact(real: np.ndarray, n: int, before: np.ndarray, after: np.ndarray) -> np.ndarray:
     """The oracle of ``carry_points``: each output a chain of correctly rounded fused
     multiply-adds along the seven inputs (exact rationals, one rounding per step), as
@@ -122,7 +110,7 @@ def _carry_exact(real: np.ndarray, n: int, before: np.ndarray, after: np.ndarray
         for j in range(7):
             acc = 0.0
             for k in range(7):
-                acc = _fma_exact(row[k], motion[k][j], acc)
+                acc = oracle_floats.fma_exact(row[k], motion[k][j], acc)
             out[j, i] = acc + shift_out[j]
     return out
 
