@@ -180,14 +180,17 @@ def record(
     slots = world.active[of].nonzero()[0]  # (K,)
     if not len(slots):
         return
-    live = of[slots]  # (K,) their robots
-    seen = ok[live]  # (K, B)
     times = np.array([np.nan if i is None else i.time_s for i in slam_infos])  # (J,)
     diverging = np.array([i is not None and i.diverging for i in slam_infos], dtype=bool)
     est, cov = estimates
+    rows: slice | np.ndarray = slots  # the slots' rows of the per-slot arrays
+    live: slice | np.ndarray = of[slots]  # (K,) their robots' rows of the world's arrays
+    if len(slots) == len(poses) and (of == slots).all():  # every robot, in order: views
+        rows = live = slice(None)
+    seen = ok[live]  # (K, B)
     history.record(
-        slots, poses[live], est[slots], cov[slots], ends[live][seen],
-        slots.repeat(seen.sum(axis=1)), times[slots], collided[live], diverging[slots],
+        slots, poses[live], est[rows], cov[rows], ends[live][seen],
+        slots.repeat(seen.sum(axis=1)), times[rows], collided[live], diverging[rows],
     )  # fmt: skip
 
 
