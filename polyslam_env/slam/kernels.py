@@ -1490,6 +1490,18 @@ def update_scan(
 
 
 @njit
+def _fma_product3(a: np.ndarray, b: np.ndarray, transposed: bool, out: np.ndarray) -> None:
+    """``out`` = a b (or a bᵀ when ``transposed``) of 3 × 3 matrices, each entry a chain of
+    fused multiply-adds along the inner index from 0, as OpenBLAS's FMA gemm kernels run it."""
+    for r in range(3):
+        for c in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc = fma(a[r, k], b[c, k] if transposed else b[k, c], acc)
+            out[r, c] = acc
+
+
+@njit
 def start_error_covs(poses: np.ndarray, p0: np.ndarray, out: np.ndarray) -> None:
     """J P0 Jᵀ of each pose (K, ≥2) into ``out`` (K, 3, 3), symmetrised as ½(C + Cᵀ), with
     J = [[1, 0, −y], [0, 1, x], [0, 0, 1]] (:func:`~polyslam_env.slam.ekf.start_error_covs`).
@@ -1502,18 +1514,8 @@ def start_error_covs(poses: np.ndarray, p0: np.ndarray, out: np.ndarray) -> None
         jac[0, 0] = jac[1, 1] = jac[2, 2] = 1.0
         jac[0, 2] = -poses[i, 1]
         jac[1, 2] = poses[i, 0]
-        for r in range(3):
-            for c in range(3):
-                acc = 0.0
-                for k in range(3):
-                    acc = fma(jac[r, k], p0[k, c], acc)
-                left[r, c] = acc
-        for r in range(3):
-            for c in range(3):
-                acc = 0.0
-                for k in range(3):
-                    acc = fma(left[r, k], jac[c, k], acc)
-                both[r, c] = acc
+        _fma_product3(jac, p0, False, left)
+        _fma_product3(left, jac, True, both)
         for r in range(3):
             for c in range(3):
                 out[i, r, c] = 0.5 * (both[r, c] + both[c, r])
