@@ -125,7 +125,8 @@ class TeamFrontierPolicy(FrontierPolicy):
         self._areas_received = 0
 
     def metrics(self) -> dict[str, float]:
-        """The goal messages of the episode so far: sent, their bytes, received."""
+        """The goal messages of the episode so far: sent, their bytes, received, and the
+        explored areas received."""
         i = self.context.index
         return {
             "goal_messages_sent": float(self.radio.messages_sent[i]),
