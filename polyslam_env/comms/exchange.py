@@ -39,7 +39,10 @@ variance of their offset along the curve's normal (:func:`normal_variance`):
   {0, 1}): the better estimate alone. So where a held landmark is at least as good, the
   piece's points it covers are dropped; only the uncovered runs of the chain (at least
   ``merge_min_overlap`` long) are refitted and fused in turn. A received polynomial thus never
-  overwrites or moves a better own one, and fusing the same message twice changes nothing;
+  overwrites or moves a better own one, and fusing the same message twice changes nothing.
+  Checked first on the received chain: where held walls no worse than any refit of it could
+  be (:func:`refit_variance_floor`) cover all its kept points, it is not refitted at all
+  (:attr:`RendezvousExchange.covered`);
 * rule 2, a newer version replaces the older: when the piece is better than every held
   landmark of its wall, those holding data from the same sender (an earlier version it sent,
   or a merge with one; provenance is kept per landmark and carried over the receiver's refits
@@ -205,7 +208,9 @@ class DeliveredMessage:
     sent_step: int
     delivered_step: int
     attempts: int
-    received: tuple[Polynomial, ...]  # refits in the receiver's frame, before any merge
+    # refits in the receiver's frame, before any merge (a record that better held walls cover
+    # wholly has none: RendezvousExchange.covered)
+    received: tuple[Polynomial, ...]
     landmark_ids: tuple[int, ...]  # receiver's landmarks holding them after the merge check
 
 
