@@ -193,22 +193,40 @@ def join_gamma(poly: Polynomial, other: Polynomial, max_gap: float) -> float | N
     :data:`JOIN_ANGLE_DEG`; the offset is the larger distance of each end point from the other
     curve's tangent line at its end, and must be at most :data:`THIN_WALL`.
     """
-    ends_p = poly.points_at(np.array([poly.lo, poly.hi]))  # (2, 2)
-    ends_o = other.points_at(np.array([other.lo, other.hi]))
-    gaps = np.linalg.norm(ends_p[:, None, :] - ends_o[None, :, :], axis=2)  # (2, 2)
-    i, k = np.unravel_index(int(np.argmin(gaps)), gaps.shape)
-    if gaps[i, k] > max_gap:
+    ends_p, ends_o = _ends(poly), _ends(other)
+    # the end-point gaps in plain floats, in C order, the first smallest (np.argmin's pick,
+    # a NaN first of all): the array form's values (its norm is √(dx² + dy²) summed in order)
+    gaps = [
+        (math.sqrt((px - ox) * (px - ox) + (py - oy) * (py - oy)), a, b)
+        for a, (px, py) in enumerate(ends_p)
+        for b, (ox, oy) in enumerate(ends_o)
+    ]
+    gap, i, k = next((g for g in gaps if math.isnan(g[0])), None) or min(gaps, key=_first)
+    if gap > max_gap:
         return None
     t_p = unit_tangent(poly, poly.lo if i == 0 else poly.hi)
     t_o = unit_tangent(other, other.lo if k == 0 else other.hi)
     if np.degrees(np.arccos(min(abs(float(t_p @ t_o)), 1.0))) > JOIN_ANGLE_DEG:
         return None
-    delta = ends_o[k] - ends_p[i]
+    delta = (ends_o[k][0] - ends_p[i][0], ends_o[k][1] - ends_p[i][1])
     offset = max(abs(_cross(t_p, delta)), abs(_cross(t_o, delta)))
     return offset if offset <= THIN_WALL else None
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> float:
+def _ends(poly: Polynomial) -> list[tuple[float, float]]:
+    """The curve's points (x¹, x²) at lo and hi in plain floats (``points_at``'s values)."""
+    out = []
+    for xi in (float(poly.lo), float(poly.hi)):
+        eta = float(poly.value(xi))
+        out.append((xi, eta) if poly.variate == 1 else (eta, xi))
+    return out
+
+
+def _first(gap: tuple[float, int, int]) -> float:
+    return gap[0]
+
+
+def _cross(a: np.ndarray, b: np.ndarray | tuple[float, float]) -> float:
     return float(a[0] * b[1] - a[1] * b[0])
 
 
