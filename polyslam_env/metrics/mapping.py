@@ -29,11 +29,10 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy import special
-from scipy.spatial import cKDTree
 
 from polyslam_env.core.geometry import transform_points
 from polyslam_env.metrics.boundary import boundary_samples, distance_to_boundary
-from polyslam_env.metrics.kernels import covered, sample_rows
+from polyslam_env.metrics.kernels import covered, parallel_neighbours, sample_rows
 from polyslam_env.metrics.pose import _check_pose
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
@@ -264,8 +263,7 @@ def seen_boundary(
     hits = hits[np.all(np.isfinite(hits), axis=1)]
     if len(hits) == 0:
         return bpts[:0], weights[:0]
-    d, _ = cKDTree(hits).query(bpts, k=1, distance_upper_bound=radius)
-    seen = np.isfinite(d)
+    seen = covered(bpts, np.ascontiguousarray(hits), float(radius))
     return bpts[seen], weights[seen]
 
 
@@ -300,8 +298,8 @@ def _completeness_seen(
     total = float(weights.sum())
     if len(starts) == 1 or total == 0.0:
         return 0.0
-    d, _ = cKDTree(points).query(bpts, k=1, distance_upper_bound=tol)
-    return float(weights[np.isfinite(d)].sum()) / total
+    near = covered(bpts, np.ascontiguousarray(points, dtype=float), float(tol))
+    return float(weights[near].sum()) / total
 
 
 #: Distance (m) and angle (rad) within which a piece of map duplicates another polynomial: the
@@ -331,14 +329,10 @@ def duplicates(
     tangent = _tangents(pts, counts)
     norm = np.linalg.norm(tangent, axis=1, keepdims=True)  # 0: a zero-extent polynomial
     tangent = np.divide(tangent, norm, out=np.zeros_like(tangent), where=norm > 0)
-    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")  # (P, 2)
     has_dir = norm[:, 0] > 0
-    pairs = pairs[(owner[pairs[:, 0]] != owner[pairs[:, 1]]) & has_dir[pairs].all(axis=1)]
-    ta, tb = tangent[pairs[:, 0]], tangent[pairs[:, 1]]
-    cross = np.abs(ta[:, 0] * tb[:, 1] - ta[:, 1] * tb[:, 0])
-    pairs = pairs[cross <= np.sin(angle)]
-    marked = np.zeros(len(pts), dtype=bool)
-    marked[pairs.ravel()] = True
+    marked = parallel_neighbours(
+        np.ascontiguousarray(pts), owner, tangent, has_dir, float(tol), float(np.sin(angle))
+    )
     return float(np.count_nonzero(marked)) / len(pts)
 
 
