@@ -375,7 +375,8 @@ class MapMaintenance:
         the kernels' frozen-shape model) over (1 + b'²)², the slope-to-angle factor at the
         centroid (:func:`~polyslam_env.slam.map_kernels.rotation_fit_var`)."""
         cfg = self.config
-        order = max(len(np.trim_zeros(np.asarray(poly.coeffs[1:], dtype=float), "b")), 1)
+        used = np.flatnonzero(poly.coeffs[1:])  # the shape without its zero tail
+        order = max(int(used[-1]) + 1 if used.size else 0, 1)
         shape = np.zeros(poly.order + 1)
         shape[1:] = poly.coeffs[1:]
         inverse = fit_inverse_table(cfg.eps_z + 1, cfg.order)
