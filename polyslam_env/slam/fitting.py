@@ -250,7 +250,8 @@ def polynomial_points(
         turn_index, pivot = turn
         if not 3 <= turn_index < n_state or turn_index == c0_index:
             raise ValueError(f"turn index must be another state index, got {turn_index}")
-        centre = poly.points_at(np.array([pivot]))[0]  # (2,)
+        at = float(pivot)  # the curve's point there: points_at's floats, one compiled call
+        centre = map_kernels.equally_spaced(poly.coeffs, poly.variate, at, at, 1)[0]  # (2,)
         d_state[:, :, turn_index] = (xy - centre) @ J_ROT.T
     return PointSet(
         xy=xy,
