@@ -257,14 +257,19 @@ def seen_boundary(
     layout: Layout, hit_points_abs: np.ndarray, radius: float = SEEN_RADIUS, step: float = 0.01
 ) -> tuple[np.ndarray, np.ndarray]:
     """The boundary samples (M, 2) within ``radius`` of a true beam hit (H, 2), absolute, and
-    their lengths (M,); non-finite hits are ignored."""
+    their lengths (M,), read-only; non-finite hits are ignored."""
     bpts, weights = boundary_samples(layout, step)
     hits = np.asarray(hit_points_abs, dtype=float).reshape(-1, 2)
     hits = hits[np.all(np.isfinite(hits), axis=1)]
     if len(hits) == 0:
         return bpts[:0], weights[:0]
     seen = covered(bpts, np.ascontiguousarray(hits), float(radius))
-    return bpts[seen], weights[seen]
+    seen_pts, seen_weights = bpts[seen], weights[seen]
+    # read-only like the cached samples: one compiled specialisation of ``covered`` serves
+    # both (numba types a read-only array apart; each is loaded once per process)
+    seen_pts.setflags(write=False)
+    seen_weights.setflags(write=False)
+    return seen_pts, seen_weights
 
 
 def completeness_seen(
