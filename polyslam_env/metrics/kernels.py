@@ -14,9 +14,12 @@
   the float operations of :meth:`~polyslam_env.slam.polynomial.Polynomial.sample_arclength`
   in the same order (numpy's ``linspace``, Horner's ``polyval``, ``diff``, the norm as the sum
   of two squares, ``cumsum`` and ``interp``), so the points are bit-identical to it.
+* :func:`record_rows`: one step of a team's history (poses, covariances, SLAM times, path
+  length, collisions, divergence flags) written for every recorded slot in one call, the
+  path length's step with libm's ``hypot`` as ``np.hypot`` computes it.
 
-Oracles: brute force over all segments and all points, and ``Polynomial.sample_arclength``
-(``tests/metrics/test_kernels.py``).
+Oracles: brute force over all segments and all points, ``Polynomial.sample_arclength`` and
+the numpy form of the history's record (``tests/metrics/test_kernels.py``).
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ import numpy as np
 from polyslam_env.core.jit import njit
 from polyslam_env.world.kernels import _segment_distance
 
-__all__ = ["covered", "parallel_neighbours", "sample_rows", "wall_distances"]
+__all__ = ["covered", "parallel_neighbours", "record_rows", "sample_rows", "wall_distances"]
 
 #: Most buckets a side in :func:`covered`.
 _MAX_BUCKETS = 256
@@ -294,3 +297,49 @@ def sample_rows(
     for q in range(q_count):
         out[starts[q] : starts[q + 1]] = chunks[q]
     return out, starts
+
+
+@njit
+def record_rows(
+    slots: np.ndarray,
+    true_poses: np.ndarray,
+    est_poses: np.ndarray,
+    est_covs: np.ndarray,
+    slam_times: np.ndarray,
+    collided: np.ndarray,
+    diverging: np.ndarray,
+    lengths: np.ndarray,
+    true: np.ndarray,
+    est: np.ndarray,
+    cov: np.ndarray,
+    times: np.ndarray,
+    path_length: np.ndarray,
+    collisions: np.ndarray,
+    diverged: np.ndarray,
+    diverged_at: np.ndarray,
+) -> None:
+    """Append one step to slots ``slots`` (K,) of a team history (changes its arrays): slot
+    ``j = slots[k]`` writes row ``lengths[j]`` of ``true``, ``est`` (capacity, J, 3), ``cov``
+    (capacity, J, 3, 3) and ``times`` (capacity, J) from row k of ``true_poses``,
+    ``est_poses`` (K, 3), ``est_covs`` (K, 3, 3) and ``slam_times`` (K,); adds the true step's
+    length to ``path_length[j]``, ``collided[k]`` to ``collisions[j]``; ``diverging[k]`` sets
+    ``diverged[j]`` and, the first time, ``diverged_at[j]`` to the row; then counts the row
+    in ``lengths``. The caller makes room first (capacity > every ``lengths[j]``)."""
+    for k in range(slots.shape[0]):
+        j = slots[k]
+        row = lengths[j]
+        dx = true_poses[k, 0] - true[row - 1, j, 0]
+        dy = true_poses[k, 1] - true[row - 1, j, 1]
+        path_length[j] += math.hypot(dx, dy)
+        for a in range(3):
+            true[row, j, a] = true_poses[k, a]
+            est[row, j, a] = est_poses[k, a]
+            for b in range(3):
+                cov[row, j, a, b] = est_covs[k, a, b]
+        times[row, j] = slam_times[k]
+        if collided[k]:
+            collisions[j] += 1
+        if diverging[k] and not diverged[j]:
+            diverged[j] = True
+            diverged_at[j] = row
+        lengths[j] = row + 1

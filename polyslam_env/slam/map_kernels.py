@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from polyslam_env.core.geometry import symmetric_eigvals3
-from polyslam_env.core.jit import njit
+from polyslam_env.core.jit import fma, njit
 from polyslam_env.slam.columns import (
     BEAM,
     CHANGED_AT,
@@ -96,6 +96,39 @@ POSE_VAR_FLOOR = 1e-12
 
 
 # -- small pieces ---------------------------------------------------------------------------------
+@njit
+def carry_points(
+    real: np.ndarray, n: int, before: np.ndarray, after: np.ndarray, c: float, s: float
+) -> None:
+    """Move the first ``n`` stored points of ``real`` (the stored points' float buffer)
+    rigidly from pose ``before`` (3,) to ``after`` (3,) (:meth:`~polyslam_env.slam.stored.
+    StoredPoints.carry`; ``c``, ``s`` the cosine and sine of the heading's change dθ):
+    position and pose position ``(p − b) Rᵀ + a``, direction ``u Rᵀ``, pose heading ``+ dθ``.
+
+    Each row times Rᵀ is computed as the BLAS product it replaced computed it (a (n, 7) ×
+    (7, 7) gemm of OpenBLAS's FMA kernels, the goldens' pinned Haswell): per output, a chain
+    of fused multiply-adds along the seven inputs from 0, the motion's zeros included (they
+    settle the sign of an exact zero)."""
+    dtheta = after[2] - before[2]
+    motion = np.zeros((7, 7))
+    motion[0, 0] = motion[2, 2] = motion[4, 4] = c
+    motion[0, 1] = motion[2, 3] = motion[4, 5] = s
+    motion[1, 0] = motion[3, 2] = motion[5, 4] = -s
+    motion[1, 1] = motion[3, 3] = motion[5, 5] = c
+    motion[6, 6] = 1.0
+    shift_in = (before[0], before[1], 0.0, 0.0, before[0], before[1], 0.0)
+    shift_out = (after[0], after[1], 0.0, 0.0, after[0], after[1], dtheta)
+    row = np.empty(7)
+    for i in range(n):
+        for k in range(7):
+            row[k] = real[X + k, i] - shift_in[k]
+        for j in range(7):
+            acc = 0.0
+            for k in range(7):
+                acc = fma(row[k], motion[k, j], acc)
+            real[X + j, i] = acc + shift_out[j]
+
+
 @njit
 def spectral_norm3(p: np.ndarray) -> float:
     """‖P‖₂ of the symmetric 3×3 block at the top left of ``p``: its largest |eigenvalue|

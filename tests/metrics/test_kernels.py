@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from polyslam_env.metrics.boundary import distance_to_boundary
-from polyslam_env.metrics.kernels import covered, parallel_neighbours, sample_rows, wall_distances
+from polyslam_env.metrics.kernels import (
+    covered,
+    parallel_neighbours,
+    record_rows,
+    sample_rows,
+    wall_distances,
+)
 from polyslam_env.slam.landmarks import PackedPolynomials
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.generators import make_generator
@@ -157,3 +163,56 @@ def test_covered__equals_the_kd_tree_query_within_its_bound() -> None:
     for tol in (0.05, 0.15):
         d, _ = cKDTree(points).query(samples, k=1, distance_upper_bound=tol)
         assert np.array_equal(covered(samples, points, tol), np.isfinite(d))
+
+
+def _record_rows_numpy(
+    slots: np.ndarray, true_poses: np.ndarray, est_poses: np.ndarray, est_covs: np.ndarray,
+    slam_times: np.ndarray, collided: np.ndarray, diverging: np.ndarray, h: dict[str, np.ndarray],
+) -> None:  # fmt: skip
+    """The oracle: ``TeamHistory.record``'s numpy form before the kernel (fancy indexing)."""
+    rows = h["lengths"][slots]
+    last = h["true"][rows - 1, slots]
+    step = np.hypot(true_poses[:, 0] - last[:, 0], true_poses[:, 1] - last[:, 1])
+    h["path_length"][slots] += step
+    h["true"][rows, slots] = true_poses
+    h["est"][rows, slots] = est_poses
+    h["cov"][rows, slots] = est_covs
+    h["times"][rows, slots] = slam_times
+    h["collisions"][slots] += collided
+    first = diverging & ~h["diverged"][slots]
+    h["diverged_at"][slots[first]] = rows[first]
+    h["diverged"][slots] |= diverging
+    h["lengths"][slots] = rows + 1
+
+
+def test_record_rows__equals_the_numpy_record_bit_for_bit() -> None:
+    rng = np.random.default_rng(7)
+    j, capacity = 5, 40
+    start = rng.normal(size=(j, 3)) * 20.0
+    fresh = {
+        "lengths": np.ones(j, dtype=np.int64),
+        "true": np.zeros((capacity, j, 3)),
+        "est": np.zeros((capacity, j, 3)),
+        "cov": np.zeros((capacity, j, 3, 3)),
+        "times": np.full((capacity, j), np.nan),
+        "path_length": np.zeros(j),
+        "collisions": np.zeros(j, dtype=np.int64),
+        "diverged": np.zeros(j, dtype=bool),
+        "diverged_at": np.full(j, -1, dtype=np.int64),
+    }
+    fresh["true"][0] = start
+    ours = {name: a.copy() for name, a in fresh.items()}
+    oracle = {name: a.copy() for name, a in fresh.items()}
+    for _ in range(30):  # steps recording a random ascending subset of slots
+        slots = np.flatnonzero(rng.random(j) < 0.7)
+        k = len(slots)
+        args = (
+            slots, rng.normal(size=(k, 3)) * 20.0, rng.normal(size=(k, 3)),
+            rng.normal(size=(k, 3, 3)), np.where(rng.random(k) < 0.3, np.nan, rng.random(k)),
+            rng.random(k) < 0.3, rng.random(k) < 0.1,
+        )  # fmt: skip
+        record_rows(*args, *ours.values())
+        _record_rows_numpy(*args, oracle)
+    for name in fresh:
+        np.testing.assert_array_equal(ours[name], oracle[name], err_msg=name, strict=True)
+    assert ours["diverged"].any() and ours["collisions"].any()  # the flags were exercised

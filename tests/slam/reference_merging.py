@@ -84,10 +84,8 @@ def max_slope(poly: Polynomial) -> float:
 
 
 def join_gamma(poly: Polynomial, other: Polynomial, max_gap: float) -> float | None:
-    """``merging.join_gamma`` as it was computed in numpy (the oracle of
-    ``map_kernels.join_offset``): the lateral offset of two pieces meeting end to end, None
-    when their nearer ends are farther than ``max_gap``, their tangents there turn by more
-    than ``JOIN_ANGLE_DEG`` or the offset exceeds ``THIN_WALL``."""
+    """``merging.join_gamma`` on numpy arrays, as it was before its end points went to plain
+    floats (the oracle, bit for bit; of ``map_kernels.join_offset`` since)."""
     ends_p = poly.points_at(np.array([poly.lo, poly.hi]))  # (2, 2)
     ends_o = other.points_at(np.array([other.lo, other.hi]))
     gaps = np.linalg.norm(ends_p[:, None, :] - ends_o[None, :, :], axis=2)  # (2, 2)
@@ -99,8 +97,6 @@ def join_gamma(poly: Polynomial, other: Polynomial, max_gap: float) -> float | N
     if np.degrees(np.arccos(min(abs(float(t_p @ t_o)), 1.0))) > JOIN_ANGLE_DEG:
         return None
     delta = ends_o[k] - ends_p[i]
-    offset = max(
-        abs(float(t_p[0] * delta[1] - t_p[1] * delta[0])),
-        abs(float(t_o[0] * delta[1] - t_o[1] * delta[0])),
-    )
+    cross = [float(t[0] * delta[1] - t[1] * delta[0]) for t in (t_p, t_o)]
+    offset = max(abs(cross[0]), abs(cross[1]))
     return offset if offset <= THIN_WALL else None
