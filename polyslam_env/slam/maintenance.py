@@ -93,7 +93,9 @@ class MapMaintenance:
         poly = clip_to_evidence(fit.poly, evidence)
         clone = cfg.rotation_states and source.gradient is None  # its fit's own slope error
         fit_var = self.rotation_fit_var(poly) if clone else 0.0
-        shift_slope = math.nan if received else self.shift_slope(fit, n)
+        # only the step's shape_shift "pose" model reads a landmark's shift slope
+        shifted = cfg.shape_shift == "pose" and not received
+        shift_slope = self.shift_slope(fit, n) if shifted else math.nan
         slam.mean, slam.cov = slam.layout.add(slam.mean, slam.cov, n, fit, source, fit_var)
         return slam.table.append(
             poly,
@@ -110,7 +112,8 @@ class MapMaintenance:
 
     def shift_slope(self, fit: Fit, n: int) -> float:
         """The slope s̄ a new landmark's c0 moves by when the pose's error shifts its points
-        along ξ (c0 changes by −s̄·δξ; ``SlamConfig.shape_shift``): from its G_x, the pose's
+        along ξ (c0 changes by −s̄·δξ; ``SlamConfig.shape_shift`` "pose", the only reader:
+        with "noise" :meth:`add` stores nan without computing it): from its G_x, the pose's
         column along ξ and, through the old landmarks it was fitted on (a refit, a merge),
         each one's own s̄ (they were shifted by the same error); nan when one of those has
         none."""
@@ -372,7 +375,8 @@ class MapMaintenance:
         the kernels' frozen-shape model) over (1 + b'²)², the slope-to-angle factor at the
         centroid (:func:`~polyslam_env.slam.map_kernels.rotation_fit_var`)."""
         cfg = self.config
-        order = max(len(np.trim_zeros(np.asarray(poly.coeffs[1:], dtype=float), "b")), 1)
+        used = np.flatnonzero(poly.coeffs[1:])  # the shape without its zero tail
+        order = max(int(used[-1]) + 1 if used.size else 0, 1)
         shape = np.zeros(poly.order + 1)
         shape[1:] = poly.coeffs[1:]
         inverse = fit_inverse_table(cfg.eps_z + 1, cfg.order)

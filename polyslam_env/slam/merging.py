@@ -191,43 +191,16 @@ def join_gamma(poly: Polynomial, other: Polynomial, max_gap: float) -> float | N
 
     The nearer pair of end points must be within ``max_gap``; the tangents there within
     :data:`JOIN_ANGLE_DEG`; the offset is the larger distance of each end point from the other
-    curve's tangent line at its end, and must be at most :data:`THIN_WALL`.
+    curve's tangent line at its end, and must be at most :data:`THIN_WALL`. One compiled call
+    (:func:`~polyslam_env.slam.map_kernels.join_offset`; its readable numpy version is the
+    oracle in ``tests/slam/reference_merging.py``): every map change and every received piece
+    tries it against its neighbours.
     """
-    ends_p, ends_o = _ends(poly), _ends(other)
-    # the end-point gaps in plain floats, in C order, the first smallest (np.argmin's pick,
-    # a NaN first of all): the array form's values (its norm is √(dx² + dy²) summed in order)
-    gaps = [
-        (math.sqrt((px - ox) * (px - ox) + (py - oy) * (py - oy)), a, b)
-        for a, (px, py) in enumerate(ends_p)
-        for b, (ox, oy) in enumerate(ends_o)
-    ]
-    gap, i, k = next((g for g in gaps if math.isnan(g[0])), None) or min(gaps, key=_first)
-    if gap > max_gap:
-        return None
-    t_p = unit_tangent(poly, poly.lo if i == 0 else poly.hi)
-    t_o = unit_tangent(other, other.lo if k == 0 else other.hi)
-    if np.degrees(np.arccos(min(abs(float(t_p @ t_o)), 1.0))) > JOIN_ANGLE_DEG:
-        return None
-    delta = (ends_o[k][0] - ends_p[i][0], ends_o[k][1] - ends_p[i][1])
-    offset = max(abs(_cross(t_p, delta)), abs(_cross(t_o, delta)))
-    return offset if offset <= THIN_WALL else None
-
-
-def _ends(poly: Polynomial) -> list[tuple[float, float]]:
-    """The curve's points (x¹, x²) at lo and hi in plain floats (``points_at``'s values)."""
-    out = []
-    for xi in (float(poly.lo), float(poly.hi)):
-        eta = float(poly.value(xi))
-        out.append((xi, eta) if poly.variate == 1 else (eta, xi))
-    return out
-
-
-def _first(gap: tuple[float, int, int]) -> float:
-    return gap[0]
-
-
-def _cross(a: np.ndarray, b: np.ndarray | tuple[float, float]) -> float:
-    return float(a[0] * b[1] - a[1] * b[0])
+    offset = map_kernels.join_offset(
+        poly.variate, poly.coeffs, poly.lo, poly.hi, other.variate, other.coeffs, other.lo,
+        other.hi, max_gap, JOIN_ANGLE_DEG, THIN_WALL,
+    )  # fmt: skip
+    return None if math.isnan(offset) else float(offset)
 
 
 def face_normal(poly: Polynomial, xi: float, side: int) -> np.ndarray:

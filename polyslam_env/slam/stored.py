@@ -64,7 +64,10 @@ class PointArrays(NamedTuple):
 
     def subset(self, rows: np.ndarray) -> PointArrays:
         """The points at ``rows`` (an index or mask array), in that order."""
-        return PointArrays(*(column[rows] for column in self))
+        return PointArrays(
+            self.xy[rows], self.direction[rows], self.sigma[rows], self.weight[rows],
+            self.pose[rows], self.beam[rows], self.step[rows],
+        )  # fmt: skip
 
 
 def point_arrays(

@@ -2,7 +2,8 @@
 the overlap of two polynomials on the first one's axis and their two-way RMS error γ there,
 as ``slam/merging.py`` computed them before the test was compiled; and a polynomial's
 steepest slope as numpy's polynomial functions find it (the oracle of
-``Polynomial.max_slope``)."""
+``Polynomial.max_slope``); and the end-to-end join's offset (the oracle of
+``map_kernels.join_offset``)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import numpy.polynomial.polynomial as P
 
 from polyslam_env.slam import kernels
 from polyslam_env.slam.landmarks import own_orders
-from polyslam_env.slam.merging import unit_tangent
+from polyslam_env.slam.merging import JOIN_ANGLE_DEG, THIN_WALL, unit_tangent
 from polyslam_env.slam.polynomial import Polynomial
 
 _SAMPLES = 64  # samples of p2 used to project it on p's axis
@@ -84,9 +85,7 @@ def max_slope(poly: Polynomial) -> float:
 
 def join_gamma(poly: Polynomial, other: Polynomial, max_gap: float) -> float | None:
     """``merging.join_gamma`` on numpy arrays, as it was before its end points went to plain
-    floats (the oracle, bit for bit)."""
-    from polyslam_env.slam.merging import JOIN_ANGLE_DEG, THIN_WALL
-
+    floats (the oracle, bit for bit; of ``map_kernels.join_offset`` since)."""
     ends_p = poly.points_at(np.array([poly.lo, poly.hi]))  # (2, 2)
     ends_o = other.points_at(np.array([other.lo, other.hi]))
     gaps = np.linalg.norm(ends_p[:, None, :] - ends_o[None, :, :], axis=2)  # (2, 2)
