@@ -607,3 +607,18 @@ def test_fit_cluster__wall_points_across_a_doorway_gap_are_cut_there() -> None:
     pts = points_at(np.column_stack([close, np.full(len(close), 0.3)]))
     res = fit_cluster(pts, np.zeros(3), 3, max_rms=0.08)
     assert res.fit is not None and len(res.leftover) == 0
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known: with two zero-length walls a beam 0.0864 m from one and 0.0865 m from the "
+    "other lands in the farther wall's Q_bad (hypothesis found it; not traced yet)",
+)
+def test_associate__box_candidates__two_zero_length_walls() -> None:
+    test = test_associate__box_candidates_classify_like_the_whole_map
+    zero_length = [Polynomial(1, np.zeros(2), x, x) for x in (0.0, 0.140625)]
+    test.hypothesis.inner_test(  # type: ignore[attr-defined]
+        polys=zero_length,
+        pose=np.full(3, 0.1328125), offsets=np.zeros(8), turns=np.zeros(8),
+        ranges=np.full(9, 0.1015625), squared=False,
+    )  # fmt: skip
