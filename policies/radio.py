@@ -31,6 +31,23 @@ goals (the current one first, then the last ones it had, newest first)::
     10         8k     distance (m), bearing (rad) of each robot it sees    float32
     10+8k      8g     its goals in its body frame: x ahead, y left (m)     float32
     10+8k+8g   4      CRC-32 (zlib) of every preceding byte                uint32
+
+**Explored area** (version 2: a message that also carries the area its sender knows explored,
+:class:`Area`, ``37 + 8k + 8g + L`` bytes): after the goals and before the CRC::
+
+    offset     size   field
+    A          12     the sender's pose x, y (m), θ (rad) in its own frame  float32
+    A+12       4      lattice index (col, row) of the grid's lower-left cell int16
+    A+16       4      grid width w, height h (cells)                        uint16
+    A+20       1      cell size (cm)                                        uint8
+    A+21       2      L, the length of the packed cells                     uint16
+    A+23       L      the w·h cells row by row (row 0 = the lowest), one bit each
+                      (``numpy.packbits``), deflated (``zlib``, level 9)
+
+with A = 10 + 8k + 8g. The cells are in the sender's own (start) frame; with its pose there,
+a receiver that places the sender's body from a mutual sighting places the grid too
+(:func:`area_in_own_frame`). Mostly-explored rooms are long runs of ones and unexplored space
+long runs of zeros, which deflate shrinks to a few hundred bytes for an office floor.
 """
 
 from __future__ import annotations
@@ -41,13 +58,42 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyslam_env.core.geometry import compose, transform_points
+from polyslam_env.core.geometry import compose, inverse, transform_points
 
-__all__ = ["GoalMessage", "Radio", "decode", "encode", "goal_in_own_frame", "mutual_sighting"]
+__all__ = [
+    "Area",
+    "GoalMessage",
+    "Radio",
+    "area_in_own_frame",
+    "decode",
+    "encode",
+    "goal_in_own_frame",
+    "mutual_sighting",
+]
 
-MAGIC, VERSION = 0x47, 1
+MAGIC, VERSION, VERSION_AREA = 0x47, 1, 2
 _HEAD = struct.Struct("<BBHIBB")  # magic, version, sender, step, k, g
+_AREA = struct.Struct("<3fhhHHBH")  # pose, col0, row0, w, h, cell cm, L
 _CRC = struct.Struct("<I")
+
+
+@dataclass(frozen=True, eq=False)
+class Area:
+    """The area a robot knows explored, as a message carries it: ``cells`` (h, w) bool of a
+    grid of ``cell`` m in its own frame whose lower-left cell has lattice index ``corner``
+    (col, row) (its corner at ``corner · cell``), and the robot's ``pose`` (3,) in that frame
+    when it sent it."""
+
+    pose: np.ndarray  # (3,) x, y m, θ rad in the sender's own frame
+    corner: tuple[int, int]  # (col, row) lattice index of cells[0, 0]
+    cells: np.ndarray  # (h, w) bool, row 0 = the lowest y
+    cell: float  # m, a whole number of cm
+
+    def centres(self) -> np.ndarray:  # (M, 2)
+        """The own-frame centres of the explored cells."""
+        rows, cols = np.nonzero(self.cells)
+        lattice = np.column_stack([cols + self.corner[0], rows + self.corner[1]])
+        return (lattice + 0.5) * self.cell
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,14 +104,23 @@ class GoalMessage:
     step: int
     detections: np.ndarray  # (k, 2) distance m, bearing rad of the robots it sees
     goals: np.ndarray  # (g, 2) m, its current then last goals in its body frame (x ahead)
+    area: Area | None = None  # the area it knows explored (version 2), or None
 
 
 def encode(message: GoalMessage) -> bytes:
-    """The message's bytes (module doc's layout); at most 255 detections and goals."""
+    """The message's bytes (module doc's layout); at most 255 detections and goals, an area
+    grid of at most 65,535 cells a side and 65,535 bytes deflated."""
     seen = np.asarray(message.detections, dtype="<f4").reshape(-1, 2)
     goals = np.asarray(message.goals, dtype="<f4").reshape(-1, 2)
-    head = _HEAD.pack(MAGIC, VERSION, message.sender, message.step, len(seen), len(goals))
+    area, version = message.area, (VERSION if message.area is None else VERSION_AREA)
+    head = _HEAD.pack(MAGIC, version, message.sender, message.step, len(seen), len(goals))
     body = head + seen.tobytes() + goals.tobytes()
+    if area is not None:
+        h, w = area.cells.shape
+        packed = zlib.compress(np.packbits(area.cells, axis=None).tobytes(), 9)
+        cm = round(area.cell * 100.0)
+        x, y, theta = (float(v) for v in area.pose)
+        body += _AREA.pack(x, y, theta, *area.corner, w, h, cm, len(packed)) + packed
     return body + _CRC.pack(zlib.crc32(body))
 
 
@@ -74,15 +129,37 @@ def decode(data: bytes) -> GoalMessage:
     if len(data) < _HEAD.size + _CRC.size:
         raise ValueError(f"goal message: {len(data)} bytes is too short")
     magic, version, sender, step, k, g = _HEAD.unpack_from(data)
-    if magic != MAGIC or version != VERSION:
-        raise ValueError(f"goal message: magic {magic:#x} version {version}, expected 0x47 1")
-    if len(data) != _HEAD.size + 8 * (k + g) + _CRC.size:
+    if magic != MAGIC or version not in (VERSION, VERSION_AREA):
+        raise ValueError(f"goal message: magic {magic:#x} version {version}, expected 0x47 1 or 2")
+    at = _HEAD.size + 8 * (k + g)  # where the area (version 2) or the CRC begins
+    size = at + _CRC.size + (_AREA.size if version == VERSION_AREA else 0)
+    if len(data) < size:
         raise ValueError(f"goal message: {len(data)} bytes for {k} detections and {g} goals")
+    if version == VERSION_AREA:
+        size += _AREA.unpack_from(data, at)[-1]
+    if len(data) != size:
+        raise ValueError(f"goal message: {len(data)} bytes, its fields say {size}")
     if zlib.crc32(data[: -_CRC.size]) != _CRC.unpack_from(data, len(data) - _CRC.size)[0]:
         raise ValueError("goal message: checksum mismatch")
     floats = np.frombuffer(data, dtype="<f4", count=2 * (k + g), offset=_HEAD.size)
     pairs = floats.astype(float).reshape(k + g, 2)
-    return GoalMessage(sender, step, pairs[:k], pairs[k:])
+    area = None if version == VERSION else _area(data, at)
+    return GoalMessage(sender, step, pairs[:k], pairs[k:], area)
+
+
+def _area(data: bytes, at: int) -> Area:
+    """The :class:`Area` of a version-2 message whose area section begins at ``at``."""
+    x, y, theta, col, row, w, h, cm, n = _AREA.unpack_from(data, at)
+    start = at + _AREA.size
+    try:
+        packed = zlib.decompress(data[start : start + n])
+    except zlib.error as exc:
+        raise ValueError(f"goal message: area cells do not inflate ({exc})") from None
+    if len(packed) != (w * h + 7) // 8 or cm == 0:
+        raise ValueError(f"goal message: area of {w} x {h} cells of {cm} cm in {len(packed)} bytes")
+    bits = np.unpackbits(np.frombuffer(packed, dtype=np.uint8), count=w * h).astype(bool)
+    pose = np.array([x, y, theta], dtype=float)
+    return Area(pose, (col, row), bits.reshape(h, w), cm / 100.0)
 
 
 class Radio:
@@ -135,6 +212,25 @@ def goal_in_own_frame(
     """A team-mate's ``goal`` (…, 2) given in its body frame, in the receiver's own frame: the
     receiver at ``pose`` (3,) saw it at ``seen`` (distance, bearing) while it saw the receiver
     at bearing ``bearing_back`` (module doc)."""
+    return np.asarray(transform_points(goal, compose(pose, _mate(seen, bearing_back))))
+
+
+def area_in_own_frame(
+    pose: np.ndarray, seen: np.ndarray, bearing_back: float, area: Area
+) -> np.ndarray:  # (4M, 2)
+    """Points that cover a team-mate's explored ``area`` (its M cells, each by the centres of
+    its four quarters, so that a cell of the receiver's grid half its size, turned any way, is
+    hit where the area covers most of it), in the receiver's own frame, placed from a mutual
+    sighting as :func:`goal_in_own_frame` places a goal: the sender's own frame is its pose
+    there composed with its body's pose in the receiver's frame."""
+    offsets = 0.25 * area.cell * np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0]])
+    points = (area.centres()[:, None, :] + offsets[None]).reshape(-1, 2)
+    frame = compose(compose(pose, _mate(seen, bearing_back)), inverse(area.pose))
+    return np.asarray(transform_points(points, frame))
+
+
+def _mate(seen: np.ndarray, bearing_back: float) -> np.ndarray:  # (3,)
+    """The pose of a team-mate in the receiver's body frame, from the receiver's sighting
+    ``seen`` (distance, bearing) and the team-mate's bearing back (SPEC §4)."""
     d, alpha = float(seen[0]), float(seen[1])
-    mate = np.array([d * np.cos(alpha), d * np.sin(alpha), np.pi + alpha - bearing_back])
-    return np.asarray(transform_points(goal, compose(pose, mate)))
+    return np.array([d * np.cos(alpha), d * np.sin(alpha), np.pi + alpha - bearing_back])

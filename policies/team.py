@@ -20,6 +20,19 @@ controller, camera claims) plus goal messages (:mod:`policies.radio`). Each robo
    (Burgard's sequential assignment: robot i yields to robots 0 … i−1, so two robots never
    swap goals back and forth).
 
+**Explored area** (``share_area``, on by default): a message also carries, every
+``area_resend`` steps of a meeting and whenever the robots in view change, the area its sender
+knows explored — the free cells of its own map and the area its team-mates told it of — as a
+grid of ``area_cell`` m cells in its own frame (:class:`~policies.radio.Area`, deflated, counted
+in the message's bytes). A receiver places it with the mutual sighting as it places the goals
+(:func:`~policies.radio.area_in_own_frame`) and keeps it for the episode (its frame and the
+sender's do not move; the error is the sighting's and the pose drift since). Its discount then
+has a second factor: the share of a frontier's unknown gain square (the planner's
+``square`` gain: ``2 · gain_radius`` a side) that no team-mate explored
+(:meth:`TeamFrontierPolicy.area_discount`), so a robot stops treating a team-mate's rooms as
+frontiers; a goal whose square lost half its unknown so replans at once, whatever the sender's
+index (an explored area is a fact, not a claim: nothing to swap back and forth).
+
 The camera claims of plain frontier (a seen robot's side is left to it, ``claim_radius`` for
 ``claim_steps``) stay: they are what a robot knows of where a team-mate was last seen heading.
 """
@@ -33,7 +46,16 @@ import numpy as np
 from policies.base import PolicyContext, PolicyError
 from policies.frontier import FrontierPolicy
 from policies.planner import team_discount
-from policies.radio import GoalMessage, Radio, decode, encode, goal_in_own_frame, mutual_sighting
+from policies.radio import (
+    Area,
+    GoalMessage,
+    Radio,
+    area_in_own_frame,
+    decode,
+    encode,
+    goal_in_own_frame,
+    mutual_sighting,
+)
 from polyslam_env.core.geometry import inverse, transform_points
 
 __all__ = ["TeamFrontierPolicy", "frontier_team"]
@@ -48,7 +70,9 @@ class TeamFrontierPolicy(FrontierPolicy):
     (the current one and the last ones), ``resend`` the steps between two messages of an
     unchanged goal, ``match_tol`` m how far two distance readings of one mutual sighting
     may differ (default 0.06 m: four σ of the difference of two readings of the default
-    camera, σ_d = 0.01 m each); other keywords go to :class:`FrontierPolicy`."""
+    camera, σ_d = 0.01 m each); ``share_area`` sends and takes the explored area (module doc)
+    on a grid of ``area_cell`` m, again every ``area_resend`` steps of a meeting; other
+    keywords go to :class:`FrontierPolicy`."""
 
     def __init__(
         self,
@@ -59,6 +83,9 @@ class TeamFrontierPolicy(FrontierPolicy):
         history: int = 4,
         resend: int = 10,
         match_tol: float = 0.06,
+        share_area: bool = True,
+        area_cell: float = 0.2,
+        area_resend: int = 20,
         **kwargs: Any,
     ) -> None:
         for name, value in (
@@ -67,6 +94,8 @@ class TeamFrontierPolicy(FrontierPolicy):
             ("history", history),
             ("resend", resend),
             ("match_tol", match_tol),
+            ("area_cell", area_cell),
+            ("area_resend", area_resend),
         ):
             if not value > 0:
                 raise PolicyError(f"frontier_team: {name} must be > 0, got {value!r}")
@@ -74,6 +103,10 @@ class TeamFrontierPolicy(FrontierPolicy):
         self.team_range, self.goal_steps = float(team_range), int(goal_steps)
         self.history = min(int(history), 255)
         self.resend, self.match_tol = int(resend), float(match_tol)
+        if not 0.01 <= area_cell <= 2.55:
+            raise PolicyError(f"frontier_team: area_cell must be 0.01 … 2.55 m, got {area_cell!r}")
+        self.share_area = bool(share_area)
+        self.area_cell, self.area_resend = round(float(area_cell), 2), int(area_resend)
         super().__init__(context, **kwargs)
 
     def reset(self, seed: int | None = None) -> None:
@@ -86,20 +119,58 @@ class TeamFrontierPolicy(FrontierPolicy):
         self._last: tuple[np.ndarray, np.ndarray] | None = None
         self._sent: tuple[tuple[int, int], int, int] | None = None  # goal, k seen, step
         self._goals: list[tuple[int, int]] = []  # the last goals (own-map cells), newest first
+        #: own-map cells a team-mate told it it explored (module doc)
+        self.team_area = np.zeros((self.map.n, self.map.n), dtype=bool)
+        self._area_sent: tuple[int, int] | None = None  # k seen, step of the last area sent
+        self._areas_received = 0
 
     def metrics(self) -> dict[str, float]:
-        """The goal messages of the episode so far: sent, their bytes, received."""
+        """The goal messages of the episode so far: sent, their bytes, received, and the
+        explored areas received."""
         i = self.context.index
         return {
             "goal_messages_sent": float(self.radio.messages_sent[i]),
             "goal_bytes_sent": float(self.radio.bytes_sent[i]),
             "goal_messages_received": float(self.radio.messages_received[i]),
+            "goal_areas_received": float(self._areas_received),
         }
 
     def frontier_discount(self, points: np.ndarray) -> np.ndarray:
-        """Burgard's discount of the frontier points (F, 2) by the team-mates' goals heard."""
+        """Burgard's discount of the frontier points (F, 2) by the team-mates' goals heard,
+        times the share of their gain square no team-mate explored (:meth:`area_discount`)."""
         goals = np.concatenate([np.zeros((0, 2)), *(g for g, _ in self.heard.values())])
-        return team_discount(points, goals, self.team_range)
+        return team_discount(points, goals, self.team_range) * self.area_discount(points)
+
+    def area_discount(self, points: np.ndarray) -> np.ndarray:  # (F,)
+        """At own-frame points (F, 2), the share of the unknown cells of the square of
+        ``2 · gain_cells + 1`` cells around each (the planner's ``square`` gain) that lies
+        outside :attr:`team_area` (1 where the square has no unknown cell or the point lies
+        off the map)."""
+        m, half = self.map, self.gain_cells
+        out = np.ones(len(points))
+        ij, inside = m.index(points)
+        if not inside.any() or not self.team_area.any():
+            return out
+        cols, rows = ij[inside, 0], ij[inside, 1]
+        r0, c0 = max(int(rows.min()) - half, 0), max(int(cols.min()) - half, 0)
+        r1, c1 = min(int(rows.max()) + half + 1, m.n), min(int(cols.max()) + half + 1, m.n)
+        unknown = ~m.layers.known.reshape(m.n, m.n)[r0:r1, c0:c1]
+        told = unknown & self.team_area[r0:r1, c0:c1]
+        lo_r, hi_r = np.maximum(rows - half, r0) - r0, np.minimum(rows + half + 1, r1) - r0
+        lo_c, hi_c = np.maximum(cols - half, c0) - c0, np.minimum(cols + half + 1, c1) - c0
+        counts = []
+        for grid in (unknown, told):
+            s = np.zeros((r1 - r0 + 1, c1 - c0 + 1), dtype=np.int64)  # summed-area table
+            s[1:, 1:] = grid.cumsum(axis=0).cumsum(axis=1)
+            counts.append(s[hi_r, hi_c] - s[lo_r, hi_c] - s[hi_r, lo_c] + s[lo_r, lo_c])
+        total, gone = counts
+        out[inside] = np.where(total > 0, 1.0 - gone / np.maximum(total, 1), 1.0)
+        return out
+
+    def _discount(self) -> Any:
+        """:meth:`frontier_discount` while a team-mate's goal or area is known, else None
+        (then the planner may stop its search early, as plain frontier's)."""
+        return self.frontier_discount if self.heard or self.team_area.any() else None
 
     # -- the frontier policy's step, with messages ------------------------------------------
     def _claim(self, pose: np.ndarray, detections: np.ndarray) -> bool:
@@ -133,10 +204,38 @@ class TeamFrontierPolicy(FrontierPolicy):
             goals = goal_in_own_frame(pose, seen[j], message.detections[k, 1], message.goals)
             self.heard[message.sender] = (goals, step + self.goal_steps)
             self.radio.messages_received[me] += 1
+            if message.area is not None and self.share_area:
+                self._take_area(pose, seen[j], message.detections[k, 1], message.area)
+                if self.goal is not None:
+                    mine = self.map.centre(*self.goal)[None]  # (1, 2)
+                    replan |= bool(self.area_discount(mine)[0] < 0.5)
             if message.sender < me and self.goal is not None:
                 mine = self.map.centre(*self.goal)[None]  # (1, 2)
                 replan |= bool(team_discount(mine, goals[:1], self.team_range)[0] < 1.0)
         return replan
+
+    def _take_area(self, pose: np.ndarray, seen: np.ndarray, back: float, area: Area) -> None:
+        """Mark a team-mate's explored ``area`` in :attr:`team_area`, placed from the mutual
+        sighting (the receiver at ``pose`` saw it at ``seen``, it saw the receiver at bearing
+        ``back``)."""
+        self.team_area[self.map.cells(area_in_own_frame(pose, seen, back, area))] = True
+        self._areas_received += 1
+
+    def explored_area(self, pose: np.ndarray) -> Area:
+        """The area this robot knows explored (its own map's free cells and :attr:`team_area`)
+        on the ``area_cell`` lattice of its own frame, a cell explored where any own-map cell
+        whose centre lies in it is; ``pose`` (3,) is its own."""
+        m = self.map
+        rows, cols = np.nonzero(m.free | self.team_area)
+        if len(rows) == 0:
+            return Area(pose.copy(), (0, 0), np.zeros((0, 0), dtype=bool), self.area_cell)
+        centres = (np.column_stack([cols, rows]) + 0.5) * m.res + m.origin
+        lattice = np.floor(centres / self.area_cell).astype(np.int64)  # (M, 2) col, row
+        corner = lattice.min(axis=0)
+        w, h = lattice.max(axis=0) - corner + 1
+        cells = np.zeros((h, w), dtype=bool)
+        cells[lattice[:, 1] - corner[1], lattice[:, 0] - corner[0]] = True
+        return Area(pose.copy(), (int(corner[0]), int(corner[1])), cells, self.area_cell)
 
     def _announce(self, pose: np.ndarray, detections: np.ndarray) -> None:
         """Send the goal while a robot is in view (module doc); remember this step's pose and
@@ -150,11 +249,19 @@ class TeamFrontierPolicy(FrontierPolicy):
             goal, k, step = self._sent
             if goal == self.goal and k == len(detections) and self._step - step < self.resend:
                 return
-        me = self.context.index
+        me, k = self.context.index, len(detections)
         goals = [self.goal, *(g for g in self._goals if g != self.goal)][: self.history]
         body = transform_points(np.array([self.map.centre(*g) for g in goals]), inverse(pose))
-        self.radio.send(me, encode(GoalMessage(me, self._step, detections, body)))
-        self._sent = (self.goal, len(detections), self._step)
+        area = None
+        if self.share_area and (
+            self._area_sent is None
+            or self._area_sent[0] != k
+            or self._step - self._area_sent[1] >= self.area_resend
+        ):
+            area = self.explored_area(pose)
+            self._area_sent = (k, self._step)
+        self.radio.send(me, encode(GoalMessage(me, self._step, detections, body, area)))
+        self._sent = (self.goal, k, self._step)
 
 
 def frontier_team(context: PolicyContext, **kwargs: Any) -> TeamFrontierPolicy:

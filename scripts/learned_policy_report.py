@@ -7,7 +7,7 @@ per map), and prints, pooled over all their episodes:
   policy's ratio to the first (the baseline) and points above ``random`` (if it ran);
 * the paired differences last − first per seed, with a 95 % t interval, of team coverage at
   the end and at step 200, overlap, ``nu_mean``, ``map_precision`` (the robots' mean), bytes
-  sent (the team's sum) and steps to 90 % (an episode that never
+  sent (the team's sum, goal messages included) and steps to 90 % (an episode that never
   reached 90 % counts as its step limit + 1, a censored value: the count of such episodes is
   printed with it);
 * when the last policy is ``ppo_goals`` (the goal-choice network): on the same maps and
@@ -115,10 +115,13 @@ def main() -> None:
             for e in sorted(report["episodes"][p], key=lambda e: e["seed"]):
                 cov[p].append(float(e["team"]["coverage"]))
                 overlap[p].append(float(e["team"]["overlap"]))
-                robots = [r for r in e["robots"].values() if r.get("has_map", 1.0)]
+                robots_all = list(e["robots"].values())
+                robots = [r for r in robots_all if r.get("has_map", 1.0)]
                 nu[p].append(float(np.mean([r["nu_mean"] for r in robots])))
                 precision[p].append(float(np.mean([r["map_precision"] for r in robots])))
-                sent[p].append(float(sum(r["bytes_sent"] for r in e["robots"].values())))
+                sent[p].append(  # the exchange's and the goal messages' (as polyslam evaluate)
+                    sum(r["bytes_sent"] + r.get("goal_bytes_sent", 0.0) for r in robots_all)
+                )
                 series = e["coverage"]  # per step; an episode that ended early stays there
                 at200[p].append(float(series[min(AT_STEP, len(series)) - 1]))
                 reached = e["team"]["steps_to_90"]

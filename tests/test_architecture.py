@@ -37,6 +37,7 @@ EXCLUSIVE: dict[str, set[str]] = {
     "pymunk": {"world", "apps"},  # apps: the benchmark times bare pymunk as a reference
     "pygame": {"render"},
     "numba": {"core"},  # only core/jit.py: one place sets the compile options
+    "llvmlite": {"core"},  # numba's code generator: core/jit.py's fma intrinsic
     "torch": {"apps", "policies"},
     "stable_baselines3": {"apps", "policies", "environment"},  # environment: the SB3 adapter
     "supersuit": {"environment", "apps"},

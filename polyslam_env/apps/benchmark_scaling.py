@@ -116,7 +116,8 @@ def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str
     ``polynomials`` count what the exchange applied (in the last episode): integrating them is
     the part of the step that grows with the number of meetings, not with the team size;
     ``skipped`` of those polynomials were versions their receiver held (no transform, no
-    refit), ``refits`` counts the received chains refitted."""
+    refit), ``covered`` were wholly covered by better walls the receiver held (no refit),
+    ``refits`` counts the received chains refitted."""
     from polyslam_env.environment.parallel import parallel_env
 
     rows = []
@@ -143,6 +144,8 @@ def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str
                 # of those, skipped as versions held; received chains refitted
                 "skipped": sum(exchange.skipped) if exchange is not None else 0,
                 "refits": sum(exchange.refits) if exchange is not None else 0,
+                # of the others, covered wholly by better held walls: no refit (rule 1)
+                "covered": sum(exchange.covered) if exchange is not None else 0,
             }
         )
     for r in rows:

@@ -34,7 +34,8 @@ COLUMNS = {
     "backends": [("slam.backend", 25), ("steps/s", 9), ("IQR", 9), ("min–max", 17),
                  ("× no SLAM", 9)],
     "team": [("robots", 9), ("steps", 6), ("mean ms", 9), ("median ms", 9), ("max ms", 9),
-             ("× first", 8), ("messages", 8), ("polys", 6), ("skipped", 7), ("refits", 6)],
+             ("× first", 8), ("messages", 8), ("polys", 6), ("skipped", 7), ("covered", 7),
+             ("refits", 6)],
     "memory": [("episode", 9), ("steps", 6), ("peak MB", 9), ("RSS MB", 9)],
     "compile": [("cold s", 9), ("warm s", 9), ("compile s", 9), ("cached", 7)],
     "workers": [("processes", 9), ("steps/s each", 12), ("total", 9), ("× one", 7)],
@@ -284,7 +285,7 @@ def _team_row(r: dict[str, Any]) -> str:
     cells = [str(r["robots"]), str(r["steps"]), f"{r['mean_ms']:.1f}", f"{r['median_ms']:.1f}",
              f"{r['max_ms']:.1f}", f"{r['ratio_to_first']:.1f}", str(r["messages"]),
              str(r["polynomials"]), str(r.get("skipped", "n/a")),
-             str(r.get("refits", "n/a"))]  # fmt: skip
+             str(r.get("covered", "n/a")), str(r.get("refits", "n/a"))]  # fmt: skip
     return _columns("team", cells)
 
 

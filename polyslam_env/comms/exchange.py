@@ -39,7 +39,10 @@ variance of their offset along the curve's normal (:func:`normal_variance`):
   {0, 1}): the better estimate alone. So where a held landmark is at least as good, the
   piece's points it covers are dropped; only the uncovered runs of the chain (at least
   ``merge_min_overlap`` long) are refitted and fused in turn. A received polynomial thus never
-  overwrites or moves a better own one, and fusing the same message twice changes nothing;
+  overwrites or moves a better own one, and fusing the same message twice changes nothing.
+  Checked first on the received chain: where held walls no worse than any refit of it could
+  be (:func:`refit_variance_floor`) cover all its kept points, it is not refitted at all
+  (:attr:`RendezvousExchange.covered`);
 * rule 2, a newer version replaces the older: when the piece is better than every held
   landmark of its wall, those holding data from the same sender (an earlier version it sent,
   or a merge with one; provenance is kept per landmark and carried over the receiver's refits
@@ -125,6 +128,7 @@ from polyslam_env.comms.alignment import (
 )
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
 from polyslam_env.comms.free_space import FreeCells, FreeSpace
+from polyslam_env.comms.kernels import covered_by_walls
 from polyslam_env.comms.messages import (
     GridMessage,
     Header,
@@ -204,7 +208,9 @@ class DeliveredMessage:
     sent_step: int
     delivered_step: int
     attempts: int
-    received: tuple[Polynomial, ...]  # refits in the receiver's frame, before any merge
+    # refits in the receiver's frame, before any merge (a record that better held walls cover
+    # wholly has none: RendezvousExchange.covered)
+    received: tuple[Polynomial, ...]
     landmark_ids: tuple[int, ...]  # receiver's landmarks holding them after the merge check
 
 
@@ -404,7 +410,7 @@ def _point_set(
     n_pts = len(xy)
     d_state = np.zeros((n_pts, 2, n_state))
     d_state[:, :, :3] = dp_dt @ d_transform_state
-    eta_axis = np.array([0.0, 1.0]) if poly.variate == 1 else np.array([1.0, 0.0])
+    eta_axis = _ETA_AXIS[poly.variate]
     d_noise = np.concatenate(
         [
             np.broadcast_to((rot @ eta_axis)[None, :, None], (n_pts, 2, 1)),
@@ -452,6 +458,7 @@ def chain_points(poly: Polynomial, chord_tol: float, spacing: float) -> np.ndarr
 
 
 _CHAIN_CACHE_SIZE = 64  # 0: no cache
+_ETA_AXIS = {1: np.array([0.0, 1.0]), 2: np.array([1.0, 0.0])}  # variate → its η axis (x, y)
 _CHAIN_CACHE: dict[tuple[object, ...], np.ndarray] = {}
 
 
@@ -639,6 +646,9 @@ class RendezvousExchange:
         self.skipped = [0] * num_robots  # received records of versions already held, skipped
         self.refits = [0] * num_robots  # received chains refitted (refit_pieces calls)
         self.fused = [0] * num_robots  # refitted pieces fused (_fuse calls)
+        # fresh records that held walls better than any refit of them cover wholly (rule 1
+        # before the refit: refit_variance_floor), skipped with no refit
+        self.covered = [0] * num_robots
         self._rendezvous = [0] * num_robots
         self._polys_sent = [0] * num_robots
         self._polys_received = [0] * num_robots
@@ -1140,6 +1150,11 @@ class RendezvousExchange:
         turn = (np.asarray(d_state, dtype=float)[2, :3].copy(), float(cov_t[2, 2]))
         received: list[Polynomial] = []
         ids: list[int] = []
+        # the transform's whole covariance as a refit sees it (through the receiver's pose and
+        # through the noise, the latter as fused: divided by ω): what refit_variance_floor needs
+        pose_part = d_state @ slam.cov[:3, :3] @ d_state.T
+        fused_cov_t = pose_part + d_noise @ noise_cov @ d_noise.T / RECEIVED_CI_WEIGHT
+        min_overlap = slam.config.merge_min_overlap
         for record in fresh:
             version = _version(record)
             seen[version] = record.revision
@@ -1147,10 +1162,24 @@ class RendezvousExchange:
             # the pose columns only (the rest are zeros): _fuse sizes G_x to the state
             q = chain_points(record.polynomial, self.chord_tol, self.spacing)
             xy, dp_dt = frame_points(q, t)
-            pts = _point_set(record, t, xy, dp_dt, d_state, d_noise, noise_cov, 3)
-            sure = _normal_sigma(q, t, dp_dt, cov_t) <= limit
+            normals = _chain_normals(q, t)
+            sure = _normal_sigma(normals, dp_dt, cov_t) <= limit
             self.dropped_points[r] += int(np.count_nonzero(~sure))
-            for rows in uncovered_runs(sure, pts.xy, slam.config.merge_min_overlap):
+            runs = uncovered_runs(sure, xy, min_overlap)
+            if not runs:
+                continue
+            # rule 1 before the refit: held walls better than any refit of this chain could
+            # be cover every run of it that rule 1 would keep, so nothing would be taken
+            shift = rotation(float(t[2])) @ _ETA_AXIS[record.polynomial.variate]
+            floor = refit_variance_floor(
+                normals[sure], fused_cov_t, shift, record.c0_var / RECEIVED_CI_WEIGHT
+            )
+            if not uncovered_runs(sure & ~_covered_by_better(slam, xy, normals, floor), xy,
+                                  min_overlap):  # fmt: skip
+                self.covered[r] += 1
+                continue
+            pts = _point_set(record, t, xy, dp_dt, d_state, d_noise, noise_cov, 3)
+            for rows in runs:
                 for piece, fit in self._refit(r, _subset(pts, rows)):
                     received.append(fit.poly)
                     ids += self._fuse(
@@ -1348,17 +1377,21 @@ def transform_normal_sigma(
     covariance ``cov_t`` (3, 3) causes, in the receiver's frame."""
     q = chain_points(poly, chord_tol, spacing)
     _, dp_dt = frame_points(q, transform)  # (N, 2, 3)
-    return _normal_sigma(q, transform, dp_dt, cov_t)
+    return _normal_sigma(_chain_normals(q, transform), dp_dt, cov_t)
 
 
-def _normal_sigma(
-    q: np.ndarray, transform: np.ndarray, dp_dt: np.ndarray, cov_t: np.ndarray
-) -> np.ndarray:
-    """:func:`transform_normal_sigma` from the chain ``q`` (N, 2, sender frame) and its
-    points' ∂p/∂T ``dp_dt`` (N, 2, 3)."""
+def _chain_normals(q: np.ndarray, transform: np.ndarray) -> np.ndarray:
+    """(N, 2) unit normals of the chain ``q`` (N, 2, sender frame) turned into the receiver's
+    frame by ``transform``."""
     d = np.gradient(q, axis=0) if len(q) > 1 else np.array([[1.0, 0.0]])
     d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
-    normal = np.stack([-d[:, 1], d[:, 0]], axis=1) @ rotation(float(transform[2])).T  # (N, 2)
+    out: np.ndarray = np.stack([-d[:, 1], d[:, 0]], axis=1) @ rotation(float(transform[2])).T
+    return out
+
+
+def _normal_sigma(normal: np.ndarray, dp_dt: np.ndarray, cov_t: np.ndarray) -> np.ndarray:
+    """:func:`transform_normal_sigma` from the chain's normals ``normal`` (N, 2,
+    :func:`_chain_normals`) and its points' ∂p/∂T ``dp_dt`` (N, 2, 3)."""
     g = np.einsum("ni,nij->nj", normal, dp_dt)  # (N, 3) ∂(normal offset)/∂T
     out: np.ndarray = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", g, cov_t, g), 0.0))
     return out
@@ -1373,6 +1406,65 @@ def normal_variance(poly: Polynomial, c0_var: float) -> float:
     """
     slope = float(poly.slope(0.5 * (poly.lo + poly.hi)))
     return c0_var / (1.0 + slope * slope)
+
+
+def refit_variance_floor(
+    normals: np.ndarray, cov_t: np.ndarray, shift: np.ndarray, shift_var: float
+) -> float:
+    """A lower bound (m²) of the normal-offset variance (:func:`normal_variance`) of a piece
+    refitted on a received chain whose unit normals in the receiver's frame are ``normals``
+    (N, 2); ``cov_t`` (3, 3) is the transform's covariance as the refit carries it (through
+    the receiver's pose, and through the noise divided by ω), ``shift`` (2,) the direction in
+    which the sender's c0 moves every point (its η axis, turned by T) and ``shift_var`` that
+    c0's variance divided by ω.
+
+    The refit is shape-fixed, so ∂c0/∂p_i = (−B'(ξ_i), 1)/N in (ξ, η) (unit weights,
+    :func:`~polyslam_env.slam.fitting.fit_polynomial`): with a = Σ_i ∂c0/∂p_i, a translation
+    u of every point moves c0 by a·u, and T = (t, θ) moves it by a·δt + b δθ. So var(c0) =
+    [a, b] Σ_T [a, b]ᵀ + shift_var (a·shift)² ≥ aᵀ Q a, Q = Σ_tt − Σ_tθ Σ_θθ⁻¹ Σ_θt (the
+    translation's covariance given the turn: the smallest the first term gets over b) +
+    shift_var · shift shiftᵀ (a 2 × 2, PSD). a = (−s̄, 1) for the mean slope s̄ of the piece,
+    i.e. √(1 + s̄²) times its unit normal at that slope; for a straight piece (s̄ = B'
+    everywhere) the normal variance var(c0)/(1 + B'²) is then at least nᵀQn, n its normal.
+    The chain's normals stand for the piece's (the refit follows the chain within
+    ``refit_tol``): the least nᵀQn over them. For curved pieces the mean-slope normal lies among
+    the chain's normals but the factor (1 + s̄²)/(1 + B'_mid²) is not exactly 1; the floor is
+    checked against the refits of random curved records in ``tests/comms/test_exchange.py``."""
+    if len(normals) == 0:
+        return 0.0
+    cov_t = np.asarray(cov_t, dtype=float)
+    q = cov_t[:2, :2].copy()
+    if cov_t[2, 2] > 0.0:
+        q -= np.outer(cov_t[:2, 2], cov_t[2, :2]) / cov_t[2, 2]
+    q += shift_var * np.outer(shift, shift)
+    return float(np.einsum("ni,ij,nj->n", normals, q, normals).min())
+
+
+def _covered_by_better(
+    slam: PolySlam, xy: np.ndarray, normals: np.ndarray, floor: float
+) -> np.ndarray:
+    """(N,) True where a chain point (N, 2, receiver frame; unit ``normals`` (N, 2)) lies on a
+    held landmark of the same wall whose normal variance (:func:`normal_variance`) is at most
+    ``floor`` (:func:`refit_variance_floor`; rule 1's "better", :data:`_ROUNDOFF`): inside its
+    extent, within γ_M of it (as :func:`covered_points`), its tangent within the merge test's
+    angle of the chain's, over a run of at least ``merge_min_overlap`` (the merge test's
+    overlap). Compiled: :func:`~polyslam_env.comms.kernels.covered_by_walls`."""
+    cfg = slam.config
+    table = slam.table
+    box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
+    c0s = slam.c0s
+    near = table.near(box, c0s, cfg.gamma_max)
+    if not len(near):
+        return np.zeros(len(xy), dtype=bool)
+    coeffs = table.shape[near]  # a copy: [0, b_1, …]
+    coeffs[:, 0] = c0s[near]
+    extent = np.stack([table.lo[near], table.hi[near]], axis=1)
+    c0_var = np.diagonal(slam.cov)[3 + near]
+    cos_max = math.cos(math.radians(MERGE_ANGLE_DEG))
+    return covered_by_walls(
+        xy, normals, table.variate[near], coeffs, extent, c0_var, floor * _ROUNDOFF,
+        cfg.gamma_max, cos_max, cfg.merge_min_overlap,
+    )  # fmt: skip
 
 
 def covered_points(xy: np.ndarray, polys: Sequence[Polynomial], reach: float) -> np.ndarray:

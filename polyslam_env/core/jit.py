@@ -26,8 +26,11 @@ from collections.abc import Callable
 from typing import Any, TypeVar, cast
 
 import numba
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
 
-__all__ = ["compile_seconds", "fallback_cache_dir", "njit"]
+__all__ = ["compile_seconds", "fallback_cache_dir", "fma", "njit"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -92,3 +95,27 @@ def _clocked(dispatcher: Any) -> Any:
     typing, and it loads from the disk cache inside it, so this sees both."""
     dispatcher.compile = _CLOCK.timed(dispatcher.compile)
     return dispatcher
+
+
+@intrinsic
+def _llvm_fma(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
+    """LLVM's ``llvm.fma.f64`` on three float64 (the arguments are cast to float64)."""
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        double = ir.DoubleType()
+        fnty = ir.FunctionType(double, [double, double, double])
+        fn = builder.module.declare_intrinsic("llvm.fma", [double], fnty)
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
+@njit
+def fma(a: float, b: float, c: float) -> float:
+    """``a·b + c`` rounded once (IEEE 754's fused multiply-add; Python 3.13's ``math.fma``):
+    the processor's instruction where it has one, else a correctly rounded library call, so
+    the same number everywhere. For a kernel that must compute a product as an FMA-based BLAS
+    does (OpenBLAS's Haswell and later kernels: a chain of FMAs along the inner dimension)."""
+    out: float = _llvm_fma(a, b, c)  # type: ignore[call-arg]  # numba passes the typing context
+    return out

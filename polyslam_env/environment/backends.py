@@ -103,6 +103,14 @@ class TeamSlam:
         """Robot i's map as points in its frame (the observations' occupied cells)."""
         return _NO_POINTS
 
+    def team_map_points(self, robots: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`map_points` of ``robots`` (K) in one array (M, 2), robot ``robots[k]``'s rows
+        ``starts[k]:starts[k + 1]`` (``starts`` (K + 1,) int64)."""
+        maps = [self.map_points(i) for i in robots]
+        starts = np.zeros(len(maps) + 1, dtype=np.int64)
+        starts[1:] = np.array([len(m) for m in maps], dtype=np.int64).cumsum()
+        return (np.concatenate(maps) if maps else _NO_POINTS), starts
+
     def map_shapes(self, i: int) -> MapShapes:
         """Robot i's wall map as arrays (the map rewards' input; empty without one)."""
         return _NO_MAP
@@ -231,6 +239,17 @@ class PolynomialTeam(_Filters):
 
     def map_points(self, i: int) -> np.ndarray:
         return self.samplers[i].points(self.slams[i])
+
+    def team_map_points(self, robots: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+        """Each sampler writes its points straight into the team's array (no copy each)."""
+        pairs = [(self.samplers[i], self.slams[i]) for i in robots]
+        starts = np.zeros(len(pairs) + 1, dtype=np.int64)
+        for k, (sampler, slam) in enumerate(pairs):
+            starts[k + 1] = starts[k] + sampler.count(slam)
+        out = np.empty((int(starts[-1]), 2))
+        for k, (sampler, slam) in enumerate(pairs):
+            sampler.write(slam, out[starts[k] : starts[k + 1]])
+        return out, starts
 
     def map_shapes(self, i: int) -> MapShapes:
         slam = self.slams[i]

@@ -1,11 +1,11 @@
-"""Compiled kernels of the observations: the egocentric local map's occupied and free cells,
-and the vector observation's parts.
+"""Compiled kernels of the observations: the robots' map points shifted by their c0s, the
+egocentric local map's occupied and free cells, and the vector observation's parts.
 
 Plain loops compiled by :func:`polyslam_env.core.jit.njit`, with the same float operations in
 the same order as the numpy version they replaced (the oracle in
 ``tests/environment/reference.py``), so the cells are identical. The two small matrix products
-that place points (``points @ R``) stay in numpy, which may compute them with fused
-multiply-adds; the kernel takes their results.
+that place points (``points @ R``) are computed as numpy's gemm computed them on OpenBLAS's FMA
+kernels (:func:`place_team`: a chain of fused multiply-adds along the inner index, from 0).
 """
 
 from __future__ import annotations
@@ -14,8 +14,59 @@ import math
 
 import numpy as np
 
-from polyslam_env.core.jit import njit
+from polyslam_env.core.jit import fma, njit
 from polyslam_env.core.raster import cell_id
+
+
+@njit
+def shifted_points(
+    points: np.ndarray,
+    owner: np.ndarray,
+    axis: np.ndarray,
+    mean: np.ndarray,
+    c0: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """A map sampler's cached ``points`` (M, 2) at the c0s they were sampled with, ``c0`` (n,),
+    moved to the c0s of the state ``mean`` (its ``3 + o`` entry for landmark o), written into
+    ``out`` (M, 2): point m's dependent coordinate ``axis[m]`` (0 or 1) of landmark
+    ``owner[m]`` gains ``mean[3 + o] − c0[o]`` (as ``points[m, axis] + (c0s − c0)[owner]``)."""
+    for m in range(points.shape[0]):
+        o = owner[m]
+        out[m, 0] = points[m, 0]
+        out[m, 1] = points[m, 1]
+        out[m, axis[m]] += mean[3 + o] - c0[o]
+
+
+@njit
+def place_team(
+    cell_centres: np.ndarray,
+    map_points: np.ndarray,
+    map_starts: np.ndarray,
+    poses: np.ndarray,
+    cos: np.ndarray,
+    sin: np.ndarray,
+    centres: np.ndarray,
+    ego: np.ndarray,
+) -> None:
+    """K robots' egocentric grid cells in their own frames and their map points in their
+    egocentric frames. Robot k at ``poses[k]`` (x, y, θ), ``cos[k]``, ``sin[k]`` of θ, R(θ)ᵀ =
+    [[c, s], [−s, c]]: ``centres[k]`` (G², 2) = ``cell_centres`` (G², 2) R(θ)ᵀ + (x, y), and
+    ``ego[m]`` = (p − (x, y)) R(θ) for its points ``map_points[map_starts[k]:map_starts[k + 1]]``
+    (M, 2). Each product entry is a chain of fused multiply-adds along the inner index from 0,
+    as numpy's gemm computed ``@`` (module docstring); numpy sends a lone point (a (1, 2)
+    product) to gemv instead, so a robot with one map point is the caller's to redo."""
+    for k in range(poses.shape[0]):
+        c, s = cos[k], sin[k]
+        x, y = poses[k, 0], poses[k, 1]
+        for i in range(cell_centres.shape[0]):
+            a, b = cell_centres[i, 0], cell_centres[i, 1]
+            centres[k, i, 0] = fma(b, -s, fma(a, c, 0.0)) + x
+            centres[k, i, 1] = fma(b, c, fma(a, s, 0.0)) + y
+        for m in range(map_starts[k], map_starts[k + 1]):
+            dx, dy = map_points[m, 0] - x, map_points[m, 1] - y
+            ego[m, 0] = fma(dy, s, fma(dx, c, 0.0))
+            ego[m, 1] = fma(dy, c, fma(dx, -s, 0.0))
 
 
 @njit

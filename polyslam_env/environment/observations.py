@@ -226,15 +226,23 @@ class MapSampler:
         self._start, self._count = first, count
         self._table, self._version = table, table.version
 
-    def points(self, slam: PolySlam) -> np.ndarray:  # (M, 2)
-        """All map points of ``slam`` in its frame."""
+    def count(self, slam: PolySlam) -> int:
+        """How many points :meth:`points` of ``slam`` gives (resampling first if the map's
+        table changed)."""
         table = slam.table
         if table is not self._table or table.version != self._version:
             self._rebuild(slam)
-        out = self._points.copy()
-        if len(out):
-            shift = (slam.c0s - self._c0)[self._owner]  # (M,)
-            out[self._rows, self._axis] += shift
+        return len(self._points)
+
+    def write(self, slam: PolySlam, out: np.ndarray) -> None:
+        """:meth:`points` of ``slam`` written into ``out`` (:meth:`count`, 2), which must be
+        called first (its resampling is not repeated here)."""
+        kernels.shifted_points(self._points, self._owner, self._axis, slam.mean, self._c0, out)
+
+    def points(self, slam: PolySlam) -> np.ndarray:  # (M, 2)
+        """All map points of ``slam`` in its frame."""
+        out = np.empty((self.count(slam), 2))
+        self.write(slam, out)
         return out
 
 
@@ -390,13 +398,12 @@ class ObservationEncoder:
         k, gg = len(team), self.g * self.g
         poses = team.poses
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        # R(θ)ᵀ (core.geometry.rotation, transposed) of each heading, C-contiguous: numpy's
-        # batched product then equals the products of one robot at a time (the same BLAS
-        # kernel, bit for bit) at half their cost.
-        rots_t = np.empty((k, 2, 2))
-        rots_t[:, 0, 0], rots_t[:, 0, 1], rots_t[:, 1, 0], rots_t[:, 1, 1] = c, s, -s, c
-        centres = self.cell_centres @ rots_t + poses[:, None, :2]  # (K, G², 2) own frames
-        points = self._ego_points(team, rots_t)  # (M, 2) ego frames
+        centres = np.empty((k, gg, 2))  # (K, G², 2) own frames
+        points = np.empty((len(team.map_points), 2))  # (M, 2) ego frames
+        kernels.place_team(
+            self.cell_centres, team.map_points, team.map_starts, poses, c, s, centres, points
+        )
+        self._lone_points(team, c, s, points)
         occ, free = np.empty((k, gg), dtype=bool), np.empty((k, gg), dtype=bool)
         grid = team.belief
         free_stack, hit_stack = grid.flat_stack
@@ -407,20 +414,14 @@ class ObservationEncoder:
         return occ, free
 
     @staticmethod
-    def _ego_points(team: TeamView, rots_t: np.ndarray) -> np.ndarray:  # (M, 2)
-        """Every robot's map points in its egocentric frame: (p − xy) @ R(θ), one robot's
-        points at a time (the product of one robot's points with its own rotation, as the
-        single-robot form computes it, so the cells do not depend on the team's size)."""
-        starts = team.map_starts.tolist()
-        if starts[-1] == 0:
-            return _NO_POINTS
-        out = np.empty((starts[-1], 2))
-        for j, (a, b) in enumerate(itertools.pairwise(starts)):
-            if b > a:
-                out[a:b] = (team.map_points[a:b] - team.poses[j, :2]) @ np.ascontiguousarray(
-                    rots_t[j].T
-                )
-        return out
+    def _lone_points(team: TeamView, c: np.ndarray, s: np.ndarray, points: np.ndarray) -> None:
+        """The ego point of each robot whose map is one point, as numpy computes (p − xy) R(θ)
+        for one row (BLAS's gemv, which rounds otherwise than the kernel's gemm chain)."""
+        starts = team.map_starts
+        for j in ((starts[1:] - starts[:-1]) == 1).nonzero()[0].tolist():
+            a = int(starts[j])
+            rot = np.array([[c[j], -s[j]], [s[j], c[j]]])  # R(θ) = (R(θ)ᵀ)ᵀ, C-contiguous
+            points[a : a + 1] = (team.map_points[a : a + 1] - team.poses[j, :2]) @ rot
 
     def local_map(self, view: RobotView) -> np.ndarray:  # (3, G, G) float32
         """Occupied / free / unknown channels of the egocentric grid (x forward = columns)."""

@@ -180,14 +180,17 @@ def record(
     slots = world.active[of].nonzero()[0]  # (K,)
     if not len(slots):
         return
-    live = of[slots]  # (K,) their robots
-    seen = ok[live]  # (K, B)
     times = np.array([np.nan if i is None else i.time_s for i in slam_infos])  # (J,)
     diverging = np.array([i is not None and i.diverging for i in slam_infos], dtype=bool)
     est, cov = estimates
+    rows: slice | np.ndarray = slots  # the slots' rows of the per-slot arrays
+    live: slice | np.ndarray = of[slots]  # (K,) their robots' rows of the world's arrays
+    if len(slots) == len(poses) and (of == slots).all():  # every robot, in order: views
+        rows = live = slice(None)
+    seen = ok[live]  # (K, B)
     history.record(
-        slots, poses[live], est[slots], cov[slots], ends[live][seen],
-        slots.repeat(seen.sum(axis=1)), times[slots], collided[live], diverging[slots],
+        slots, poses[live], est[rows], cov[rows], ends[live][seen],
+        slots.repeat(seen.sum(axis=1)), times[rows], collided[live], diverging[rows],
     )  # fmt: skip
 
 
@@ -246,25 +249,26 @@ def observe(
         sweep_beliefs(grids, poses[sweeping], state.angles, state.sensing.ranges[sweeping])
     if not robots:
         return {}
-    stds = np.sqrt(np.maximum(covs[robots].diagonal(axis1=1, axis2=2), 0.0))  # (K, 3)
-    maps = [state.slam.map_points(i) for i in robots]
-    starts = np.zeros(len(robots) + 1, dtype=np.int64)
-    starts[1:] = np.array([len(m) for m in maps], dtype=np.int64).cumsum()
+    # every robot acting (the usual case): views of the team's arrays, not copies
+    every = robots == list(range(len(active)))
+    pick: slice | list[int] = slice(None) if every else robots
+    stds = np.sqrt(np.maximum(covs[pick].diagonal(axis1=1, axis2=2), 0.0))  # (K, 3)
+    map_points, starts = state.slam.team_map_points(robots)
     camera = state.sensing.camera
-    last = state.last_rendezvous[robots]
+    last = state.last_rendezvous[pick]
     team = TeamView(
-        ranges=state.sensing.ranges[robots],
-        poses=poses[robots],
+        ranges=state.sensing.ranges[pick],
+        poses=poses[pick],
         pose_stds=stds,
-        map_points=np.concatenate(maps),
+        map_points=map_points,
         map_starts=starts,
         belief=state.beliefs[0],  # a team's grids are rows of one stack (belief_grids)
-        belief_rows=np.asarray(robots, dtype=np.int64),
-        seen=camera.seen[robots],
-        distance=camera.distance[robots],
-        bearing=camera.bearing[robots],
+        belief_rows=np.array(robots, dtype=np.int64),
+        seen=camera.seen[pick],
+        distance=camera.distance[pick],
+        bearing=camera.bearing[pick],
         since=np.where(last == NEVER, NEVER, state.step_count - last),
-        rendezvous=state.rendezvous[robots],
+        rendezvous=state.rendezvous[pick],
         step=np.full(len(robots), state.step_count, dtype=np.int64),
     )
     return dict(zip(acting, encoder.encode_team(team), strict=True))

@@ -17,22 +17,38 @@ with SuperSuit 3.11 and SB3 2.x:
   SuperSuit's ``black_death_v3`` ends the episode only when every agent is terminated *and*
   truncated (so never at ``max_steps``: the next step has no live agent and the env raises).
   :class:`FixedAgents` keeps every robot present by design instead.
+
+With worker processes, :func:`vectorise` builds SuperSuit's ``ProcConcatVec`` itself, for two
+reasons. SuperSuit's ``concat_vec_envs_v1`` seeds worker ``i`` with ``seed + i`` and its
+``k``-th env copy with that plus ``k``: with more copies than workers two copies got the same
+seed (4 copies on 2 workers: ``s, s+1, s+1, s+2``), and so the same maps and layouts for the
+whole run. Here copy ``k`` gets ``seed + k`` with any number of workers (:class:`_Copies`), as
+in one process. And each worker plays one step of a copy in a thread as soon as it is built
+(:meth:`_Copies.warm`), so that it loads its compiled kernels while the parent builds the model
+(PPO's build imports ``torch._dynamo``, seconds) instead of at the first reset, when the parent
+waits for it; the seeded reset that follows starts the episode afresh. SuperSuit's
+constructor also built one more copy in the parent only to read its metadata.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import functools
+import threading
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import supersuit as ss
 from gymnasium import spaces
+from gymnasium.vector.utils import create_empty_array
 from pettingzoo import ParallelEnv
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices
+from supersuit.vector import ConcatVecEnv
 from supersuit.vector.multiproc_vec import ProcConcatVec, decompress_info
 from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
+from supersuit.vector.vector_constructors import vec_env_args
 
 from polyslam_env.environment.parallel import parallel_env
 
@@ -221,10 +237,89 @@ def vectorise(
     if num_envs < 1:
         raise ValueError(f"num_envs: must be >= 1, got {num_envs}")
     markov = ss.pettingzoo_env_to_vec_env_v1(team)
-    wrapper = ss.concat_vec_envs_v1(
-        markov, num_envs, num_cpus=num_cpus, base_class="stable_baselines3"
-    )
-    venv: VecEnv = SB3VecEnvAdapter.from_supersuit(wrapper)
+    workers = min(num_cpus, num_envs)
+    if workers <= 1:
+        wrapper = ss.concat_vec_envs_v1(markov, num_envs, base_class="stable_baselines3")
+        venv: VecEnv = SB3VecEnvAdapter.from_supersuit(wrapper)
+    else:
+        venv = SB3VecEnvAdapter(_processes(markov, num_envs, workers))
     if seed is not None:
         venv.seed(seed)
     return VecMonitor(venv) if monitor else venv
+
+
+class _Copies(ConcatVecEnv):
+    """One worker's env copies, ``first`` … of all: a seeded reset gives copy ``first + k`` the
+    seed ``seed + first + k`` (module doc). ``ProcConcatVec`` hands worker ``i`` the seed
+    ``seed + i``, so ``offset = first − i``.
+
+    :meth:`warm` resets and steps the first copy once (zero actions) in a thread, so that the
+    worker loads its compiled kernels while it waits for its first instruction; every method
+    that touches the copies waits for that thread first (and raises what it raised)."""
+
+    def __init__(self, copies: list[Callable[[], Any]], offset: int) -> None:
+        super().__init__(copies)
+        self.offset = offset
+        self._warming: threading.Thread | None = None
+        self._warm_error: BaseException | None = None
+
+    def warm(self) -> None:
+        """Start the first copy's warm-up step (class doc)."""
+
+        def play() -> None:
+            try:
+                first = self.vec_envs[0]
+                first.reset(seed=0)
+                first.step(create_empty_array(first.action_space, n=first.num_envs))
+            except BaseException as error:  # raised again by the next call that waits
+                self._warm_error = error
+
+        self._warming = threading.Thread(target=play, name="polyslam-warm-up", daemon=True)
+        self._warming.start()
+
+    def _ready(self) -> None:
+        if self._warming is not None:
+            self._warming.join()
+            self._warming = None
+            if self._warm_error is not None:
+                raise self._warm_error
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+        self._ready()
+        return super().reset(seed=None if seed is None else seed + self.offset, options=options)
+
+    def step(self, actions: Any) -> Any:
+        self._ready()
+        return super().step(actions)
+
+    def render(self) -> Any:
+        self._ready()
+        return super().render()
+
+    def close(self) -> None:
+        self._ready()
+        super().close()
+
+
+def _worker_copies(markov: Any, count: int, offset: int) -> _Copies:
+    """In a worker process: ``count`` copies of ``markov``, the first warming up (its kernels
+    loaded while the parent builds the model: module doc)."""
+    copies = _Copies(vec_env_args(markov, count)[0], offset)  # SuperSuit's own copies
+    copies.warm()
+    return copies
+
+
+def _processes(markov: Any, num_envs: int, workers: int) -> ProcConcatVec:
+    """``num_envs`` copies of ``markov`` in ``workers`` processes, as SuperSuit splits them
+    (consecutive copies, ``ceil(num_envs / workers)`` per worker), each copy seeded by its own
+    index (module doc)."""
+    per = -(-num_envs // workers)
+    firsts = range(0, num_envs, per)
+    build = [
+        functools.partial(_worker_copies, markov, min(per, num_envs - first), first - i)
+        for i, first in enumerate(firsts)
+    ]
+    return ProcConcatVec(
+        build, markov.observation_space, markov.action_space, num_envs * markov.num_envs,
+        markov.metadata,
+    )  # fmt: skip

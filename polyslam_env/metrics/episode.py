@@ -25,6 +25,7 @@ import numpy as np
 
 from polyslam_env import metrics
 from polyslam_env.core.geometry import between
+from polyslam_env.metrics import kernels
 from polyslam_env.metrics.mapping import MapShapes, map_quality
 from polyslam_env.slam.ekf import start_error_covs
 from polyslam_env.slam.polynomial import Polynomial
@@ -284,20 +285,12 @@ class TeamHistory:
         recorded): true poses (K, 3), estimates (K, 3), covariances (K, 3, 3), SLAM seconds
         (K,) (NaN: none), collided and diverging flags (K,), and the step's beam hit points
         (H, 2) with the slot of each ``hit_slots`` (H,) (in the order they are appended)."""
-        rows = self.lengths[slots]  # (K,) the row each slot writes
-        self._grow(int(rows.max()) + 1 if len(rows) else 0)
-        last = self._true[rows - 1, slots]  # (K, 3) each slot's previous true pose
-        step = np.hypot(true_poses[:, 0] - last[:, 0], true_poses[:, 1] - last[:, 1])
-        self.path_length[slots] += step
-        self._true[rows, slots] = true_poses
-        self._est[rows, slots] = est_poses
-        self._cov[rows, slots] = est_covs
-        self._times[rows, slots] = slam_times
-        self.collisions[slots] += collided
-        first = diverging & ~self.diverged[slots]
-        self.diverged_at[slots[first]] = rows[first]
-        self.diverged[slots] |= diverging
-        self.lengths[slots] = rows + 1
+        self._grow(int(self.lengths.max()) + 1)
+        kernels.record_rows(
+            slots, true_poses, est_poses, est_covs, slam_times, collided, diverging,
+            self.lengths, self._true, self._est, self._cov, self._times, self.path_length,
+            self.collisions, self.diverged, self.diverged_at,
+        )  # fmt: skip
         self._add_hits(hits, hit_slots)
 
     def _grow(self, rows: int) -> None:

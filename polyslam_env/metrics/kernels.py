@@ -8,13 +8,18 @@
 * :func:`covered`: which boundary samples lie strictly within ``tol`` of some map point (the
   completeness), with the map points bucketed in a grid of side ≥ ``tol`` so that only the
   3 × 3 buckets around a sample are searched.
+* :func:`parallel_neighbours`: the duplicates metric's samples lying within ``tol`` of, and
+  parallel to, a sample of another polynomial, over the same buckets.
 * :func:`sample_rows`: many polynomials sampled every ``step`` of arc length in one call, with
   the float operations of :meth:`~polyslam_env.slam.polynomial.Polynomial.sample_arclength`
   in the same order (numpy's ``linspace``, Horner's ``polyval``, ``diff``, the norm as the sum
   of two squares, ``cumsum`` and ``interp``), so the points are bit-identical to it.
+* :func:`record_rows`: one step of a team's history (poses, covariances, SLAM times, path
+  length, collisions, divergence flags) written for every recorded slot in one call, the
+  path length's step with libm's ``hypot`` as ``np.hypot`` computes it.
 
-Oracles: brute force over all segments and all points, and ``Polynomial.sample_arclength``
-(``tests/metrics/test_kernels.py``).
+Oracles: brute force over all segments and all points, ``Polynomial.sample_arclength`` and
+the numpy form of the history's record (``tests/metrics/test_kernels.py``).
 """
 
 from __future__ import annotations
@@ -26,7 +31,7 @@ import numpy as np
 from polyslam_env.core.jit import njit
 from polyslam_env.world.kernels import _segment_distance
 
-__all__ = ["covered", "sample_rows", "wall_distances"]
+__all__ = ["covered", "parallel_neighbours", "record_rows", "sample_rows", "wall_distances"]
 
 #: Most buckets a side in :func:`covered`.
 _MAX_BUCKETS = 256
@@ -80,21 +85,19 @@ def wall_distances(
 
 
 @njit
-def covered(samples: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
-    """Whether each sample (M, 2) has a point (N, 2) strictly within ``tol`` (> 0):
-    dx² + dy² < tol²."""
-    m = samples.shape[0]
-    out = np.zeros(m, dtype=np.bool_)
+def _buckets(
+    points: np.ndarray, tol: float
+) -> tuple[float, float, float, int, int, np.ndarray, np.ndarray]:
+    """The points (N ≥ 1, 2) bucketed in a grid of side ≥ ``tol`` (at most ``_MAX_BUCKETS``
+    a side), so that every point within ``tol`` of a place lies in its 3 × 3 buckets: (x0,
+    y0, side, ncols, nrows, order, starts), bucket b's points ``order[starts[b]:starts[b+1]]``
+    in ascending index."""
     n = points.shape[0]
-    if n == 0 or m == 0 or not tol > 0.0:
-        return out
     x0, y0 = points[0, 0], points[0, 1]
     x1, y1 = x0, y0
     for i in range(n):
         x0, y0 = min(x0, points[i, 0]), min(y0, points[i, 1])
         x1, y1 = max(x1, points[i, 0]), max(y1, points[i, 1])
-    # buckets of side ≥ tol (so a sample's 3 × 3 buckets hold every point within tol), at
-    # most _MAX_BUCKETS a side
     side = max(tol, max(x1 - x0, y1 - y0) / _MAX_BUCKETS)
     ncols = 1
     nrows = 1
@@ -114,6 +117,19 @@ def covered(samples: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
         starts[keys[i] + 1] += 1
     for b in range(nrows * ncols):
         starts[b + 1] += starts[b]
+    return x0, y0, side, ncols, nrows, order, starts
+
+
+@njit
+def covered(samples: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
+    """Whether each sample (M, 2) has a point (N, 2) strictly within ``tol`` (> 0):
+    dx² + dy² < tol²."""
+    m = samples.shape[0]
+    out = np.zeros(m, dtype=np.bool_)
+    n = points.shape[0]
+    if n == 0 or m == 0 or not tol > 0.0:
+        return out
+    x0, y0, side, ncols, nrows, order, starts = _buckets(points, tol)
     tol2 = tol * tol
     for s in range(m):
         sx, sy = samples[s, 0], samples[s, 1]
@@ -134,6 +150,49 @@ def covered(samples: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
             if found:
                 break
         out[s] = found
+    return out
+
+
+@njit
+def parallel_neighbours(
+    points: np.ndarray,
+    owner: np.ndarray,
+    tangent: np.ndarray,
+    has_dir: np.ndarray,
+    tol: float,
+    max_sine: float,
+) -> np.ndarray:
+    """Whether each point (M, 2) has a point of another ``owner`` (M,) within ``tol``
+    (dx² + dy² ≤ tol², as ``cKDTree.query_pairs``) whose unit ``tangent`` (M, 2) is parallel
+    to its own: |t_a × t_b| ≤ ``max_sine`` (t_a the lower index's), both with a direction
+    (``has_dir`` (M,)). The duplicates metric's pairs."""
+    m = points.shape[0]
+    out = np.zeros(m, dtype=np.bool_)
+    if m == 0 or not tol >= 0.0:
+        return out
+    x0, y0, side, ncols, nrows, order, starts = _buckets(points, max(tol, 1e-12))
+    tol2 = tol * tol
+    for i in range(m):
+        if out[i] or not has_dir[i]:
+            continue
+        px, py = points[i, 0], points[i, 1]
+        c = math.floor((px - x0) / side)
+        r = math.floor((py - y0) / side)
+        for rr in range(max(r - 1, 0), min(r + 1, nrows - 1) + 1):
+            for cc in range(max(c - 1, 0), min(c + 1, ncols - 1) + 1):
+                b = rr * ncols + cc
+                for k in range(starts[b], starts[b + 1]):
+                    j = order[k]
+                    if owner[j] == owner[i] or not has_dir[j]:
+                        continue
+                    dx, dy = px - points[j, 0], py - points[j, 1]
+                    if not dx * dx + dy * dy <= tol2:
+                        continue
+                    a, o = (i, j) if i < j else (j, i)
+                    cross = abs(tangent[a, 0] * tangent[o, 1] - tangent[a, 1] * tangent[o, 0])
+                    if cross <= max_sine:
+                        out[i] = True
+                        out[j] = True
     return out
 
 
@@ -238,3 +297,49 @@ def sample_rows(
     for q in range(q_count):
         out[starts[q] : starts[q + 1]] = chunks[q]
     return out, starts
+
+
+@njit
+def record_rows(
+    slots: np.ndarray,
+    true_poses: np.ndarray,
+    est_poses: np.ndarray,
+    est_covs: np.ndarray,
+    slam_times: np.ndarray,
+    collided: np.ndarray,
+    diverging: np.ndarray,
+    lengths: np.ndarray,
+    true: np.ndarray,
+    est: np.ndarray,
+    cov: np.ndarray,
+    times: np.ndarray,
+    path_length: np.ndarray,
+    collisions: np.ndarray,
+    diverged: np.ndarray,
+    diverged_at: np.ndarray,
+) -> None:
+    """Append one step to slots ``slots`` (K,) of a team history (changes its arrays): slot
+    ``j = slots[k]`` writes row ``lengths[j]`` of ``true``, ``est`` (capacity, J, 3), ``cov``
+    (capacity, J, 3, 3) and ``times`` (capacity, J) from row k of ``true_poses``,
+    ``est_poses`` (K, 3), ``est_covs`` (K, 3, 3) and ``slam_times`` (K,); adds the true step's
+    length to ``path_length[j]``, ``collided[k]`` to ``collisions[j]``; ``diverging[k]`` sets
+    ``diverged[j]`` and, the first time, ``diverged_at[j]`` to the row; then counts the row
+    in ``lengths``. The caller makes room first (capacity > every ``lengths[j]``)."""
+    for k in range(slots.shape[0]):
+        j = slots[k]
+        row = lengths[j]
+        dx = true_poses[k, 0] - true[row - 1, j, 0]
+        dy = true_poses[k, 1] - true[row - 1, j, 1]
+        path_length[j] += math.hypot(dx, dy)
+        for a in range(3):
+            true[row, j, a] = true_poses[k, a]
+            est[row, j, a] = est_poses[k, a]
+            for b in range(3):
+                cov[row, j, a, b] = est_covs[k, a, b]
+        times[row, j] = slam_times[k]
+        if collided[k]:
+            collisions[j] += 1
+        if diverging[k] and not diverged[j]:
+            diverged[j] = True
+            diverged_at[j] = row
+        lengths[j] = row + 1

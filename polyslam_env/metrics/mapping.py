@@ -29,11 +29,10 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy import special
-from scipy.spatial import cKDTree
 
 from polyslam_env.core.geometry import transform_points
 from polyslam_env.metrics.boundary import boundary_samples, distance_to_boundary
-from polyslam_env.metrics.kernels import covered, sample_rows
+from polyslam_env.metrics.kernels import covered, parallel_neighbours, sample_rows
 from polyslam_env.metrics.pose import _check_pose
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
@@ -258,15 +257,19 @@ def seen_boundary(
     layout: Layout, hit_points_abs: np.ndarray, radius: float = SEEN_RADIUS, step: float = 0.01
 ) -> tuple[np.ndarray, np.ndarray]:
     """The boundary samples (M, 2) within ``radius`` of a true beam hit (H, 2), absolute, and
-    their lengths (M,); non-finite hits are ignored."""
+    their lengths (M,), read-only; non-finite hits are ignored."""
     bpts, weights = boundary_samples(layout, step)
     hits = np.asarray(hit_points_abs, dtype=float).reshape(-1, 2)
     hits = hits[np.all(np.isfinite(hits), axis=1)]
     if len(hits) == 0:
         return bpts[:0], weights[:0]
-    d, _ = cKDTree(hits).query(bpts, k=1, distance_upper_bound=radius)
-    seen = np.isfinite(d)
-    return bpts[seen], weights[seen]
+    seen = covered(bpts, np.ascontiguousarray(hits), float(radius))
+    seen_pts, seen_weights = bpts[seen], weights[seen]
+    # read-only like the cached samples: one compiled specialisation of ``covered`` serves
+    # both (numba types a read-only array apart; each is loaded once per process)
+    seen_pts.setflags(write=False)
+    seen_weights.setflags(write=False)
+    return seen_pts, seen_weights
 
 
 def completeness_seen(
@@ -300,8 +303,8 @@ def _completeness_seen(
     total = float(weights.sum())
     if len(starts) == 1 or total == 0.0:
         return 0.0
-    d, _ = cKDTree(points).query(bpts, k=1, distance_upper_bound=tol)
-    return float(weights[np.isfinite(d)].sum()) / total
+    near = covered(bpts, np.ascontiguousarray(points, dtype=float), float(tol))
+    return float(weights[near].sum()) / total
 
 
 #: Distance (m) and angle (rad) within which a piece of map duplicates another polynomial: the
@@ -331,14 +334,10 @@ def duplicates(
     tangent = _tangents(pts, counts)
     norm = np.linalg.norm(tangent, axis=1, keepdims=True)  # 0: a zero-extent polynomial
     tangent = np.divide(tangent, norm, out=np.zeros_like(tangent), where=norm > 0)
-    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")  # (P, 2)
     has_dir = norm[:, 0] > 0
-    pairs = pairs[(owner[pairs[:, 0]] != owner[pairs[:, 1]]) & has_dir[pairs].all(axis=1)]
-    ta, tb = tangent[pairs[:, 0]], tangent[pairs[:, 1]]
-    cross = np.abs(ta[:, 0] * tb[:, 1] - ta[:, 1] * tb[:, 0])
-    pairs = pairs[cross <= np.sin(angle)]
-    marked = np.zeros(len(pts), dtype=bool)
-    marked[pairs.ravel()] = True
+    marked = parallel_neighbours(
+        np.ascontiguousarray(pts), owner, tangent, has_dir, float(tol), float(np.sin(angle))
+    )
     return float(np.count_nonzero(marked)) / len(pts)
 
 

@@ -100,19 +100,13 @@ def start_error_cov(pose: np.ndarray, p0: np.ndarray) -> np.ndarray:  # (3, 3)
 
 
 def start_error_covs(poses: np.ndarray, p0: np.ndarray) -> np.ndarray:  # (K, 3, 3)
-    """:func:`start_error_cov` of each pose (K, ≥2) (x, y first) in one go: a stack of J, the
-    products J P0 Jᵀ as one matmul over the stack (numpy runs each (3, 3) product of a stack
-    as it runs a lone one, so the same floats) and the symmetrised result."""
-    poses = np.asarray(poses, dtype=float)
-    J = np.zeros((poses.shape[0], 3, 3))  # (K, 3, 3)
-    J[:, _DIAGONAL, _DIAGONAL] = 1.0
-    J[:, 0, 2] = -poses[:, 1]
-    J[:, 1, 2] = poses[:, 0]
-    out: np.ndarray = J @ np.asarray(p0, dtype=float) @ J.mT
-    return 0.5 * (out + out.mT)
-
-
-_DIAGONAL = np.arange(3)
+    """:func:`start_error_cov` of each pose (K, ≥2) (x, y first) in one compiled call
+    (:func:`~polyslam_env.slam.kernels.start_error_covs`: the products J P0 Jᵀ as numpy's
+    stacked matmul computed them, and the symmetrised result)."""
+    poses = np.ascontiguousarray(poses, dtype=float)
+    out = np.empty((poses.shape[0], 3, 3))
+    kernels.start_error_covs(poses, np.ascontiguousarray(p0, dtype=float), out)
+    return out
 
 
 # -- update -------------------------------------------------------------------------------------

@@ -18,6 +18,7 @@ Points come from three constructors:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -249,7 +250,8 @@ def polynomial_points(
         turn_index, pivot = turn
         if not 3 <= turn_index < n_state or turn_index == c0_index:
             raise ValueError(f"turn index must be another state index, got {turn_index}")
-        centre = poly.points_at(np.array([pivot]))[0]  # (2,)
+        at = float(pivot)  # the curve's point there: points_at's floats, one compiled call
+        centre = map_kernels.equally_spaced(poly.coeffs, poly.variate, at, at, 1)[0]  # (2,)
         d_state[:, :, turn_index] = (xy - centre) @ J_ROT.T
     return PointSet(
         xy=xy,
@@ -398,15 +400,31 @@ def turn_gradient(points: PointSet, fit: Fit, pivot: float) -> tuple[np.ndarray,
     (pieces that are not quite one curve), an error of the shape of size ``fit.rms`` at each
     point, taken as independent between points: rms² · Σ_i (∂α/∂η_i)², the least-squares
     variance of the turn for that scatter."""
+    return turn_gradient_with(
+        points, fit, pivot, fit_kernels.weighted_qr, fit_kernels.coefficient_gradient
+    )
+
+
+def turn_gradient_with(
+    points: PointSet,
+    fit: Fit,
+    pivot: float,
+    weighted_qr: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray, int]],
+    coefficient_gradient: Callable[..., np.ndarray],
+) -> tuple[np.ndarray, float]:
+    """:func:`turn_gradient` with the fit's QR (``fit_kernels.weighted_qr``'s signature) and
+    the gradient of a linear function of the coefficients (``fit_kernels.
+    coefficient_gradient``'s) given: production passes the compiled ones, the tests their
+    readable numpy oracles (``tests/slam/reference_fitting.py``), so the rest is one piece."""
     poly = fit.poly
     xi, eta, scale, w = _scaled(points, poly.variate)
-    a_mat, _, r, m = fit_kernels.weighted_qr(xi / scale, np.sqrt(w), fit.order)
+    a_mat, _, r, m = weighted_qr(xi / scale, np.sqrt(w), fit.order)
     a_s = poly.coeffs[: m + 1] * scale ** np.arange(m + 1)
     resid = eta - a_mat @ a_s
     e = np.zeros(m + 1)  # p'(ξ_p) = Σ_k k a_s[k] (ξ_p/s)^(k−1) / s
     e[1:] = np.arange(1, m + 1) * (pivot / scale) ** np.arange(m) / scale
     slope = float(poly.slope(pivot))
-    d = fit_kernels.coefficient_gradient(e, scale, w, a_mat, r, a_s, resid) / (1.0 + slope**2)
+    d = coefficient_gradient(e, scale, w, a_mat, r, a_s, resid) / (1.0 + slope**2)
     d_xy = d if poly.variate == 1 else d[:, ::-1]
     sign = 1.0 if poly.variate == 1 else -1.0  # α turns counter-clockwise in (x¹, x²)
     residual_var = fit.rms**2 * float(np.sum(d[:, 1] ** 2))

@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from polyslam_env.core.jit import njit
+from polyslam_env.core.jit import fma, njit
 from polyslam_env.slam.columns import (
     CHANGED_AT,
     ETA_HI,
@@ -1518,3 +1518,35 @@ def update_scan(
     )  # fmt: skip
     count_uses(index, n, c0_index[:k], accepted)
     return used
+
+
+@njit
+def _fma_product3(a: np.ndarray, b: np.ndarray, transposed: bool, out: np.ndarray) -> None:
+    """``out`` = a b (or a bᵀ when ``transposed``) of 3 × 3 matrices, each entry a chain of
+    fused multiply-adds along the inner index from 0, as OpenBLAS's FMA gemm kernels run it."""
+    for r in range(3):
+        for c in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc = fma(a[r, k], b[c, k] if transposed else b[k, c], acc)
+            out[r, c] = acc
+
+
+@njit
+def start_error_covs(poses: np.ndarray, p0: np.ndarray, out: np.ndarray) -> None:
+    """J P0 Jᵀ of each pose (K, ≥2) into ``out`` (K, 3, 3), symmetrised as ½(C + Cᵀ), with
+    J = [[1, 0, −y], [0, 1, x], [0, 0, 1]] (:func:`~polyslam_env.slam.ekf.start_error_covs`).
+    The two products as numpy's stacked matmul ran them on OpenBLAS's FMA gemm kernels: each
+    entry a chain of fused multiply-adds along the inner index from 0, J's zeros included."""
+    jac = np.zeros((3, 3))
+    left = np.empty((3, 3))
+    both = np.empty((3, 3))
+    for i in range(poses.shape[0]):
+        jac[0, 0] = jac[1, 1] = jac[2, 2] = 1.0
+        jac[0, 2] = -poses[i, 1]
+        jac[1, 2] = poses[i, 0]
+        _fma_product3(jac, p0, False, left)
+        _fma_product3(left, jac, True, both)
+        for r in range(3):
+            for c in range(3):
+                out[i, r, c] = 0.5 * (both[r, c] + both[c, r])

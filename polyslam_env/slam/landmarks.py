@@ -210,7 +210,7 @@ def _own_order(shape: np.ndarray) -> tuple[float, ...]:
     """A zero-padded shape row without its zero tail, kept at least linear."""
     used = np.flatnonzero(shape)
     width = max(int(used[-1]) + 1 if used.size else 0, 2)
-    return tuple(float(b) for b in shape[:width])
+    return tuple(shape[:width].tolist())
 
 
 class LandmarkTable:
@@ -462,7 +462,7 @@ class LandmarkTable:
         stamp = int(self.index[STAMP, index])
         if self._built_stamp[index] != stamp:
             old = self._built[index]
-            self._built[index] = Polynomial(
+            self._built[index] = Polynomial.unchecked(  # the extents the kernels stretch
                 old.variate, old.coeffs, float(self.real[LO, index]), float(self.real[HI, index])
             )
             self._built_stamp[index] = stamp

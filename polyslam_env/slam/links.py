@@ -84,8 +84,7 @@ import numpy as np
 
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.ekf import chi2_1dof_quantile
-from polyslam_env.slam.fitting import polynomial_points
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.polynomial import Polynomial, polyval
 
 
 def evidence_gap(a: tuple[float, float], b: tuple[float, float]) -> float:
@@ -108,23 +107,43 @@ def link_rows(
 
     A state change δX moves the point of a curve at ξ by δπ = D δX (``polynomial_points``'
     ``d_state``: 1 on c0 along η, J(π − π_c) on the turn α); the curve's η at the fixed ξ
-    then changes by δπ_η − B'(ξ)·δπ_ξ.
-    """
+    then changes by δπ_η − B'(ξ)·δπ_ξ: 1 on c0 and, on α, (ξ − ξ_c) + B'(ξ)(η − η_c) for
+    variate 1 and −(ξ − ξ_c) − B'(ξ)(η − η_c) for variate 2 (J turns (x¹, x²)). Each entry
+    in floats, with the operations of that product of ``polynomial_points``' Jacobian (the
+    same bits: ``tests/slam/reference_links.py``); a link is a map change's most frequent
+    call, and its point sets cost ~40 interpreter calls a row."""
     if poly_i.variate != poly_j.variate:
         raise ValueError("link_rows: the two pieces must share their variate")
     xis = np.asarray(xis, dtype=float).reshape(-1)
-    eta = 1 if poly_i.variate == 1 else 0  # the column of η in a point (x¹, x²)
     residual = np.zeros(xis.size)
     H = np.zeros((xis.size, n_state))
     for sign, poly, c0_index, turn in (
         (1.0, poly_i, c0_index_i, turn_i),
         (-1.0, poly_j, c0_index_j, turn_j),
     ):
+        if not 3 <= c0_index < n_state:
+            raise ValueError(
+                f"c0_index must be a landmark state index in [3, {n_state}), got {c0_index}"
+            )
+        coeffs = poly.coeffs
+        centre = 0.0
+        if turn is not None:
+            turn_index, pivot = turn
+            if not 3 <= turn_index < n_state or turn_index == c0_index:
+                raise ValueError(f"turn index must be another state index, got {turn_index}")
+            centre = float(polyval(pivot, coeffs))  # η_c
         for row, xi in enumerate(xis.tolist()):
-            pts = polynomial_points(poly, c0_index, 1.0, 1, xi, xi, n_state, turn)
-            d = pts.d_state[0]  # (2, n_state)
-            H[row] += sign * (d[eta] - float(poly.slope(xi)) * d[1 - eta])
-            residual[row] += sign * float(pts.xy[0, eta])
+            eta = float(polyval(xi, coeffs))
+            slope = float(polyval(xi, coeffs, derivative=1))
+            H[row, c0_index] += sign * (1.0 - slope * 0.0)
+            if turn is not None:
+                along, across = xi - pivot, eta - centre
+                if poly.variate == 1:  # J(π − π_c) = (−(η − η_c), ξ − ξ_c) in (x¹, x²)
+                    moved = along - slope * -across
+                else:  # = (−(ξ − ξ_c), η − η_c)
+                    moved = -along - slope * across
+                H[row, turn_index] += sign * moved
+            residual[row] += sign * eta
     return residual, H
 
 

@@ -94,8 +94,10 @@ class MapMaintenance:
         clone = cfg.rotation_states and source.gradient is None  # its fit's own slope error
         fit_var = self.rotation_fit_var(poly) if clone else 0.0
         xi_var = float(slam.cov[0, 0] if poly.variate == 1 else slam.cov[1, 1])
-        shift_slope = math.nan if received else self.shift_slope(fit, n)
-        if cfg.shape_shift == "pose" and not math.isnan(shift_slope):
+        # only the step's shape_shift "pose" model reads a landmark's shift slope
+        shifted = cfg.shape_shift == "pose" and not received
+        shift_slope = self.shift_slope(fit, n) if shifted else math.nan
+        if not math.isnan(shift_slope):
             xi_var = self.shift_var(fit, n, xi_var)
         slam.mean, slam.cov = slam.layout.add(slam.mean, slam.cov, n, fit, source, fit_var)
         return slam.table.append(
@@ -113,7 +115,8 @@ class MapMaintenance:
 
     def shift_slope(self, fit: Fit, n: int) -> float:
         """The slope s̄ a new landmark's c0 moves by when the pose's error shifts its points
-        along ξ (c0 changes by −s̄·δξ; ``SlamConfig.shape_shift``): from its G_x, the pose's
+        along ξ (c0 changes by −s̄·δξ; ``SlamConfig.shape_shift`` "pose", the only reader:
+        with "noise" :meth:`add` stores nan without computing it): from its G_x, the pose's
         column along ξ and, through the old landmarks it was fitted on (a refit, a merge),
         each one's own s̄ (they were shifted by the same error); nan when one of those has
         none, or lies along the other axis (its s̄ is a slope against the other ξ, and G_x on
@@ -398,7 +401,8 @@ class MapMaintenance:
         the kernels' frozen-shape model) over (1 + b'²)², the slope-to-angle factor at the
         centroid (:func:`~polyslam_env.slam.map_kernels.rotation_fit_var`)."""
         cfg = self.config
-        order = max(len(np.trim_zeros(np.asarray(poly.coeffs[1:], dtype=float), "b")), 1)
+        used = np.flatnonzero(poly.coeffs[1:])  # the shape without its zero tail
+        order = max(int(used[-1]) + 1 if used.size else 0, 1)
         shape = np.zeros(poly.order + 1)
         shape[1:] = poly.coeffs[1:]
         inverse = fit_inverse_table(cfg.eps_z + 1, cfg.order)

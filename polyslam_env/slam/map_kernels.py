@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from polyslam_env.core.geometry import symmetric_eigvals3
-from polyslam_env.core.jit import njit
+from polyslam_env.core.jit import fma, njit
 from polyslam_env.slam.columns import (
     BEAM,
     CHANGED_AT,
@@ -96,6 +96,39 @@ POSE_VAR_FLOOR = 1e-12
 
 
 # -- small pieces ---------------------------------------------------------------------------------
+@njit
+def carry_points(
+    real: np.ndarray, n: int, before: np.ndarray, after: np.ndarray, c: float, s: float
+) -> None:
+    """Move the first ``n`` stored points of ``real`` (the stored points' float buffer)
+    rigidly from pose ``before`` (3,) to ``after`` (3,) (:meth:`~polyslam_env.slam.stored.
+    StoredPoints.carry`; ``c``, ``s`` the cosine and sine of the heading's change dθ):
+    position and pose position ``(p − b) Rᵀ + a``, direction ``u Rᵀ``, pose heading ``+ dθ``.
+
+    Each row times Rᵀ is computed as the BLAS product it replaced computed it (a (n, 7) ×
+    (7, 7) gemm of OpenBLAS's FMA kernels, the goldens' pinned Haswell): per output, a chain
+    of fused multiply-adds along the seven inputs from 0, the motion's zeros included (they
+    settle the sign of an exact zero)."""
+    dtheta = after[2] - before[2]
+    motion = np.zeros((7, 7))
+    motion[0, 0] = motion[2, 2] = motion[4, 4] = c
+    motion[0, 1] = motion[2, 3] = motion[4, 5] = s
+    motion[1, 0] = motion[3, 2] = motion[5, 4] = -s
+    motion[1, 1] = motion[3, 3] = motion[5, 5] = c
+    motion[6, 6] = 1.0
+    shift_in = (before[0], before[1], 0.0, 0.0, before[0], before[1], 0.0)
+    shift_out = (after[0], after[1], 0.0, 0.0, after[0], after[1], dtheta)
+    row = np.empty(7)
+    for i in range(n):
+        for k in range(7):
+            row[k] = real[X + k, i] - shift_in[k]
+        for j in range(7):
+            acc = 0.0
+            for k in range(7):
+                acc = fma(row[k], motion[k, j], acc)
+            real[X + j, i] = acc + shift_out[j]
+
+
 @njit
 def spectral_norm3(p: np.ndarray) -> float:
     """‖P‖₂ of the symmetric 3×3 block at the top left of ``p``: its largest |eigenvalue|
@@ -298,6 +331,53 @@ def merge_test(
     out[2] = gamma_o if gamma_o > gamma_p else gamma_p  # Python's max(gamma_p, gamma_o)
     out[3] = xi_o[inside[inside.size // 2]]
     return MEASURED
+
+
+@njit
+def _unit_tangent(variate: int, c: np.ndarray, xi: float) -> tuple[float, float]:
+    """``merging.unit_tangent``: (1, B') or (B', 1) over its norm, the same floats."""
+    slope = slope_at(c, c.size - 1, xi)
+    t0, t1 = (1.0, slope) if variate == 1 else (slope, 1.0)
+    norm = math.sqrt(t0 * t0 + t1 * t1)
+    return t0 / norm, t1 / norm
+
+
+@njit
+def join_offset(
+    p_variate: int, p_coeffs: np.ndarray, p_lo: float, p_hi: float,
+    o_variate: int, o_coeffs: np.ndarray, o_lo: float, o_hi: float,
+    max_gap: float, max_angle_deg: float, thin_wall: float,
+) -> float:  # fmt: skip
+    """``merging.join_gamma`` of p against another polynomial (coefficients with their c0,
+    extents): the lateral offset of the two pieces meeting end to end, nan when they cannot
+    be joined (nearer ends farther than ``max_gap``, tangents there beyond ``max_angle_deg``,
+    offset above ``thin_wall``). The same floats as the readable version in
+    ``tests/slam/reference_merging.py`` (tested)."""
+    ends = np.empty(2)
+    ends_p, ends_o = np.empty((2, 2)), np.empty((2, 2))
+    ends[0], ends[1] = p_lo, p_hi
+    _on_curve(p_coeffs, p_variate, ends, ends_p)
+    ends[0], ends[1] = o_lo, o_hi
+    _on_curve(o_coeffs, o_variate, ends, ends_o)
+    best_i, best_k, best = 0, 0, np.inf
+    for i in range(2):
+        for k in range(2):
+            dx, dy = ends_p[i, 0] - ends_o[k, 0], ends_p[i, 1] - ends_o[k, 1]
+            gap = math.sqrt(dx * dx + dy * dy)
+            if gap < best or (i == 0 and k == 0):  # numpy's argmin: the first smallest
+                best_i, best_k, best = i, k, gap
+    if best > max_gap:
+        return np.nan
+    tp0, tp1 = _unit_tangent(p_variate, p_coeffs, p_lo if best_i == 0 else p_hi)
+    to0, to1 = _unit_tangent(o_variate, o_coeffs, o_lo if best_k == 0 else o_hi)
+    cosine = min(abs(tp0 * to0 + tp1 * to1), 1.0)
+    if math.acos(cosine) * (180.0 / math.pi) > max_angle_deg:  # np.degrees' factor
+        return np.nan
+    d0 = ends_o[best_k, 0] - ends_p[best_i, 0]
+    d1 = ends_o[best_k, 1] - ends_p[best_i, 1]
+    across_p, across_o = abs(tp0 * d1 - tp1 * d0), abs(to0 * d1 - to1 * d0)
+    offset = across_o if across_o > across_p else across_p  # Python's max(across_p, across_o)
+    return offset if offset <= thin_wall else np.nan
 
 
 # -- stored points --------------------------------------------------------------------------------

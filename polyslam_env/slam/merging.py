@@ -191,25 +191,16 @@ def join_gamma(poly: Polynomial, other: Polynomial, max_gap: float) -> float | N
 
     The nearer pair of end points must be within ``max_gap``; the tangents there within
     :data:`JOIN_ANGLE_DEG`; the offset is the larger distance of each end point from the other
-    curve's tangent line at its end, and must be at most :data:`THIN_WALL`.
+    curve's tangent line at its end, and must be at most :data:`THIN_WALL`. One compiled call
+    (:func:`~polyslam_env.slam.map_kernels.join_offset`; its readable numpy version is the
+    oracle in ``tests/slam/reference_merging.py``): every map change and every received piece
+    tries it against its neighbours.
     """
-    ends_p = poly.points_at(np.array([poly.lo, poly.hi]))  # (2, 2)
-    ends_o = other.points_at(np.array([other.lo, other.hi]))
-    gaps = np.linalg.norm(ends_p[:, None, :] - ends_o[None, :, :], axis=2)  # (2, 2)
-    i, k = np.unravel_index(int(np.argmin(gaps)), gaps.shape)
-    if gaps[i, k] > max_gap:
-        return None
-    t_p = unit_tangent(poly, poly.lo if i == 0 else poly.hi)
-    t_o = unit_tangent(other, other.lo if k == 0 else other.hi)
-    if np.degrees(np.arccos(min(abs(float(t_p @ t_o)), 1.0))) > JOIN_ANGLE_DEG:
-        return None
-    delta = ends_o[k] - ends_p[i]
-    offset = max(abs(_cross(t_p, delta)), abs(_cross(t_o, delta)))
-    return offset if offset <= THIN_WALL else None
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> float:
-    return float(a[0] * b[1] - a[1] * b[0])
+    offset = map_kernels.join_offset(
+        poly.variate, poly.coeffs, poly.lo, poly.hi, other.variate, other.coeffs, other.lo,
+        other.hi, max_gap, JOIN_ANGLE_DEG, THIN_WALL,
+    )  # fmt: skip
+    return None if math.isnan(offset) else float(offset)
 
 
 def face_normal(poly: Polynomial, xi: float, side: int) -> np.ndarray:

@@ -118,9 +118,15 @@ class Polynomial:
             raise ValueError("polynomial coefficients and extent must be finite")
         coeffs = self.coeffs.copy()
         coeffs[0] = c0
+        return Polynomial.unchecked(self.variate, coeffs, self.lo, self.hi)
+
+    @staticmethod
+    def unchecked(variate: int, coeffs: np.ndarray, lo: float, hi: float) -> Polynomial:
+        """A polynomial from parts known valid (a float (m+1,) array, finite, lo ≤ hi: those
+        of a valid polynomial or a table's extents), without :meth:`__post_init__`'s checks,
+        which cost as much as the rest of a map change's reading of its landmarks."""
         out = object.__new__(Polynomial)
-        for name, value in (("variate", self.variate), ("coeffs", coeffs), ("lo", self.lo),
-                            ("hi", self.hi)):  # fmt: skip
+        for name, value in (("variate", variate), ("coeffs", coeffs), ("lo", lo), ("hi", hi)):
             object.__setattr__(out, name, value)
         return out
 

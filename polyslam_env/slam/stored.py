@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from polyslam_env.slam import map_kernels
 from polyslam_env.slam.columns import (
     BEAM,
     CLUSTER,
@@ -63,7 +64,10 @@ class PointArrays(NamedTuple):
 
     def subset(self, rows: np.ndarray) -> PointArrays:
         """The points at ``rows`` (an index or mask array), in that order."""
-        return PointArrays(*(column[rows] for column in self))
+        return PointArrays(
+            self.xy[rows], self.direction[rows], self.sigma[rows], self.weight[rows],
+            self.pose[rows], self.beam[rows], self.step[rows],
+        )  # fmt: skip
 
 
 def point_arrays(
@@ -202,17 +206,27 @@ class StoredPoints:
         n = len(self)
         if n == 0:
             return
-        index = self.index
-        order = np.lexsort((index[RANK, :n], index[OWNER, :n], index[KIND, :n]))
-        bx, by, dtheta = float(before[0]), float(before[1]), float(after[2] - before[2])
-        ax, ay = float(after[0]), float(after[1])
+        dtheta = float(after[2] - before[2])
         c, s = math.cos(dtheta), math.sin(dtheta)
-        rows = np.ascontiguousarray(self.real[X : PTH + 1, order].T)  # (n, 7)
-        rows = rows - np.array([bx, by, 0.0, 0.0, bx, by, 0.0])
-        motion = np.zeros((7, 7))  # Rᵀ on xy, direction and pose xy (row vectors times Rᵀ)
-        motion[0, :2] = motion[2, 2:4] = motion[4, 4:6] = c, s
-        motion[1, :2] = motion[3, 2:4] = motion[5, 4:6] = -s, c
-        motion[6, 6] = 1.0
+        if n > 1:  # as numpy's (n, 7) × (7, 7) product computed it (BLAS gemm), compiled
+            map_kernels.carry_points(self.real, n, before, after, c, s)
+            return
+        # A lone point: numpy's product of one row is BLAS's gemv, which rounds differently
+        # from gemm's chain of fused multiply-adds; kept as it was.
+        bx, by, ax, ay = float(before[0]), float(before[1]), float(after[0]), float(after[1])
+        rows = np.ascontiguousarray(self.real[X : PTH + 1, :n].T)  # (1, 7)
+        rows -= (bx, by, 0.0, 0.0, bx, by, 0.0)
+        motion = np.array(
+            [  # Rᵀ on xy, direction and pose xy (row vectors times Rᵀ)
+                [c, s, 0.0, 0.0, 0.0, 0.0, 0.0],
+                [-s, c, 0.0, 0.0, 0.0, 0.0, 0.0],
+                [0.0, 0.0, c, s, 0.0, 0.0, 0.0],
+                [0.0, 0.0, -s, c, 0.0, 0.0, 0.0],
+                [0.0, 0.0, 0.0, 0.0, c, s, 0.0],
+                [0.0, 0.0, 0.0, 0.0, -s, c, 0.0],
+                [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+            ]
+        )
         rows = rows @ motion
-        rows += np.array([ax, ay, 0.0, 0.0, ax, ay, dtheta])
-        self.real[X : PTH + 1, order] = rows.T
+        rows += (ax, ay, 0.0, 0.0, ax, ay, dtheta)
+        self.real[X : PTH + 1, :n] = rows.T

@@ -373,6 +373,7 @@ def _stats(median: float, low: float, high: float) -> dict[str, float]:
                 "messages": 1290,
                 "polynomials": 16170,
                 "skipped": 12345,
+                "covered": 12345,
                 "refits": 99999,
             },
         ),

@@ -15,18 +15,24 @@ from polyslam_env import metrics
 from polyslam_env.apps.simulate import SimulationResult, simulate
 from polyslam_env.comms.channel import ChannelConfig
 from polyslam_env.comms.exchange import (
+    _ETA_AXIS,
     RECEIVED_CI_WEIGHT,
     RendezvousExchange,
+    _c0_variance,
+    _chain_normals,
     chain_points,
     covered_points,
     frame_message,
     map_transform,
     normal_variance,
     received_point_set,
+    refit_pieces,
+    refit_variance_floor,
     transform_normal_sigma,
     uncovered_runs,
     unframe_message,
 )
+from polyslam_env.comms.kernels import covered_by_walls
 from polyslam_env.comms.messages import Header, PolynomialMessage, PolynomialRecord, encode
 from polyslam_env.comms.relative_pose import frame_transform, relative_pose, wrap_angle
 from polyslam_env.core.geometry import compose, inverse, rotation, transform_points
@@ -572,9 +578,13 @@ def test_exchange__received_wall_never_replaces_a_better_own_one() -> None:
     _add_wall(sender, WALL[5:-5] + np.array([0.0, 0.03]), f)  # the same wall, 3 cm off, less of it
     k = receiver.table.state_index(own)
     before = receiver.mean[k], receiver.cov[k, k], receiver.n_landmarks
-    out = _exchange().step(0, [sender, receiver], _mutual(p_s, p_r), np.ones(2, bool))
+    ex = _exchange()
+    out = ex.step(0, [sender, receiver], _mutual(p_s, p_r), np.ones(2, bool))
     got = next(d for d in out.delivered if d.receiver == 1)
     assert got.n_polynomials == 1 and got.landmark_ids == ()  # covered: nothing inserted
+    # the own wall is better than any refit of the received chain could be and covers all
+    # of it: skipped before the refit (rule 1 before the refit)
+    assert ex.covered[1] == 1 and ex.refits[1] == 0 and got.received == ()
     k = receiver.table.state_index(own)
     assert (receiver.mean[k], receiver.cov[k, k], receiver.n_landmarks) == before
 
@@ -867,3 +877,109 @@ def test_uncovered_runs__each_run_as_its_own_chain_measures_it() -> None:
         for min_length in (0.1, *lengths[:3]):  # a run exactly at the threshold is kept
             assert uncovered_runs(keep, xy, min_length) == oracle(keep, xy, min_length)
     assert uncovered_runs(np.zeros(4, dtype=bool), np.zeros((4, 2)), 0.1) == []
+
+
+def _random_record(rng: np.random.Generator) -> PolynomialRecord:
+    """A straight or curved received wall (either variate, up to a cubic) of 0.3–3 m."""
+    lo = float(rng.uniform(-2.0, 1.0))
+    coeffs = np.zeros(4)
+    coeffs[0] = rng.uniform(-2.0, 2.0)
+    coeffs[1] = rng.uniform(-0.8, 0.8)
+    if rng.random() < 0.5:  # curved
+        coeffs[2] = rng.uniform(-0.3, 0.3)
+        coeffs[3] = rng.uniform(-0.1, 0.1)
+    poly = Polynomial(int(rng.integers(1, 3)), coeffs, lo, lo + float(rng.uniform(0.3, 3.0)))
+    return PolynomialRecord(0, poly, float(rng.uniform(0.0, 4e-4)), 0, 0)
+
+
+def _random_psd(rng: np.random.Generator, n: int, scale: float) -> np.ndarray:
+    a = rng.normal(0.0, scale, (n, n))
+    return a @ a.T
+
+
+def test_refit_variance_floor__bounds_the_refits_of_random_records() -> None:
+    """The floor the exchange compares held walls with before refitting a received chain
+    (rule 1 before the refit) is at most the normal variance of every piece refitted from
+    it, as ``_fuse`` computes that variance, on random straight and curved records, random
+    transforms and random transform, pose and c0 covariances (the floor is exact for
+    straight pieces: equality up to round-off is allowed, 1e-9 relative)."""
+    rng = np.random.default_rng(41)
+    tight = []
+    for _ in range(150):
+        record = _random_record(rng)
+        t = np.array([rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-np.pi, np.pi)])
+        d_state, d_noise = rng.normal(0.0, 1.0, (3, 3)), rng.normal(0.0, 1.0, (3, 6))
+        noise_cov = _random_psd(rng, 6, 0.01)
+        pose_cov = _random_psd(rng, 3, 0.01)
+        pts = received_point_set(record, t, d_state, d_noise, noise_cov, 3)
+        q = chain_points(record.polynomial, 0.005, 0.05)
+        cov_t = (
+            d_state @ pose_cov @ d_state.T + d_noise @ noise_cov @ d_noise.T / RECEIVED_CI_WEIGHT
+        )
+        shift = rotation(float(t[2])) @ _ETA_AXIS[record.polynomial.variate]
+        normals = _chain_normals(q, t)
+        floor = refit_variance_floor(normals, cov_t, shift, record.c0_var / RECEIVED_CI_WEIGHT)
+        for _, fit in refit_pieces(pts, 3, True, 0.0025):
+            var = normal_variance(fit.poly, _c0_variance(fit, pose_cov))
+            assert var >= floor * (1.0 - 1e-9)
+            tight.append(var / floor)
+    assert min(tight) < 1.0 + 1e-6  # and it is reached (straight pieces)
+
+
+def _covered_oracle(
+    xy: np.ndarray, normals: np.ndarray, walls: list[Polynomial], c0_var: np.ndarray,
+    max_var: float, reach: float, cos_max: float, min_overlap: float,
+) -> np.ndarray:  # fmt: skip
+    """numpy's ``covered_by_walls``, wall by wall."""
+    out = np.zeros(len(xy), dtype=bool)
+    for wall, var in zip(walls, c0_var, strict=True):
+        mid = float(wall.slope(0.5 * (wall.lo + wall.hi)))
+        if var / (1.0 + mid * mid) > max_var:
+            continue
+        xi, eta = wall.from_xy(xy)
+        n_xi, n_eta = wall.from_xy(normals)
+        s = wall.slope(xi)
+        on = (xi >= wall.lo) & (xi <= wall.hi) & (np.abs(eta - wall.value(xi)) <= reach)
+        on &= np.abs(n_eta - s * n_xi) >= cos_max * np.sqrt(1.0 + s * s)
+        for run in uncovered_runs(on, xy, 0.0):
+            steps = np.diff(xy[run], axis=0)
+            length = 0.0
+            for dx, dy in steps.tolist():
+                length += float(np.sqrt(dx * dx + dy * dy))
+            if length >= min_overlap:
+                out[run] = True
+    return out
+
+
+def test_covered_by_walls__matches_the_numpy_oracle() -> None:
+    """The compiled coverage of a received chain by held walls is numpy's, point for point,
+    on random chains near random walls (some covered, some crossing, some too uncertain)."""
+    rng = np.random.default_rng(7)
+    cos_max = float(np.cos(np.radians(30.0)))
+    hits = 0
+    for _ in range(200):
+        walls = [_random_record(rng).polynomial.with_c0(float(rng.uniform(-1, 1)))
+                 for _ in range(int(rng.integers(1, 4)))]  # fmt: skip
+        base = walls[0]
+        xi = np.linspace(base.lo - 0.3, base.hi + 0.3, int(rng.integers(2, 80)))
+        eta = base.value(xi) + rng.normal(0.0, rng.choice([0.01, 0.2]), xi.size)
+        xy = base.to_xy(xi, eta)
+        d = np.gradient(xy, axis=0)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        normals = np.stack([-d[:, 1], d[:, 0]], axis=1)
+        c0_var = rng.uniform(0.0, 1e-3, len(walls))
+        width = max(w.order for w in walls) + 1
+        coeffs = np.zeros((len(walls), width))
+        for k, w in enumerate(walls):
+            coeffs[k, : w.order + 1] = w.coeffs
+        args = (0.35, cos_max, float(rng.choice([0.0, 0.1, 0.5])))
+        max_var = float(rng.uniform(0.0, 1e-3))
+        got = covered_by_walls(
+            xy, normals, np.array([w.variate for w in walls]), coeffs,
+            np.array([(w.lo, w.hi) for w in walls]), c0_var, max_var, *args,
+        )  # fmt: skip
+        np.testing.assert_array_equal(
+            got, _covered_oracle(xy, normals, walls, c0_var, max_var, *args)
+        )
+        hits += int(got.any() and not got.all())
+    assert hits > 20  # partly covered chains were among the cases

@@ -10,12 +10,13 @@ import subprocess
 import sys
 import tempfile
 from collections.abc import Iterator
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from polyslam_env.core.jit import fallback_cache_dir, njit
+from polyslam_env.core.jit import fallback_cache_dir, fma, njit
 
 PACKAGE = Path(__file__).resolve().parents[2] / "polyslam_env"
 
@@ -170,3 +171,16 @@ def test_compile_seconds__counts_a_kernels_first_compile_once() -> None:
     again = compile_seconds()
     assert outer(2.0) == 7.0  # type: ignore[operator]
     assert compile_seconds() == again
+
+
+def test_fma__rounds_once_as_the_exact_product_plus_sum() -> None:
+    """The oracle: a·b + c in exact rationals, rounded once (Python's float of a Fraction is
+    correctly rounded); a plain a·b + c rounds twice and differs in some of these."""
+    rng = np.random.default_rng(4)
+    values = rng.normal(size=(2000, 3)) * rng.choice([1e-8, 1.0, 1e8], size=(2000, 3))
+    twice = 0
+    for a, b, c in values.tolist():
+        exact = float(Fraction(a) * Fraction(b) + Fraction(c))
+        assert fma(a, b, c) == exact
+        twice += a * b + c != exact
+    assert twice > 0  # the cases tell a fused from an unfused multiply-add

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from polyslam_env.environment import kernels
 from polyslam_env.environment.config import resolve_config
 from polyslam_env.environment.observations import (
     BeliefGrid,
@@ -14,6 +15,7 @@ from polyslam_env.environment.observations import (
 )
 from polyslam_env.world.sensors import Detection
 from tests.environment import reference
+from tests.slam.reference_floats import fma_exact
 
 
 @pytest.mark.parametrize("slam_enabled", [True, False])
@@ -125,3 +127,44 @@ def test_encode_team__equals_each_view_alone_and_the_oracle() -> None:
             encoder.res, False,
         )  # fmt: skip
         np.testing.assert_array_equal(got, reference.vector(encoder, view, cells))
+
+
+def test_place_team__the_products_as_exact_fma_chains_and_a_lone_point_as_numpy() -> None:
+    """Cell centres R(θ)ᵀ + xy and ego points (p − xy) R(θ) of a team, bit for bit: entries
+    of robots with two or more points against exact fused multiply-add chains (what numpy's
+    gemm gave on an FMA BLAS), a robot with one point against numpy's own product."""
+    config = resolve_config(None, slam_enabled=True)
+    encoder = ObservationEncoder(config, (10.0, 8.0))
+    cc = encoder.cell_centres[::7]  # a sample of the grid's cells, (0, 0) among them
+    rng = np.random.default_rng(5)
+    counts = [0, 1, 2, 9]
+    poses = np.column_stack([rng.uniform(-5.0, 5.0, (4, 2)), rng.uniform(-4.0, 4.0, 4)])
+    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    points = rng.uniform(-6.0, 6.0, (int(starts[-1]), 2))
+    team = TeamView(
+        ranges=np.ones((4, 2)), poses=poses, pose_stds=np.zeros((4, 3)), map_points=points,
+        map_starts=starts, belief=BeliefGrid(12.0, 0.1, 2.0), belief_rows=np.zeros(4, np.int64),
+        seen=np.zeros((4, 4), bool), distance=np.zeros((4, 4)), bearing=np.zeros((4, 4)),
+        since=np.zeros(4, np.int64), rendezvous=np.zeros(4, np.int64), step=np.zeros(4, np.int64),
+    )  # fmt: skip
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    centres, ego = np.empty((4, len(cc), 2)), np.empty((len(points), 2))
+    kernels.place_team(cc, points, starts, poses, c, s, centres, ego)
+    ObservationEncoder._lone_points(team, c, s, ego)
+    for k in range(4):
+        rot_t = [[c[k], s[k]], [-s[k], c[k]]]  # R(θ)ᵀ; R(θ) is its transpose
+        for i, (a, b) in enumerate(cc.tolist()):
+            for j in range(2):
+                chain = fma_exact(b, rot_t[1][j], fma_exact(a, rot_t[0][j], 0.0))
+                assert centres[k, i, j] == chain + poses[k, j]
+        for m in range(starts[k], starts[k + 1]):
+            d = points[m] - poses[k, :2]
+            if counts[k] == 1:
+                want = (points[m : m + 1] - poses[k, :2]) @ np.array([[c[k], -s[k]], [s[k], c[k]]])
+                np.testing.assert_array_equal(ego[m], want[0])
+                continue
+            for j in range(2):
+                chain = fma_exact(
+                    float(d[1]), rot_t[j][1], fma_exact(float(d[0]), rot_t[j][0], 0.0)
+                )
+                assert ego[m, j] == chain

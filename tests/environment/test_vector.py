@@ -87,19 +87,23 @@ def test_vec_path__fault_injection_keeps_slots_and_ends_episodes_cleanly() -> No
 
 
 def test_vec_path__worker_processes_give_the_same_rollout() -> None:
-    actions = np.random.default_rng(0).uniform(-1, 1, (5, 4, 2)).astype(np.float32)
+    """Three copies on two workers (two on the first: SuperSuit's own split seeded the third
+    like the second) play what they play in one process, although each worker first plays
+    a step of its own to load its kernels."""
+    actions = np.random.default_rng(0).uniform(-1, 1, (5, 6, 2)).astype(np.float32)
     results = []
     for cpus in (0, 2):
-        venv = _adapter(num_cpus=cpus)
+        venv = _adapter(num_envs=3, num_cpus=cpus)
         venv.seed(3)
         obs = [venv.reset()]
-        assert len(venv.reset_infos) == 4 and all(isinstance(i, dict) for i in venv.reset_infos)
+        assert len(venv.reset_infos) == 6 and all(isinstance(i, dict) for i in venv.reset_infos)
         venv.seed(3)
         obs = [venv.reset()]
         obs += [venv.step(a)[0] for a in actions]
         results.append(np.array(obs))
         venv.close()
     np.testing.assert_array_equal(results[0], results[1])
+    assert not np.array_equal(results[0][:, 2:4], results[0][:, 4:6])  # copies 1, 2: own seeds
 
 
 def test_fixed_agents__maps_the_unit_box_to_physical_limits() -> None:

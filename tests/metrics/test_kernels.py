@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from polyslam_env.metrics.boundary import distance_to_boundary
-from polyslam_env.metrics.kernels import covered, sample_rows, wall_distances
+from polyslam_env.metrics.kernels import (
+    covered,
+    parallel_neighbours,
+    record_rows,
+    sample_rows,
+    wall_distances,
+)
 from polyslam_env.slam.landmarks import PackedPolynomials
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.generators import make_generator
@@ -107,3 +113,106 @@ def test_sample_rows__equals_sample_arclength_bit_for_bit(step: float) -> None:
     for q, r in enumerate(rows.tolist()):
         want = polys[r].sample_arclength(step)
         np.testing.assert_array_equal(points[starts[q] : starts[q + 1]], want)
+
+
+def _parallel_neighbours_by_kd_tree(
+    points: np.ndarray, owner: np.ndarray, tangent: np.ndarray, has_dir: np.ndarray, tol: float,
+    max_sine: float,
+) -> np.ndarray:  # fmt: skip
+    """The oracle: the duplicates metric as it was written with scipy's KD-tree pairs."""
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(points).query_pairs(tol, output_type="ndarray")  # (P, 2), i < j
+    pairs = pairs[(owner[pairs[:, 0]] != owner[pairs[:, 1]]) & has_dir[pairs].all(axis=1)]
+    ta, tb = tangent[pairs[:, 0]], tangent[pairs[:, 1]]
+    pairs = pairs[np.abs(ta[:, 0] * tb[:, 1] - ta[:, 1] * tb[:, 0]) <= max_sine]
+    marked = np.zeros(len(points), dtype=bool)
+    marked[pairs.ravel()] = True
+    return marked
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_parallel_neighbours__equal_the_kd_tree_pairs(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    m = int(rng.integers(2, 3000))
+    points = rng.uniform(0, 4, size=(m, 2))
+    if seed == 1:  # points on a 5 cm lattice: many pairs exactly at the tolerance
+        points = np.round(points / 0.05) * 0.05
+    if seed == 3:  # spread far: the bucket side grows past tol
+        points[-1] = [500.0, -300.0]
+    owner = rng.integers(0, 12, size=m)
+    angle = rng.uniform(0, 2 * np.pi, size=m)
+    tangent = np.column_stack([np.cos(angle), np.sin(angle)])
+    has_dir = rng.random(m) > 0.1
+    max_sine = float(np.sin(np.deg2rad(30.0)))
+    for tol in (0.05, 0.1, 0.0):
+        expected = _parallel_neighbours_by_kd_tree(points, owner, tangent, has_dir, tol, max_sine)
+        got = parallel_neighbours(points, owner, tangent, has_dir, tol, max_sine)
+        assert np.array_equal(got, expected)
+        assert tol == 0.0 or 0 < got.sum() < m  # both kinds present: a real comparison
+
+
+def test_covered__equals_the_kd_tree_query_within_its_bound() -> None:
+    """``covered`` replaced ``cKDTree.query(…, distance_upper_bound=tol)`` in the seen
+    boundary: the same samples, ties at exactly ``tol`` included (both strict)."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(5)
+    points = np.round(rng.uniform(0, 3, size=(500, 2)) / 0.05) * 0.05
+    samples = np.round(rng.uniform(-0.5, 3.5, size=(4000, 2)) / 0.05) * 0.05
+    for tol in (0.05, 0.15):
+        d, _ = cKDTree(points).query(samples, k=1, distance_upper_bound=tol)
+        assert np.array_equal(covered(samples, points, tol), np.isfinite(d))
+
+
+def _record_rows_numpy(
+    slots: np.ndarray, true_poses: np.ndarray, est_poses: np.ndarray, est_covs: np.ndarray,
+    slam_times: np.ndarray, collided: np.ndarray, diverging: np.ndarray, h: dict[str, np.ndarray],
+) -> None:  # fmt: skip
+    """The oracle: ``TeamHistory.record``'s numpy form before the kernel (fancy indexing)."""
+    rows = h["lengths"][slots]
+    last = h["true"][rows - 1, slots]
+    step = np.hypot(true_poses[:, 0] - last[:, 0], true_poses[:, 1] - last[:, 1])
+    h["path_length"][slots] += step
+    h["true"][rows, slots] = true_poses
+    h["est"][rows, slots] = est_poses
+    h["cov"][rows, slots] = est_covs
+    h["times"][rows, slots] = slam_times
+    h["collisions"][slots] += collided
+    first = diverging & ~h["diverged"][slots]
+    h["diverged_at"][slots[first]] = rows[first]
+    h["diverged"][slots] |= diverging
+    h["lengths"][slots] = rows + 1
+
+
+def test_record_rows__equals_the_numpy_record_bit_for_bit() -> None:
+    rng = np.random.default_rng(7)
+    j, capacity = 5, 40
+    start = rng.normal(size=(j, 3)) * 20.0
+    fresh = {
+        "lengths": np.ones(j, dtype=np.int64),
+        "true": np.zeros((capacity, j, 3)),
+        "est": np.zeros((capacity, j, 3)),
+        "cov": np.zeros((capacity, j, 3, 3)),
+        "times": np.full((capacity, j), np.nan),
+        "path_length": np.zeros(j),
+        "collisions": np.zeros(j, dtype=np.int64),
+        "diverged": np.zeros(j, dtype=bool),
+        "diverged_at": np.full(j, -1, dtype=np.int64),
+    }
+    fresh["true"][0] = start
+    ours = {name: a.copy() for name, a in fresh.items()}
+    oracle = {name: a.copy() for name, a in fresh.items()}
+    for _ in range(30):  # steps recording a random ascending subset of slots
+        slots = np.flatnonzero(rng.random(j) < 0.7)
+        k = len(slots)
+        args = (
+            slots, rng.normal(size=(k, 3)) * 20.0, rng.normal(size=(k, 3)),
+            rng.normal(size=(k, 3, 3)), np.where(rng.random(k) < 0.3, np.nan, rng.random(k)),
+            rng.random(k) < 0.3, rng.random(k) < 0.1,
+        )  # fmt: skip
+        record_rows(*args, *ours.values())
+        _record_rows_numpy(*args, oracle)
+    for name in fresh:
+        np.testing.assert_array_equal(ours[name], oracle[name], err_msg=name, strict=True)
+    assert ours["diverged"].any() and ours["collisions"].any()  # the flags were exercised

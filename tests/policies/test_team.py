@@ -14,7 +14,16 @@ from hypothesis import strategies as st
 import polyslam_env
 from policies import make_policy, make_team
 from policies.planner import team_discount
-from policies.radio import GoalMessage, Radio, decode, encode, goal_in_own_frame, mutual_sighting
+from policies.radio import (
+    Area,
+    GoalMessage,
+    Radio,
+    area_in_own_frame,
+    decode,
+    encode,
+    goal_in_own_frame,
+    mutual_sighting,
+)
 from policies.team import TeamFrontierPolicy
 from tests.policies import reference
 
@@ -97,13 +106,13 @@ def test_mutual_sighting__pairs_by_distance_and_refuses_ambiguity() -> None:
     assert mutual_sighting(np.zeros((0, 2)), np.array([[1.0, 0.0]]), 0.06) is None
 
 
-def _corridor_team() -> tuple[TeamFrontierPolicy, TeamFrontierPolicy]:
+def _corridor_team(**kwargs: Any) -> tuple[TeamFrontierPolicy, TeamFrontierPolicy]:
     """Two ``frontier_team`` robots sharing a radio, each with the same own map: a corridor
     6 m × 1.6 m (x −3 … 3), walls along its sides, open (unknown) at both ends, and a post
     mapped at either end 3 m beyond (so that the unknown ends lie inside the planner's
-    window, whose border counts as known)."""
+    window, whose border counts as known); ``kwargs`` go to the policies."""
     env = polyslam_env.parallel_env(map="generator:warehouse", num_robots=2)
-    team = make_team("frontier_team", env)
+    team = make_team("frontier_team", env, **kwargs)
     first, second = team.policies.values()
     assert isinstance(first, TeamFrontierPolicy) and isinstance(second, TeamFrontierPolicy)
     assert first.radio is second.radio
@@ -141,7 +150,9 @@ def test_second_robot__goes_elsewhere_because_of_the_first_robots_announced_goal
     second._plan(pose_1)
     alone = second.goal
     assert alone is not None and second.map.centre(*alone)[0] < 0  # the same end, alone
-    assert first.radio.bytes_sent[0] == len(first.radio.heard(1)[0]) == 14 + 8 + 8
+    sent = first.radio.heard(1)[0]  # with its explored area: the corridor, known to both
+    area = decode(sent).area
+    assert area is not None and first.radio.bytes_sent[0] == len(sent) > 14 + 8 + 8 + 23
 
     second._announce(pose_1, np.zeros((0, 2)))  # it did not see robot 0 at that step
     second._step = 2
@@ -159,6 +170,91 @@ def test_second_robot__goes_elsewhere_because_of_the_first_robots_announced_goal
     second._plan(pose_1)
     assert second.goal is not None and second.map.centre(*second.goal)[0] > 0  # the right end
     assert second.metrics()["goal_messages_received"] == 1.0
+
+
+def test_explored_area__round_trips_and_a_broken_one_is_a_one_line_error() -> None:
+    rng = np.random.default_rng(3)
+    cells = rng.random((7, 13)) < 0.4
+    area = Area(np.array([1.5, -2.25, 0.75]), (-4, 9), cells, 0.2)
+    message = GoalMessage(1, 5, np.array([[1.0, 0.5]]), np.array([[2.0, 0.0]]), area)
+    data = encode(message)
+    packed = len(data) - (37 + 8 + 8)  # the layout of policies.radio's doc: L bytes of cells
+    assert packed > 0 and data[1] == 2
+    back = decode(data).area
+    assert back is not None and back.corner == (-4, 9) and back.cell == 0.2
+    assert np.array_equal(back.cells, cells)
+    np.testing.assert_allclose(back.pose, area.pose.astype(np.float32), rtol=0, atol=0)
+    assert decode(encode(GoalMessage(1, 5, message.detections, message.goals))).area is None
+    for broken in (data[:-1], data[:40], data[:-6] + b"\x00\x00" + data[-4:]):
+        with pytest.raises(ValueError, match="goal message"):
+            decode(broken)
+
+
+def test_area_in_own_frame__places_a_mates_explored_cells_from_a_mutual_sighting() -> None:
+    """A sender's explored cells, known in the world: the receiver places each cell's four
+    quarter centres where they are in its own start frame (brute force, exact readings)."""
+    rng = np.random.default_rng(7)
+    for _ in range(30):
+        start_r, start_s = rng.uniform(-5, 5, 3), rng.uniform(-5, 5, 3)
+        pose_r, pose_s = rng.uniform(-3, 3, 3), rng.uniform(-3, 3, 3)
+        world_r, world_s = _compose(start_r, pose_r), _compose(start_s, pose_s)
+        d = math.hypot(*(world_s[:2] - world_r[:2]))
+        seen = np.array([d, _bearing(world_r, world_s[:2])])
+        back = _bearing(world_s, world_r[:2])
+        cells = rng.random((4, 5)) < 0.5
+        area = Area(pose_s, (int(rng.integers(-20, 20)), int(rng.integers(-20, 20))), cells, 0.2)
+        got = area_in_own_frame(pose_r, seen, back, area).reshape(-1, 4, 2)
+        for (x, y), quarters in zip(area.centres(), got, strict=True):
+            for q, (dx, dy) in zip(quarters, [(-1, -1), (1, -1), (-1, 1), (1, 1)], strict=True):
+                world = _compose(start_s, np.array([x + 0.05 * dx, y + 0.05 * dy, 0.0]))[:2]
+                np.testing.assert_allclose(q, _to_body(start_r, world), atol=1e-9)
+
+
+def test_area_discount__is_the_untold_share_of_the_unknown_gain_square() -> None:
+    """Against a brute-force count over each point's square, on a random map and area."""
+    first, _ = _corridor_team()
+    m, half = first.map, first.gain_cells
+    rng = np.random.default_rng(11)
+    first.team_area[:] = rng.random(first.team_area.shape) < 0.3
+    points = np.vstack([rng.uniform(-4.0, 4.0, (40, 2)), [[1e4, 0.0]]])  # the last off the map
+    got = first.area_discount(points)
+    unknown = ~m.layers.known.reshape(m.n, m.n)
+    for p, value in zip(points[:-1], got[:-1], strict=True):
+        row, col = m.cell(*p)  # type: ignore[misc]
+        box = np.s_[max(row - half, 0) : row + half + 1, max(col - half, 0) : col + half + 1]
+        total = np.count_nonzero(unknown[box])
+        told = np.count_nonzero(unknown[box] & first.team_area[box])
+        assert value == (1.0 - told / total if total else 1.0)
+    assert got[-1] == 1.0
+
+
+@pytest.mark.parametrize("share_area", [True, False])
+def test_second_robot__leaves_the_room_a_team_mate_explored(share_area: bool) -> None:
+    """Robot 0 came down the corridor from a room beyond its left end (its own map holds the
+    room) and heads away (a goal 20 m off, which discounts nothing here); robot 1 knows only
+    the corridor and stands near the left end, so alone it would explore there. Over a mutual
+    sighting robot 0's message brings the room: robot 1 replans and heads for the right end.
+    Without the area (``share_area=False``) it hears the goal only and keeps the left end."""
+    first, second = _corridor_team(share_area=share_area)
+    room = first.map.cells(np.array([[-6.0, -2.0], [-3.0, 2.0]]))
+    first.map.free[room[0][0] : room[0][1] + 1, room[1][0] : room[1][1] + 1] = True
+    first.map.rebuild()
+    pose_0, pose_1 = np.array([-1.6, 0.4, 0.0]), np.array([-1.6, -0.4, 0.0])
+    sees_1, sees_0 = np.array([[0.8, -0.5 * math.pi]]), np.array([[0.8, 0.5 * math.pi]])
+    second._step = 1
+    second._plan(pose_1)
+    alone = second.goal
+    assert alone is not None and second.map.centre(*alone)[0] < 0  # the left end, alone
+    first._step = 1
+    first.goal = first.map.cell(0.0, 20.0)
+    first._announce(pose_0, sees_1)
+    second._announce(pose_1, sees_0)
+    second._step = 2
+    assert second._listen() is share_area  # the goal it heard discounts nothing here
+    second._plan(pose_1)
+    assert second.goal is not None
+    assert bool(second.map.centre(*second.goal)[0] > 0) is share_area
+    assert second.metrics()["goal_areas_received"] == float(share_area)
 
 
 def _actions(seed: int, steps: int) -> list[dict[str, Any]]:

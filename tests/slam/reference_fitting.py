@@ -10,7 +10,7 @@ import numpy as np
 import scipy.linalg.lapack
 import scipy.special
 
-from polyslam_env.slam.fitting import Fit, PointSet
+from polyslam_env.slam.fitting import Fit, PointSet, turn_gradient_with
 from polyslam_env.slam.map_kernels import GAP_SPLIT
 from polyslam_env.slam.polynomial import Polynomial, polyval
 
@@ -202,32 +202,17 @@ def _coefficient_gradient(
 
 
 def turn_gradient(points: PointSet, fit: Fit, pivot: float) -> tuple[np.ndarray, float]:
-    """(∂α/∂X (n_state,), residual variance) of the turn α of ``fit``, the LMS fit of
-    ``points``, about its point at ξ = ``pivot``.
+    """:func:`~polyslam_env.slam.fitting.turn_gradient` on this module's readable QR and
+    coefficient gradient (the rest of it is one piece: ``fitting.turn_gradient_with``; its
+    derivative is checked by finite differences in ``tests/slam/test_merging.py``)."""
 
-    ∂α/∂X: how the fitted curve's direction there, atan(p'(ξ_p)), moves when the points move
-    as their ``d_state`` says, the weights held (as :func:`fit_polynomial`'s c0 gradient, with
-    the full derivative: the shape is what moves). For points sampled on landmarks (a merge)
-    this is the merged shape's turn as a linear function of their c0s and turns: two pieces
-    of one straight wall far apart fix its direction through their offsets.
+    def gradient(
+        e: np.ndarray, scale: float, w: np.ndarray, a_mat: np.ndarray, r: np.ndarray,
+        a_s: np.ndarray, resid: np.ndarray,
+    ) -> np.ndarray:  # fmt: skip
+        return _coefficient_gradient(e, scale, w, a_mat, r, a_s, resid, a_mat.shape[1] - 1)
 
-    The residual variance is the part no state holds: where the points disagree with the fit
-    (pieces that are not quite one curve), an error of the shape of size ``fit.rms`` at each
-    point, taken as independent between points: rms² · Σ_i (∂α/∂η_i)², the least-squares
-    variance of the turn for that scatter."""
-    poly = fit.poly
-    xi, eta, scale, w = _scaled(points, poly.variate)
-    a_mat, _, r, m = _weighted_qr(xi / scale, np.sqrt(w), fit.order)
-    a_s = poly.coeffs[: m + 1] * scale ** np.arange(m + 1)
-    resid = eta - a_mat @ a_s
-    e = np.zeros(m + 1)  # p'(ξ_p) = Σ_k k a_s[k] (ξ_p/s)^(k−1) / s
-    e[1:] = np.arange(1, m + 1) * (pivot / scale) ** np.arange(m) / scale
-    slope = float(poly.slope(pivot))
-    d = _coefficient_gradient(e, scale, w, a_mat, r, a_s, resid, m) / (1.0 + slope * slope)
-    d_xy = d if poly.variate == 1 else d[:, ::-1]
-    sign = 1.0 if poly.variate == 1 else -1.0  # α turns counter-clockwise in (x¹, x²)
-    residual_var = fit.rms**2 * float(np.sum(d[:, 1] ** 2))
-    return sign * np.einsum("nj,njs->s", d_xy, points.d_state), residual_var
+    return turn_gradient_with(points, fit, pivot, _weighted_qr, gradient)
 
 
 # -- which of a cluster's points make one wall (association.fit_cluster, steps 1–3b) -----

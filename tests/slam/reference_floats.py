@@ -11,7 +11,9 @@ orders 4–5: complex instead of real LAPACK; the update and the NIS: BLAS's pro
 * :func:`beam_rows` — ``PolySlam._beam_rows``' loop with the frozen-shape terms;
 * :func:`update_sparse_inplace`, :func:`predict_inplace`, :func:`normalised_innovations` — the
   numpy EKF pieces;
-* :func:`nearest_by_error`, :func:`boxes`, :func:`boxes_near`.
+* :func:`nearest_by_error`, :func:`boxes`, :func:`boxes_near`;
+* :func:`fma_exact`, :func:`fma_matmul` — a product as an FMA-based BLAS computes it, in exact
+  rationals rounded once per multiply-add (the oracle of kernels that replaced such products).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Sequence
+from fractions import Fraction
 from math import comb
 from typing import NamedTuple
 
@@ -837,3 +840,28 @@ def boxes_near(boxes: np.ndarray, box: np.ndarray, distance: float) -> np.ndarra
     gap_x = np.maximum(np.maximum(boxes[:, 0] - box[1], box[0] - boxes[:, 1]), 0.0)
     gap_y = np.maximum(np.maximum(boxes[:, 2] - box[3], box[2] - boxes[:, 3]), 0.0)
     return np.flatnonzero(gap_x * gap_x + gap_y * gap_y <= distance * distance)
+
+
+def fma_exact(a: float, b: float, c: float) -> float:
+    """a·b + c rounded once (IEEE 754): exact rationals, and an exact zero signed as IEEE's
+    sum of a zero product and a zero addend is (−0 only for −0 + −0)."""
+    exact = Fraction(a) * Fraction(b) + Fraction(c)
+    if exact != 0:
+        return float(exact)
+    if (a == 0.0 or b == 0.0) and c == 0.0:
+        negative = math.copysign(1.0, a) * math.copysign(1.0, b) < 0 and math.copysign(1.0, c) < 0
+        return -0.0 if negative else 0.0
+    return 0.0  # non-zero terms cancelling exactly: +0 when rounding to nearest
+
+
+def fma_matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:  # (m, p)
+    """a (m, n) × b (n, p) as OpenBLAS's FMA gemm kernels compute it: each entry a chain of
+    :func:`fma_exact` along the inner index from 0 (zeros included)."""
+    out = np.empty((a.shape[0], b.shape[1]))
+    for r in range(a.shape[0]):
+        for c in range(b.shape[1]):
+            acc = 0.0
+            for k in range(a.shape[1]):
+                acc = fma_exact(float(a[r, k]), float(b[k, c]), acc)
+            out[r, c] = acc
+    return out

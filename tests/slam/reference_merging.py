@@ -2,7 +2,8 @@
 the overlap of two polynomials on the first one's axis and their two-way RMS error γ there,
 as ``slam/merging.py`` computed them before the test was compiled; and a polynomial's
 steepest slope as numpy's polynomial functions find it (the oracle of
-``Polynomial.max_slope``)."""
+``Polynomial.max_slope``); and the end-to-end join's offset (the oracle of
+``map_kernels.join_offset``)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import numpy.polynomial.polynomial as P
 
 from polyslam_env.slam import kernels
 from polyslam_env.slam.landmarks import own_orders
-from polyslam_env.slam.merging import unit_tangent
+from polyslam_env.slam.merging import JOIN_ANGLE_DEG, THIN_WALL, unit_tangent
 from polyslam_env.slam.polynomial import Polynomial
 
 _SAMPLES = 64  # samples of p2 used to project it on p's axis
@@ -80,3 +81,22 @@ def max_slope(poly: Polynomial) -> float:
     real = turns.real[np.abs(turns.imag) <= 1e-9 * np.maximum(1.0, np.abs(turns.real))]
     inside = real[(real > poly.lo) & (real < poly.hi)]
     return float(np.max(np.abs(poly.slope(np.concatenate([[poly.lo, poly.hi], inside])))))
+
+
+def join_gamma(poly: Polynomial, other: Polynomial, max_gap: float) -> float | None:
+    """``merging.join_gamma`` on numpy arrays, as it was before its end points went to plain
+    floats (the oracle, bit for bit; of ``map_kernels.join_offset`` since)."""
+    ends_p = poly.points_at(np.array([poly.lo, poly.hi]))  # (2, 2)
+    ends_o = other.points_at(np.array([other.lo, other.hi]))
+    gaps = np.linalg.norm(ends_p[:, None, :] - ends_o[None, :, :], axis=2)  # (2, 2)
+    i, k = np.unravel_index(int(np.argmin(gaps)), gaps.shape)
+    if gaps[i, k] > max_gap:
+        return None
+    t_p = unit_tangent(poly, poly.lo if i == 0 else poly.hi)
+    t_o = unit_tangent(other, other.lo if k == 0 else other.hi)
+    if np.degrees(np.arccos(min(abs(float(t_p @ t_o)), 1.0))) > JOIN_ANGLE_DEG:
+        return None
+    delta = ends_o[k] - ends_p[i]
+    cross = [float(t[0] * delta[1] - t[1] * delta[0]) for t in (t_p, t_o)]
+    offset = max(abs(cross[0]), abs(cross[1]))
+    return offset if offset <= THIN_WALL else None

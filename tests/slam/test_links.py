@@ -24,6 +24,7 @@ from polyslam_env.slam.links import (
 )
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
+from tests.slam import reference_links
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 from tests.slam.test_map_building import cast, drive, straight, turn_around
 
@@ -78,6 +79,29 @@ def test_link_rows__residual_and_jacobian_match_the_turned_lines(
         assert got[row] == pytest.approx(residual(state, row), abs=1e-12)
         expected = fd_jacobian(lambda x, row=row: residual(x, row), state)
         np.testing.assert_allclose(H[row], expected, rtol=FD_RTOL, atol=FD_ATOL)
+
+
+@pytest.mark.parametrize("variate", [1, 2])
+def test_link_rows__bit_identical_to_the_rows_from_point_sets(variate: int) -> None:
+    """The float entries equal the oracle's (the rows built from ``polynomial_points``), bit
+    for bit, signed zeros included, with and without turn states, on cubics as on lines."""
+    rng = np.random.default_rng(variate)
+    for trial in range(40):
+        order = 1 if trial % 2 else 3
+        polys = [
+            Polynomial(variate, rng.normal(0, [2.0, 0.5, 0.1, 0.02][: order + 1]), -3.0, 3.0)
+            for _ in range(2)
+        ]
+        xis = rng.uniform(-3.0, 3.0, size=1 + trial % 2)
+        turns: list[tuple[int, float] | None] = [
+            (7, float(rng.uniform(-3, 3))), (8, float(rng.uniform(-3, 3)))
+        ]  # fmt: skip
+        if trial % 4 == 3:
+            turns = [None, None]
+        args = (polys[0], 4, turns[0], polys[1], 6, turns[1], xis, 10)
+        got, expected = link_rows(*args), reference_links.link_rows(*args)
+        for a, b in zip(got, expected, strict=True):
+            assert a.tobytes() == b.tobytes()
 
 
 def test_link_rows__without_turn_states_touch_only_the_offsets() -> None:

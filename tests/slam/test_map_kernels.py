@@ -4,6 +4,8 @@ bit (``tests/slam/reference_association.py``; the association itself is checked 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -14,6 +16,7 @@ from polyslam_env.slam import map_kernels
 from polyslam_env.slam.maintenance import fit_inverse_table as _fit_inverse_table
 from polyslam_env.slam.polynomial import Polynomial
 from tests.slam import reference_association as oracle
+from tests.slam import reference_floats as oracle_floats
 
 
 def test_symmetric_eigvals3__bit_identical_to_python_floats() -> None:
@@ -87,3 +90,41 @@ def test_equally_spaced__bit_identical_to_points_at_of_linspace() -> None:
             want = poly.points_at(np.linspace(lo, hi, n))
             got = map_kernels.equally_spaced(poly.coeffs, variate, lo, hi, n)
             assert got.tobytes() == want.tobytes()
+
+
+def _carry_exact(real: np.ndarray, n: int, before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """The oracle of ``carry_points``: each output a chain of correctly rounded fused
+    multiply-adds along the seven inputs (exact rationals, one rounding per step), as
+    OpenBLAS's FMA gemm kernels compute the (n, 7) × (7, 7) product the carry replaced."""
+    d = float(after[2] - before[2])
+    c, s = math.cos(d), math.sin(d)
+    motion = [[0.0] * 7 for _ in range(7)]
+    for a, b in ((0, 1), (2, 3), (4, 5)):
+        motion[a][a], motion[a][b], motion[b][a], motion[b][b] = c, s, -s, c
+    motion[6][6] = 1.0
+    shift_in = [before[0], before[1], 0.0, 0.0, before[0], before[1], 0.0]
+    shift_out = [after[0], after[1], 0.0, 0.0, after[0], after[1], d]
+    out = real.copy()
+    for i in range(n):
+        row = [float(real[k, i] - shift_in[k]) for k in range(7)]
+        for j in range(7):
+            acc = 0.0
+            for k in range(7):
+                acc = oracle_floats.fma_exact(row[k], motion[k][j], acc)
+            out[j, i] = acc + shift_out[j]
+    return out
+
+
+def test_carry_points__equals_a_chain_of_exact_fused_multiply_adds() -> None:
+    rng = np.random.default_rng(11)
+    for trial in range(40):
+        n = int(rng.integers(2, 30))
+        real = np.zeros((9, 32))
+        real[:7, :n] = rng.normal(size=(7, n)) * 10.0
+        real[:7, :n][rng.random((7, n)) < 0.1] = 0.0  # axis-aligned directions, etc.
+        before = rng.normal(size=3)
+        after = before + rng.normal(size=3) * (0.05, 0.05, 0.0 if trial % 4 == 0 else 0.01)
+        want = _carry_exact(real, n, before, after)
+        d = float(after[2] - before[2])
+        map_kernels.carry_points(real, n, before, after, math.cos(d), math.sin(d))
+        np.testing.assert_array_equal(real[:7], want[:7], strict=True)

@@ -14,12 +14,15 @@ from polyslam_env.slam.merging import (
     THIN_WALL,
     face_normal,
     find_merge,
+    join_gamma,
     merge_angle,
     merge_points,
     unit_tangent,
 )
 from polyslam_env.slam.polynomial import Polynomial
+from tests.slam import reference_merging
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
+from tests.slam.reference_merging import join_gamma as reference_join_gamma
 from tests.slam.reference_merging import max_slope, merge_gamma, overlap_interval
 
 GAMMA_M = 0.35  # paper value
@@ -361,3 +364,57 @@ def test_merge_test__the_same_floats_as_the_readable_version(
     assert got == map_kernels.MEASURED
     assert found[:3].tolist() == [a, b, gamma]
     assert merge_angle(p, other, a, b, float(found[3])) == angle
+
+
+def test_join_gamma__the_same_floats_as_the_readable_version() -> None:
+    """Pieces of one curve end to end (gaps up to 0.3 m, offsets and turns of a few cm and
+    degrees, either variate on either side) and unrelated pieces: the compiled join's offset
+    is the readable version's, bit for bit, and None where it is."""
+    rng = np.random.default_rng(7)
+    joined = 0
+    for trial in range(600):
+        variate = int(rng.integers(1, 3))
+        coeffs = rng.normal(0.0, [1.0, 0.3, 0.05, 0.01][: int(rng.integers(2, 5))])
+        lo = float(rng.uniform(-2.0, 1.0))
+        mid = lo + float(rng.uniform(0.0, 1.5))
+        p = Polynomial(variate, coeffs, lo, mid)
+        if trial % 5 == 4:  # an unrelated piece
+            shifted = rng.normal(0.0, 1.0, coeffs.size)
+        else:  # the curve's next piece, a little off
+            shifted = coeffs + rng.normal(0.0, [0.02, 0.03, 0.0, 0.0][: coeffs.size])
+        start = mid + float(rng.uniform(0.0, 0.3))
+        other = Polynomial(variate, shifted, start, start + float(rng.uniform(0.0, 1.5)))
+        for a, b in ((p, other), (other, p)):
+            got = join_gamma(a, b, 0.25)
+            want = reference_merging.join_gamma(a, b, 0.25)
+            assert (got is None) == (want is None)
+            if want is not None:
+                assert got is not None and got.hex() == want.hex()
+                joined += 1
+    assert 100 < joined < 1200  # both outcomes are exercised
+
+
+def test_join_gamma__equals_the_numpy_oracle_bit_for_bit() -> None:
+    """End-to-end joins in plain floats give numpy's offsets bit for bit (or both None), on
+    random pieces of random walls of either variate placed end to end, some offset, some
+    turned, some of equal gaps (ties pick the same pair)."""
+    rng = np.random.default_rng(11)
+    joined = 0
+    for _ in range(400):
+        variate = int(rng.integers(1, 3))
+        coeffs = np.array([rng.uniform(-1, 1), rng.uniform(-0.5, 0.5), 0.0, 0.0])
+        if rng.random() < 0.5:
+            coeffs[2:] = rng.uniform(-0.2, 0.2, 2)
+        lo = float(rng.uniform(-2, 0))
+        mid = lo + float(rng.uniform(0.3, 2.0))
+        gap = float(rng.choice([0.0, rng.uniform(0.0, 0.4)]))
+        first = Polynomial(variate, coeffs, lo, mid)
+        other = coeffs.copy()
+        other[0] += float(rng.choice([0.0, rng.normal(0.0, 0.03)]))
+        other[1] += float(rng.choice([0.0, rng.normal(0.0, 0.2)]))
+        second = Polynomial(variate, other, mid + gap, mid + gap + float(rng.uniform(0.3, 2.0)))
+        for a, b in ((first, second), (second, first), (first, first)):
+            want = reference_join_gamma(a, b, 0.3)
+            assert join_gamma(a, b, 0.3) == want
+            joined += want is not None
+    assert joined > 100
