@@ -124,8 +124,9 @@ class SlamConfig(Config):
     reuse_bound: str = "curved"
     # A curved shape is frozen shifted along its axis ξ by the pose's error along ξ when it was
     # fitted (c0 carries the shift only where the shape turns about, its pivot). "pose": that
-    # shift is taken to be the *current* pose's error along ξ (the beam's ∂h/∂ξ uses the
-    # shape's slope at its pivot, not at the hit), and its drift since the fit goes into R;
+    # shift is predicted from the *current* pose's error along ξ (kernels.shift_prediction:
+    # the errors nested, all of it right after the fit, little of it on a return to a shape
+    # fitted when the pose was better known) and only what the prediction leaves goes into R;
     # "noise" (the paper preset): the shift is noise in R, independent of the pose, so the
     # curve's change of slope between its pivot and each hit told the filter where the robot
     # is along ξ, information a shape placed by that same pose does not hold

@@ -526,9 +526,10 @@ def beam_rows(
     range_var: float,  # σ² of the range noise
     model_var: np.ndarray,  # (n,) fit variance beyond the noise
     shape_follows_pose: bool,
-    shift_with_pose: bool,  # a frozen shape's shift along ξ is the current pose's error along ξ
+    shift_with_pose: bool,  # a frozen shape's shift along ξ is predicted from the current pose
     pivot: np.ndarray,  # (n,)
     xi_var: np.ndarray,  # (n,)
+    pose_var: np.ndarray,  # (2,) the current pose's variance along x and along y
     shift_slope: np.ndarray,  # (n,) ∂c0/∂(its shape's shift along ξ), negated; nan: unknown
     turn_var: np.ndarray,  # (n,) variance of the heading change since the shape was fitted
     fit_half: np.ndarray,  # (n,)
@@ -589,13 +590,16 @@ def beam_rows(
             value_c, slope_c = horner(shape[j], m, pivot[j], shape[j, 0])
             carried = shift_slope[j]  # the slope c0 moves by per shift along ξ (nan: unknown)
             if shift_with_pose and not math.isnan(carried):
-                # the shape moved with the pose along ξ: c0 carries −carried·δξ, the pose's
-                # own error along ξ the rest of the curve's move at the hit
+                # the shape was shifted along ξ by the pose's error e_f when it was fitted; c0
+                # carries −carried·e_f, the rest of the curve's move at the hit is −shift·e_f,
+                # predicted from the current pose's error e_n (shift_prediction)
                 shift = (b_slope_at - carried) * inv_d
-                h_xi -= shift
+                gain, left = shift_prediction(xi_var[j], pose_var[0 if v1 else 1])
+                h_xi -= gain * shift
+                extra = shift * shift * left
             else:
                 shift = (b_slope_at - slope_c) * inv_d
-            extra = shift * shift * xi_var[j]
+                extra = shift * shift * xi_var[j]
             scaled = (xi[b] - pivot[j]) / fit_half[j]
             in_state = alpha_base >= 0
             fit_var = _shape_fit_var(shape[j], m, scaled, fit_inverse, n_fit, range_var, in_state)
@@ -625,6 +629,24 @@ def beam_rows(
         xi_grad[k, 3] = cos if v1 else sin
         k += 1
     return k
+
+
+@njit
+def shift_prediction(fit_var: float, now_var: float) -> tuple[float, float]:
+    """The best linear prediction of the pose's error along ξ when a shape was fitted, e_f
+    (variance ``fit_var``), from the current one, e_n (variance ``now_var``): (gain β, the
+    variance left) with e_f = β·e_n + r, r independent of e_n (``SlamConfig.shape_shift``
+    "pose"). The two errors are taken to be nested, the smaller one part of the larger: when
+    the pose has grown less certain since the fit, e_n = e_f + d with the drift d independent
+    of e_f, so β = var_f/var_n and var(r) = var_f·(1 − β); when it has grown more certain,
+    e_f = e_n + d with d independent of e_n, so β = 1 and var(r) = var_f − var_n. Right after
+    a fit (var_n = var_f) the shape moves with the pose (β = 1, nothing left); returning to a
+    shape fitted near the start (var_f ≈ 0) it stays where it was (β ≈ 0): the curve's
+    change of slope then tells the filter where it is along ξ, a loop closure."""
+    if now_var > fit_var:
+        gain = fit_var / now_var
+        return gain, fit_var * (1.0 - gain)
+    return 1.0, fit_var - now_var
 
 
 @njit
@@ -1235,6 +1257,7 @@ def _scan_model(
 @njit
 def _beam_rows_of(
     mean: np.ndarray,
+    cov: np.ndarray,
     angles: np.ndarray,
     ranges: np.ndarray,
     beams: np.ndarray,
@@ -1295,16 +1318,23 @@ def _beam_rows_of(
     With rotation states (``shape_rotation="considered"``) the rotation is instead the
     landmark's own α: ±lever/D goes to ∂h/∂α, and neither the heading drift nor the
     slope's part of the fit variance (σ²·t²·M⁻¹[1, 1], which α's variance holds) enters R.
+
+    With ``shape_shift="pose"`` the translation is not noise independent of the pose: the
+    fit-time error along ξ is predicted from the current one (:func:`shift_prediction`, from
+    σ²_ξ and the current pose variance along ξ), the predicted part of the curve's move at the
+    hit, −β·(B'(ξ*) − s̄)/D (s̄ the slope c0 moves by, ``SHIFT_SLOPE``), goes to ∂h/∂ξ and only
+    what the prediction leaves goes into R (docs/notes/floors.md, Round 5).
     """
     near, turn_var, alpha_base = _scan_model(mean, real, index, n, params, switches, step)
+    pose_var = np.array([cov[0, 0], cov[1, 1]])
     return beam_rows(
         mean[0], mean[1], mean[2], angles, ranges, beams, params[P_REACH], index[VARIATE, :n],
         index[ORDER, :n], shape[:n], real[LO, :n], real[HI, :n], mean[3 : 3 + n], near,
         params[P_MAX_RANGE], params[P_MIN_SINE], params[P_RANGE_VAR], real[MODEL_VAR, :n],
         switches[S_SHAPE_FOLLOWS_POSE] != 0, switches[S_SHIFT_WITH_POSE] != 0, real[PIVOT, :n],
-        real[XI_VAR, :n], real[SHIFT_SLOPE, :n], turn_var, real[FIT_HALF, :n], fit_inverse,
-        switches[S_N_FIT], alpha_base, innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha,
-        variance, end_room, xi_grad,
+        real[XI_VAR, :n], pose_var, real[SHIFT_SLOPE, :n], turn_var, real[FIT_HALF, :n],
+        fit_inverse, switches[S_N_FIT], alpha_base, innovation, h_pose, c0_index, h_c0,
+        alpha_index, h_alpha, variance, end_room, xi_grad,
     )  # fmt: skip
 
 
@@ -1336,7 +1366,7 @@ def screen_scan(
     alpha_index, h_alpha = np.empty(n_beams, np.int64), np.empty(n_beams)
     end_room, xi_grad = np.empty(n_beams), np.empty((n_beams, 4))
     k = _beam_rows_of(
-        mean, angles, seen, np.arange(n_beams), real, index, shape, n, params, switches,
+        mean, cov, angles, seen, np.arange(n_beams), real, index, shape, n, params, switches,
         fit_inverse, step, innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance,
         end_room, xi_grad,
     )  # fmt: skip
@@ -1457,8 +1487,9 @@ def update_scan(
         )  # fmt: skip
         beams = beams[steady]
     k = _beam_rows_of(
-        mean, angles, ranges, beams, real, index, shape, n, params, switches, fit_inverse, step,
-        innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance, end_room, xi_grad,
+        mean, cov, angles, ranges, beams, real, index, shape, n, params, switches, fit_inverse,
+        step, innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance, end_room,
+        xi_grad,
     )  # fmt: skip
     if k > 0 and end_sigma > 0.0:
         keep = np.empty(k, np.bool_)

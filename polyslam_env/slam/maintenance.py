@@ -93,14 +93,17 @@ class MapMaintenance:
         poly = clip_to_evidence(fit.poly, evidence)
         clone = cfg.rotation_states and source.gradient is None  # its fit's own slope error
         fit_var = self.rotation_fit_var(poly) if clone else 0.0
+        xi_var = float(slam.cov[0, 0] if poly.variate == 1 else slam.cov[1, 1])
         # only the step's shape_shift "pose" model reads a landmark's shift slope
         shifted = cfg.shape_shift == "pose" and not received
         shift_slope = self.shift_slope(fit, n) if shifted else math.nan
+        if not math.isnan(shift_slope):
+            xi_var = self.shift_var(fit, n, xi_var)
         slam.mean, slam.cov = slam.layout.add(slam.mean, slam.cov, n, fit, source, fit_var)
         return slam.table.append(
             poly,
             pivot=0.5 * (poly.lo + poly.hi) if pivot is None else pivot,
-            xi_var=float(slam.cov[0, 0] if poly.variate == 1 else slam.cov[1, 1]),
+            xi_var=xi_var,
             model_var=max(fit.rms**2 - cfg.range_sigma**2, 0.0),
             fit_half=max(0.5 * (poly.hi - poly.lo), 0.05),
             step=slam.step_count,
@@ -116,13 +119,36 @@ class MapMaintenance:
         with "noise" :meth:`add` stores nan without computing it): from its G_x, the pose's
         column along ξ and, through the old landmarks it was fitted on (a refit, a merge),
         each one's own s̄ (they were shifted by the same error); nan when one of those has
-        none."""
+        none, or lies along the other axis (its s̄ is a slope against the other ξ, and G_x on
+        its c0 is no share of the new one's points: a merge across a corner of a curved
+        wall, where carrying it anyway gave a slope far from the new shape's and the pose
+        drifted along that wall at 4–6 σ; docs/notes/floors.md, Round 5)."""
         gx = fit.Gx[0]
-        slope = -float(gx[0 if fit.poly.variate == 1 else 1])
+        variate = fit.poly.variate
+        slope = -float(gx[0 if variate == 1 else 1])
         table = self.slam.table
         for row in np.flatnonzero(gx[3 : 3 + n]).tolist():
+            if int(table.variate[row]) != variate:
+                return math.nan
             slope += float(gx[3 + row]) * float(table.shift_slope[row])
         return slope
+
+    def shift_var(self, fit: Fit, n: int, pose_var: float) -> float:
+        """The variance of the shift along ξ a new landmark's shape was fitted with
+        (``SlamConfig.shape_shift`` "pose"): its points placed by the current pose (variance
+        ``pose_var`` along ξ) carry that pose's error, those sampled on old landmarks (a refit,
+        a merge) each one's own, and its shape is their weighted mean (the shares: G_x on the
+        pose's η and on each old c0). Their correlation unknown, the standard deviations add
+        (the bound). Taking the current pose's instead made a merge across a loop claim that
+        the old piece's shape moved with today's pose: on a curved floor the pose then drifted
+        along the wall at 3-4 σ (docs/notes/floors.md, Round 5)."""
+        gx = np.abs(fit.Gx[0])
+        rows = np.flatnonzero(gx[3 : 3 + n])
+        if rows.size == 0:
+            return pose_var
+        sigma = float(gx[1 if fit.poly.variate == 1 else 0]) * math.sqrt(pose_var)
+        sigma += float(gx[3 + rows] @ np.sqrt(self.slam.table.xi_var[rows]))
+        return sigma * sigma
 
     def drop(self, landmark_id: int) -> None:
         """Take a landmark out of the state, the table and the stored points (a

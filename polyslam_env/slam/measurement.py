@@ -201,6 +201,7 @@ def range_rows(
         False,  # shift_with_pose
         np.zeros(n),  # pivot
         np.zeros(n),  # xi_var
+        np.zeros(2),  # pose_var
         np.full(n, np.nan),  # shift_slope
         np.zeros(n),  # turn_var
         np.ones(n),  # fit_half

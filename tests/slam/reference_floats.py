@@ -320,6 +320,10 @@ class RowModel(NamedTuple):
     # state index of landmark 0's shape rotation (SlamConfig.shape_rotation "considered");
     # −1: the rotation is the current heading error
     alpha_base: int = -1
+    # SlamConfig.shape_shift "pose": a frozen shape's shift along ξ predicted from the pose's
+    # current error along ξ, whose variance along x and along y is ``pose_var``
+    shift_with_pose: bool = False
+    pose_var: tuple[float, float] = (0.0, 0.0)
 
 
 def beam_rows(
@@ -335,13 +339,15 @@ def beam_rows(
     boxes: Sequence[Sequence[float]],
     model: RowModel,
     turn_var: Sequence[float] | None = None,
+    shift_slope: Sequence[float] | None = None,
 ) -> tuple[np.ndarray, ...] | None:
     """(innovation, h_pose, c0 state index, h_c0, rotation state index, h_α, R diagonal) of
     the beams with a usable hit (``boxes`` per candidate), or None. ``turn_var`` (per
     landmark, default 0): the variance of the heading change since its shape was fitted
     (``PolySlam._turn_var``). With ``model.alpha_base`` ≥ 0 the shape's rotation is its own
     state: the lever term goes to h_α instead of h_θ, and neither the heading drift nor the
-    slope's fit variance enters R."""
+    slope's fit variance enters R. ``shift_slope`` (per landmark, default nan: unknown): the
+    slope its c0 moves by when its shape shifts along ξ, used with ``model.shift_with_pose``."""
     hits = cast(x, y, theta, list(angles), list(candidates), rows, list(c0s), max_range, boxes)
     range_var = model.range_sigma**2
     in_state = model.alpha_base >= 0
@@ -355,7 +361,12 @@ def beam_rows(
         var = range_var + row.model_var * (inv_d * inv_d)
         h_rot = 0.0
         if model.shape_follows_pose:
-            lever, extra = _shape_terms(row, hit.xi, inv_d, model)
+            carried = math.nan if shift_slope is None else shift_slope[hit.landmark]
+            lever, extra, moved = _shape_terms(row, hit.xi, inv_d, model, carried)
+            if hit.variate == 1:
+                h_x -= moved
+            else:
+                h_y -= moved
             turn = (1.0 if hit.variate == 1 else -1.0) * lever * inv_d
             if in_state:
                 h_rot = turn
@@ -387,15 +398,31 @@ def beam_rows(
     )
 
 
-def _shape_terms(row: LandmarkRow, xi: float, inv_d: float, model: RowModel) -> tuple[float, float]:
-    """A frozen shape's error in a beam's range: (rotation lever, extra variance)."""
+def _shape_terms(
+    row: LandmarkRow, xi: float, inv_d: float, model: RowModel, carried: float
+) -> tuple[float, float, float]:
+    """A frozen shape's error in a beam's range: (rotation lever, extra variance, the part of
+    ∂h/∂ξ the predicted shift along ξ takes away)."""
     value, slope = value_and_slope(row.shape, xi)
     value_c, slope_c = value_and_slope(row.shape, row.pivot)
-    shift = (slope - slope_c) * inv_d
-    extra = shift * shift * row.xi_var
+    moved = 0.0
+    if model.shift_with_pose and not math.isnan(carried):
+        # e_f = β e_n + r, the errors nested (the smaller one part of the larger)
+        shift = (slope - carried) * inv_d
+        now = model.pose_var[0 if row.variate == 1 else 1]
+        if now > row.xi_var:
+            gain = row.xi_var / now
+            left = row.xi_var * (1.0 - gain)
+        else:
+            gain, left = 1.0, row.xi_var - now
+        moved = gain * shift
+        extra = shift * shift * left
+    else:
+        shift = (slope - slope_c) * inv_d
+        extra = shift * shift * row.xi_var
     extra += inv_d * inv_d * shape_fit_var(row.shape, (xi - row.pivot) / row.fit_half, model)
     lever = (xi - row.pivot) + slope * (value - value_c)
-    return lever, extra
+    return lever, extra, moved
 
 
 def shape_fit_var(shape: tuple[float, ...], t: float, model: RowModel) -> float:
@@ -652,8 +679,8 @@ def update_scan(
         np.empty(k, dtype=np.int64), np.empty(k), np.empty(k), np.empty(k), np.empty((k, 4)),
     )  # fmt: skip
     used = kernels._beam_rows_of(
-        mean, angles, ranges, beams, real, index, shape, n, params, switches, fit_inverse, step,
-        *rows,
+        mean, cov, angles, ranges, beams, real, index, shape, n, params, switches, fit_inverse,
+        step, *rows,
     )  # fmt: skip
     if used == 0:
         return -1

@@ -157,6 +157,7 @@ def test_cast_scan__300_landmarks_equal_oracle() -> None:
     seed=st.integers(0, 2**32 - 1),
     follows=st.booleans(),
     rotation_states=st.booleans(),
+    shift=st.booleans(),
 )
 def test_beam_rows__bit_identical_to_oracle(
     polys: list[Polynomial],
@@ -165,16 +166,24 @@ def test_beam_rows__bit_identical_to_oracle(
     seed: int,
     follows: bool,
     rotation_states: bool,
+    shift: bool,
 ) -> None:
     rng = np.random.default_rng(seed)
     table = _table(polys, rng)
+    # shape_shift "pose": carried slopes (some unknown: received), the pose's variance now
+    # below or above each landmark's at its fit (both branches of the prediction)
+    slopes = rng.normal(0.0, 1.0, len(polys))
+    slopes[rng.uniform(size=len(polys)) < 0.25] = np.nan
+    table.shift_slope[:] = slopes
+    pose_var = rng.uniform(0.0, 2e-3, 2)
     c0s = np.array([p.c0 for p in polys])
     ranges = rng.uniform(0.1, 2.0, beams.size)
     boxes = table.boxes(c0s)
     x, y, theta = pose.tolist()
     alpha_base = 3 + len(polys) if rotation_states else -1
     model = ref.RowModel(min_sine=math.sin(math.radians(10.0)), range_sigma=0.02,
-                         shape_follows_pose=follows, eps_z=10, alpha_base=alpha_base)  # fmt: skip
+                         shape_follows_pose=follows, eps_z=10, alpha_base=alpha_base,
+                         shift_with_pose=shift, pose_var=tuple(pose_var.tolist()))  # fmt: skip
     reach = float(rng.uniform(1.0, 6.0))
     every = ref.boxes_near(boxes, np.array([x, x, y, y]), reach)  # the landmarks within reach
     order = rng.permutation(beams.size)  # any subset of beams, in any order
@@ -182,7 +191,7 @@ def test_beam_rows__bit_identical_to_oracle(
     turn_var = rng.uniform(0.0, 1e-4, len(polys))  # rad², the heading change since the fit
     want = ref.beam_rows(
         x, y, theta, beams[subset], ranges[subset], every.tolist(), table.rows(), c0s, 2.5,
-        boxes[every].tolist(), model, turn_var.tolist(),
+        boxes[every].tolist(), model, turn_var.tolist(), slopes.tolist(),
     )  # fmt: skip
     width, k = table.shape.shape[1], subset.size
     got = (
@@ -191,8 +200,8 @@ def test_beam_rows__bit_identical_to_oracle(
     )  # fmt: skip
     used = kernels.beam_rows(
         x, y, theta, beams, ranges, subset, reach, *table.arrays(), c0s, boxes, 2.5,
-        model.min_sine, model.range_sigma**2, table.model_var, follows, False, table.pivot,
-        table.xi_var, table.shift_slope, turn_var, table.fit_half,
+        model.min_sine, model.range_sigma**2, table.model_var, follows, shift, table.pivot,
+        table.xi_var, pose_var, table.shift_slope, turn_var, table.fit_half,
         _fit_inverse_table(model.eps_z + 1, width - 1), model.eps_z + 1, alpha_base, *got,
     )  # fmt: skip
     if want is None:
@@ -483,7 +492,8 @@ def _rows_of(
     used = kernels.beam_rows(
         *pose.tolist(), angles, np.zeros(k), np.arange(k), math.inf, *table.arrays(), c0s,
         table.boxes(c0s), 10.0, math.sin(math.radians(10.0)), 4e-4, table.model_var, follows,
-        False, table.pivot, table.xi_var, table.shift_slope, np.zeros(len(table)), table.fit_half,
+        False, table.pivot, table.xi_var, np.zeros(2), table.shift_slope, np.zeros(len(table)),
+        table.fit_half,
         _fit_inverse_table(16, table.shape.shape[1] - 1), 16, alpha_base, *rows,
     )  # fmt: skip
     return used, rows

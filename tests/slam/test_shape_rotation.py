@@ -79,7 +79,8 @@ def test_range_jacobian_in_the_shape_rotation__matches_finite_differences(wall: 
         used = kernels.beam_rows(
             x, y, theta, angles, np.zeros(angles.size), np.array([beam]), math.inf,
             *table.arrays(), np.array([poly.c0]), table.boxes(np.array([poly.c0])), 10.0, 0.17,
-            4e-4, table.model_var, True, False, table.pivot, table.xi_var, table.shift_slope,
+            4e-4, table.model_var, True, False, table.pivot, table.xi_var, np.zeros(2),
+            table.shift_slope,
             np.zeros(1),
             table.fit_half, _fit_inverse_table(16, 3), 16, 4, *rows,
         )  # fmt: skip

@@ -12,9 +12,15 @@ steps (docs/notes/floors.md, Round 4).
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
+import numpy as np
+import pytest
+
+from polyslam_env.slam import kernels
 from polyslam_env.slam.config import SlamConfig
+from polyslam_env.slam.fitting import Fit
+from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.sensors import cast_rays
@@ -79,3 +85,41 @@ def test_own_curved_map__taken_for_a_reference_with_the_shift_as_noise() -> None
     curve's beams shrink the covariance by a fifth or more below dead reckoning (measured
     22–32 %), so the test above is not vacuous."""
     assert min(_shrink("noise", seed) for seed in SEEDS) < -0.15
+
+
+@pytest.mark.parametrize(
+    ("fit_var", "now_var"), [(4e-4, 9e-4), (9e-4, 4e-4), (4e-4, 4e-4), (0.0, 1e-3)]
+)
+def test_shift_prediction__is_the_gaussian_conditional_of_nested_errors(
+    fit_var: float, now_var: float
+) -> None:
+    """The fit-time error e_f predicted from the current one e_n: for nested errors (the
+    larger one is the smaller plus an independent drift) their covariance is the smaller
+    variance, and (gain, variance left) must be the Gaussian conditional's, Σ_fn/Σ_nn and
+    Σ_ff − Σ_fn²/Σ_nn (computed here from the joint covariance, to rounding)."""
+    joint = np.array([[fit_var, min(fit_var, now_var)], [min(fit_var, now_var), now_var]])
+    gain, left = kernels.shift_prediction(fit_var, now_var)
+    want_gain = joint[0, 1] / joint[1, 1]
+    assert gain == pytest.approx(want_gain, rel=1e-12)
+    assert left == pytest.approx(joint[0, 0] - joint[0, 1] ** 2 / joint[1, 1], abs=1e-18)
+
+
+def test_shift_slope__a_parent_along_the_other_axis_leaves_it_unknown() -> None:
+    """A landmark refitted or merged on an old one carries that one's s̄ by its share of the
+    points (G_x on its c0); a parent whose ξ is the other axis has a slope against another
+    axis and no share there, so the new landmark's s̄ is unknown (nan: the shift is noise).
+    Carrying it anyway gave a merge across a curved wall's turn s̄ = −0.07 where its shape's
+    slope is 0.85 at its pivot (curved_floor seed 2, robot 2, step 307)."""
+    sensor = WorldConfig().range_sensor
+    slam = PolySlam(SlamConfig(shape_shift="pose"), sensor.angles, sensor.max_range)
+    old = Polynomial(1, np.array([1.0, 0.2, 0.3]), -1.0, 1.0)
+    slam.table.append(old, pivot=0.0, xi_var=1e-4, model_var=0.0, fit_half=1.0, shift_slope=0.8)
+    gx = np.zeros((1, 4))
+    gx[0, 0], gx[0, 3] = -0.25, 0.5  # half its points on the pose (slope 0.5), half on the old
+    for variate, want in ((1, 0.25 + 0.5 * 0.8), (2, math.nan)):
+        poly = Polynomial(variate, np.array([1.0, 0.2, 0.3]), -1.0, 1.0)
+        if variate == 2:
+            gx[0, 0], gx[0, 1] = 0.0, -0.25
+        fit = Fit(poly, 1.0, gx.copy(), np.zeros((1, 0)), np.zeros((0, 0)), 0.0, 2)
+        got = slam.maintenance.shift_slope(fit, 1)
+        assert got == pytest.approx(want, nan_ok=True), variate
