@@ -188,9 +188,9 @@ def _refine_from(
             return None
         residual, grad, wall, keep = match  # (M,), (M, 3), (M,), (N,)
         pair = chain_of[keep] * n_walls + wall  # (chain, wall) key
-        _, inverse, counts = np.unique(pair, return_inverse=True, return_counts=True)
+        counts = np.bincount(pair)  # points per pair key (np.unique's counts, without a sort)
         pair_var = point_var[keep] + var_w[wall]  # (M,)
-        weight = 1.0 / (pair_var * counts[inverse])  # each pair counts once
+        weight = 1.0 / (pair_var * counts[pair])  # each pair counts once
         info = info_prior + (grad * weight[:, None]).T @ grad
         rhs = -(grad * weight[:, None]).T @ residual - info_prior @ (t - t0)
         step = np.linalg.solve(info, rhs)
@@ -205,7 +205,7 @@ def _refine_from(
     # pair one observation) against their count; residuals larger than their variances
     # say (map errors the variances miss, errors shared by many walls) scale it up, never
     # down (Förstner & Wrobel's σ̂₀², capped below at 1)
-    factor = max(1.0, float(weight @ (residual * residual)) / len(counts))
+    factor = max(1.0, float(weight @ (residual * residual)) / np.count_nonzero(counts))
     return t, factor * 0.5 * (posterior + posterior.T)
 
 

@@ -115,7 +115,6 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
-import scipy.linalg
 from scipy.spatial import cKDTree
 
 from polyslam_env.comms import polyline
@@ -1020,7 +1019,10 @@ class RendezvousExchange:
         rel_cov = relative_pose_covariance(
             sighting.distance, sighting.bearing, header.bearing, self.sigma_d, self.sigma_bearing
         )
-        return (*out, scipy.linalg.block_diag(rel_cov, np.diag(pose_var)))
+        noise_cov = np.zeros((6, 6))  # block-diagonal: the relative pose's, the sender's pose's
+        noise_cov[:3, :3] = rel_cov
+        noise_cov[3:, 3:] = np.diag(pose_var)
+        return (*out, noise_cov)
 
     def _feature_map(
         self, robot: int, slams: Sequence[PolySlam], features: Sequence[FeatureBook]
