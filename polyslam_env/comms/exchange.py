@@ -127,7 +127,7 @@ from polyslam_env.comms.alignment import (
 )
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
 from polyslam_env.comms.free_space import FreeCells, FreeSpace
-from polyslam_env.comms.kernels import covered_by_walls, normal_variances
+from polyslam_env.comms.kernels import covered_by_walls, kept_runs, normal_variances
 from polyslam_env.comms.messages import (
     GridMessage,
     Header,
@@ -1487,16 +1487,11 @@ def covered_points(xy: np.ndarray, polys: Sequence[Polynomial], reach: float) ->
 
 def uncovered_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> list[slice]:
     """Maximal runs of consecutive ``keep`` points (N,) of a chain (N, 2) whose length along
-    the chain is at least ``min_length`` (m)."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(int), [0]]))).tolist()
-    if not edges:
-        return []
-    step = np.linalg.norm(np.diff(xy, axis=0), axis=1)  # (N-1,) each row's own norm
-    runs = []
-    for a, b in zip(edges[::2], edges[1::2], strict=True):
-        if float(step[a : b - 1].sum()) >= min_length:  # the run's own steps, summed alone
-            runs.append(slice(a, b))
-    return runs
+    the chain is at least ``min_length`` (m): each run's own steps summed as numpy sums them
+    (compiled: :func:`~polyslam_env.comms.kernels.kept_runs`)."""
+    keep = np.ascontiguousarray(keep, dtype=np.bool_)
+    bounds = kept_runs(keep, np.ascontiguousarray(xy, dtype=float), float(min_length))
+    return [slice(a, b) for a, b in bounds.tolist()]
 
 
 def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:

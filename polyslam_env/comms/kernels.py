@@ -160,6 +160,61 @@ def normal_variances(
     return out
 
 
+@njit
+def _pairwise_sum(a: np.ndarray, start: int, n: int) -> float:
+    """``a[start:start + n].sum()`` of a contiguous float64 row in numpy's order: in order
+    below 8 terms, eight running sums combined pairwise up to 128, halves (a multiple of 8
+    first) past that (numpy's pairwise summation; checked against ``.sum()`` bit for bit)."""
+    if n < 8:
+        total = 0.0
+        for i in range(n):
+            total += a[start + i]
+        return total
+    if n <= 128:
+        r = np.empty(8)
+        for j in range(8):
+            r[j] = a[start + j]
+        i = 8
+        while i < n - n % 8:
+            for j in range(8):
+                r[j] += a[start + i + j]
+            i += 8
+        total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        while i < n:
+            total += a[start + i]
+            i += 1
+        return total
+    half = n // 2
+    half -= half % 8
+    return _pairwise_sum(a, start, half) + _pairwise_sum(a, start + half, n - half)
+
+
+@njit
+def kept_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> np.ndarray:
+    """(K, 2) [first, end) rows of the maximal runs of ``keep`` (N,) bool along a chain
+    ``xy`` (N, 2) whose length (the sum of the run's own steps ‖p_{i+1} − p_i‖, in numpy's
+    summation order) is at least ``min_length`` (``exchange.uncovered_runs``)."""
+    n = keep.size
+    step = np.empty(max(n - 1, 0))
+    for i in range(n - 1):
+        dx, dy = xy[i + 1, 0] - xy[i, 0], xy[i + 1, 1] - xy[i, 1]
+        step[i] = math.sqrt(dx * dx + dy * dy)
+    out = np.empty((n // 2 + 1, 2), dtype=np.int64)
+    k = 0
+    i = 0
+    while i < n:
+        if not keep[i]:
+            i += 1
+            continue
+        first = i
+        while i < n and keep[i]:
+            i += 1
+        if _pairwise_sum(step, first, i - 1 - first) >= min_length:
+            out[k, 0], out[k, 1] = first, i
+            k += 1
+    return out[:k]
+
+
 # -- the chain of a received polynomial (comms/polyline.py, orders ≤ 3) -------------------------
 @njit
 def _derivative(coeffs: np.ndarray, derivative: int) -> np.ndarray:
