@@ -157,6 +157,7 @@ from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH
+from polyslam_env.slam.map_kernels import equally_spaced
 from polyslam_env.slam.merging import MERGE_ANGLE_DEG, measured_gamma
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -1500,7 +1501,8 @@ def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
     candidate)."""
     cfg = slam.config
     c0s = slam.c0s
-    xy = poly.equally_spaced(_BOX_SAMPLES)
+    # poly.equally_spaced's points in one compiled call (the same floats)
+    xy = equally_spaced(poly.coeffs, poly.variate, poly.lo, poly.hi, _BOX_SAMPLES)
     box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
     found = np.empty(4)
     return [
