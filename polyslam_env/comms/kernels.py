@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from polyslam_env.core.jit import njit
+from polyslam_env.core.jit import njit, sum_like_numpy
 from polyslam_env.slam.map_kernels import eta_range
 
 
@@ -161,35 +161,6 @@ def normal_variances(
 
 
 @njit
-def _pairwise_sum(a: np.ndarray, start: int, n: int) -> float:
-    """``a[start:start + n].sum()`` of a contiguous float64 row in numpy's order: in order
-    below 8 terms, eight running sums combined pairwise up to 128, halves (a multiple of 8
-    first) past that (numpy's pairwise summation; checked against ``.sum()`` bit for bit)."""
-    if n < 8:
-        total = 0.0
-        for i in range(n):
-            total += a[start + i]
-        return total
-    if n <= 128:
-        r = np.empty(8)
-        for j in range(8):
-            r[j] = a[start + j]
-        i = 8
-        while i < n - n % 8:
-            for j in range(8):
-                r[j] += a[start + i + j]
-            i += 8
-        total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-        while i < n:
-            total += a[start + i]
-            i += 1
-        return total
-    half = n // 2
-    half -= half % 8
-    return _pairwise_sum(a, start, half) + _pairwise_sum(a, start + half, n - half)
-
-
-@njit
 def kept_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> np.ndarray:
     """(K, 2) [first, end) rows of the maximal runs of ``keep`` (N,) bool along a chain
     ``xy`` (N, 2) whose length (the sum of the run's own steps ‖p_{i+1} − p_i‖, in numpy's
@@ -209,7 +180,7 @@ def kept_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> np.ndarray
         first = i
         while i < n and keep[i]:
             i += 1
-        if _pairwise_sum(step, first, i - 1 - first) >= min_length:
+        if sum_like_numpy(step, first, i - 1 - first) >= min_length:
             out[k, 0], out[k, 1] = first, i
             k += 1
     return out[:k]
