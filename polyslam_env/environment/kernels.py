@@ -20,22 +20,28 @@ from polyslam_env.core.raster import cell_id
 
 @njit
 def shifted_points(
-    points: np.ndarray,
-    owner: np.ndarray,
+    pool: np.ndarray,
+    start: np.ndarray,
+    count: np.ndarray,
     axis: np.ndarray,
     mean: np.ndarray,
     c0: np.ndarray,
     out: np.ndarray,
 ) -> None:
-    """A map sampler's cached ``points`` (M, 2) at the c0s they were sampled with, ``c0`` (n,),
-    moved to the c0s of the state ``mean`` (its ``3 + o`` entry for landmark o), written into
-    ``out`` (M, 2): point m's dependent coordinate ``axis[m]`` (0 or 1) of landmark
-    ``owner[m]`` gains ``mean[3 + o] − c0[o]`` (as ``points[m, axis] + (c0s − c0)[owner]``)."""
-    for m in range(points.shape[0]):
-        o = owner[m]
-        out[m, 0] = points[m, 0]
-        out[m, 1] = points[m, 1]
-        out[m, axis[m]] += mean[3 + o] - c0[o]
+    """A map sampler's cached points, landmark o's ``count[o]`` rows of ``pool`` (P, 2) from
+    ``start[o]`` (n,) at the c0 they were sampled with, ``c0[o]``, moved to the c0s of the
+    state ``mean`` (its ``3 + o`` entry) and written one landmark after the other into ``out``
+    (Σ count, 2): each point's dependent coordinate ``axis[o]`` (0 or 1) gains
+    ``mean[3 + o] − c0[o]`` (as ``points[m, axis] + (c0s − c0)[owner]``)."""
+    m = 0
+    for o in range(start.shape[0]):
+        shift = mean[3 + o] - c0[o]
+        a = axis[o]
+        for p in range(start[o], start[o] + count[o]):
+            out[m, 0] = pool[p, 0]
+            out[m, 1] = pool[p, 1]
+            out[m, a] += shift
+            m += 1
 
 
 @njit
