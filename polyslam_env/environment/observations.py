@@ -417,34 +417,33 @@ class ObservationEncoder:
 
     def team_cells(self, team: TeamView) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`local_cells` of K robots (K, G²) each, in one call of the compiled
-        :func:`~polyslam_env.environment.kernels.local_cells`."""
+        :func:`~polyslam_env.environment.kernels.local_cells` (which places the cells and
+        the map points itself)."""
         k, gg = len(team), self.g * self.g
         poses = team.poses
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        centres = np.empty((k, gg, 2))  # (K, G², 2) own frames
-        points = np.empty((len(team.map_points), 2))  # (M, 2) ego frames
-        kernels.place_team(
-            self.cell_centres, team.map_points, team.map_starts, poses, c, s, centres, points
-        )
-        self._lone_points(team, c, s, points)
         occ, free = np.empty((k, gg), dtype=bool), np.empty((k, gg), dtype=bool)
         grid = team.belief
         free_stack, hit_stack = grid.flat_stack
         kernels.local_cells(
-            centres, points, team.map_starts, self.g, self.res, free_stack, hit_stack,
+            self.cell_centres, team.map_points, team.map_starts, poses, c, s,
+            self._lone_points(team, c, s), self.g, self.res, free_stack, hit_stack,
             team.belief_rows, grid.origin, grid.resolution, grid.n, self.use_hits, occ, free,
         )  # fmt: skip
         return occ, free
 
     @staticmethod
-    def _lone_points(team: TeamView, c: np.ndarray, s: np.ndarray, points: np.ndarray) -> None:
-        """The ego point of each robot whose map is one point, as numpy computes (p − xy) R(θ)
-        for one row (BLAS's gemv, which rounds otherwise than the kernel's gemm chain)."""
+    def _lone_points(team: TeamView, c: np.ndarray, s: np.ndarray) -> np.ndarray:  # (K, 2)
+        """Row k: the ego point of robot k if its map is one point, as numpy computes
+        (p − xy) R(θ) for one row (BLAS's gemv, which rounds otherwise than the kernel's gemm
+        chain); rows of the other robots are not read (left unset)."""
         starts = team.map_starts
+        lone = np.empty((len(starts) - 1, 2))
         for j in ((starts[1:] - starts[:-1]) == 1).nonzero()[0].tolist():
             a = int(starts[j])
             rot = np.array([[c[j], -s[j]], [s[j], c[j]]])  # R(θ) = (R(θ)ᵀ)ᵀ, C-contiguous
-            points[a : a + 1] = (team.map_points[a : a + 1] - team.poses[j, :2]) @ rot
+            lone[j] = ((team.map_points[a : a + 1] - team.poses[j, :2]) @ rot)[0]
+        return lone
 
     def local_map(self, view: RobotView) -> np.ndarray:  # (3, G, G) float32
         """Occupied / free / unknown channels of the egocentric grid (x forward = columns)."""
