@@ -243,14 +243,17 @@ def observe(
     poses, covs = estimates
     active = state.world.active
     robots = list(acting.values())
-    sweeping = [i for i in robots if active[i]]
-    if sweeping:
-        grids = [state.beliefs[i] for i in sweeping]
-        sweep_beliefs(grids, poses[sweeping], state.angles, state.sensing.ranges[sweeping])
-    if not robots:
-        return {}
     # every robot acting (the usual case): views of the team's arrays, not copies
     every = robots == list(range(len(active)))
+    if every and active.all():
+        sweep_beliefs(state.beliefs, poses, state.angles, state.sensing.ranges)
+    else:
+        sweeping = [i for i in robots if active[i]]
+        if sweeping:
+            grids = [state.beliefs[i] for i in sweeping]
+            sweep_beliefs(grids, poses[sweeping], state.angles, state.sensing.ranges[sweeping])
+    if not robots:
+        return {}
     pick: slice | list[int] = slice(None) if every else robots
     stds = np.sqrt(np.maximum(covs[pick].diagonal(axis1=1, axis2=2), 0.0))  # (K, 3)
     map_points, starts = state.slam.team_map_points(robots)
