@@ -206,9 +206,11 @@ def exchange(state: EpisodeState) -> ExchangeStep | None:
     SLAMs): the mutual sightings for rendering, then the team SLAM's exchange; the robots of
     each new rendezvous count it and remember its step."""
     seen = state.sensing.camera.seen  # (N, N)
-    i_idx, j_idx = (seen & seen.T).nonzero()  # row by row, as np.triu(…, k=1) then nonzero
-    upper = i_idx < j_idx
-    state.links = list(zip(i_idx[upper].tolist(), j_idx[upper].tolist(), strict=True))
+    state.links = []
+    if seen.any():  # (most steps nobody sees anyone)
+        i_idx, j_idx = (seen & seen.T).nonzero()  # row by row, as np.triu(…, k=1) then nonzero
+        upper = i_idx < j_idx
+        state.links = list(zip(i_idx[upper].tolist(), j_idx[upper].tolist(), strict=True))
     out = state.slam.exchange(state.step_count, state.world, state.sensing)
     if out is None:
         return None
