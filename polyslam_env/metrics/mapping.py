@@ -31,8 +31,12 @@ import numpy as np
 from scipy import special
 
 from polyslam_env.core.geometry import transform_points
-from polyslam_env.metrics.boundary import boundary_samples, distance_to_boundary
-from polyslam_env.metrics.kernels import covered, parallel_neighbours, sample_rows
+from polyslam_env.metrics.boundary import (
+    boundary_buckets,
+    boundary_samples,
+    distance_to_boundary,
+)
+from polyslam_env.metrics.kernels import covered, covered_by, parallel_neighbours, sample_rows
 from polyslam_env.metrics.pose import _check_pose
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
@@ -383,7 +387,9 @@ def _covered_fraction(points: np.ndarray, layout: Layout, tol: float, step: floa
     total = float(weights.sum())
     if len(pts) == 0 or total == 0.0:
         return 0.0
-    near = covered(bpts, np.ascontiguousarray(pts), float(tol))
+    # the boundary's samples bucketed once per layout: each call only walks the points
+    found = boundary_buckets(layout, step, tol)
+    near = covered_by(bpts, *found, np.ascontiguousarray(pts), float(tol))
     return float(weights[near].sum()) / total
 
 
