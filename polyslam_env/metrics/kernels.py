@@ -129,6 +129,17 @@ def buckets(
 
 
 @njit
+def _bucket_span(
+    px: float, py: float, x0: float, y0: float, side: float, ncols: int, nrows: int
+) -> tuple[int, int, int, int]:
+    """The rows r0…r1 and columns c0…c1 of the 3 × 3 buckets around (px, py), clipped to
+    the grid (empty ranges when the place is far outside it)."""
+    c = math.floor((px - x0) / side)
+    r = math.floor((py - y0) / side)
+    return max(r - 1, 0), min(r + 1, nrows - 1), max(c - 1, 0), min(c + 1, ncols - 1)
+
+
+@njit
 def covered(samples: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
     """Whether each sample (M, 2) has a point (N, 2) strictly within ``tol`` (> 0):
     dx² + dy² < tol²."""
@@ -141,11 +152,10 @@ def covered(samples: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
     tol2 = tol * tol
     for s in range(m):
         sx, sy = samples[s, 0], samples[s, 1]
-        c = math.floor((sx - x0) / side)
-        r = math.floor((sy - y0) / side)
+        r0, r1, c0, c1 = _bucket_span(sx, sy, x0, y0, side, ncols, nrows)
         found = False
-        for rr in range(max(r - 1, 0), min(r + 1, nrows - 1) + 1):
-            for cc in range(max(c - 1, 0), min(c + 1, ncols - 1) + 1):
+        for rr in range(r0, r1 + 1):
+            for cc in range(c0, c1 + 1):
                 b = rr * ncols + cc
                 for j in range(starts[b], starts[b + 1]):
                     p = order[j]
@@ -186,10 +196,9 @@ def covered_by(
     tol2 = tol * tol
     for i in range(points.shape[0]):
         px, py = points[i, 0], points[i, 1]
-        c = math.floor((px - x0) / side)
-        r = math.floor((py - y0) / side)
-        for rr in range(max(r - 1, 0), min(r + 1, nrows - 1) + 1):
-            for cc in range(max(c - 1, 0), min(c + 1, ncols - 1) + 1):
+        r0, r1, c0, c1 = _bucket_span(px, py, x0, y0, side, ncols, nrows)
+        for rr in range(r0, r1 + 1):
+            for cc in range(c0, c1 + 1):
                 b = rr * ncols + cc
                 for j in range(starts[b], starts[b + 1]):
                     s = order[j]
@@ -223,10 +232,9 @@ def parallel_neighbours(
         if out[i] or not has_dir[i]:
             continue
         px, py = points[i, 0], points[i, 1]
-        c = math.floor((px - x0) / side)
-        r = math.floor((py - y0) / side)
-        for rr in range(max(r - 1, 0), min(r + 1, nrows - 1) + 1):
-            for cc in range(max(c - 1, 0), min(c + 1, ncols - 1) + 1):
+        r0, r1, c0, c1 = _bucket_span(px, py, x0, y0, side, ncols, nrows)
+        for rr in range(r0, r1 + 1):
+            for cc in range(c0, c1 + 1):
                 b = rr * ncols + cc
                 for k in range(starts[b], starts[b + 1]):
                     j = order[k]
