@@ -38,7 +38,8 @@ then has the env's distance test, :class:`~policies.radio.Radio`): every message
 its sender's own-frame pose, and a receiver keeps, from its first mutual sighting of a
 team-mate, the transform between their two start frames (:func:`~policies.radio.own_frame_of`).
 A robot that has met a team-mate so sends its goal (and, every ``radio_area_resend`` steps, its
-area) also while it sees nobody — when its goal changes and every ``radio_resend`` steps — and
+area) also while it sees nobody, every ``radio_resend`` steps (a goal changed meanwhile waits:
+frontier goals change every few steps, and the bytes count), and
 a receiver within radio range whose transform to the sender it holds places the message
 through it, with no sighting, and takes it as one heard over a sighting. With the default env
 (``channel.range`` = the camera's 1.5 m) nothing changes.
@@ -85,8 +86,8 @@ class TeamFrontierPolicy(FrontierPolicy):
     may differ (default 0.06 m: four σ of the difference of two readings of the default
     camera, σ_d = 0.01 m each); ``share_area`` sends and takes the explored area (module doc)
     on a grid of ``area_cell`` m, again every ``area_resend`` steps of a meeting; over a radio
-    longer than the camera (module doc) a robot that sees nobody sends its unchanged goal
-    again every ``radio_resend`` steps and its area every ``radio_area_resend``; other
+    longer than the camera (module doc) a robot that sees nobody sends its goal every
+    ``radio_resend`` steps and its area every ``radio_area_resend``; other
     keywords go to :class:`FrontierPolicy`."""
 
     def __init__(
@@ -102,7 +103,7 @@ class TeamFrontierPolicy(FrontierPolicy):
         area_cell: float = 0.2,
         area_resend: int = 20,
         radio_resend: int = 20,
-        radio_area_resend: int = 50,
+        radio_area_resend: int = 100,
         **kwargs: Any,
     ) -> None:
         for name, value in (
@@ -297,8 +298,8 @@ class TeamFrontierPolicy(FrontierPolicy):
         )
         if self._sent is not None:
             goal, k_sent, step = self._sent
-            if goal == self.goal and k_sent == k and self._step - step < resend:
-                return
+            if self._step - step < resend and (k == 0 or (goal == self.goal and k_sent == k)):
+                return  # over the radio alone, at most every radio_resend steps
         me = self.context.index
         goals = [self.goal, *(g for g in self._goals if g != self.goal)][: self.history]
         body = transform_points(np.array([self.map.centre(*g) for g in goals]), inverse(pose))
