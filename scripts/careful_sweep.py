@@ -154,12 +154,10 @@ def main(argv: list[str] | None = None) -> int:
             if done.exists():
                 print(f"# done: {shlex.join(command)}")
                 continue
+            if args.run and "NEWEST.zip" in " ".join(command):  # trained just now: look again
+                command = dict(commands(args.out, p, args.seed, args.episodes, args.workers))[done]
             print(shlex.join(command), flush=True)
             if args.run:
-                if "NEWEST.zip" in " ".join(command):  # trained just now: look again
-                    command = dict(commands(args.out, p, args.seed, args.episodes, args.workers))[
-                        done
-                    ]
                 if subprocess.call(command) != 0:
                     print(f"careful_sweep: failed: {shlex.join(command)}", file=sys.stderr)
                     return 1
