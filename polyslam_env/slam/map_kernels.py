@@ -188,14 +188,14 @@ def eta_range(shape: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
     terms = np.empty(width - 1)
     for k in range(1, width):
         terms[k - 1] = abs(taylor[k]) * math.pow(half, float(k))
-    spread = _sum_like_numpy(terms)
+    spread = sum_like_numpy(terms)
     # a relative pad absorbs the rounding of T_0 and of the exact values this bounds
     pad = spread * 1e-9 + 1e-9 * (1.0 + abs(taylor[0]))
     return taylor[0] - spread - pad, taylor[0] + spread + pad
 
 
 @njit
-def _sum_like_numpy(a: np.ndarray) -> float:
+def sum_like_numpy(a: np.ndarray) -> float:
     """``a.sum()`` as numpy adds a short contiguous row: in order below 8 terms, from 8 on
     in eight running sums combined pairwise (numpy's pairwise summation, one block)."""
     n = a.size
@@ -282,7 +282,7 @@ def _rms_error(xy: np.ndarray, variate: int, c: np.ndarray, lo: float, hi: float
         np.full(1, order, dtype=np.int64), shape, np.full(1, lo), np.full(1, hi),
         np.full(1, c[0]), False, best, errors,
     )  # fmt: skip
-    return math.sqrt(_sum_like_numpy(errors * errors) / n)
+    return math.sqrt(sum_like_numpy(errors * errors) / n)
 
 
 @njit
