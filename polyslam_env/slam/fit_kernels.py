@@ -33,6 +33,7 @@ __all__ = [
     "fit_points",
     "principal_variate",
     "sample_into",
+    "stored_point_arrays",
     "turn_gradient",
     "wall_mask",
     "weighted_qr",
@@ -289,6 +290,47 @@ def sample_into(
             d_state[row, 0, turn_index] = fma(dy, -1.0, fma(dx, 0.0, 0.0))
             d_state[row, 1, turn_index] = fma(dy, 0.0, fma(dx, 1.0, 0.0))
         weights[row] = weight
+
+
+@njit
+def stored_point_arrays(
+    xy0: np.ndarray,
+    direction: np.ndarray,
+    sigma: np.ndarray,
+    anchor: np.ndarray,
+    at: np.ndarray,
+    noise: np.ndarray,
+    n_state: int,
+    square: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(xy (N, 2), d_state (N, 2, S), d_noise (N, 2, N), noise_cov (N, N)) of stored points
+    ``xy0`` (N, 2) with beam directions ``direction`` (N, 2) and range σ ``sigma`` (N,),
+    attached to the pose ``anchor`` (3,) and evaluated at the pose ``at`` with range errors
+    ``noise`` (N,): the model of :func:`~polyslam_env.slam.fitting.stored_points`.
+
+    The floats of its numpy form (``tests/slam/reference_fitting.py``), bit for bit: the
+    products with R(θ − θ̂)ᵀ and Jᵀ are BLAS's chains of FMAs from 0 along the inner index
+    (as :func:`sample_into`'s), R's entries numpy's ``cos``/``sin`` (libm's), the variances
+    σ² libm's ``pow`` (``square`` = 2.0 an argument, as :func:`turn_gradient`'s)."""
+    n = xy0.shape[0]
+    turn = at[2] - anchor[2]
+    c, s = math.cos(turn), math.sin(turn)
+    xy = np.empty((n, 2))
+    d_state = np.zeros((n, 2, n_state))
+    d_noise = np.zeros((n, 2, n))
+    noise_cov = np.zeros((n, n))
+    for i in range(n):
+        dx, dy = xy0[i, 0] - anchor[0], xy0[i, 1] - anchor[1]
+        rx = fma(dy, -s, fma(dx, c, 0.0))  # (π̂ − p̂) R(θ − θ̂)ᵀ: Rᵀ = [[c, s], [−s, c]]
+        ry = fma(dy, c, fma(dx, s, 0.0))
+        xy[i, 0] = at[0] + rx + noise[i] * direction[i, 0]
+        xy[i, 1] = at[1] + ry + noise[i] * direction[i, 1]
+        d_state[i, 0, 0] = d_state[i, 1, 1] = 1.0
+        d_state[i, 0, 2] = fma(ry, -1.0, fma(rx, 0.0, 0.0))  # rel Jᵀ = (−rel_y, rel_x)
+        d_state[i, 1, 2] = fma(ry, 0.0, fma(rx, 1.0, 0.0))
+        d_noise[i, 0, i], d_noise[i, 1, i] = direction[i, 0], direction[i, 1]
+        noise_cov[i, i] = math.pow(sigma[i], square)
+    return xy, d_state, d_noise, noise_cov
 
 
 @njit

@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.special
 
-from polyslam_env.core.geometry import rotation
 from polyslam_env.slam import fit_kernels, map_kernels
 from polyslam_env.slam.columns import N_POINT_REAL, PTH, PX, SIGMA, UX, UY, WEIGHT, X, Y
 from polyslam_env.slam.polynomial import Polynomial
@@ -196,26 +195,19 @@ def stored_points(
     in the state, so its correlation with the map is carried through the current pose, and the
     odometry drift between the point's step and now is neglected (it is small over the few
     steps a point spends in a cluster or Q_bad). ``pose`` and ``noise`` (default: the anchor
-    and zero) evaluate the model elsewhere, for finite-difference checks.
+    and zero) evaluate the model elsewhere, for finite-difference checks. One compiled call
+    (:func:`~polyslam_env.slam.fit_kernels.stored_point_arrays`).
     """
     if len(points) == 0:
         raise ValueError("stored_points needs at least one point")
     anchor = np.asarray(anchor_pose, dtype=float)
     at = anchor if pose is None else np.asarray(pose, dtype=float)
     e = np.zeros(len(points)) if noise is None else np.asarray(noise, dtype=float)
-    xy0 = np.ascontiguousarray(points.xy, dtype=float)  # (N, 2)
-    u = np.ascontiguousarray(points.direction, dtype=float)  # (N, 2)
-    rel = (xy0 - anchor[:2]) @ rotation(at[2] - anchor[2]).T  # (N, 2) R(θ − θ̂)(π̂ − p̂)
-    d_state = np.zeros((len(points), 2, n_state))
-    d_state[:, :, :2] = np.eye(2)
-    d_state[:, :, 2] = rel @ J_ROT.T
-    return PointSet(
-        xy=at[:2] + rel + e[:, None] * u,
-        d_state=d_state,
-        d_noise=_diag_noise(u),
-        noise_cov=np.diag([s**2 for s in points.sigma.tolist()]),  # Python's **: libm pow
-        weights=np.array(points.weight, dtype=float),
-    )
+    xy, d_state, d_noise, noise_cov = fit_kernels.stored_point_arrays(
+        np.ascontiguousarray(points.xy, dtype=float), np.ascontiguousarray(points.direction),
+        points.sigma, anchor, at, e, n_state, 2.0,
+    )  # fmt: skip
+    return PointSet(xy, d_state, d_noise, noise_cov, np.array(points.weight, dtype=float))
 
 
 def polynomial_points(

@@ -12,9 +12,12 @@ import numpy as np
 import scipy.linalg.lapack
 import scipy.special
 
+from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.fitting import J_ROT, Fit, PointSet
+from polyslam_env.slam.fitting import _diag_noise as diag_noise
 from polyslam_env.slam.map_kernels import GAP_SPLIT, equally_spaced
 from polyslam_env.slam.polynomial import Polynomial, polyval
+from polyslam_env.slam.stored import PointArrays
 
 
 def choose_variate(xy: np.ndarray, weights: np.ndarray | None = None) -> int:
@@ -353,4 +356,28 @@ def polynomial_points(
         d_noise=np.zeros((n, 2, 0)),
         noise_cov=np.zeros((0, 0)),
         weights=np.full(n, 1.0 / float(c0_var)),
+    )
+
+
+def stored_points(
+    points: PointArrays, anchor_pose: np.ndarray, n_state: int, pose: np.ndarray | None = None
+) -> PointSet:
+    """:func:`~polyslam_env.slam.fitting.stored_points` in numpy (before
+    :func:`~polyslam_env.slam.fit_kernels.stored_point_arrays`): its oracle, bit for bit at
+    the anchor."""
+    anchor = np.asarray(anchor_pose, dtype=float)
+    at = anchor if pose is None else np.asarray(pose, dtype=float)
+    e = np.zeros(len(points))
+    xy0 = np.ascontiguousarray(points.xy, dtype=float)  # (N, 2)
+    u = np.ascontiguousarray(points.direction, dtype=float)  # (N, 2)
+    rel = (xy0 - anchor[:2]) @ rotation(at[2] - anchor[2]).T  # (N, 2) R(θ − θ̂)(π̂ − p̂)
+    d_state = np.zeros((len(points), 2, n_state))
+    d_state[:, :, :2] = np.eye(2)
+    d_state[:, :, 2] = rel @ J_ROT.T
+    return PointSet(
+        xy=at[:2] + rel + e[:, None] * u,
+        d_state=d_state,
+        d_noise=diag_noise(u),
+        noise_cov=np.diag([s**2 for s in points.sigma.tolist()]),  # Python's **: libm pow
+        weights=np.array(points.weight, dtype=float),
     )

@@ -24,11 +24,13 @@ from polyslam_env.slam.fitting import (
     concat,
     fit_polynomial,
     polynomial_points,
+    stored_points,
     turn_gradient,
 )
 from polyslam_env.slam.map_kernels import GAP_SPLIT
 from polyslam_env.slam.merging import merge_points
 from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.stored import PointArrays
 from tests.slam import reference_fitting as reference
 
 EPS = np.finfo(float).eps
@@ -177,6 +179,31 @@ def test_polynomial_points__the_numpy_points_bit_for_bit() -> None:
         stacked = concat(want, reference.polynomial_points(other, 3, 2e-3, n, -1.0, 1.0, n_state))
         for name in ("xy", "d_state", "d_noise", "noise_cov", "weights"):
             assert getattr(merged, name).tobytes() == getattr(stacked, name).tobytes(), name
+
+
+def test_stored_points__the_numpy_points_bit_for_bit() -> None:
+    """Stored points attached to the current pose (one compiled call) are the numpy form's
+    floats at the anchor, 1–20 points anywhere; evaluated at another pose (the model's
+    finite-difference checks) they agree to rounding (R's cos/sin: 1e-12 m on metres)."""
+    rng = np.random.default_rng(44)
+    for _ in range(200):
+        n = int(rng.integers(1, 21))
+        angles = rng.uniform(-np.pi, np.pi, n)
+        points = PointArrays(
+            rng.normal(scale=4.0, size=(n, 2)), np.column_stack([np.cos(angles), np.sin(angles)]),
+            rng.uniform(0.005, 0.05, n), rng.uniform(1.0, 1e3, n), np.zeros((n, 3)),
+            np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64),
+        )  # fmt: skip
+        anchor = rng.normal(size=3)
+        got = stored_points(points, anchor, 7)
+        want = reference.stored_points(points, anchor, 7)
+        for name in ("xy", "d_state", "d_noise", "noise_cov", "weights"):
+            assert getattr(got, name).tobytes() == getattr(want, name).tobytes(), name
+        pose = anchor + rng.normal(scale=0.05, size=3)
+        moved = stored_points(points, anchor, 7, pose=pose)
+        np.testing.assert_allclose(
+            moved.xy, reference.stored_points(points, anchor, 7, pose=pose).xy, rtol=0, atol=1e-12
+        )
 
 
 def _cluster(rng: np.random.Generator) -> np.ndarray:
