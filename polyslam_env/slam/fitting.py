@@ -18,6 +18,7 @@ Points come from three constructors:
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -310,11 +311,14 @@ def _split(xy: np.ndarray, variate: int) -> tuple[np.ndarray, np.ndarray]:
     return (xy[:, 0], xy[:, 1]) if variate == 1 else (xy[:, 1], xy[:, 0])
 
 
+@functools.lru_cache(maxsize=256)
 def order_limits(n_points: int, order: int, noise_var: float) -> np.ndarray:  # (order,)
     """The residual sum of squares below which order m = 1 … ``order`` is accepted (the order
     selection of :func:`fit_polynomial`): the 99 % χ² quantile with N − m − 1 dof times the
     points' noise variance, or, without noise (points sampled on polynomials), N · 1e-8
-    (0.1 mm RMS). Orders without a positive dof are never tested against theirs."""
+    (0.1 mm RMS). Orders without a positive dof are never tested against theirs. Cached: a
+    SLAM's fits repeat a few sizes and noise levels (merges: 2 ε_M points, σ_range²); the
+    array is shared, never written."""
     if noise_var > 0:
         dof = n_points - 1 - np.arange(1, order + 1)
         return np.asarray(scipy.special.chdtri(np.maximum(dof, 1), 0.01) * noise_var)
