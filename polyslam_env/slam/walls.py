@@ -111,11 +111,16 @@ class WallGraph:
         reach = cfg.link_gap * (1.0 + 1e-9) + EXTENT_MARGIN
         candidates = []
         matured = slam.step_count - cfg.link_age  # partners at least as old (link_changed)
-        for j in table.near(maintenance.box(idx), slam.c0s, reach).tolist():
-            if j == idx or table.variate[j] != table.variate[idx] or table.order[j] != 1:
-                continue
-            if table.changed_at[j] > matured or table.received[j]:
-                continue
+        near = table.near(maintenance.box(idx), slam.c0s, reach)
+        variate, order = table.variate, table.order
+        near = near[
+            (near != idx)
+            & (variate[near] == variate[idx])
+            & (order[near] == 1)
+            & (table.changed_at[near] <= matured)
+            & (table.received[near] == 0)
+        ]
+        for j in near.tolist():
             gap = evidence_gap(evidence, maintenance.evidence(j))
             if -2.0 * EXTENT_MARGIN <= gap <= cfg.link_gap:
                 candidates.append((gap, table.ids[j]))
