@@ -127,7 +127,7 @@ def test_turn_gradient__the_numpy_form_on_the_same_qr_bit_for_bit() -> None:
     sparse derivatives with exact zeros as a merge's are, and merges of two sampled lines."""
     rng = np.random.default_rng(41)
     cases = 0
-    for k in range(400):
+    for k in range(160):
         points = _case(rng) if k % 4 else _sparse_case(rng)
         for order in (1, 2, 3):
             fit = fit_polynomial(points, order, None, True, bool(k % 2), 4e-4)
@@ -139,7 +139,7 @@ def test_turn_gradient__the_numpy_form_on_the_same_qr_bit_for_bit() -> None:
             )
             assert got.tobytes() == want.tobytes() and got_var == want_var
             cases += fit.poly.variate == 2
-    assert cases > 100  # both variates were exercised
+    assert cases > 40  # both variates were exercised
 
 
 def _sparse_case(rng: np.random.Generator) -> PointSet:
@@ -161,7 +161,7 @@ def test_polynomial_points__the_numpy_points_bit_for_bit() -> None:
     included: 1–8 points, both variates, with and without a turn, pivots on a sample (an
     exact zero in π − π_c) and off; a merge's set is its two polynomials' stacked."""
     rng = np.random.default_rng(43)
-    for k in range(300):
+    for k in range(120):
         n, n_state = int(rng.integers(1, 9)), 9
         lo = float(rng.uniform(-3.0, 3.0))
         hi = lo + float(rng.uniform(0.0, 2.0)) * (k % 7 != 0)  # a point-like extent too

@@ -137,7 +137,7 @@ def test_turned_line__the_numpy_floats_bit_for_bit() -> None:
     """The compiled turn of a stored line gives the numpy form's floats (R from numpy's
     cos/sin, its gemv): lines of both variates, turns from 1e-6 to 0.1 rad either way."""
     rng = np.random.default_rng(45)
-    for _ in range(2000):
+    for _ in range(500):
         coeffs = np.array([rng.normal() * 3.0, rng.normal() * 0.3, 0.0, 0.0])
         line = Polynomial(int(rng.integers(1, 3)), coeffs, -1.0, 2.0)
         pivot = float(rng.uniform(-1.0, 2.0))
