@@ -82,7 +82,7 @@ import math
 
 import numpy as np
 
-from polyslam_env.core.geometry import rotation
+from polyslam_env.slam import map_kernels
 from polyslam_env.slam.ekf import chi2_1dof_quantile
 from polyslam_env.slam.polynomial import Polynomial, polyval
 
@@ -165,18 +165,15 @@ def turned_line(poly: Polynomial, pivot: float, angle: float) -> Polynomial:
     counter-clockwise in (x¹, x²), the sense of a landmark's turn α) about its point at
     ξ = ``pivot``; same variate and extent. The turned line's offset at the pivot is the
     same, so a c0 error means what it meant before (a turn state reset to zero after its
-    estimate was applied keeps its covariance)."""
+    estimate was applied keeps its covariance). The arithmetic is one compiled call
+    (:func:`~polyslam_env.slam.map_kernels.turned_line`)."""
     if np.any(poly.coeffs[2:] != 0.0):
         raise ValueError("turned_line: the polynomial must be a straight line")
-    slope = float(poly.coeffs[1])
-    eta_c = poly.c0 + slope * pivot
-    xi_axis, eta_axis = (0, 1) if poly.variate == 1 else (1, 0)
-    direction = np.zeros(2)
-    direction[xi_axis], direction[eta_axis] = 1.0, slope
-    turned = rotation(angle) @ direction
-    new_slope = float(turned[eta_axis] / turned[xi_axis])
+    c0, slope = map_kernels.turned_line(
+        float(poly.coeffs[0]), float(poly.coeffs[1]), poly.variate, float(pivot), float(angle)
+    )
     coeffs = np.zeros_like(poly.coeffs)
-    coeffs[0], coeffs[1] = eta_c - new_slope * pivot, new_slope
+    coeffs[0], coeffs[1] = c0, slope
     return Polynomial(poly.variate, coeffs, poly.lo, poly.hi)
 
 

@@ -111,11 +111,16 @@ class WallGraph:
         reach = cfg.link_gap * (1.0 + 1e-9) + EXTENT_MARGIN
         candidates = []
         matured = slam.step_count - cfg.link_age  # partners at least as old (link_changed)
-        for j in table.near(maintenance.box(idx), slam.c0s, reach).tolist():
-            if j == idx or table.variate[j] != table.variate[idx] or table.order[j] != 1:
-                continue
-            if table.changed_at[j] > matured or table.received[j]:
-                continue
+        near = table.near(maintenance.box(idx), slam.c0s, reach)
+        variate, order = table.variate, table.order
+        near = near[
+            (near != idx)
+            & (variate[near] == variate[idx])
+            & (order[near] == 1)
+            & (table.changed_at[near] <= matured)
+            & (table.received[near] == 0)
+        ]
+        for j in near.tolist():
             gap = evidence_gap(evidence, maintenance.evidence(j))
             if -2.0 * EXTENT_MARGIN <= gap <= cfg.link_gap:
                 candidates.append((gap, table.ids[j]))
@@ -165,18 +170,9 @@ class WallGraph:
         i = table.index_of(landmark_id)
         if table.received[i] or table.order[i] != 1 or not self.long_enough(i):
             return 0
-        group = self.direction_of[landmark_id]
-        matured = slam.step_count - cfg.link_age
+        group, ids = self.direction_of[landmark_id], table.ids
         others = np.array(
-            [
-                j
-                for j, (lid, at) in enumerate(zip(table.ids, table.changed_at, strict=True))
-                if table.order[j] == 1
-                and at <= matured
-                and not table.received[j]
-                and self.direction_of[lid] != group
-                and self.long_enough(j)
-            ],
+            [j for j in self.mature_lines().tolist() if self.direction_of[ids[j]] != group],
             dtype=np.int64,
         )
         if others.size == 0:
@@ -211,18 +207,7 @@ class WallGraph:
         table = slam.table
         if not cfg.rotation_states:
             return False
-        matured = slam.step_count - cfg.link_age
-        rows = np.array(
-            [
-                j
-                for j in range(len(table))
-                if table.order[j] == 1
-                and not table.received[j]
-                and table.changed_at[j] <= matured
-                and table.hi[j] - table.lo[j] >= SQUARE_MIN_LENGTH
-            ],
-            dtype=np.int64,
-        )
+        rows = self.mature_lines(SQUARE_MIN_LENGTH)
         turns = slam.layout.turn_index(0, len(table)) + rows
         directions = np.array([line_angle(table.polys[j]) for j in rows.tolist()])
         directions += slam.mean[turns]
@@ -269,6 +254,19 @@ class WallGraph:
         )
         slam.mean[3 + row], slam.mean[t] = line.c0, 0.0
         slam.table.set_shape(row, line)
+
+    def mature_lines(self, min_length: float | None = None) -> np.ndarray:
+        """Rows (ascending, int64) of the own straight landmarks made at least
+        ``config.link_age`` steps ago and at least ``min_length`` long on ξ (default: long
+        enough to update the pose, :meth:`long_enough`): those a square tie or the
+        rectilinear test may use."""
+        cfg, table = self.config, self.slam.table
+        floor = cfg.min_update_extent if min_length is None else min_length
+        matured = self.slam.step_count - cfg.link_age
+        lines = (table.order == 1) & (table.received == 0) & (table.changed_at <= matured)
+        if floor > 0.0 or min_length is not None:
+            lines &= table.hi - table.lo >= floor
+        return np.flatnonzero(lines)
 
     def long_enough(self, row: int) -> bool:
         """Whether landmark ``row`` is long enough to update the pose (``min_update_extent``)."""

@@ -6,13 +6,18 @@ the cluster split."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import scipy.linalg.lapack
 import scipy.special
 
-from polyslam_env.slam.fitting import Fit, PointSet, turn_gradient_with
-from polyslam_env.slam.map_kernels import GAP_SPLIT
+from polyslam_env.core.geometry import rotation
+from polyslam_env.slam.fitting import J_ROT, Fit, PointSet
+from polyslam_env.slam.fitting import _diag_noise as diag_noise
+from polyslam_env.slam.map_kernels import GAP_SPLIT, equally_spaced
 from polyslam_env.slam.polynomial import Polynomial, polyval
+from polyslam_env.slam.stored import PointArrays
 
 
 def choose_variate(xy: np.ndarray, weights: np.ndarray | None = None) -> int:
@@ -201,9 +206,37 @@ def _coefficient_gradient(
     return np.stack([d_xi, d_eta], axis=-1)
 
 
+def turn_gradient_with(
+    points: PointSet,
+    fit: Fit,
+    pivot: float,
+    weighted_qr: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray, int]],
+    coefficient_gradient: Callable[..., np.ndarray],
+) -> tuple[np.ndarray, float]:
+    """:func:`~polyslam_env.slam.fitting.turn_gradient` in numpy (the production code before
+    :func:`~polyslam_env.slam.fit_kernels.turn_gradient`) with the fit's QR
+    (``fit_kernels.weighted_qr``'s signature) and the gradient of a linear function of the
+    coefficients (``fit_kernels.coefficient_gradient``'s) given: with the compiled ones it is
+    the kernel's bit-for-bit oracle, with this module's readable ones the conditioning
+    bound's."""
+    poly = fit.poly
+    xi, eta, scale, w = _scaled(points, poly.variate)
+    a_mat, _, r, m = weighted_qr(xi / scale, np.sqrt(w), fit.order)
+    a_s = poly.coeffs[: m + 1] * scale ** np.arange(m + 1)
+    resid = eta - a_mat @ a_s
+    e = np.zeros(m + 1)  # p'(ξ_p) = Σ_k k a_s[k] (ξ_p/s)^(k−1) / s
+    e[1:] = np.arange(1, m + 1) * (pivot / scale) ** np.arange(m) / scale
+    slope = float(poly.slope(pivot))
+    d = coefficient_gradient(e, scale, w, a_mat, r, a_s, resid) / (1.0 + slope**2)
+    d_xy = d if poly.variate == 1 else d[:, ::-1]
+    sign = 1.0 if poly.variate == 1 else -1.0  # α turns counter-clockwise in (x¹, x²)
+    residual_var = fit.rms**2 * float(np.sum(d[:, 1] ** 2))
+    return sign * np.einsum("nj,njs->s", d_xy, points.d_state), residual_var
+
+
 def turn_gradient(points: PointSet, fit: Fit, pivot: float) -> tuple[np.ndarray, float]:
     """:func:`~polyslam_env.slam.fitting.turn_gradient` on this module's readable QR and
-    coefficient gradient (the rest of it is one piece: ``fitting.turn_gradient_with``; its
+    coefficient gradient (the rest of it is :func:`turn_gradient_with`; its
     derivative is checked by finite differences in ``tests/slam/test_merging.py``)."""
 
     def gradient(
@@ -293,3 +326,58 @@ def _dominant_line(xy: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
     inliers = xy[dist[best] <= tol]
     direction = _tls_direction(inliers)
     return direction, _line_distances(inliers, direction, xy)
+
+
+def polynomial_points(
+    poly: Polynomial,
+    c0_index: int,
+    c0_var: float,
+    n: int,
+    lo: float,
+    hi: float,
+    n_state: int,
+    turn: tuple[int, float] | None = None,
+) -> PointSet:
+    """:func:`~polyslam_env.slam.fitting.polynomial_points` in numpy (before
+    :func:`~polyslam_env.slam.fit_kernels.sample_into`): its bit-for-bit oracle."""
+    xy = equally_spaced(poly.coeffs, poly.variate, float(lo), float(hi), n)  # (n, 2)
+    d_state = np.zeros((n, 2, n_state))
+    d_state[:, 1 if poly.variate == 1 else 0, c0_index] = 1.0
+    if turn is not None:
+        turn_index, pivot = turn
+        if not 3 <= turn_index < n_state or turn_index == c0_index:
+            raise ValueError(f"turn index must be another state index, got {turn_index}")
+        at = float(pivot)  # the curve's point there: points_at's floats, one compiled call
+        centre = equally_spaced(poly.coeffs, poly.variate, at, at, 1)[0]  # (2,)
+        d_state[:, :, turn_index] = (xy - centre) @ J_ROT.T
+    return PointSet(
+        xy=xy,
+        d_state=d_state,
+        d_noise=np.zeros((n, 2, 0)),
+        noise_cov=np.zeros((0, 0)),
+        weights=np.full(n, 1.0 / float(c0_var)),
+    )
+
+
+def stored_points(
+    points: PointArrays, anchor_pose: np.ndarray, n_state: int, pose: np.ndarray | None = None
+) -> PointSet:
+    """:func:`~polyslam_env.slam.fitting.stored_points` in numpy (before
+    :func:`~polyslam_env.slam.fit_kernels.stored_point_arrays`): its oracle, bit for bit at
+    the anchor."""
+    anchor = np.asarray(anchor_pose, dtype=float)
+    at = anchor if pose is None else np.asarray(pose, dtype=float)
+    e = np.zeros(len(points))
+    xy0 = np.ascontiguousarray(points.xy, dtype=float)  # (N, 2)
+    u = np.ascontiguousarray(points.direction, dtype=float)  # (N, 2)
+    rel = (xy0 - anchor[:2]) @ rotation(at[2] - anchor[2]).T  # (N, 2) R(θ − θ̂)(π̂ − p̂)
+    d_state = np.zeros((len(points), 2, n_state))
+    d_state[:, :, :2] = np.eye(2)
+    d_state[:, :, 2] = rel @ J_ROT.T
+    return PointSet(
+        xy=at[:2] + rel + e[:, None] * u,
+        d_state=d_state,
+        d_noise=diag_noise(u),
+        noise_cov=np.diag([s**2 for s in points.sigma.tolist()]),  # Python's **: libm pow
+        weights=np.array(points.weight, dtype=float),
+    )

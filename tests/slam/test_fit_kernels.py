@@ -17,9 +17,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from polyslam_env.slam import fit_kernels
 from polyslam_env.slam.fit_kernels import wall_mask
-from polyslam_env.slam.fitting import PointSet, fit_polynomial, turn_gradient
+from polyslam_env.slam.fitting import (
+    PointSet,
+    concat,
+    fit_polynomial,
+    polynomial_points,
+    stored_points,
+    turn_gradient,
+)
 from polyslam_env.slam.map_kernels import GAP_SPLIT
+from polyslam_env.slam.merging import merge_points
+from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.stored import PointArrays
 from tests.slam import reference_fitting as reference
 
 EPS = np.finfo(float).eps
@@ -107,6 +118,92 @@ def test_turn_gradient__matches_the_numpy_gradient_within_its_conditioning() -> 
         tol = _tolerance(points, fit.poly.variate, fit.order)
         assert _close(got, want, tol)
         assert abs(got_var - want_var) <= tol * max(want_var, 1e-12)
+
+
+def test_turn_gradient__the_numpy_form_on_the_same_qr_bit_for_bit() -> None:
+    """The compiled turn gradient computes the numpy form's floats (its residual through the
+    same BLAS gemv, its sums in numpy's orders): on the compiled QR and coefficient gradient
+    the two agree exactly, on curved walls of 1–30 points of both variates and orders 0–3,
+    sparse derivatives with exact zeros as a merge's are, and merges of two sampled lines."""
+    rng = np.random.default_rng(41)
+    cases = 0
+    for k in range(160):
+        points = _case(rng) if k % 4 else _sparse_case(rng)
+        for order in (1, 2, 3):
+            fit = fit_polynomial(points, order, None, True, bool(k % 2), 4e-4)
+            xi = points.xy[:, 0 if fit.poly.variate == 1 else 1]
+            pivot = float(rng.uniform(xi.min(), xi.max()))
+            got, got_var = turn_gradient(points, fit, pivot)
+            want, want_var = reference.turn_gradient_with(
+                points, fit, pivot, fit_kernels.weighted_qr, fit_kernels.coefficient_gradient
+            )
+            assert got.tobytes() == want.tobytes() and got_var == want_var
+            cases += fit.poly.variate == 2
+    assert cases > 40  # both variates were exercised
+
+
+def _sparse_case(rng: np.random.Generator) -> PointSet:
+    """1–12 points on a line with derivatives on a few state entries only (as a merge's
+    points sampled on landmarks: exact zeros elsewhere)."""
+    n = int(rng.integers(1, 13))
+    t = np.linspace(-1.0, 1.0, n) * rng.uniform(0.2, 3.0)
+    angle = rng.uniform(0.0, np.pi)
+    xy = rng.normal(scale=5.0, size=2) + np.column_stack([np.cos(angle) * t, np.sin(angle) * t])
+    d_state = np.zeros((n, 2, 9))
+    d_state[:, rng.integers(2), rng.integers(3, 9)] = 1.0
+    d_state[:, :, rng.integers(3, 9)] = rng.normal(size=(n, 2))
+    weights = np.full(n, rng.uniform(10.0, 1e4))
+    return PointSet(xy, d_state, np.zeros((n, 2, 0)), np.zeros((0, 0)), weights)
+
+
+def test_polynomial_points__the_numpy_points_bit_for_bit() -> None:
+    """Points sampled on a landmark (one compiled call) are the numpy form's, signed zeros
+    included: 1–8 points, both variates, with and without a turn, pivots on a sample (an
+    exact zero in π − π_c) and off; a merge's set is its two polynomials' stacked."""
+    rng = np.random.default_rng(43)
+    for k in range(120):
+        n, n_state = int(rng.integers(1, 9)), 9
+        lo = float(rng.uniform(-3.0, 3.0))
+        hi = lo + float(rng.uniform(0.0, 2.0)) * (k % 7 != 0)  # a point-like extent too
+        poly = Polynomial(int(rng.integers(1, 3)), rng.normal(size=4) * [1, 0.5, 0.1, 0.02], lo, hi)
+        xis = np.linspace(lo, hi, n)
+        pivot = float(xis[n // 2] if k % 2 else rng.uniform(lo, hi + 1e-9))
+        turn = None if k % 3 == 0 else (int(rng.integers(5, 9)), pivot)
+        c0_var = float(rng.uniform(1e-5, 1e-2))
+        got = polynomial_points(poly, 4, c0_var, n, lo, hi, n_state, turn)
+        want = reference.polynomial_points(poly, 4, c0_var, n, lo, hi, n_state, turn)
+        for name in ("xy", "d_state", "d_noise", "noise_cov", "weights"):
+            assert getattr(got, name).tobytes() == getattr(want, name).tobytes(), name
+        other = Polynomial(1, np.array([0.3, 0.1, 0.0, 0.0]), -1.0, 1.0)
+        merged = merge_points(poly, 4, c0_var, other, 3, 2e-3, n, n_state, turn, None)
+        stacked = concat(want, reference.polynomial_points(other, 3, 2e-3, n, -1.0, 1.0, n_state))
+        for name in ("xy", "d_state", "d_noise", "noise_cov", "weights"):
+            assert getattr(merged, name).tobytes() == getattr(stacked, name).tobytes(), name
+
+
+def test_stored_points__the_numpy_points_bit_for_bit() -> None:
+    """Stored points attached to the current pose (one compiled call) are the numpy form's
+    floats at the anchor, 1–20 points anywhere; evaluated at another pose (the model's
+    finite-difference checks) they agree to rounding (R's cos/sin: 1e-12 m on metres)."""
+    rng = np.random.default_rng(44)
+    for _ in range(200):
+        n = int(rng.integers(1, 21))
+        angles = rng.uniform(-np.pi, np.pi, n)
+        points = PointArrays(
+            rng.normal(scale=4.0, size=(n, 2)), np.column_stack([np.cos(angles), np.sin(angles)]),
+            rng.uniform(0.005, 0.05, n), rng.uniform(1.0, 1e3, n), np.zeros((n, 3)),
+            np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64),
+        )  # fmt: skip
+        anchor = rng.normal(size=3)
+        got = stored_points(points, anchor, 7)
+        want = reference.stored_points(points, anchor, 7)
+        for name in ("xy", "d_state", "d_noise", "noise_cov", "weights"):
+            assert getattr(got, name).tobytes() == getattr(want, name).tobytes(), name
+        pose = anchor + rng.normal(scale=0.05, size=3)
+        moved = stored_points(points, anchor, 7, pose=pose)
+        np.testing.assert_allclose(
+            moved.xy, reference.stored_points(points, anchor, 7, pose=pose).xy, rtol=0, atol=1e-12
+        )
 
 
 def _cluster(rng: np.random.Generator) -> np.ndarray:
