@@ -86,6 +86,11 @@ class SlamConfig(Config):
 
     order: int = 3  # m, the largest polynomial order
     auto_order: bool = True  # pick each fit's order ≤ m by BIC (False: always m, as printed)
+    # with auto_order, a fit of beam hits keeps the next order when its one more coefficient
+    # is significant at 1 % (fitting.next_term_limits): a short piece of a curved wall whose
+    # sagitta the all-dof χ² test lets pass as a line becomes a curve (docs/notes/floors.md,
+    # Round 6); off: the χ² test alone
+    curvature_test: bool = False
     rho_min: float = 0.08  # m, good-approximation threshold ρ at zero uncertainty
     rho_max: float = 0.24  # m, ... at K·P0
     sigma_min: float = 0.1  # m, "unmapped" threshold σ at zero uncertainty
@@ -222,7 +227,7 @@ class SlamConfig(Config):
             raise ConfigError(f"slam.link_age: must be an integer >= 0, got {self.link_age!r}")
         check_positive("slam.wall_straightness", self.wall_straightness)
         check_positive("slam.wall_squareness_deg", self.wall_squareness_deg)
-        for name in ("square_walls", "square_evidence"):
+        for name in ("square_walls", "square_evidence", "curvature_test"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(
                     f"slam.{name}: must be true or false, got {getattr(self, name)!r}"
