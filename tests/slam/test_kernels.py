@@ -258,16 +258,7 @@ def test_frozen_offset_var__is_what_beam_rows_adds_to_r_at_the_hit(
     x, y, theta = pose.tolist()
     checked = 0
     for b in range(beams.size):
-        rows = (
-            np.empty(1), np.empty((1, 3)), np.empty(1, dtype=np.int64), np.empty(1),
-            np.empty(1, dtype=np.int64), np.empty(1), np.empty(1), np.empty(1), np.empty((1, 4)),
-        )  # fmt: skip
-        used = kernels.beam_rows(
-            x, y, theta, beams, np.zeros(beams.size), np.array([b]), math.inf,
-            *table.arrays(), c0s, table.boxes(c0s), 10.0, math.sin(math.radians(10.0)), 4e-4,
-            table.model_var, follows, False, table.pivot, table.xi_var, np.zeros(2),
-            table.shift_slope, turn_var, table.fit_half, fit_inverse, 16, alpha_base, *rows,
-        )  # fmt: skip
+        used, rows = _rows_of(table, c0s, pose, beams, alpha_base, follows, np.array([b]), turn_var)
         if used == 0:
             continue
         j, inv_d, t = int(rows[2][0]) - 3, rows[3][0], -rows[0][0]
@@ -540,17 +531,22 @@ def _rows_of(
     angles: np.ndarray,
     alpha_base: int,
     follows: bool = True,
+    wanted: np.ndarray | None = None,
+    turn_var: np.ndarray | None = None,
 ) -> tuple[int, tuple[np.ndarray, ...]]:
-    """Every beam's row on ``table`` (kernels.beam_rows, zero readings)."""
-    k = angles.size
+    """Every beam's row on ``table`` (kernels.beam_rows, zero readings), or the ``wanted``
+    beams' only; ``turn_var`` each landmark's heading drift since its fit (default 0)."""
+    wanted = np.arange(angles.size) if wanted is None else wanted
+    turn_var = np.zeros(len(table)) if turn_var is None else turn_var
+    k = wanted.size
     rows = (
         np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k),
         np.empty(k, dtype=np.int64), np.empty(k), np.empty(k), np.empty(k), np.empty((k, 4)),
     )  # fmt: skip
     used = kernels.beam_rows(
-        *pose.tolist(), angles, np.zeros(k), np.arange(k), math.inf, *table.arrays(), c0s,
+        *pose.tolist(), angles, np.zeros(angles.size), wanted, math.inf, *table.arrays(), c0s,
         table.boxes(c0s), 10.0, math.sin(math.radians(10.0)), 4e-4, table.model_var, follows,
-        False, table.pivot, table.xi_var, np.zeros(2), table.shift_slope, np.zeros(len(table)),
+        False, table.pivot, table.xi_var, np.zeros(2), table.shift_slope, turn_var,
         table.fit_half,
         _fit_inverse_table(16, table.shape.shape[1] - 1), 16, alpha_base, *rows,
     )  # fmt: skip
