@@ -69,7 +69,8 @@ def test_nees__whole_episodes_of_each_family__inside_the_log_nees_band(name: str
 #: curved landmarks are nearly honest once their frozen shape error counts (1.63 curved, 0.99
 #: cave); what is left is mostly *lines* on curved walls (406 and 325 of them: 4.32, 3.04):
 #: a short piece of arc passes the order test as a line, and its sagitta is an error no state
-#: and no fit misfit holds (docs/notes/floors.md, Round 6; ``slam.curvature_test`` halves it).
+#: and no fit misfit holds (docs/notes/floors.md, Round 6; ``slam.curvature_test`` about halves
+#: the excess on this harness, 4.07 → 2.39 curved, 2.35 → 1.84 cave).
 CURVED_MAP = "lines on curved walls: their sagitta is a frozen error the map does not state"
 
 
