@@ -175,15 +175,26 @@ def _select_order(
     xi_s: np.ndarray, eta: np.ndarray, sqrt_w: np.ndarray, max_order: int, limits: np.ndarray
 ) -> int:
     """The lowest order in 1..max_order whose residual sum of squares is within
-    ``limits[m − 1]`` (the caller's χ² bound, :func:`~polyslam_env.slam.fitting.
-    order_limits`); a rank-deficient design or too few points stop the search."""
+    ``limits[0, m − 1]`` (the caller's χ² bound, :func:`~polyslam_env.slam.fitting.
+    order_limits`) and, when ``limits`` has a second row, whose sum drops by no more than
+    ``limits[1, m − 1]`` at order m + 1 (:func:`~polyslam_env.slam.fitting.
+    next_term_limits`); a rank-deficient design or too few points stop the search."""
     n = xi_s.size
     for m in range(1, max_order + 1):
         a_mat, q, r, m_eff = weighted_qr(xi_s, sqrt_w, m)
         if m_eff < m or n <= m + 1:
             return max(m_eff, 1)
         resid = _residuals(a_mat, _least_squares(q, r, sqrt_w, eta), eta)
-        if (resid * resid).sum() <= limits[m - 1]:
+        rss = (resid * resid).sum()
+        if rss > limits[0, m - 1]:
+            continue
+        if m == max_order or limits.shape[0] < 2:
+            return m
+        a_next, q_next, r_next, m_next = weighted_qr(xi_s, sqrt_w, m + 1)
+        if m_next <= m or n <= m + 2:
+            return m
+        rest = _residuals(a_next, _least_squares(q_next, r_next, sqrt_w, eta), eta)
+        if rss - (rest * rest).sum() <= limits[1, m - 1]:
             return m
     return max_order
 
@@ -205,7 +216,8 @@ def fit_points(
 
     ``variate`` 0 chooses it by the principal direction; ``order`` ≥ 1 is the largest order,
     lowered to the distinct abscissae (and, with ``auto_order``, to the lowest order whose
-    residuals pass ``limits`` (order,)); a rank-deficient design lowers it further.
+    residuals pass ``limits`` (1 or 2, order): :func:`_select_order`); a rank-deficient
+    design lowers it further.
     ``shape_fixed`` differentiates c0 with the shape held (∂c0/∂η_i = w_i/Σw,
     ∂c0/∂ξ_i = −w_i B'(ξ_i)/Σw), else through the whole solution.
 

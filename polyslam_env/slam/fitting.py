@@ -312,7 +312,7 @@ def _split(xy: np.ndarray, variate: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @functools.lru_cache(maxsize=256)
-def order_limits(n_points: int, order: int, noise_var: float) -> np.ndarray:  # (order,)
+def order_limits(n_points: int, order: int, noise_var: float) -> np.ndarray:  # (1, order)
     """The residual sum of squares below which order m = 1 … ``order`` is accepted (the order
     selection of :func:`fit_polynomial`): the 99 % χ² quantile with N − m − 1 dof times the
     points' noise variance, or, without noise (points sampled on polynomials), N · 1e-8
@@ -321,11 +321,22 @@ def order_limits(n_points: int, order: int, noise_var: float) -> np.ndarray:  # 
     array is shared, never written."""
     if noise_var > 0:
         dof = n_points - 1 - np.arange(1, order + 1)
-        return np.asarray(scipy.special.chdtri(np.maximum(dof, 1), 0.01) * noise_var)
-    return np.full(order, n_points * 1e-8)
+        return np.asarray(scipy.special.chdtri(np.maximum(dof, 1), 0.01) * noise_var)[None, :]
+    return np.full((1, order), n_points * 1e-8)
 
 
-_NO_LIMITS = np.zeros(0)
+def next_term_limits(order: int, noise_var: float) -> np.ndarray:  # (order,)
+    """The drop of the residual sum of squares from order m to m + 1 (m = 1 … ``order``)
+    below which the next coefficient is not needed (``SlamConfig.curvature_test``): the 99 %
+    χ²(1) quantile times the points' noise variance. With known noise that drop over σ² is
+    the next coefficient's z² (its estimate over its standard error, squared), χ²(1) when it
+    is zero: a line whose points' order-2 coefficient is significant at 1 % is not kept a
+    line even when :func:`order_limits`' test over all N − 2 dof passes it (that test spreads
+    its power over every shape of misfit; a short arc's sagitta is one)."""
+    return np.full(order, scipy.special.chdtri(1, 0.01) * noise_var)
+
+
+_NO_LIMITS = np.zeros((0, 0))
 
 
 def fit_polynomial(
@@ -335,6 +346,7 @@ def fit_polynomial(
     shape_fixed: bool = False,
     auto_order: bool = False,
     min_noise_var: float = 0.0,
+    curvature_test: bool = False,
 ) -> Fit:
     """Weighted LMS polynomial a = (AᵀWA)⁻¹AᵀWη, with ∂c0/∂X and ∂c0/∂noise, in one compiled
     call (:func:`~polyslam_env.slam.fit_kernels.fit_points`).
@@ -363,6 +375,11 @@ def fit_polynomial(
     noise of their own, but their polynomials came from noisy ranges, and a 1 cm disagreement
     between two segments of one straight wall must not buy a cubic whose spurious curvature
     then makes the pose look observable.
+
+    ``curvature_test=True`` (with ``auto_order``) also keeps the next order when its one more
+    coefficient is significant at 1 % (:func:`next_term_limits`), for points with noise of
+    their own only (beam hits: new landmarks and refits), not for points sampled on
+    polynomials, whose noise is only the floor ``min_noise_var``, not their scatter.
     """
     n_points = points.n_points
     if n_points == 0:
@@ -373,6 +390,8 @@ def fit_polynomial(
     if auto_order:
         noise_var = max(float(points.noise_cov.trace()) / n_points, min_noise_var)
         limits = order_limits(n_points, order, noise_var)
+        if curvature_test and float(points.noise_cov.trace()) > 0:
+            limits = np.vstack([limits, next_term_limits(order, noise_var)])
     var, m, coeffs, lo, hi, rms, gx, gy, r, scale = fit_kernels.fit_points(
         points.xy, points.weights, points.d_state, points.d_noise, order,
         0 if variate is None else variate, shape_fixed, auto_order, limits,

@@ -189,6 +189,26 @@ SQUARE_MIN_LENGTH = 1.0
 SQUARE_CLUTTER = 0.1
 
 
+def pair_supported(
+    first: int, second: int, directions: np.ndarray, relative_var: np.ndarray, gate_prob: float
+) -> bool:
+    """Whether walls ``first`` and ``second`` (indices into ``directions`` (n,) rad, with
+    ``relative_var`` (n, n) as :func:`rectilinear`'s) have a third wall square to both, each
+    within the χ²(1) gate at ``gate_prob``: the robot's own evidence that *these* two
+    directions belong to one rectilinear set (``SlamConfig.square_pair_evidence``). A pair
+    alone is no evidence (its own gate judges only that it could be square); a floor-wide
+    share (:func:`rectilinear`) is the wrong grain where square rooms meet angled wings or
+    clutter. The caller leaves out walls that are pieces of either of the two."""
+    gate = chi2_1dof_quantile(gate_prob)
+    difference = directions[:, None] - directions[None, [first, second]]
+    quarter = 0.5 * math.pi
+    off = difference - quarter * np.round(difference / quarter)  # (n, 2)
+    square = off**2 <= gate * relative_var[:, [first, second]]
+    both = square[:, 0] & square[:, 1]
+    both[[first, second]] = False
+    return bool(both.any())
+
+
 def rectilinear(
     directions: np.ndarray, relative_var: np.ndarray, lengths: np.ndarray, gate_prob: float
 ) -> bool:

@@ -211,6 +211,7 @@ class MapMaintenance:
             shape_fixed=True,
             auto_order=cfg.auto_order,
             min_noise_var=cfg.range_sigma**2,
+            curvature_test=cfg.curvature_test,
         )
         # the unused points go back as one cluster of the newest ≤ ε_Z: the next point then
         # refits the newest evidence instead of an ever-growing set every step
@@ -389,6 +390,7 @@ class MapMaintenance:
             shape_fixed=True,
             auto_order=cfg.auto_order,
             min_noise_var=cfg.range_sigma**2,
+            curvature_test=cfg.curvature_test,
         )
         if not (
             np.isfinite(fit.c0) and np.all(np.isfinite(fit.Gx)) and np.all(np.isfinite(fit.Gy))

@@ -81,7 +81,12 @@ def _weighted_qr(
 
 
 def select_order(
-    xi: np.ndarray, eta: np.ndarray, w: np.ndarray, max_order: int, noise_var: float = 0.0
+    xi: np.ndarray,
+    eta: np.ndarray,
+    w: np.ndarray,
+    max_order: int,
+    noise_var: float = 0.0,
+    next_term: bool = False,
 ) -> int:
     """The lowest order in 1..max_order whose residuals the point noise explains.
 
@@ -91,7 +96,8 @@ def select_order(
     overconfident filter). With a known per-point noise variance, order m is accepted when
     its residual sum of squares is below the 99 % χ² quantile with N − m − 1 dof times the
     variance. Without noise (points sampled on polynomials) the lowest order that fits to
-    0.1 mm RMS is taken.
+    0.1 mm RMS is taken. ``next_term`` (``SlamConfig.curvature_test``): and the next order's
+    one more coefficient is not significant at 1 %.
     """
     n_pts = len(xi)
     scale = max(float(np.abs(xi).max()), 1e-9)
@@ -107,7 +113,16 @@ def select_order(
             limit = float(scipy.special.chdtri(n_pts - m - 1, 0.01)) * noise_var
         else:
             limit = n_pts * 1e-8
-        if rss <= limit:
+        if rss > limit:
+            continue
+        if not next_term or m == max_order:
+            return m
+        a_next, q_next, r_next, m_next = _weighted_qr(xi / scale, sqrt_w, m + 1)
+        if m_next <= m or n_pts <= m + 2:
+            return m
+        rest = eta - a_next @ solve_upper(r_next, q_next.T @ (sqrt_w * eta))
+        # the next coefficient's z²: χ²(1) when it is zero (the noise known)
+        if rss - float(rest @ rest) <= float(scipy.special.chdtri(1, 0.01)) * noise_var:
             return m
     return max_order
 
@@ -119,6 +134,7 @@ def fit_polynomial(
     shape_fixed: bool = False,
     auto_order: bool = False,
     min_noise_var: float = 0.0,
+    curvature_test: bool = False,
 ) -> Fit:
     """Weighted LMS polynomial a = (AᵀWA)⁻¹AᵀWη, with ∂c0/∂X and ∂c0/∂noise.
 
@@ -151,7 +167,8 @@ def fit_polynomial(
     m = min(order, _distinct_count(xi, max(scale, 1.0)) - 1)
     if auto_order and m > 1:
         noise_var = max(float(np.trace(points.noise_cov)) / points.n_points, min_noise_var)
-        m = select_order(xi, eta, w, m, noise_var)
+        own_noise = float(np.trace(points.noise_cov)) > 0  # beam hits, not sampled points
+        m = select_order(xi, eta, w, m, noise_var, curvature_test and own_noise)
     a_mat, q, r, m = _weighted_qr(xi / scale, np.sqrt(w), m)
     a_s = solve_upper(r, q.T @ (np.sqrt(w) * eta))  # scaled coefficients
     resid = eta - a_mat @ a_s  # (N,)
