@@ -75,6 +75,7 @@ class PolicyContext:
     beam_angles: np.ndarray  # (B,) rad, in the robot frame
     max_range: float  # m
     camera_range: float  # m
+    radio_range: float  # m, the channel's range (policies.radio: a longer one links unseen)
     robot_radius: float  # m
     v_max: float  # m/s
     omega_max: float  # rad/s
@@ -270,7 +271,9 @@ class TeamPolicy:
 def make_team(name: str, env: Any, **kwargs: Any) -> TeamPolicy:
     """The same policy ``name`` for every agent of ``env``. A factory with a ``team``
     attribute makes the whole team at once, ``factory.team(contexts, **kwargs)`` → ``{agent:
-    policy}`` (team-mates that share something, e.g. ``frontier_team``'s radio)."""
+    policy}`` (team-mates that share something, e.g. ``frontier_team``'s radio); one whose
+    ``takes_links`` is set also gets ``links=env.unwrapped.radio_links``, the medium's
+    distance test for that radio (``policies.radio``: the policies never see positions)."""
     factory = policy_factory(name)
     build_team = getattr(factory, "team", None)
     if build_team is None:
@@ -280,5 +283,7 @@ def make_team(name: str, env: Any, **kwargs: Any) -> TeamPolicy:
         if not getattr(factory, "takes_checkpoint", False):
             raise PolicyError(f"policy {name!r} takes no checkpoint, got {checkpoint!r}")
         kwargs["checkpoint"] = checkpoint
+    if getattr(factory, "takes_links", False):
+        kwargs["links"] = env.unwrapped.radio_links
     contexts = [PolicyContext.from_env(env, a) for a in env.possible_agents]
     return TeamPolicy(build_team(contexts, **kwargs))

@@ -34,7 +34,7 @@ from gymnasium import spaces
 from policies.base import CheckpointError, PolicyContext, PolicyError
 from policies.frontier import FrontierPolicy
 from policies.loading import load_checkpoint
-from policies.radio import Radio
+from policies.radio import Links, team_radio
 from policies.team import TeamFrontierPolicy
 
 __all__ = [
@@ -235,10 +235,14 @@ class TeamDrivePolicy(DrivePolicy, TeamDriveGuide):
 
 
 def drive_team(
-    contexts: list[PolicyContext], checkpoint: str | Path, deterministic: bool = True
+    contexts: list[PolicyContext],
+    checkpoint: str | Path,
+    deterministic: bool = True,
+    links: Links | None = None,
 ) -> dict[str, TeamDrivePolicy]:
-    """The :class:`TeamDrivePolicy` of every robot of a team, sharing one radio."""
-    radio = Radio(len(contexts))
+    """The :class:`TeamDrivePolicy` of every robot of a team, sharing one radio (reaching as
+    far as the env's channel with its ``links``: :func:`~policies.radio.team_radio`)."""
+    radio = team_radio(contexts, links)
     return {c.agent: TeamDrivePolicy(c, checkpoint, deterministic, radio=radio) for c in contexts}
 
 

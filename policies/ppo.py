@@ -33,6 +33,7 @@ from policies.drive import SHIPPED_DRIVE, TeamDrivePolicy, drive_team
 from policies.drive import feature_size as drive_features
 from policies.goals import CANDIDATES, GoalPolicy, feature_size
 from policies.loading import load_checkpoint
+from policies.radio import Links
 
 __all__ = [
     "SHIPPED",
@@ -67,12 +68,16 @@ def make_ppo(
 
 
 def _ppo_team(
-    contexts: list[PolicyContext], checkpoint: str | Path | None = None, deterministic: bool = True
+    contexts: list[PolicyContext],
+    checkpoint: str | Path | None = None,
+    deterministic: bool = True,
+    links: Links | None = None,
 ) -> dict[str, Policy]:
-    """The ``ppo`` policies of a whole team: a driving network's guides share one radio."""
+    """The ``ppo`` policies of a whole team: a driving network's guides share one radio (with
+    the env's ``links``: :func:`policies.radio.team_radio`)."""
     checkpoint = _shipped("ppo", SHIPPED) if checkpoint is None else checkpoint
     if contexts and _kind(contexts[0], checkpoint) == "drive":
-        return dict(drive_team(contexts, checkpoint, deterministic))
+        return dict(drive_team(contexts, checkpoint, deterministic, links))
     return {c.agent: make_ppo(c, checkpoint, deterministic) for c in contexts}
 
 
@@ -87,6 +92,7 @@ def make_ppo_goals(
 
 make_ppo.takes_checkpoint = True  # type: ignore[attr-defined]
 make_ppo.team = _ppo_team  # type: ignore[attr-defined]
+make_ppo.takes_links = True  # type: ignore[attr-defined]
 make_ppo_goals.takes_checkpoint = True  # type: ignore[attr-defined]
 
 

@@ -11,6 +11,16 @@ whether or not anyone receives it; the policy reports them (``goal_bytes_sent``)
 ``polyslam evaluate`` adds them to the bytes the robots sent. The env's ``bytes`` reward term
 does not see them.
 
+**A radio range longer than the camera's** (the env's ``channel.range`` above
+``world.camera.range``, a public fact, ``radio_range``): the radio then also has the medium's
+distance test (``links``: the env's ``radio_links()``, which robots are within
+``channel.range`` of each other now, from their true positions, as the env's channel decides
+its own deliveries; the radio keeps only whom a post reached, never a position). A message
+then also carries its sender's pose in its own frame (version 3, or the area's pose in version
+2), so that a receiver that once placed the sender by a mutual sighting keeps the transform
+between their two start frames (:func:`own_frame_of`) and places the sender's later messages
+through it, with no sighting, whenever the medium says they reached it (:meth:`Radio.reached`).
+
 A robot sees anonymous detections (distance, bearing), not who is who; so a message carries the
 sender's own detections, and a receiver takes it as coming from the one robot it saw at the
 same distance (within ``tol``), the pair's mutual sighting. The two bearings then give the
@@ -44,7 +54,13 @@ goals (the current one first, then the last ones it had, newest first)::
     A+23       L      the w·h cells row by row (row 0 = the lowest), one bit each
                       (``numpy.packbits``), deflated (``zlib``, level 9)
 
-with A = 10 + 8k + 8g. The cells are in the sender's own (start) frame; with its pose there,
+with A = 10 + 8k + 8g.
+
+**Sender's pose** (version 3: a message without an area that carries its sender's pose in its
+own frame, sent only over a radio longer than the camera, ``26 + 8k + 8g`` bytes): after the
+goals and before the CRC, the pose x, y (m), θ (rad), three float32 (as the area's).
+
+The area's cells are in the sender's own (start) frame; with its pose there,
 a receiver that places the sender's body from a mutual sighting places the grid too
 (:func:`area_in_own_frame`). Mostly-explored rooms are long runs of ones and unexplored space
 long runs of zeros, which deflate shrinks to a few hundred bytes for an office floor.
@@ -54,26 +70,37 @@ from __future__ import annotations
 
 import struct
 import zlib
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from policies.base import PolicyContext
 from polyslam_env.core.geometry import compose, inverse, transform_points
 
 __all__ = [
     "Area",
     "GoalMessage",
+    "Links",
     "Radio",
+    "area_in_frame",
     "area_in_own_frame",
     "decode",
     "encode",
     "goal_in_own_frame",
+    "mate_in_own_frame",
     "mutual_sighting",
+    "own_frame_of",
+    "team_radio",
 ]
 
-MAGIC, VERSION, VERSION_AREA = 0x47, 1, 2
+#: the medium's distance test: () → (N, N) bool, which robots are within radio range now
+Links = Callable[[], np.ndarray]
+
+MAGIC, VERSION, VERSION_AREA, VERSION_POSE = 0x47, 1, 2, 3
 _HEAD = struct.Struct("<BBHIBB")  # magic, version, sender, step, k, g
 _AREA = struct.Struct("<3fhhHHBH")  # pose, col0, row0, w, h, cell cm, L
+_POSE = struct.Struct("<3f")  # x, y, θ
 _CRC = struct.Struct("<I")
 
 
@@ -105,16 +132,24 @@ class GoalMessage:
     detections: np.ndarray  # (k, 2) distance m, bearing rad of the robots it sees
     goals: np.ndarray  # (g, 2) m, its current then last goals in its body frame (x ahead)
     area: Area | None = None  # the area it knows explored (version 2), or None
+    #: its pose (3,) in its own frame (version 3; version 2 carries it as the area's), or None
+    pose: np.ndarray | None = None
 
 
 def encode(message: GoalMessage) -> bytes:
     """The message's bytes (module doc's layout); at most 255 detections and goals, an area
-    grid of at most 65,535 cells a side and 65,535 bytes deflated."""
+    grid of at most 65,535 cells a side and 65,535 bytes deflated. With an area, ``pose`` is
+    the area's (a different one is a ValueError)."""
     seen = np.asarray(message.detections, dtype="<f4").reshape(-1, 2)
     goals = np.asarray(message.goals, dtype="<f4").reshape(-1, 2)
-    area, version = message.area, (VERSION if message.area is None else VERSION_AREA)
+    area, pose = message.area, message.pose
+    if area is not None and pose is not None and not np.array_equal(area.pose, pose):
+        raise ValueError("goal message: a pose other than its area's")
+    version = VERSION_AREA if area is not None else VERSION if pose is None else VERSION_POSE
     head = _HEAD.pack(MAGIC, version, message.sender, message.step, len(seen), len(goals))
     body = head + seen.tobytes() + goals.tobytes()
+    if area is None and pose is not None:
+        body += _POSE.pack(*(float(v) for v in pose))
     if area is not None:
         h, w = area.cells.shape
         packed = zlib.compress(np.packbits(area.cells, axis=None).tobytes(), 9)
@@ -129,10 +164,13 @@ def decode(data: bytes) -> GoalMessage:
     if len(data) < _HEAD.size + _CRC.size:
         raise ValueError(f"goal message: {len(data)} bytes is too short")
     magic, version, sender, step, k, g = _HEAD.unpack_from(data)
-    if magic != MAGIC or version not in (VERSION, VERSION_AREA):
-        raise ValueError(f"goal message: magic {magic:#x} version {version}, expected 0x47 1 or 2")
-    at = _HEAD.size + 8 * (k + g)  # where the area (version 2) or the CRC begins
-    size = at + _CRC.size + (_AREA.size if version == VERSION_AREA else 0)
+    if magic != MAGIC or version not in (VERSION, VERSION_AREA, VERSION_POSE):
+        raise ValueError(
+            f"goal message: magic {magic:#x} version {version}, expected 0x47 and 1, 2 or 3"
+        )
+    at = _HEAD.size + 8 * (k + g)  # where the area (version 2), the pose (3) or the CRC begins
+    extra = {VERSION: 0, VERSION_AREA: _AREA.size, VERSION_POSE: _POSE.size}[version]
+    size = at + _CRC.size + extra
     if len(data) < size:
         raise ValueError(f"goal message: {len(data)} bytes for {k} detections and {g} goals")
     if version == VERSION_AREA:
@@ -143,8 +181,11 @@ def decode(data: bytes) -> GoalMessage:
         raise ValueError("goal message: checksum mismatch")
     floats = np.frombuffer(data, dtype="<f4", count=2 * (k + g), offset=_HEAD.size)
     pairs = floats.astype(float).reshape(k + g, 2)
-    area = None if version == VERSION else _area(data, at)
-    return GoalMessage(sender, step, pairs[:k], pairs[k:], area)
+    area = _area(data, at) if version == VERSION_AREA else None
+    pose = area.pose if area is not None else None
+    if version == VERSION_POSE:
+        pose = np.array(_POSE.unpack_from(data, at), dtype=float)
+    return GoalMessage(sender, step, pairs[:k], pairs[k:], area, pose)
 
 
 def _area(data: bytes, at: int) -> Area:
@@ -166,11 +207,16 @@ class Radio:
     """The team's goal radio: each robot's last message, and what it sent (module doc).
 
     ``send`` posts a robot's message (its previous one is gone); a team-mate reads the posts
-    with ``heard`` and decides from its own sightings which reached it. Counters per robot:
+    with ``heard`` and decides from its own sightings which reached it. With ``links`` (the
+    medium's distance test, a callable giving the (N, N) bool of robots within radio range of
+    each other now: a radio longer than the camera, module doc) a post also reaches the
+    team-mates within range when it was sent (:meth:`reached`). Counters per robot:
     ``messages_sent``, ``bytes_sent``, ``messages_received``."""
 
-    def __init__(self, robots: int) -> None:
+    def __init__(self, robots: int, links: Links | None = None) -> None:
+        self.links = links
         self._posts: dict[int, bytes] = {}
+        self._reach: dict[int, np.ndarray] = {}  # sender → (N,) bool, in range at its post
         self.messages_sent = [0] * robots
         self.bytes_sent = [0] * robots
         self.messages_received = [0] * robots
@@ -178,17 +224,35 @@ class Radio:
     def reset(self, robot: int) -> None:
         """Forget robot ``robot``'s post and zero its counters (a new episode)."""
         self._posts.pop(robot, None)
+        self._reach.pop(robot, None)
         self.messages_sent[robot] = self.bytes_sent[robot] = self.messages_received[robot] = 0
 
     def send(self, robot: int, data: bytes) -> None:
-        """Post ``data`` from robot ``robot`` and count it."""
+        """Post ``data`` from robot ``robot`` and count it (with ``links``, note whom it
+        reaches: the team-mates within radio range now)."""
         self._posts[robot] = bytes(data)
+        if self.links is not None:
+            self._reach[robot] = np.array(self.links()[robot], dtype=bool)
         self.messages_sent[robot] += 1
         self.bytes_sent[robot] += len(data)
+
+    def reached(self, sender: int, robot: int) -> bool:
+        """Whether ``sender``'s post reached ``robot`` over the radio's range (always False
+        without ``links``: then only a mutual sighting carries it)."""
+        reach = self._reach.get(sender)
+        return reach is not None and sender != robot and bool(reach[robot])
 
     def heard(self, robot: int) -> list[bytes]:
         """The team-mates' posts, in robot order (what robot ``robot``'s radio picks up)."""
         return [data for sender, data in sorted(self._posts.items()) if sender != robot]
+
+
+def team_radio(contexts: Sequence[PolicyContext], links: Links | None = None) -> Radio:
+    """The radio a team of ``contexts`` shares: with the env's ``links`` when its channel
+    reaches farther than the camera (the public fact ``radio_range`` > ``camera_range``, module
+    doc), else one that carries a message over a mutual sighting only (``links`` unused)."""
+    far = bool(contexts) and contexts[0].radio_range > contexts[0].camera_range
+    return Radio(len(contexts), links if far else None)
 
 
 def mutual_sighting(own: np.ndarray, theirs: np.ndarray, tol: float) -> tuple[int, int] | None:
@@ -206,26 +270,47 @@ def mutual_sighting(own: np.ndarray, theirs: np.ndarray, tol: float) -> tuple[in
     return j, int(np.argmin(gap[j]))
 
 
+def mate_in_own_frame(pose: np.ndarray, seen: np.ndarray, bearing_back: float) -> np.ndarray:
+    """A team-mate's body pose (3,) in the receiver's own frame: the receiver at ``pose`` (3,)
+    saw it at ``seen`` (distance, bearing) while it saw the receiver at bearing
+    ``bearing_back`` (module doc)."""
+    return np.asarray(compose(pose, _mate(seen, bearing_back)))
+
+
+def own_frame_of(body: np.ndarray, pose: np.ndarray) -> np.ndarray:  # (3,)
+    """A team-mate's own (start) frame in the receiver's: its ``body`` pose (3,) in the
+    receiver's frame (:func:`mate_in_own_frame`) with its ``pose`` (3,) in its own frame at the
+    same time. Both frames are fixed, so the transform holds for the episode (its error is the
+    sighting's and the two pose estimates' then)."""
+    return np.asarray(compose(body, inverse(pose)))
+
+
 def goal_in_own_frame(
     pose: np.ndarray, seen: np.ndarray, bearing_back: float, goal: np.ndarray
 ) -> np.ndarray:  # (…, 2)
     """A team-mate's ``goal`` (…, 2) given in its body frame, in the receiver's own frame: the
     receiver at ``pose`` (3,) saw it at ``seen`` (distance, bearing) while it saw the receiver
     at bearing ``bearing_back`` (module doc)."""
-    return np.asarray(transform_points(goal, compose(pose, _mate(seen, bearing_back))))
+    return np.asarray(transform_points(goal, mate_in_own_frame(pose, seen, bearing_back)))
 
 
 def area_in_own_frame(
     pose: np.ndarray, seen: np.ndarray, bearing_back: float, area: Area
 ) -> np.ndarray:  # (4M, 2)
+    """:func:`area_in_frame` placed from a mutual sighting as :func:`goal_in_own_frame` places
+    a goal: the sender's own frame is its pose there composed with its body's pose in the
+    receiver's frame (:func:`own_frame_of`)."""
+    body = mate_in_own_frame(pose, seen, bearing_back)
+    return area_in_frame(area, own_frame_of(body, area.pose))
+
+
+def area_in_frame(area: Area, frame: np.ndarray) -> np.ndarray:  # (4M, 2)
     """Points that cover a team-mate's explored ``area`` (its M cells, each by the centres of
     its four quarters, so that a cell of the receiver's grid half its size, turned any way, is
-    hit where the area covers most of it), in the receiver's own frame, placed from a mutual
-    sighting as :func:`goal_in_own_frame` places a goal: the sender's own frame is its pose
-    there composed with its body's pose in the receiver's frame."""
+    hit where the area covers most of it), in the receiver's own frame, where the sender's own
+    frame is ``frame`` (3,)."""
     offsets = 0.25 * area.cell * np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0]])
     points = (area.centres()[:, None, :] + offsets[None]).reshape(-1, 2)
-    frame = compose(compose(pose, _mate(seen, bearing_back)), inverse(area.pose))
     return np.asarray(transform_points(points, frame))
 
 

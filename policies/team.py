@@ -33,6 +33,17 @@ has a second factor: the share of a frontier's unknown gain square (the planner'
 frontiers; a goal whose square lost half its unknown so replans at once, whatever the sender's
 index (an explored area is a fact, not a claim: nothing to swap back and forth).
 
+**A radio longer than the camera** (the env's ``channel.range`` above the camera's; the radio
+then has the env's distance test, :class:`~policies.radio.Radio`): every message also carries
+its sender's own-frame pose, and a receiver keeps, from its first mutual sighting of a
+team-mate, the transform between their two start frames (:func:`~policies.radio.own_frame_of`).
+A robot that has met a team-mate so sends its goal (and, every ``radio_area_resend`` steps, its
+area) also while it sees nobody, every ``radio_resend`` steps (a goal changed meanwhile waits:
+frontier goals change every few steps, and the bytes count), and
+a receiver within radio range whose transform to the sender it holds places the message
+through it, with no sighting, and takes it as one heard over a sighting. With the default env
+(``channel.range`` = the camera's 1.5 m) nothing changes.
+
 The camera claims of plain frontier (a seen robot's side is left to it, ``claim_radius`` for
 ``claim_steps``) stay: they are what a robot knows of where a team-mate was last seen heading.
 """
@@ -49,14 +60,17 @@ from policies.planner import team_discount
 from policies.radio import (
     Area,
     GoalMessage,
+    Links,
     Radio,
-    area_in_own_frame,
+    area_in_frame,
     decode,
     encode,
-    goal_in_own_frame,
+    mate_in_own_frame,
     mutual_sighting,
+    own_frame_of,
+    team_radio,
 )
-from polyslam_env.core.geometry import inverse, transform_points
+from polyslam_env.core.geometry import compose, inverse, transform_points
 
 __all__ = ["TeamFrontierPolicy", "frontier_team"]
 
@@ -71,7 +85,9 @@ class TeamFrontierPolicy(FrontierPolicy):
     unchanged goal, ``match_tol`` m how far two distance readings of one mutual sighting
     may differ (default 0.06 m: four σ of the difference of two readings of the default
     camera, σ_d = 0.01 m each); ``share_area`` sends and takes the explored area (module doc)
-    on a grid of ``area_cell`` m, again every ``area_resend`` steps of a meeting; other
+    on a grid of ``area_cell`` m, again every ``area_resend`` steps of a meeting; over a radio
+    longer than the camera (module doc) a robot that sees nobody sends its goal every
+    ``radio_resend`` steps and its area every ``radio_area_resend``; other
     keywords go to :class:`FrontierPolicy`."""
 
     def __init__(
@@ -86,6 +102,8 @@ class TeamFrontierPolicy(FrontierPolicy):
         share_area: bool = True,
         area_cell: float = 0.2,
         area_resend: int = 20,
+        radio_resend: int = 20,
+        radio_area_resend: int = 100,
         **kwargs: Any,
     ) -> None:
         for name, value in (
@@ -96,6 +114,8 @@ class TeamFrontierPolicy(FrontierPolicy):
             ("match_tol", match_tol),
             ("area_cell", area_cell),
             ("area_resend", area_resend),
+            ("radio_resend", radio_resend),
+            ("radio_area_resend", radio_area_resend),
         ):
             if not value > 0:
                 raise PolicyError(f"frontier_team: {name} must be > 0, got {value!r}")
@@ -107,6 +127,7 @@ class TeamFrontierPolicy(FrontierPolicy):
             raise PolicyError(f"frontier_team: area_cell must be 0.01 … 2.55 m, got {area_cell!r}")
         self.share_area = bool(share_area)
         self.area_cell, self.area_resend = round(float(area_cell), 2), int(area_resend)
+        self.radio_resend, self.radio_area_resend = int(radio_resend), int(radio_area_resend)
         super().__init__(context, **kwargs)
 
     def reset(self, seed: int | None = None) -> None:
@@ -123,15 +144,20 @@ class TeamFrontierPolicy(FrontierPolicy):
         self.team_area = np.zeros((self.map.n, self.map.n), dtype=bool)
         self._area_sent: tuple[int, int] | None = None  # k seen, step of the last area sent
         self._areas_received = 0
+        #: team-mate → its own (start) frame (3,) in this robot's, from the first mutual
+        #: sighting whose message carried its pose (a radio longer than the camera only)
+        self.frames: dict[int, np.ndarray] = {}
+        self._radio_received = 0
 
     def metrics(self) -> dict[str, float]:
-        """The goal messages of the episode so far: sent, their bytes, received, and the
-        explored areas received."""
+        """The goal messages of the episode so far: sent, their bytes, received (of which
+        over the radio's range, without a sighting), and the explored areas received."""
         i = self.context.index
         return {
             "goal_messages_sent": float(self.radio.messages_sent[i]),
             "goal_bytes_sent": float(self.radio.bytes_sent[i]),
             "goal_messages_received": float(self.radio.messages_received[i]),
+            "goal_messages_unseen": float(self._radio_received),
             "goal_areas_received": float(self._areas_received),
         }
 
@@ -186,6 +212,7 @@ class TeamFrontierPolicy(FrontierPolicy):
 
     def _listen(self) -> bool:
         """Take in the team-mates' messages of the last step that came over a mutual sighting
+        or, with a radio longer than the camera, over its range from a team-mate met before
         (module doc); whether one of a lower-index team-mate discounts the current goal."""
         step, me = self._step, self.context.index
         self.heard = {k: v for k, v in self.heard.items() if v[1] > step}
@@ -197,15 +224,14 @@ class TeamFrontierPolicy(FrontierPolicy):
             message = decode(data)
             if message.step != step - 1:
                 continue  # not sent at the last step: out of range then, or old
-            pair = mutual_sighting(seen, message.detections, self.match_tol)
-            if pair is None:
+            body = self._place(message, pose, seen)
+            if body is None:
                 continue
-            j, k = pair
-            goals = goal_in_own_frame(pose, seen[j], message.detections[k, 1], message.goals)
+            goals = np.asarray(transform_points(message.goals, body))
             self.heard[message.sender] = (goals, step + self.goal_steps)
             self.radio.messages_received[me] += 1
             if message.area is not None and self.share_area:
-                self._take_area(pose, seen[j], message.detections[k, 1], message.area)
+                self._take_area(own_frame_of(body, message.area.pose), message.area)
                 if self.goal is not None:
                     mine = self.map.centre(*self.goal)[None]  # (1, 2)
                     replan |= bool(self.area_discount(mine)[0] < 0.5)
@@ -214,11 +240,30 @@ class TeamFrontierPolicy(FrontierPolicy):
                 replan |= bool(team_discount(mine, goals[:1], self.team_range)[0] < 1.0)
         return replan
 
-    def _take_area(self, pose: np.ndarray, seen: np.ndarray, back: float, area: Area) -> None:
-        """Mark a team-mate's explored ``area`` in :attr:`team_area`, placed from the mutual
-        sighting (the receiver at ``pose`` saw it at ``seen``, it saw the receiver at bearing
-        ``back``)."""
-        self.team_area[self.map.cells(area_in_own_frame(pose, seen, back, area))] = True
+    def _place(self, message: GoalMessage, pose: np.ndarray, seen: np.ndarray) -> Any:
+        """The sender's body pose (3,) in the own frame when ``message`` reached this robot,
+        else None: over a mutual sighting (this robot at ``pose`` saw ``seen`` then; keeps the
+        sender's frame at the first one that carries its pose), or over the radio's range
+        from a team-mate whose frame it keeps."""
+        pair = mutual_sighting(seen, message.detections, self.match_tol)
+        if pair is not None:
+            j, k = pair
+            body = mate_in_own_frame(pose, seen[j], message.detections[k, 1])
+            if message.pose is not None and message.sender not in self.frames:
+                self.frames[message.sender] = own_frame_of(body, message.pose)
+            return body
+        frame = self.frames.get(message.sender)
+        if frame is None or message.pose is None:
+            return None
+        if not self.radio.reached(message.sender, self.context.index):
+            return None
+        self._radio_received += 1
+        return np.asarray(compose(frame, message.pose))
+
+    def _take_area(self, frame: np.ndarray, area: Area) -> None:
+        """Mark a team-mate's explored ``area`` in :attr:`team_area`, its own frame being
+        ``frame`` (3,) in this robot's."""
+        self.team_area[self.map.cells(area_in_frame(area, frame))] = True
         self._areas_received += 1
 
     def explored_area(self, pose: np.ndarray) -> Area:
@@ -238,29 +283,36 @@ class TeamFrontierPolicy(FrontierPolicy):
         return Area(pose.copy(), (int(corner[0]), int(corner[1])), cells, self.area_cell)
 
     def _announce(self, pose: np.ndarray, detections: np.ndarray) -> None:
-        """Send the goal while a robot is in view (module doc); remember this step's pose and
-        detections for the messages the next step brings."""
+        """Send the goal while a robot is in view, or over a radio longer than the camera once
+        it has met a team-mate (module doc); remember this step's pose and detections for the
+        messages the next step brings."""
         self._last = (pose.copy(), detections.copy())
         if self.goal is not None and self.goal not in self._goals[:1]:
             self._goals = [self.goal, *self._goals][: self.history]
-        if len(detections) == 0 or self.goal is None:
+        far = self.radio.links is not None  # a radio longer than the camera
+        k = len(detections)
+        if self.goal is None or (k == 0 and not (far and self.frames)):
             return
+        resend, area_resend = (
+            (self.resend, self.area_resend) if k else (self.radio_resend, self.radio_area_resend)
+        )
         if self._sent is not None:
-            goal, k, step = self._sent
-            if goal == self.goal and k == len(detections) and self._step - step < self.resend:
-                return
-        me, k = self.context.index, len(detections)
+            goal, k_sent, step = self._sent
+            if self._step - step < resend and (k == 0 or (goal == self.goal and k_sent == k)):
+                return  # over the radio alone, at most every radio_resend steps
+        me = self.context.index
         goals = [self.goal, *(g for g in self._goals if g != self.goal)][: self.history]
         body = transform_points(np.array([self.map.centre(*g) for g in goals]), inverse(pose))
         area = None
         if self.share_area and (
             self._area_sent is None
-            or self._area_sent[0] != k
-            or self._step - self._area_sent[1] >= self.area_resend
+            or (k and self._area_sent[0] != k)
+            or self._step - self._area_sent[1] >= area_resend
         ):
             area = self.explored_area(pose)
             self._area_sent = (k, self._step)
-        self.radio.send(me, encode(GoalMessage(me, self._step, detections, body, area)))
+        own = pose.copy() if far and area is None else None
+        self.radio.send(me, encode(GoalMessage(me, self._step, detections, body, area, own)))
         self._sent = (self.goal, k, self._step)
 
 
@@ -269,10 +321,14 @@ def frontier_team(context: PolicyContext, **kwargs: Any) -> TeamFrontierPolicy:
     return TeamFrontierPolicy(context, **kwargs)
 
 
-def _team(contexts: list[PolicyContext], **kwargs: Any) -> dict[str, TeamFrontierPolicy]:
-    """The policies ``frontier_team`` of a whole team, sharing one radio."""
-    radio = Radio(len(contexts))
+def _team(
+    contexts: list[PolicyContext], links: Links | None = None, **kwargs: Any
+) -> dict[str, TeamFrontierPolicy]:
+    """The policies ``frontier_team`` of a whole team, sharing one radio (reaching as far as
+    the env's channel with its ``links``: :func:`~policies.radio.team_radio`)."""
+    radio = team_radio(contexts, links)
     return {c.agent: TeamFrontierPolicy(c, radio=radio, **kwargs) for c in contexts}
 
 
 frontier_team.team = _team  # type: ignore[attr-defined]
+frontier_team.takes_links = True  # type: ignore[attr-defined]

@@ -31,7 +31,7 @@ from gymnasium import spaces
 
 from policies.base import PolicyContext
 from policies.drive import DriveGuide, TeamDriveGuide, feature_size
-from policies.radio import Radio
+from policies.radio import team_radio
 from polyslam_env.apps.draw_env import MapDrawEnv, Step
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.environment.config import EnvConfig
@@ -76,7 +76,7 @@ class DriveEnv(MapDrawEnv):
         contexts = [PolicyContext.from_env(env, a) for a in self.possible_agents]
         if not self.team:
             return {c.agent: DriveGuide(c) for c in contexts}
-        radio = Radio(len(contexts))
+        radio = team_radio(contexts, env.unwrapped.radio_links)
         return {c.agent: TeamDriveGuide(c, radio=radio) for c in contexts}
 
     def reset(

@@ -25,14 +25,14 @@ would let whole walls in far from where the maps overlap.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
-from polyslam_env.comms.kernels import match_walls
+from polyslam_env.comms.kernels import match_walls, reach_boxes
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.fitting import J_ROT
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH, line_angle, off_square
-from polyslam_env.slam.map_kernels import eta_range
 from polyslam_env.slam.polynomial import Polynomial
 
 #: χ²₃ 99 % quantile: a correction of T further than this (in Σ_T's metric) is refused, and
@@ -46,6 +46,32 @@ CHI2_3DOF_99 = 11.345
 RESTART_SIGMAS = 2.0
 GATE_SIGMAS = 3.0  # a point pairs with a wall within 3σ of its predicted normal distance
 MAX_ANGLE_DEG = 30.0  # same direction: tangents within 30° (the merge test's angle)
+
+
+class WallArrays(NamedTuple):
+    """The receiver's walls as the refinement's kernels read them (:func:`pack_walls`, or a
+    landmark table's columns: a row's zero tail changes no value the kernels compute)."""
+
+    order: np.ndarray  # (W,) int64: wall w's coefficients are coeffs[w, : order[w] + 1]
+    variate: np.ndarray  # (W,) int64, 1 or 2
+    coeffs: np.ndarray  # (W, M+1) float, current c0 first, zero-padded
+    extent: np.ndarray  # (W, 2) lo, hi
+
+
+def pack_walls(walls: Sequence[Polynomial] | WallArrays) -> WallArrays:
+    """``walls`` as :class:`WallArrays` (unchanged if they are already)."""
+    if isinstance(walls, WallArrays):
+        return walls
+    width = max((poly.order + 1 for poly in walls), default=2)
+    coeffs = np.zeros((len(walls), width))
+    for w, poly in enumerate(walls):
+        coeffs[w, : poly.order + 1] = poly.coeffs
+    return WallArrays(
+        np.array([poly.order for poly in walls], dtype=np.int64),
+        np.array([poly.variate for poly in walls], dtype=np.int64),
+        coeffs,
+        np.array([(poly.lo, poly.hi) for poly in walls], dtype=float).reshape(-1, 2),
+    )
 
 
 def frame_points(q: np.ndarray, transform: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -74,7 +100,7 @@ def refine_transform(
     t0: np.ndarray,
     cov_t: np.ndarray,
     chains: Sequence[np.ndarray],
-    walls: Sequence[Polynomial],
+    walls: Sequence[Polynomial] | WallArrays,
     sigma: float,
     iterations: int = 5,
     chain_var: Sequence[float] | np.ndarray | None = None,
@@ -83,11 +109,12 @@ def refine_transform(
 ) -> tuple[np.ndarray, np.ndarray]:
     """MAP refinement (3,) of the transform ``t0`` (3,) with prior covariance ``cov_t``
     (3, 3), from received ``chains`` (each (N_k, 2), sender frame, points along a curve) and
-    the receiver's ``walls`` (with their current c0). One (chain k, wall w) pair's offset has
-    variance σ² + ``chain_var[k]`` + ``wall_var[w]`` (m²): ``sigma`` of the range noise, and
-    each map's own error of that wall along its normal (both maps drift from their robots'
-    true starts; weighed by the range noise alone, the posterior is overconfident:
-    ``tests/comms/test_alignment.py``); the variances default to zero.
+    the receiver's ``walls`` (with their current c0; polynomials or :class:`WallArrays`). One
+    (chain k, wall w) pair's offset has variance σ² + ``chain_var[k]`` + ``wall_var[w]``
+    (m²): ``sigma`` of the range noise, and each map's own error of that wall along its
+    normal (both maps drift from their robots' true starts; weighed by the range noise
+    alone, the posterior is overconfident: ``tests/comms/test_alignment.py``); the variances
+    default to zero.
     Returns the transform and its posterior covariance (Σ_T⁻¹ + Jᵀ W J)⁻¹ at the
     solution; ``(t0, cov_t)`` when nothing matches, Σ_T is singular, or the correction fails
     the χ²₃ 99 % test. With ``restarts`` (``channel.align_restarts``, an option) also when the
@@ -98,7 +125,7 @@ def refine_transform(
     says why this is an option)."""
     t0 = np.asarray(t0, dtype=float)
     cov_t = np.asarray(cov_t, dtype=float)
-    args = (chains, walls, sigma, iterations, chain_var, wall_var)
+    args = (chains, pack_walls(walls), sigma, iterations, chain_var, wall_var)
     found = _refine_from(t0, t0, cov_t, *args)
     if found is None:
         return t0, cov_t
@@ -123,7 +150,7 @@ def _refine_from(
     t0: np.ndarray,
     cov_t: np.ndarray,
     chains: Sequence[np.ndarray],
-    walls: Sequence[Polynomial],
+    walls: WallArrays,
     sigma: float,
     iterations: int,
     chain_var: Sequence[float] | np.ndarray | None,
@@ -137,13 +164,14 @@ def _refine_from(
     except np.linalg.LinAlgError:
         return None
     info_prior = info_prior.T @ info_prior  # (3, 3)
-    if not walls or not chains:
+    n_walls = len(walls.order)
+    if not n_walls or not chains:
         return None
     q = np.vstack(chains)  # (N, 2)
     chain_of = np.concatenate([np.full(len(c), k) for k, c in enumerate(chains)])
     var_c = np.zeros(len(chains)) if chain_var is None else np.asarray(chain_var, dtype=float)
-    var_w = np.zeros(len(walls)) if wall_var is None else np.asarray(wall_var, dtype=float)
-    if var_c.shape != (len(chains),) or var_w.shape != (len(walls),):
+    var_w = np.zeros(n_walls) if wall_var is None else np.asarray(wall_var, dtype=float)
+    if var_c.shape != (len(chains),) or var_w.shape != (n_walls,):
         raise ValueError("chain_var and wall_var need one variance per chain and per wall")
     point_var = sigma * sigma + var_c[chain_of]  # (N,) before the wall's share
     tangents_q = np.vstack([_tangents(c) for c in chains])  # (N, 2) sender frame
@@ -159,10 +187,10 @@ def _refine_from(
         if match is None:
             return None
         residual, grad, wall, keep = match  # (M,), (M, 3), (M,), (N,)
-        pair = chain_of[keep] * len(walls) + wall  # (chain, wall) key
-        _, inverse, counts = np.unique(pair, return_inverse=True, return_counts=True)
+        pair = chain_of[keep] * n_walls + wall  # (chain, wall) key
+        counts = np.bincount(pair)  # points per pair key (np.unique's counts, without a sort)
         pair_var = point_var[keep] + var_w[wall]  # (M,)
-        weight = 1.0 / (pair_var * counts[inverse])  # each pair counts once
+        weight = 1.0 / (pair_var * counts[pair])  # each pair counts once
         info = info_prior + (grad * weight[:, None]).T @ grad
         rhs = -(grad * weight[:, None]).T @ residual - info_prior @ (t - t0)
         step = np.linalg.solve(info, rhs)
@@ -177,7 +205,7 @@ def _refine_from(
     # pair one observation) against their count; residuals larger than their variances
     # say (map errors the variances miss, errors shared by many walls) scale it up, never
     # down (Förstner & Wrobel's σ̂₀², capped below at 1)
-    factor = max(1.0, float(weight @ (residual * residual)) / len(counts))
+    factor = max(1.0, float(weight @ (residual * residual)) / np.count_nonzero(counts))
     return t, factor * 0.5 * (posterior + posterior.T)
 
 
@@ -227,7 +255,7 @@ def _match(
     p: np.ndarray,
     dp_dt: np.ndarray,
     tangents: np.ndarray,
-    walls: Sequence[Polynomial],
+    walls: Sequence[Polynomial] | WallArrays,
     cov_t: np.ndarray,
     point_var: np.ndarray,
     wall_var: np.ndarray,
@@ -242,17 +270,12 @@ def _match(
     ``starts[k]:starts[k+1]`` of ``p``) can pair with each wall (default: one chain, every
     wall); the others cannot, so leaving them out changes nothing. Compiled:
     :func:`~polyslam_env.comms.kernels.match_walls`."""
+    walls = pack_walls(walls)
     if meets is None or starts is None:
-        meets, starts = np.ones((len(walls), 1), dtype=bool), np.array([0, len(p)])
-    width = max((poly.order + 1 for poly in walls), default=2)
-    coeffs = np.zeros((len(walls), width))
-    for w, poly in enumerate(walls):
-        coeffs[w, : poly.order + 1] = poly.coeffs
-    variate = np.array([poly.variate for poly in walls], dtype=np.int64)
-    extent = np.array([(poly.lo, poly.hi) for poly in walls], dtype=float).reshape(-1, 2)
+        meets, starts = np.ones((len(walls.order), 1), dtype=bool), np.array([0, len(p)])
     sin_max = float(np.sqrt(1 - np.cos(np.radians(MAX_ANGLE_DEG)) ** 2))
     _, residual, grad, wall_of = match_walls(
-        p, dp_dt, tangents, variate, coeffs, extent, cov_t, point_var,
+        p, dp_dt, tangents, walls.variate, walls.coeffs, walls.extent, cov_t, point_var,
         np.asarray(wall_var, dtype=float), meets, np.asarray(starts, dtype=np.int64),
         GATE_SIGMAS, sin_max,
     )  # fmt: skip
@@ -263,7 +286,7 @@ def _match(
 
 
 def wall_reach(
-    walls: Sequence[Polynomial],
+    walls: Sequence[Polynomial] | WallArrays,
     wall_var: np.ndarray,
     cov_t: np.ndarray,
     point_var: np.ndarray,
@@ -274,22 +297,22 @@ def wall_reach(
     |r| ≤ GATE_SIGMAS·pred with r the η offset over √(1 + B'²). Bounds: pred² = gᵀΣ_T g +
     point_var + wall_var with g = nᵀ ∂p/∂T = (n_x, n_y, nᵀJR q), so |g|² ≤ 1 + |q|² and
     gᵀΣ_T g ≤ tr(Σ_T)(1 + max |q|²); the η offset is at most |r| √(1 + max B'²) (the slope's
-    exact maximum over the extent); B over the extent lies in
+    exact maximum over the extent, ``Polynomial.max_slope``); B over the extent lies in
     :func:`~polyslam_env.slam.map_kernels.eta_range` (interval arithmetic, padded), and 1e-9 m
-    more covers the rounding of c0 + B."""
+    more covers the rounding of c0 + B. Compiled wall by wall
+    (:func:`~polyslam_env.comms.kernels.reach_boxes`); slopes of orders ≥ 4 (a root finder)
+    from ``Polynomial.max_slope``."""
+    walls = pack_walls(walls)
     worst = float(np.trace(cov_t)) * (1.0 + float(np.max(np.sum(q * q, axis=1), initial=0.0)))
     worst += float(np.max(point_var, initial=0.0))
-    out = np.empty((len(walls), 4))
-    for w, poly in enumerate(walls):
-        shape = poly.coeffs.copy()
-        shape[0] = 0.0
-        b_lo, b_hi = eta_range(shape, poly.lo, poly.hi)
-        slope = poly.max_slope()
-        reach = GATE_SIGMAS * np.sqrt((worst + wall_var[w]) * (1.0 + slope * slope)) + 1e-9
-        eta = (poly.c0 + b_lo - reach, poly.c0 + b_hi + reach)
-        box = (poly.lo, poly.hi, *eta) if poly.variate == 1 else (*eta, poly.lo, poly.hi)
-        out[w] = box
-    return out
+    slopes = np.full(len(walls.order), -1.0)
+    for w in np.flatnonzero(walls.order > 3).tolist():
+        c = walls.coeffs[w, : walls.order[w] + 1]
+        slopes[w] = Polynomial.unchecked(1, c, *walls.extent[w].tolist()).max_slope()
+    return reach_boxes(
+        walls.order, walls.variate, walls.coeffs, walls.extent, slopes,
+        np.asarray(wall_var, dtype=float), worst, GATE_SIGMAS,
+    )  # fmt: skip
 
 
 def _near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndarray:

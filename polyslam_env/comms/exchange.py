@@ -115,20 +115,19 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
-import scipy.linalg
 from scipy.spatial import cKDTree
 
 from polyslam_env.comms import polyline
 from polyslam_env.comms.alignment import (
+    WallArrays,
     frame_points,
-    is_straight_wall,
     refine_transform,
     square_turn,
     straight_walls,
 )
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
 from polyslam_env.comms.free_space import FreeCells, FreeSpace
-from polyslam_env.comms.kernels import covered_by_walls
+from polyslam_env.comms.kernels import covered_by_walls, kept_runs, normal_variances
 from polyslam_env.comms.messages import (
     GridMessage,
     Header,
@@ -157,6 +156,8 @@ from polyslam_env.slam.corners import wall_corners
 from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED
+from polyslam_env.slam.links import SQUARE_MIN_LENGTH
+from polyslam_env.slam.map_kernels import equally_spaced
 from polyslam_env.slam.merging import MERGE_ANGLE_DEG, measured_gamma
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -1019,7 +1020,10 @@ class RendezvousExchange:
         rel_cov = relative_pose_covariance(
             sighting.distance, sighting.bearing, header.bearing, self.sigma_d, self.sigma_bearing
         )
-        return (*out, scipy.linalg.block_diag(rel_cov, np.diag(pose_var)))
+        noise_cov = np.zeros((6, 6))  # block-diagonal: the relative pose's, the sender's pose's
+        noise_cov[:3, :3] = rel_cov
+        noise_cov[3:, 3:] = np.diag(pose_var)
+        return (*out, noise_cov)
 
     def _feature_map(
         self, robot: int, slams: Sequence[PolySlam], features: Sequence[FeatureBook]
@@ -1207,26 +1211,28 @@ class RendezvousExchange:
         to that meeting's error); one (chain, wall) pair weighs as one offset whose variance
         is the range noise's plus both landmarks' normal variances (the sender's from its
         record, the receiver's from its state: :func:`normal_variance`)."""
+        table = slam.table
         sources = self._sources[r]
-        polys = slam.polynomials()
-        anchors = [
-            (poly, normal_variance(poly, slam.c0_variance(lid)))
-            for lid, poly in zip(slam.table.ids, polys, strict=True)
-            if sender not in sources.get(lid, ())
-        ]
+        rows = np.array(
+            [i for i, lid in enumerate(table.ids) if sender not in sources.get(lid, ())],
+            dtype=np.int64,
+        )
+        walls = _table_walls(slam, rows)
         chains = [chain_points(rec.polynomial, self.chord_tol, self.spacing) for rec in records]
         refined, cov_refined = refine_transform(
             t,
             cov_t,
             chains,
-            [poly for poly, _ in anchors],
+            walls,
             slam.config.range_sigma,
             chain_var=[normal_variance(rec.polynomial, rec.c0_var) for rec in records],
-            wall_var=[var for _, var in anchors],
+            wall_var=normal_variances(
+                walls.order, walls.coeffs, walls.extent, np.diagonal(slam.cov)[3 + rows]
+            ),
             restarts=self.config.align_restarts,
         )
         if not np.array_equal(refined, t) and self._off_square(
-            slam, polys, records, t, refined, cov_refined
+            slam, records, t, refined, cov_refined
         ):
             self.off_square[r] += 1
             return t, cov_t
@@ -1235,14 +1241,13 @@ class RendezvousExchange:
     @staticmethod
     def _off_square(
         slam: PolySlam,
-        polys: Sequence[Polynomial],
         records: Sequence[PolynomialRecord],
         t: np.ndarray,
         refined: np.ndarray,
         cov_refined: np.ndarray,
     ) -> bool:
         """Whether the refined transform turns the sender's straight walls off square to the
-        receiver's (``polys``, ``slam.polynomials()``; ``SlamConfig.square_walls``;
+        receiver's (its map's landmarks; ``SlamConfig.square_walls``;
         :func:`~polyslam_env.comms.alignment.square_turn`) by more than
         :data:`SQUARE_SIGMAS` σ: σ² is the refined turn's variance
         plus twice the turn variance of the receiver's longest straight wall (the sender's
@@ -1257,12 +1262,16 @@ class RendezvousExchange:
             return False
         if cfg.square_evidence and not slam.walls.rectilinear():
             return False
-        held = [k for k, poly in enumerate(polys) if is_straight_wall(poly)]
+        table = slam.table
+        # is_straight_wall from the table's columns: no coefficient past the slope, long enough
+        length = table.hi - table.lo
+        held = ~np.any(table.shape[:, 2:], axis=1) & (length >= SQUARE_MIN_LENGTH)
         sent = straight_walls([rec.polynomial for rec in records])
-        if not held or not sent:
+        if not held.any() or not sent:
             return False
-        k = max(held, key=lambda k: polys[k].hi - polys[k].lo)  # the longest
-        square = square_turn(sent, straight_walls([polys[k]]), float(t[2]))
+        k = int(np.argmax(np.where(held, length, -np.inf)))  # the longest (the first of ties)
+        longest = table.poly(k).with_c0(float(slam.c0s[k]))
+        square = square_turn(sent, straight_walls([longest]), float(t[2]))
         assert square is not None
         turn_var = slam.turn_variance(slam.table.ids[k])
         sigma = math.sqrt(float(cov_refined[2, 2]) + 2.0 * turn_var)
@@ -1479,16 +1488,11 @@ def covered_points(xy: np.ndarray, polys: Sequence[Polynomial], reach: float) ->
 
 def uncovered_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> list[slice]:
     """Maximal runs of consecutive ``keep`` points (N,) of a chain (N, 2) whose length along
-    the chain is at least ``min_length`` (m)."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(int), [0]]))).tolist()
-    if not edges:
-        return []
-    step = np.linalg.norm(np.diff(xy, axis=0), axis=1)  # (N-1,) each row's own norm
-    runs = []
-    for a, b in zip(edges[::2], edges[1::2], strict=True):
-        if float(step[a : b - 1].sum()) >= min_length:  # the run's own steps, summed alone
-            runs.append(slice(a, b))
-    return runs
+    the chain is at least ``min_length`` (m): each run's own steps summed as numpy sums them
+    (compiled: :func:`~polyslam_env.comms.kernels.kept_runs`)."""
+    keep = np.ascontiguousarray(keep, dtype=np.bool_)
+    bounds = kept_runs(keep, np.ascontiguousarray(xy, dtype=float), float(min_length))
+    return [slice(a, b) for a, b in bounds.tolist()]
 
 
 def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
@@ -1497,7 +1501,8 @@ def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
     candidate)."""
     cfg = slam.config
     c0s = slam.c0s
-    xy = poly.equally_spaced(_BOX_SAMPLES)
+    # poly.equally_spaced's points in one compiled call (the same floats)
+    xy = equally_spaced(poly.coeffs, poly.variate, poly.lo, poly.hi, _BOX_SAMPLES)
     box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
     found = np.empty(4)
     return [
@@ -1508,6 +1513,19 @@ def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
             cfg.merge_min_overlap, MERGE_ANGLE_DEG, found,
         ) is not None
     ]  # fmt: skip
+
+
+def _table_walls(slam: PolySlam, rows: np.ndarray) -> WallArrays:
+    """Landmarks ``rows`` of a SLAM's map as :class:`~polyslam_env.comms.alignment.
+    WallArrays`, from its table's columns (no polynomial objects): each row at its own order,
+    its current c0 first."""
+    table = slam.table
+    order = table.order[rows]
+    width = int(order.max(initial=1)) + 1
+    coeffs = table.shape[rows, :width]  # a copy: [0, b_1, …]
+    coeffs[:, 0] = slam.c0s[rows]
+    extent = np.stack([table.lo[rows], table.hi[rows]], axis=1)
+    return WallArrays(order, table.variate[rows], coeffs, extent)
 
 
 def _c0_variance(fit: Fit, cov: np.ndarray) -> float:

@@ -2,7 +2,9 @@
 
 :func:`match_walls` is the point-to-wall pairing of the transform refinement, point by point
 in the numpy version's operations (``tests/comms/test_alignment.py`` holds that version as the
-oracle and checks the two bit for bit).
+oracle and checks the two bit for bit); :func:`reach_boxes` and :func:`normal_variances` are
+the refinement's per-wall bounds and weights, in the operations of ``Polynomial.max_slope``,
+``map_kernels.eta_range`` and ``exchange.normal_variance`` (oracles in the same tests).
 """
 
 from __future__ import annotations
@@ -11,7 +13,8 @@ import math
 
 import numpy as np
 
-from polyslam_env.core.jit import njit
+from polyslam_env.core.jit import njit, sum_like_numpy
+from polyslam_env.slam.map_kernels import eta_range
 
 
 @njit
@@ -86,6 +89,101 @@ def match_walls(
                     best[i], residual[i], wall_of[i] = score, r, w
                     grad[i, 0], grad[i, 1], grad[i, 2] = g[0], g[1], g[2]
     return best, residual, grad, wall_of
+
+
+@njit
+def max_slope(coeffs: np.ndarray, lo: float, hi: float) -> float:
+    """max |dη/dξ| over [lo, hi] of a polynomial of at most 4 coefficients, in the operations
+    of ``Polynomial.max_slope`` (the ends, and a cubic's one turn of the slope inside)."""
+    at = np.empty(3)
+    at[0], at[1] = lo, hi
+    n = 2
+    if coeffs.size == 4:
+        rate = 2.0 * (3.0 * coeffs[3])  # p'' = 2b₂ + rate·ξ
+        if rate != 0.0:
+            turn = -(2.0 * coeffs[2]) / rate
+            if lo < turn < hi:
+                at[2] = turn
+                n = 3
+    deriv = _derivative(coeffs, 1)
+    out = abs(_horner(deriv, at[0]))
+    for k in range(1, n):
+        value = abs(_horner(deriv, at[k]))
+        if value > out or value != value:  # np.max: the largest, nan if any is
+            out = value
+    return out
+
+
+@njit
+def reach_boxes(
+    order: np.ndarray,  # (W,) int64: wall w's coefficients are coeffs[w, : order[w] + 1]
+    variate: np.ndarray,  # (W,) int64, 1 or 2
+    coeffs: np.ndarray,  # (W, M+1) zero-padded, current c0 first
+    extent: np.ndarray,  # (W, 2) lo, hi
+    slopes: np.ndarray,  # (W,) max |B'| where known (orders ≥ 4), −1: computed here
+    wall_var: np.ndarray,  # (W,)
+    worst: float,  # the bound of gᵀΣ_T g + point_var (alignment.wall_reach)
+    gate: float,  # GATE_SIGMAS
+) -> np.ndarray:
+    """``alignment.wall_reach``'s boxes (W, 4), wall by wall in its operations."""
+    out = np.empty((coeffs.shape[0], 4))
+    for w in range(coeffs.shape[0]):
+        c = coeffs[w, : order[w] + 1]
+        shape = c.copy()
+        shape[0] = 0.0
+        lo, hi = extent[w, 0], extent[w, 1]
+        b_lo, b_hi = eta_range(shape, lo, hi)
+        slope = slopes[w] if slopes[w] >= 0.0 else max_slope(c, lo, hi)
+        reach = gate * math.sqrt((worst + wall_var[w]) * (1.0 + slope * slope)) + 1e-9
+        eta_lo, eta_hi = c[0] + b_lo - reach, c[0] + b_hi + reach
+        if variate[w] == 1:
+            out[w, 0], out[w, 1], out[w, 2], out[w, 3] = lo, hi, eta_lo, eta_hi
+        else:
+            out[w, 0], out[w, 1], out[w, 2], out[w, 3] = eta_lo, eta_hi, lo, hi
+    return out
+
+
+@njit
+def normal_variances(
+    order: np.ndarray,  # (W,) int64
+    coeffs: np.ndarray,  # (W, M+1) zero-padded
+    extent: np.ndarray,  # (W, 2) lo, hi
+    c0_var: np.ndarray,  # (W,)
+) -> np.ndarray:
+    """``exchange.normal_variance`` of each wall (W,): var(c0) / (1 + B'²) at the middle of
+    the extent, in its operations."""
+    out = np.empty(coeffs.shape[0])
+    for w in range(coeffs.shape[0]):
+        deriv = _derivative(coeffs[w, : order[w] + 1], 1)
+        slope = _horner(deriv, 0.5 * (extent[w, 0] + extent[w, 1]))
+        out[w] = c0_var[w] / (1.0 + slope * slope)
+    return out
+
+
+@njit
+def kept_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> np.ndarray:
+    """(K, 2) [first, end) rows of the maximal runs of ``keep`` (N,) bool along a chain
+    ``xy`` (N, 2) whose length (the sum of the run's own steps ‖p_{i+1} − p_i‖, in numpy's
+    summation order) is at least ``min_length`` (``exchange.uncovered_runs``)."""
+    n = keep.size
+    step = np.empty(max(n - 1, 0))
+    for i in range(n - 1):
+        dx, dy = xy[i + 1, 0] - xy[i, 0], xy[i + 1, 1] - xy[i, 1]
+        step[i] = math.sqrt(dx * dx + dy * dy)
+    out = np.empty((n // 2 + 1, 2), dtype=np.int64)
+    k = 0
+    i = 0
+    while i < n:
+        if not keep[i]:
+            i += 1
+            continue
+        first = i
+        while i < n and keep[i]:
+            i += 1
+        if sum_like_numpy(step, first, i - 1 - first) >= min_length:
+            out[k, 0], out[k, 1] = first, i
+            k += 1
+    return out[:k]
 
 
 # -- the chain of a received polynomial (comms/polyline.py, orders ≤ 3) -------------------------

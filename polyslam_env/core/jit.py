@@ -26,6 +26,7 @@ from collections.abc import Callable
 from typing import Any, TypeVar, cast
 
 import numba
+import numpy as np
 from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
@@ -119,3 +120,34 @@ def fma(a: float, b: float, c: float) -> float:
     does (OpenBLAS's Haswell and later kernels: a chain of FMAs along the inner dimension)."""
     out: float = _llvm_fma(a, b, c)  # type: ignore[call-arg]  # numba passes the typing context
     return out
+
+
+@njit
+def sum_like_numpy(a: np.ndarray, start: int, n: int) -> float:
+    """``a[start:start + n].sum()`` of a contiguous float64 row in numpy's own order, bit for
+    bit: in order below 8 terms; eight running sums combined pairwise up to 128 terms; past
+    that the two halves (the first a multiple of 8) summed alike and added (numpy's pairwise
+    summation, ``pairwise_sum`` in its ``loops_utils``). For a kernel that replaces a numpy
+    ``.sum()`` and must give its bits."""
+    if n < 8:
+        total = 0.0
+        for i in range(n):
+            total += a[start + i]
+        return total
+    if n <= 128:
+        r = np.empty(8)
+        for j in range(8):
+            r[j] = a[start + j]
+        i = 8
+        while i < n - n % 8:
+            for j in range(8):
+                r[j] += a[start + i + j]
+            i += 8
+        total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        while i < n:
+            total += a[start + i]
+            i += 1
+        return total
+    half = n // 2
+    half -= half % 8
+    return sum_like_numpy(a, start, half) + sum_like_numpy(a, start + half, n - half)

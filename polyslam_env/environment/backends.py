@@ -230,12 +230,13 @@ class PolynomialTeam(_Filters):
             if active[i]:
                 reading = sensing.pillars[i]
                 book.add(self.slams[i].pose, reading.ids, reading.z, reading.descriptors)
-        if self.map_exchange is None:
+        exchange = self.map_exchange
+        if exchange is None:
             return None
+        poses = world.poses if exchange.config.mode == "alignment" else None  # the radio's
         return exchange_maps(
-            self.map_exchange, step, self.slams, active, sensing, self.angles, world.poses,
-            self.features,
-        )  # fmt: skip
+            exchange, step, self.slams, active, sensing, self.angles, poses, self.features
+        )
 
     def map_points(self, i: int) -> np.ndarray:
         return self.samplers[i].points(self.slams[i])

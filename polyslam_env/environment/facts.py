@@ -30,7 +30,9 @@ def public_facts(config: EnvConfig, map_size: tuple[float, float]) -> dict[str, 
     ``pose_std_scale`` is what the observed pose standard deviations are divided by (then
     clipped to [0, 1]); ``p0_sigma`` the standard deviations of the start-error prior P0 that
     the reported pose covariance holds (J P0 Jᵀ, see ``slam.ekf.start_error_cov``), or None
-    without SLAM (the observed deviations are then 0).
+    without SLAM (the observed deviations are then 0). ``radio_range`` is the channel's range
+    (``channel.range``; the camera's without a channel): a team's own radio reaches that far
+    (``policies.radio``), through the env's :meth:`radio_links`.
     """
     rc, wc, oc = config.world.robot, config.world, config.observation
     map_file: Path | None = None
@@ -53,6 +55,7 @@ def public_facts(config: EnvConfig, map_size: tuple[float, float]) -> dict[str, 
         "beam_angles": np.deg2rad(np.asarray(wc.range_sensor.angles_deg, dtype=float)),
         "max_range": wc.range_sensor.max_range,
         "camera_range": wc.camera.range,
+        "radio_range": radio_range(config),
         "robot_radius": rc.radius,
         "v_max": rc.v_max,
         "omega_max": rc.omega_max,
@@ -60,3 +63,9 @@ def public_facts(config: EnvConfig, map_size: tuple[float, float]) -> dict[str, 
         "dt": wc.dt,
         "max_steps": config.max_steps,
     }
+
+
+def radio_range(config: EnvConfig) -> float:
+    """m, how far a team's radio reaches: the channel's ``range``, or the camera's without a
+    channel (then only a mutual sighting links two robots)."""
+    return config.world.camera.range if config.channel is None else config.channel.range

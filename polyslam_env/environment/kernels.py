@@ -5,7 +5,8 @@ Plain loops compiled by :func:`polyslam_env.core.jit.njit`, with the same float 
 the same order as the numpy version they replaced (the oracle in
 ``tests/environment/reference.py``), so the cells are identical. The two small matrix products
 that place points (``points @ R``) are computed as numpy's gemm computed them on OpenBLAS's FMA
-kernels (:func:`place_team`: a chain of fused multiply-adds along the inner index, from 0).
+kernels (:func:`placed_centre`, :func:`ego_point`: a chain of fused multiply-adds along the inner
+index, from 0).
 """
 
 from __future__ import annotations
@@ -20,60 +21,57 @@ from polyslam_env.core.raster import cell_id
 
 @njit
 def shifted_points(
-    points: np.ndarray,
-    owner: np.ndarray,
+    pool: np.ndarray,
+    start: np.ndarray,
+    count: np.ndarray,
     axis: np.ndarray,
     mean: np.ndarray,
     c0: np.ndarray,
     out: np.ndarray,
 ) -> None:
-    """A map sampler's cached ``points`` (M, 2) at the c0s they were sampled with, ``c0`` (n,),
-    moved to the c0s of the state ``mean`` (its ``3 + o`` entry for landmark o), written into
-    ``out`` (M, 2): point m's dependent coordinate ``axis[m]`` (0 or 1) of landmark
-    ``owner[m]`` gains ``mean[3 + o] − c0[o]`` (as ``points[m, axis] + (c0s − c0)[owner]``)."""
-    for m in range(points.shape[0]):
-        o = owner[m]
-        out[m, 0] = points[m, 0]
-        out[m, 1] = points[m, 1]
-        out[m, axis[m]] += mean[3 + o] - c0[o]
+    """A map sampler's cached points, landmark o's ``count[o]`` rows of ``pool`` (P, 2) from
+    ``start[o]`` (n,) at the c0 they were sampled with, ``c0[o]``, moved to the c0s of the
+    state ``mean`` (its ``3 + o`` entry) and written one landmark after the other into ``out``
+    (Σ count, 2): each point's dependent coordinate ``axis[o]`` (0 or 1) gains
+    ``mean[3 + o] − c0[o]`` (as ``points[m, axis] + (c0s − c0)[owner]``)."""
+    m = 0
+    for o in range(start.shape[0]):
+        shift = mean[3 + o] - c0[o]
+        a = axis[o]
+        for p in range(start[o], start[o] + count[o]):
+            out[m, 0] = pool[p, 0]
+            out[m, 1] = pool[p, 1]
+            out[m, a] += shift
+            m += 1
 
 
 @njit
-def place_team(
+def placed_centre(
+    a: float, b: float, c: float, s: float, x: float, y: float
+) -> tuple[float, float]:
+    """An egocentric cell centre (a, b) in the frame of a robot at (x, y) heading θ (c, s =
+    cos θ, sin θ): (a, b) R(θ)ᵀ + (x, y), each product entry a chain of fused multiply-adds
+    along the inner index from 0, as numpy's gemm computed ``@`` (module docstring)."""
+    return fma(b, -s, fma(a, c, 0.0)) + x, fma(b, c, fma(a, s, 0.0)) + y
+
+
+@njit
+def ego_point(px: float, py: float, c: float, s: float, x: float, y: float) -> tuple[float, float]:
+    """A map point (px, py) of a robot at (x, y) heading θ (c, s = cos θ, sin θ) in its
+    egocentric frame: (p − (x, y)) R(θ), as :func:`placed_centre` computes its product."""
+    dx, dy = px - x, py - y
+    return fma(dy, s, fma(dx, c, 0.0)), fma(dy, c, fma(dx, -s, 0.0))
+
+
+@njit
+def local_cells(
     cell_centres: np.ndarray,
     map_points: np.ndarray,
     map_starts: np.ndarray,
     poses: np.ndarray,
     cos: np.ndarray,
     sin: np.ndarray,
-    centres: np.ndarray,
-    ego: np.ndarray,
-) -> None:
-    """K robots' egocentric grid cells in their own frames and their map points in their
-    egocentric frames. Robot k at ``poses[k]`` (x, y, θ), ``cos[k]``, ``sin[k]`` of θ, R(θ)ᵀ =
-    [[c, s], [−s, c]]: ``centres[k]`` (G², 2) = ``cell_centres`` (G², 2) R(θ)ᵀ + (x, y), and
-    ``ego[m]`` = (p − (x, y)) R(θ) for its points ``map_points[map_starts[k]:map_starts[k + 1]]``
-    (M, 2). Each product entry is a chain of fused multiply-adds along the inner index from 0,
-    as numpy's gemm computed ``@`` (module docstring); numpy sends a lone point (a (1, 2)
-    product) to gemv instead, so a robot with one map point is the caller's to redo."""
-    for k in range(poses.shape[0]):
-        c, s = cos[k], sin[k]
-        x, y = poses[k, 0], poses[k, 1]
-        for i in range(cell_centres.shape[0]):
-            a, b = cell_centres[i, 0], cell_centres[i, 1]
-            centres[k, i, 0] = fma(b, -s, fma(a, c, 0.0)) + x
-            centres[k, i, 1] = fma(b, c, fma(a, s, 0.0)) + y
-        for m in range(map_starts[k], map_starts[k + 1]):
-            dx, dy = map_points[m, 0] - x, map_points[m, 1] - y
-            ego[m, 0] = fma(dy, s, fma(dx, c, 0.0))
-            ego[m, 1] = fma(dy, c, fma(dx, -s, 0.0))
-
-
-@njit
-def local_cells(
-    centres: np.ndarray,
-    ego_points: np.ndarray,
-    ego_starts: np.ndarray,
+    lone: np.ndarray,
     g: int,
     cell: float,
     belief_free: np.ndarray,
@@ -87,26 +85,38 @@ def local_cells(
     free: np.ndarray,
 ) -> None:
     """Occupied ``occ`` and free ``free`` (K, G²) cells of K robots' G × G egocentric grids of
-    side ``cell``. Robot k: occupied where one of its ego points ``ego_points[ego_starts[k]:
-    ego_starts[k + 1]]`` falls (and, with ``use_hits``, where its belief grid saw a hit); free
-    where its belief grid is free at the cell's centre ``centres[k]`` (G², 2, in the belief
-    grid's frame) and not occupied. Belief grids: flat rows ``rows[k]`` of ``belief_free``,
-    ``belief_hit`` (R, n·n), lower-left corner (origin, origin), cell side ``resolution``."""
+    side ``cell``. Robot k at ``poses[k]`` (x, y, θ), ``cos[k]``, ``sin[k]`` of θ: occupied
+    where one of its map points ``map_points[map_starts[k]:map_starts[k + 1]]`` falls, placed
+    in its egocentric frame (:func:`ego_point`; a robot with one point uses ``lone[k]``
+    (K, 2), its ego point as the caller computed it: numpy sends a (1, 2) product to gemv,
+    which rounds otherwise), and, with ``use_hits``, where its belief grid saw a hit; free
+    where its belief grid is free at the cell's centre (``cell_centres`` (G², 2) placed by
+    :func:`placed_centre`) and not occupied. Belief grids: flat rows ``rows[k]`` of
+    ``belief_free``, ``belief_hit`` (R, n·n), lower-left corner (origin, origin), cell side
+    ``resolution``."""
     half = g // 2 + 0.5
-    for k in range(centres.shape[0]):
+    for k in range(poses.shape[0]):
+        c, s = cos[k], sin[k]
+        x, y = poses[k, 0], poses[k, 1]
         own_free, own_hit = belief_free[rows[k]], belief_hit[rows[k]]
         for i in range(g * g):
             occ[k, i] = False
-        for m in range(ego_starts[k], ego_starts[k + 1]):
-            col = math.floor(ego_points[m, 0] / cell + half)
-            row = math.floor(ego_points[m, 1] / cell + half)
+        first, last = map_starts[k], map_starts[k + 1]
+        for m in range(first, last):
+            if last - first == 1:
+                ex, ey = lone[k, 0], lone[k, 1]
+            else:
+                ex, ey = ego_point(map_points[m, 0], map_points[m, 1], c, s, x, y)
+            col = math.floor(ex / cell + half)
+            row = math.floor(ey / cell + half)
             if 0 <= col < g and 0 <= row < g:
                 occ[k, row * g + col] = True
         for i in range(g * g):
-            c = cell_id(centres[k, i, 0], centres[k, i, 1], origin, origin, resolution, n, n)
-            if c >= 0 and use_hits and own_hit[c]:
+            cx, cy = placed_centre(cell_centres[i, 0], cell_centres[i, 1], c, s, x, y)
+            cid = cell_id(cx, cy, origin, origin, resolution, n, n)
+            if cid >= 0 and use_hits and own_hit[cid]:
                 occ[k, i] = True
-            free[k, i] = c >= 0 and own_free[c] and not occ[k, i]
+            free[k, i] = cid >= 0 and own_free[cid] and not occ[k, i]
 
 
 @njit

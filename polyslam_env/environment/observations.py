@@ -164,67 +164,88 @@ class MapSampler:
     or extended: the table bumps it with every change of shape or extent), all of them in
     one compiled call (:func:`~polyslam_env.metrics.mapping.sample_shapes`). A c0 change
     alone shifts the cached points along the polynomial's dependent axis, which is exact.
+
+    The points live in an append-only pool: a resampled landmark's points are appended and
+    its row points at them, so a change touches only the stale rows (the others' points stay
+    where they are); :meth:`write` gathers the rows in state order. The pool is compacted
+    (copied, no arithmetic) when it holds more than twice the live points.
     """
 
     def __init__(self, step: float) -> None:
         self.step = float(step)
         self._table: object | None = None  # the table the cache was built on
         self._version = -1  # its version then
-        # Per landmark of the cache (its row then), the points' pool they live in and where:
-        self._row_of: dict[int, int] = {}  # landmark id → row
-        self._stamp = np.zeros(0, dtype=np.int64)  # (n,) its stamp when sampled
-        self._c0 = np.zeros(0)  # (n,) its c0 when sampled
-        self._dependent = np.zeros(0, dtype=np.intp)  # (n,) its dependent coordinate (0 or 1)
-        self._start = np.zeros(0, dtype=np.intp)  # (n,) its first point in _points
-        self._count = np.zeros(0, dtype=np.intp)  # (n,) its number of points
-        self._points = np.zeros((0, 2))  # (M, 2) all points at the cached c0s
-        self._owner = np.zeros(0, dtype=np.intp)  # (M,) landmark (state order) of each point
-        self._axis = np.zeros(0, dtype=np.intp)  # (M,) the dependent coordinate (0 or 1)
-        self._rows = np.zeros(0, dtype=np.intp)  # (M,) 0 … M − 1
+        self._ids: list[int] = []  # the landmark ids then, in state order
+        self._row_of: dict[int, int] = {}  # landmark id → row (built when the ids change)
+        # Per landmark (row in state order): its stamp and c0 when sampled, its dependent
+        # coordinate (0 or 1), and where its points are in the pool
+        self._stamp = np.zeros(0, dtype=np.int64)  # (n,)
+        self._c0 = np.zeros(0)  # (n,)
+        self._dependent = np.zeros(0, dtype=np.int64)  # (n,)
+        self._start = np.zeros(0, dtype=np.int64)  # (n,) first point in the pool
+        self._count = np.zeros(0, dtype=np.int64)  # (n,) number of points
+        self._pool = np.zeros((0, 2))  # (capacity, 2): points at the cached c0s
+        self._used = 0  # rows of the pool in use (live or dropped)
+        self._total = 0  # live points: Σ count
 
     def _rebuild(self, slam: PolySlam) -> None:
-        """Resample the landmarks whose stamp moved (or that are new), keep the others'
-        points, and lay them out in state order: a handful of array operations, whatever the
-        number of landmarks."""
+        """Resample the landmarks whose stamp moved (or that are new) into the pool, keep the
+        others' rows: a handful of array operations, whatever the number of landmarks."""
         table = slam.table
         ids = table.ids
         n = len(ids)
         real, index, shape = table.buffers  # the table's columns (capacity ≥ n), read whole
         stamps, c0s = index[col.STAMP, :n], slam.mean[3 : 3 + n]  # (n,) each
-        rows_then = map(self._row_of.get, ids, itertools.repeat(-1, n))
-        old = np.fromiter(rows_then, np.intp, n)  # (n,) row in the cache, −1: new
-        kept = old >= 0
-        stale = ~kept
-        stale[kept] = self._stamp[old[kept]] != stamps[kept]
-        kept &= ~stale
-        start, count = np.empty(n, dtype=np.intp), np.empty(n, dtype=np.intp)
-        c0, dependent = np.empty(n), np.empty(n, dtype=np.intp)
-        pool = self._points
+        if ids == self._ids:  # the same landmarks in the same rows (an extent or shape moved)
+            stale = self._stamp != stamps
+            start, count = self._start.copy(), self._count.copy()
+            c0, dependent = self._c0.copy(), self._dependent.copy()
+        else:
+            if len(self._row_of) != len(self._ids):
+                self._row_of = dict(zip(self._ids, range(len(self._ids)), strict=True))
+            rows_then = map(self._row_of.get, ids, itertools.repeat(-1, n))
+            old = np.fromiter(rows_then, np.int64, n)  # (n,) row in the cache, −1: new
+            kept = old >= 0
+            stale = ~kept
+            was = old[kept]
+            stale[kept] = self._stamp[was] != stamps[kept]
+            start, count = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+            c0, dependent = np.zeros(n), np.zeros(n, dtype=np.int64)
+            start[kept], count[kept] = self._start[was], self._count[was]
+            c0[kept], dependent[kept] = self._c0[was], self._dependent[was]
+            self._ids = list(ids)
+            self._row_of = {}  # rebuilt at the next change of ids
         rows = stale.nonzero()[0]
         if len(rows):
             coeffs = shape[:n].copy()  # (n, M+1) [0, b_1, …]: c0 from the state
             coeffs[:, 0] = c0s
             fresh = MapShapes(index[col.VARIATE, :n], coeffs, real[col.LO, :n], real[col.HI, :n])
             points, starts = sample_shapes(fresh, self.step, rows)
-            start[rows] = starts[:-1] + len(pool)
+            count[rows] = 0  # their old points are dropped
+            if self._used + len(points) > len(self._pool):
+                self._make_room(start, count, int(count.sum()) + len(points))
+            start[rows] = starts[:-1] + self._used
             count[rows] = starts[1:] - starts[:-1]
             c0[rows] = c0s[rows]
             dependent[rows] = fresh.variate[rows] == 1
-            pool = np.concatenate((pool, points))
-        was = old[kept]
-        start[kept], count[kept] = self._start[was], self._count[was]
-        c0[kept], dependent[kept] = self._c0[was], self._dependent[was]
-        ends = count.cumsum()
-        first = ends - count  # (n,) where each landmark's points go
-        total = int(ends[-1]) if n else 0
-        self._rows = np.arange(total)
-        self._points = pool[self._rows + (start - first).repeat(count)]
-        self._owner = np.arange(n).repeat(count)
-        self._axis = dependent.repeat(count)
-        self._row_of = dict(zip(ids, range(n), strict=True))
+            self._pool[self._used : self._used + len(points)] = points
+            self._used += len(points)
+        self._total = int(count.sum())
         self._stamp, self._c0, self._dependent = stamps.copy(), c0, dependent
-        self._start, self._count = first, count
+        self._start, self._count = start, count
         self._table, self._version = table, table.version
+
+    def _make_room(self, start: np.ndarray, count: np.ndarray, need: int) -> None:
+        """Copy the live rows' points (``start``, ``count`` (n,), changed to where they go)
+        to the front of a pool with room for ``need`` points (twice as much: amortised)."""
+        pool = np.empty((max(2 * need, 64), 2))
+        at = 0
+        for r in (count > 0).nonzero()[0].tolist():
+            a, k = int(start[r]), int(count[r])
+            pool[at : at + k] = self._pool[a : a + k]
+            start[r] = at
+            at += k
+        self._pool, self._used = pool, at
 
     def count(self, slam: PolySlam) -> int:
         """How many points :meth:`points` of ``slam`` gives (resampling first if the map's
@@ -232,12 +253,14 @@ class MapSampler:
         table = slam.table
         if table is not self._table or table.version != self._version:
             self._rebuild(slam)
-        return len(self._points)
+        return self._total
 
     def write(self, slam: PolySlam, out: np.ndarray) -> None:
         """:meth:`points` of ``slam`` written into ``out`` (:meth:`count`, 2), which must be
         called first (its resampling is not repeated here)."""
-        kernels.shifted_points(self._points, self._owner, self._axis, slam.mean, self._c0, out)
+        kernels.shifted_points(
+            self._pool, self._start, self._count, self._dependent, slam.mean, self._c0, out
+        )
 
     def points(self, slam: PolySlam) -> np.ndarray:  # (M, 2)
         """All map points of ``slam`` in its frame."""
@@ -394,34 +417,33 @@ class ObservationEncoder:
 
     def team_cells(self, team: TeamView) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`local_cells` of K robots (K, G²) each, in one call of the compiled
-        :func:`~polyslam_env.environment.kernels.local_cells`."""
+        :func:`~polyslam_env.environment.kernels.local_cells` (which places the cells and
+        the map points itself)."""
         k, gg = len(team), self.g * self.g
         poses = team.poses
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        centres = np.empty((k, gg, 2))  # (K, G², 2) own frames
-        points = np.empty((len(team.map_points), 2))  # (M, 2) ego frames
-        kernels.place_team(
-            self.cell_centres, team.map_points, team.map_starts, poses, c, s, centres, points
-        )
-        self._lone_points(team, c, s, points)
         occ, free = np.empty((k, gg), dtype=bool), np.empty((k, gg), dtype=bool)
         grid = team.belief
         free_stack, hit_stack = grid.flat_stack
         kernels.local_cells(
-            centres, points, team.map_starts, self.g, self.res, free_stack, hit_stack,
+            self.cell_centres, team.map_points, team.map_starts, poses, c, s,
+            self._lone_points(team, c, s), self.g, self.res, free_stack, hit_stack,
             team.belief_rows, grid.origin, grid.resolution, grid.n, self.use_hits, occ, free,
         )  # fmt: skip
         return occ, free
 
     @staticmethod
-    def _lone_points(team: TeamView, c: np.ndarray, s: np.ndarray, points: np.ndarray) -> None:
-        """The ego point of each robot whose map is one point, as numpy computes (p − xy) R(θ)
-        for one row (BLAS's gemv, which rounds otherwise than the kernel's gemm chain)."""
+    def _lone_points(team: TeamView, c: np.ndarray, s: np.ndarray) -> np.ndarray:  # (K, 2)
+        """Row k: the ego point of robot k if its map is one point, as numpy computes
+        (p − xy) R(θ) for one row (BLAS's gemv, which rounds otherwise than the kernel's gemm
+        chain); rows of the other robots are not read (left unset)."""
         starts = team.map_starts
+        lone = np.empty((len(starts) - 1, 2))
         for j in ((starts[1:] - starts[:-1]) == 1).nonzero()[0].tolist():
             a = int(starts[j])
             rot = np.array([[c[j], -s[j]], [s[j], c[j]]])  # R(θ) = (R(θ)ᵀ)ᵀ, C-contiguous
-            points[a : a + 1] = (team.map_points[a : a + 1] - team.poses[j, :2]) @ rot
+            lone[j] = ((team.map_points[a : a + 1] - team.poses[j, :2]) @ rot)[0]
+        return lone
 
     def local_map(self, view: RobotView) -> np.ndarray:  # (3, G, G) float32
         """Occupied / free / unknown channels of the egocentric grid (x forward = columns)."""

@@ -26,11 +26,12 @@ from pettingzoo.utils import wrappers
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from polyslam_env import metrics
+from polyslam_env.comms.channel import in_radio_range
 from polyslam_env.core.errors import ConfigError, MapFileError
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.environment import stages
 from polyslam_env.environment.config import EnvConfig, resolve_config
-from polyslam_env.environment.facts import public_facts
+from polyslam_env.environment.facts import public_facts, radio_range
 from polyslam_env.environment.faults import FaultEvent, FaultPlan
 from polyslam_env.environment.observations import ObservationEncoder
 from polyslam_env.environment.rewards import REWARD_TERMS, combine, reward_terms
@@ -254,6 +255,16 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         """Static facts a policy may know (beam angles, limits, dt, observation layout, map);
         see :func:`~polyslam_env.environment.facts.public_facts`."""
         return public_facts(self.config, self._map_size)
+
+    def radio_links(self) -> np.ndarray:  # (N, N) bool
+        """Which robots are within the channel's ``range`` (the public fact ``radio_range``)
+        of each other now, from their true positions: the radio medium's distance test, as
+        the channel makes it for its own deliveries (``comms.channel.in_radio_range``), for a
+        radio that a team's policies share (``policies.radio.Radio``), which delivers by it and
+        keeps no position. Raises before the first ``reset``."""
+        if self.episode is None:
+            raise RuntimeError("radio_links: call reset() first")
+        return in_radio_range(self.episode.world.poses, radio_range(self.config))
 
     def observation_space(self, agent: str) -> spaces.Space[Any]:
         """``agent``'s observation space (the class docstring's Observations; the same for

@@ -206,9 +206,11 @@ def exchange(state: EpisodeState) -> ExchangeStep | None:
     SLAMs): the mutual sightings for rendering, then the team SLAM's exchange; the robots of
     each new rendezvous count it and remember its step."""
     seen = state.sensing.camera.seen  # (N, N)
-    i_idx, j_idx = (seen & seen.T).nonzero()  # row by row, as np.triu(…, k=1) then nonzero
-    upper = i_idx < j_idx
-    state.links = list(zip(i_idx[upper].tolist(), j_idx[upper].tolist(), strict=True))
+    state.links = []
+    if seen.any():  # (most steps nobody sees anyone)
+        i_idx, j_idx = (seen & seen.T).nonzero()  # row by row, as np.triu(…, k=1) then nonzero
+        upper = i_idx < j_idx
+        state.links = list(zip(i_idx[upper].tolist(), j_idx[upper].tolist(), strict=True))
     out = state.slam.exchange(state.step_count, state.world, state.sensing)
     if out is None:
         return None
@@ -243,14 +245,17 @@ def observe(
     poses, covs = estimates
     active = state.world.active
     robots = list(acting.values())
-    sweeping = [i for i in robots if active[i]]
-    if sweeping:
-        grids = [state.beliefs[i] for i in sweeping]
-        sweep_beliefs(grids, poses[sweeping], state.angles, state.sensing.ranges[sweeping])
-    if not robots:
-        return {}
     # every robot acting (the usual case): views of the team's arrays, not copies
     every = robots == list(range(len(active)))
+    if every and active.all():
+        sweep_beliefs(state.beliefs, poses, state.angles, state.sensing.ranges)
+    else:
+        sweeping = [i for i in robots if active[i]]
+        if sweeping:
+            grids = [state.beliefs[i] for i in sweeping]
+            sweep_beliefs(grids, poses[sweeping], state.angles, state.sensing.ranges[sweeping])
+    if not robots:
+        return {}
     pick: slice | list[int] = slice(None) if every else robots
     stds = np.sqrt(np.maximum(covs[pick].diagonal(axis1=1, axis2=2), 0.0))  # (K, 3)
     map_points, starts = state.slam.team_map_points(robots)

@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import weakref
+from typing import Any
 
 import numpy as np
 
-from polyslam_env.metrics.kernels import wall_distances
+from polyslam_env.metrics.kernels import buckets, wall_distances
 from polyslam_env.world.layout import Layout
 from polyslam_env.world.nearby import wall_index
 
 # -- the true boundary ----------------------------------------------------------------------
-_BoundaryCache = dict[tuple[str, float], tuple[np.ndarray, ...]]
+_BoundaryCache = dict[tuple[Any, ...], tuple[Any, ...]]
 _CACHE: weakref.WeakKeyDictionary[Layout, _BoundaryCache] = weakref.WeakKeyDictionary()
 
 
@@ -70,6 +71,23 @@ def boundary_samples(layout: Layout, step: float = 0.01) -> tuple[np.ndarray, np
         per_layout[key] = (_frozen(np.vstack([wp, pp])), _frozen(np.concatenate([ww, pw])))
     pts, weights = per_layout[key]
     return pts, weights
+
+
+#: :func:`~polyslam_env.metrics.kernels.buckets`' answer: x0, y0, side, ncols, nrows, order, starts.
+Buckets = tuple[float, float, float, int, int, np.ndarray, np.ndarray]
+
+
+def boundary_buckets(layout: Layout, step: float, tol: float) -> Buckets:
+    """:func:`~polyslam_env.metrics.kernels.buckets` of :func:`boundary_samples` (``step``)
+    for queries within ``tol`` (what :func:`~polyslam_env.metrics.kernels.covered_by` takes
+    after the samples), cached per layout; the layout must have boundary samples."""
+    per_layout = _CACHE.setdefault(layout, {})
+    key = ("buckets", float(step), float(tol))
+    if key not in per_layout:
+        bpts = boundary_samples(layout, step)[0]
+        per_layout[key] = tuple(buckets(bpts, float(tol)))
+    found: Buckets = per_layout[key]
+    return found
 
 
 def boundary_points(layout: Layout, step: float = 0.01) -> np.ndarray:  # (M, 2)

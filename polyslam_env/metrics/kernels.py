@@ -31,7 +31,15 @@ import numpy as np
 from polyslam_env.core.jit import njit
 from polyslam_env.world.kernels import _segment_distance
 
-__all__ = ["covered", "parallel_neighbours", "record_rows", "sample_rows", "wall_distances"]
+__all__ = [
+    "buckets",
+    "covered",
+    "covered_by",
+    "parallel_neighbours",
+    "record_rows",
+    "sample_rows",
+    "wall_distances",
+]
 
 #: Most buckets a side in :func:`covered`.
 _MAX_BUCKETS = 256
@@ -85,7 +93,7 @@ def wall_distances(
 
 
 @njit
-def _buckets(
+def buckets(
     points: np.ndarray, tol: float
 ) -> tuple[float, float, float, int, int, np.ndarray, np.ndarray]:
     """The points (N ≥ 1, 2) bucketed in a grid of side ≥ ``tol`` (at most ``_MAX_BUCKETS``
@@ -121,6 +129,17 @@ def _buckets(
 
 
 @njit
+def _bucket_span(
+    px: float, py: float, x0: float, y0: float, side: float, ncols: int, nrows: int
+) -> tuple[int, int, int, int]:
+    """The rows r0…r1 and columns c0…c1 of the 3 × 3 buckets around (px, py), clipped to
+    the grid (empty ranges when the place is far outside it)."""
+    c = math.floor((px - x0) / side)
+    r = math.floor((py - y0) / side)
+    return max(r - 1, 0), min(r + 1, nrows - 1), max(c - 1, 0), min(c + 1, ncols - 1)
+
+
+@njit
 def covered(samples: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
     """Whether each sample (M, 2) has a point (N, 2) strictly within ``tol`` (> 0):
     dx² + dy² < tol²."""
@@ -129,15 +148,14 @@ def covered(samples: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
     n = points.shape[0]
     if n == 0 or m == 0 or not tol > 0.0:
         return out
-    x0, y0, side, ncols, nrows, order, starts = _buckets(points, tol)
+    x0, y0, side, ncols, nrows, order, starts = buckets(points, tol)
     tol2 = tol * tol
     for s in range(m):
         sx, sy = samples[s, 0], samples[s, 1]
-        c = math.floor((sx - x0) / side)
-        r = math.floor((sy - y0) / side)
+        r0, r1, c0, c1 = _bucket_span(sx, sy, x0, y0, side, ncols, nrows)
         found = False
-        for rr in range(max(r - 1, 0), min(r + 1, nrows - 1) + 1):
-            for cc in range(max(c - 1, 0), min(c + 1, ncols - 1) + 1):
+        for rr in range(r0, r1 + 1):
+            for cc in range(c0, c1 + 1):
                 b = rr * ncols + cc
                 for j in range(starts[b], starts[b + 1]):
                     p = order[j]
@@ -150,6 +168,44 @@ def covered(samples: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
             if found:
                 break
         out[s] = found
+    return out
+
+
+@njit
+def covered_by(
+    samples: np.ndarray,
+    x0: float,
+    y0: float,
+    side: float,
+    ncols: int,
+    nrows: int,
+    order: np.ndarray,
+    starts: np.ndarray,
+    points: np.ndarray,
+    tol: float,
+) -> np.ndarray:
+    """:func:`covered` the other way round, for samples (M, 2) bucketed once
+    (:func:`buckets` of the samples with the same ``tol``: x0 … starts) and many point sets:
+    each point (N, 2), finite, marks the samples strictly within ``tol`` (> 0) in its 3 × 3
+    buckets. The same booleans as ``covered(samples, points, tol)`` (the same test,
+    dx² + dy² < tol², on the same differences)."""
+    m = samples.shape[0]
+    out = np.zeros(m, dtype=np.bool_)
+    if points.shape[0] == 0 or m == 0 or not tol > 0.0:
+        return out
+    tol2 = tol * tol
+    for i in range(points.shape[0]):
+        px, py = points[i, 0], points[i, 1]
+        r0, r1, c0, c1 = _bucket_span(px, py, x0, y0, side, ncols, nrows)
+        for rr in range(r0, r1 + 1):
+            for cc in range(c0, c1 + 1):
+                b = rr * ncols + cc
+                for j in range(starts[b], starts[b + 1]):
+                    s = order[j]
+                    if not out[s]:
+                        dx, dy = samples[s, 0] - px, samples[s, 1] - py
+                        if dx * dx + dy * dy < tol2:
+                            out[s] = True
     return out
 
 
@@ -170,16 +226,15 @@ def parallel_neighbours(
     out = np.zeros(m, dtype=np.bool_)
     if m == 0 or not tol >= 0.0:
         return out
-    x0, y0, side, ncols, nrows, order, starts = _buckets(points, max(tol, 1e-12))
+    x0, y0, side, ncols, nrows, order, starts = buckets(points, max(tol, 1e-12))
     tol2 = tol * tol
     for i in range(m):
         if out[i] or not has_dir[i]:
             continue
         px, py = points[i, 0], points[i, 1]
-        c = math.floor((px - x0) / side)
-        r = math.floor((py - y0) / side)
-        for rr in range(max(r - 1, 0), min(r + 1, nrows - 1) + 1):
-            for cc in range(max(c - 1, 0), min(c + 1, ncols - 1) + 1):
+        r0, r1, c0, c1 = _bucket_span(px, py, x0, y0, side, ncols, nrows)
+        for rr in range(r0, r1 + 1):
+            for cc in range(c0, c1 + 1):
                 b = rr * ncols + cc
                 for k in range(starts[b], starts[b + 1]):
                     j = order[k]

@@ -31,8 +31,12 @@ import numpy as np
 from scipy import special
 
 from polyslam_env.core.geometry import transform_points
-from polyslam_env.metrics.boundary import boundary_samples, distance_to_boundary
-from polyslam_env.metrics.kernels import covered, parallel_neighbours, sample_rows
+from polyslam_env.metrics.boundary import (
+    boundary_buckets,
+    boundary_samples,
+    distance_to_boundary,
+)
+from polyslam_env.metrics.kernels import covered, covered_by, parallel_neighbours, sample_rows
 from polyslam_env.metrics.pose import _check_pose
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
@@ -102,12 +106,24 @@ def _placed(polys: MapLike, start_pose: np.ndarray, step: float) -> tuple[np.nda
     array (M, 2), and where each polynomial's points start (n + 1,); (0, 2) and [0] for an
     empty map. One transform for all points (it is pointwise, so the same numbers as one per
     polynomial)."""
-    x0 = _check_pose(start_pose)
+    own, starts = _sampled(polys, step)
+    return _moved(own, start_pose), starts
+
+
+def _sampled(polys: MapLike, step: float) -> tuple[np.ndarray, list[int]]:
+    """Every polynomial's points every ``step`` of arc length in the map's own frame (M, 2),
+    and where each one's points start (n + 1,); (0, 2) and [0] for an empty map."""
     shapes = MapShapes.of(polys)
     if not len(shapes):
         return np.zeros((0, 2)), [0]
     own, starts = sample_shapes(shapes, step)
-    return transform_points(own, x0), starts.tolist()
+    return own, starts.tolist()
+
+
+def _moved(own: np.ndarray, start_pose: np.ndarray) -> np.ndarray:  # (M, 2)
+    """Own-frame samples (:func:`_sampled`) placed by ``start_pose`` (3,)."""
+    x0 = _check_pose(start_pose)
+    return transform_points(own, x0) if len(own) else own
 
 
 def _pieces(values: np.ndarray, starts: list[int]) -> list[np.ndarray]:
@@ -325,19 +341,23 @@ def duplicates(
     angle between their tangents ≤ sin(angle) (a zero-extent polynomial has no direction and
     never counts). Tangents are central differences of the samples. Invariant under moving the
     map, so computed in the robot's frame. 0.0 for an empty map."""
-    own = [p for p in sample_arclength_batch(polys, step) if len(p)]
-    if not own:
+    return _duplicates(*_sampled(polys, step), tol, angle)
+
+
+def _duplicates(own: np.ndarray, starts: list[int], tol: float, angle: float) -> float:
+    """:func:`duplicates` of the map's own-frame samples (:func:`_sampled`)."""
+    bounds = np.asarray(starts, dtype=np.int64)
+    counts = bounds[1:] - bounds[:-1]  # (n,)
+    counts = counts[counts > 0]  # polynomials without samples take no part
+    if not len(counts):
         return 0.0
-    pts = np.vstack(own)  # (M, 2)
-    counts = np.array([len(p) for p in own])
-    owner = np.repeat(np.arange(len(own)), counts)  # (M,)
+    pts = np.ascontiguousarray(own, dtype=float)  # (M, 2)
+    owner = np.repeat(np.arange(len(counts)), counts)  # (M,)
     tangent = _tangents(pts, counts)
     norm = np.linalg.norm(tangent, axis=1, keepdims=True)  # 0: a zero-extent polynomial
     tangent = np.divide(tangent, norm, out=np.zeros_like(tangent), where=norm > 0)
     has_dir = norm[:, 0] > 0
-    marked = parallel_neighbours(
-        np.ascontiguousarray(pts), owner, tangent, has_dir, float(tol), float(np.sin(angle))
-    )
+    marked = parallel_neighbours(pts, owner, tangent, has_dir, float(tol), float(np.sin(angle)))
     return float(np.count_nonzero(marked)) / len(pts)
 
 
@@ -367,7 +387,9 @@ def _covered_fraction(points: np.ndarray, layout: Layout, tol: float, step: floa
     total = float(weights.sum())
     if len(pts) == 0 or total == 0.0:
         return 0.0
-    near = covered(bpts, np.ascontiguousarray(pts), float(tol))
+    # the boundary's samples bucketed once per layout: each call only walks the points
+    found = boundary_buckets(layout, step, tol)
+    near = covered_by(bpts, *found, np.ascontiguousarray(pts), float(tol))
     return float(weights[near].sum()) / total
 
 
@@ -399,20 +421,21 @@ def map_quality(
     sampling, one placing and one distance query of the map (each function alone samples and
     places it again; the distances were computed four times)."""
     step, tol = 0.01, 0.05
-    points, starts = _placed(polys, start_pose, step)
+    own, starts = _sampled(polys, step)
+    points = _moved(own, start_pose)
     ds = _distances(points, starts, layout)
     frame = np.asarray(frame, dtype=float)
     same = np.array_equal(frame, np.asarray(start_pose, dtype=float))
     return {
         "nu": _nu(ds),
         "nu_mean": _nu_mean(ds),
-        "nu_mean_abs": _nu_mean(ds) if same else nu_mean(polys, frame, layout, step),
+        "nu_mean_abs": _nu_mean(ds if same else _distances(_moved(own, frame), starts, layout)),
         "completeness": _covered_fraction(points, layout, tol, step),
         "completeness_seen": _completeness_seen(
             points, starts, layout, hit_points_abs, SEEN_RADIUS, tol, step
         ),
         "map_precision": _precision(ds, tol),
-        "duplicates": duplicates(polys),
+        "duplicates": _duplicates(own, starts, DUPLICATE_TOL, DUPLICATE_ANGLE),
         "has_map": has_map(polys),
     }
 

@@ -27,7 +27,7 @@ from polyslam_env.slam.fitting import (
     fit_polynomial,
     turn_gradient,
 )
-from polyslam_env.slam.landmarks import clip_to_evidence, evidence_on, hull
+from polyslam_env.slam.landmarks import boxes_near, clip_to_evidence, evidence_on, hull
 from polyslam_env.slam.layout import TurnSource
 from polyslam_env.slam.lineage import CREATED, INSERTED, MERGED, REMOVED, REPLACED
 from polyslam_env.slam.merging import JOIN_GAP, choose_merge, face_normal, merge_points
@@ -294,7 +294,8 @@ class MapMaintenance:
         idx = slam.table.index_of(landmark_id)
         c0s = slam.c0s
         reach = cfg.gamma_max * (1.0 + 1e-9) + 1e-12  # ≥ γ_M despite rounding
-        near = slam.table.near(self.box(idx), c0s, reach)
+        boxes = slam.table.boxes(c0s)  # once: table.near(self.box(idx), …) computed them twice
+        near = boxes_near(boxes, boxes[idx], reach)
         near = near[near != idx]
         poly = self.polynomial(idx)
         partners = [self.polynomial(int(j)) for j in near]

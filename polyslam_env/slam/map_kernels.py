@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from polyslam_env.core.geometry import symmetric_eigvals3
-from polyslam_env.core.jit import fma, njit
+from polyslam_env.core.jit import fma, njit, sum_like_numpy
 from polyslam_env.slam.columns import (
     BEAM,
     CHANGED_AT,
@@ -188,35 +188,10 @@ def eta_range(shape: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
     terms = np.empty(width - 1)
     for k in range(1, width):
         terms[k - 1] = abs(taylor[k]) * math.pow(half, float(k))
-    spread = _sum_like_numpy(terms)
+    spread = sum_like_numpy(terms, 0, terms.size)
     # a relative pad absorbs the rounding of T_0 and of the exact values this bounds
     pad = spread * 1e-9 + 1e-9 * (1.0 + abs(taylor[0]))
     return taylor[0] - spread - pad, taylor[0] + spread + pad
-
-
-@njit
-def _sum_like_numpy(a: np.ndarray) -> float:
-    """``a.sum()`` as numpy adds a short contiguous row: in order below 8 terms, from 8 on
-    in eight running sums combined pairwise (numpy's pairwise summation, one block)."""
-    n = a.size
-    if n < 8:
-        total = 0.0
-        for i in range(n):
-            total += a[i]
-        return total
-    r = np.empty(8)
-    for j in range(8):
-        r[j] = a[j]
-    i = 8
-    while i + 8 <= n:
-        for j in range(8):
-            r[j] += a[i + j]
-        i += 8
-    total = (r[0] + r[1] + (r[2] + r[3])) + (r[4] + r[5] + (r[6] + r[7]))
-    while i < n:
-        total += a[i]
-        i += 1
-    return total
 
 
 # -- the merge test of two polynomials ------------------------------------------------------------
@@ -282,7 +257,7 @@ def _rms_error(xy: np.ndarray, variate: int, c: np.ndarray, lo: float, hi: float
         np.full(1, order, dtype=np.int64), shape, np.full(1, lo), np.full(1, hi),
         np.full(1, c[0]), False, best, errors,
     )  # fmt: skip
-    return math.sqrt(_sum_like_numpy(errors * errors) / n)
+    return math.sqrt(sum_like_numpy(errors * errors, 0, n) / n)
 
 
 @njit

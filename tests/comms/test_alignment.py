@@ -286,15 +286,11 @@ def test_off_square__refuses_a_refined_turn_beyond_3_sigma_of_the_square_one() -
     camera = np.array([1.0, 2.0, math.radians(21.0)])
     for factor, refused in ((0.0, False), (2.9, False), (3.1, True), (-3.1, True)):
         refined = np.array([1.0, 2.0, square + factor * sigma])
-        got = RendezvousExchange._off_square(
-            slam, slam.polynomials(), records, camera, refined, cov
-        )
+        got = RendezvousExchange._off_square(slam, records, camera, refined, cov)
         assert got is refused, factor
     slam.config = SlamConfig(square_walls=False)
     refined = np.array([1.0, 2.0, square + 5.0 * sigma])
-    assert not RendezvousExchange._off_square(
-        slam, slam.polynomials(), records, camera, refined, cov
-    )
+    assert not RendezvousExchange._off_square(slam, records, camera, refined, cov)
 
 
 @pytest.mark.parametrize(
@@ -318,9 +314,7 @@ def test_off_square__on_an_angled_floor_keeps_a_refined_turn_that_is_not_square(
     slam.config = SlamConfig(square_evidence=square_evidence)
     camera = np.array([1.0, 2.0, math.radians(21.0)])
     refined = np.array([1.0, 2.0, square + 5.0 * sigma])
-    assert not RendezvousExchange._off_square(
-        slam, slam.polynomials(), records, camera, refined, cov
-    )
+    assert not RendezvousExchange._off_square(slam, records, camera, refined, cov)
 
 
 def _match_oracle(
@@ -395,3 +389,71 @@ def test_match__compiled_with_reach_boxes_is_the_numpy_pairing_bit_for_bit() -> 
                 for a, b in zip(oracle, out, strict=True):
                     np.testing.assert_array_equal(a, b)
     assert left_out > 0 and paired > 0  # the boxes did leave chains out; points did pair
+
+
+def _wall_reach_oracle(
+    walls: list[Polynomial], wall_var: np.ndarray, cov_t: np.ndarray, point_var: np.ndarray,
+    q: np.ndarray,
+) -> np.ndarray:  # fmt: skip
+    """``alignment.wall_reach`` wall by wall over ``Polynomial`` objects (what the compiled
+    ``comms.kernels.reach_boxes`` replaced)."""
+    from polyslam_env.slam.map_kernels import eta_range
+
+    worst = float(np.trace(cov_t)) * (1.0 + float(np.max(np.sum(q * q, axis=1), initial=0.0)))
+    worst += float(np.max(point_var, initial=0.0))
+    out = np.empty((len(walls), 4))
+    for w, poly in enumerate(walls):
+        shape = poly.coeffs.copy()
+        shape[0] = 0.0
+        b_lo, b_hi = eta_range(shape, poly.lo, poly.hi)
+        slope = poly.max_slope()
+        reach = alignment.GATE_SIGMAS * np.sqrt((worst + wall_var[w]) * (1.0 + slope * slope))
+        reach += 1e-9
+        eta = (poly.c0 + b_lo - reach, poly.c0 + b_hi + reach)
+        out[w] = (poly.lo, poly.hi, *eta) if poly.variate == 1 else (*eta, poly.lo, poly.hi)
+    return out
+
+
+def _random_walls(rng: np.random.Generator, n: int) -> list[Polynomial]:
+    """Lines to quintics of either variate, many cubics with their slope's turn inside."""
+    walls = []
+    for _ in range(n):
+        order = int(rng.choice([1, 2, 3, 3, 3, 4, 5]))
+        coeffs = [*rng.normal(0, 2, 2), *rng.normal(0, 0.3, order - 1)]
+        lo, hi = sorted(rng.uniform(-3, 3, 2))
+        walls.append(Polynomial(int(rng.integers(1, 3)), coeffs, lo, hi))
+    return walls
+
+
+def test_wall_reach__compiled_is_the_per_polynomial_bound_bit_for_bit() -> None:
+    """``wall_reach`` (``comms.kernels.reach_boxes``, slopes of orders ≥ 4 from
+    ``Polynomial.max_slope``) equals the per-polynomial version bit for bit, on walls of
+    mixed orders packed into one zero-padded array; and the packed walls' normal variances
+    (``comms.kernels.normal_variances``) equal ``exchange.normal_variance`` bit for bit. A
+    mutation (the turn of a cubic's slope ignored) fails the first: cubics' turns land inside
+    their extents here."""
+    from polyslam_env.comms.exchange import normal_variance
+    from polyslam_env.comms.kernels import normal_variances
+
+    rng = np.random.default_rng(11)
+    turns_inside = 0
+    for _ in range(60):
+        walls = _random_walls(rng, 8)
+        for poly in walls:
+            if poly.order == 3:
+                turn = -poly.coeffs[2] / (3 * poly.coeffs[3])
+                turns_inside += int(poly.lo < turn < poly.hi)
+        wall_var = rng.uniform(0, 0.05**2, len(walls))
+        cov_t = COV_T * rng.uniform(0.5, 20.0)
+        q = rng.normal(0, 2, (int(rng.integers(0, 30)), 2))
+        point_var = np.full(len(q), 0.02**2)
+        expected = _wall_reach_oracle(walls, wall_var, cov_t, point_var, q)
+        got = alignment.wall_reach(walls, wall_var, cov_t, point_var, q)
+        assert got.tobytes() == expected.tobytes()
+        packed = alignment.pack_walls(walls)
+        c0_var = rng.uniform(0, 0.01, len(walls))
+        variances = normal_variances(packed.order, packed.coeffs, packed.extent, c0_var)
+        pairs = zip(walls, c0_var.tolist(), strict=True)
+        oracle = np.array([normal_variance(poly, var) for poly, var in pairs])
+        assert variances.tobytes() == oracle.tobytes()
+    assert turns_inside > 20

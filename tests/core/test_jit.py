@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from polyslam_env.core.jit import fallback_cache_dir, fma, njit
+from polyslam_env.core.jit import fallback_cache_dir, fma, njit, sum_like_numpy
 
 PACKAGE = Path(__file__).resolve().parents[2] / "polyslam_env"
 
@@ -184,3 +184,28 @@ def test_fma__rounds_once_as_the_exact_product_plus_sum() -> None:
         assert fma(a, b, c) == exact
         twice += a * b + c != exact
     assert twice > 0  # the cases tell a fused from an unfused multiply-add
+
+
+def test_sum_like_numpy__bit_identical_to_numpy_sum_at_every_block_boundary() -> None:
+    """numpy's pairwise summation changes shape at 8 terms (running sums) and past 128 (halves,
+    the first a multiple of 8): lengths around each boundary, and slices not at the start,
+    with magnitudes spread over 12 decades so that a different order shows in the last bits."""
+    rng = np.random.default_rng(5)
+    lengths = [0, 1, 7, 8, 9, 15, 16, 127, 128, 129, 135, 136, 255, 256, 257, 1000, 4099]
+    for n in lengths:
+        for _ in range(20):
+            row = rng.normal(size=n + 13) * 10.0 ** rng.uniform(-6, 6, n + 13)
+            start = int(rng.integers(0, 13))
+            want = row[start : start + n].sum()
+            assert sum_like_numpy(row, start, n) == want, (n, start)
+    # the test can tell orders apart: on these rows a plain running sum misses numpy's bits
+    rows = [rng.normal(size=300) * 10.0 ** rng.uniform(-6, 6, 300) for _ in range(50)]
+    assert any(running_sum(r.tolist()) != r.sum() for r in rows)
+
+
+def running_sum(values: list[float]) -> float:
+    """Left to right, one rounding per term (Python 3.12's ``sum`` compensates: not that)."""
+    total = 0.0
+    for v in values:
+        total += v
+    return total

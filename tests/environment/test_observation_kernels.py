@@ -129,10 +129,11 @@ def test_encode_team__equals_each_view_alone_and_the_oracle() -> None:
         np.testing.assert_array_equal(got, reference.vector(encoder, view, cells))
 
 
-def test_place_team__the_products_as_exact_fma_chains_and_a_lone_point_as_numpy() -> None:
-    """Cell centres R(θ)ᵀ + xy and ego points (p − xy) R(θ) of a team, bit for bit: entries
-    of robots with two or more points against exact fused multiply-add chains (what numpy's
-    gemm gave on an FMA BLAS), a robot with one point against numpy's own product."""
+def test_local_cells__places_by_exact_fma_chains_and_a_lone_point_as_numpy() -> None:
+    """Cell centres R(θ)ᵀ + xy and ego points (p − xy) R(θ) of a team, bit for bit, as the
+    kernel places them (``kernels.placed_centre``, ``kernels.ego_point``): entries against
+    exact fused multiply-add chains (what numpy's gemm gave on an FMA BLAS); a robot with one
+    point (``ObservationEncoder._lone_points``) against numpy's own product."""
     config = resolve_config(None, slam_enabled=True)
     encoder = ObservationEncoder(config, (10.0, 8.0))
     cc = encoder.cell_centres[::7]  # a sample of the grid's cells, (0, 0) among them
@@ -148,23 +149,25 @@ def test_place_team__the_products_as_exact_fma_chains_and_a_lone_point_as_numpy(
         since=np.zeros(4, np.int64), rendezvous=np.zeros(4, np.int64), step=np.zeros(4, np.int64),
     )  # fmt: skip
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    centres, ego = np.empty((4, len(cc), 2)), np.empty((len(points), 2))
-    kernels.place_team(cc, points, starts, poses, c, s, centres, ego)
-    ObservationEncoder._lone_points(team, c, s, ego)
+    lone = ObservationEncoder._lone_points(team, c, s)
     for k in range(4):
-        rot_t = [[c[k], s[k]], [-s[k], c[k]]]  # R(θ)ᵀ; R(θ) is its transpose
-        for i, (a, b) in enumerate(cc.tolist()):
+        x, y = float(poses[k, 0]), float(poses[k, 1])
+        ck, sk = float(c[k]), float(s[k])
+        rot_t = [[ck, sk], [-sk, ck]]  # R(θ)ᵀ; R(θ) is its transpose
+        for a, b in cc.tolist():
+            got = kernels.placed_centre(a, b, ck, sk, x, y)
             for j in range(2):
                 chain = fma_exact(b, rot_t[1][j], fma_exact(a, rot_t[0][j], 0.0))
-                assert centres[k, i, j] == chain + poses[k, j]
+                assert got[j] == chain + poses[k, j]
         for m in range(starts[k], starts[k + 1]):
             d = points[m] - poses[k, :2]
             if counts[k] == 1:
                 want = (points[m : m + 1] - poses[k, :2]) @ np.array([[c[k], -s[k]], [s[k], c[k]]])
-                np.testing.assert_array_equal(ego[m], want[0])
+                np.testing.assert_array_equal(lone[k], want[0])
                 continue
+            got = kernels.ego_point(float(points[m, 0]), float(points[m, 1]), ck, sk, x, y)
             for j in range(2):
                 chain = fma_exact(
                     float(d[1]), rot_t[j][1], fma_exact(float(d[0]), rot_t[j][0], 0.0)
                 )
-                assert ego[m, j] == chain
+                assert got[j] == chain

@@ -9,7 +9,9 @@ import pytest
 
 from polyslam_env.metrics.boundary import distance_to_boundary
 from polyslam_env.metrics.kernels import (
+    buckets,
     covered,
+    covered_by,
     parallel_neighbours,
     record_rows,
     sample_rows,
@@ -77,6 +79,27 @@ def test_covered__equals_brute_force(seed: int, tol: float) -> None:
     d2 = ((samples[:, None, :] - points[None, :, :]) ** 2).sum(-1)  # (M, N)
     expected = (d2 < tol * tol).any(axis=1)
     assert np.array_equal(covered(samples, np.ascontiguousarray(points), tol), expected)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("tol", [0.05, 0.3])
+def test_covered_by__equals_brute_force_and_covered(seed: int, tol: float) -> None:
+    """The samples bucketed once, each point marking its neighbours: the same booleans as
+    the brute force and as ``covered`` (points far outside the samples' grid included)."""
+    rng = np.random.default_rng(seed)
+    samples = rng.uniform(-1, 6, size=(2000, 2))
+    if seed == 3:  # spread far: the bucket side grows past tol
+        samples = np.vstack([samples, [[400.0, -250.0]]])
+    found = buckets(samples, tol)
+    for n in (0, 1, int(rng.integers(2, 300))):
+        points = rng.uniform(-3, 8, size=(n, 2))
+        if seed == 2 and n:
+            points[0] = (-900.0, 700.0)  # far outside the grid
+        d2 = ((samples[:, None, :] - points[None, :, :]) ** 2).sum(-1)  # (M, N)
+        expected = (d2 < tol * tol).any(axis=1)
+        got = covered_by(samples, *found, np.ascontiguousarray(points), tol)
+        assert np.array_equal(got, expected)
+        assert np.array_equal(got, covered(samples, np.ascontiguousarray(points), tol))
 
 
 def test_covered__empty_inputs_and_zero_tolerance() -> None:

@@ -42,7 +42,7 @@ def test_eta_range__bit_identical_to_numpy_shape_range(
     coeffs: list[float], lo: float, width: float, pad: int
 ) -> None:
     """Widths from 2 to 16 coefficients: numpy sums a short row in order and eight or more
-    in running sums (``map_kernels._sum_like_numpy``)."""
+    in running sums (``core.jit.sum_like_numpy``)."""
     shape = np.zeros(len(coeffs) + pad)
     shape[1 : len(coeffs)] = coeffs[1:]
     want = oracle.shape_range(shape[None], np.array([lo]), np.array([lo + width]))[0]
