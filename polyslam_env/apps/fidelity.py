@@ -255,7 +255,11 @@ def self_assessment(env: PolySlamParallelEnv, result: EpisodeResult) -> None:
             continue
         lengths, jacobian = slam.map_error_jacobian()
         mean, risk = expected_precision(
-            lengths, jacobian, slam.cov, floor=TARGETS["map_precision_min"]
+            lengths,
+            jacobian,
+            slam.cov,
+            floor=TARGETS["map_precision_min"],
+            frozen=slam.map_frozen_variance(),
         )
         result.robots[agent]["map_precision_expected"] = mean
         result.robots[agent]["map_precision_risk"] = risk

@@ -123,31 +123,62 @@ def fma(a: float, b: float, c: float) -> float:
 
 
 @njit
-def sum_like_numpy(a: np.ndarray, start: int, n: int) -> float:
-    """``a[start:start + n].sum()`` of a contiguous float64 row in numpy's own order, bit for
-    bit: in order below 8 terms; eight running sums combined pairwise up to 128 terms; past
-    that the two halves (the first a multiple of 8) summed alike and added (numpy's pairwise
-    summation, ``pairwise_sum`` in its ``loops_utils``). For a kernel that replaces a numpy
-    ``.sum()`` and must give its bits."""
+def _block_sum(a: np.ndarray, start: int, n: int) -> float:
+    """numpy's sum of at most 128 contiguous terms: in order below 8, else eight running sums
+    combined pairwise, then the tail in order."""
     if n < 8:
         total = 0.0
         for i in range(n):
             total += a[start + i]
         return total
-    if n <= 128:
-        r = np.empty(8)
+    r = np.empty(8)
+    for j in range(8):
+        r[j] = a[start + j]
+    i = 8
+    while i < n - n % 8:
         for j in range(8):
-            r[j] = a[start + j]
-        i = 8
-        while i < n - n % 8:
-            for j in range(8):
-                r[j] += a[start + i + j]
-            i += 8
-        total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-        while i < n:
-            total += a[start + i]
-            i += 1
-        return total
-    half = n // 2
-    half -= half % 8
-    return sum_like_numpy(a, start, half) + sum_like_numpy(a, start + half, n - half)
+            r[j] += a[start + i + j]
+        i += 8
+    total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        total += a[start + i]
+        i += 1
+    return total
+
+
+@njit
+def sum_like_numpy(a: np.ndarray, start: int, n: int) -> float:
+    """``a[start:start + n].sum()`` of a contiguous float64 row in numpy's own order, bit for
+    bit: up to 128 terms one block (:func:`_block_sum`); past that the two halves (the first a
+    multiple of 8) summed alike and added (numpy's pairwise summation, ``pairwise_sum`` in its
+    ``loops_utils``). For a kernel that replaces a numpy ``.sum()`` and must give its bits.
+
+    The halving is walked with an explicit stack, not by recursion: a cached recursive kernel
+    called from another module's cached kernel jumps to a null pointer when loaded (numba
+    0.6x; seen as a segfault of the golden episodes)."""
+    if n <= 128:
+        return _block_sum(a, start, n)
+    # frames (start, length, combine?): a split pushes its combine, then its right, then its
+    # left half, so the left half is summed first, as the recursion does
+    frame = np.empty((192, 3), dtype=np.int64)
+    values = np.empty(64)
+    top, count = 0, 0
+    frame[0, 0], frame[0, 1], frame[0, 2] = start, n, 0
+    top = 1
+    while top > 0:
+        top -= 1
+        s, m, combine = frame[top, 0], frame[top, 1], frame[top, 2]
+        if combine:
+            count -= 1
+            values[count - 1] = values[count - 1] + values[count]
+        elif m <= 128:
+            values[count] = _block_sum(a, s, m)
+            count += 1
+        else:
+            half = m // 2
+            half -= half % 8
+            frame[top, 0], frame[top, 1], frame[top, 2] = s, m, 1
+            frame[top + 1, 0], frame[top + 1, 1], frame[top + 1, 2] = s + half, m - half, 0
+            frame[top + 2, 0], frame[top + 2, 1], frame[top + 2, 2] = s, half, 0
+            top += 3
+    return values[0]

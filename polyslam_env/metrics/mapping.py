@@ -220,11 +220,17 @@ def expected_precision(
     floor: float = 0.9,
     draws: int = 400,
     seed: int = 0,
+    frozen: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[float, float]:
     """:func:`map_precision` as the filter itself expects it: (its mean, the probability that
     it is below ``floor``), for a map whose points (arc lengths ``lengths`` (M,) m) are off
     their true walls along the normal by e = ``jacobian`` (M, S) times the state error, and
-    that error ~ N(0, ``cov``) (S, S) (``PolySlam.map_error_jacobian`` and ``PolySlam.cov``).
+    that error ~ N(0, ``cov``) (S, S) (``PolySlam.map_error_jacobian`` and ``PolySlam.cov``),
+    plus, with ``frozen`` = (variances (M,), landmark of each point (M,)) (``PolySlam.
+    map_frozen_variance``), each landmark's frozen error, which no state holds: independent
+    of the state's and of other landmarks', N(0, variance) at each point and in the draws one
+    normal variate per landmark (its points' frozen errors are one curve's: taken fully
+    correlated, which spreads the precision most, so the probability is not understated).
 
     No ground truth goes in: it is the robot's own estimate of its map's precision. The mean
     is exact, Σ ℓ_i P(|e_i| ≤ tol) / Σ ℓ_i with e_i ~ N(0, J_i P J_iᵀ); the probability comes
@@ -240,12 +246,19 @@ def expected_precision(
     values, vectors = np.linalg.eigh(0.5 * (block + block.T))
     root = vectors * np.sqrt(np.clip(values, 0.0, None))  # block = root rootᵀ (PSD part)
     sd = np.linalg.norm(jac @ root, axis=1)  # (M,)
+    if frozen is not None:
+        sd = np.sqrt(sd**2 + frozen[0])
     weights = lengths / lengths.sum()
     with np.errstate(divide="ignore"):
         within = np.where(sd > 0, special.erf(tol / (np.sqrt(2.0) * sd)), 1.0)
     mean = float(weights @ within)
-    z = np.random.default_rng(seed).standard_normal((root.shape[1], draws))
+    rng = np.random.default_rng(seed)
+    z = rng.standard_normal((root.shape[1], draws))
     errors = jac @ (root @ z)  # (M, draws)
+    if frozen is not None:
+        own, landmark = frozen
+        per_landmark = rng.standard_normal((int(landmark.max()) + 1, draws))
+        errors += np.sqrt(own)[:, None] * per_landmark[landmark]
     precision = weights @ (np.abs(errors) <= tol)  # (draws,)
     return mean, float(np.mean(precision < floor))
 

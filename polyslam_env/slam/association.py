@@ -126,6 +126,7 @@ def fit_cluster(
     auto_order: bool = False,
     min_noise_var: float = 0.0,
     max_gap: float | None = None,
+    curvature_test: bool = False,
 ) -> ClusterFit:
     """A new polynomial from a cluster, without cutting across corners or gaps.
 
@@ -148,8 +149,8 @@ def fit_cluster(
     4. the fit is accepted with ≥ order + 2 points, rms ≤ ``max_rms`` (the caller's ρ_k) and
        no tangent steeper than :data:`~polyslam_env.slam.fitting.MAX_SLOPE` on its extent;
        otherwise no landmark and every point is left over. ``shape_fixed`` is passed to
-       :func:`~polyslam_env.slam.fitting.fit_polynomial`, and so are ``auto_order`` and
-       ``min_noise_var``.
+       :func:`~polyslam_env.slam.fitting.fit_polynomial`, and so are ``auto_order``,
+       ``min_noise_var`` and ``curvature_test``.
 
     Bounds (tested): for a noiseless right-angle corner the polynomial lies on one wall
     (1e-6 m); with σ = 2 cm range noise and arms of 0.3–0.4 m it stays within 0.15 m of one
@@ -169,6 +170,7 @@ def fit_cluster(
             shape_fixed,
             auto_order,
             min_noise_var,
+            curvature_test,
         )
         if fit.rms <= max_rms and fit.poly.max_slope() <= MAX_SLOPE:
             return ClusterFit(fit, used, points.subset(~mask))

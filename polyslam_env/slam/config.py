@@ -86,6 +86,11 @@ class SlamConfig(Config):
 
     order: int = 3  # m, the largest polynomial order
     auto_order: bool = True  # pick each fit's order ≤ m by BIC (False: always m, as printed)
+    # with auto_order, a fit of beam hits keeps the next order when its one more coefficient
+    # is significant at 1 % (fitting.next_term_limits): a short piece of a curved wall whose
+    # sagitta the all-dof χ² test lets pass as a line becomes a curve (docs/notes/floors.md,
+    # Round 6); off: the χ² test alone
+    curvature_test: bool = False
     rho_min: float = 0.08  # m, good-approximation threshold ρ at zero uncertainty
     rho_max: float = 0.24  # m, ... at K·P0
     sigma_min: float = 0.1  # m, "unmapped" threshold σ at zero uncertainty
@@ -175,6 +180,10 @@ class SlamConfig(Config):
     # Willow office it turned the ties off and its maps fell from 0.84–0.89 to 0.46–0.67
     # map_precision (docs/results/floors.md); on for angled, curved and cave floors
     square_evidence: bool = False
+    # tie walls i and j square only when a third confident straight wall, no piece of
+    # either, is square to both (links.pair_supported): the evidence per pair of directions,
+    # not per floor (docs/notes/floors.md, Round 6); False: as square_evidence says
+    square_pair_evidence: bool = False
     # degrees, how far a real wall may be from square to the others (the square link's noise
     # beyond the fits'): 1 mm per metre, as wall_straightness
     wall_squareness_deg: float = 0.057
@@ -222,7 +231,7 @@ class SlamConfig(Config):
             raise ConfigError(f"slam.link_age: must be an integer >= 0, got {self.link_age!r}")
         check_positive("slam.wall_straightness", self.wall_straightness)
         check_positive("slam.wall_squareness_deg", self.wall_squareness_deg)
-        for name in ("square_walls", "square_evidence"):
+        for name in ("square_walls", "square_evidence", "square_pair_evidence", "curvature_test"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(
                     f"slam.{name}: must be true or false, got {getattr(self, name)!r}"

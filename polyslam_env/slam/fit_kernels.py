@@ -25,9 +25,19 @@ import math
 
 import numpy as np
 
-from polyslam_env.core.jit import njit
+from polyslam_env.core.jit import fma, njit, sum_like_numpy
+from polyslam_env.slam.map_kernels import equally_spaced
 
-__all__ = ["coefficient_gradient", "fit_points", "principal_variate", "wall_mask", "weighted_qr"]
+__all__ = [
+    "coefficient_gradient",
+    "fit_points",
+    "principal_variate",
+    "sample_into",
+    "stored_point_arrays",
+    "turn_gradient",
+    "wall_mask",
+    "weighted_qr",
+]
 
 
 @njit
@@ -165,15 +175,26 @@ def _select_order(
     xi_s: np.ndarray, eta: np.ndarray, sqrt_w: np.ndarray, max_order: int, limits: np.ndarray
 ) -> int:
     """The lowest order in 1..max_order whose residual sum of squares is within
-    ``limits[m − 1]`` (the caller's χ² bound, :func:`~polyslam_env.slam.fitting.
-    order_limits`); a rank-deficient design or too few points stop the search."""
+    ``limits[0, m − 1]`` (the caller's χ² bound, :func:`~polyslam_env.slam.fitting.
+    order_limits`) and, when ``limits`` has a second row, whose sum drops by no more than
+    ``limits[1, m − 1]`` at order m + 1 (:func:`~polyslam_env.slam.fitting.
+    next_term_limits`); a rank-deficient design or too few points stop the search."""
     n = xi_s.size
     for m in range(1, max_order + 1):
         a_mat, q, r, m_eff = weighted_qr(xi_s, sqrt_w, m)
         if m_eff < m or n <= m + 1:
             return max(m_eff, 1)
         resid = _residuals(a_mat, _least_squares(q, r, sqrt_w, eta), eta)
-        if (resid * resid).sum() <= limits[m - 1]:
+        rss = (resid * resid).sum()
+        if rss > limits[0, m - 1]:
+            continue
+        if m == max_order or limits.shape[0] < 2:
+            return m
+        a_next, q_next, r_next, m_next = weighted_qr(xi_s, sqrt_w, m + 1)
+        if m_next <= m or n <= m + 2:
+            return m
+        rest = _residuals(a_next, _least_squares(q_next, r_next, sqrt_w, eta), eta)
+        if rss - (rest * rest).sum() <= limits[1, m - 1]:
             return m
     return max_order
 
@@ -195,7 +216,8 @@ def fit_points(
 
     ``variate`` 0 chooses it by the principal direction; ``order`` ≥ 1 is the largest order,
     lowered to the distinct abscissae (and, with ``auto_order``, to the lowest order whose
-    residuals pass ``limits`` (order,)); a rank-deficient design lowers it further.
+    residuals pass ``limits`` (1 or 2, order): :func:`_select_order`); a rank-deficient
+    design lowers it further.
     ``shape_fixed`` differentiates c0 with the shape held (∂c0/∂η_i = w_i/Σw,
     ∂c0/∂ξ_i = −w_i B'(ξ_i)/Σw), else through the whole solution.
 
@@ -242,6 +264,153 @@ def fit_points(
             gy[s] += u_x * d_noise[i, 0, s] + u_y * d_noise[i, 1, s]
     rms = math.sqrt((resid * resid).sum() / n)
     return var, m, coeffs, xi.min(), xi.max(), rms, gx, gy, r, scale
+
+
+@njit
+def sample_into(
+    c: np.ndarray,
+    variate: int,
+    extent: tuple[float, float],
+    c0: tuple[int, float],
+    turn: tuple[int, float],
+    xy: np.ndarray,
+    d_state: np.ndarray,
+    weights: np.ndarray,
+    start: int,
+    n: int,
+) -> None:
+    """``n`` points equally spaced over ξ ∈ ``extent`` on the curve ``c`` (``variate``) into
+    rows ``start`` … ``start + n − 1`` of ``xy`` (·, 2), ``d_state`` (·, 2, S, zeros on
+    entry) and ``weights``: the model of :func:`~polyslam_env.slam.fitting.polynomial_points`
+    (``c0`` = (c0's state index, its variance): ∂η/∂c0 = 1, weight 1/var; ``turn`` = (α's
+    state index or −1, pivot ξ): ∂π/∂α = J (π − π_c)).
+
+    The floats of its numpy form (``tests/slam/reference_fitting.py``), bit for bit, signed
+    zeros included: ``(π − π_c) @ Jᵀ`` is BLAS's product, a chain of FMAs from 0 along
+    the inner index, zeros of J included (``docs/notes/paperenv.md``)."""
+    pts = equally_spaced(c, variate, extent[0], extent[1], n)
+    eta_axis = 1 if variate == 1 else 0
+    c0_index, weight = c0[0], 1.0 / c0[1]
+    turn_index = turn[0]
+    centre = equally_spaced(c, variate, turn[1], turn[1], 1)
+    for i in range(n):
+        row = start + i
+        xy[row, 0], xy[row, 1] = pts[i, 0], pts[i, 1]
+        d_state[row, eta_axis, c0_index] = 1.0
+        if turn_index >= 0:  # J = [[0, −1], [1, 0]]: the product's row is (−d_y, d_x)
+            dx, dy = pts[i, 0] - centre[0, 0], pts[i, 1] - centre[0, 1]
+            d_state[row, 0, turn_index] = fma(dy, -1.0, fma(dx, 0.0, 0.0))
+            d_state[row, 1, turn_index] = fma(dy, 0.0, fma(dx, 1.0, 0.0))
+        weights[row] = weight
+
+
+@njit
+def stored_point_arrays(
+    xy0: np.ndarray,
+    direction: np.ndarray,
+    sigma: np.ndarray,
+    anchor: np.ndarray,
+    at: np.ndarray,
+    noise: np.ndarray,
+    n_state: int,
+    square: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(xy (N, 2), d_state (N, 2, S), d_noise (N, 2, N), noise_cov (N, N)) of stored points
+    ``xy0`` (N, 2) with beam directions ``direction`` (N, 2) and range σ ``sigma`` (N,),
+    attached to the pose ``anchor`` (3,) and evaluated at the pose ``at`` with range errors
+    ``noise`` (N,): the model of :func:`~polyslam_env.slam.fitting.stored_points`.
+
+    The floats of its numpy form (``tests/slam/reference_fitting.py``), bit for bit: the
+    products with R(θ − θ̂)ᵀ and Jᵀ are BLAS's chains of FMAs from 0 along the inner index
+    (as :func:`sample_into`'s), R's entries numpy's ``cos``/``sin`` (libm's), the variances
+    σ² libm's ``pow`` (``square`` = 2.0 an argument, as :func:`turn_gradient`'s)."""
+    n = xy0.shape[0]
+    turn = at[2] - anchor[2]
+    c, s = math.cos(turn), math.sin(turn)
+    xy = np.empty((n, 2))
+    d_state = np.zeros((n, 2, n_state))
+    d_noise = np.zeros((n, 2, n))
+    noise_cov = np.zeros((n, n))
+    for i in range(n):
+        dx, dy = xy0[i, 0] - anchor[0], xy0[i, 1] - anchor[1]
+        rx = fma(dy, -s, fma(dx, c, 0.0))  # (π̂ − p̂) R(θ − θ̂)ᵀ: Rᵀ = [[c, s], [−s, c]]
+        ry = fma(dy, c, fma(dx, s, 0.0))
+        xy[i, 0] = at[0] + rx + noise[i] * direction[i, 0]
+        xy[i, 1] = at[1] + ry + noise[i] * direction[i, 1]
+        d_state[i, 0, 0] = d_state[i, 1, 1] = 1.0
+        d_state[i, 0, 2] = fma(ry, -1.0, fma(rx, 0.0, 0.0))  # rel Jᵀ = (−rel_y, rel_x)
+        d_state[i, 1, 2] = fma(ry, 0.0, fma(rx, 1.0, 0.0))
+        d_noise[i, 0, i], d_noise[i, 1, i] = direction[i, 0], direction[i, 1]
+        noise_cov[i, i] = math.pow(sigma[i], square)
+    return xy, d_state, d_noise, noise_cov
+
+
+@njit
+def _slope_at(coeffs: np.ndarray, x: float) -> float:
+    """dη/dξ at ``x`` of the polynomial ``coeffs`` in ``Polynomial.slope``'s floats (``polyval``
+    of the derivative's coefficients j·c_j, Horner from ``c[-1] + x·0``)."""
+    n = coeffs.size
+    if n < 2:
+        return coeffs[0] * 0.0 + x * 0.0
+    value = coeffs[n - 1] * (n - 1) + x * 0.0
+    for j in range(n - 2, 0, -1):
+        value = coeffs[j] * j + value * x
+    return value
+
+
+@njit
+def turn_gradient(
+    xy: np.ndarray,
+    weights: np.ndarray,
+    d_state: np.ndarray,
+    variate: int,
+    order: int,
+    coeffs: np.ndarray,
+    rms: float,
+    pivot: float,
+    square: float,
+) -> tuple[np.ndarray, float]:
+    """(∂α/∂X (S,), residual variance) of the turn α about ξ = ``pivot`` of the fit
+    (``variate``, ``order``, ``coeffs``, ``rms``) of points ``xy`` (N ≥ 2, 2) with
+    ``weights`` and derivatives ``d_state`` (N, 2, S): the model is
+    :func:`~polyslam_env.slam.fitting.turn_gradient`'s. ``square`` is 2.0, an argument as
+    :func:`~polyslam_env.slam.map_kernels.rotation_fit_var`'s: Python's ``x ** 2`` is libm's
+    ``pow``, and LLVM turns a literal ``pow(x, 2.0)`` into ``x · x``, which rounds otherwise.
+
+    The floats of its readable numpy form (``tests/slam/reference_fitting.py``), bit for bit:
+    the residual's product goes through BLAS's gemv as numpy's does (numba calls the same
+    routine), powers through ``pow``, the sum of squares in numpy's pairwise order and the
+    contraction in ``np.einsum``'s (the points in order, ξ before η of each, one running sum
+    per state entry)."""
+    k_xi, k_eta = (0, 1) if variate == 1 else (1, 0)
+    xi = xy[:, k_xi].copy()
+    eta = xy[:, k_eta].copy()
+    scale = max(np.abs(xi).max(), 1e-9)
+    w = weights / weights.max()
+    a_mat, _, r, m = weighted_qr(xi / scale, np.sqrt(w), order)
+    a_s = np.empty(m + 1)
+    for j in range(m + 1):
+        a_s[j] = coeffs[j] * math.pow(scale, float(j))
+    resid = eta - a_mat @ a_s
+    e = np.zeros(m + 1)  # p'(ξ_p) = Σ_k k a_s[k] (ξ_p/s)^(k−1) / s
+    for j in range(1, m + 1):
+        e[j] = j * math.pow(pivot / scale, float(j - 1)) / scale
+    slope = _slope_at(coeffs, pivot)
+    d = coefficient_gradient(e, scale, w, a_mat, r, a_s, resid) / (1.0 + math.pow(slope, square))
+    squares = np.empty(d.shape[0])
+    for i in range(d.shape[0]):
+        squares[i] = d[i, 1] * d[i, 1]
+    residual_var = math.pow(rms, square) * sum_like_numpy(squares, 0, squares.size)
+    sign = 1.0 if variate == 1 else -1.0  # α turns counter-clockwise in (x¹, x²)
+    out = np.zeros(d_state.shape[2])
+    for i in range(d.shape[0]):
+        for c in range(2):  # the point's x¹ then x² derivative
+            u = d[i, c] if variate == 1 else d[i, 1 - c]
+            for s in range(out.size):
+                out[s] += u * d_state[i, c, s]
+    for s in range(out.size):
+        out[s] = sign * out[s]
+    return out, residual_var
 
 
 # -- which of a cluster's points make one wall ----------------------------------------------

@@ -18,13 +18,12 @@ Points come from three constructors:
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.special
 
-from polyslam_env.core.geometry import rotation
 from polyslam_env.slam import fit_kernels, map_kernels
 from polyslam_env.slam.columns import N_POINT_REAL, PTH, PX, SIGMA, UX, UY, WEIGHT, X, Y
 from polyslam_env.slam.polynomial import Polynomial
@@ -197,26 +196,19 @@ def stored_points(
     in the state, so its correlation with the map is carried through the current pose, and the
     odometry drift between the point's step and now is neglected (it is small over the few
     steps a point spends in a cluster or Q_bad). ``pose`` and ``noise`` (default: the anchor
-    and zero) evaluate the model elsewhere, for finite-difference checks.
+    and zero) evaluate the model elsewhere, for finite-difference checks. One compiled call
+    (:func:`~polyslam_env.slam.fit_kernels.stored_point_arrays`).
     """
     if len(points) == 0:
         raise ValueError("stored_points needs at least one point")
     anchor = np.asarray(anchor_pose, dtype=float)
     at = anchor if pose is None else np.asarray(pose, dtype=float)
     e = np.zeros(len(points)) if noise is None else np.asarray(noise, dtype=float)
-    xy0 = np.ascontiguousarray(points.xy, dtype=float)  # (N, 2)
-    u = np.ascontiguousarray(points.direction, dtype=float)  # (N, 2)
-    rel = (xy0 - anchor[:2]) @ rotation(at[2] - anchor[2]).T  # (N, 2) R(θ − θ̂)(π̂ − p̂)
-    d_state = np.zeros((len(points), 2, n_state))
-    d_state[:, :, :2] = np.eye(2)
-    d_state[:, :, 2] = rel @ J_ROT.T
-    return PointSet(
-        xy=at[:2] + rel + e[:, None] * u,
-        d_state=d_state,
-        d_noise=_diag_noise(u),
-        noise_cov=np.diag([s**2 for s in points.sigma.tolist()]),  # Python's **: libm pow
-        weights=np.array(points.weight, dtype=float),
-    )
+    xy, d_state, d_noise, noise_cov = fit_kernels.stored_point_arrays(
+        np.ascontiguousarray(points.xy, dtype=float), np.ascontiguousarray(points.direction),
+        points.sigma, anchor, at, e, n_state, 2.0,
+    )  # fmt: skip
+    return PointSet(xy, d_state, d_noise, noise_cov, np.array(points.weight, dtype=float))
 
 
 def polynomial_points(
@@ -235,31 +227,43 @@ def polynomial_points(
     for variate 2); there is no measurement noise; every point weighs 1/var(c0). ``turn`` =
     (state index of the shape's turn α, pivot ξ_c): the true wall is the shape turned by α
     about its point at ξ_c, so ∂π/∂α = J(π − π_c) (a landmark's considered rotation state,
-    see :class:`~polyslam_env.slam.robot.PolySlam`).
+    see :class:`~polyslam_env.slam.robot.PolySlam`). One compiled call
+    (:func:`~polyslam_env.slam.fit_kernels.sample_into`).
     """
+    xy, d_state, weights = np.empty((n, 2)), np.zeros((n, 2, n_state)), np.empty(n)
+    sample_into(poly, c0_index, c0_var, (lo, hi, n), turn, (xy, d_state, weights), 0)
+    return PointSet(xy, d_state, np.zeros((n, 2, 0)), np.zeros((0, 0)), weights)
+
+
+def sample_into(
+    poly: Polynomial,
+    c0_index: int,
+    c0_var: float,
+    span: tuple[float, float, int],
+    turn: tuple[int, float] | None,
+    out: tuple[np.ndarray, np.ndarray, np.ndarray],
+    start: int,
+) -> None:
+    """:func:`polynomial_points`' n points over ξ ∈ [lo, hi] (``span`` = (lo, hi, n)) into
+    rows ``start`` … ``start + n − 1`` of ``out`` = (xy (·, 2), d_state (·, 2, S), zero
+    there, weights (·,)): a merge samples two polynomials into one set
+    (:func:`~polyslam_env.slam.merging.merge_points`). The arguments are checked here, the
+    points made by one compiled call (:func:`~polyslam_env.slam.fit_kernels.sample_into`)."""
+    xy, d_state, weights = out
+    n_state = d_state.shape[2]
     if not 3 <= c0_index < n_state:
         raise ValueError(
             f"c0_index must be a landmark state index in [3, {n_state}), got {c0_index}"
         )
     if not c0_var > 0:
         raise ValueError(f"c0_var must be > 0, got {c0_var}")
-    xy = map_kernels.equally_spaced(poly.coeffs, poly.variate, float(lo), float(hi), n)  # (n, 2)
-    d_state = np.zeros((n, 2, n_state))
-    d_state[:, 1 if poly.variate == 1 else 0, c0_index] = 1.0
-    if turn is not None:
-        turn_index, pivot = turn
-        if not 3 <= turn_index < n_state or turn_index == c0_index:
-            raise ValueError(f"turn index must be another state index, got {turn_index}")
-        at = float(pivot)  # the curve's point there: points_at's floats, one compiled call
-        centre = map_kernels.equally_spaced(poly.coeffs, poly.variate, at, at, 1)[0]  # (2,)
-        d_state[:, :, turn_index] = (xy - centre) @ J_ROT.T
-    return PointSet(
-        xy=xy,
-        d_state=d_state,
-        d_noise=np.zeros((n, 2, 0)),
-        noise_cov=np.zeros((0, 0)),
-        weights=np.full(n, 1.0 / float(c0_var)),
-    )
+    if turn is not None and (not 3 <= turn[0] < n_state or turn[0] == c0_index):
+        raise ValueError(f"turn index must be another state index, got {turn[0]}")
+    fit_kernels.sample_into(
+        poly.coeffs, poly.variate, (float(span[0]), float(span[1])),
+        (c0_index, float(c0_var)), NO_TURN if turn is None else (turn[0], float(turn[1])),
+        xy, d_state, weights, start, span[2],
+    )  # fmt: skip
 
 
 def concat(*pointsets: PointSet) -> PointSet:
@@ -287,6 +291,10 @@ def concat(*pointsets: PointSet) -> PointSet:
     )
 
 
+#: :func:`~polyslam_env.slam.fit_kernels.sample_into`'s turn argument for a shape without one
+NO_TURN = (-1, 0.0)
+
+
 # -- fitting --------------------------------------------------------------------------------
 #: Steepest tangent |dη/dξ| a landmark's shape may have anywhere on its extent: tan 75°. The
 #: variate is the points' principal direction
@@ -303,18 +311,32 @@ def _split(xy: np.ndarray, variate: int) -> tuple[np.ndarray, np.ndarray]:
     return (xy[:, 0], xy[:, 1]) if variate == 1 else (xy[:, 1], xy[:, 0])
 
 
-def order_limits(n_points: int, order: int, noise_var: float) -> np.ndarray:  # (order,)
+@functools.lru_cache(maxsize=256)
+def order_limits(n_points: int, order: int, noise_var: float) -> np.ndarray:  # (1, order)
     """The residual sum of squares below which order m = 1 … ``order`` is accepted (the order
     selection of :func:`fit_polynomial`): the 99 % χ² quantile with N − m − 1 dof times the
     points' noise variance, or, without noise (points sampled on polynomials), N · 1e-8
-    (0.1 mm RMS). Orders without a positive dof are never tested against theirs."""
+    (0.1 mm RMS). Orders without a positive dof are never tested against theirs. Cached: a
+    SLAM's fits repeat a few sizes and noise levels (merges: 2 ε_M points, σ_range²); the
+    array is shared, never written."""
     if noise_var > 0:
         dof = n_points - 1 - np.arange(1, order + 1)
-        return np.asarray(scipy.special.chdtri(np.maximum(dof, 1), 0.01) * noise_var)
-    return np.full(order, n_points * 1e-8)
+        return np.asarray(scipy.special.chdtri(np.maximum(dof, 1), 0.01) * noise_var)[None, :]
+    return np.full((1, order), n_points * 1e-8)
 
 
-_NO_LIMITS = np.zeros(0)
+def next_term_limits(order: int, noise_var: float) -> np.ndarray:  # (order,)
+    """The drop of the residual sum of squares from order m to m + 1 (m = 1 … ``order``)
+    below which the next coefficient is not needed (``SlamConfig.curvature_test``): the 99 %
+    χ²(1) quantile times the points' noise variance. With known noise that drop over σ² is
+    the next coefficient's z² (its estimate over its standard error, squared), χ²(1) when it
+    is zero: a line whose points' order-2 coefficient is significant at 1 % is not kept a
+    line even when :func:`order_limits`' test over all N − 2 dof passes it (that test spreads
+    its power over every shape of misfit; a short arc's sagitta is one)."""
+    return np.full(order, scipy.special.chdtri(1, 0.01) * noise_var)
+
+
+_NO_LIMITS = np.zeros((0, 0))
 
 
 def fit_polynomial(
@@ -324,6 +346,7 @@ def fit_polynomial(
     shape_fixed: bool = False,
     auto_order: bool = False,
     min_noise_var: float = 0.0,
+    curvature_test: bool = False,
 ) -> Fit:
     """Weighted LMS polynomial a = (AᵀWA)⁻¹AᵀWη, with ∂c0/∂X and ∂c0/∂noise, in one compiled
     call (:func:`~polyslam_env.slam.fit_kernels.fit_points`).
@@ -352,6 +375,11 @@ def fit_polynomial(
     noise of their own, but their polynomials came from noisy ranges, and a 1 cm disagreement
     between two segments of one straight wall must not buy a cubic whose spurious curvature
     then makes the pose look observable.
+
+    ``curvature_test=True`` (with ``auto_order``) also keeps the next order when its one more
+    coefficient is significant at 1 % (:func:`next_term_limits`), for points with noise of
+    their own only (beam hits: new landmarks and refits), not for points sampled on
+    polynomials, whose noise is only the floor ``min_noise_var``, not their scatter.
     """
     n_points = points.n_points
     if n_points == 0:
@@ -362,6 +390,8 @@ def fit_polynomial(
     if auto_order:
         noise_var = max(float(points.noise_cov.trace()) / n_points, min_noise_var)
         limits = order_limits(n_points, order, noise_var)
+        if curvature_test and float(points.noise_cov.trace()) > 0:
+            limits = np.vstack([limits, next_term_limits(order, noise_var)])
     var, m, coeffs, lo, hi, rms, gx, gy, r, scale = fit_kernels.fit_points(
         points.xy, points.weights, points.d_state, points.d_noise, order,
         0 if variate is None else variate, shape_fixed, auto_order, limits,
@@ -379,13 +409,6 @@ def fit_polynomial(
     )
 
 
-def _scaled(points: PointSet, variate: int) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
-    """(ξ, η, scale, w) of a fit: the abscissae are scaled by max|ξ| in the design, and the
-    weights by their largest (a fit is invariant to a common weight factor)."""
-    xi, eta = _split(points.xy, variate)
-    return xi, eta, max(float(np.abs(xi).max()), 1e-9), points.weights / points.weights.max()
-
-
 def turn_gradient(points: PointSet, fit: Fit, pivot: float) -> tuple[np.ndarray, float]:
     """(∂α/∂X (n_state,), residual variance) of the turn α of ``fit``, the LMS fit of
     ``points``, about its point at ξ = ``pivot``.
@@ -399,36 +422,14 @@ def turn_gradient(points: PointSet, fit: Fit, pivot: float) -> tuple[np.ndarray,
     The residual variance is the part no state holds: where the points disagree with the fit
     (pieces that are not quite one curve), an error of the shape of size ``fit.rms`` at each
     point, taken as independent between points: rms² · Σ_i (∂α/∂η_i)², the least-squares
-    variance of the turn for that scatter."""
-    return turn_gradient_with(
-        points, fit, pivot, fit_kernels.weighted_qr, fit_kernels.coefficient_gradient
-    )
+    variance of the turn for that scatter.
 
-
-def turn_gradient_with(
-    points: PointSet,
-    fit: Fit,
-    pivot: float,
-    weighted_qr: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray, int]],
-    coefficient_gradient: Callable[..., np.ndarray],
-) -> tuple[np.ndarray, float]:
-    """:func:`turn_gradient` with the fit's QR (``fit_kernels.weighted_qr``'s signature) and
-    the gradient of a linear function of the coefficients (``fit_kernels.
-    coefficient_gradient``'s) given: production passes the compiled ones, the tests their
-    readable numpy oracles (``tests/slam/reference_fitting.py``), so the rest is one piece."""
-    poly = fit.poly
-    xi, eta, scale, w = _scaled(points, poly.variate)
-    a_mat, _, r, m = weighted_qr(xi / scale, np.sqrt(w), fit.order)
-    a_s = poly.coeffs[: m + 1] * scale ** np.arange(m + 1)
-    resid = eta - a_mat @ a_s
-    e = np.zeros(m + 1)  # p'(ξ_p) = Σ_k k a_s[k] (ξ_p/s)^(k−1) / s
-    e[1:] = np.arange(1, m + 1) * (pivot / scale) ** np.arange(m) / scale
-    slope = float(poly.slope(pivot))
-    d = coefficient_gradient(e, scale, w, a_mat, r, a_s, resid) / (1.0 + slope**2)
-    d_xy = d if poly.variate == 1 else d[:, ::-1]
-    sign = 1.0 if poly.variate == 1 else -1.0  # α turns counter-clockwise in (x¹, x²)
-    residual_var = fit.rms**2 * float(np.sum(d[:, 1] ** 2))
-    return sign * np.einsum("nj,njs->s", d_xy, points.d_state), residual_var
+    One compiled call (:func:`~polyslam_env.slam.fit_kernels.turn_gradient`); its readable
+    numpy form is the oracle in ``tests/slam/reference_fitting.py``, bit for bit."""
+    return fit_kernels.turn_gradient(
+        points.xy, points.weights, points.d_state, fit.poly.variate, fit.order,
+        fit.poly.coeffs, fit.rms, float(pivot), 2.0,
+    )  # fmt: skip
 
 
 def centroid_xi(points: PointSet, variate: int) -> float:

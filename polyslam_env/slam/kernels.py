@@ -632,6 +632,51 @@ def beam_rows(
 
 
 @njit
+def frozen_offset_var(
+    shape: np.ndarray,  # (M+1,) the landmark's shape (c0 unused)
+    m: int,  # its order
+    xi: np.ndarray,  # (k,) where along ξ
+    pivot: float,
+    fit_half: float,
+    model_var: float,
+    xi_var: float,
+    shift_slope: float,  # ∂c0/∂(its shape's shift along ξ), negated; nan: unknown
+    turn_var: float,  # variance of the heading change since the fit (no turn state)
+    fit_inverse: np.ndarray,
+    n_fit: int,
+    range_var: float,
+    shape_follows_pose: bool,
+    shift_with_pose: bool,
+    in_state: bool,  # the shape's turn α is a state
+    out: np.ndarray,  # (k,) out: the variance of the landmark's η error at each ξ
+) -> None:
+    """The variance of a landmark's frozen error along η at each ``xi``: what no state holds
+    and :func:`beam_rows` adds to a beam's R there (times 1/D²), the same terms: the fit's
+    misfit beyond the range noise ``model_var``; with ``shape_follows_pose`` the shape's
+    higher-order fit error (:func:`_shape_fit_var`), its shift along ξ when it was fitted
+    (variance ``xi_var``) beyond what c0 carries (the slope at the pivot, or with
+    ``shift_with_pose`` and a known ``shift_slope`` that slope: the map, unlike a beam, does
+    not predict the fit-time shift from the current pose, so all of ``xi_var`` stays), and
+    without a turn state the heading change since the fit on the lever about the pivot.
+    ``tests/slam/test_kernels.py`` checks it against :func:`beam_rows`' R."""
+    for i in range(xi.size):
+        var = model_var
+        if shape_follows_pose:
+            value, slope_at = horner(shape, m, xi[i], shape[0])
+            value_c, slope_c = horner(shape, m, pivot, shape[0])
+            ref = slope_c
+            if shift_with_pose and not math.isnan(shift_slope):
+                ref = shift_slope
+            var += (slope_at - ref) * (slope_at - ref) * xi_var
+            scaled = (xi[i] - pivot) / fit_half
+            var += _shape_fit_var(shape, m, scaled, fit_inverse, n_fit, range_var, in_state)
+            if not in_state:
+                lever = (xi[i] - pivot) + slope_at * (value - value_c)
+                var += lever * lever * turn_var
+        out[i] = var
+
+
+@njit
 def shift_prediction(fit_var: float, now_var: float) -> tuple[float, float]:
     """The best linear prediction of the pose's error along ξ when a shape was fitted, e_f
     (variance ``fit_var``), from the current one, e_n (variance ``now_var``): (gain β, the

@@ -583,9 +583,10 @@ def evidence_on(
 ) -> tuple[float, float]:
     """The ξ-interval, on ``new``'s axis, of ``old``'s curve over its ``evidence`` interval
     (both with their current c0; their variates may differ): ``samples`` points of the curve
-    are projected, so a bulge between the ends counts."""
-    xi = np.linspace(evidence[0], evidence[1], samples)
-    xy = old.points_at(xi)  # (S, 2)
+    are projected, so a bulge between the ends counts (``old.points_at(np.linspace(…))``'s
+    floats in one compiled call, :func:`~polyslam_env.slam.map_kernels.equally_spaced`)."""
+    lo, hi = float(evidence[0]), float(evidence[1])
+    xy = map_kernels.equally_spaced(old.coeffs, old.variate, lo, hi, samples)  # (S, 2)
     on_new = xy[:, 0] if new.variate == 1 else xy[:, 1]
     return float(on_new.min()), float(on_new.max())
 

@@ -112,12 +112,14 @@ class StateLayout:
         return new_c0_before_turns(mean, cov, n)
 
     def remove(
-        self, mean: np.ndarray, cov: np.ndarray, row: int, n: int
+        self, mean: np.ndarray, cov: np.ndarray, row: int | Sequence[int], n: int
     ) -> tuple[np.ndarray, np.ndarray]:
-        """The state without landmark ``row``'s c0 (and α) among ``n`` landmarks."""
-        drop = [self.c0_index(row)]
+        """The state without the c0 (and α) of landmark ``row`` (or of each of ``row``, a
+        merge's two at once: one copy of the covariance) among ``n`` landmarks."""
+        rows = [row] if isinstance(row, int | np.integer) else list(row)
+        drop = [self.c0_index(r) for r in rows]
         if self.rotation_states:
-            drop.append(self.turn_index(row, n))
+            drop += [self.turn_index(r, n) for r in rows]
         return ekf.remove(mean, cov, drop)
 
 

@@ -82,7 +82,7 @@ import math
 
 import numpy as np
 
-from polyslam_env.core.geometry import rotation
+from polyslam_env.slam import map_kernels
 from polyslam_env.slam.ekf import chi2_1dof_quantile
 from polyslam_env.slam.polynomial import Polynomial, polyval
 
@@ -165,18 +165,15 @@ def turned_line(poly: Polynomial, pivot: float, angle: float) -> Polynomial:
     counter-clockwise in (x¹, x²), the sense of a landmark's turn α) about its point at
     ξ = ``pivot``; same variate and extent. The turned line's offset at the pivot is the
     same, so a c0 error means what it meant before (a turn state reset to zero after its
-    estimate was applied keeps its covariance)."""
+    estimate was applied keeps its covariance). The arithmetic is one compiled call
+    (:func:`~polyslam_env.slam.map_kernels.turned_line`)."""
     if np.any(poly.coeffs[2:] != 0.0):
         raise ValueError("turned_line: the polynomial must be a straight line")
-    slope = float(poly.coeffs[1])
-    eta_c = poly.c0 + slope * pivot
-    xi_axis, eta_axis = (0, 1) if poly.variate == 1 else (1, 0)
-    direction = np.zeros(2)
-    direction[xi_axis], direction[eta_axis] = 1.0, slope
-    turned = rotation(angle) @ direction
-    new_slope = float(turned[eta_axis] / turned[xi_axis])
+    c0, slope = map_kernels.turned_line(
+        float(poly.coeffs[0]), float(poly.coeffs[1]), poly.variate, float(pivot), float(angle)
+    )
     coeffs = np.zeros_like(poly.coeffs)
-    coeffs[0], coeffs[1] = eta_c - new_slope * pivot, new_slope
+    coeffs[0], coeffs[1] = c0, slope
     return Polynomial(poly.variate, coeffs, poly.lo, poly.hi)
 
 
@@ -190,6 +187,26 @@ SQUARE_MIN_LENGTH = 1.0
 #: (a design choice, stated: one wall in ten of an otherwise square floor). An angled wing or
 #: a cave's straight stretches hold more, and then no wall is tied.
 SQUARE_CLUTTER = 0.1
+
+
+def pair_supported(
+    first: int, second: int, directions: np.ndarray, relative_var: np.ndarray, gate_prob: float
+) -> bool:
+    """Whether walls ``first`` and ``second`` (indices into ``directions`` (n,) rad, with
+    ``relative_var`` (n, n) as :func:`rectilinear`'s) have a third wall square to both, each
+    within the χ²(1) gate at ``gate_prob``: the robot's own evidence that *these* two
+    directions belong to one rectilinear set (``SlamConfig.square_pair_evidence``). A pair
+    alone is no evidence (its own gate judges only that it could be square); a floor-wide
+    share (:func:`rectilinear`) is the wrong grain where square rooms meet angled wings or
+    clutter. The caller leaves out walls that are pieces of either of the two."""
+    gate = chi2_1dof_quantile(gate_prob)
+    difference = directions[:, None] - directions[None, [first, second]]
+    quarter = 0.5 * math.pi
+    off = difference - quarter * np.round(difference / quarter)  # (n, 2)
+    square = off**2 <= gate * relative_var[:, [first, second]]
+    both = square[:, 0] & square[:, 1]
+    both[[first, second]] = False
+    return bool(both.any())
 
 
 def rectilinear(

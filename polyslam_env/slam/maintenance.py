@@ -150,14 +150,17 @@ class MapMaintenance:
         sigma += float(gx[3 + rows] @ np.sqrt(self.slam.table.xi_var[rows]))
         return sigma * sigma
 
-    def drop(self, landmark_id: int) -> None:
-        """Take a landmark out of the state, the table and the stored points (a
-        marginalisation: the rest of the covariance is unchanged; the caller records it)."""
+    def drop(self, *landmark_ids: int) -> None:
+        """Take landmarks out of the state, the table and the stored points (a
+        marginalisation: the rest of the covariance is unchanged; the caller records it). A
+        merge's two leave together: one copy of the state, the same numbers as one by one."""
         slam = self.slam
-        row = slam.table.index_of(landmark_id)
-        slam.mean, slam.cov = slam.layout.remove(slam.mean, slam.cov, row, len(slam.table))
-        slam.table.remove(row)
-        slam.points.drop_qbad(landmark_id)
+        rows = [slam.table.index_of(landmark_id) for landmark_id in landmark_ids]
+        slam.mean, slam.cov = slam.layout.remove(slam.mean, slam.cov, rows, len(slam.table))
+        for row in sorted(rows, reverse=True):  # the rows after a removed one move up
+            slam.table.remove(row)
+        for landmark_id in landmark_ids:
+            slam.points.drop_qbad(landmark_id)
 
     def remove(self, landmark_id: int) -> None:
         """:meth:`drop`, recorded as removed."""
@@ -190,8 +193,7 @@ class MapMaintenance:
         table = slam.table
         received = any(bool(table.received[table.index_of(lid)]) for lid in old_ids)
         new_id = self.add(fit, side, evidence, source, points, received)
-        for lid in old_ids:
-            self.drop(lid)
+        self.drop(*old_ids)
         kind = REPLACED if len(old_ids) == 1 else MERGED
         slam.lineage.record(kind, new_id, tuple(old_ids), slam.step_count)
         return new_id
@@ -209,6 +211,7 @@ class MapMaintenance:
             shape_fixed=True,
             auto_order=cfg.auto_order,
             min_noise_var=cfg.range_sigma**2,
+            curvature_test=cfg.curvature_test,
         )
         # the unused points go back as one cluster of the newest ≤ ε_Z: the next point then
         # refits the newest evidence instead of an ever-growing set every step
@@ -387,6 +390,7 @@ class MapMaintenance:
             shape_fixed=True,
             auto_order=cfg.auto_order,
             min_noise_var=cfg.range_sigma**2,
+            curvature_test=cfg.curvature_test,
         )
         if not (
             np.isfinite(fit.c0) and np.all(np.isfinite(fit.Gx)) and np.all(np.isfinite(fit.Gy))

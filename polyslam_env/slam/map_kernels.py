@@ -194,6 +194,25 @@ def eta_range(shape: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
     return taylor[0] - spread - pad, taylor[0] + spread + pad
 
 
+@njit
+def turned_line(
+    c0: float, slope: float, variate: int, pivot: float, angle: float
+) -> tuple[float, float]:
+    """(c0, slope) of the line η = c0 + slope·ξ (``variate``) turned by ``angle`` about its
+    point at ξ = ``pivot`` (:func:`~polyslam_env.slam.links.turned_line`'s model): its
+    direction (1, slope) on (ξ, η) turned by R(angle) in (x¹, x²), the offset at the pivot
+    kept. The floats of its numpy form (``tests/slam/reference_links.py``): R's entries are
+    libm's ``cos``/``sin`` as numpy's, and ``R @ d`` is BLAS's gemv of two columns, the
+    second column's product rounded, the first's fused onto it."""
+    eta_c = c0 + slope * pivot
+    c, s = math.cos(angle), math.sin(angle)
+    dx, dy = (1.0, slope) if variate == 1 else (slope, 1.0)
+    tx = fma(c, dx, -s * dy)  # R = [[c, −s], [s, c]]
+    ty = fma(s, dx, c * dy)
+    turned = ty / tx if variate == 1 else tx / ty
+    return eta_c - turned * pivot, turned
+
+
 # -- the merge test of two polynomials ------------------------------------------------------------
 #: samples of the other polynomial projected on p's axis (``merging`` module: overlap and γ)
 MERGE_SAMPLES = 64

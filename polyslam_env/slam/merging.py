@@ -45,7 +45,7 @@ import numpy as np
 
 from polyslam_env.slam import map_kernels
 from polyslam_env.slam.association import GAP_SPLIT
-from polyslam_env.slam.fitting import PointSet, concat, polynomial_points
+from polyslam_env.slam.fitting import PointSet, sample_into
 from polyslam_env.slam.map_kernels import MEASURED
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -236,11 +236,9 @@ def merge_points(
     landmark, so the fit's G_x has entries on both c0s, and on their turns α with ``turn_a``,
     ``turn_b`` = (α's state index, pivot ξ) (:func:`~polyslam_env.slam.fitting.polynomial_points`).
     """
-    return concat(
-        polynomial_points(
-            poly_a, c0_index_a, c0_var_a, eps_m, poly_a.lo, poly_a.hi, n_state, turn_a
-        ),
-        polynomial_points(
-            poly_b, c0_index_b, c0_var_b, eps_m, poly_b.lo, poly_b.hi, n_state, turn_b
-        ),
-    )
+    n = 2 * eps_m
+    out = np.empty((n, 2)), np.zeros((n, 2, n_state)), np.empty(n)
+    sample_into(poly_a, c0_index_a, c0_var_a, (poly_a.lo, poly_a.hi, eps_m), turn_a, out, 0)
+    sample_into(poly_b, c0_index_b, c0_var_b, (poly_b.lo, poly_b.hi, eps_m), turn_b, out, eps_m)
+    xy, d_state, weights = out
+    return PointSet(xy, d_state, np.zeros((n, 2, 0)), np.zeros((0, 0)), weights)

@@ -31,6 +31,7 @@ from polyslam_env.slam.links import (
     line_angle,
     link_rows,
     off_square,
+    pair_supported,
     rectilinear,
     turned_line,
 )
@@ -92,7 +93,28 @@ class WallGraph:
             if made:
                 links += made
                 slam.maintenance.merge_into_map(landmark_id)
+        if cfg.square_pair_evidence and fresh:
+            links += self.square_loners()
         return links
+
+    def square_loners(self) -> int:
+        """With the evidence per pair (``config.square_pair_evidence``) a wall's tie may have
+        lacked its third wall when it was tried: once new walls have matured, try again every
+        own straight wall still alone in its direction group and ``config.link_age`` steps old.
+        Returns the number of ties."""
+        table = self.slam.table
+        matured = self.slam.step_count - self.config.link_age
+        sizes: dict[int, int] = {}
+        for group in self.direction_of.values():
+            sizes[group] = sizes.get(group, 0) + 1
+        alone = [
+            lid
+            for j, lid in enumerate(table.ids)
+            if table.order[j] == 1
+            and table.changed_at[j] <= matured
+            and sizes[self.direction_of[lid]] == 1
+        ]
+        return sum(self.square_wall(lid) for lid in alone if lid in table)
 
     def link_walls(self, landmark_id: int) -> int:
         """Link a straight landmark to every straight piece of another wall group, made at
@@ -111,11 +133,16 @@ class WallGraph:
         reach = cfg.link_gap * (1.0 + 1e-9) + EXTENT_MARGIN
         candidates = []
         matured = slam.step_count - cfg.link_age  # partners at least as old (link_changed)
-        for j in table.near(maintenance.box(idx), slam.c0s, reach).tolist():
-            if j == idx or table.variate[j] != table.variate[idx] or table.order[j] != 1:
-                continue
-            if table.changed_at[j] > matured or table.received[j]:
-                continue
+        near = table.near(maintenance.box(idx), slam.c0s, reach)
+        variate, order = table.variate, table.order
+        near = near[
+            (near != idx)
+            & (variate[near] == variate[idx])
+            & (order[near] == 1)
+            & (table.changed_at[near] <= matured)
+            & (table.received[near] == 0)
+        ]
+        for j in near.tolist():
             gap = evidence_gap(evidence, maintenance.evidence(j))
             if -2.0 * EXTENT_MARGIN <= gap <= cfg.link_gap:
                 candidates.append((gap, table.ids[j]))
@@ -165,18 +192,9 @@ class WallGraph:
         i = table.index_of(landmark_id)
         if table.received[i] or table.order[i] != 1 or not self.long_enough(i):
             return 0
-        group = self.direction_of[landmark_id]
-        matured = slam.step_count - cfg.link_age
+        group, ids = self.direction_of[landmark_id], table.ids
         others = np.array(
-            [
-                j
-                for j, (lid, at) in enumerate(zip(table.ids, table.changed_at, strict=True))
-                if table.order[j] == 1
-                and at <= matured
-                and not table.received[j]
-                and self.direction_of[lid] != group
-                and self.long_enough(j)
-            ],
+            [j for j in self.mature_lines().tolist() if self.direction_of[ids[j]] != group],
             dtype=np.int64,
         )
         if others.size == 0:
@@ -195,6 +213,8 @@ class WallGraph:
         r = math.radians(cfg.wall_squareness_deg) ** 2 + sum(
             float(table.model_var[k]) / float(table.fit_half[k]) ** 2 for k in (i, j)
         )
+        if cfg.square_pair_evidence and not self.pair_supported(i, j):
+            return 0
         if not self.update_pair(i, j, np.array([-off_square(angle)]), H, np.array([[r]])):
             return 0
         join_groups(self.direction_of, landmark_id, table.ids[j])
@@ -207,22 +227,32 @@ class WallGraph:
         pair's relative direction variance that of a tie (the state's var(α_i − α_j) plus
         each fit's direction variance and ``config.wall_squareness_deg``²). Needs rotation
         states (False without)."""
+        if not self.config.rotation_states:
+            return False
+        directions, relative, lengths = self.square_evidence(self.confident_walls())
+        return rectilinear(directions, relative, lengths, self.config.gate_prob)
+
+    def pair_supported(self, i: int, j: int) -> bool:
+        """Whether straight landmarks ``i`` and ``j`` (rows) have a third confident straight
+        wall (as :meth:`rectilinear`'s, no piece of either's wall) square to both
+        (:func:`~polyslam_env.slam.links.pair_supported`; ``config.square_pair_evidence``)."""
+        table = self.slam.table
+        walls = {self.wall_of[table.ids[i]], self.wall_of[table.ids[j]]}
+        others = [k for k in self.confident_walls() if self.wall_of[table.ids[k]] not in walls]
+        directions, relative, _ = self.square_evidence([i, j, *others])
+        return pair_supported(0, 1, directions, relative, self.config.gate_prob)
+
+    def confident_walls(self) -> list[int]:
+        """Rows of the straight walls that are square evidence: own, ``config.link_age``
+        steps old, ``SQUARE_MIN_LENGTH`` long."""
+        return self.mature_lines(SQUARE_MIN_LENGTH).tolist()
+
+    def square_evidence(self, rows_list: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(directions, their pairwise relative variances, lengths) of straight walls
+        ``rows_list`` (rows) as :func:`~polyslam_env.slam.links.rectilinear` takes them."""
         cfg, slam = self.config, self.slam
         table = slam.table
-        if not cfg.rotation_states:
-            return False
-        matured = slam.step_count - cfg.link_age
-        rows = np.array(
-            [
-                j
-                for j in range(len(table))
-                if table.order[j] == 1
-                and not table.received[j]
-                and table.changed_at[j] <= matured
-                and table.hi[j] - table.lo[j] >= SQUARE_MIN_LENGTH
-            ],
-            dtype=np.int64,
-        )
+        rows = np.asarray(rows_list, dtype=np.int64)
         turns = slam.layout.turn_index(0, len(table)) + rows
         directions = np.array([line_angle(table.polys[j]) for j in rows.tolist()])
         directions += slam.mean[turns]
@@ -231,7 +261,7 @@ class WallGraph:
         block = slam.cov[np.ix_(turns, turns)]
         relative = own[:, None] + own[None, :] - 2.0 * block
         lengths = table.hi[rows] - table.lo[rows]
-        return rectilinear(directions, relative, lengths, cfg.gate_prob)
+        return directions, relative, lengths
 
     def update_pair(
         self, i: int, j: int, innovation: np.ndarray, H: np.ndarray, R: np.ndarray
@@ -269,6 +299,19 @@ class WallGraph:
         )
         slam.mean[3 + row], slam.mean[t] = line.c0, 0.0
         slam.table.set_shape(row, line)
+
+    def mature_lines(self, min_length: float | None = None) -> np.ndarray:
+        """Rows (ascending, int64) of the own straight landmarks made at least
+        ``config.link_age`` steps ago and at least ``min_length`` long on ξ (default: long
+        enough to update the pose, :meth:`long_enough`): those a square tie or the
+        rectilinear test may use."""
+        cfg, table = self.config, self.slam.table
+        floor = cfg.min_update_extent if min_length is None else min_length
+        matured = self.slam.step_count - cfg.link_age
+        lines = (table.order == 1) & (table.received == 0) & (table.changed_at <= matured)
+        if floor > 0.0 or min_length is not None:
+            lines &= table.hi - table.lo >= floor
+        return np.flatnonzero(lines)
 
     def long_enough(self, row: int) -> bool:
         """Whether landmark ``row`` is long enough to update the pose (``min_update_extent``)."""

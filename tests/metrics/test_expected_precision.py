@@ -71,6 +71,33 @@ def test_expected_precision__mean_is_the_length_weighted_normal_probability() ->
     assert 0.0 < risk < 1.0
 
 
+def test_expected_precision__frozen_errors_are_one_curve_per_landmark() -> None:
+    """A landmark's frozen error (``PolySlam.map_frozen_variance``) counts as one more normal
+    variate per landmark that moves its points by √variance each: the mean equals that of the
+    map with those variates as states (to rounding), and the probability matches 4,000 maps
+    drawn so, within 4 standard deviations of the two estimates' binomial errors. Without the
+    frozen errors the map is more precise than it is (the mean is higher)."""
+    rng = np.random.default_rng(8)
+    lengths, jac, cov = _map(rng)
+    walls = 6
+    landmark = np.repeat(np.arange(walls), len(lengths) // walls)
+    frozen = rng.uniform(0.0, 0.03, walls)[landmark] ** 2 * np.linspace(0.2, 1.0, len(lengths))
+    mean, risk = expected_precision(lengths, jac, cov, TOL, FLOOR, frozen=(frozen, landmark))
+    extra = np.zeros((len(lengths), walls))
+    extra[np.arange(len(lengths)), landmark] = np.sqrt(frozen)
+    wide = np.hstack([jac, extra])
+    wide_cov = np.zeros((len(cov) + walls, len(cov) + walls))
+    wide_cov[: len(cov), : len(cov)] = cov
+    wide_cov[len(cov) :, len(cov) :] = np.eye(walls)
+    assert mean == pytest.approx(expected_precision(lengths, wide, wide_cov, TOL)[0], rel=1e-12)
+    assert mean < expected_precision(lengths, jac, cov, TOL, FLOOR)[0]
+    truth = _true_precisions(rng, lengths, wide, wide_cov, 4000)
+    frequency = float(np.mean(truth < FLOOR))
+    assert 0.1 < frequency < 0.9  # the case tests the tail, not a certainty
+    spread = np.sqrt(frequency * (1 - frequency) * (1 / 400 + 1 / len(truth)))
+    assert abs(risk - frequency) <= 4 * spread
+
+
 def test_expected_precision__empty_certain_and_hopeless_maps() -> None:
     assert expected_precision(np.zeros(0), np.zeros((0, 3)), np.eye(3)) == (1.0, 0.0)
     lengths, jac = np.ones(5), np.ones((5, 2))

@@ -6,13 +6,18 @@ the cluster split."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import scipy.linalg.lapack
 import scipy.special
 
-from polyslam_env.slam.fitting import Fit, PointSet, turn_gradient_with
-from polyslam_env.slam.map_kernels import GAP_SPLIT
+from polyslam_env.core.geometry import rotation
+from polyslam_env.slam.fitting import J_ROT, Fit, PointSet
+from polyslam_env.slam.fitting import _diag_noise as diag_noise
+from polyslam_env.slam.map_kernels import GAP_SPLIT, equally_spaced
 from polyslam_env.slam.polynomial import Polynomial, polyval
+from polyslam_env.slam.stored import PointArrays
 
 
 def choose_variate(xy: np.ndarray, weights: np.ndarray | None = None) -> int:
@@ -76,7 +81,12 @@ def _weighted_qr(
 
 
 def select_order(
-    xi: np.ndarray, eta: np.ndarray, w: np.ndarray, max_order: int, noise_var: float = 0.0
+    xi: np.ndarray,
+    eta: np.ndarray,
+    w: np.ndarray,
+    max_order: int,
+    noise_var: float = 0.0,
+    next_term: bool = False,
 ) -> int:
     """The lowest order in 1..max_order whose residuals the point noise explains.
 
@@ -86,7 +96,8 @@ def select_order(
     overconfident filter). With a known per-point noise variance, order m is accepted when
     its residual sum of squares is below the 99 % χ² quantile with N − m − 1 dof times the
     variance. Without noise (points sampled on polynomials) the lowest order that fits to
-    0.1 mm RMS is taken.
+    0.1 mm RMS is taken. ``next_term`` (``SlamConfig.curvature_test``): and the next order's
+    one more coefficient is not significant at 1 %.
     """
     n_pts = len(xi)
     scale = max(float(np.abs(xi).max()), 1e-9)
@@ -102,7 +113,16 @@ def select_order(
             limit = float(scipy.special.chdtri(n_pts - m - 1, 0.01)) * noise_var
         else:
             limit = n_pts * 1e-8
-        if rss <= limit:
+        if rss > limit:
+            continue
+        if not next_term or m == max_order:
+            return m
+        a_next, q_next, r_next, m_next = _weighted_qr(xi / scale, sqrt_w, m + 1)
+        if m_next <= m or n_pts <= m + 2:
+            return m
+        rest = eta - a_next @ solve_upper(r_next, q_next.T @ (sqrt_w * eta))
+        # the next coefficient's z²: χ²(1) when it is zero (the noise known)
+        if rss - float(rest @ rest) <= float(scipy.special.chdtri(1, 0.01)) * noise_var:
             return m
     return max_order
 
@@ -114,6 +134,7 @@ def fit_polynomial(
     shape_fixed: bool = False,
     auto_order: bool = False,
     min_noise_var: float = 0.0,
+    curvature_test: bool = False,
 ) -> Fit:
     """Weighted LMS polynomial a = (AᵀWA)⁻¹AᵀWη, with ∂c0/∂X and ∂c0/∂noise.
 
@@ -146,7 +167,8 @@ def fit_polynomial(
     m = min(order, _distinct_count(xi, max(scale, 1.0)) - 1)
     if auto_order and m > 1:
         noise_var = max(float(np.trace(points.noise_cov)) / points.n_points, min_noise_var)
-        m = select_order(xi, eta, w, m, noise_var)
+        own_noise = float(np.trace(points.noise_cov)) > 0  # beam hits, not sampled points
+        m = select_order(xi, eta, w, m, noise_var, curvature_test and own_noise)
     a_mat, q, r, m = _weighted_qr(xi / scale, np.sqrt(w), m)
     a_s = solve_upper(r, q.T @ (np.sqrt(w) * eta))  # scaled coefficients
     resid = eta - a_mat @ a_s  # (N,)
@@ -201,9 +223,37 @@ def _coefficient_gradient(
     return np.stack([d_xi, d_eta], axis=-1)
 
 
+def turn_gradient_with(
+    points: PointSet,
+    fit: Fit,
+    pivot: float,
+    weighted_qr: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray, int]],
+    coefficient_gradient: Callable[..., np.ndarray],
+) -> tuple[np.ndarray, float]:
+    """:func:`~polyslam_env.slam.fitting.turn_gradient` in numpy (the production code before
+    :func:`~polyslam_env.slam.fit_kernels.turn_gradient`) with the fit's QR
+    (``fit_kernels.weighted_qr``'s signature) and the gradient of a linear function of the
+    coefficients (``fit_kernels.coefficient_gradient``'s) given: with the compiled ones it is
+    the kernel's bit-for-bit oracle, with this module's readable ones the conditioning
+    bound's."""
+    poly = fit.poly
+    xi, eta, scale, w = _scaled(points, poly.variate)
+    a_mat, _, r, m = weighted_qr(xi / scale, np.sqrt(w), fit.order)
+    a_s = poly.coeffs[: m + 1] * scale ** np.arange(m + 1)
+    resid = eta - a_mat @ a_s
+    e = np.zeros(m + 1)  # p'(ξ_p) = Σ_k k a_s[k] (ξ_p/s)^(k−1) / s
+    e[1:] = np.arange(1, m + 1) * (pivot / scale) ** np.arange(m) / scale
+    slope = float(poly.slope(pivot))
+    d = coefficient_gradient(e, scale, w, a_mat, r, a_s, resid) / (1.0 + slope**2)
+    d_xy = d if poly.variate == 1 else d[:, ::-1]
+    sign = 1.0 if poly.variate == 1 else -1.0  # α turns counter-clockwise in (x¹, x²)
+    residual_var = fit.rms**2 * float(np.sum(d[:, 1] ** 2))
+    return sign * np.einsum("nj,njs->s", d_xy, points.d_state), residual_var
+
+
 def turn_gradient(points: PointSet, fit: Fit, pivot: float) -> tuple[np.ndarray, float]:
     """:func:`~polyslam_env.slam.fitting.turn_gradient` on this module's readable QR and
-    coefficient gradient (the rest of it is one piece: ``fitting.turn_gradient_with``; its
+    coefficient gradient (the rest of it is :func:`turn_gradient_with`; its
     derivative is checked by finite differences in ``tests/slam/test_merging.py``)."""
 
     def gradient(
@@ -293,3 +343,58 @@ def _dominant_line(xy: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
     inliers = xy[dist[best] <= tol]
     direction = _tls_direction(inliers)
     return direction, _line_distances(inliers, direction, xy)
+
+
+def polynomial_points(
+    poly: Polynomial,
+    c0_index: int,
+    c0_var: float,
+    n: int,
+    lo: float,
+    hi: float,
+    n_state: int,
+    turn: tuple[int, float] | None = None,
+) -> PointSet:
+    """:func:`~polyslam_env.slam.fitting.polynomial_points` in numpy (before
+    :func:`~polyslam_env.slam.fit_kernels.sample_into`): its bit-for-bit oracle."""
+    xy = equally_spaced(poly.coeffs, poly.variate, float(lo), float(hi), n)  # (n, 2)
+    d_state = np.zeros((n, 2, n_state))
+    d_state[:, 1 if poly.variate == 1 else 0, c0_index] = 1.0
+    if turn is not None:
+        turn_index, pivot = turn
+        if not 3 <= turn_index < n_state or turn_index == c0_index:
+            raise ValueError(f"turn index must be another state index, got {turn_index}")
+        at = float(pivot)  # the curve's point there: points_at's floats, one compiled call
+        centre = equally_spaced(poly.coeffs, poly.variate, at, at, 1)[0]  # (2,)
+        d_state[:, :, turn_index] = (xy - centre) @ J_ROT.T
+    return PointSet(
+        xy=xy,
+        d_state=d_state,
+        d_noise=np.zeros((n, 2, 0)),
+        noise_cov=np.zeros((0, 0)),
+        weights=np.full(n, 1.0 / float(c0_var)),
+    )
+
+
+def stored_points(
+    points: PointArrays, anchor_pose: np.ndarray, n_state: int, pose: np.ndarray | None = None
+) -> PointSet:
+    """:func:`~polyslam_env.slam.fitting.stored_points` in numpy (before
+    :func:`~polyslam_env.slam.fit_kernels.stored_point_arrays`): its oracle, bit for bit at
+    the anchor."""
+    anchor = np.asarray(anchor_pose, dtype=float)
+    at = anchor if pose is None else np.asarray(pose, dtype=float)
+    e = np.zeros(len(points))
+    xy0 = np.ascontiguousarray(points.xy, dtype=float)  # (N, 2)
+    u = np.ascontiguousarray(points.direction, dtype=float)  # (N, 2)
+    rel = (xy0 - anchor[:2]) @ rotation(at[2] - anchor[2]).T  # (N, 2) R(θ − θ̂)(π̂ − p̂)
+    d_state = np.zeros((len(points), 2, n_state))
+    d_state[:, :, :2] = np.eye(2)
+    d_state[:, :, 2] = rel @ J_ROT.T
+    return PointSet(
+        xy=at[:2] + rel + e[:, None] * u,
+        d_state=d_state,
+        d_noise=diag_noise(u),
+        noise_cov=np.diag([s**2 for s in points.sigma.tolist()]),  # Python's **: libm pow
+        weights=np.array(points.weight, dtype=float),
+    )

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.fitting import polynomial_points
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -37,3 +38,20 @@ def link_rows(
             H[row] += sign * (d[eta] - float(poly.slope(xi)) * d[1 - eta])
             residual[row] += sign * float(pts.xy[0, eta])
     return residual, H
+
+
+def turned_line(poly: Polynomial, pivot: float, angle: float) -> Polynomial:
+    """:func:`~polyslam_env.slam.links.turned_line` in numpy (before
+    :func:`~polyslam_env.slam.map_kernels.turned_line`): its oracle, bit for bit."""
+    if np.any(poly.coeffs[2:] != 0.0):
+        raise ValueError("turned_line: the polynomial must be a straight line")
+    slope = float(poly.coeffs[1])
+    eta_c = poly.c0 + slope * pivot
+    xi_axis, eta_axis = (0, 1) if poly.variate == 1 else (1, 0)
+    direction = np.zeros(2)
+    direction[xi_axis], direction[eta_axis] = 1.0, slope
+    turned = rotation(angle) @ direction
+    new_slope = float(turned[eta_axis] / turned[xi_axis])
+    coeffs = np.zeros_like(poly.coeffs)
+    coeffs[0], coeffs[1] = eta_c - new_slope * pivot, new_slope
+    return Polynomial(poly.variate, coeffs, poly.lo, poly.hi)

@@ -227,6 +227,55 @@ def test_shape_fit_var__bit_identical_to_oracle_over_many_positions() -> None:
                 assert got == want
 
 
+@settings(max_examples=100, deadline=None)
+@given(
+    polys=st.lists(polynomials(), min_size=1, max_size=4),
+    pose=poses,
+    beams=beam_sets,
+    seed=st.integers(0, 2**32 - 1),
+    follows=st.booleans(),
+    rotation_states=st.booleans(),
+)
+def test_frozen_offset_var__is_what_beam_rows_adds_to_r_at_the_hit(
+    polys: list[Polynomial],
+    pose: np.ndarray,
+    beams: np.ndarray,
+    seed: int,
+    follows: bool,
+    rotation_states: bool,
+) -> None:
+    """The map's frozen variance (``PolySlam.map_frozen_variance``) is the update's: at each
+    beam's hit, R − σ² = frozen_offset_var / D² (shape_shift "noise"; with "pose" the beam
+    predicts part of the shift from the current pose, which the map does not). Relative
+    1e-9: the same terms, added in another order, at the hit's ξ rebuilt from its range."""
+    rng = np.random.default_rng(seed)
+    table = _table(polys, rng)
+    c0s = np.array([p.c0 for p in polys])
+    n, width = len(polys), table.shape.shape[1]
+    alpha_base = 3 + n if rotation_states else -1
+    turn_var = rng.uniform(0.0, 1e-4, n)
+    fit_inverse = _fit_inverse_table(16, width - 1)
+    x, y, theta = pose.tolist()
+    checked = 0
+    for b in range(beams.size):
+        used, rows = _rows_of(table, c0s, pose, beams, alpha_base, follows, np.array([b]), turn_var)
+        if used == 0:
+            continue
+        j, inv_d, t = int(rows[2][0]) - 3, rows[3][0], -rows[0][0]
+        phi = theta + beams[b]
+        xi = x + t * math.cos(phi) if polys[j].variate == 1 else y + t * math.sin(phi)
+        out = np.empty(1)
+        kernels.frozen_offset_var(
+            table.shape[j], int(table.order[j]), np.array([xi]), table.pivot[j],
+            table.fit_half[j], table.model_var[j], table.xi_var[j], table.shift_slope[j],
+            turn_var[j], fit_inverse, 16, 4e-4, follows, False, rotation_states, out,
+        )  # fmt: skip
+        extra = rows[6][0] - 4e-4
+        np.testing.assert_allclose(out[0] * inv_d * inv_d, extra, rtol=1e-9, atol=1e-15)
+        checked += 1
+    assume(checked > 0)
+
+
 # -- association error ----------------------------------------------------------------------------
 @settings(max_examples=200, deadline=None)
 @given(
@@ -482,17 +531,22 @@ def _rows_of(
     angles: np.ndarray,
     alpha_base: int,
     follows: bool = True,
+    wanted: np.ndarray | None = None,
+    turn_var: np.ndarray | None = None,
 ) -> tuple[int, tuple[np.ndarray, ...]]:
-    """Every beam's row on ``table`` (kernels.beam_rows, zero readings)."""
-    k = angles.size
+    """Every beam's row on ``table`` (kernels.beam_rows, zero readings), or the ``wanted``
+    beams' only; ``turn_var`` each landmark's heading drift since its fit (default 0)."""
+    wanted = np.arange(angles.size) if wanted is None else wanted
+    turn_var = np.zeros(len(table)) if turn_var is None else turn_var
+    k = wanted.size
     rows = (
         np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k),
         np.empty(k, dtype=np.int64), np.empty(k), np.empty(k), np.empty(k), np.empty((k, 4)),
     )  # fmt: skip
     used = kernels.beam_rows(
-        *pose.tolist(), angles, np.zeros(k), np.arange(k), math.inf, *table.arrays(), c0s,
+        *pose.tolist(), angles, np.zeros(angles.size), wanted, math.inf, *table.arrays(), c0s,
         table.boxes(c0s), 10.0, math.sin(math.radians(10.0)), 4e-4, table.model_var, follows,
-        False, table.pivot, table.xi_var, np.zeros(2), table.shift_slope, np.zeros(len(table)),
+        False, table.pivot, table.xi_var, np.zeros(2), table.shift_slope, turn_var,
         table.fit_half,
         _fit_inverse_table(16, table.shape.shape[1] - 1), 16, alpha_base, *rows,
     )  # fmt: skip

@@ -19,6 +19,7 @@ from polyslam_env.slam.links import (
     line_angle,
     link_rows,
     off_square,
+    pair_supported,
     rectilinear,
     turned_line,
 )
@@ -131,6 +132,20 @@ def test_turned_line__is_the_line_rotated_about_its_pivot(
         assert float(turned.value(xi)) == pytest.approx(
             _eta_of_turned_line(line, c0, 0.4, angle, xi), abs=1e-12
         )
+
+
+def test_turned_line__the_numpy_floats_bit_for_bit() -> None:
+    """The compiled turn of a stored line gives the numpy form's floats (R from numpy's
+    cos/sin, its gemv): lines of both variates, turns from 1e-6 to 0.1 rad either way."""
+    rng = np.random.default_rng(45)
+    for _ in range(500):
+        coeffs = np.array([rng.normal() * 3.0, rng.normal() * 0.3, 0.0, 0.0])
+        line = Polynomial(int(rng.integers(1, 3)), coeffs, -1.0, 2.0)
+        pivot = float(rng.uniform(-1.0, 2.0))
+        angle = float(rng.normal() * 10.0 ** rng.integers(-6, -1))
+        got = turned_line(line, pivot, angle)
+        want = reference_links.turned_line(line, pivot, angle)
+        assert got.coeffs.tobytes() == want.coeffs.tobytes()
 
 
 def test_turned_line__refuses_a_curve() -> None:
@@ -487,6 +502,18 @@ def test_rectilinear__a_wall_off_square_within_its_uncertainty_counts_as_square(
     assert not rectilinear(directions, _relative([0.2] * 3), lengths, 0.99)
 
 
+def test_pair_supported__needs_a_third_wall_square_to_both() -> None:
+    """Walls at 0° and 92° known to 3°: a third at 180° (parallel to the first, 88° to the
+    second: square to both within the gate) supports the pair; one at 30° does not, nor does
+    the pair alone; known to 0.2°, the 92° wall is square to nothing, so no third wall
+    supports it."""
+    three = _relative([3.0] * 3)
+    assert pair_supported(0, 1, np.radians([0.0, 92.0, 180.0]), three, 0.99)
+    assert not pair_supported(0, 1, np.radians([0.0, 92.0, 30.0]), three, 0.99)
+    assert not pair_supported(0, 1, np.radians([0.0, 92.0]), _relative([3.0] * 2), 0.99)
+    assert not pair_supported(0, 1, np.radians([0.0, 92.0, 180.0]), _relative([0.2] * 3), 0.99)
+
+
 def test_rectilinear__fewer_than_three_walls_are_no_evidence() -> None:
     """Two walls are one pair, which the tie's own gate judges: no evidence either way."""
     assert rectilinear(np.radians([0.0, 45.0]), _relative([0.2] * 2), np.ones(2), 0.99)
@@ -524,31 +551,43 @@ def _near_square_wall_nees(cfg: SlamConfig) -> tuple[float, int]:
 
 
 @pytest.mark.parametrize(
-    "square_evidence",
-    [True, pytest.param(False, marks=pytest.mark.xfail(strict=True, reason="rule forced on"))],
+    "square_evidence, per_pair",
+    [
+        (True, False),
+        (False, True),
+        pytest.param(False, False, marks=pytest.mark.xfail(strict=True, reason="rule forced on")),
+    ],
 )
 def test_square_walls__on_an_angled_floor_a_near_square_wall_keeps_its_direction(
-    square_evidence: bool,
+    square_evidence: bool, per_pair: bool
 ) -> None:
     """On an angled floor (a wall clearly at 30° already in the map) a wall 2° from square
     is not tied square: its direction errors over 20 seeds lie in the two-sided 99 % χ² band
     of its own variance. With the rule forced on (``square_evidence`` off) the gate lets the
     tie through (2° is within the 1 m fit's direction uncertainty), the wall is turned onto
-    90° with a variance that claims a fraction of a degree, and the sum leaves the band."""
-    total, count = _near_square_wall_nees(SlamConfig(square_evidence=square_evidence))
+    90° with a variance that claims a fraction of a degree, and the sum leaves the band. The
+    evidence per pair (``square_pair_evidence``) refuses it too: no third wall is square to
+    both the near-square wall and the first."""
+    cfg = SlamConfig(square_evidence=square_evidence, square_pair_evidence=per_pair)
+    total, count = _near_square_wall_nees(cfg)
     assert count >= 20
     lo, hi = scipy.stats.chi2.ppf([0.005, 0.995], count)
     assert lo <= total <= hi, (total, count, lo, hi)
 
 
-def test_square_walls__on_a_rectilinear_floor_the_evidence_lets_the_tie_through() -> None:
+@pytest.mark.parametrize("per_pair", [False, True])
+def test_square_walls__on_a_rectilinear_floor_the_evidence_lets_the_tie_through(
+    per_pair: bool,
+) -> None:
     """The same room with its walls square (the first one's direction, the far wall at 90°,
-    the near one along the path): every seed ties the far wall to the first."""
+    the near one along the path): every seed ties the far wall to the first, with the
+    floor-wide evidence and with the evidence per pair (the near wall square to both)."""
     walls = ANGLED_ROOM.copy()
     walls[1] = [[3.3, -3.0], [3.3, -0.3]]
     walls[2] = [[0.1, -0.35], [2.3, -0.35]]
+    cfg = SlamConfig(square_evidence=not per_pair, square_pair_evidence=per_pair)
     for seed in range(5):
-        slam, *_ = drive(walls, CORNER_DRIVE, seed, SlamConfig(square_evidence=True))
+        slam, *_ = drive(walls, CORNER_DRIVE, seed, cfg)
         assert slam.walls.rectilinear(), seed
         groups = slam.direction_groups
         variates = {lid: slam.shapes[lid].variate for lid in slam.landmark_ids}
