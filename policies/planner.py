@@ -344,11 +344,14 @@ class FrontierPlanner:
         enough that every operation of the window's frontier at the cell (closing, opening,
         dilation, clearance up to the inflation radius) sees the same cells as on the whole
         map."""
+        return self.frontier_near(cell, 0)
+
+    def frontier_near(self, cell: tuple[int, int], reach: int) -> bool:
+        """Whether a map cell within ``reach`` cells (Chebyshev) of map ``cell`` (row, col) is a
+        frontier by :meth:`still_frontier`."""
         m = self.own
         half = 2 * m.close_cells + 4 + math.ceil(m.inflate / m.res)
-        r0, c0 = max(cell[0] - half, 0), max(cell[1] - half, 0)
-        r1, c1 = min(cell[0] + half + 1, m.n), min(cell[1] + half + 1, m.n)
-        return bool(window_kernels.frontier_at(m.layers, r0, r1, c0, c1, cell[0], cell[1]))
+        return bool(window_kernels.frontier_near(m.layers, half, cell[0], cell[1], int(reach)))
 
     def path_to(self, search: Search, goal: tuple[int, int]) -> np.ndarray:  # (P, 2)
         """Own-frame waypoints (cell centres) of the path of ``search`` to ``goal`` (row, col

@@ -208,6 +208,20 @@ def frontier_at(layers: Layers, r0: int, r1: int, c0: int, c1: int, row: int, co
     return i < cells.shape[0] and cells[i] == (row - r0) * w + col - c0
 
 
+@njit
+def frontier_near(layers: Layers, half: int, row: int, col: int, reach: int) -> bool:
+    """Whether a map cell within ``reach`` cells (Chebyshev) of map cell (row, col) is a
+    frontier cell by :func:`frontier_at` on the window of ``half`` cells around it (clipped to
+    the map), the cells in row-major order until one is."""
+    n = layers.n
+    for r in range(max(row - reach, 0), min(row + reach + 1, n)):
+        for c in range(max(col - reach, 0), min(col + reach + 1, n)):
+            r0, c0 = max(r - half, 0), max(c - half, 0)
+            if frontier_at(layers, r0, min(r + half + 1, n), c0, min(c + half + 1, n), r, c):
+                return True
+    return False
+
+
 # -- the gain ----------------------------------------------------------------------------------
 @njit
 def square_gain(

@@ -175,20 +175,31 @@ def test_paths__search_on_the_maps_layers_is_the_readable_planners(
     p_known=st.floats(0.05, 0.6),
     p_obst=st.sampled_from([0.0, 0.02, 0.1]),
     where=st.tuples(st.floats(0, 1), st.floats(0, 1)),
+    reach=st.integers(0, 4),
 )
-def test_still_frontier__is_the_readable_planners_goal_test(
-    seed: int, n: int, p_known: float, p_obst: float, where: tuple[float, float]
+def test_frontier_near__is_the_readable_planners_goal_test_over_the_square(
+    seed: int, n: int, p_known: float, p_obst: float, where: tuple[float, float], reach: int
 ) -> None:
-    """The frontier test of a goal on a window around it, obstacles anywhere, the goal near
-    the map's edge or not."""
+    """Whether the frontier left a goal's neighbourhood (the policy's replan test): true when
+    a cell within ``reach`` (Chebyshev, inside the map) is a frontier by the readable planner
+    on a window around that cell, obstacles anywhere, near the map's edge or not; with reach 0,
+    the goal test of the cell alone (``still_frontier``)."""
     m = _own_map(seed, n, p_known, p_obst)
     r, c = min(int(where[0] * n), n - 1), min(int(where[1] * n), n - 1)
-    policy_half = 2 * CLOSE + 4 + math.ceil(INFLATE / RES)
-    r0, c0 = max(r - policy_half, 0), max(c - policy_half, 0)
-    small = (slice(r0, r + policy_half + 1), slice(c0, c + policy_half + 1))
-    want = reference.frontier_and_cost(m.free[small], m.obstacles[small], INFLATE, CLOSE, RES)
+    half = 2 * CLOSE + 4 + math.ceil(INFLATE / RES)
+    want = False
+    for y in range(max(r - reach, 0), min(r + reach + 1, n)):
+        for x in range(max(c - reach, 0), min(c + reach + 1, n)):
+            y0, x0 = max(y - half, 0), max(x - half, 0)
+            small = (slice(y0, y + half + 1), slice(x0, x + half + 1))
+            frontier = reference.frontier_and_cost(
+                m.free[small], m.obstacles[small], INFLATE, CLOSE, RES
+            )[0]
+            want = want or bool(frontier[y - y0, x - x0])
     planner = FrontierPlanner(m, INFLATE / RES + 1.0, "square", 10, 8.0, 0.8)
-    assert planner.still_frontier((r, c)) == want[0][r - r0, c - c0]
+    assert planner.frontier_near((r, c), reach) == want
+    if reach == 0:
+        assert planner.still_frontier((r, c)) == want
 
 
 @settings(max_examples=60, deadline=None)
