@@ -2,7 +2,7 @@
 
 :class:`DriveGuide` is the frontier policy (:mod:`policies.frontier`) without its controller: it
 folds every observation into its own map, plans the path to the frontier of best utility and
-replans when the frontier policy does (goal reached or left by the frontier, path blocked,
+replans when the frontier policy does (goal reached or no longer a frontier, path blocked,
 robot stalled, a robot seen near the goal, every ``replan_every`` steps). It does not drive.
 What the network sees each step (:meth:`DriveGuide.features`, layout :data:`FEATURES`), all from
 the robot's own observation and own map, in its own frame:

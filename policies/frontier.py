@@ -14,12 +14,9 @@ keeps the obstacle clearance and the frontier up to date where cells change. The
 2. the controller (:class:`~policies.controller.Controller`) follows the path by pure pursuit
    within the (v, ω) limits, slowing down or turning away when a front beam is short and
    keeping off mapped obstacles;
-3. the policy replans when the goal is reached, the frontier has left its neighbourhood (no
-   frontier cell within :data:`SAME_GOAL` of it: a goal that the robot's own beams have just
-   uncovered still leads to the frontier a cell or two beyond it), the path gets blocked, the
-   robot stalls, the goal lies on a team-mate's side (a claim, below: one just made, or one
-   made since the plan), or every ``replan_every`` steps; a goal it could not reach is
-   blacklisted for a while;
+3. the policy replans when the goal is reached, stops being a frontier, the path gets blocked,
+   the robot stalls, a robot is seen near the goal, or every ``replan_every`` steps; a goal it
+   could not reach is blacklisted for a while;
 4. it backs off when it stalls against another robot (:attr:`~policies.modes.Mode.BACK_OFF`):
    two robots that meet too close to pass (round a corner, where the camera saw neither in
    time) would each turn away, turn back to their paths and stop again for ever; each drives
@@ -84,9 +81,6 @@ __all__ = [
 
 #: Steps a goal the robot stalled on (or backed off from) stays blacklisted.
 REST_GOAL = 60
-#: m: goal cells this near each other count as the same goal: a blacklisted goal rests every
-#: frontier cell this near it, and a plan is kept while a frontier cell lies this near its goal.
-SAME_GOAL = 0.3
 
 
 class FrontierPolicy(Policy):
@@ -141,7 +135,6 @@ class FrontierPolicy(Policy):
         self.lookahead, self.min_goal = float(lookahead), float(min_goal)
         self.replan_every = int(replan_every)
         self.close_cells = max(1, round(close_gaps / resolution))
-        self.same_goal_cells = max(1, round(SAME_GOAL / resolution))
         self.gain_cells = max(1, round(gain_radius / resolution))
         self.decay = float(decay)
         self.claim_radius, self.claim_steps = float(claim_radius), int(claim_steps)
@@ -332,10 +325,8 @@ class FrontierPolicy(Policy):
         if self._stalled():
             self._blacklist[self.goal] = self._step + REST_GOAL  # stalled: give it a rest
             return True
-        if not self.planner.frontier_near(self.goal, self.same_goal_cells):
-            return True  # the frontier moved on (module doc)
-        if self._claims and self._claimed(self.map.centre(*self.goal)[None], self._claims)[0]:
-            return True  # left to a team-mate seen since (module doc)
+        if not self.planner.still_frontier(self.goal):
+            return True
         return self.planner.blocked(self.path)
 
     def _plan(self, pose: np.ndarray) -> None:
@@ -361,8 +352,9 @@ class FrontierPolicy(Policy):
         if self.map.cell(pose[0], pose[1]) is None:
             return None
         exclude = (lambda pts: self._claimed(pts, self._claims)) if self._claims else None
+        near = max(1, round(0.3 / self.map.res))
         return self.planner.search(
-            pose, self._blacklisted(), self.same_goal_cells, exclude, self._discount(), complete
+            pose, self._blacklisted(), near, exclude, self._discount(), complete
         )
 
     def _discount(self) -> Any:
@@ -389,8 +381,7 @@ class FrontierPolicy(Policy):
         free_start(passable, clearance, start, reach)
 
     def _blacklisted(self) -> list[tuple[int, int]]:
-        """The goal cells still resting (expired ones dropped): no goal within
-        :data:`SAME_GOAL` of them."""
+        """The goal cells still resting (expired ones dropped): no goal within 0.3 m of them."""
         for cell, until in list(self._blacklist.items()):
             if until <= self._step:
                 del self._blacklist[cell]

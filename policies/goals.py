@@ -8,7 +8,7 @@ fixed-size feature vector (:meth:`GoalPolicy.features`, layout in :data:`FEATURE
 :meth:`GoalPolicy.choose` picks one — slot 0 here; the learned network in
 :class:`policies.ppo.LearnedGoalPolicy` — and the planner drives there. Between decisions it
 replans as the frontier policy does when the goal is reached, blocked, claimed by a robot it
-saw or left by the frontier (:data:`~policies.frontier.SAME_GOAL`), then to its own best goal.
+saw or no longer a frontier, then to its own best goal.
 
 Everything the features hold comes from the robot's observation (its pose estimate, its own
 map, its camera sightings): no ground truth. The decision loop is split so that a training
