@@ -6,9 +6,11 @@ floors asks, of every robot with the exchange on: ``nu_mean`` ≤ 0.03 m, ``map_
 ≥ 0.9, ``completeness_seen`` ≥ 0.8, ``duplicates`` ≤ 0.05, ``nees_rel`` ≤ 6 as a Monte Carlo
 mean (per robot slot over the seeds; the largest is shown); team coverage ≥ 0.85; and, exchange
 on against off (paired by seed and robot, mean ± 95 % t half-width), ``completeness_seen``
-higher and ``nu_mean`` no more than 3 mm worse. Usage::
+higher and ``nu_mean`` no more than 3 mm worse. With ``--against B``, also each map the two
+studies share, exchange on, robot by robot paired by seed (this study − B): a variant (a
+policy, a ``--set``) against the default. Usage::
 
-    python scripts/floor_targets.py out/fidelity/summary.json
+    python scripts/floor_targets.py out/fidelity/summary.json [--against out/base/summary.json]
 """
 
 from __future__ import annotations
@@ -77,12 +79,50 @@ def table(summary: Mapping[str, Any]) -> str:
     return "\n".join([head, *rows])
 
 
+PAIRED = ("nu_mean", "map_precision", "completeness_seen", "nees_rel", "pose_error")
+
+
+def against(summary: Mapping[str, Any], base: Mapping[str, Any]) -> str:
+    """Per map both studies ran: each metric's mean in ``base`` and in ``summary``, and their
+    difference paired by seed and robot (exchange on; seeds only one study ran are left
+    out)."""
+    lines = [
+        "| map | metric | base | this | this − base (paired, 95 % t) | robots |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, by in summary["episodes"].items():
+        if name not in base["episodes"]:
+            continue
+        theirs = {ep["seed"]: ep for ep in base["episodes"][name]["exchange_on"]}
+        pairs = [
+            (ep["robots"][k], theirs[ep["seed"]]["robots"][k])
+            for ep in by["exchange_on"]
+            if ep["seed"] in theirs
+            for k in sorted(ep["robots"])
+        ]
+        for metric in PAIRED:
+            mine = [a[metric] for a, _ in pairs]
+            ref = [b[metric] for _, b in pairs]
+            d, h = paired([x - y for x, y in zip(mine, ref, strict=True)])
+            lines.append(
+                f"| {name} | `{metric}` | {np.mean(ref):.4g} | {np.mean(mine):.4g} | "
+                f"{d:+.4g} ± {h:.2g} | {len(pairs)} |"
+            )
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("summary", help="a polyslam fidelity study's summary.json")
+    parser.add_argument("--against", help="another study's summary.json to pair with")
     args = parser.parse_args()
     with open(args.summary) as f:
-        print(table(json.load(f)))
+        summary = json.load(f)
+    print(table(summary))
+    if args.against:
+        with open(args.against) as f:
+            print()
+            print(against(summary, json.load(f)))
 
 
 if __name__ == "__main__":

@@ -40,3 +40,16 @@ def test_paired__the_t_interval_of_two_differences() -> None:
     mean, half = script.paired([1.0, 3.0])
     # sd = √2, t(0.975, 1) = 12.706: half-width 12.706 · √2 / √2
     assert mean == 2.0 and half == pytest.approx(12.7062, abs=1e-4)
+
+
+def test_against__pairs_the_maps_both_studies_ran_by_seed() -> None:
+    script = load_script("floor_targets")
+    for ep in (a := [_episode(0, 0.02, 0.9, 2.0, 0.9), _episode(1, 0.04, 0.9, 2.0, 0.9)]):
+        for r in ep["robots"].values():
+            r["pose_error"] = 0.1
+    base = {"episodes": {"m": {"exchange_on": [dict(a[1]), dict(a[0])]}, "other": {}}}
+    this = {"episodes": {"m": {"exchange_on": a}, "only_here": {"exchange_on": a}}}
+    rows = script.against(this, base).splitlines()[2:]
+    # one map in common, one row per metric, each robot paired with itself: zero differences
+    assert [r.split("|")[2].strip() for r in rows] == [f"`{m}`" for m in script.PAIRED]
+    assert all("+0 ± 0" in r and r.rstrip("| ").endswith("6") for r in rows)
