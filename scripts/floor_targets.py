@@ -21,19 +21,13 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from scipy import stats
+
+from polyslam_env.metrics.statistics import paired_interval
 
 NU_MAX, PRECISION_MIN, SEEN_MIN, DUPLICATES_MAX, NEES_REL_MAX, COVERAGE_MIN = (
     0.03, 0.9, 0.8, 0.05, 6.0, 0.85,
 )  # fmt: skip
 NU_SLACK_MM = 3.0
-
-
-def paired(diffs: Sequence[float]) -> tuple[float, float]:
-    """(mean, 95 % t half-width) of paired differences."""
-    d = np.asarray(diffs, dtype=float)
-    half = stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / np.sqrt(d.size)
-    return float(d.mean()), float(half)
 
 
 def map_row(name: str, on: Sequence[Mapping[str, Any]], off: Sequence[Mapping[str, Any]]) -> str:
@@ -55,7 +49,7 @@ def map_row(name: str, on: Sequence[Mapping[str, Any]], off: Sequence[Mapping[st
             a, b = ep["robots"][k], other["robots"][k]
             seen.append(a["completeness_seen"] - b["completeness_seen"])
             nu.append(1000.0 * (a["nu_mean"] - b["nu_mean"]))
-    (ds, hs), (dn, hn) = paired(seen), paired(nu)
+    (ds, hs), (dn, hn) = paired_interval(seen), paired_interval(nu)
     return (
         f"| {name} | {on[0]['steps']} | {len(on)} | {count(lambda r: r['nu_mean'] <= NU_MAX)} | "
         f"{count(lambda r: r['map_precision'] >= PRECISION_MIN)} | "
@@ -103,7 +97,7 @@ def against(summary: Mapping[str, Any], base: Mapping[str, Any]) -> str:
         for metric in PAIRED:
             mine = [a[metric] for a, _ in pairs]
             ref = [b[metric] for _, b in pairs]
-            d, h = paired([x - y for x, y in zip(mine, ref, strict=True)])
+            d, h = paired_interval([x - y for x, y in zip(mine, ref, strict=True)])
             lines.append(
                 f"| {name} | `{metric}` | {np.mean(ref):.4g} | {np.mean(mine):.4g} | "
                 f"{d:+.4g} ± {h:.2g} | {len(pairs)} |"

@@ -29,11 +29,11 @@ from multiprocessing import Pool
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 import polyslam_env
 from policies.base import PolicyContext, make_policy
 from policies.goals import CANDIDATES, FEATURES, GoalPolicy
+from polyslam_env.metrics.statistics import t_half_width
 
 POLICIES = ("frontier", "random", "ppo")
 #: The step of the "coverage at step" comparison (issue 44: team coverage at 200 steps).
@@ -77,10 +77,6 @@ def _episode(job: tuple[dict[str, Any], int, str]) -> tuple[float, list[int]]:
         obs, *_ = env.step({a: team[a].act(obs[a], rng) for a in env.agents})
     assert env.episode is not None
     return float(env.episode.coverage.coverage), chosen
-
-
-def _interval(diff: np.ndarray) -> float:
-    return float(stats.t.ppf(0.975, len(diff) - 1) * diff.std(ddof=1) / np.sqrt(len(diff)))
 
 
 def main() -> None:
@@ -150,8 +146,9 @@ def main() -> None:
     ):
         diff = np.array(values[last]) - np.array(values[base])
         relative = 100 * diff.mean() / np.mean(values[base])
+        half = f"{t_half_width(diff):.4f}" if diff.size > 1 else "n/a (one pair)"
         print(
-            f"{last} − {base} {name}, paired by seed: {diff.mean():+.4f} ± {_interval(diff):.4f}"
+            f"{last} − {base} {name}, paired by seed: {diff.mean():+.4f} ± {half}"
             f" (95 % t interval; {relative:+.1f} %)"
         )
     print(

@@ -29,7 +29,6 @@ import time
 from typing import Any
 
 import numpy as np
-import scipy.stats
 
 from policies.base import make_team
 from polyslam_env.apps.fidelity import FidelityConfig, episode_config
@@ -40,6 +39,7 @@ from polyslam_env.core.config import parse_overrides
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import parallel_env
+from polyslam_env.metrics.statistics import t_half_width
 
 #: metric → (target, True when a value must be at least the target)
 METRICS = {
@@ -126,7 +126,7 @@ def report(results: list[dict[str, Any]]) -> str:
         a = np.array([r[metric] for res in results for r in res["a"]])
         b = np.array([r[metric] for res in results for r in res["b"]])
         d = b - a
-        half = scipy.stats.t.ppf(0.975, len(d) - 1) * d.std(ddof=1) / np.sqrt(len(d))
+        half = t_half_width(d)
         miss_a = int(np.sum(a < target if at_least else a > target))
         miss_b = int(np.sum(b < target if at_least else b > target))
         lines.append(

@@ -19,7 +19,8 @@ import argparse
 import json
 
 import numpy as np
-from scipy import stats
+
+from polyslam_env.metrics.statistics import t_half_width
 
 #: The measures per episode, in the order printed.
 MEASURES = ("coverage", "nu_mean", "map_precision", "bytes")
@@ -56,11 +57,6 @@ def _episodes(policy: str, files: list[str]) -> dict[str, np.ndarray]:
     return out
 
 
-def _half_width(x: np.ndarray) -> float:
-    """Half-width of the 95 % t interval of the mean of ``x``."""
-    return float(stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / np.sqrt(len(x)))
-
-
 def _front(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Indices of the points no other point beats (lower x and higher y), by x."""
     keep = [
@@ -94,14 +90,14 @@ def main() -> None:
     import matplotlib.pyplot as plt
 
     cov = np.array([d["coverage"].mean() for d in data])
-    cov_err = np.array([_half_width(d["coverage"]) for d in data])
+    cov_err = np.array([t_half_width(d["coverage"]) for d in data])
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
     for ax, key, scale, xlabel in (
         (axes[0], "nu_mean", 1000.0, "nu_mean (mm, robots' mean)"),
         (axes[1], "bytes", 1.0, "bytes sent (team, per episode)"),
     ):
         x = scale * np.array([d[key].mean() for d in data])
-        x_err = scale * np.array([_half_width(d[key]) for d in data])
+        x_err = scale * np.array([t_half_width(d[key]) for d in data])
         for i, label in enumerate(labels):
             ax.errorbar(
                 x[i], cov[i], xerr=x_err[i], yerr=cov_err[i], fmt="o", capsize=3, label=label
@@ -117,8 +113,8 @@ def main() -> None:
         d = data[i]
         print(
             f"{label}: coverage {cov[i]:.3f} ± {cov_err[i]:.3f}, nu_mean"
-            f" {d['nu_mean'].mean():.4f} ± {_half_width(d['nu_mean']):.4f} m, bytes"
-            f" {d['bytes'].mean():.0f} ± {_half_width(d['bytes']):.0f}, map_precision"
+            f" {d['nu_mean'].mean():.4f} ± {t_half_width(d['nu_mean']):.4f} m, bytes"
+            f" {d['bytes'].mean():.0f} ± {t_half_width(d['bytes']):.0f}, map_precision"
             f" {d['map_precision'].mean():.3f}"
             f" ({len(d['coverage'])} episodes)"
         )
@@ -127,7 +123,7 @@ def main() -> None:
             print(f"{label}: not the same maps and seeds as {labels[0]}, not paired")
             continue
         paired = ", ".join(
-            f"{name} {d.mean():+.4g} ± {_half_width(d):.2g}"
+            f"{name} {d.mean():+.4g} ± {t_half_width(d):.2g}"
             for name in MEASURES
             for d in [data[i][name] - data[0][name]]
         )

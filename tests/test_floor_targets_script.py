@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import pytest
-
 from tests.scripts_module import load_script
 
 
@@ -33,13 +31,6 @@ def test_map_row__counts_each_target_at_its_bound_and_pairs_on_with_off() -> Non
     # paired by seed: completeness +0.1 every robot (zero spread), nu_mean +2 mm every robot
     assert cells[9] == "+0.100 ± 0.000"
     assert cells[10] == "+2.00 ± 0.00"
-
-
-def test_paired__the_t_interval_of_two_differences() -> None:
-    script = load_script("floor_targets")
-    mean, half = script.paired([1.0, 3.0])
-    # sd = √2, t(0.975, 1) = 12.706: half-width 12.706 · √2 / √2
-    assert mean == 2.0 and half == pytest.approx(12.7062, abs=1e-4)
 
 
 def test_against__pairs_the_maps_both_studies_ran_by_seed() -> None:
