@@ -235,7 +235,9 @@ def _command_sections(
     if "reproduce" in wanted and plan.reproduce_runs:
         out["reproduce"] = _emit(report, "reproduce", command.bench_reproduce(plan.reproduce_runs))
     if "train" in wanted and plan.train_timesteps:
-        row = command.bench_train(plan.train_timesteps, baseline=train_baseline)
+        row = command.bench_train(
+            plan.train_timesteps, baseline=train_baseline, repeats=plan.train_repeats
+        )
         row["ratio_to_mpe"] = ratio(row["env_steps_per_s"], mpe)
         row.setdefault("ratio_to_today", None)  # measured only against a --train-baseline tree
         out["train"] = _emit(report, "train", row)

@@ -92,7 +92,8 @@ TITLES = {
     " the env step's split into the team SLAM's step, its exchange and the rest",
     "reproduce": "polyslam reproduce --runs N (the core paper's runs, 2 workers)",
     "train": "polyslam train --config configs/train_goals.yaml, cut short: env steps per second"
-    " of the whole run",
+    " of its learning loop after the first rollout (median of the runs; × today: median over"
+    " interleaved pairs of runs of both trees)",
     "profile": "profile of the env step",
 }
 
@@ -352,7 +353,12 @@ def _train_row(r: dict[str, Any]) -> str:
     cells = [str(r["timesteps"]), f"{r['env_steps']:.0f}", f"{r['seconds']:.1f}",
              f"{r['env_steps_per_s']:.1f}", _opt(r.get("ratio_to_mpe"), 4),
              _opt(r.get("ratio_to_today"))]  # fmt: skip
-    return _columns("train", cells)
+    line = _columns("train", cells)
+    if r.get("ratios_to_today"):
+        pairs = ", ".join(f"{x:.2f}" for x in r["ratios_to_today"])
+        cpu = ", ".join(f"{x:.2f}" for x in r["cpu_ratios_to_today"])
+        line += f"\n(× today per pair of runs: {pairs}; CPU per env step, today / here: {cpu})"
+    return line
 
 
 FORMATTERS = {

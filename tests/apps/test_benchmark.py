@@ -144,27 +144,78 @@ def test_targets__met_flags_and_missing_figures() -> None:
     assert rows[7]["measured"] == pytest.approx(11.0, rel=1e-12)
 
 
-def test_train_row__its_ratios_to_mpe_and_to_today(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The training row's env steps/s over the same run's MPE rate; over the baseline tree's
-    (``--train-baseline``), both trees run as ``polyslam train`` processes, same run."""
+def test_train_row__median_of_interleaved_pairs(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Against a baseline tree (``--train-baseline``), the row runs pairs of ``polyslam train``
+    processes, baseline first then this tree first, and gives the median over the pairs of the
+    learning loops' ratios (and over this tree's runs, its env steps/s over MPE's)."""
     from polyslam_env.apps import benchmark_system
 
-    rates, cpus = {"base": 10.0}, {"base": 4.0}
+    # per tree, the loop's env steps/s and CPU ms per env step of each successive run
+    rates = {"base": [10.0, 12.0, 8.0], "here": [30.0, 24.0, 40.0]}
+    cpus = {"base": [4.0, 5.0, 4.4], "here": [1.6, 2.0, 1.1]}
+    order: list[str] = []
 
     def fake_run(tree: Path, timesteps: int, config: str) -> dict[str, Any]:
-        rate = rates.get(Path(tree).name, 30.0)
-        return {"timesteps": timesteps, "env_steps": 512.0, "seconds": 512.0 / rate,
-                "env_steps_per_s": rate,
-                "cpu_ms_per_env_step": cpus.get(Path(tree).name, 1.6)}  # fmt: skip
+        name = "base" if Path(tree).name == "base" else "here"
+        k = order.count(name)
+        order.append(name)
+        rate, cpu = rates[name][k], cpus[name][k]
+        loop = {"env_steps": 512.0, "seconds": 512.0 / rate, "env_steps_per_s": rate,
+                "cpu_ms_per_env_step": cpu, "rollouts": 2, "before_s": 9.0}  # fmt: skip
+        whole = rate / 2.0 if name == "here" else rate
+        return {"timesteps": timesteps, "env_steps": 768.0, "seconds": 768.0 / whole,
+                "env_steps_per_s": whole, "cpu_ms_per_env_step": cpu, "steady": loop}  # fmt: skip
 
     monkeypatch.setattr(benchmark_system, "train_in_tree", fake_run)
     out: dict[str, Any] = {}
     plan = benchmark.PLANS["full"]
+    assert plan.train_repeats == 3
     benchmark._command_sections(out, plan, {"train"}, lambda s, r: None, 5000.0, Path("base"))
-    assert out["train"]["ratio_to_mpe"] == pytest.approx(30.0 / 5000.0, rel=1e-12)
-    assert out["train"]["ratio_to_today"] == pytest.approx(3.0, rel=1e-12)
-    assert out["train"]["cpu_ratio_to_today"] == pytest.approx(4.0 / 1.6, rel=1e-12)
-    assert out["train"]["baseline"]["env_steps_per_s"] == 10.0
+    assert order == ["base", "here", "here", "base", "base", "here"]
+    row = out["train"]
+    assert row["ratios_to_today"] == pytest.approx([3.0, 2.0, 5.0], rel=1e-12)
+    assert row["ratio_to_today"] == pytest.approx(3.0, rel=1e-12)  # not the mean, 10/3
+    assert row["cpu_ratios_to_today"] == pytest.approx([2.5, 2.5, 4.0], rel=1e-12)
+    assert row["cpu_ratio_to_today"] == pytest.approx(2.5, rel=1e-12)
+    assert row["whole_ratios_to_today"] == pytest.approx([1.5, 1.0, 2.5], rel=1e-12)
+    assert row["env_steps_per_s"] == 30.0 and row["baseline"]["env_steps_per_s"] == 10.0
+    assert row["ratio_to_mpe"] == pytest.approx(30.0 / 5000.0, rel=1e-12)
+    assert len(row["runs"]) == 3 and len(row["baseline"]["runs"]) == 3
+
+
+def test_train_marks__time_the_loop_after_the_first_rollout(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``train_marks`` wraps SB3's rollout collection and PPO's update (here stand-ins that
+    count timesteps and burn CPU, under the names ``learn`` calls) to mark each rollout's start
+    and each update's end; ``steady`` is the loop from the second rollout on."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+
+    from polyslam_env.apps import train_marks
+
+    def collect(self: Any, *args: Any) -> bool:
+        self.num_timesteps += 32
+        sum(range(20_000))  # CPU time to see
+        return True
+
+    monkeypatch.setattr(OnPolicyAlgorithm, "collect_rollouts", collect)
+    monkeypatch.setattr(PPO, "train", lambda self: None)
+    got = train_marks.install()
+    model = type("Model", (), {"num_timesteps": 0, "env": None})()
+    for _ in range(3):
+        assert OnPolicyAlgorithm.collect_rollouts(model, None, None, None, 32)  # type: ignore[arg-type]
+        PPO.train(model)  # type: ignore[arg-type]
+    assert [m["what"] for m in got] == ["rollout", "updated"] * 3
+    assert [m["timesteps"] for m in got] == [0, 32, 32, 64, 64, 96]
+    times, cpu = [m["t"] for m in got], [m["cpu"] for m in got]
+    assert times == sorted(times) and cpu == sorted(cpu) and cpu[-1] > cpu[0]
+    loop = train_marks.steady(got)
+    assert loop["timesteps"] == 64 and loop["rollouts"] == 2
+    assert loop["seconds"] == pytest.approx(times[-1] - times[2], rel=1e-12)
+    assert loop["cpu_s"] == pytest.approx(cpu[-1] - cpu[2], rel=1e-12)
+    with pytest.raises(ValueError, match="at least two"):
+        train_marks.steady(got[:2])
 
 
 def test_train_in_tree__a_tree_without_the_config_is_a_one_line_error(tmp_path: Path) -> None:
