@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -159,6 +161,13 @@ def register(sub: Any) -> None:
         help="also run the train row from this source tree (e.g. a checkout of issue 41's"
         " 'today', main at d0c6831) and give this tree's env steps/s over it, same run",
     )
+    parser.add_argument(
+        "--train-repeats",
+        type=int,
+        metavar="N",
+        help="pairs of training runs against --train-baseline, interleaved (default 3; the row"
+        " gives the median of the pairs' ratios)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of maps and actions")
     # Hidden: a few steps per figure, only to exercise the command (tests).
     parser.add_argument("--tiny", action="store_true", help=argparse.SUPPRESS)
@@ -170,6 +179,12 @@ def run(args: argparse.Namespace) -> int:
     from polyslam_env.core.io import write_json
 
     plan = PLANS["tiny" if args.tiny else "quick" if args.quick else "full"]
+    if args.train_repeats is not None:
+        if args.train_repeats < 1:
+            print(f"polyslam: error: --train-repeats: must be >= 1, got {args.train_repeats}",
+                  file=sys.stderr)  # fmt: skip
+            return 2
+        plan = dataclasses.replace(plan, train_repeats=args.train_repeats)
     printer = _Printer()
     extra = bool(args.processes) or args.profile is not None
     sections = args.only or ([] if extra else SECTIONS)

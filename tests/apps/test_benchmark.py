@@ -474,3 +474,12 @@ def test_benchmark_command__backends_rows_time_every_backend_against_no_slam(
         assert r["ratio_to_no_slam"] == pytest.approx(r["steps_per_s"]["median"] / reference)
     printed = capsys.readouterr().out
     assert all(b in printed for b in BACKENDS)
+
+
+def test_benchmark_command__train_repeats_below_one_is_a_one_line_error(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["benchmark", "--only", "train", "--train-repeats", "0"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "polyslam: error: --train-repeats: must be >= 1, got 0"
+    )
