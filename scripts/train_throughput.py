@@ -36,6 +36,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="a source tree (repeat: the first is the reference)")  # fmt: skip
     parser.add_argument("--timesteps", type=int, default=2304, help="robot decisions per run")
     parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument(
+        "--n-steps", type=int, help="PPO's decisions per slot and rollout (default: the config's)"
+    )
     parser.add_argument("--out", type=Path, help="write the runs as JSON here")
     args = parser.parse_args(argv)
     trees = [t.resolve() for t in args.tree]
@@ -43,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     for k in range(args.repeats):
         for tree in trees:
             print(f"repeat {k + 1}/{args.repeats}: {tree}", file=sys.stderr, flush=True)
-            runs[str(tree)].append(train_in_tree(tree, args.timesteps))
+            runs[str(tree)].append(train_in_tree(tree, args.timesteps, n_steps=args.n_steps))
     first = None
     print(f"{'tree':<40} {'whole: env steps/s':>18} {'loop: env steps/s':>17}"
           f" {'CPU ms/env step':>15} {'× first':>8}")  # fmt: skip

@@ -49,7 +49,8 @@ PRINTING = [
     (["seif_fusion_nees.py", "--episodes", "1", "--steps", "20"], "NEES"),
     (["slam_table.py", "--seeds", "1", "--workers", "1"], "paper Table 1:"),
     (["slam_calls.py", "--first", "2", "--last", "6"], "calls per env step"),
-    (["train_throughput.py", "--tree", ".", "--timesteps", "64", "--repeats", "1"],
+    (["train_throughput.py", "--tree", ".", "--timesteps", "48", "--n-steps", "2", "--repeats",
+      "1"],
      "CPU ms/env step"),
     (["vec_lockstep.py", "--steps", "10"], "2 processes / one:"),
 ]  # fmt: skip

@@ -55,9 +55,12 @@ def bench_reproduce(runs: int, workers: int = 2) -> dict[str, Any]:
     return {"runs": runs, "workers": workers, "seconds": time.perf_counter() - start}
 
 
-def train_in_tree(tree: Path, timesteps: int, config: str = "train_goals.yaml") -> dict[str, Any]:
+def train_in_tree(
+    tree: Path, timesteps: int, config: str = "train_goals.yaml", n_steps: int | None = None
+) -> dict[str, Any]:
     """One ``polyslam train`` process of the source ``tree`` (on ``PYTHONPATH``) on its
-    ``configs/<config>`` cut to ``timesteps`` (module docstring), with
+    ``configs/<config>`` cut to ``timesteps`` (module docstring; ``n_steps``, if given,
+    replaces PPO's decisions per slot and rollout: short rollouts for a quick check), with
     :mod:`~polyslam_env.apps.train_marks` recording its rollouts: the whole process (wall
     seconds, env steps, env steps/s, CPU ms per env step of the process and its workers) and
     its learning loop after the first rollout (``steady``: the same figures)."""
@@ -69,6 +72,8 @@ def train_in_tree(tree: Path, timesteps: int, config: str = "train_goals.yaml") 
         raise FileNotFoundError(f"{source}: no such training config in the tree {tree}")
     cfg = yaml.safe_load(source.read_text())
     cfg.update(timesteps=timesteps, eval_episodes=0, checkpoint_every=10 * timesteps)
+    if n_steps is not None:
+        cfg.setdefault("ppo", {})["n_steps"] = n_steps
     per_decision = cfg.get("decide_every", 1) if cfg.get("control") == "goals" else 1
     env_steps_per = per_decision / cfg["env"]["num_robots"]  # env steps per robot decision
     program = Path(train_marks.__file__).read_text() + "\n" + CLI
