@@ -254,6 +254,66 @@ def test_closing__starts_above_close_above_and_ends_below_close_below() -> None:
     assert sigma(0.04) and policy.closings == 2
 
 
+def test_closing__spends_at_most_close_share_of_the_steps_closing_loops() -> None:
+    """The budget: a loop closing starts only while the steps spent closing are at most
+    ``close_share`` of the steps so far (with ``shape_shift: pose``'s honest σ on Willow the
+    closings, unbounded, took 35–45 % of the steps and the teams' coverage fell below 0.85);
+    the steps are counted and reported by ``metrics``."""
+    policy = _open_room_policy(
+        close_above=0.03, close_below=0.02, anchor_below=0.01, close_rest=0, close_share=0.25
+    )
+    pose = np.array([0.0, 0.0, 0.0])
+    state = {"std": np.array([0.005, 0.0, 0.001])}
+    policy.context = _with_std(policy.context, state)
+
+    def sigma(s: float) -> bool:
+        state["std"] = np.array([s, 0.0, 0.001])
+        policy._step += 1
+        return policy._closing_now(pose, None)
+
+    assert not sigma(0.005)  # step 1: anchored
+    assert all(sigma(0.04) for _ in range(9))  # steps 2–10 closing: 9 steps
+    assert not sigma(0.01)  # step 11: done
+    # 9 closing steps are within 0.25 of the steps only from step 36 on
+    closing = {step: sigma(0.04) for step in range(12, 41)}
+    assert not any(closing[step] for step in range(12, 36)) and all(
+        closing[s] for s in range(36, 41)
+    )
+    assert policy.metrics() == {"closings": 2.0, "closing_steps": 9.0 + 5.0}
+    assert (
+        make_policy(
+            "frontier",
+            polyslam_env.parallel_env(map="generator:warehouse", num_robots=1),
+            "robot_0",
+        ).metrics()
+        == {}
+    )
+
+
+def test_closing__gives_up_after_close_timeout_and_forgets_that_anchor() -> None:
+    """A loop closing that neither reaches its anchor nor its σ within ``close_timeout`` steps
+    (a robot stalled on its way: on Willow one closing lasted 1,714 steps) ends, and the
+    anchors within 1 m of its goal are forgotten; others stay."""
+    policy = _open_room_policy(
+        close_above=0.03, close_below=0.02, anchor_below=0.01, close_timeout=10, close_share=1.0
+    )
+    pose = np.array([-2.0, 0.0, 0.0])
+    goal = _anchor(policy, -2.0, 2.0)
+    other = _anchor(policy, 2.0, -2.0)
+    state = {"std": np.array([0.04, 0.0, 0.001])}
+    policy.context = _with_std(policy.context, state)
+    policy._step += 1
+    assert policy._closing_now(pose, None)
+    policy._plan_anchor(pose)
+    assert policy.goal == goal
+    for _ in range(9):
+        policy._step += 1
+        assert policy._closing_now(pose, None)
+    policy._step += 1
+    assert not policy._closing_now(pose, None)  # 10 steps: given up
+    assert not policy._anchors[goal] and policy._anchors[other]
+
+
 def _with_std(context: Any, state: dict) -> Any:
     """``context`` whose relative_pose_std returns ``state["std"]``."""
 
