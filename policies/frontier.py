@@ -34,8 +34,8 @@ exploring once the σ is below ``close_below`` (or the place is reached; it then
 ``close_rest`` steps). Two bounds keep it exploring: a closing starts only while the steps
 spent closing are at most ``close_share`` of the steps so far, and one that has not ended
 after ``close_timeout`` steps (a stall on the way) is given up and its anchor forgotten.
-The EKF's correlations carry the correction to the walls mapped on the way out. It corrects position drift, not heading drift: README "SLAM on large floor plans" has
-the measurements.
+The EKF's correlations carry the correction to the walls mapped on the way out. It corrects
+position drift, not heading drift: README "SLAM on large floor plans" has the measurements.
 
 Team coordination uses only what a robot sees: when its camera detects another robot, the
 frontiers nearer to where that robot was seen than to where this one stood (within
