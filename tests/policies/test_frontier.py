@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -231,20 +232,27 @@ def test_plan_anchor__goes_to_the_nearest_anchor_by_path_within_reach() -> None:
     assert not policy._closing and policy.goal != far  # out of reach: back to exploring
 
 
-def test_closing__starts_above_close_above_and_ends_below_close_below() -> None:
-    """The loop closing's switch on the filter's own position σ (√(σx² + σy²) of P_S):
-    anchors where σ < ``anchor_below``, a closing once σ > ``close_above`` (and an anchor
-    exists), its end once σ < ``close_below``, then ``close_rest`` steps without one."""
-    policy = _open_room_policy(close_above=0.03, close_below=0.02, anchor_below=0.01, close_rest=5)
-    pose = np.array([0.0, 0.0, 0.0])
-    state = {"std": np.array([0.005, 0.005, 0.001])}
+def _sigma_steps(policy: FrontierPolicy) -> Callable[[float], bool]:
+    """A function that plays one step of ``policy``'s loop-closing switch at the origin with
+    the filter's position σ ``s`` (m) and returns whether a closing is on."""
+    state = {"std": np.zeros(3)}
     policy.context = _with_std(policy.context, state)
+    pose = np.zeros(3)
 
     def sigma(s: float) -> bool:
         state["std"] = np.array([s, 0.0, 0.001])
         policy._step += 1
         return policy._closing_now(pose, None)
 
+    return sigma
+
+
+def test_closing__starts_above_close_above_and_ends_below_close_below() -> None:
+    """The loop closing's switch on the filter's own position σ (√(σx² + σy²) of P_S):
+    anchors where σ < ``anchor_below``, a closing once σ > ``close_above`` (and an anchor
+    exists), its end once σ < ``close_below``, then ``close_rest`` steps without one."""
+    policy = _open_room_policy(close_above=0.03, close_below=0.02, anchor_below=0.01, close_rest=5)
+    sigma = _sigma_steps(policy)
     assert not sigma(0.005) and policy._anchors.sum() == 1  # anchored here
     assert not sigma(0.029)  # below close_above
     assert sigma(0.031) and policy.closings == 1
@@ -262,15 +270,7 @@ def test_closing__spends_at_most_close_share_of_the_steps_closing_loops() -> Non
     policy = _open_room_policy(
         close_above=0.03, close_below=0.02, anchor_below=0.01, close_rest=0, close_share=0.25
     )
-    pose = np.array([0.0, 0.0, 0.0])
-    state = {"std": np.array([0.005, 0.0, 0.001])}
-    policy.context = _with_std(policy.context, state)
-
-    def sigma(s: float) -> bool:
-        state["std"] = np.array([s, 0.0, 0.001])
-        policy._step += 1
-        return policy._closing_now(pose, None)
-
+    sigma = _sigma_steps(policy)
     assert not sigma(0.005)  # step 1: anchored
     assert all(sigma(0.04) for _ in range(9))  # steps 2–10 closing: 9 steps
     assert not sigma(0.01)  # step 11: done
