@@ -332,6 +332,10 @@ def test_frontier_closing__bad_thresholds_are_named() -> None:
         make_policy("frontier_closing", env, "robot_0", close_below=0.05)
     with pytest.raises(ValueError, match="close_reach must be > 0"):
         make_policy("frontier_closing", env, "robot_0", close_reach=0.0)
+    with pytest.raises(ValueError, match=r"close_share must be in \[0, 1\], got 1.5"):
+        make_policy("frontier_closing", env, "robot_0", close_share=1.5)
+    with pytest.raises(ValueError, match="close_timeout must be >= 1, got 0"):
+        make_policy("frontier_closing", env, "robot_0", close_timeout=0)
     assert not make_policy("frontier", env, "robot_0").close_loops  # off by default
 
 
