@@ -127,7 +127,13 @@ from polyslam_env.comms.alignment import (
 )
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
 from polyslam_env.comms.free_space import FreeCells, FreeSpace
-from polyslam_env.comms.kernels import covered_by_walls, kept_runs, normal_variances
+from polyslam_env.comms.kernels import (
+    covered_by_walls,
+    kept_runs,
+    normal_variances,
+    variance_floor,
+)
+from polyslam_env.comms.kernels import received_geometry as kernel_geometry
 from polyslam_env.comms.messages import (
     GridMessage,
     Header,
@@ -1159,22 +1165,22 @@ class RendezvousExchange:
         pose_part = d_state @ slam.cov[:3, :3] @ d_state.T
         fused_cov_t = pose_part + d_noise @ noise_cov @ d_noise.T / RECEIVED_CI_WEIGHT
         min_overlap = slam.config.merge_min_overlap
+        turned = rotation(float(t[2]))
         for record in fresh:
             version = _version(record)
             seen[version] = record.revision
             # received_point_set and transform_normal_sigma on one chain and one ∂p/∂T; on
             # the pose columns only (the rest are zeros): _fuse sizes G_x to the state
             q = chain_points(record.polynomial, self.chord_tol, self.spacing)
-            xy, dp_dt = frame_points(q, t)
-            normals = _chain_normals(q, t)
-            sure = _normal_sigma(normals, dp_dt, cov_t) <= limit
+            xy, dp_dt, normals, sigma = received_geometry(q, t, turned, cov_t)
+            sure = sigma <= limit
             self.dropped_points[r] += int(np.count_nonzero(~sure))
             runs = uncovered_runs(sure, xy, min_overlap)
             if not runs:
                 continue
             # rule 1 before the refit: held walls better than any refit of this chain could
             # be cover every run of it that rule 1 would keep, so nothing would be taken
-            shift = rotation(float(t[2])) @ _ETA_AXIS[record.polynomial.variate]
+            shift = turned @ _ETA_AXIS[record.polynomial.variate]
             floor = refit_variance_floor(
                 normals[sure], fused_cov_t, shift, record.c0_var / RECEIVED_CI_WEIGHT
             )
@@ -1385,25 +1391,19 @@ def transform_normal_sigma(
     standard deviation (m) of its position along the curve's normal that the transform's
     covariance ``cov_t`` (3, 3) causes, in the receiver's frame."""
     q = chain_points(poly, chord_tol, spacing)
-    _, dp_dt = frame_points(q, transform)  # (N, 2, 3)
-    return _normal_sigma(_chain_normals(q, transform), dp_dt, cov_t)
+    return received_geometry(q, transform, rotation(float(transform[2])), cov_t)[3]
 
 
-def _chain_normals(q: np.ndarray, transform: np.ndarray) -> np.ndarray:
-    """(N, 2) unit normals of the chain ``q`` (N, 2, sender frame) turned into the receiver's
-    frame by ``transform``."""
-    d = np.gradient(q, axis=0) if len(q) > 1 else np.array([[1.0, 0.0]])
-    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
-    out: np.ndarray = np.stack([-d[:, 1], d[:, 0]], axis=1) @ rotation(float(transform[2])).T
-    return out
-
-
-def _normal_sigma(normal: np.ndarray, dp_dt: np.ndarray, cov_t: np.ndarray) -> np.ndarray:
-    """:func:`transform_normal_sigma` from the chain's normals ``normal`` (N, 2,
-    :func:`_chain_normals`) and its points' ∂p/∂T ``dp_dt`` (N, 2, 3)."""
-    g = np.einsum("ni,nij->nj", normal, dp_dt)  # (N, 3) ∂(normal offset)/∂T
-    out: np.ndarray = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", g, cov_t, g), 0.0))
-    return out
+def received_geometry(
+    q: np.ndarray, transform: np.ndarray, turned: np.ndarray, cov_t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A received chain ``q`` (N, 2, sender frame) in the receiver's frame: its points (N, 2)
+    and their ∂p/∂T (N, 2, 3) (:func:`~polyslam_env.comms.alignment.frame_points`), its unit
+    normals (N, 2) and each point's σ along its normal from the transform's covariance
+    ``cov_t`` (3, 3) (:func:`transform_normal_sigma`); ``turned`` = R(θ) of ``transform``.
+    One compiled call: :func:`~polyslam_env.comms.kernels.received_geometry`."""
+    t = np.asarray(transform, dtype=float)
+    return kernel_geometry(q, t, turned, np.asarray(cov_t, dtype=float))
 
 
 def normal_variance(poly: Polynomial, c0_var: float) -> float:
@@ -1438,15 +1438,14 @@ def refit_variance_floor(
     The chain's normals stand for the piece's (the refit follows the chain within
     ``refit_tol``): the least nᵀQn over them. For curved pieces the mean-slope normal lies among
     the chain's normals but the factor (1 + s̄²)/(1 + B'_mid²) is not exactly 1; the floor is
-    checked against the refits of random curved records in ``tests/comms/test_exchange.py``."""
-    if len(normals) == 0:
-        return 0.0
-    cov_t = np.asarray(cov_t, dtype=float)
-    q = cov_t[:2, :2].copy()
-    if cov_t[2, 2] > 0.0:
-        q -= np.outer(cov_t[:2, 2], cov_t[2, :2]) / cov_t[2, 2]
-    q += shift_var * np.outer(shift, shift)
-    return float(np.einsum("ni,ij,nj->n", normals, q, normals).min())
+    checked against the refits of random curved records in ``tests/comms/test_exchange.py``.
+    Compiled: :func:`~polyslam_env.comms.kernels.variance_floor`."""
+    return float(
+        variance_floor(
+            np.asarray(normals, dtype=float).reshape(-1, 2), np.asarray(cov_t, dtype=float),
+            np.asarray(shift, dtype=float), float(shift_var),
+        )
+    )  # fmt: skip
 
 
 def _covered_by_better(

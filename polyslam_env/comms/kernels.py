@@ -5,6 +5,10 @@ in the numpy version's operations (``tests/comms/test_alignment.py`` holds that 
 oracle and checks the two bit for bit); :func:`reach_boxes` and :func:`normal_variances` are
 the refinement's per-wall bounds and weights, in the operations of ``Polynomial.max_slope``,
 ``map_kernels.eta_range`` and ``exchange.normal_variance`` (oracles in the same tests).
+:func:`unit_tangents`, :func:`frame_chain`, :func:`received_geometry` and
+:func:`variance_floor` are a received chain's geometry in the receiver's frame, in the floats
+of the numpy they replaced (``np.gradient``, BLAS's products, ``np.einsum``; the numpy
+versions are the oracles in ``tests/comms/reference_geometry.py``).
 """
 
 from __future__ import annotations
@@ -13,7 +17,8 @@ import math
 
 import numpy as np
 
-from polyslam_env.core.jit import njit, sum_like_numpy
+from polyslam_env.core.jit import fma, njit, sum_like_numpy
+from polyslam_env.slam.fitting import J_ROT
 from polyslam_env.slam.map_kernels import eta_range
 
 
@@ -418,3 +423,130 @@ def covered_by_walls(
                 out[i : j + 1] = True
             i = j + 1
     return out
+
+
+# -- a received chain's geometry in the receiver's frame (comms/alignment.py, exchange.py) -------
+@njit
+def unit_tangents(q: np.ndarray) -> np.ndarray:
+    """(N, 2) unit tangents of a chain of points ``q`` (N, 2): ``np.gradient(q, axis=0)``
+    (central differences / 2 inside, one-sided at the ends) over its row norms floored at
+    1e-12 (NaN kept, as ``np.maximum``); (1, 0) for a single point."""
+    n = q.shape[0]
+    out = np.empty((n, 2))
+    if n < 2:
+        for i in range(n):
+            out[i, 0], out[i, 1] = 1.0, 0.0
+        return out
+    for i in range(n):
+        if i == 0:
+            dx, dy = q[1, 0] - q[0, 0], q[1, 1] - q[0, 1]
+        elif i == n - 1:
+            dx, dy = q[i, 0] - q[i - 1, 0], q[i, 1] - q[i - 1, 1]
+        else:
+            dx, dy = (q[i + 1, 0] - q[i - 1, 0]) / 2.0, (q[i + 1, 1] - q[i - 1, 1]) / 2.0
+        norm = math.sqrt(dx * dx + dy * dy)
+        if norm < 1e-12:  # np.maximum(norm, 1e-12): a NaN norm stays NaN
+            norm = 1e-12
+        out[i, 0], out[i, 1] = dx / norm, dy / norm
+    return out
+
+
+@njit
+def _times_transposed(a: np.ndarray, m: np.ndarray, out: np.ndarray) -> None:
+    """``out`` = ``a`` (N, 2) @ ``m``ᵀ (m (2, 2)) as numpy's matmul computes it through BLAS:
+    a gemm for N ≥ 2 (per output a chain of fused multiply-adds along the row from 0), a gemv
+    for N = 1 (the second product rounded, the first fused onto it)."""
+    n = a.shape[0]
+    for i in range(n):
+        for j in range(2):
+            if n == 1:
+                out[i, j] = fma(a[i, 0], m[j, 0], a[i, 1] * m[j, 1])
+            else:
+                out[i, j] = fma(a[i, 1], m[j, 1], fma(a[i, 0], m[j, 0], 0.0))
+
+
+@njit
+def frame_chain(q: np.ndarray, t: np.ndarray, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points ``q`` (N, 2) of the sender's frame in the receiver's, p = R q + t, and ∂p/∂T
+    (N, 2, 3) w.r.t. T = (t_x, t_y, θ); ``rot`` = R(θ) (2, 2) (``alignment.frame_points``)."""
+    n = q.shape[0]
+    rq = np.empty((n, 2))
+    _times_transposed(q, rot, rq)
+    turn = np.empty((n, 2))
+    _times_transposed(rq, J_ROT, turn)  # ∂(R q)/∂θ = J R q
+    p = np.empty((n, 2))
+    dp_dt = np.zeros((n, 2, 3))
+    for i in range(n):
+        p[i, 0], p[i, 1] = t[0] + rq[i, 0], t[1] + rq[i, 1]
+        dp_dt[i, 0, 0] = dp_dt[i, 1, 1] = 1.0
+        dp_dt[i, 0, 2], dp_dt[i, 1, 2] = turn[i, 0], turn[i, 1]
+    return p, dp_dt
+
+
+@njit
+def received_geometry(
+    q: np.ndarray, t: np.ndarray, rot: np.ndarray, cov_t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A received chain ``q`` (N, 2, sender frame) in the receiver's frame under T = ``t``
+    (rot = R(θ)): its points (N, 2), ∂p/∂T (N, 2, 3), unit normals (N, 2; the tangents of
+    :func:`unit_tangents` turned by +90° and by R) and each point's standard deviation along
+    its normal from T's covariance ``cov_t`` (3, 3): √(gᵀ Σ_T g), g = nᵀ ∂p/∂T (einsum's
+    floats: g's two products added, then the nine products (g_i Σ_ij) g_j summed from 0, i
+    outer) (``exchange.transform_normal_sigma``)."""
+    n = q.shape[0]
+    p, dp_dt = frame_chain(q, t, rot)
+    tangent = unit_tangents(q)
+    left = np.empty((n, 2))
+    for i in range(n):
+        left[i, 0], left[i, 1] = -tangent[i, 1], tangent[i, 0]
+    normals = np.empty((n, 2))
+    _times_transposed(left, rot, normals)
+    sigma = np.empty(n)
+    g = np.empty(3)
+    for i in range(n):
+        for j in range(3):
+            g[j] = normals[i, 0] * dp_dt[i, 0, j] + normals[i, 1] * dp_dt[i, 1, j]
+        v = 0.0
+        for a in range(3):
+            for b in range(3):
+                v += (g[a] * cov_t[a, b]) * g[b]
+        sigma[i] = math.sqrt(v) if v > 0.0 or v != v else 0.0  # √max(v, 0), NaN kept
+    return p, dp_dt, normals, sigma
+
+
+@njit
+def variance_floor(
+    normals: np.ndarray, cov_t: np.ndarray, shift: np.ndarray, shift_var: float
+) -> float:
+    """The least nᵀ Q n over the unit ``normals`` (N, 2) (0.0 for none; NaN if any is), Q the
+    translation's covariance given the turn, Σ_tt − Σ_tθ Σ_θθ⁻¹ Σ_θt (Σ = ``cov_t`` (3, 3); no
+    correction when Σ_θθ ≤ 0), plus ``shift_var`` · shift shiftᵀ, in numpy's floats
+    (``exchange.refit_variance_floor``): ``np.einsum("ni,ij,nj->n", …)`` sums the four
+    products (n_a Q_ab) n_b from 0 in order (a outer), but on one or two normals sums each a's
+    pair apart and then those (numpy 2.4's loop order, found by testing every order)."""
+    n = normals.shape[0]
+    if n == 0:
+        return 0.0
+    q = np.empty((2, 2))
+    for a in range(2):
+        for b in range(2):
+            q[a, b] = cov_t[a, b]
+            if cov_t[2, 2] > 0.0:
+                q[a, b] -= (cov_t[a, 2] * cov_t[2, b]) / cov_t[2, 2]
+            q[a, b] += shift_var * (shift[a] * shift[b])
+    least = np.inf
+    for i in range(n):
+        v = 0.0
+        for a in range(2):
+            row = 0.0
+            for b in range(2):
+                term = (normals[i, a] * q[a, b]) * normals[i, b]
+                if n <= 2:  # einsum sums each row of Q apart first on one or two normals
+                    row += term
+                else:
+                    v += term
+            v += row
+        if v != v:
+            return v
+        least = min(least, v)
+    return least
