@@ -161,6 +161,7 @@ from polyslam_env.slam.alignment import Alignment, FeatureMap, align
 from polyslam_env.slam.corners import wall_corners
 from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
+from polyslam_env.slam.landmarks import boxes_near
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH
 from polyslam_env.slam.map_kernels import equally_spaced
@@ -1461,7 +1462,7 @@ def _covered_by_better(
     table = slam.table
     box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
     c0s = slam.c0s
-    near = table.near(box, c0s, cfg.gamma_max)
+    near = boxes_near(slam.landmark_boxes(), box, cfg.gamma_max)
     if not len(near):
         return np.zeros(len(xy), dtype=bool)
     coeffs = table.shape[near]  # a copy: [0, b_1, …]
@@ -1506,7 +1507,7 @@ def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
     found = np.empty(4)
     return [
         slam.table.ids[j]
-        for j in slam.table.near(box, c0s, cfg.gamma_max).tolist()
+        for j in boxes_near(slam.landmark_boxes(), box, cfg.gamma_max).tolist()
         if measured_gamma(
             poly, slam.table.polys[j].with_c0(float(c0s[j])), cfg.gamma_max,
             cfg.merge_min_overlap, MERGE_ANGLE_DEG, found,
