@@ -131,6 +131,7 @@ from polyslam_env.comms.kernels import (
     covered_by_walls,
     kept_runs,
     normal_variances,
+    point_jacobians,
     variance_floor,
 )
 from polyslam_env.comms.kernels import received_geometry as kernel_geometry
@@ -412,26 +413,19 @@ def _point_set(
     n_state: int,
 ) -> PointSet:
     """:func:`received_point_set` from the chain's points ``xy`` (N, 2) in the receiver's
-    frame and their ∂p/∂T ``dp_dt`` (N, 2, 3) (:func:`frame_points`)."""
-    poly = record.polynomial
-    rot = rotation(transform[2])
-    n_pts = len(xy)
-    d_state = np.zeros((n_pts, 2, n_state))
-    d_state[:, :, :3] = dp_dt @ d_transform_state
-    eta_axis = _ETA_AXIS[poly.variate]
-    d_noise = np.concatenate(
-        [
-            np.broadcast_to((rot @ eta_axis)[None, :, None], (n_pts, 2, 1)),
-            dp_dt @ d_transform_noise,
-        ],
-        axis=2,
-    )  # (N, 2, 1 + K)
+    frame and their ∂p/∂T ``dp_dt`` (N, 2, 3) (:func:`frame_points`); the Jacobians in one
+    compiled call (:func:`~polyslam_env.comms.kernels.point_jacobians`)."""
+    shift = rotation(transform[2]) @ _ETA_AXIS[record.polynomial.variate]  # (2,)
+    d_state, d_noise = point_jacobians(
+        dp_dt, np.ascontiguousarray(d_transform_state, dtype=float),
+        np.ascontiguousarray(d_transform_noise, dtype=float), shift, n_state,
+    )  # fmt: skip
     return PointSet(
         xy=xy,
         d_state=d_state,
         d_noise=d_noise,
         noise_cov=_with_c0_variance(record.c0_var, noise_cov) / RECEIVED_CI_WEIGHT,
-        weights=np.ones(n_pts),
+        weights=np.ones(len(xy)),
     )
 
 

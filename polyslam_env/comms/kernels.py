@@ -550,3 +550,33 @@ def variance_floor(
             return v
         least = min(least, v)
     return least
+
+
+@njit
+def point_jacobians(
+    dp_dt: np.ndarray, d_state: np.ndarray, d_noise: np.ndarray, shift: np.ndarray, n_state: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """A received chain's point Jacobians from their ∂p/∂T ``dp_dt`` (N, 2, 3): w.r.t. the
+    receiver's state (N, 2, ``n_state``), ∂p/∂T ∂T/∂pose (``d_state`` (3, 3)) in the pose's
+    three columns and zeros after; w.r.t. the noise (N, 2, 1 + K), ``shift`` (2,) (the
+    sender's c0 moves every point along its turned η axis) then ∂p/∂T ∂T/∂noise (``d_noise``
+    (3, K)). The products as numpy's batched matmul computes them through BLAS (per output
+    a chain of fused multiply-adds from 0) (``exchange._point_set``)."""
+    n = dp_dt.shape[0]
+    k = d_noise.shape[1]
+    out_state = np.zeros((n, 2, n_state))
+    out_noise = np.empty((n, 2, 1 + k))
+    for i in range(n):
+        for r in range(2):
+            for c in range(3):
+                acc = 0.0
+                for m in range(3):
+                    acc = fma(dp_dt[i, r, m], d_state[m, c], acc)
+                out_state[i, r, c] = acc
+            out_noise[i, r, 0] = shift[r]
+            for c in range(k):
+                acc = 0.0
+                for m in range(3):
+                    acc = fma(dp_dt[i, r, m], d_noise[m, c], acc)
+                out_noise[i, r, 1 + c] = acc
+    return out_state, out_noise

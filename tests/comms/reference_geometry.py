@@ -56,3 +56,16 @@ def refit_variance_floor(
         q -= np.outer(cov_t[:2, 2], cov_t[2, :2]) / cov_t[2, 2]
     q += shift_var * np.outer(shift, shift)
     return float(np.einsum("ni,ij,nj->n", normals, q, normals).min())
+
+
+def point_jacobians(
+    dp_dt: np.ndarray, d_state: np.ndarray, d_noise: np.ndarray, shift: np.ndarray, n_state: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """A received chain's ∂p/∂state (N, 2, n_state) and ∂p/∂noise (N, 2, 1 + K)."""
+    n_pts = len(dp_dt)
+    out_state = np.zeros((n_pts, 2, n_state))
+    out_state[:, :, :3] = dp_dt @ d_state
+    out_noise = np.concatenate(
+        [np.broadcast_to(shift[None, :, None], (n_pts, 2, 1)), dp_dt @ d_noise], axis=2
+    )
+    return out_state, out_noise
