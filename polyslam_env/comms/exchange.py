@@ -880,23 +880,27 @@ class RendezvousExchange:
         seq = self._seq.get((s, r), 0)
         self._seq[(s, r)] = seq + 1
         header = Header(s, r, seq, slam.pose, bearing)
-        polys = slam.polynomials()
-        index = {lid: n for n, lid in enumerate(slam.landmark_ids)}
+        kind, precision = self.config.payload, self.config.precision
+        # the whole map only where a grid or the free space needs it: a record's polynomial
+        # is its row's (the same floats as slam.polynomials() gives it)
+        whole = kind == "grid" or self.compare_payloads or features is not None
+        polys = slam.polynomials() if whole else []
+        table, c0s = slam.table, slam.c0s
+        rows = [table.index_of(lid) for lid in ids]
         records = tuple(
             PolynomialRecord(
                 self.version(s, lid)[1],
-                polys[index[lid]],
+                table.poly(row).with_c0(c0s[row]),
                 max(slam.c0_variance(lid), 0.0),
                 self.version(s, lid)[0],
                 self.revision(s, lid),
             )
-            for lid in ids
+            for lid, row in zip(ids, rows, strict=True)
         )
         since_log = self._last_log.get((s, r), 0)
         self._last_meeting[(s, r)] = slam.step_count
         self._last_log[(s, r)] = len(self.scan_logs[s])
         pose_var = np.diag(slam.pose_cov_relative).clip(min=0.0)
-        kind, precision = self.config.payload, self.config.precision
         variants = self._variants(header, records, s, since_log, polys, kind)
         if self.compare_payloads:
             self._log_sizes(k, s, r, variants, pose_var, len(records))
