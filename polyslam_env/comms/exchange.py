@@ -1361,6 +1361,8 @@ class RendezvousExchange:
         self._lineage_at[r] = slam.lineage.cursor
 
 
+_COS_MERGE = math.cos(math.radians(MERGE_ANGLE_DEG))  # the merge test's angle, as a cosine
+
 #: A refined transform whose turn lays the sender's straight walls further off square to the
 #: receiver's than this many σ is refused (:meth:`RendezvousExchange._off_square`): 3σ, the
 #: two-sided 99.7 % of a normal turn error.
@@ -1463,14 +1465,9 @@ def _covered_by_better(
     near = boxes_near(slam.landmark_boxes(), box, cfg.gamma_max)
     if not len(near):
         return np.zeros(len(xy), dtype=bool)
-    coeffs = table.shape[near]  # a copy: [0, b_1, …]
-    coeffs[:, 0] = c0s[near]
-    extent = np.stack([table.lo[near], table.hi[near]], axis=1)
-    c0_var = np.diagonal(slam.cov)[3 + near]
-    cos_max = math.cos(math.radians(MERGE_ANGLE_DEG))
     return covered_by_walls(
-        xy, normals, table.variate[near], coeffs, extent, c0_var, floor * _ROUNDOFF,
-        cfg.gamma_max, cos_max, cfg.merge_min_overlap,
+        xy, normals, near, table.variate, table.shape, c0s, table.lo, table.hi, slam.cov,
+        floor * _ROUNDOFF, cfg.gamma_max, _COS_MERGE, cfg.merge_min_overlap,
     )  # fmt: skip
 
 

@@ -371,20 +371,24 @@ def chain(variate: int, coeffs: np.ndarray, lo: float, hi: float, chord_tol: flo
 def covered_by_walls(
     xy: np.ndarray,  # (N, 2) a received chain in the receiver's frame
     normals: np.ndarray,  # (N, 2) its unit normals
-    variate: np.ndarray,  # (W,) int64, 1 or 2
-    coeffs: np.ndarray,  # (W, M+1) zero-padded, current c0 first
-    extent: np.ndarray,  # (W, 2) lo, hi
-    c0_var: np.ndarray,  # (W,) var(c0) of each wall
+    rows: np.ndarray,  # (W,) int64: the walls to test, rows of the arrays below
+    variate: np.ndarray,  # (n,) int64, 1 or 2
+    shape: np.ndarray,  # (n, M+1) zero-padded coefficients (c0 from c0s)
+    c0s: np.ndarray,  # (n,) each wall's current c0
+    lo: np.ndarray,  # (n,) extents
+    hi: np.ndarray,
+    cov: np.ndarray,  # (3+n, 3+n) the state's covariance: var(c0) of row w at [3+w, 3+w]
     max_var: float,  # a wall counts only if its normal variance is at most this
     reach: float,  # m, γ_M
     cos_max: float,  # cos of the merge test's angle
     min_overlap: float,  # m, merge_min_overlap
 ) -> np.ndarray:
-    """(N,) True where a chain point lies on a wall whose normal variance var(c0)/(1 + B'²)
-    (B' at the middle of its extent) is at most ``max_var``: inside the wall's extent, within
-    ``reach`` of it along η, the two normals within the merge test's angle, on a run of such
-    points at least ``min_overlap`` long (the sum of the steps between its points)
-    (``exchange._covered_by_better``; the oracle is in ``tests/comms/test_exchange.py``)."""
+    """(N,) True where a chain point lies on one of the walls ``rows`` whose normal variance
+    var(c0)/(1 + B'²) (B' at the middle of its extent) is at most ``max_var``: inside the
+    wall's extent, within ``reach`` of it along η, the two normals within the merge test's
+    angle, on a run of such points at least ``min_overlap`` long (the sum of the steps between
+    its points) (``exchange._covered_by_better``, reading a landmark table's columns; the
+    oracle is in ``tests/comms/test_exchange.py``)."""
     n_pts = xy.shape[0]
     out = np.zeros(n_pts, dtype=np.bool_)
     on = np.zeros(n_pts, dtype=np.bool_)
@@ -392,22 +396,24 @@ def covered_by_walls(
     for i in range(n_pts - 1):
         dx, dy = xy[i + 1, 0] - xy[i, 0], xy[i + 1, 1] - xy[i, 1]
         step[i] = math.sqrt(dx * dx + dy * dy)
-    width = coeffs.shape[1]
+    width = shape.shape[1]
     deriv = np.zeros(max(width - 1, 1))
-    for w in range(coeffs.shape[0]):
-        c = coeffs[w]
+    c = np.empty(width)
+    for w in rows:
+        c[:] = shape[w]
+        c[0] = c0s[w]
         for j in range(1, width):
             deriv[j - 1] = c[j] * float(j)
-        lo, hi = extent[w, 0], extent[w, 1]
-        mid_slope = _horner(deriv[: max(width - 1, 1)], 0.5 * (lo + hi))
-        if c0_var[w] / (1.0 + mid_slope * mid_slope) > max_var:
+        w_lo, w_hi = lo[w], hi[w]
+        mid_slope = _horner(deriv[: max(width - 1, 1)], 0.5 * (w_lo + w_hi))
+        if cov[3 + w, 3 + w] / (1.0 + mid_slope * mid_slope) > max_var:
             continue
         for i in range(n_pts):
             xi, eta = (xy[i, 0], xy[i, 1]) if variate[w] == 1 else (xy[i, 1], xy[i, 0])
             n_xi, n_eta = (normals[i, 0], normals[i, 1]) if variate[w] == 1 else (
                 normals[i, 1], normals[i, 0])  # fmt: skip
             on[i] = False
-            if lo <= xi <= hi and abs(eta - _horner(c, xi)) <= reach:
+            if w_lo <= xi <= w_hi and abs(eta - _horner(c, xi)) <= reach:
                 s = _horner(deriv[: max(width - 1, 1)], xi)
                 on[i] = abs(n_eta - s * n_xi) >= cos_max * math.sqrt(1.0 + s * s)
         i = 0

@@ -974,9 +974,12 @@ def test_covered_by_walls__matches_the_numpy_oracle() -> None:
             coeffs[k, : w.order + 1] = w.coeffs
         args = (0.35, cos_max, float(rng.choice([0.0, 0.1, 0.5])))
         max_var = float(rng.uniform(0.0, 1e-3))
+        cov = np.zeros((3 + len(walls), 3 + len(walls)))
+        cov[3:, 3:] = np.diag(c0_var)  # the kernel reads a state covariance's diagonal
         got = covered_by_walls(
-            xy, normals, np.array([w.variate for w in walls]), coeffs,
-            np.array([(w.lo, w.hi) for w in walls]), c0_var, max_var, *args,
+            xy, normals, np.arange(len(walls)), np.array([w.variate for w in walls]), coeffs,
+            coeffs[:, 0].copy(), np.array([w.lo for w in walls]), np.array([w.hi for w in walls]),
+            cov, max_var, *args,
         )  # fmt: skip
         np.testing.assert_array_equal(
             got, _covered_oracle(xy, normals, walls, c0_var, max_var, *args)
