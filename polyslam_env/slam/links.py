@@ -147,6 +147,68 @@ def link_rows(
     return residual, H
 
 
+def junction(a: tuple[float, float], b: tuple[float, float]) -> float:
+    """ξ where two pieces' evidence intervals meet: the middle of the gap between them, or of
+    their overlap when they overlap."""
+    first, second = sorted((a, b), key=sum)
+    return 0.5 * (first[1] + second[0])
+
+
+def junction_rows(
+    poly_i: Polynomial,
+    c0_index_i: int,
+    turn_i: tuple[int, float] | None,
+    poly_j: Polynomial,
+    c0_index_j: int,
+    turn_j: tuple[int, float] | None,
+    xi: float,
+    n_state: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rows that two pieces of one wall, a curve among them, meet at ``xi`` with one
+    tangent (same variate, current c0s): residuals (η_i − η_j, B'_i − B'_j) at ξ (2,) and
+    their Jacobian H (2, ``n_state``). The first row is :func:`link_rows`' at ξ. On the
+    second, c0 does not move a slope; a turn α about the pivot (ξ_c, η_c) moves the curve's
+    η at ξ by (ξ − ξ_c) + B'(ξ)(η − η_c) (variate 1; variate 2 the negative), whose
+    derivative along ξ is the slope's: 1 + B'(ξ)² + B''(ξ)(η − η_c)."""
+    residual = np.zeros(2)
+    H = np.zeros((2, n_state))
+    residual[:1], H[:1] = link_rows(
+        poly_i, c0_index_i, turn_i, poly_j, c0_index_j, turn_j, np.array([xi]), n_state
+    )
+    for sign, poly, turn in ((1.0, poly_i, turn_i), (-1.0, poly_j, turn_j)):
+        slope = float(polyval(xi, poly.coeffs, derivative=1))
+        residual[1] += sign * slope
+        if turn is not None:
+            turn_index, pivot = turn
+            across = float(polyval(xi, poly.coeffs)) - float(polyval(pivot, poly.coeffs))
+            bend = 1.0 + slope * slope + float(polyval(xi, poly.coeffs, derivative=2)) * across
+            H[1, turn_index] += sign * (bend if poly.variate == 1 else -bend)
+    return residual, H
+
+
+def frozen_slope_var(
+    shape: np.ndarray,
+    order: int,
+    t: float,
+    fit_half: float,
+    fit_inverse: np.ndarray,
+    noise_var: float,
+    turn_in_state: bool,
+) -> float:
+    """Variance of a frozen shape's slope B'(ξ) from its fit at scaled position t = (ξ −
+    pivot)/``fit_half``: the slope's counterpart of the value's (``kernels._shape_fit_var``),
+    σ²·a'(t)ᵀ M⁻¹ a'(t)/``fit_half``² with a' = ∂a/∂t = [0, 1, 2t, 3t², …] and M⁻¹ =
+    ``fit_inverse[order]``; with ``turn_in_state`` less the slope coefficient's own part
+    (the shape's turn α, a state, carries it)."""
+    if order < 1 or shape[order] == 0.0:
+        return 0.0
+    a = np.array([float(k) * t ** (k - 1) if k else 0.0 for k in range(order + 1)])
+    quad = float(a @ fit_inverse[order, : order + 1, : order + 1] @ a)
+    if turn_in_state:
+        quad -= float(fit_inverse[order, 1, 1])
+    return noise_var * max(quad, 0.0) / fit_half**2
+
+
 def line_angle(poly: Polynomial) -> float:
     """Direction (rad, in (−π, π]) of straight ``poly`` in its frame (x¹, x²): atan B' for
     η = x² (variate 1), π/2 − atan B' for η = x¹ (variate 2)."""

@@ -28,6 +28,9 @@ from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED, LineageEvent
 from polyslam_env.slam.links import (
     SQUARE_MIN_LENGTH,
     evidence_gap,
+    frozen_slope_var,
+    junction,
+    junction_rows,
     line_angle,
     link_rows,
     off_square,
@@ -35,6 +38,7 @@ from polyslam_env.slam.links import (
     rectilinear,
     turned_line,
 )
+from polyslam_env.slam.polynomial import polyval
 
 if TYPE_CHECKING:
     from polyslam_env.slam.robot import PolySlam
@@ -127,7 +131,7 @@ class WallGraph:
         if cfg.link_gap <= 0.0 or landmark_id not in table:
             return 0
         idx = table.index_of(landmark_id)
-        if table.received[idx] or table.order[idx] != 1:
+        if table.received[idx] or not self.linkable(int(table.order[idx])):
             return 0
         evidence = maintenance.evidence(idx)
         reach = cfg.link_gap * (1.0 + 1e-9) + EXTENT_MARGIN
@@ -138,7 +142,7 @@ class WallGraph:
         near = near[
             (near != idx)
             & (variate[near] == variate[idx])
-            & (order[near] == 1)
+            & ((order[near] == 1) | self.linkable(2))
             & (table.changed_at[near] <= matured)
             & (table.received[near] == 0)
         ]
@@ -152,14 +156,22 @@ class WallGraph:
                 links += self.link_pair(landmark_id, other_id)
         return links
 
+    def linkable(self, order: int) -> bool:
+        """Whether a landmark of ``order`` may be linked: a line, or with
+        ``config.curve_links`` and rotation states a curve too."""
+        return order == 1 or (self.config.curve_links and self.config.rotation_states)
+
     def link_pair(self, first: int, second: int) -> bool:
         """The collinearity update of two straight landmarks (rows at the middle of each one's
         evidence, noise each fit's variance beyond the range noise plus
         ``config.wall_straightness``²), estimating their two turns (:meth:`update_pair`);
-        whether it passed the gate and was applied."""
+        whether it passed the gate and was applied. A pair with a curve meets at its
+        junction instead (:meth:`link_junction`)."""
         slam = self.slam
         table, maintenance = slam.table, slam.maintenance
         i, j = table.index_of(first), table.index_of(second)
+        if table.order[i] != 1 or table.order[j] != 1:
+            return self.link_junction(first, second)
         xis = np.array([0.5 * sum(maintenance.evidence(i)), 0.5 * sum(maintenance.evidence(j))])
         if self.direction_of[first] == self.direction_of[second]:
             xis = xis.mean(keepdims=True)  # parallel already: only the offset is new
@@ -170,6 +182,46 @@ class WallGraph:
         )  # fmt: skip
         r = float(table.model_var[i] + table.model_var[j]) + self.config.wall_straightness**2
         if not self.update_pair(i, j, -residual, H, r * np.eye(xis.size)):
+            return False
+        self.join_walls(first, second)
+        return True
+
+    def link_junction(self, first: int, second: int) -> bool:
+        """Two pieces of one wall, a curve among them (``config.curve_links``), meet at the
+        junction of their evidence with one tangent (:func:`~polyslam_env.slam.links.
+        junction_rows`; only the offset when they are in one direction group already). The
+        noise of each row is what no state holds at the junction, the curve extrapolated
+        there included: each piece's frozen error (:meth:`PolySlam.frozen_variance` on η,
+        :func:`~polyslam_env.slam.links.frozen_slope_var` and its misfit's direction
+        variance on the slope, the shift along ξ on B'') plus ``config.wall_straightness``²
+        on η and ``config.wall_squareness_deg`` as a kink on the direction. Gated by χ²;
+        the lines' turns are estimated, the curves' stay considered (:meth:`update_pair`)."""
+        slam, cfg = self.slam, self.config
+        table, maintenance = slam.table, slam.maintenance
+        i, j = table.index_of(first), table.index_of(second)
+        xi = junction(maintenance.evidence(i), maintenance.evidence(j))
+        residual, H = junction_rows(
+            maintenance.polynomial(i), 3 + i, maintenance.turn_of(i),
+            maintenance.polynomial(j), 3 + j, maintenance.turn_of(j),
+            xi, slam.mean.size,
+        )  # fmt: skip
+        fit_inverse, noise_var = slam._fit_inverse(), cfg.range_sigma**2
+        value_var, slope_var = cfg.wall_straightness**2, 0.0
+        for k in (i, j):
+            poly, half = table.polys[k], float(table.fit_half[k])
+            value_var += float(slam.frozen_variance(k, np.array([xi]))[0])
+            slope_var += float(table.model_var[k]) / half**2 + frozen_slope_var(
+                table.shape_buffer[k], int(table.order[k]), (xi - float(table.pivot[k])) / half,
+                half, fit_inverse, noise_var, cfg.rotation_states,
+            )  # fmt: skip
+            if cfg.shape_follows_pose:
+                bend = float(polyval(xi, poly.coeffs, derivative=2))
+                slope_var += bend * bend * float(table.xi_var[k])
+        slope = float(polyval(xi, table.polys[i].coeffs, derivative=1))
+        slope_var += (1.0 + slope * slope) ** 2 * math.radians(cfg.wall_squareness_deg) ** 2
+        rows = 1 if self.direction_of[first] == self.direction_of[second] else 2
+        R = np.diag([value_var, slope_var])[:rows, :rows]
+        if not self.update_pair(i, j, -residual[:rows], H[:rows], R):
             return False
         self.join_walls(first, second)
         return True
@@ -273,16 +325,17 @@ class WallGraph:
         slam, cfg = self.slam, self.config
         considered = None
         n = len(slam.table)
+        lines = [k for k in (i, j) if slam.table.order[k] == 1]
         if cfg.rotation_states:  # every turn but the two lines' own
             turns = slam.layout.turn_index(0, n) + np.arange(n)
-            considered = np.delete(turns, [i, j])
+            considered = np.delete(turns, lines)
         result = ekf.update_rows(slam.mean, slam.cov, innovation, H, R, cfg.gate_prob, considered)
         if result is None:
             return False
         before = slam.mean[:3].copy()
         slam.mean, slam.cov, _ = result
         if cfg.rotation_states:
-            for k in (i, j):
+            for k in lines:
                 self.apply_turn(k)
         slam.state_moved(before)
         return True

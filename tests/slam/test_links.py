@@ -7,6 +7,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+import scipy.optimize
 import scipy.stats
 
 from polyslam_env.core.errors import ConfigError
@@ -16,6 +17,9 @@ from polyslam_env.slam.fitting import Fit, polynomial_points
 from polyslam_env.slam.links import (
     SQUARE_CLUTTER,
     evidence_gap,
+    frozen_slope_var,
+    junction,
+    junction_rows,
     line_angle,
     link_rows,
     off_square,
@@ -23,6 +27,7 @@ from polyslam_env.slam.links import (
     rectilinear,
     turned_line,
 )
+from polyslam_env.slam.maintenance import fit_inverse_table
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from tests.slam import reference_links
@@ -118,6 +123,103 @@ def test_link_rows__pieces_of_different_variates_are_refused() -> None:
             Polynomial(2, np.array([0.0, 0.1]), 0.0, 1.0), 4, None,
             np.array([0.5]), 5,
         )  # fmt: skip
+
+
+def _turned_curve_at(
+    poly: Polynomial, c0: float, pivot: float, angle: float, xi: float
+) -> tuple[float, float]:
+    """Oracle: (η, dη/dξ) at ξ of curve ``poly`` with offset ``c0`` turned by ``angle``
+    counter-clockwise in (x¹, x²) about its point at ``pivot``: the point of parameter s,
+    rotated, whose ξ is ``xi`` (root-found), and the rotated tangent's slope there."""
+    coeffs = np.r_[c0, poly.coeffs[1:]]
+    c, s_ = math.cos(angle), math.sin(angle)
+    flip = poly.variate == 2  # (x¹, x²) = (η, ξ)
+
+    def rotated(s: float) -> tuple[float, float, float, float]:
+        """(ξ, η, dξ/ds, dη/ds) of the turned curve's point of parameter s."""
+        eta, slope = np.polyval(coeffs[::-1], s), np.polyval(np.polyder(coeffs[::-1]), s)
+        centre = np.polyval(coeffs[::-1], pivot)
+        p = np.array([s - pivot, eta - centre])
+        d = np.array([1.0, slope])
+        if flip:
+            p, d = p[::-1], d[::-1]
+        p = np.array([c * p[0] - s_ * p[1], s_ * p[0] + c * p[1]])
+        d = np.array([c * d[0] - s_ * d[1], s_ * d[0] + c * d[1]])
+        if flip:
+            p, d = p[::-1], d[::-1]
+        return p[0] + pivot, p[1] + centre, d[0], d[1]
+
+    s = scipy.optimize.brentq(lambda s: rotated(s)[0] - xi, xi - 2.0, xi + 2.0, xtol=1e-15)
+    _, eta, dxi, deta = rotated(s)
+    return eta, deta / dxi
+
+
+CURVES = [  # (variate, coefficients of the first piece; the second: a line or a curve)
+    (1, [0.8, 0.2, 0.15]),
+    (2, [3.0, -0.4, 0.25, -0.02]),
+]
+
+
+@pytest.mark.parametrize(("variate", "coeffs"), CURVES)
+@pytest.mark.parametrize("second_order", [1, 2])
+def test_junction_rows__residual_and_jacobian_match_the_turned_curves(
+    variate: int, coeffs: list[float], second_order: int
+) -> None:
+    """State [pose, c0_i, c0_j, α_i, α_j]: the rows' residuals are (η_i − η_j, B'_i − B'_j)
+    at the junction of the two pieces turned by their α about their pivots (a brute-force
+    oracle: rotated points, root-found), and H their central finite differences, at α = 0
+    and at a turned state."""
+    first = Polynomial(variate, np.array(coeffs), -1.5, 0.4)
+    second = Polynomial(variate, np.array([0.85, 0.35, -0.1][: second_order + 1]), 0.9, 2.5)
+    pivots, xi, n_state = (-0.5, 1.6), junction((-1.2, 0.3), (1.0, 2.4)), 7
+    assert xi == pytest.approx(0.65)
+
+    def residual(state: np.ndarray, row: int) -> float:
+        values = [
+            _turned_curve_at(p, state[3 + k], pivots[k], state[5 + k], xi)[row]
+            for k, p in enumerate((first, second))
+        ]
+        return values[0] - values[1]
+
+    for alpha in (0.0, 0.02):
+        state = np.array([0.1, -0.2, 0.3, coeffs[0], 0.85, alpha, -alpha])
+        if alpha == 0.0:
+            got, H = junction_rows(first, 3, (5, pivots[0]), second, 4, (6, pivots[1]), xi, 7)
+            for row in range(2):
+                assert got[row] == pytest.approx(residual(state, row), abs=1e-12)
+        for row in range(2):
+            expected = fd_jacobian(lambda x, row=row: residual(x, row), state)
+            if alpha == 0.0:
+                np.testing.assert_allclose(H[row], expected, rtol=FD_RTOL, atol=FD_ATOL)
+            else:  # the rows are linear in α to first order: H holds at a small turn too
+                np.testing.assert_allclose(H[row], expected, atol=0.05 * np.abs(H).max())
+    _, H = junction_rows(first, 3, None, second, 4, None, xi, n_state)
+    np.testing.assert_array_equal(H, [[0, 0, 0, 1, -1, 0, 0], [0] * 7])
+
+
+@pytest.mark.parametrize(("order", "t"), [(2, 0.0), (2, 1.6), (3, -2.0), (1, 0.7)])
+def test_frozen_slope_var__is_the_fits_slope_variance_over_monte_carlo(
+    order: int, t: float
+) -> None:
+    """Least-squares fits of order m to N = 16 noisy points over [−1, 1]·h (σ = 2 cm, h =
+    0.5 m): the sample variance of the fitted slope at t·h over 4,000 draws matches
+    ``frozen_slope_var`` without a turn state within its 99.9 % χ² interval; with one, the
+    slope coefficient's own variance σ²M⁻¹[1, 1]/h² is left out."""
+    n, sigma, half, draws = 16, 0.02, 0.5, 4000
+    rng = np.random.default_rng(order)
+    t_points = np.linspace(-1.0, 1.0, n)
+    A = t_points[:, None] ** np.arange(order + 1)
+    fits = np.linalg.lstsq(A, rng.normal(0.0, sigma, (n, draws)), rcond=None)[0]
+    slopes = np.array([k * t ** (k - 1) if k else 0.0 for k in range(order + 1)]) @ fits / half
+    inverse = fit_inverse_table(n, 3)
+    shape = np.ones(order + 1)
+    expected = frozen_slope_var(shape, order, t, half, inverse, sigma**2, False)
+    lo, hi = scipy.stats.chi2.ppf([0.0005, 0.9995], draws - 1) / (draws - 1)
+    assert lo <= slopes.var(ddof=1) / expected <= hi
+    own = sigma**2 * inverse[order, 1, 1] / half**2
+    assert frozen_slope_var(shape, order, t, half, inverse, sigma**2, True) == pytest.approx(
+        max(expected - own, 0.0), rel=1e-12, abs=1e-18
+    )
 
 
 @pytest.mark.parametrize(("variate", "c0", "slope"), LINES)
@@ -314,6 +416,38 @@ def test_parallel_walls__a_shelf_depth_apart_are_not_linked() -> None:
     for seed in range(3):
         slam, *_ = drive(walls, straight(5.5), seed)
         assert len(_groups(slam)) == slam.n_landmarks >= 2, seed
+
+
+def _arc(x0: float, x1: float) -> np.ndarray:
+    """A curved wall y = 1 + (x − 3)²/12 (radius 6 m at its apex) over [x0, x1], as 59
+    segments."""
+    x = np.linspace(x0, x1, 60)
+    points = np.stack([x, 1.0 + (x - 3.0) ** 2 / 12.0], axis=1)
+    return np.stack([points[:-1], points[1:]], axis=1)
+
+
+CURVED_DOOR = np.concatenate([_arc(-1.0, 2.6), _arc(3.4, 7.5)])  # a doorway at x ∈ [2.6, 3.4]
+
+
+@pytest.mark.parametrize("curve_links", [False, True])
+def test_curve_links__the_pieces_of_a_curved_wall_meet_across_its_doorway(
+    curve_links: bool,
+) -> None:
+    """A curved wall with a doorway, driven past (5 seeds, the curvature test on so its
+    pieces are fitted as curves): with ``curve_links`` the pieces on either side of the
+    doorway are one wall group in most seeds (4 of 5: the gate may refuse a pair whose
+    extrapolated ends disagree), the covariance symmetric PSD; without, no pieces across the
+    doorway are joined."""
+    cfg = SlamConfig(curvature_test=True, curve_links=curve_links)
+    joined = 0
+    for seed in range(5):
+        slam, *_ = drive(CURVED_DOOR, straight(7.0), seed, cfg)
+        sides = {lid: slam.table.hi[slam.table.index_of(lid)] > 3.0 for lid in slam.landmark_ids}
+        groups = _groups(slam).values()
+        joined += any(len({sides[lid] for lid in group}) == 2 for group in groups)
+        np.testing.assert_array_equal(slam.cov, slam.cov.T)
+        assert np.linalg.eigvalsh(slam.cov).min() > -1e-12
+    assert joined >= 4 if curve_links else joined == 0
 
 
 def test_link__covariance_stays_symmetric_psd() -> None:
