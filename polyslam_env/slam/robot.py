@@ -55,9 +55,10 @@ from polyslam_env.slam.fitting import Fit, polynomial_points
 from polyslam_env.slam.landmarks import LandmarkTable, ShapesView
 from polyslam_env.slam.layout import StateLayout
 from polyslam_env.slam.lineage import Lineage
+from polyslam_env.slam.links import frozen_slope_var
 from polyslam_env.slam.maintenance import MapMaintenance, fit_inverse_table
 from polyslam_env.slam.model import REACH_MARGIN, step_model, update_beam_mask
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.polynomial import Polynomial, polyval
 from polyslam_env.slam.stored import PointArrays, StoredPoints
 from polyslam_env.slam.walls import WallGraph
 
@@ -316,6 +317,23 @@ class PolySlam:
             cfg.shape_shift == "pose", cfg.rotation_states, eta_var,
         )  # fmt: skip
         return eta_var
+
+    def frozen_slope_variance(self, row: int, xi: float) -> float:
+        """The variance of landmark ``row``'s frozen error in its slope B' at ``xi``, the
+        slope's counterpart of :meth:`frozen_variance`: the misfit beyond the range noise as
+        a direction (model_var/h², as a square tie takes it), the shape's fit
+        (:func:`~polyslam_env.slam.links.frozen_slope_var`) and, with shapes that follow
+        the pose, the fit-time shift along ξ on the curvature (B''² · xi_var)."""
+        cfg, table = self.config, self.table
+        half = float(table.fit_half[row])
+        var = float(table.model_var[row]) / half**2 + frozen_slope_var(
+            table.shape_buffer[row], int(table.order[row]), (xi - float(table.pivot[row])) / half,
+            half, self._fit_inverse(), cfg.range_sigma**2, cfg.rotation_states,
+        )  # fmt: skip
+        if cfg.shape_follows_pose:
+            bend = float(polyval(xi, table.polys[row].coeffs, derivative=2))
+            var += bend * bend * float(table.xi_var[row])
+        return var
 
     def step(self, odometry: np.ndarray, ranges: np.ndarray) -> SlamStepInfo:
         """Advance by one control period given odometry (3,) and range readings (B,).

@@ -28,7 +28,6 @@ from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED, LineageEvent
 from polyslam_env.slam.links import (
     SQUARE_MIN_LENGTH,
     evidence_gap,
-    frozen_slope_var,
     junction,
     junction_rows,
     line_angle,
@@ -192,8 +191,7 @@ class WallGraph:
         junction_rows`; only the offset when they are in one direction group already). The
         noise of each row is what no state holds at the junction, the curve extrapolated
         there included: each piece's frozen error (:meth:`PolySlam.frozen_variance` on η,
-        :func:`~polyslam_env.slam.links.frozen_slope_var` and its misfit's direction
-        variance on the slope, the shift along ξ on B'') plus ``config.wall_straightness``²
+        :meth:`PolySlam.frozen_slope_variance` on the slope) plus ``config.wall_straightness``²
         on η and ``config.wall_squareness_deg`` as a kink on the direction. Gated by χ²;
         the lines' turns are estimated, the curves' stay considered (:meth:`update_pair`)."""
         slam, cfg = self.slam, self.config
@@ -205,18 +203,10 @@ class WallGraph:
             maintenance.polynomial(j), 3 + j, maintenance.turn_of(j),
             xi, slam.mean.size,
         )  # fmt: skip
-        fit_inverse, noise_var = slam._fit_inverse(), cfg.range_sigma**2
         value_var, slope_var = cfg.wall_straightness**2, 0.0
         for k in (i, j):
-            poly, half = table.polys[k], float(table.fit_half[k])
             value_var += float(slam.frozen_variance(k, np.array([xi]))[0])
-            slope_var += float(table.model_var[k]) / half**2 + frozen_slope_var(
-                table.shape_buffer[k], int(table.order[k]), (xi - float(table.pivot[k])) / half,
-                half, fit_inverse, noise_var, cfg.rotation_states,
-            )  # fmt: skip
-            if cfg.shape_follows_pose:
-                bend = float(polyval(xi, poly.coeffs, derivative=2))
-                slope_var += bend * bend * float(table.xi_var[k])
+            slope_var += slam.frozen_slope_variance(k, xi)
         slope = float(polyval(xi, table.polys[i].coeffs, derivative=1))
         slope_var += (1.0 + slope * slope) ** 2 * math.radians(cfg.wall_squareness_deg) ** 2
         rows = 1 if self.direction_of[first] == self.direction_of[second] else 2
