@@ -159,7 +159,7 @@ class SlamConfig(Config):
     # 0: never (paper)
     link_gap: float = 1.2
     # with link_gap, pieces of one curved wall are linked too (a curve to a curve or a line,
-    # same variate, evidence within link_gap): they meet at the junction with one tangent
+    # same variate, evidence that meets: walls.CURVE_LINK_GAP): they meet at the junction with one tangent
     # (links.junction_rows), the curves' turns considered, the lines' estimated; needs
     # rotation states; False: straight pieces only (docs/notes/curved.md)
     curve_links: bool = False

@@ -35,6 +35,13 @@ leaves out the errors that the walls of one message share through the frame tran
 strict xfail ``test_refine_transform__covariance_holds_errors_the_walls_share``), and a link
 would trust them as if they had none.
 
+**Curved pieces** (``SlamConfig.curve_links``, opt-in): a curve and a curve or a line of one
+variate whose evidence meets (``walls.CURVE_LINK_GAP``) meet at the junction ξ of their evidence
+(:func:`junction`) with one value and one tangent (:func:`junction_rows`); the noise is each
+piece's frozen error at ξ, extrapolated (:func:`frozen_slope_var` for the slope), and the
+curves' turns stay considered (a curve cannot be turned exactly as :func:`turned_line` turns
+a line).
+
 A fact may be used once: pieces already joined by links (directly or through others, or
 merged from linked pieces) form one *wall group* and are never linked again among
 themselves, so no collinearity enters the filter twice.

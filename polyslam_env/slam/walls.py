@@ -37,10 +37,19 @@ from polyslam_env.slam.links import (
     rectilinear,
     turned_line,
 )
+from polyslam_env.slam.map_kernels import GAP_SPLIT
 from polyslam_env.slam.polynomial import polyval
 
 if TYPE_CHECKING:
     from polyslam_env.slam.robot import PolySlam
+
+
+#: m: a curve is linked only to pieces whose evidence meets its own, a gap no wider than the
+#: beams' sampling along a wall (``map_kernels.GAP_SPLIT``, wider is a doorway): the junction
+#: rows extrapolate each shape to the junction, and beyond its evidence a curve's order-m fit
+#: misses the wall's next terms, which its frozen variance does not hold (linked across
+#: ``link_gap``, the curved floors' maps got worse: docs/notes/curved.md)
+CURVE_LINK_GAP = GAP_SPLIT
 
 
 class WallGraph:
@@ -147,7 +156,8 @@ class WallGraph:
         ]
         for j in near.tolist():
             gap = evidence_gap(evidence, maintenance.evidence(j))
-            if -2.0 * EXTENT_MARGIN <= gap <= cfg.link_gap:
+            reach_j = cfg.link_gap if order[idx] == order[j] == 1 else CURVE_LINK_GAP
+            if -2.0 * EXTENT_MARGIN <= gap <= reach_j:
                 candidates.append((gap, table.ids[j]))
         links = 0
         for _, other_id in sorted(candidates):
