@@ -159,9 +159,9 @@ class SlamConfig(Config):
     # 0: never (paper)
     link_gap: float = 1.2
     # with link_gap, pieces of one curved wall are linked too (a curve to a curve or a line,
-    # same variate, evidence that meets: walls.CURVE_LINK_GAP): they meet at the junction with one tangent
-    # (links.junction_rows), the curves' turns considered, the lines' estimated; needs
-    # rotation states; False: straight pieces only (docs/notes/curved.md)
+    # same variate, evidence that meets: walls.CURVE_LINK_GAP): they meet at the junction
+    # with one tangent (links.junction_rows), the curves' turns considered, the lines'
+    # estimated; needs rotation states; False: straight pieces only (docs/notes/curved.md)
     curve_links: bool = False
     # steps after a landmark is made (refit, merged) that its links are sought: by then the
     # beams have updated its c0, while a fresh fit hangs the hits of several steps on one pose
