@@ -193,6 +193,16 @@ def junction_rows(
     return residual, H
 
 
+def chord_bias(bend: float, offset: float, half: float) -> tuple[float, float]:
+    """How far a straight piece fitted to a wall of curvature ``bend`` (B'', the wall's
+    η = B''·u²/2 about the piece's middle) lies from the wall at ``offset`` from its middle
+    (m along ξ), its evidence ``half`` long each side: (η, slope). The least-squares line
+    over hits spread evenly on [−h, h] takes the mean B''·h²/6 and no slope, so at u the
+    wall is B''(u² − h²/3)/2 above it and B''·u steeper: a frozen bias no state and no
+    misfit variance holds (a sagitta below the range noise, docs/notes/floors.md R6.1)."""
+    return 0.5 * bend * (offset * offset - half * half / 3.0), bend * offset
+
+
 def frozen_slope_var(
     shape: np.ndarray,
     order: int,

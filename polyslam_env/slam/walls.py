@@ -27,6 +27,7 @@ from polyslam_env.slam.landmarks import EXTENT_MARGIN
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED, LineageEvent
 from polyslam_env.slam.links import (
     SQUARE_MIN_LENGTH,
+    chord_bias,
     evidence_gap,
     junction,
     junction_rows,
@@ -214,9 +215,15 @@ class WallGraph:
             xi, slam.mean.size,
         )  # fmt: skip
         value_var, slope_var = cfg.wall_straightness**2, 0.0
-        for k in (i, j):
+        for k, other in ((i, j), (j, i)):
             value_var += float(slam.frozen_variance(k, np.array([xi]))[0])
             slope_var += slam.frozen_slope_variance(k, xi)
+            if table.order[k] == 1:  # a line on the other's curve: a chord, off at its end
+                bend = float(polyval(xi, table.polys[other].coeffs, derivative=2))
+                lo, hi = maintenance.evidence(k)
+                value_bias, slope_bias = chord_bias(bend, xi - 0.5 * (lo + hi), 0.5 * (hi - lo))
+                value_var += value_bias**2
+                slope_var += slope_bias**2
         slope = float(polyval(xi, table.polys[i].coeffs, derivative=1))
         slope_var += (1.0 + slope * slope) ** 2 * math.radians(cfg.wall_squareness_deg) ** 2
         rows = 1 if self.direction_of[first] == self.direction_of[second] else 2

@@ -16,6 +16,7 @@ from polyslam_env.slam.config import PRESETS, SlamConfig
 from polyslam_env.slam.fitting import Fit, polynomial_points
 from polyslam_env.slam.links import (
     SQUARE_CLUTTER,
+    chord_bias,
     evidence_gap,
     frozen_slope_var,
     junction,
@@ -196,6 +197,20 @@ def test_junction_rows__residual_and_jacobian_match_the_turned_curves(
                 np.testing.assert_allclose(H[row], expected, atol=0.05 * np.abs(H).max())
     _, H = junction_rows(first, 3, None, second, 4, None, xi, n_state)
     np.testing.assert_array_equal(H, [[0, 0, 0, 1, -1, 0, 0], [0] * 7])
+
+
+@pytest.mark.parametrize(("bend", "offset", "half"), [(0.4, 0.6, 0.4), (-0.19, -0.45, 0.3)])
+def test_chord_bias__is_the_wall_minus_the_least_squares_line_through_its_hits(
+    bend: float, offset: float, half: float
+) -> None:
+    """Hits spread evenly over [−h, h] on η = B''u²/2 (noise-free, n = 200,001 of them: their
+    mean u² is h²/3·(n + 1)/(n − 1), the continuous limit to 1e-5 relative), a line fitted by
+    least squares: the wall minus the line at ``offset``, in value and slope."""
+    u = np.linspace(-half, half, 200_001)
+    slope, c0 = np.polyfit(u, 0.5 * bend * u**2, 1)
+    value, steeper = chord_bias(bend, offset, half)
+    assert value == pytest.approx(0.5 * bend * offset**2 - (c0 + slope * offset), rel=5e-5)
+    assert steeper == pytest.approx(bend * offset - slope, rel=1e-9)
 
 
 @pytest.mark.parametrize(("order", "t"), [(2, 0.0), (2, 1.6), (3, -2.0), (1, 0.7)])
