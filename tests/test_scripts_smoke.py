@@ -80,6 +80,14 @@ def test_learned_policy_report__reads_an_evaluate_json(tmp_path: Path) -> None:
          "--json", str(path))  # fmt: skip
     assert path.exists()
     assert _run("scripts/learned_policy_report.py", str(path), "--workers", "1").strip()
+    # a policy renamed from a file of its own pairs with the same policy of another file
+    one = tmp_path / "one.json"
+    report = json.loads(path.read_text())
+    report["episodes"] = {"frontier": report["episodes"]["frontier"]}
+    one.write_text(json.dumps(report))
+    out = _run("scripts/learned_policy_report.py", "--phases", "--policies", "frontier,again",
+               str(path), f"again={one}")  # fmt: skip
+    assert "again − frontier steps to 30 %, paired by seed: +0.0000" in out, out
     # the Pareto figure of two of its policies, paired on the same episode
     figure = tmp_path / "pareto.png"
     out = _run("scripts/pareto.py", "--out", str(figure), "--point", "F", "frontier", str(path),

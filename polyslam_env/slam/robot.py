@@ -378,20 +378,20 @@ class PolySlam:
         if points.counters[N_REFIT] or points.counters[N_NEW] or status[ST_FRESH]:
             with blas_threads(self.config.blas_threads):
                 counts = self._change_map(rho, int(status[ST_FRESH]))
+            real, index, shape = table.buffers  # (the map changes may have grown them)
+            fit_inverse, n = self._fit_inverse(), len(table)
         refit, created, merged, linked = counts
         if self.profile is not None:
             lap = self._lap("map", lap)
 
-        real, index, shape = table.buffers  # (the map changes may have grown them)
         step_kernels.finish_step(
-            self.mean, self._cov, ranges, model.beams, real, index, shape, len(table),
-            model.params, model.switches, self._fit_inverse(), self.step_count, per_beam, status,
-            values,
+            self.mean, self._cov, ranges, model.beams, real, index, shape, n, model.params,
+            model.switches, fit_inverse, self.step_count, per_beam, status, values,
         )  # fmt: skip
         used = int(status[ST_USED])
         if used > 0:  # kernels.update_scan's consider_from
             considered = self.config.rotation_states
-            self._mirror_from = 3 + len(table) if considered else self._cov.shape[0]
+            self._mirror_from = 3 + n if considered else self._cov.shape[0]
         if used >= 0:  # the update ran
             self.state_moved(values[V_BEFORE : V_BEFORE + 3] if used else None)
         self.divergence_f = float(values[V_F])
@@ -402,7 +402,7 @@ class PolySlam:
         if self.profile is not None:
             self._lap("update", lap)
         return SlamStepInfo(
-            self.step_count, time.perf_counter() - start, len(table), max(used, 0), created,
+            self.step_count, time.perf_counter() - start, n, max(used, 0), created,
             refit, merged, rho, sigma, self.divergence_f, self.diverging, linked,
         )  # fmt: skip
 
@@ -484,6 +484,12 @@ class PolySlam:
         """Ids of the landmarks created, refit or merged after ``step`` (exchange payloads)."""
         table = self.table
         return [table.ids[j] for j in np.flatnonzero(table.changed_at > step).tolist()]
+
+    def landmark_boxes(self) -> np.ndarray:
+        """Bounding boxes (n, 4) = (x_min, x_max, y_min, y_max) of the landmarks at the current
+        c0s, in table order, cached until the map or the state changes (read-only: the map's
+        merge check and the exchange share them)."""
+        return self._boxes()
 
     def _boxes(self) -> np.ndarray:
         """Bounding boxes (n, 4) of the landmarks at the current c0s, cached by the table until

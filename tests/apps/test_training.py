@@ -283,6 +283,13 @@ def test_shipped_ppo_config__loads() -> None:
     assert cfg.control == "drive" and cfg.team and Path(cfg.init).name == "ppo_drive.zip"
 
 
+def test_team_slam_config__loads() -> None:
+    # the same fine-tune on the env --policy ppo is evaluated in: SLAM on, ppo_drive's reward
+    cfg = TrainConfig.from_yaml(configs_dir() / "train_ppo_team_slam.yaml")
+    assert cfg.control == "drive" and cfg.team and cfg.env.slam_enabled
+    assert Path(cfg.init).name == "ppo_drive.zip" and cfg.env.reward.map_error == 0
+
+
 @pytest.mark.parametrize(
     ("top", "match"),
     [
