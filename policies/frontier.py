@@ -31,9 +31,11 @@ filter's own position σ, :meth:`~policies.base.PolicyContext.relative_pose_std`
 back to the nearest such place by path (no farther than ``close_reach``)
 (:attr:`~policies.modes.Mode.CLOSE_LOOP`), re-observes the walls it mapped there, and returns to
 exploring once the σ is below ``close_below`` (or the place is reached; it then rests
-``close_rest`` steps). The EKF's correlations carry the correction to the walls mapped on the
-way out. It corrects position drift, not heading drift: README "SLAM on large floor plans" has
-the measurements.
+``close_rest`` steps). Two bounds keep it exploring: a closing starts only while the steps
+spent closing are at most ``close_share`` of the steps so far, and one that has not ended
+after ``close_timeout`` steps (a stall on the way) is given up and its anchor forgotten.
+The EKF's correlations carry the correction to the walls mapped on the way out. It corrects
+position drift, not heading drift: README "SLAM on large floor plans" has the measurements.
 
 Team coordination uses only what a robot sees: when its camera detects another robot, the
 frontiers nearer to where that robot was seen than to where this one stood (within
@@ -106,6 +108,8 @@ class FrontierPolicy(Policy):
         anchor_below: float = 0.012,
         close_rest: int = 40,
         close_reach: float = math.inf,
+        close_share: float = 0.25,
+        close_timeout: int = 200,
         gain: str = "square",
     ) -> None:
         super().__init__(context)
@@ -146,6 +150,12 @@ class FrontierPolicy(Policy):
         if gain not in GAINS:
             raise PolicyError(f"frontier: gain must be one of {', '.join(GAINS)}, got {gain!r}")
         self.gain = gain
+        if not 0.0 <= close_share <= 1.0:
+            raise PolicyError(f"frontier: close_share must be in [0, 1], got {close_share!r}")
+        self.close_share = float(close_share)
+        if close_timeout < 1:
+            raise PolicyError(f"frontier: close_timeout must be >= 1, got {close_timeout!r}")
+        self.close_timeout = int(close_timeout)
         if close_rest < 0:
             raise PolicyError(f"frontier: close_rest must be >= 0, got {close_rest!r}")
         self.close_loops = bool(close_loops) and context.p0_sigma is not None
@@ -200,6 +210,13 @@ class FrontierPolicy(Policy):
         b = self.modes.back_off
         return None if b is None else (b.direction, b.until)
 
+    def metrics(self) -> dict[str, float]:
+        """With active loop closing: the loop closings started and the steps spent closing
+        loops this episode (none without)."""
+        if not self.close_loops:
+            return {}
+        return {"closings": float(self.closings), "closing_steps": float(self.modes.closing_steps)}
+
     def frontier_discount(self, points: np.ndarray) -> np.ndarray | None:
         """Factors (F,) in [0, 1] multiplying the utility of the frontier cells whose
         own-frame centres are ``points`` (F, 2), or None for none (here): the hook for
@@ -228,19 +245,33 @@ class FrontierPolicy(Policy):
             self._anchors[self.map.cells(pose[None, :2])] = True
         if self._closing and sigma < self.close_below:
             self._stop_closing()
+        elif self._closing and self._step - self.modes.closing_since >= self.close_timeout:
+            self._give_up_closing()
         elif (
             not self._closing
             and sigma > self.close_above
             and self._step >= self.modes.rest_until
+            and self.modes.closing_steps <= self.close_share * self._step
             and self._anchors.any()
         ):
-            self.modes.start_closing(self.goal)
+            self.modes.start_closing(self.goal, self._step)
             self.path, self.goal = None, None
+        self.modes.closing_steps += self._closing
         return self._closing
 
     def _stop_closing(self) -> None:
         self.modes.stop_closing(self._step, self.close_rest)
         self.path, self.goal = None, None
+
+    def _give_up_closing(self) -> None:
+        """End a loop closing that took ``close_timeout`` steps without reaching its anchor
+        or its σ (a stall, a path that keeps being blocked): the anchors within 1 m of its
+        goal are forgotten, so the next closing does not head for the same place."""
+        if self.goal is not None:
+            r, c = self.goal
+            k = max(1, round(1.0 / self.map.res))
+            self._anchors[max(0, r - k) : r + k + 1, max(0, c - k) : c + k + 1] = False
+        self._stop_closing()
 
     def _needs_anchor_plan(self, pose: np.ndarray) -> bool:
         """Whether to plan the way to an anchor again (as :meth:`_needs_plan`, without the

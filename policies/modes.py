@@ -46,6 +46,8 @@ class ModeState:
     resume: tuple[int, int] | None = None  # the frontier goal a loop closing left
     rest_until: int = 0  # no new loop closing before this step
     closings: int = 0  # loop closings started this episode
+    closing_steps: int = 0  # steps spent closing loops this episode
+    closing_since: int = 0  # the step the loop closing under way started
 
     @property
     def mode(self) -> Mode:
@@ -57,10 +59,12 @@ class ModeState:
         """Whether a loop closing is under way (backing off or not)."""
         return self.heading is Mode.CLOSE_LOOP
 
-    def start_closing(self, resume: tuple[int, int] | None) -> None:
-        """Head back to an anchor, remembering the frontier goal ``resume`` to return to."""
+    def start_closing(self, resume: tuple[int, int] | None, step: int) -> None:
+        """Head back to an anchor from step ``step``, remembering the frontier goal ``resume``
+        to return to."""
         self.heading, self.resume = Mode.CLOSE_LOOP, resume
         self.closings += 1
+        self.closing_since = step
 
     def stop_closing(self, step: int, rest: int) -> None:
         """Explore again; no new loop closing for ``rest`` steps after ``step``."""

@@ -188,11 +188,18 @@ def parallel_stepper(env: Any, action: Callable[[Any, str], Any], seed: int) -> 
 
 
 def random_stepper(env: Any, seed: int) -> Callable[[], None]:
-    """One env step per call with seeded uniform random actions; resets when all are done."""
+    """One env step per call with seeded uniform random actions; resets when all are done.
+
+    Each action is ``rng.uniform(low, high)`` drawn as ``low + (high − low) · rng.random(d)``:
+    the same doubles from the same stream (numpy's uniform is that expression), at a sixth of
+    the cost (uniform with array bounds broadcasts and checks them each call, ~18 µs, 3 per env
+    step: ~4 % of the paper env's step was the benchmark's own action draws)."""
     rng = np.random.default_rng(seed)
     space = env.action_space(env.possible_agents[0])
-    low, high = space.low, space.high
-    return parallel_stepper(env, lambda e, a: rng.uniform(low, high), seed)
+    low = np.asarray(space.low, dtype=float)  # (d,) as uniform converts its bounds
+    span = np.asarray(space.high, dtype=float) - low
+    shape = low.shape
+    return parallel_stepper(env, lambda e, a: low + span * rng.random(shape), seed)
 
 
 # -- figures of a run ---------------------------------------------------------------------------

@@ -182,6 +182,7 @@ def simulate(
         np.array([s.pose_cov for s in every]),
         world.poses[robots],
         scfg.p0,
+        np.asarray(wcfg.range_sensor.angles),
     )
     ex = _make_exchange(exchange, num_robots, seed, wcfg, scfg)
     angles = np.asarray(wcfg.range_sensor.angles)

@@ -29,9 +29,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from polyslam_env.comms.kernels import match_walls, reach_boxes
+from polyslam_env.comms.kernels import frame_chain, match_walls, reach_boxes, unit_tangents
 from polyslam_env.core.geometry import rotation
-from polyslam_env.slam.fitting import J_ROT
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH, line_angle, off_square
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -76,12 +75,10 @@ def pack_walls(walls: Sequence[Polynomial] | WallArrays) -> WallArrays:
 
 def frame_points(q: np.ndarray, transform: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Points ``q`` (N, 2) of the sender's frame in the receiver's, p = R(θ) q + t, and the
-    Jacobian ∂p/∂T (N, 2, 3) w.r.t. T = (t_x, t_y, θ)."""
-    rq = q @ rotation(transform[2]).T  # (N, 2)
-    dp_dt = np.zeros((len(q), 2, 3))
-    dp_dt[:, :, :2] = np.eye(2)
-    dp_dt[:, :, 2] = rq @ J_ROT.T
-    return transform[:2] + rq, dp_dt
+    Jacobian ∂p/∂T (N, 2, 3) w.r.t. T = (t_x, t_y, θ). Compiled:
+    :func:`~polyslam_env.comms.kernels.frame_chain` (R from numpy's cos and sin)."""
+    t = np.asarray(transform, dtype=float)
+    return frame_chain(np.asarray(q, dtype=float), t, rotation(float(t[2])))
 
 
 def align_transform(
@@ -244,11 +241,9 @@ def square_turn(
 
 
 def _tangents(chain: np.ndarray) -> np.ndarray:
-    """(N, 2) unit tangents along a chain of points (N, 2)."""
-    if len(chain) < 2:
-        return np.tile([1.0, 0.0], (len(chain), 1))
-    d = np.gradient(chain, axis=0)
-    return np.asarray(d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12))
+    """(N, 2) unit tangents along a chain of points (N, 2) (compiled:
+    :func:`~polyslam_env.comms.kernels.unit_tangents`)."""
+    return unit_tangents(np.asarray(chain, dtype=float))
 
 
 def _match(

@@ -127,7 +127,14 @@ from polyslam_env.comms.alignment import (
 )
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
 from polyslam_env.comms.free_space import FreeCells, FreeSpace
-from polyslam_env.comms.kernels import covered_by_walls, kept_runs, normal_variances
+from polyslam_env.comms.kernels import (
+    covered_by_walls,
+    kept_runs,
+    normal_variances,
+    point_jacobians,
+    variance_floor,
+)
+from polyslam_env.comms.kernels import received_geometry as kernel_geometry
 from polyslam_env.comms.messages import (
     GridMessage,
     Header,
@@ -155,6 +162,7 @@ from polyslam_env.slam.alignment import Alignment, FeatureMap, align
 from polyslam_env.slam.corners import wall_corners
 from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
+from polyslam_env.slam.landmarks import boxes_near
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH
 from polyslam_env.slam.map_kernels import equally_spaced
@@ -405,26 +413,19 @@ def _point_set(
     n_state: int,
 ) -> PointSet:
     """:func:`received_point_set` from the chain's points ``xy`` (N, 2) in the receiver's
-    frame and their ∂p/∂T ``dp_dt`` (N, 2, 3) (:func:`frame_points`)."""
-    poly = record.polynomial
-    rot = rotation(transform[2])
-    n_pts = len(xy)
-    d_state = np.zeros((n_pts, 2, n_state))
-    d_state[:, :, :3] = dp_dt @ d_transform_state
-    eta_axis = _ETA_AXIS[poly.variate]
-    d_noise = np.concatenate(
-        [
-            np.broadcast_to((rot @ eta_axis)[None, :, None], (n_pts, 2, 1)),
-            dp_dt @ d_transform_noise,
-        ],
-        axis=2,
-    )  # (N, 2, 1 + K)
+    frame and their ∂p/∂T ``dp_dt`` (N, 2, 3) (:func:`frame_points`); the Jacobians in one
+    compiled call (:func:`~polyslam_env.comms.kernels.point_jacobians`)."""
+    shift = rotation(transform[2]) @ _ETA_AXIS[record.polynomial.variate]  # (2,)
+    d_state, d_noise = point_jacobians(
+        dp_dt, np.ascontiguousarray(d_transform_state, dtype=float),
+        np.ascontiguousarray(d_transform_noise, dtype=float), shift, n_state,
+    )  # fmt: skip
     return PointSet(
         xy=xy,
         d_state=d_state,
         d_noise=d_noise,
         noise_cov=_with_c0_variance(record.c0_var, noise_cov) / RECEIVED_CI_WEIGHT,
-        weights=np.ones(n_pts),
+        weights=np.ones(len(xy)),
     )
 
 
@@ -879,23 +880,27 @@ class RendezvousExchange:
         seq = self._seq.get((s, r), 0)
         self._seq[(s, r)] = seq + 1
         header = Header(s, r, seq, slam.pose, bearing)
-        polys = slam.polynomials()
-        index = {lid: n for n, lid in enumerate(slam.landmark_ids)}
+        kind, precision = self.config.payload, self.config.precision
+        # the whole map only where a grid or the free space needs it: a record's polynomial
+        # is its row's (the same floats as slam.polynomials() gives it)
+        whole = kind == "grid" or self.compare_payloads or features is not None
+        polys = slam.polynomials() if whole else []
+        table, c0s = slam.table, slam.c0s
+        rows = [table.index_of(lid) for lid in ids]
         records = tuple(
             PolynomialRecord(
                 self.version(s, lid)[1],
-                polys[index[lid]],
+                table.poly(row).with_c0(c0s[row]),
                 max(slam.c0_variance(lid), 0.0),
                 self.version(s, lid)[0],
                 self.revision(s, lid),
             )
-            for lid in ids
+            for lid, row in zip(ids, rows, strict=True)
         )
         since_log = self._last_log.get((s, r), 0)
         self._last_meeting[(s, r)] = slam.step_count
         self._last_log[(s, r)] = len(self.scan_logs[s])
         pose_var = np.diag(slam.pose_cov_relative).clip(min=0.0)
-        kind, precision = self.config.payload, self.config.precision
         variants = self._variants(header, records, s, since_log, polys, kind)
         if self.compare_payloads:
             self._log_sizes(k, s, r, variants, pose_var, len(records))
@@ -1159,22 +1164,22 @@ class RendezvousExchange:
         pose_part = d_state @ slam.cov[:3, :3] @ d_state.T
         fused_cov_t = pose_part + d_noise @ noise_cov @ d_noise.T / RECEIVED_CI_WEIGHT
         min_overlap = slam.config.merge_min_overlap
+        turned = rotation(float(t[2]))
         for record in fresh:
             version = _version(record)
             seen[version] = record.revision
             # received_point_set and transform_normal_sigma on one chain and one ∂p/∂T; on
             # the pose columns only (the rest are zeros): _fuse sizes G_x to the state
             q = chain_points(record.polynomial, self.chord_tol, self.spacing)
-            xy, dp_dt = frame_points(q, t)
-            normals = _chain_normals(q, t)
-            sure = _normal_sigma(normals, dp_dt, cov_t) <= limit
+            xy, dp_dt, normals, sigma = received_geometry(q, t, turned, cov_t)
+            sure = sigma <= limit
             self.dropped_points[r] += int(np.count_nonzero(~sure))
             runs = uncovered_runs(sure, xy, min_overlap)
             if not runs:
                 continue
             # rule 1 before the refit: held walls better than any refit of this chain could
             # be cover every run of it that rule 1 would keep, so nothing would be taken
-            shift = rotation(float(t[2])) @ _ETA_AXIS[record.polynomial.variate]
+            shift = turned @ _ETA_AXIS[record.polynomial.variate]
             floor = refit_variance_floor(
                 normals[sure], fused_cov_t, shift, record.c0_var / RECEIVED_CI_WEIGHT
             )
@@ -1356,6 +1361,8 @@ class RendezvousExchange:
         self._lineage_at[r] = slam.lineage.cursor
 
 
+_COS_MERGE = math.cos(math.radians(MERGE_ANGLE_DEG))  # the merge test's angle, as a cosine
+
 #: A refined transform whose turn lays the sender's straight walls further off square to the
 #: receiver's than this many σ is refused (:meth:`RendezvousExchange._off_square`): 3σ, the
 #: two-sided 99.7 % of a normal turn error.
@@ -1385,25 +1392,19 @@ def transform_normal_sigma(
     standard deviation (m) of its position along the curve's normal that the transform's
     covariance ``cov_t`` (3, 3) causes, in the receiver's frame."""
     q = chain_points(poly, chord_tol, spacing)
-    _, dp_dt = frame_points(q, transform)  # (N, 2, 3)
-    return _normal_sigma(_chain_normals(q, transform), dp_dt, cov_t)
+    return received_geometry(q, transform, rotation(float(transform[2])), cov_t)[3]
 
 
-def _chain_normals(q: np.ndarray, transform: np.ndarray) -> np.ndarray:
-    """(N, 2) unit normals of the chain ``q`` (N, 2, sender frame) turned into the receiver's
-    frame by ``transform``."""
-    d = np.gradient(q, axis=0) if len(q) > 1 else np.array([[1.0, 0.0]])
-    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
-    out: np.ndarray = np.stack([-d[:, 1], d[:, 0]], axis=1) @ rotation(float(transform[2])).T
-    return out
-
-
-def _normal_sigma(normal: np.ndarray, dp_dt: np.ndarray, cov_t: np.ndarray) -> np.ndarray:
-    """:func:`transform_normal_sigma` from the chain's normals ``normal`` (N, 2,
-    :func:`_chain_normals`) and its points' ∂p/∂T ``dp_dt`` (N, 2, 3)."""
-    g = np.einsum("ni,nij->nj", normal, dp_dt)  # (N, 3) ∂(normal offset)/∂T
-    out: np.ndarray = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", g, cov_t, g), 0.0))
-    return out
+def received_geometry(
+    q: np.ndarray, transform: np.ndarray, turned: np.ndarray, cov_t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A received chain ``q`` (N, 2, sender frame) in the receiver's frame: its points (N, 2)
+    and their ∂p/∂T (N, 2, 3) (:func:`~polyslam_env.comms.alignment.frame_points`), its unit
+    normals (N, 2) and each point's σ along its normal from the transform's covariance
+    ``cov_t`` (3, 3) (:func:`transform_normal_sigma`); ``turned`` = R(θ) of ``transform``.
+    One compiled call: :func:`~polyslam_env.comms.kernels.received_geometry`."""
+    t = np.asarray(transform, dtype=float)
+    return kernel_geometry(q, t, turned, np.asarray(cov_t, dtype=float))
 
 
 def normal_variance(poly: Polynomial, c0_var: float) -> float:
@@ -1438,15 +1439,14 @@ def refit_variance_floor(
     The chain's normals stand for the piece's (the refit follows the chain within
     ``refit_tol``): the least nᵀQn over them. For curved pieces the mean-slope normal lies among
     the chain's normals but the factor (1 + s̄²)/(1 + B'_mid²) is not exactly 1; the floor is
-    checked against the refits of random curved records in ``tests/comms/test_exchange.py``."""
-    if len(normals) == 0:
-        return 0.0
-    cov_t = np.asarray(cov_t, dtype=float)
-    q = cov_t[:2, :2].copy()
-    if cov_t[2, 2] > 0.0:
-        q -= np.outer(cov_t[:2, 2], cov_t[2, :2]) / cov_t[2, 2]
-    q += shift_var * np.outer(shift, shift)
-    return float(np.einsum("ni,ij,nj->n", normals, q, normals).min())
+    checked against the refits of random curved records in ``tests/comms/test_exchange.py``.
+    Compiled: :func:`~polyslam_env.comms.kernels.variance_floor`."""
+    return float(
+        variance_floor(
+            np.asarray(normals, dtype=float).reshape(-1, 2), np.asarray(cov_t, dtype=float),
+            np.asarray(shift, dtype=float), float(shift_var),
+        )
+    )  # fmt: skip
 
 
 def _covered_by_better(
@@ -1462,17 +1462,12 @@ def _covered_by_better(
     table = slam.table
     box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
     c0s = slam.c0s
-    near = table.near(box, c0s, cfg.gamma_max)
+    near = boxes_near(slam.landmark_boxes(), box, cfg.gamma_max)
     if not len(near):
         return np.zeros(len(xy), dtype=bool)
-    coeffs = table.shape[near]  # a copy: [0, b_1, …]
-    coeffs[:, 0] = c0s[near]
-    extent = np.stack([table.lo[near], table.hi[near]], axis=1)
-    c0_var = np.diagonal(slam.cov)[3 + near]
-    cos_max = math.cos(math.radians(MERGE_ANGLE_DEG))
     return covered_by_walls(
-        xy, normals, table.variate[near], coeffs, extent, c0_var, floor * _ROUNDOFF,
-        cfg.gamma_max, cos_max, cfg.merge_min_overlap,
+        xy, normals, near, table.variate, table.shape, c0s, table.lo, table.hi, slam.cov,
+        floor * _ROUNDOFF, cfg.gamma_max, _COS_MERGE, cfg.merge_min_overlap,
     )  # fmt: skip
 
 
@@ -1507,7 +1502,7 @@ def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
     found = np.empty(4)
     return [
         slam.table.ids[j]
-        for j in slam.table.near(box, c0s, cfg.gamma_max).tolist()
+        for j in boxes_near(slam.landmark_boxes(), box, cfg.gamma_max).tolist()
         if measured_gamma(
             poly, slam.table.polys[j].with_c0(float(c0s[j])), cfg.gamma_max,
             cfg.merge_min_overlap, MERGE_ANGLE_DEG, found,

@@ -5,6 +5,10 @@ in the numpy version's operations (``tests/comms/test_alignment.py`` holds that 
 oracle and checks the two bit for bit); :func:`reach_boxes` and :func:`normal_variances` are
 the refinement's per-wall bounds and weights, in the operations of ``Polynomial.max_slope``,
 ``map_kernels.eta_range`` and ``exchange.normal_variance`` (oracles in the same tests).
+:func:`unit_tangents`, :func:`frame_chain`, :func:`received_geometry` and
+:func:`variance_floor` are a received chain's geometry in the receiver's frame, in the floats
+of the numpy they replaced (``np.gradient``, BLAS's products, ``np.einsum``; the numpy
+versions are the oracles in ``tests/comms/reference_geometry.py``).
 """
 
 from __future__ import annotations
@@ -13,7 +17,8 @@ import math
 
 import numpy as np
 
-from polyslam_env.core.jit import njit, sum_like_numpy
+from polyslam_env.core.jit import fma, njit, sum_like_numpy
+from polyslam_env.slam.fitting import J_ROT
 from polyslam_env.slam.map_kernels import eta_range
 
 
@@ -366,20 +371,24 @@ def chain(variate: int, coeffs: np.ndarray, lo: float, hi: float, chord_tol: flo
 def covered_by_walls(
     xy: np.ndarray,  # (N, 2) a received chain in the receiver's frame
     normals: np.ndarray,  # (N, 2) its unit normals
-    variate: np.ndarray,  # (W,) int64, 1 or 2
-    coeffs: np.ndarray,  # (W, M+1) zero-padded, current c0 first
-    extent: np.ndarray,  # (W, 2) lo, hi
-    c0_var: np.ndarray,  # (W,) var(c0) of each wall
+    rows: np.ndarray,  # (W,) int64: the walls to test, rows of the arrays below
+    variate: np.ndarray,  # (n,) int64, 1 or 2
+    shape: np.ndarray,  # (n, M+1) zero-padded coefficients (c0 from c0s)
+    c0s: np.ndarray,  # (n,) each wall's current c0
+    lo: np.ndarray,  # (n,) extents
+    hi: np.ndarray,
+    cov: np.ndarray,  # (3+n, 3+n) the state's covariance: var(c0) of row w at [3+w, 3+w]
     max_var: float,  # a wall counts only if its normal variance is at most this
     reach: float,  # m, γ_M
     cos_max: float,  # cos of the merge test's angle
     min_overlap: float,  # m, merge_min_overlap
 ) -> np.ndarray:
-    """(N,) True where a chain point lies on a wall whose normal variance var(c0)/(1 + B'²)
-    (B' at the middle of its extent) is at most ``max_var``: inside the wall's extent, within
-    ``reach`` of it along η, the two normals within the merge test's angle, on a run of such
-    points at least ``min_overlap`` long (the sum of the steps between its points)
-    (``exchange._covered_by_better``; the oracle is in ``tests/comms/test_exchange.py``)."""
+    """(N,) True where a chain point lies on one of the walls ``rows`` whose normal variance
+    var(c0)/(1 + B'²) (B' at the middle of its extent) is at most ``max_var``: inside the
+    wall's extent, within ``reach`` of it along η, the two normals within the merge test's
+    angle, on a run of such points at least ``min_overlap`` long (the sum of the steps between
+    its points) (``exchange._covered_by_better``, reading a landmark table's columns; the
+    oracle is in ``tests/comms/test_exchange.py``)."""
     n_pts = xy.shape[0]
     out = np.zeros(n_pts, dtype=np.bool_)
     on = np.zeros(n_pts, dtype=np.bool_)
@@ -387,22 +396,24 @@ def covered_by_walls(
     for i in range(n_pts - 1):
         dx, dy = xy[i + 1, 0] - xy[i, 0], xy[i + 1, 1] - xy[i, 1]
         step[i] = math.sqrt(dx * dx + dy * dy)
-    width = coeffs.shape[1]
+    width = shape.shape[1]
     deriv = np.zeros(max(width - 1, 1))
-    for w in range(coeffs.shape[0]):
-        c = coeffs[w]
+    c = np.empty(width)
+    for w in rows:
+        c[:] = shape[w]
+        c[0] = c0s[w]
         for j in range(1, width):
             deriv[j - 1] = c[j] * float(j)
-        lo, hi = extent[w, 0], extent[w, 1]
-        mid_slope = _horner(deriv[: max(width - 1, 1)], 0.5 * (lo + hi))
-        if c0_var[w] / (1.0 + mid_slope * mid_slope) > max_var:
+        w_lo, w_hi = lo[w], hi[w]
+        mid_slope = _horner(deriv[: max(width - 1, 1)], 0.5 * (w_lo + w_hi))
+        if cov[3 + w, 3 + w] / (1.0 + mid_slope * mid_slope) > max_var:
             continue
         for i in range(n_pts):
             xi, eta = (xy[i, 0], xy[i, 1]) if variate[w] == 1 else (xy[i, 1], xy[i, 0])
             n_xi, n_eta = (normals[i, 0], normals[i, 1]) if variate[w] == 1 else (
                 normals[i, 1], normals[i, 0])  # fmt: skip
             on[i] = False
-            if lo <= xi <= hi and abs(eta - _horner(c, xi)) <= reach:
+            if w_lo <= xi <= w_hi and abs(eta - _horner(c, xi)) <= reach:
                 s = _horner(deriv[: max(width - 1, 1)], xi)
                 on[i] = abs(n_eta - s * n_xi) >= cos_max * math.sqrt(1.0 + s * s)
         i = 0
@@ -418,3 +429,160 @@ def covered_by_walls(
                 out[i : j + 1] = True
             i = j + 1
     return out
+
+
+# -- a received chain's geometry in the receiver's frame (comms/alignment.py, exchange.py) -------
+@njit
+def unit_tangents(q: np.ndarray) -> np.ndarray:
+    """(N, 2) unit tangents of a chain of points ``q`` (N, 2): ``np.gradient(q, axis=0)``
+    (central differences / 2 inside, one-sided at the ends) over its row norms floored at
+    1e-12 (NaN kept, as ``np.maximum``); (1, 0) for a single point."""
+    n = q.shape[0]
+    out = np.empty((n, 2))
+    if n < 2:
+        for i in range(n):
+            out[i, 0], out[i, 1] = 1.0, 0.0
+        return out
+    for i in range(n):
+        if i == 0:
+            dx, dy = q[1, 0] - q[0, 0], q[1, 1] - q[0, 1]
+        elif i == n - 1:
+            dx, dy = q[i, 0] - q[i - 1, 0], q[i, 1] - q[i - 1, 1]
+        else:
+            dx, dy = (q[i + 1, 0] - q[i - 1, 0]) / 2.0, (q[i + 1, 1] - q[i - 1, 1]) / 2.0
+        norm = math.sqrt(dx * dx + dy * dy)
+        if norm < 1e-12:  # np.maximum(norm, 1e-12): a NaN norm stays NaN
+            norm = 1e-12
+        out[i, 0], out[i, 1] = dx / norm, dy / norm
+    return out
+
+
+@njit
+def _times_transposed(a: np.ndarray, m: np.ndarray, out: np.ndarray) -> None:
+    """``out`` = ``a`` (N, 2) @ ``m``ᵀ (m (2, 2)) as numpy's matmul computes it through BLAS:
+    a gemm for N ≥ 2 (per output a chain of fused multiply-adds along the row from 0), a gemv
+    for N = 1 (the second product rounded, the first fused onto it)."""
+    n = a.shape[0]
+    for i in range(n):
+        for j in range(2):
+            if n == 1:
+                out[i, j] = fma(a[i, 0], m[j, 0], a[i, 1] * m[j, 1])
+            else:
+                out[i, j] = fma(a[i, 1], m[j, 1], fma(a[i, 0], m[j, 0], 0.0))
+
+
+@njit
+def frame_chain(q: np.ndarray, t: np.ndarray, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points ``q`` (N, 2) of the sender's frame in the receiver's, p = R q + t, and ∂p/∂T
+    (N, 2, 3) w.r.t. T = (t_x, t_y, θ); ``rot`` = R(θ) (2, 2) (``alignment.frame_points``)."""
+    n = q.shape[0]
+    rq = np.empty((n, 2))
+    _times_transposed(q, rot, rq)
+    turn = np.empty((n, 2))
+    _times_transposed(rq, J_ROT, turn)  # ∂(R q)/∂θ = J R q
+    p = np.empty((n, 2))
+    dp_dt = np.zeros((n, 2, 3))
+    for i in range(n):
+        p[i, 0], p[i, 1] = t[0] + rq[i, 0], t[1] + rq[i, 1]
+        dp_dt[i, 0, 0] = dp_dt[i, 1, 1] = 1.0
+        dp_dt[i, 0, 2], dp_dt[i, 1, 2] = turn[i, 0], turn[i, 1]
+    return p, dp_dt
+
+
+@njit
+def received_geometry(
+    q: np.ndarray, t: np.ndarray, rot: np.ndarray, cov_t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A received chain ``q`` (N, 2, sender frame) in the receiver's frame under T = ``t``
+    (rot = R(θ)): its points (N, 2), ∂p/∂T (N, 2, 3), unit normals (N, 2; the tangents of
+    :func:`unit_tangents` turned by +90° and by R) and each point's standard deviation along
+    its normal from T's covariance ``cov_t`` (3, 3): √(gᵀ Σ_T g), g = nᵀ ∂p/∂T (einsum's
+    floats: g's two products added, then the nine products (g_i Σ_ij) g_j summed from 0, i
+    outer) (``exchange.transform_normal_sigma``)."""
+    n = q.shape[0]
+    p, dp_dt = frame_chain(q, t, rot)
+    tangent = unit_tangents(q)
+    left = np.empty((n, 2))
+    for i in range(n):
+        left[i, 0], left[i, 1] = -tangent[i, 1], tangent[i, 0]
+    normals = np.empty((n, 2))
+    _times_transposed(left, rot, normals)
+    sigma = np.empty(n)
+    g = np.empty(3)
+    for i in range(n):
+        for j in range(3):
+            g[j] = normals[i, 0] * dp_dt[i, 0, j] + normals[i, 1] * dp_dt[i, 1, j]
+        v = 0.0
+        for a in range(3):
+            for b in range(3):
+                v += (g[a] * cov_t[a, b]) * g[b]
+        sigma[i] = math.sqrt(v) if v > 0.0 or v != v else 0.0  # √max(v, 0), NaN kept
+    return p, dp_dt, normals, sigma
+
+
+@njit
+def variance_floor(
+    normals: np.ndarray, cov_t: np.ndarray, shift: np.ndarray, shift_var: float
+) -> float:
+    """The least nᵀ Q n over the unit ``normals`` (N, 2) (0.0 for none; NaN if any is), Q the
+    translation's covariance given the turn, Σ_tt − Σ_tθ Σ_θθ⁻¹ Σ_θt (Σ = ``cov_t`` (3, 3); no
+    correction when Σ_θθ ≤ 0), plus ``shift_var`` · shift shiftᵀ, in numpy's floats
+    (``exchange.refit_variance_floor``): ``np.einsum("ni,ij,nj->n", …)`` sums the four
+    products (n_a Q_ab) n_b from 0 in order (a outer), but on one or two normals sums each a's
+    pair apart and then those (numpy 2.4's loop order, found by testing every order)."""
+    n = normals.shape[0]
+    if n == 0:
+        return 0.0
+    q = np.empty((2, 2))
+    for a in range(2):
+        for b in range(2):
+            q[a, b] = cov_t[a, b]
+            if cov_t[2, 2] > 0.0:
+                q[a, b] -= (cov_t[a, 2] * cov_t[2, b]) / cov_t[2, 2]
+            q[a, b] += shift_var * (shift[a] * shift[b])
+    least = np.inf
+    for i in range(n):
+        v = 0.0
+        for a in range(2):
+            row = 0.0
+            for b in range(2):
+                term = (normals[i, a] * q[a, b]) * normals[i, b]
+                if n <= 2:  # einsum sums each row of Q apart first on one or two normals
+                    row += term
+                else:
+                    v += term
+            v += row
+        if v != v:
+            return v
+        least = min(least, v)
+    return least
+
+
+@njit
+def point_jacobians(
+    dp_dt: np.ndarray, d_state: np.ndarray, d_noise: np.ndarray, shift: np.ndarray, n_state: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """A received chain's point Jacobians from their ∂p/∂T ``dp_dt`` (N, 2, 3): w.r.t. the
+    receiver's state (N, 2, ``n_state``), ∂p/∂T ∂T/∂pose (``d_state`` (3, 3)) in the pose's
+    three columns and zeros after; w.r.t. the noise (N, 2, 1 + K), ``shift`` (2,) (the
+    sender's c0 moves every point along its turned η axis) then ∂p/∂T ∂T/∂noise (``d_noise``
+    (3, K)). The products as numpy's batched matmul computes them through BLAS (per output
+    a chain of fused multiply-adds from 0) (``exchange._point_set``)."""
+    n = dp_dt.shape[0]
+    k = d_noise.shape[1]
+    out_state = np.zeros((n, 2, n_state))
+    out_noise = np.empty((n, 2, 1 + k))
+    for i in range(n):
+        for r in range(2):
+            for c in range(3):
+                acc = 0.0
+                for m in range(3):
+                    acc = fma(dp_dt[i, r, m], d_state[m, c], acc)
+                out_state[i, r, c] = acc
+            out_noise[i, r, 0] = shift[r]
+            for c in range(k):
+                acc = 0.0
+                for m in range(3):
+                    acc = fma(dp_dt[i, r, m], d_noise[m, c], acc)
+                out_noise[i, r, 1 + c] = acc
+    return out_state, out_noise

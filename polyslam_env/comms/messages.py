@@ -335,7 +335,8 @@ def _parse_record(reader: _Reader, index: int) -> PolynomialRecord:
     coeffs, c0_var, lo, hi = values[: order + 1], values[-3], values[-2], values[-1]
     if c0_var < 0 or hi < lo:
         raise ValueError(f"corrupt record {index}: c0 variance {c0_var}, extent [{lo}, {hi}]")
-    poly = Polynomial(variate, coeffs, lo, hi)
+    # what Polynomial's own checks would refuse was refused above (variate, order ≥ 1, finite)
+    poly = Polynomial.unchecked(variate, coeffs, lo, hi)
     return PolynomialRecord(int(landmark_id), poly, float(c0_var), int(origin), int(revision))
 
 

@@ -437,10 +437,12 @@ class ObservationEncoder:
         """Row k: the ego point of robot k if its map is one point, as numpy computes
         (p − xy) R(θ) for one row (BLAS's gemv, which rounds otherwise than the kernel's gemm
         chain); rows of the other robots are not read (left unset)."""
-        starts = team.map_starts
+        starts = team.map_starts.tolist()  # K + 1 ints: a Python loop, no numpy calls
         lone = np.empty((len(starts) - 1, 2))
-        for j in ((starts[1:] - starts[:-1]) == 1).nonzero()[0].tolist():
-            a = int(starts[j])
+        for j in range(len(starts) - 1):
+            a = starts[j]
+            if starts[j + 1] - a != 1:
+                continue
             rot = np.array([[c[j], -s[j]], [s[j], c[j]]])  # R(θ) = (R(θ)ᵀ)ᵀ, C-contiguous
             lone[j] = ((team.map_points[a : a + 1] - team.poses[j, :2]) @ rot)[0]
         return lone

@@ -30,7 +30,7 @@ import numpy as np
 
 from polyslam_env import metrics
 from polyslam_env.comms.exchange import AlignmentAttempt, ExchangeStep
-from polyslam_env.core.geometry import beam_endpoints, between, wrap_remainder
+from polyslam_env.core.geometry import between, wrap_remainder
 from polyslam_env.environment.backends import (
     WRONG_ALIGNMENT_DEG,
     WRONG_ALIGNMENT_M,
@@ -130,7 +130,7 @@ def new_episode(
     )
     poses, covs = state.slam.estimates(world, start_poses)  # a history starts from them
     p0 = config.slam.p0 if config.slam_enabled else None
-    state.history = TeamHistory(start_poses, poses, covs, world.poses, p0)
+    state.history = TeamHistory(start_poses, poses, covs, world.poses, p0, state.angles)
     state.histories = [state.history.robot(i) for i in range(n)]
     sweep_coverage(state)
     return state
@@ -168,14 +168,11 @@ def record(
     active: slot j follows world robot ``robots[j]`` with estimate ``estimates`` = (poses
     (J, 3), covariances (J, 3, 3)) row j and the SLAM step ``slam_infos[j]``.
 
-    Hit points are the true points the beams hit: the noiseless ranges of the step's ray cast
-    placed with the true poses (beams without return give none).
+    The history keeps the noiseless ranges of the step's ray cast: its hit points are the true
+    points the beams hit, placed with the true poses when read (beams without return give
+    none; :meth:`~polyslam_env.metrics.episode.TeamHistory.hits`).
     """
     poses = world.poses  # (N, 3)
-    ok = np.isfinite(sensing.true_ranges)  # (N, B)
-    phi = poses[:, 2:3] + world.range_sensor.angles  # (N, B)
-    ranges = np.where(ok, sensing.true_ranges, 0.0)  # no inf · cos: no NaN, no warning
-    ends = beam_endpoints(poses[:, None, :2], phi, ranges)  # (N, B, 2)
     of = np.asarray(robots, dtype=np.int64)  # (J,) slot → world robot
     slots = world.active[of].nonzero()[0]  # (K,)
     if not len(slots):
@@ -187,10 +184,9 @@ def record(
     live: slice | np.ndarray = of[slots]  # (K,) their robots' rows of the world's arrays
     if len(slots) == len(poses) and (of == slots).all():  # every robot, in order: views
         rows = live = slice(None)
-    seen = ok[live]  # (K, B)
     history.record(
-        slots, poses[live], est[rows], cov[rows], ends[live][seen],
-        slots.repeat(seen.sum(axis=1)), times[rows], collided[live], diverging[rows],
+        slots, poses[live], est[rows], cov[rows], sensing.true_ranges[live], times[rows],
+        collided[live], diverging[rows],
     )  # fmt: skip
 
 

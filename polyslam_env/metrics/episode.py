@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from polyslam_env import metrics
-from polyslam_env.core.geometry import between
+from polyslam_env.core.geometry import beam_endpoints, between
 from polyslam_env.metrics import kernels
 from polyslam_env.metrics.mapping import MapShapes, map_quality
 from polyslam_env.slam.ekf import start_error_covs
@@ -230,6 +230,10 @@ class TeamHistory:
 
     Slot ``j``'s rows ``0 … len(j) − 1`` are its steps (row 0: the start); a slot whose robot
     failed stops growing. :meth:`robot` is slot j as a :class:`RobotHistory`.
+
+    The beams' hit points are kept as each step's true ranges and placed by the recorded true
+    pose when :meth:`hits` reads them (the same operations on the same numbers as placing them
+    every step, done once per episode instead of every step).
     """
 
     def __init__(
@@ -239,22 +243,26 @@ class TeamHistory:
         est_covs: np.ndarray,
         true_poses: np.ndarray | None = None,
         p0: np.ndarray | None = None,
+        angles: np.ndarray | None = None,
     ) -> None:
         """Slot j starts from its frame ``start_poses[j]`` (J, 3) (absolute), estimate
         ``est_poses[j]`` (J, 3) and covariance ``est_covs[j]`` (J, 3, 3) (own frame), and its
         robot's true pose ``true_poses[j]`` (J, 3) (default: the frame's origin); ``p0`` (3, 3)
-        is the start-error covariance the estimates include, if any."""
+        is the start-error covariance the estimates include, if any; ``angles`` (B,) the beams'
+        angles in the robot's frame, whose true ranges :meth:`record` takes (None: no beams)."""
         self.start_poses = np.array(start_poses, dtype=float).reshape(-1, 3)  # (J, 3) absolute
         j = len(self.start_poses)
         self.p0 = None if p0 is None else np.asarray(p0, dtype=float)
+        self.angles = np.zeros(0) if angles is None else np.asarray(angles, dtype=float)  # (B,)
         first = self.start_poses if true_poses is None else np.asarray(true_poses, dtype=float)
         self._true = np.empty((64, j, 3))  # (capacity, J, 3) absolute
         self._est = np.empty((64, j, 3))  # own frames
         self._cov = np.empty((64, j, 3, 3))
         self._times = np.full((64, j), np.nan)  # s per SLAM step, NaN: none (row 0: none)
+        self._beams = np.full((64, j, len(self.angles)), np.inf)  # true ranges (row 0: none)
         self._true[0], self._est[0], self._cov[0] = first, est_poses, est_covs
         self.lengths = np.ones(j, dtype=np.int64)  # (J,) rows of each slot
-        self._hits = np.empty((256, 2))  # (capacity, 2) every hit point, absolute
+        self._hits = np.empty((256, 2))  # (capacity, 2) hit points given as points, absolute
         self._hit_owner = np.empty(256, dtype=np.int64)  # its slot
         self._n_hits = 0
         self.collisions = np.zeros(j, dtype=np.int64)  # (J,)
@@ -275,23 +283,21 @@ class TeamHistory:
         true_poses: np.ndarray,
         est_poses: np.ndarray,
         est_covs: np.ndarray,
-        hits: np.ndarray,
-        hit_slots: np.ndarray,
+        ranges: np.ndarray,
         slam_times: np.ndarray,
         collided: np.ndarray,
         diverging: np.ndarray,
     ) -> None:
         """Append one step to the slots ``slots`` (K,) (ascending; the others are not
-        recorded): true poses (K, 3), estimates (K, 3), covariances (K, 3, 3), SLAM seconds
-        (K,) (NaN: none), collided and diverging flags (K,), and the step's beam hit points
-        (H, 2) with the slot of each ``hit_slots`` (H,) (in the order they are appended)."""
+        recorded): true poses (K, 3), estimates (K, 3), covariances (K, 3, 3), the true ranges
+        (K, B) of the beams at :attr:`angles` (``inf`` or NaN: no return), SLAM seconds (K,)
+        (NaN: none), collided and diverging flags (K,)."""
         self._grow(int(self.lengths.max()) + 1)
         kernels.record_rows(
-            slots, true_poses, est_poses, est_covs, slam_times, collided, diverging,
-            self.lengths, self._true, self._est, self._cov, self._times, self.path_length,
-            self.collisions, self.diverged, self.diverged_at,
+            slots, true_poses, est_poses, est_covs, slam_times, ranges, collided, diverging,
+            self.lengths, self._true, self._est, self._cov, self._times, self._beams,
+            self.path_length, self.collisions, self.diverged, self.diverged_at,
         )  # fmt: skip
-        self._add_hits(hits, hit_slots)
 
     def _grow(self, rows: int) -> None:
         """Room for ``rows`` rows per slot (the capacity doubles)."""
@@ -299,17 +305,19 @@ class TeamHistory:
         if rows <= have:
             return
         size = max(rows, 2 * have)
-        for name in ("_true", "_est", "_cov", "_times"):
+        fill = {"_times": np.nan, "_beams": np.inf}
+        for name in ("_true", "_est", "_cov", "_times", "_beams"):
             old = getattr(self, name)
             new = (
-                np.full((size, *old.shape[1:]), np.nan)
-                if name == "_times"
+                np.full((size, *old.shape[1:]), fill[name])
+                if name in fill
                 else np.empty((size, *old.shape[1:]))
             )
             new[:have] = old
             setattr(self, name, new)
 
-    def _add_hits(self, hits: np.ndarray, owners: np.ndarray) -> None:
+    def add_hits(self, hits: np.ndarray, owners: np.ndarray) -> None:
+        """Hit points (H, 2) (absolute) given as points, with the slot of each ``owners`` (H,)."""
         n, m = self._n_hits, len(hits)
         if n + m > len(self._hits):
             size = max(n + m, 2 * len(self._hits))
@@ -335,8 +343,22 @@ class TeamHistory:
         return times[~np.isnan(times)]
 
     def hits(self, j: int) -> np.ndarray:  # (H_j, 2)
+        """Slot j's hit points (absolute): those given as points, then its recorded beams'
+        (step by step, beam by beam) ``true + r·(cos φ, sin φ)`` with φ the true heading plus
+        the beam's angle, the operations :func:`~polyslam_env.core.geometry.beam_endpoints`
+        did for each step."""
         n = self._n_hits
-        return self._hits[:n][self._hit_owner[:n] == j]
+        given = self._hits[:n][self._hit_owner[:n] == j]
+        rows = slice(1, int(self.lengths[j]))
+        ranges = self._beams[rows, j]  # (k, B)
+        if ranges.size == 0:
+            return given
+        poses = self._true[rows, j]  # (k, 3)
+        ok = np.isfinite(ranges)
+        phi = poses[:, 2:3] + self.angles  # (k, B)
+        ends = beam_endpoints(poses[:, None, :2], phi, np.where(ok, ranges, 0.0))  # (k, B, 2)
+        placed = ends[ok]
+        return np.concatenate([given, placed]) if len(given) else placed
 
 
 class RobotHistory:
@@ -419,19 +441,21 @@ class RobotHistory:
         collided: bool,
         diverging: bool,
     ) -> None:
-        """Append one step: poses (3,), covariance (3, 3), beam hit points (h, 2)."""
+        """Append one step: poses (3,), covariance (3, 3), beam hit points (h, 2) (absolute;
+        a team's history records its beams' ranges instead)."""
         hits = np.asarray(hits, dtype=float).reshape(-1, 2)
-        self.team.record(
+        team = self.team
+        team.record(
             np.array([self.slot]),
             np.asarray(true_pose, dtype=float)[None],
             np.asarray(est_pose, dtype=float)[None],
             np.asarray(est_cov, dtype=float)[None],
-            hits,
-            np.full(len(hits), self.slot),
+            np.full((1, len(team.angles)), np.inf),  # no beams of its own
             np.array([np.nan if slam_time is None else slam_time]),
             np.array([bool(collided)]),
             np.array([bool(diverging)]),
         )
+        team.add_hits(hits, np.full(len(hits), self.slot))
 
     def true_path(self) -> np.ndarray:  # (k, 2)
         return self.true[:, :2].copy()

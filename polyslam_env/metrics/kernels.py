@@ -14,8 +14,9 @@
   the float operations of :meth:`~polyslam_env.slam.polynomial.Polynomial.sample_arclength`
   in the same order (numpy's ``linspace``, Horner's ``polyval``, ``diff``, the norm as the sum
   of two squares, ``cumsum`` and ``interp``), so the points are bit-identical to it.
-* :func:`record_rows`: one step of a team's history (poses, covariances, SLAM times, path
-  length, collisions, divergence flags) written for every recorded slot in one call, the
+* :func:`record_rows`: one step of a team's history (poses, covariances, SLAM times, the
+  beams' true ranges, path length, collisions, divergence flags) written for every recorded
+  slot in one call, the
   path length's step with libm's ``hypot`` as ``np.hypot`` computes it.
 
 Oracles: brute force over all segments and all points, ``Polynomial.sample_arclength`` and
@@ -361,6 +362,7 @@ def record_rows(
     est_poses: np.ndarray,
     est_covs: np.ndarray,
     slam_times: np.ndarray,
+    ranges: np.ndarray,
     collided: np.ndarray,
     diverging: np.ndarray,
     lengths: np.ndarray,
@@ -368,6 +370,7 @@ def record_rows(
     est: np.ndarray,
     cov: np.ndarray,
     times: np.ndarray,
+    beams: np.ndarray,
     path_length: np.ndarray,
     collisions: np.ndarray,
     diverged: np.ndarray,
@@ -375,8 +378,9 @@ def record_rows(
 ) -> None:
     """Append one step to slots ``slots`` (K,) of a team history (changes its arrays): slot
     ``j = slots[k]`` writes row ``lengths[j]`` of ``true``, ``est`` (capacity, J, 3), ``cov``
-    (capacity, J, 3, 3) and ``times`` (capacity, J) from row k of ``true_poses``,
-    ``est_poses`` (K, 3), ``est_covs`` (K, 3, 3) and ``slam_times`` (K,); adds the true step's
+    (capacity, J, 3, 3), ``times`` (capacity, J) and ``beams`` (capacity, J, B) from row k of
+    ``true_poses``, ``est_poses`` (K, 3), ``est_covs`` (K, 3, 3), ``slam_times`` (K,) and
+    ``ranges`` (K, B); adds the true step's
     length to ``path_length[j]``, ``collided[k]`` to ``collisions[j]``; ``diverging[k]`` sets
     ``diverged[j]`` and, the first time, ``diverged_at[j]`` to the row; then counts the row
     in ``lengths``. The caller makes room first (capacity > every ``lengths[j]``)."""
@@ -392,6 +396,8 @@ def record_rows(
             for b in range(3):
                 cov[row, j, a, b] = est_covs[k, a, b]
         times[row, j] = slam_times[k]
+        for b in range(ranges.shape[1]):
+            beams[row, j, b] = ranges[k, b]
         if collided[k]:
             collisions[j] += 1
         if diverging[k] and not diverged[j]:

@@ -36,7 +36,7 @@ from polyslam_env.metrics.boundary import (
     boundary_samples,
     distance_to_boundary,
 )
-from polyslam_env.metrics.kernels import covered, covered_by, parallel_neighbours, sample_rows
+from polyslam_env.metrics.kernels import covered_by, parallel_neighbours, sample_rows
 from polyslam_env.metrics.pose import _check_pose
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
@@ -288,14 +288,10 @@ def seen_boundary(
     """The boundary samples (M, 2) within ``radius`` of a true beam hit (H, 2), absolute, and
     their lengths (M,), read-only; non-finite hits are ignored."""
     bpts, weights = boundary_samples(layout, step)
-    hits = np.asarray(hit_points_abs, dtype=float).reshape(-1, 2)
-    hits = hits[np.all(np.isfinite(hits), axis=1)]
-    if len(hits) == 0:
-        return bpts[:0], weights[:0]
-    seen = covered(bpts, np.ascontiguousarray(hits), float(radius))
+    seen = _near(hit_points_abs, layout, radius, step)
     seen_pts, seen_weights = bpts[seen], weights[seen]
-    # read-only like the cached samples: one compiled specialisation of ``covered`` serves
-    # both (numba types a read-only array apart; each is loaded once per process)
+    # read-only like the cached samples (numba types a read-only array apart: one compiled
+    # specialisation of ``covered`` serves callers that query them)
     seen_pts.setflags(write=False)
     seen_weights.setflags(write=False)
     return seen_pts, seen_weights
@@ -326,14 +322,19 @@ def _completeness_seen(
     radius: float,
     tol: float,
     step: float,
+    near: np.ndarray | None = None,
 ) -> float:
-    """:func:`completeness_seen` of the placed samples (:func:`_placed`)."""
-    bpts, weights = seen_boundary(layout, hit_points_abs, radius, step)
-    total = float(weights.sum())
+    """:func:`completeness_seen` of the placed samples (:func:`_placed`); ``near`` is
+    :func:`_near` of them if the caller has it. The seen samples' weights are summed as
+    :func:`seen_boundary` returns them (the same elements in the same order)."""
+    weights = boundary_samples(layout, step)[1]
+    seen = _near(hit_points_abs, layout, radius, step)  # the seen samples
+    total = float(weights[seen].sum())
     if len(starts) == 1 or total == 0.0:
         return 0.0
-    near = covered(bpts, np.ascontiguousarray(points, dtype=float), float(tol))
-    return float(weights[near].sum()) / total
+    if near is None:
+        near = _near(points, layout, tol, step)
+    return float(weights[seen & near].sum()) / total
 
 
 #: Distance (m) and angle (rad) within which a piece of map duplicates another polynomial: the
@@ -390,20 +391,34 @@ def _tangents(points: np.ndarray, counts: np.ndarray) -> np.ndarray:  # (M, 2)
     return out
 
 
-def _covered_fraction(points: np.ndarray, layout: Layout, tol: float, step: float) -> float:
-    """Fraction of the true boundary length within ``tol`` of some point (N, 2)."""
+def _covered_fraction(
+    points: np.ndarray, layout: Layout, tol: float, step: float, near: np.ndarray | None = None
+) -> float:
+    """Fraction of the true boundary length within ``tol`` of some point (N, 2); ``near`` is
+    :func:`_near` of them if the caller has it."""
     if tol < 0:
         raise ValueError(f"tol must be >= 0, got {tol}")
-    bpts, weights = boundary_samples(layout, step)
+    weights = boundary_samples(layout, step)[1]
+    total = float(weights.sum())
+    if total == 0.0:
+        return 0.0
+    if near is None:  # no finite point: nothing near, 0.0
+        near = _near(points, layout, tol, step)
+    return float(weights[near].sum()) / total
+
+
+def _near(points: np.ndarray, layout: Layout, tol: float, step: float) -> np.ndarray:
+    """Which of the boundary samples (``boundary_samples(layout, step)``) lie strictly within
+    ``tol`` of a finite point (N, 2) (M,) bool: ``covered_by`` over the samples bucketed once
+    per layout (each call only walks the points), the same booleans as ``covered(samples,
+    points, tol)``."""
+    bpts = boundary_samples(layout, step)[0]
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
     pts = pts[np.all(np.isfinite(pts), axis=1)]
-    total = float(weights.sum())
-    if len(pts) == 0 or total == 0.0:
-        return 0.0
-    # the boundary's samples bucketed once per layout: each call only walks the points
+    if len(pts) == 0:
+        return np.zeros(len(bpts), dtype=bool)
     found = boundary_buckets(layout, step, tol)
-    near = covered_by(bpts, *found, np.ascontiguousarray(pts), float(tol))
-    return float(weights[near].sum()) / total
+    return covered_by(bpts, *found, np.ascontiguousarray(pts), float(tol))
 
 
 def completeness(
@@ -439,13 +454,14 @@ def map_quality(
     ds = _distances(points, starts, layout)
     frame = np.asarray(frame, dtype=float)
     same = np.array_equal(frame, np.asarray(start_pose, dtype=float))
+    near = _near(points, layout, tol, step)  # for both completeness figures
     return {
         "nu": _nu(ds),
         "nu_mean": _nu_mean(ds),
         "nu_mean_abs": _nu_mean(ds if same else _distances(_moved(own, frame), starts, layout)),
-        "completeness": _covered_fraction(points, layout, tol, step),
+        "completeness": _covered_fraction(points, layout, tol, step, near),
         "completeness_seen": _completeness_seen(
-            points, starts, layout, hit_points_abs, SEEN_RADIUS, tol, step
+            points, starts, layout, hit_points_abs, SEEN_RADIUS, tol, step, near
         ),
         "map_precision": _precision(ds, tol),
         "duplicates": _duplicates(own, starts, DUPLICATE_TOL, DUPLICATE_ANGLE),

@@ -158,6 +158,11 @@ class SlamConfig(Config):
     # are linked by a collinearity pseudo-measurement when its χ² gate passes (links.py);
     # 0: never (paper)
     link_gap: float = 1.2
+    # with link_gap, pieces of one curved wall are linked too (a curve to a curve or a line,
+    # same variate, evidence that meets: walls.CURVE_LINK_GAP): they meet at the junction
+    # with one tangent (links.junction_rows), the curves' turns considered, the lines'
+    # estimated; needs rotation states; False: straight pieces only (docs/notes/curved.md)
+    curve_links: bool = False
     # steps after a landmark is made (refit, merged) that its links are sought: by then the
     # beams have updated its c0, while a fresh fit hangs the hits of several steps on one pose
     # and states its offset relative to that pose too precisely (linked at once, the lone
@@ -231,7 +236,13 @@ class SlamConfig(Config):
             raise ConfigError(f"slam.link_age: must be an integer >= 0, got {self.link_age!r}")
         check_positive("slam.wall_straightness", self.wall_straightness)
         check_positive("slam.wall_squareness_deg", self.wall_squareness_deg)
-        for name in ("square_walls", "square_evidence", "square_pair_evidence", "curvature_test"):
+        for name in (
+            "square_walls",
+            "square_evidence",
+            "square_pair_evidence",
+            "curvature_test",
+            "curve_links",
+        ):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(
                     f"slam.{name}: must be true or false, got {getattr(self, name)!r}"

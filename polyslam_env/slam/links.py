@@ -35,6 +35,13 @@ leaves out the errors that the walls of one message share through the frame tran
 strict xfail ``test_refine_transform__covariance_holds_errors_the_walls_share``), and a link
 would trust them as if they had none.
 
+**Curved pieces** (``SlamConfig.curve_links``, opt-in): a curve and a curve or a line of one
+variate whose evidence meets (``walls.CURVE_LINK_GAP``) meet at the junction ξ of their evidence
+(:func:`junction`) with one value and one tangent (:func:`junction_rows`); the noise is each
+piece's frozen error at ξ, extrapolated (:func:`frozen_slope_var` for the slope), and the
+curves' turns stay considered (a curve cannot be turned exactly as :func:`turned_line` turns
+a line).
+
 A fact may be used once: pieces already joined by links (directly or through others, or
 merged from linked pieces) form one *wall group* and are never linked again among
 themselves, so no collinearity enters the filter twice.
@@ -145,6 +152,78 @@ def link_rows(
                 H[row, turn_index] += sign * moved
             residual[row] += sign * eta
     return residual, H
+
+
+def junction(a: tuple[float, float], b: tuple[float, float]) -> float:
+    """ξ where two pieces' evidence intervals meet: the middle of the gap between them, or of
+    their overlap when they overlap."""
+    first, second = sorted((a, b), key=sum)
+    return 0.5 * (first[1] + second[0])
+
+
+def junction_rows(
+    poly_i: Polynomial,
+    c0_index_i: int,
+    turn_i: tuple[int, float] | None,
+    poly_j: Polynomial,
+    c0_index_j: int,
+    turn_j: tuple[int, float] | None,
+    xi: float,
+    n_state: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rows that two pieces of one wall, a curve among them, meet at ``xi`` with one
+    tangent (same variate, current c0s): residuals (η_i − η_j, B'_i − B'_j) at ξ (2,) and
+    their Jacobian H (2, ``n_state``). The first row is :func:`link_rows`' at ξ. On the
+    second, c0 does not move a slope; a turn α about the pivot (ξ_c, η_c) moves the curve's
+    η at ξ by (ξ − ξ_c) + B'(ξ)(η − η_c) (variate 1; variate 2 the negative), whose
+    derivative along ξ is the slope's: 1 + B'(ξ)² + B''(ξ)(η − η_c)."""
+    residual = np.zeros(2)
+    H = np.zeros((2, n_state))
+    residual[:1], H[:1] = link_rows(
+        poly_i, c0_index_i, turn_i, poly_j, c0_index_j, turn_j, np.array([xi]), n_state
+    )
+    for sign, poly, turn in ((1.0, poly_i, turn_i), (-1.0, poly_j, turn_j)):
+        slope = float(polyval(xi, poly.coeffs, derivative=1))
+        residual[1] += sign * slope
+        if turn is not None:
+            turn_index, pivot = turn
+            across = float(polyval(xi, poly.coeffs)) - float(polyval(pivot, poly.coeffs))
+            bend = 1.0 + slope * slope + float(polyval(xi, poly.coeffs, derivative=2)) * across
+            H[1, turn_index] += sign * (bend if poly.variate == 1 else -bend)
+    return residual, H
+
+
+def chord_bias(bend: float, offset: float, half: float) -> tuple[float, float]:
+    """How far a straight piece fitted to a wall of curvature ``bend`` (B'', the wall's
+    η = B''·u²/2 about the piece's middle) lies from the wall at ``offset`` from its middle
+    (m along ξ), its evidence ``half`` long each side: (η, slope). The least-squares line
+    over hits spread evenly on [−h, h] takes the mean B''·h²/6 and no slope, so at u the
+    wall is B''(u² − h²/3)/2 above it and B''·u steeper: a frozen bias no state and no
+    misfit variance holds (a sagitta below the range noise, docs/notes/floors.md R6.1)."""
+    return 0.5 * bend * (offset * offset - half * half / 3.0), bend * offset
+
+
+def frozen_slope_var(
+    shape: np.ndarray,
+    order: int,
+    t: float,
+    fit_half: float,
+    fit_inverse: np.ndarray,
+    noise_var: float,
+    turn_in_state: bool,
+) -> float:
+    """Variance of a frozen shape's slope B'(ξ) from its fit at scaled position t = (ξ −
+    pivot)/``fit_half``: the slope's counterpart of the value's (``kernels._shape_fit_var``),
+    σ²·a'(t)ᵀ M⁻¹ a'(t)/``fit_half``² with a' = ∂a/∂t = [0, 1, 2t, 3t², …] and M⁻¹ =
+    ``fit_inverse[order]``; with ``turn_in_state`` less the slope coefficient's own part
+    (the shape's turn α, a state, carries it)."""
+    if order < 1 or shape[order] == 0.0:
+        return 0.0
+    a = np.array([float(k) * t ** (k - 1) if k else 0.0 for k in range(order + 1)])
+    quad = float(a @ fit_inverse[order, : order + 1, : order + 1] @ a)
+    if turn_in_state:
+        quad -= float(fit_inverse[order, 1, 1])
+    return noise_var * max(quad, 0.0) / fit_half**2
 
 
 def line_angle(poly: Polynomial) -> float:

@@ -297,7 +297,7 @@ class MapMaintenance:
         idx = slam.table.index_of(landmark_id)
         c0s = slam.c0s
         reach = cfg.gamma_max * (1.0 + 1e-9) + 1e-12  # ≥ γ_M despite rounding
-        boxes = slam.table.boxes(c0s)  # once: table.near(self.box(idx), …) computed them twice
+        boxes = slam.landmark_boxes()  # cached until the map or the state changes
         near = boxes_near(boxes, boxes[idx], reach)
         near = near[near != idx]
         poly = self.polynomial(idx)

@@ -55,9 +55,10 @@ from polyslam_env.slam.fitting import Fit, polynomial_points
 from polyslam_env.slam.landmarks import LandmarkTable, ShapesView
 from polyslam_env.slam.layout import StateLayout
 from polyslam_env.slam.lineage import Lineage
+from polyslam_env.slam.links import frozen_slope_var
 from polyslam_env.slam.maintenance import MapMaintenance, fit_inverse_table
 from polyslam_env.slam.model import REACH_MARGIN, step_model, update_beam_mask
-from polyslam_env.slam.polynomial import Polynomial
+from polyslam_env.slam.polynomial import Polynomial, polyval
 from polyslam_env.slam.stored import PointArrays, StoredPoints
 from polyslam_env.slam.walls import WallGraph
 
@@ -290,28 +291,49 @@ class PolySlam:
     def map_frozen_variance(self, spacing: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
         """What :meth:`map_error_jacobian` leaves out: at the same points, the variance (M,)
         of each point's offset along the curve's normal from its landmark's frozen errors (no
-        state holds them; :func:`~polyslam_env.slam.kernels.frozen_offset_var`, the terms the
-        update adds to a beam's R there), and the landmark row of each point (M,) int: one
-        landmark's frozen error is one curve, shared by its points."""
-        cfg, table = self.config, self.table
-        fit_inverse, n_fit = self._fit_inverse(), cfg.eps_z + 1
-        heading_var = float(cfg.odom_cov[2, 2])
+        state holds them; :meth:`frozen_variance`), and the landmark row of each point (M,)
+        int: one landmark's frozen error is one curve, shared by its points."""
         variances, rows = [np.zeros(0)], [np.zeros(0, dtype=np.int64)]
         for i, poly in enumerate(self.polynomials()):
             n = max(2, math.ceil((poly.hi - poly.lo) / spacing) + 1)
             xi = np.linspace(poly.lo, poly.hi, n)
-            eta_var = np.empty(n)
-            kernels.frozen_offset_var(
-                table.shape_buffer[i], int(table.order[i]), xi, float(table.pivot[i]),
-                float(table.fit_half[i]), float(table.model_var[i]), float(table.xi_var[i]),
-                float(table.shift_slope[i]),
-                (self.step_count - int(table.changed_at[i])) * heading_var, fit_inverse, n_fit,
-                cfg.range_sigma**2, cfg.shape_follows_pose, cfg.shape_shift == "pose",
-                cfg.rotation_states, eta_var,
-            )  # fmt: skip
+            eta_var = self.frozen_variance(i, xi)
             variances.append(eta_var / (1.0 + poly.slope(xi) ** 2))  # η error → normal offset
             rows.append(np.full(n, i, dtype=np.int64))
         return np.concatenate(variances), np.concatenate(rows)
+
+    def frozen_variance(self, row: int, xi: np.ndarray) -> np.ndarray:
+        """The variance (k,) of landmark ``row``'s frozen error along η at each ``xi`` (k,):
+        :func:`~polyslam_env.slam.kernels.frozen_offset_var`, the terms the update adds to a
+        beam's R there."""
+        cfg, table = self.config, self.table
+        eta_var = np.empty(xi.size)
+        kernels.frozen_offset_var(
+            table.shape_buffer[row], int(table.order[row]), xi, float(table.pivot[row]),
+            float(table.fit_half[row]), float(table.model_var[row]), float(table.xi_var[row]),
+            float(table.shift_slope[row]),
+            (self.step_count - int(table.changed_at[row])) * float(cfg.odom_cov[2, 2]),
+            self._fit_inverse(), cfg.eps_z + 1, cfg.range_sigma**2, cfg.shape_follows_pose,
+            cfg.shape_shift == "pose", cfg.rotation_states, eta_var,
+        )  # fmt: skip
+        return eta_var
+
+    def frozen_slope_variance(self, row: int, xi: float) -> float:
+        """The variance of landmark ``row``'s frozen error in its slope B' at ``xi``, the
+        slope's counterpart of :meth:`frozen_variance`: the misfit beyond the range noise as
+        a direction (model_var/h², as a square tie takes it), the shape's fit
+        (:func:`~polyslam_env.slam.links.frozen_slope_var`) and, with shapes that follow
+        the pose, the fit-time shift along ξ on the curvature (B''² · xi_var)."""
+        cfg, table = self.config, self.table
+        half = float(table.fit_half[row])
+        var = float(table.model_var[row]) / half**2 + frozen_slope_var(
+            table.shape_buffer[row], int(table.order[row]), (xi - float(table.pivot[row])) / half,
+            half, self._fit_inverse(), cfg.range_sigma**2, cfg.rotation_states,
+        )  # fmt: skip
+        if cfg.shape_follows_pose:
+            bend = float(polyval(xi, table.polys[row].coeffs, derivative=2))
+            var += bend * bend * float(table.xi_var[row])
+        return var
 
     def step(self, odometry: np.ndarray, ranges: np.ndarray) -> SlamStepInfo:
         """Advance by one control period given odometry (3,) and range readings (B,).
@@ -356,20 +378,20 @@ class PolySlam:
         if points.counters[N_REFIT] or points.counters[N_NEW] or status[ST_FRESH]:
             with blas_threads(self.config.blas_threads):
                 counts = self._change_map(rho, int(status[ST_FRESH]))
+            real, index, shape = table.buffers  # (the map changes may have grown them)
+            fit_inverse, n = self._fit_inverse(), len(table)
         refit, created, merged, linked = counts
         if self.profile is not None:
             lap = self._lap("map", lap)
 
-        real, index, shape = table.buffers  # (the map changes may have grown them)
         step_kernels.finish_step(
-            self.mean, self._cov, ranges, model.beams, real, index, shape, len(table),
-            model.params, model.switches, self._fit_inverse(), self.step_count, per_beam, status,
-            values,
+            self.mean, self._cov, ranges, model.beams, real, index, shape, n, model.params,
+            model.switches, fit_inverse, self.step_count, per_beam, status, values,
         )  # fmt: skip
         used = int(status[ST_USED])
         if used > 0:  # kernels.update_scan's consider_from
             considered = self.config.rotation_states
-            self._mirror_from = 3 + len(table) if considered else self._cov.shape[0]
+            self._mirror_from = 3 + n if considered else self._cov.shape[0]
         if used >= 0:  # the update ran
             self.state_moved(values[V_BEFORE : V_BEFORE + 3] if used else None)
         self.divergence_f = float(values[V_F])
@@ -380,7 +402,7 @@ class PolySlam:
         if self.profile is not None:
             self._lap("update", lap)
         return SlamStepInfo(
-            self.step_count, time.perf_counter() - start, len(table), max(used, 0), created,
+            self.step_count, time.perf_counter() - start, n, max(used, 0), created,
             refit, merged, rho, sigma, self.divergence_f, self.diverging, linked,
         )  # fmt: skip
 
@@ -462,6 +484,12 @@ class PolySlam:
         """Ids of the landmarks created, refit or merged after ``step`` (exchange payloads)."""
         table = self.table
         return [table.ids[j] for j in np.flatnonzero(table.changed_at > step).tolist()]
+
+    def landmark_boxes(self) -> np.ndarray:
+        """Bounding boxes (n, 4) = (x_min, x_max, y_min, y_max) of the landmarks at the current
+        c0s, in table order, cached until the map or the state changes (read-only: the map's
+        merge check and the exchange share them)."""
+        return self._boxes()
 
     def _boxes(self) -> np.ndarray:
         """Bounding boxes (n, 4) of the landmarks at the current c0s, cached by the table until

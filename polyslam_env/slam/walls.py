@@ -27,7 +27,10 @@ from polyslam_env.slam.landmarks import EXTENT_MARGIN
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED, LineageEvent
 from polyslam_env.slam.links import (
     SQUARE_MIN_LENGTH,
+    chord_bias,
     evidence_gap,
+    junction,
+    junction_rows,
     line_angle,
     link_rows,
     off_square,
@@ -35,9 +38,19 @@ from polyslam_env.slam.links import (
     rectilinear,
     turned_line,
 )
+from polyslam_env.slam.map_kernels import GAP_SPLIT
+from polyslam_env.slam.polynomial import polyval
 
 if TYPE_CHECKING:
     from polyslam_env.slam.robot import PolySlam
+
+
+#: m: a curve is linked only to pieces whose evidence meets its own, a gap no wider than the
+#: beams' sampling along a wall (``map_kernels.GAP_SPLIT``, wider is a doorway): the junction
+#: rows extrapolate each shape to the junction, and beyond its evidence a curve's order-m fit
+#: misses the wall's next terms, which its frozen variance does not hold (linked across
+#: ``link_gap``, the curved floors' maps got worse: docs/notes/curved.md)
+CURVE_LINK_GAP = GAP_SPLIT
 
 
 class WallGraph:
@@ -127,7 +140,7 @@ class WallGraph:
         if cfg.link_gap <= 0.0 or landmark_id not in table:
             return 0
         idx = table.index_of(landmark_id)
-        if table.received[idx] or table.order[idx] != 1:
+        if table.received[idx] or not self.linkable(int(table.order[idx])):
             return 0
         evidence = maintenance.evidence(idx)
         reach = cfg.link_gap * (1.0 + 1e-9) + EXTENT_MARGIN
@@ -138,13 +151,14 @@ class WallGraph:
         near = near[
             (near != idx)
             & (variate[near] == variate[idx])
-            & (order[near] == 1)
+            & ((order[near] == 1) | self.linkable(2))
             & (table.changed_at[near] <= matured)
             & (table.received[near] == 0)
         ]
         for j in near.tolist():
             gap = evidence_gap(evidence, maintenance.evidence(j))
-            if -2.0 * EXTENT_MARGIN <= gap <= cfg.link_gap:
+            reach_j = cfg.link_gap if order[idx] == order[j] == 1 else CURVE_LINK_GAP
+            if -2.0 * EXTENT_MARGIN <= gap <= reach_j:
                 candidates.append((gap, table.ids[j]))
         links = 0
         for _, other_id in sorted(candidates):
@@ -152,14 +166,22 @@ class WallGraph:
                 links += self.link_pair(landmark_id, other_id)
         return links
 
+    def linkable(self, order: int) -> bool:
+        """Whether a landmark of ``order`` may be linked: a line, or with
+        ``config.curve_links`` and rotation states a curve too."""
+        return order == 1 or (self.config.curve_links and self.config.rotation_states)
+
     def link_pair(self, first: int, second: int) -> bool:
         """The collinearity update of two straight landmarks (rows at the middle of each one's
         evidence, noise each fit's variance beyond the range noise plus
         ``config.wall_straightness``²), estimating their two turns (:meth:`update_pair`);
-        whether it passed the gate and was applied."""
+        whether it passed the gate and was applied. A pair with a curve meets at its
+        junction instead (:meth:`link_junction`)."""
         slam = self.slam
         table, maintenance = slam.table, slam.maintenance
         i, j = table.index_of(first), table.index_of(second)
+        if table.order[i] != 1 or table.order[j] != 1:
+            return self.link_junction(first, second)
         xis = np.array([0.5 * sum(maintenance.evidence(i)), 0.5 * sum(maintenance.evidence(j))])
         if self.direction_of[first] == self.direction_of[second]:
             xis = xis.mean(keepdims=True)  # parallel already: only the offset is new
@@ -170,6 +192,43 @@ class WallGraph:
         )  # fmt: skip
         r = float(table.model_var[i] + table.model_var[j]) + self.config.wall_straightness**2
         if not self.update_pair(i, j, -residual, H, r * np.eye(xis.size)):
+            return False
+        self.join_walls(first, second)
+        return True
+
+    def link_junction(self, first: int, second: int) -> bool:
+        """Two pieces of one wall, a curve among them (``config.curve_links``), meet at the
+        junction of their evidence with one tangent (:func:`~polyslam_env.slam.links.
+        junction_rows`; only the offset when they are in one direction group already). The
+        noise of each row is what no state holds at the junction, the curve extrapolated
+        there included: each piece's frozen error (:meth:`PolySlam.frozen_variance` on η,
+        :meth:`PolySlam.frozen_slope_variance` on the slope) plus ``config.wall_straightness``²
+        on η and ``config.wall_squareness_deg`` as a kink on the direction. Gated by χ²;
+        the lines' turns are estimated, the curves' stay considered (:meth:`update_pair`)."""
+        slam, cfg = self.slam, self.config
+        table, maintenance = slam.table, slam.maintenance
+        i, j = table.index_of(first), table.index_of(second)
+        xi = junction(maintenance.evidence(i), maintenance.evidence(j))
+        residual, H = junction_rows(
+            maintenance.polynomial(i), 3 + i, maintenance.turn_of(i),
+            maintenance.polynomial(j), 3 + j, maintenance.turn_of(j),
+            xi, slam.mean.size,
+        )  # fmt: skip
+        value_var, slope_var = cfg.wall_straightness**2, 0.0
+        for k, other in ((i, j), (j, i)):
+            value_var += float(slam.frozen_variance(k, np.array([xi]))[0])
+            slope_var += slam.frozen_slope_variance(k, xi)
+            if table.order[k] == 1:  # a line on the other's curve: a chord, off at its end
+                bend = float(polyval(xi, table.polys[other].coeffs, derivative=2))
+                lo, hi = maintenance.evidence(k)
+                value_bias, slope_bias = chord_bias(bend, xi - 0.5 * (lo + hi), 0.5 * (hi - lo))
+                value_var += value_bias**2
+                slope_var += slope_bias**2
+        slope = float(polyval(xi, table.polys[i].coeffs, derivative=1))
+        slope_var += (1.0 + slope * slope) ** 2 * math.radians(cfg.wall_squareness_deg) ** 2
+        rows = 1 if self.direction_of[first] == self.direction_of[second] else 2
+        R = np.diag([value_var, slope_var])[:rows, :rows]
+        if not self.update_pair(i, j, -residual[:rows], H[:rows], R):
             return False
         self.join_walls(first, second)
         return True
@@ -273,16 +332,17 @@ class WallGraph:
         slam, cfg = self.slam, self.config
         considered = None
         n = len(slam.table)
+        lines = [k for k in (i, j) if slam.table.order[k] == 1]
         if cfg.rotation_states:  # every turn but the two lines' own
             turns = slam.layout.turn_index(0, n) + np.arange(n)
-            considered = np.delete(turns, [i, j])
+            considered = np.delete(turns, lines)
         result = ekf.update_rows(slam.mean, slam.cov, innovation, H, R, cfg.gate_prob, considered)
         if result is None:
             return False
         before = slam.mean[:3].copy()
         slam.mean, slam.cov, _ = result
         if cfg.rotation_states:
-            for k in (i, j):
+            for k in lines:
                 self.apply_turn(k)
         slam.state_moved(before)
         return True

@@ -94,6 +94,41 @@ def test_rate_samples__calls_per_second(clock: FakeClock) -> None:
     assert rate_samples(step, steps=10, repeats=3, warmup=1).n == 3
 
 
+class _RecordingEnv:
+    """Two agents with the env's (v, ω) Box; records the actions it is stepped with."""
+
+    def __init__(self) -> None:
+        from gymnasium import spaces
+
+        self.possible_agents = ["robot_0", "robot_1"]
+        self.agents: list[str] = []
+        self.space = spaces.Box(
+            np.array([-0.5, -1.2], np.float32), np.array([0.7, 1.2], np.float32)
+        )
+        self.actions: list[np.ndarray] = []
+
+    def action_space(self, agent: str) -> Any:
+        return self.space
+
+    def reset(self, seed: int | None = None) -> None:
+        self.agents = list(self.possible_agents)
+
+    def step(self, actions: dict[str, np.ndarray]) -> None:
+        self.actions += [actions[a] for a in self.agents]
+
+
+def test_random_stepper__draws_what_uniform_draws_bit_for_bit() -> None:
+    env = _RecordingEnv()
+    step = benchmark_harness.random_stepper(env, 7)
+    for _ in range(500):
+        step()
+    rng = np.random.default_rng(7)
+    expected = [rng.uniform(env.space.low, env.space.high) for _ in env.actions]
+    got = np.array(env.actions)
+    assert got.dtype == np.float64
+    np.testing.assert_array_equal(got, np.array(expected))
+
+
 def test_scaling_exponent__linear_and_constant() -> None:
     counts = [1, 3, 8, 16, 32]
     linear = [5.0 * n for n in counts]

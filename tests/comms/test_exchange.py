@@ -19,12 +19,12 @@ from polyslam_env.comms.exchange import (
     RECEIVED_CI_WEIGHT,
     RendezvousExchange,
     _c0_variance,
-    _chain_normals,
     chain_points,
     covered_points,
     frame_message,
     map_transform,
     normal_variance,
+    received_geometry,
     received_point_set,
     refit_pieces,
     refit_variance_floor,
@@ -917,7 +917,7 @@ def test_refit_variance_floor__bounds_the_refits_of_random_records() -> None:
             d_state @ pose_cov @ d_state.T + d_noise @ noise_cov @ d_noise.T / RECEIVED_CI_WEIGHT
         )
         shift = rotation(float(t[2])) @ _ETA_AXIS[record.polynomial.variate]
-        normals = _chain_normals(q, t)
+        normals = received_geometry(q, t, rotation(float(t[2])), cov_t)[2]
         floor = refit_variance_floor(normals, cov_t, shift, record.c0_var / RECEIVED_CI_WEIGHT)
         for _, fit in refit_pieces(pts, 3, True, 0.0025):
             var = normal_variance(fit.poly, _c0_variance(fit, pose_cov))
@@ -974,9 +974,12 @@ def test_covered_by_walls__matches_the_numpy_oracle() -> None:
             coeffs[k, : w.order + 1] = w.coeffs
         args = (0.35, cos_max, float(rng.choice([0.0, 0.1, 0.5])))
         max_var = float(rng.uniform(0.0, 1e-3))
+        cov = np.zeros((3 + len(walls), 3 + len(walls)))
+        cov[3:, 3:] = np.diag(c0_var)  # the kernel reads a state covariance's diagonal
         got = covered_by_walls(
-            xy, normals, np.array([w.variate for w in walls]), coeffs,
-            np.array([(w.lo, w.hi) for w in walls]), c0_var, max_var, *args,
+            xy, normals, np.arange(len(walls)), np.array([w.variate for w in walls]), coeffs,
+            coeffs[:, 0].copy(), np.array([w.lo for w in walls]), np.array([w.hi for w in walls]),
+            cov, max_var, *args,
         )  # fmt: skip
         np.testing.assert_array_equal(
             got, _covered_oracle(xy, normals, walls, c0_var, max_var, *args)

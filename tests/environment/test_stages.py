@@ -83,6 +83,33 @@ def test_record__hit_points_are_the_true_points_the_beams_hit() -> None:
     assert np.minimum(walls, pillars).max() < 1e-9
 
 
+def test_record__hits_read_later_are_the_step_by_step_placement_bit_for_bit() -> None:
+    """The history keeps the true ranges and places them when read: the same floats as
+    placing every step's hits with that step's true poses (the record's former form)."""
+    from polyslam_env.core.geometry import beam_endpoints
+
+    env = parallel_env(map="two_rooms", num_robots=2, slam_enabled=False, max_steps=60)
+    env.reset(seed=3)
+    rng = np.random.default_rng(3)
+    expected: list[list[np.ndarray]] = [[], []]
+    while env.agents:
+        env.step({a: rng.uniform(-1.0, 1.0, 2) for a in env.agents})
+        state = env.episode
+        assert state is not None
+        poses, true = state.world.poses, state.sensing.true_ranges
+        ok = np.isfinite(true)
+        phi = poses[:, 2:3] + state.world.range_sensor.angles
+        ends = beam_endpoints(poses[:, None, :2], phi, np.where(ok, true, 0.0))
+        for i in range(2):
+            expected[i].append(ends[i][ok[i]])
+    state = env.episode
+    assert state is not None
+    for i in range(2):
+        want = np.concatenate(expected[i])
+        assert len(want) > 100  # the beams hit walls on most steps
+        np.testing.assert_array_equal(state.history.hits(i), want, strict=True)
+
+
 def test_simulate_and_env__same_seed_and_commands_give_identical_histories() -> None:
     """simulate and the env run the same stages (exchange off: the env's reset also takes a
     camera frame for the first observation, which simulate does not)."""

@@ -190,7 +190,8 @@ def test_covered__equals_the_kd_tree_query_within_its_bound() -> None:
 
 def _record_rows_numpy(
     slots: np.ndarray, true_poses: np.ndarray, est_poses: np.ndarray, est_covs: np.ndarray,
-    slam_times: np.ndarray, collided: np.ndarray, diverging: np.ndarray, h: dict[str, np.ndarray],
+    slam_times: np.ndarray, ranges: np.ndarray, collided: np.ndarray, diverging: np.ndarray,
+    h: dict[str, np.ndarray],
 ) -> None:  # fmt: skip
     """The oracle: ``TeamHistory.record``'s numpy form before the kernel (fancy indexing)."""
     rows = h["lengths"][slots]
@@ -201,6 +202,7 @@ def _record_rows_numpy(
     h["est"][rows, slots] = est_poses
     h["cov"][rows, slots] = est_covs
     h["times"][rows, slots] = slam_times
+    h["beams"][rows, slots] = ranges
     h["collisions"][slots] += collided
     first = diverging & ~h["diverged"][slots]
     h["diverged_at"][slots[first]] = rows[first]
@@ -218,6 +220,7 @@ def test_record_rows__equals_the_numpy_record_bit_for_bit() -> None:
         "est": np.zeros((capacity, j, 3)),
         "cov": np.zeros((capacity, j, 3, 3)),
         "times": np.full((capacity, j), np.nan),
+        "beams": np.full((capacity, j, 4), np.inf),
         "path_length": np.zeros(j),
         "collisions": np.zeros(j, dtype=np.int64),
         "diverged": np.zeros(j, dtype=bool),
@@ -232,6 +235,7 @@ def test_record_rows__equals_the_numpy_record_bit_for_bit() -> None:
         args = (
             slots, rng.normal(size=(k, 3)) * 20.0, rng.normal(size=(k, 3)),
             rng.normal(size=(k, 3, 3)), np.where(rng.random(k) < 0.3, np.nan, rng.random(k)),
+            np.where(rng.random((k, 4)) < 0.3, np.inf, rng.random((k, 4)) * 5.0),
             rng.random(k) < 0.3, rng.random(k) < 0.1,
         )  # fmt: skip
         record_rows(*args, *ours.values())

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -231,20 +232,27 @@ def test_plan_anchor__goes_to_the_nearest_anchor_by_path_within_reach() -> None:
     assert not policy._closing and policy.goal != far  # out of reach: back to exploring
 
 
-def test_closing__starts_above_close_above_and_ends_below_close_below() -> None:
-    """The loop closing's switch on the filter's own position σ (√(σx² + σy²) of P_S):
-    anchors where σ < ``anchor_below``, a closing once σ > ``close_above`` (and an anchor
-    exists), its end once σ < ``close_below``, then ``close_rest`` steps without one."""
-    policy = _open_room_policy(close_above=0.03, close_below=0.02, anchor_below=0.01, close_rest=5)
-    pose = np.array([0.0, 0.0, 0.0])
-    state = {"std": np.array([0.005, 0.005, 0.001])}
+def _sigma_steps(policy: FrontierPolicy) -> Callable[[float], bool]:
+    """A function that plays one step of ``policy``'s loop-closing switch at the origin with
+    the filter's position σ ``s`` (m) and returns whether a closing is on."""
+    state = {"std": np.zeros(3)}
     policy.context = _with_std(policy.context, state)
+    pose = np.zeros(3)
 
     def sigma(s: float) -> bool:
         state["std"] = np.array([s, 0.0, 0.001])
         policy._step += 1
         return policy._closing_now(pose, None)
 
+    return sigma
+
+
+def test_closing__starts_above_close_above_and_ends_below_close_below() -> None:
+    """The loop closing's switch on the filter's own position σ (√(σx² + σy²) of P_S):
+    anchors where σ < ``anchor_below``, a closing once σ > ``close_above`` (and an anchor
+    exists), its end once σ < ``close_below``, then ``close_rest`` steps without one."""
+    policy = _open_room_policy(close_above=0.03, close_below=0.02, anchor_below=0.01, close_rest=5)
+    sigma = _sigma_steps(policy)
     assert not sigma(0.005) and policy._anchors.sum() == 1  # anchored here
     assert not sigma(0.029)  # below close_above
     assert sigma(0.031) and policy.closings == 1
@@ -252,6 +260,58 @@ def test_closing__starts_above_close_above_and_ends_below_close_below() -> None:
     assert not sigma(0.019)  # done: rest for 5 steps
     assert not any(sigma(0.04) for _ in range(4))
     assert sigma(0.04) and policy.closings == 2
+
+
+def test_closing__spends_at_most_close_share_of_the_steps_closing_loops() -> None:
+    """The budget: a loop closing starts only while the steps spent closing are at most
+    ``close_share`` of the steps so far (with ``shape_shift: pose``'s honest σ on Willow the
+    closings, unbounded, took 35–45 % of the steps and the teams' coverage fell below 0.85);
+    the steps are counted and reported by ``metrics``."""
+    policy = _open_room_policy(
+        close_above=0.03, close_below=0.02, anchor_below=0.01, close_rest=0, close_share=0.25
+    )
+    sigma = _sigma_steps(policy)
+    assert not sigma(0.005)  # step 1: anchored
+    assert all(sigma(0.04) for _ in range(9))  # steps 2–10 closing: 9 steps
+    assert not sigma(0.01)  # step 11: done
+    # 9 closing steps are within 0.25 of the steps only from step 36 on
+    closing = {step: sigma(0.04) for step in range(12, 41)}
+    assert not any(closing[step] for step in range(12, 36)) and all(
+        closing[s] for s in range(36, 41)
+    )
+    assert policy.metrics() == {"closings": 2.0, "closing_steps": 9.0 + 5.0}
+    assert (
+        make_policy(
+            "frontier",
+            polyslam_env.parallel_env(map="generator:warehouse", num_robots=1),
+            "robot_0",
+        ).metrics()
+        == {}
+    )
+
+
+def test_closing__gives_up_after_close_timeout_and_forgets_that_anchor() -> None:
+    """A loop closing that neither reaches its anchor nor its σ within ``close_timeout`` steps
+    (a robot stalled on its way: on Willow one closing lasted 1,714 steps) ends, and the
+    anchors within 1 m of its goal are forgotten; others stay."""
+    policy = _open_room_policy(
+        close_above=0.03, close_below=0.02, anchor_below=0.01, close_timeout=10, close_share=1.0
+    )
+    pose = np.array([-2.0, 0.0, 0.0])
+    goal = _anchor(policy, -2.0, 2.0)
+    other = _anchor(policy, 2.0, -2.0)
+    state = {"std": np.array([0.04, 0.0, 0.001])}
+    policy.context = _with_std(policy.context, state)
+    policy._step += 1
+    assert policy._closing_now(pose, None)
+    policy._plan_anchor(pose)
+    assert policy.goal == goal
+    for _ in range(9):
+        policy._step += 1
+        assert policy._closing_now(pose, None)
+    policy._step += 1
+    assert not policy._closing_now(pose, None)  # 10 steps: given up
+    assert not policy._anchors[goal] and policy._anchors[other]
 
 
 def _with_std(context: Any, state: dict) -> Any:
@@ -272,6 +332,10 @@ def test_frontier_closing__bad_thresholds_are_named() -> None:
         make_policy("frontier_closing", env, "robot_0", close_below=0.05)
     with pytest.raises(ValueError, match="close_reach must be > 0"):
         make_policy("frontier_closing", env, "robot_0", close_reach=0.0)
+    with pytest.raises(ValueError, match=r"close_share must be in \[0, 1\], got 1.5"):
+        make_policy("frontier_closing", env, "robot_0", close_share=1.5)
+    with pytest.raises(ValueError, match="close_timeout must be >= 1, got 0"):
+        make_policy("frontier_closing", env, "robot_0", close_timeout=0)
     assert not make_policy("frontier", env, "robot_0").close_loops  # off by default
 
 

@@ -7,6 +7,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+import scipy.optimize
 import scipy.stats
 
 from polyslam_env.core.errors import ConfigError
@@ -15,7 +16,11 @@ from polyslam_env.slam.config import PRESETS, SlamConfig
 from polyslam_env.slam.fitting import Fit, polynomial_points
 from polyslam_env.slam.links import (
     SQUARE_CLUTTER,
+    chord_bias,
     evidence_gap,
+    frozen_slope_var,
+    junction,
+    junction_rows,
     line_angle,
     link_rows,
     off_square,
@@ -23,8 +28,10 @@ from polyslam_env.slam.links import (
     rectilinear,
     turned_line,
 )
+from polyslam_env.slam.maintenance import fit_inverse_table
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
+from polyslam_env.slam.walls import WallGraph
 from tests.slam import reference_links
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 from tests.slam.test_map_building import cast, drive, straight, turn_around
@@ -118,6 +125,117 @@ def test_link_rows__pieces_of_different_variates_are_refused() -> None:
             Polynomial(2, np.array([0.0, 0.1]), 0.0, 1.0), 4, None,
             np.array([0.5]), 5,
         )  # fmt: skip
+
+
+def _turned_curve_at(
+    poly: Polynomial, c0: float, pivot: float, angle: float, xi: float
+) -> tuple[float, float]:
+    """Oracle: (η, dη/dξ) at ξ of curve ``poly`` with offset ``c0`` turned by ``angle``
+    counter-clockwise in (x¹, x²) about its point at ``pivot``: the point of parameter s,
+    rotated, whose ξ is ``xi`` (root-found), and the rotated tangent's slope there."""
+    coeffs = np.r_[c0, poly.coeffs[1:]]
+    c, s_ = math.cos(angle), math.sin(angle)
+    flip = poly.variate == 2  # (x¹, x²) = (η, ξ)
+
+    def rotated(s: float) -> tuple[float, float, float, float]:
+        """(ξ, η, dξ/ds, dη/ds) of the turned curve's point of parameter s."""
+        eta, slope = np.polyval(coeffs[::-1], s), np.polyval(np.polyder(coeffs[::-1]), s)
+        centre = np.polyval(coeffs[::-1], pivot)
+        p = np.array([s - pivot, eta - centre])
+        d = np.array([1.0, slope])
+        if flip:
+            p, d = p[::-1], d[::-1]
+        p = np.array([c * p[0] - s_ * p[1], s_ * p[0] + c * p[1]])
+        d = np.array([c * d[0] - s_ * d[1], s_ * d[0] + c * d[1]])
+        if flip:
+            p, d = p[::-1], d[::-1]
+        return p[0] + pivot, p[1] + centre, d[0], d[1]
+
+    s = scipy.optimize.brentq(lambda s: rotated(s)[0] - xi, xi - 2.0, xi + 2.0, xtol=1e-15)
+    _, eta, dxi, deta = rotated(s)
+    return eta, deta / dxi
+
+
+CURVES = [  # (variate, coefficients of the first piece; the second: a line or a curve)
+    (1, [0.8, 0.2, 0.15]),
+    (2, [3.0, -0.4, 0.25, -0.02]),
+]
+
+
+@pytest.mark.parametrize(("variate", "coeffs"), CURVES)
+@pytest.mark.parametrize("second_order", [1, 2])
+def test_junction_rows__residual_and_jacobian_match_the_turned_curves(
+    variate: int, coeffs: list[float], second_order: int
+) -> None:
+    """State [pose, c0_i, c0_j, α_i, α_j]: the rows' residuals are (η_i − η_j, B'_i − B'_j)
+    at the junction of the two pieces turned by their α about their pivots (a brute-force
+    oracle: rotated points, root-found), and H their central finite differences, at α = 0
+    and at a turned state."""
+    first = Polynomial(variate, np.array(coeffs), -1.5, 0.4)
+    second = Polynomial(variate, np.array([0.85, 0.35, -0.1][: second_order + 1]), 0.9, 2.5)
+    pivots, xi, n_state = (-0.5, 1.6), junction((-1.2, 0.3), (1.0, 2.4)), 7
+    assert xi == pytest.approx(0.65)
+
+    def residual(state: np.ndarray, row: int) -> float:
+        values = [
+            _turned_curve_at(p, state[3 + k], pivots[k], state[5 + k], xi)[row]
+            for k, p in enumerate((first, second))
+        ]
+        return values[0] - values[1]
+
+    for alpha in (0.0, 0.02):
+        state = np.array([0.1, -0.2, 0.3, coeffs[0], 0.85, alpha, -alpha])
+        if alpha == 0.0:
+            got, H = junction_rows(first, 3, (5, pivots[0]), second, 4, (6, pivots[1]), xi, 7)
+            for row in range(2):
+                assert got[row] == pytest.approx(residual(state, row), abs=1e-12)
+        for row in range(2):
+            expected = fd_jacobian(lambda x, row=row: residual(x, row), state)
+            if alpha == 0.0:
+                np.testing.assert_allclose(H[row], expected, rtol=FD_RTOL, atol=FD_ATOL)
+            else:  # the rows are linear in α to first order: H holds at a small turn too
+                np.testing.assert_allclose(H[row], expected, atol=0.05 * np.abs(H).max())
+    _, H = junction_rows(first, 3, None, second, 4, None, xi, n_state)
+    np.testing.assert_array_equal(H, [[0, 0, 0, 1, -1, 0, 0], [0] * 7])
+
+
+@pytest.mark.parametrize(("bend", "offset", "half"), [(0.4, 0.6, 0.4), (-0.19, -0.45, 0.3)])
+def test_chord_bias__is_the_wall_minus_the_least_squares_line_through_its_hits(
+    bend: float, offset: float, half: float
+) -> None:
+    """Hits spread evenly over [−h, h] on η = B''u²/2 (noise-free, n = 200,001 of them: their
+    mean u² is h²/3·(n + 1)/(n − 1), the continuous limit to 1e-5 relative), a line fitted by
+    least squares: the wall minus the line at ``offset``, in value and slope."""
+    u = np.linspace(-half, half, 200_001)
+    slope, c0 = np.polyfit(u, 0.5 * bend * u**2, 1)
+    value, steeper = chord_bias(bend, offset, half)
+    assert value == pytest.approx(0.5 * bend * offset**2 - (c0 + slope * offset), rel=5e-5)
+    assert steeper == pytest.approx(bend * offset - slope, rel=1e-9)
+
+
+@pytest.mark.parametrize(("order", "t"), [(2, 0.0), (2, 1.6), (3, -2.0), (1, 0.7)])
+def test_frozen_slope_var__is_the_fits_slope_variance_over_monte_carlo(
+    order: int, t: float
+) -> None:
+    """Least-squares fits of order m to N = 16 noisy points over [−1, 1]·h (σ = 2 cm, h =
+    0.5 m): the sample variance of the fitted slope at t·h over 4,000 draws matches
+    ``frozen_slope_var`` without a turn state within its 99.9 % χ² interval; with one, the
+    slope coefficient's own variance σ²M⁻¹[1, 1]/h² is left out."""
+    n, sigma, half, draws = 16, 0.02, 0.5, 4000
+    rng = np.random.default_rng(order)
+    t_points = np.linspace(-1.0, 1.0, n)
+    A = t_points[:, None] ** np.arange(order + 1)
+    fits = np.linalg.lstsq(A, rng.normal(0.0, sigma, (n, draws)), rcond=None)[0]
+    slopes = np.array([k * t ** (k - 1) if k else 0.0 for k in range(order + 1)]) @ fits / half
+    inverse = fit_inverse_table(n, 3)
+    shape = np.ones(order + 1)
+    expected = frozen_slope_var(shape, order, t, half, inverse, sigma**2, False)
+    lo, hi = scipy.stats.chi2.ppf([0.0005, 0.9995], draws - 1) / (draws - 1)
+    assert lo <= slopes.var(ddof=1) / expected <= hi
+    own = sigma**2 * inverse[order, 1, 1] / half**2
+    assert frozen_slope_var(shape, order, t, half, inverse, sigma**2, True) == pytest.approx(
+        max(expected - own, 0.0), rel=1e-12, abs=1e-18
+    )
 
 
 @pytest.mark.parametrize(("variate", "c0", "slope"), LINES)
@@ -314,6 +432,54 @@ def test_parallel_walls__a_shelf_depth_apart_are_not_linked() -> None:
     for seed in range(3):
         slam, *_ = drive(walls, straight(5.5), seed)
         assert len(_groups(slam)) == slam.n_landmarks >= 2, seed
+
+
+def _arc(x0: float, x1: float) -> np.ndarray:
+    """A curved wall y = 1 + (x − 3)²/12 (radius 6 m at its apex) over [x0, x1], as 59
+    segments."""
+    x = np.linspace(x0, x1, 60)
+    points = np.stack([x, 1.0 + (x - 3.0) ** 2 / 12.0], axis=1)
+    return np.stack([points[:-1], points[1:]], axis=1)
+
+
+def _junction_links(
+    walls: np.ndarray, seeds: range, cfg: SlamConfig, monkeypatch: pytest.MonkeyPatch
+) -> tuple[int, int]:
+    """(junction links tried, made) driving past ``walls`` over ``seeds``; the covariance
+    stays symmetric PSD."""
+    counts = [0, 0]
+    link_junction = WallGraph.link_junction
+
+    def counted(self: WallGraph, first: int, second: int) -> bool:
+        made = link_junction(self, first, second)
+        counts[0], counts[1] = counts[0] + 1, counts[1] + made
+        return made
+
+    monkeypatch.setattr(WallGraph, "link_junction", counted)
+    for seed in seeds:
+        slam, *_ = drive(walls, straight(7.0), seed, cfg)
+        np.testing.assert_array_equal(slam.cov, slam.cov.T)
+        assert np.linalg.eigvalsh(slam.cov).min() > -1e-12
+    return counts[0], counts[1]
+
+
+def test_curve_links__pieces_that_meet_are_linked_not_across_a_doorway(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A curved wall with a 0.15 m gap (narrower than the beams' sampling: pieces that
+    meet), driven past with the curvature test on so its pieces are curves: with
+    ``curve_links`` pieces are linked at their junction (seeds 0–3: in two or more of them;
+    the gate refuses a line that is a chord of the arc, and some seeds map one landmark);
+    across a 0.8 m doorway no curve is even tried (its ends would be extrapolated beyond
+    ``CURVE_LINK_GAP``); without ``curve_links``, never."""
+    on = SlamConfig(curvature_test=True, curve_links=True)
+    meeting = np.concatenate([_arc(-1.0, 2.85), _arc(3.0, 7.5)])
+    _, made = _junction_links(meeting, range(4), on, monkeypatch)
+    assert made >= 2
+    doorway = np.concatenate([_arc(-1.0, 2.6), _arc(3.4, 7.5)])
+    assert _junction_links(doorway, range(2), on, monkeypatch) == (0, 0)
+    off = SlamConfig(curvature_test=True)
+    assert _junction_links(meeting, range(2), off, monkeypatch) == (0, 0)
 
 
 def test_link__covariance_stays_symmetric_psd() -> None:

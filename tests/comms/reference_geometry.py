@@ -1,0 +1,71 @@
+"""A received chain's geometry as readable numpy (the oracles of ``comms/kernels.py``'s
+:func:`unit_tangents`, :func:`frame_chain`, :func:`received_geometry` and
+:func:`variance_floor`): the numpy the exchange and the transform refinement ran before
+those were compiled."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polyslam_env.core.geometry import rotation
+from polyslam_env.slam.fitting import J_ROT
+
+
+def frame_points(q: np.ndarray, transform: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """p = R(θ) q + t (N, 2) and ∂p/∂T (N, 2, 3)."""
+    rq = q @ rotation(transform[2]).T  # (N, 2)
+    dp_dt = np.zeros((len(q), 2, 3))
+    dp_dt[:, :, :2] = np.eye(2)
+    dp_dt[:, :, 2] = rq @ J_ROT.T
+    return transform[:2] + rq, dp_dt
+
+
+def tangents(chain: np.ndarray) -> np.ndarray:
+    """(N, 2) unit tangents along a chain of points (N, 2)."""
+    if len(chain) < 2:
+        return np.tile([1.0, 0.0], (len(chain), 1))
+    d = np.gradient(chain, axis=0)
+    return np.asarray(d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12))
+
+
+def chain_normals(q: np.ndarray, transform: np.ndarray) -> np.ndarray:
+    """(N, 2) unit normals of the chain ``q`` turned into the receiver's frame."""
+    d = np.gradient(q, axis=0) if len(q) > 1 else np.array([[1.0, 0.0]])
+    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    out: np.ndarray = np.stack([-d[:, 1], d[:, 0]], axis=1) @ rotation(float(transform[2])).T
+    return out
+
+
+def normal_sigma(normal: np.ndarray, dp_dt: np.ndarray, cov_t: np.ndarray) -> np.ndarray:
+    """Each point's σ along its normal from the transform's covariance."""
+    g = np.einsum("ni,nij->nj", normal, dp_dt)  # (N, 3) ∂(normal offset)/∂T
+    out: np.ndarray = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", g, cov_t, g), 0.0))
+    return out
+
+
+def refit_variance_floor(
+    normals: np.ndarray, cov_t: np.ndarray, shift: np.ndarray, shift_var: float
+) -> float:
+    """The least nᵀQn over the normals, Q the translation's covariance given the turn plus
+    shift_var · shift shiftᵀ."""
+    if len(normals) == 0:
+        return 0.0
+    cov_t = np.asarray(cov_t, dtype=float)
+    q = cov_t[:2, :2].copy()
+    if cov_t[2, 2] > 0.0:
+        q -= np.outer(cov_t[:2, 2], cov_t[2, :2]) / cov_t[2, 2]
+    q += shift_var * np.outer(shift, shift)
+    return float(np.einsum("ni,ij,nj->n", normals, q, normals).min())
+
+
+def point_jacobians(
+    dp_dt: np.ndarray, d_state: np.ndarray, d_noise: np.ndarray, shift: np.ndarray, n_state: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """A received chain's ∂p/∂state (N, 2, n_state) and ∂p/∂noise (N, 2, 1 + K)."""
+    n_pts = len(dp_dt)
+    out_state = np.zeros((n_pts, 2, n_state))
+    out_state[:, :, :3] = dp_dt @ d_state
+    out_noise = np.concatenate(
+        [np.broadcast_to(shift[None, :, None], (n_pts, 2, 1)), dp_dt @ d_noise], axis=2
+    )
+    return out_state, out_noise

@@ -1,0 +1,83 @@
+"""The compiled geometry of a received chain (``comms/kernels.py``) against its numpy oracle
+(``tests/comms/reference_geometry.py``), bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polyslam_env.comms import kernels
+from polyslam_env.comms.alignment import _tangents, frame_points
+from polyslam_env.comms.exchange import chain_points, received_geometry, refit_variance_floor
+from polyslam_env.core.geometry import rotation
+from polyslam_env.slam.polynomial import Polynomial
+from tests.comms import reference_geometry as ref
+
+
+def _chains(rng: np.random.Generator) -> list[np.ndarray]:
+    """Chains of 1–300 points: random walks, chains of random curves (as the exchange samples
+    them), and chains with repeated points (a zero step: the norm's floor)."""
+    out = [rng.normal(0.0, 2.0, (n, 2)) for n in (1, 2, 3, 7, 300)]
+    for _ in range(30):
+        lo = float(rng.uniform(-3.0, 2.0))
+        coeffs = rng.normal(0.0, [1.0, 0.5, 0.2, 0.05])
+        poly = Polynomial(int(rng.integers(1, 3)), coeffs, lo, lo + float(rng.uniform(0.02, 4.0)))
+        out.append(np.array(chain_points(poly, 0.005, 0.05)))
+    repeated = rng.normal(0.0, 1.0, (6, 2))
+    repeated[2] = repeated[1]
+    repeated[4] = repeated[3] = repeated[5]
+    out.append(repeated)
+    return out
+
+
+def test_received_geometry__is_the_numpy_oracle_bit_for_bit() -> None:
+    """Points, ∂p/∂T, normals and normal σ of random chains under random transforms and
+    covariances equal the numpy the exchange ran before (``np.gradient``, BLAS's products,
+    ``np.einsum``): gemm for N ≥ 2, gemv for one point, sums in einsum's order."""
+    rng = np.random.default_rng(7)
+    for q in _chains(rng):
+        for _ in range(4):
+            t = np.array([*rng.normal(0.0, 3.0, 2), rng.uniform(-np.pi, np.pi)])
+            a = rng.normal(0.0, 0.05, (3, 3))
+            cov_t = a @ a.T
+            xy, dp_dt, normals, sigma = received_geometry(q, t, rotation(float(t[2])), cov_t)
+            want_xy, want_dp = ref.frame_points(q, t)
+            want_normals = ref.chain_normals(q, t)
+            assert np.array_equal(xy, want_xy) and np.array_equal(dp_dt, want_dp)
+            assert np.array_equal(frame_points(q, t)[0], want_xy)
+            assert np.array_equal(normals, want_normals)
+            assert np.array_equal(sigma, ref.normal_sigma(want_normals, want_dp, cov_t))
+            assert np.array_equal(_tangents(q), ref.tangents(q))
+            shift = rotation(float(t[2])) @ np.array([0.0, 1.0])
+            for rows in (slice(None), slice(0, 0), slice(0, 1), slice(0, 2), slice(0, 3)):
+                got = refit_variance_floor(normals[rows], cov_t, shift, 1e-4)
+                assert got == ref.refit_variance_floor(normals[rows], cov_t, shift, 1e-4)
+
+
+def test_received_geometry__a_nan_point_stays_nan() -> None:
+    """A NaN in the chain gives NaN normals and σ where numpy's do (np.maximum keeps NaN),
+    and the floor over them is NaN, as numpy's min."""
+    q = np.array([[0.0, 0.0], [1.0, np.nan], [2.0, 0.0], [3.0, 0.0]])
+    t = np.array([0.1, -0.2, 0.3])
+    cov_t = np.diag([1e-4, 2e-4, 3e-5])
+    _, _, normals, sigma = received_geometry(q, t, rotation(0.3), cov_t)
+    want = ref.normal_sigma(ref.chain_normals(q, t), ref.frame_points(q, t)[1], cov_t)
+    assert np.array_equal(np.isnan(sigma), np.isnan(want)) and np.isnan(sigma).any()
+    assert np.isnan(kernels.variance_floor(normals, cov_t, np.array([0.0, 1.0]), 1e-4))
+
+
+def test_point_jacobians__are_the_numpy_oracle_bit_for_bit() -> None:
+    """A received chain's Jacobians w.r.t. the state and the noise equal numpy's batched
+    products (BLAS: FMA chains), for one point and many, a (3, 6) noise Jacobian sliced out
+    of a wider one (not contiguous: numpy copies it), and a state wider than the pose."""
+    rng = np.random.default_rng(8)
+    for n_pts in (1, 2, 5, 80):
+        for n_state in (3, 7):
+            dp_dt = rng.normal(0.0, 1.0, (n_pts, 2, 3))
+            d_state = rng.normal(0.0, 1.0, (3, 3))
+            d_noise = rng.normal(0.0, 1.0, (3, 9))[:, 3:]
+            shift = rotation(float(rng.uniform(-3.0, 3.0))) @ np.array([1.0, 0.0])
+            got = kernels.point_jacobians(
+                dp_dt, d_state, np.ascontiguousarray(d_noise), shift, n_state
+            )
+            want = ref.point_jacobians(dp_dt, d_state, d_noise, shift, n_state)
+            assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
