@@ -31,9 +31,11 @@ filter's own position σ, :meth:`~policies.base.PolicyContext.relative_pose_std`
 back to the nearest such place by path (no farther than ``close_reach``)
 (:attr:`~policies.modes.Mode.CLOSE_LOOP`), re-observes the walls it mapped there, and returns to
 exploring once the σ is below ``close_below`` (or the place is reached; it then rests
-``close_rest`` steps). Two bounds keep it exploring: a closing starts only while the steps
-spent closing are at most ``close_share`` of the steps so far, and one that has not ended
-after ``close_timeout`` steps (a stall on the way) is given up and its anchor forgotten.
+``close_rest`` steps). Two optional bounds keep it exploring (both off by default: on Willow
+they cost ``frontier_closing``'s map gains with the default shape shift, see
+``docs/results/floors.md``): a closing starts only while the steps spent closing are at most
+``close_share`` of the steps so far, and one that has not ended after ``close_timeout``
+steps (a stall on the way) is given up and its anchor forgotten.
 The EKF's correlations carry the correction to the walls mapped on the way out. It corrects
 position drift, not heading drift: README "SLAM on large floor plans" has the measurements.
 
@@ -108,8 +110,8 @@ class FrontierPolicy(Policy):
         anchor_below: float = 0.012,
         close_rest: int = 40,
         close_reach: float = math.inf,
-        close_share: float = 0.25,
-        close_timeout: int = 200,
+        close_share: float = 1.0,
+        close_timeout: int | None = None,
         gain: str = "square",
     ) -> None:
         super().__init__(context)
@@ -153,9 +155,9 @@ class FrontierPolicy(Policy):
         if not 0.0 <= close_share <= 1.0:
             raise PolicyError(f"frontier: close_share must be in [0, 1], got {close_share!r}")
         self.close_share = float(close_share)
-        if close_timeout < 1:
+        if close_timeout is not None and close_timeout < 1:
             raise PolicyError(f"frontier: close_timeout must be >= 1, got {close_timeout!r}")
-        self.close_timeout = int(close_timeout)
+        self.close_timeout = None if close_timeout is None else int(close_timeout)
         if close_rest < 0:
             raise PolicyError(f"frontier: close_rest must be >= 0, got {close_rest!r}")
         self.close_loops = bool(close_loops) and context.p0_sigma is not None
@@ -245,7 +247,11 @@ class FrontierPolicy(Policy):
             self._anchors[self.map.cells(pose[None, :2])] = True
         if self._closing and sigma < self.close_below:
             self._stop_closing()
-        elif self._closing and self._step - self.modes.closing_since >= self.close_timeout:
+        elif (
+            self._closing
+            and self.close_timeout is not None
+            and self._step - self.modes.closing_since >= self.close_timeout
+        ):
             self._give_up_closing()
         elif (
             not self._closing
