@@ -489,9 +489,4 @@ class PolySlam:
         """Bounding boxes (n, 4) = (x_min, x_max, y_min, y_max) of the landmarks at the current
         c0s, in table order, cached until the map or the state changes (read-only: the map's
         merge check and the exchange share them)."""
-        return self._boxes()
-
-    def _boxes(self) -> np.ndarray:
-        """Bounding boxes (n, 4) of the landmarks at the current c0s, cached by the table until
-        the map or the state changes."""
         return self.table.boxes(self.c0s, self._state_version)
