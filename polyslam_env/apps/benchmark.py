@@ -140,7 +140,7 @@ def run_benchmark(
         raise ValueError(f"sections: unknown {sorted(unknown)}; choose from {SECTIONS}")
     out: dict[str, Any] = {"plan": asdict(plan), "seed": seed, "machine": machine_info()}
     if "slam" in wanted:
-        out["slam"] = [_emit(report, "slam", bench_slam(n, plan, seed)) for n in plan.slam_sizes]
+        out["slam"] = [_emit(report, "slam", r) for r in bench_slam(plan.slam_sizes, plan, seed)]
     if "world" in wanted:
         rows = [_emit(report, "world", bench_world(n, plan)) for n in plan.robot_counts]
         out["world"] = {

@@ -12,13 +12,13 @@ reference timed in the same run.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
 import pymunk
 
-from polyslam_env.apps.benchmark_harness import Plan, Stats, time_calls
+from polyslam_env.apps.benchmark_harness import Plan, Stats, interleaved_calls, time_calls
 from polyslam_env.core.geometry import compose
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.slam.config import SlamConfig
@@ -123,37 +123,71 @@ def make_inputs(
     return out
 
 
-def bench_slam(n: int, plan: Plan, seed: int = 0) -> dict[str, Any]:
-    """One SLAM step with ``n`` landmarks (µs), a 3×3 solve for reference, stage medians, and
-    the same steps with ``shape_rotation="heading"`` (no rotation states: half the state)."""
+SOLVES = 20  # 3×3 solves per reference sample (one solve is near the timer's grain)
+
+
+def bench_slam(sizes: Sequence[int], plan: Plan, seed: int = 0) -> list[dict[str, Any]]:
+    """One SLAM step with each of ``sizes`` landmarks (µs), a 3×3 solve for reference, stage
+    medians, and the same steps with ``shape_rotation="heading"`` (no rotation states: half the
+    state); one row per size.
+
+    Every size's two SLAMs and the reference are timed in turns (:func:`interleaved_calls`,
+    ``plan.slam_windows`` rounds), each SLAM on its own seeded walls and inputs as if timed
+    alone: the steps each one makes are the same, only their order in time is shared, so a slow
+    spell of the machine falls on the reference too and ``ratio_to_solve3`` does not move with it.
+    """
+    slams: list[PolySlam] = []
+    streams: list[Iterator[tuple[np.ndarray, np.ndarray]]] = []
+    beams: list[list[int]] = []
+    steppers: list[Callable[[], None]] = []
+    for n in sizes:
+        rng = np.random.default_rng(seed)
+        walls = make_walls(n, rng)
+        all_inputs = make_inputs(walls, plan.slam_warmup + 2 * plan.slam_steps, rng)
+        slam = make_slam(walls, SlamConfig())
+        heading = make_slam(walls, SlamConfig(shape_rotation="heading"))
+        slams.append(slam)
+        streams.append(iter(all_inputs))  # the timed steps, then the stages' pass
+        beams.append([])
+        steppers.append(_slam_stepper(slam, streams[-1], beams[-1]))
+        steppers.append(_slam_stepper(heading, iter(all_inputs), []))
     rng = np.random.default_rng(seed)
-    walls = make_walls(n, rng)
-    all_inputs = make_inputs(walls, plan.slam_warmup + 2 * plan.slam_steps, rng)
-    inputs = iter(all_inputs)
-    slam = make_slam(walls)
-    beams = []
+    a, b = rng.normal(size=(3, 3)) + 3 * np.eye(3), rng.normal(size=3)
+
+    def solves() -> None:  # the reference: SOLVES back-to-back 3×3 solves per sample
+        for _ in range(SOLVES):
+            np.linalg.solve(a, b)
+
+    windows = min(plan.slam_windows, plan.slam_steps)
+    times = interleaved_calls([*steppers, solves], plan.slam_steps, windows, plan.slam_warmup)
+    solve_us = times[-1].scaled(1e6 / SOLVES)
+    out = []
+    for k, (slam, inputs) in enumerate(zip(slams, streams, strict=True)):
+        step_us = times[2 * k].scaled(1e6)
+        out.append(
+            {
+                "landmarks": slam.n_landmarks,
+                "step_us": step_us.to_dict(),
+                "reference_solve3_us": solve_us.to_dict(),
+                "ratio_to_solve3": step_us.median / solve_us.median,
+                "heading_step_us": times[2 * k + 1].scaled(1e6).to_dict(),
+                "beams_used_per_step": float(np.mean(beams[k][plan.slam_warmup :])),
+                "windows": windows,
+                "stages_us": slam_stages(slam, [next(inputs) for _ in range(plan.slam_steps)]),
+            }
+        )
+    return out
+
+
+def _slam_stepper(
+    slam: PolySlam, inputs: Iterator[tuple[np.ndarray, np.ndarray]], beams: list[int]
+) -> Callable[[], None]:
+    """One step of ``slam`` on the next of ``inputs``; the beams it used appended to ``beams``."""
 
     def step() -> None:
         beams.append(slam.step(*next(inputs)).beams_used)
 
-    step_us = time_calls(step, plan.slam_steps, warmup=plan.slam_warmup).scaled(1e6)
-    heading = make_slam(walls, SlamConfig(shape_rotation="heading"))
-    heading_inputs = iter(all_inputs)
-    heading_us = time_calls(
-        lambda: heading.step(*next(heading_inputs)), plan.slam_steps, warmup=plan.slam_warmup
-    ).scaled(1e6)
-    a, b = rng.normal(size=(3, 3)) + 3 * np.eye(3), rng.normal(size=3)
-    solve_us = time_calls(lambda: np.linalg.solve(a, b), max(plan.repeats, 5), number=200)
-    solve_us = solve_us.scaled(1e6)
-    return {
-        "landmarks": slam.n_landmarks,
-        "step_us": step_us.to_dict(),
-        "reference_solve3_us": solve_us.to_dict(),
-        "ratio_to_solve3": step_us.median / solve_us.median,
-        "heading_step_us": heading_us.to_dict(),
-        "beams_used_per_step": float(np.mean(beams[plan.slam_warmup :])),
-        "stages_us": slam_stages(slam, [next(inputs) for _ in range(plan.slam_steps)]),
-    }
+    return step
 
 
 def slam_stages(slam: PolySlam, inputs: list[tuple[np.ndarray, np.ndarray]]) -> dict[str, float]:

@@ -18,7 +18,7 @@ import cProfile
 import os
 import pstats
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -32,6 +32,7 @@ __all__ = [
     "Plan",
     "Stats",
     "count_calls",
+    "interleaved_calls",
     "machine_info",
     "parallel_stepper",
     "random_stepper",
@@ -100,6 +101,35 @@ def time_calls(fn: Callable[[], object], repeats: int, number: int = 1, warmup: 
     return Stats.of(samples)
 
 
+def interleaved_calls(
+    fns: Sequence[Callable[[], object]], calls: int, windows: int, warmup: int = 0
+) -> list[Stats]:
+    """Seconds per call of each of ``fns``, one sample per call, measured in turns.
+
+    ``warmup`` untimed calls of each, then ``windows`` rounds in which each function makes its
+    share of ``calls`` timed calls back to back (the shares differ by at most one). Why in
+    turns: this machine has slow spells (5 ms to 0.5 s during which even a fixed numpy workload
+    runs up to 1.7× slower, from whatever shares the host). A row timed in one stretch of
+    25 ms either misses a spell or sits wholly inside one, so its median came out at one of
+    two values from run to run. In turns, a spell falls on a minority of each row's windows
+    and on every row alike: the medians are those of the machine's usual state.
+    """
+    if windows < 1:
+        raise ValueError(f"windows: expected >= 1, got {windows}")
+    for fn in fns:
+        for _ in range(warmup):
+            fn()
+    samples: list[list[float]] = [[] for _ in fns]
+    for w in range(windows):
+        share = calls * (w + 1) // windows - calls * w // windows
+        for fn, out in zip(fns, samples, strict=True):
+            for _ in range(share):
+                start = time.perf_counter()
+                fn()
+                out.append(time.perf_counter() - start)
+    return [Stats.of(x) for x in samples]
+
+
 def rate_samples(step: Callable[[], object], steps: int, repeats: int, warmup: int = 0) -> Stats:
     """Calls per second of ``step``: one sample per block of ``steps`` calls."""
     for _ in range(warmup):
@@ -146,6 +176,7 @@ class Plan:
     memory_steps: int = 200  # steps per such episode
     profile_steps: int = 300  # profiled env steps (--profile)
     slam_sizes: tuple[int, ...] = (10, 30, 100, 300)
+    slam_windows: int = 20  # turns the SLAM rows take (benchmark_harness.interleaved_calls)
     robot_counts: tuple[int, ...] = (1, 3, 8, 16, 32)
     team_sizes: tuple[int, ...] = (3, 20)
     floor_steps: tuple[int, int] = (100, 400)  # the floor episode: measured steps first…last

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +18,12 @@ from hypothesis import strategies as st
 from polyslam_env.apps import benchmark, benchmark_harness
 from polyslam_env.apps.benchmark import targets
 from polyslam_env.apps.benchmark_components import scaling_exponent
-from polyslam_env.apps.benchmark_harness import Stats, rate_samples, time_calls
+from polyslam_env.apps.benchmark_harness import (
+    Stats,
+    interleaved_calls,
+    rate_samples,
+    time_calls,
+)
 from polyslam_env.cli.main import main
 
 
@@ -78,6 +83,27 @@ def test_time_calls__per_call_time_with_warmup_and_number(clock: FakeClock) -> N
     s = time_calls(fn, repeats=3, number=6, warmup=2)
     assert len(calls) == 2 + 3 * 6
     assert (s.min, s.median, s.max, s.n) == (2.0, 2.0, 6.0, 3)
+
+
+def test_interleaved_calls__turns_shares_and_one_sample_per_call(clock: FakeClock) -> None:
+    order: list[str] = []
+
+    def make(name: str, seconds: float) -> Callable[[], None]:
+        def fn() -> None:
+            order.append(name)
+            clock.tick(seconds)
+
+        return fn
+
+    # 7 calls in 3 windows: shares 2, 2, 3 (they differ by at most one and sum to 7)
+    a, b = interleaved_calls([make("a", 1.0), make("b", 3.0)], calls=7, windows=3, warmup=1)
+    assert (
+        order == ["a", "b"] + ["a"] * 2 + ["b"] * 2 + ["a"] * 2 + ["b"] * 2 + ["a"] * 3 + ["b"] * 3
+    )
+    assert (a.n, a.median, a.max) == (7, 1.0, 1.0)
+    assert (b.n, b.median, b.min) == (7, 3.0, 3.0)
+    with pytest.raises(ValueError, match="windows"):
+        interleaved_calls([make("a", 1.0)], calls=3, windows=0)
 
 
 def test_rate_samples__calls_per_second(clock: FakeClock) -> None:
