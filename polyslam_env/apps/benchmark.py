@@ -37,7 +37,7 @@ from polyslam_env.apps.benchmark_components import (
     make_walls,
     scaling_exponent,
 )
-from polyslam_env.apps.benchmark_env import bench_backends, bench_env, bench_mpe, bench_vec
+from polyslam_env.apps.benchmark_env import bench_backends, bench_env_turns, bench_mpe, bench_vec
 from polyslam_env.apps.benchmark_harness import (
     ENV_CONFIG,
     PLANS,
@@ -121,7 +121,9 @@ def run_benchmark(
 ) -> dict[str, Any]:
     """Run ``sections`` (see :data:`SECTIONS`); ``report(section, row)`` after every row.
 
-    The reference (MPE) runs before the env rows, which carry ``ratio_to_mpe`` (the vectorised
+    The reference (MPE) runs in turns with the env rows (``benchmark_env.bench_env_turns``),
+    or alone before the later rows when ``env`` is not wanted; the env rows carry
+    ``ratio_to_mpe`` (the vectorised
     rows run the same 2 envs in one process, then in 2 worker processes; the second carries
     ``ratio_to_one_process`` and ``ratio_to_env``, over full SLAM in one plain env); a ratio is
     None when either figure was not measured. ``workers`` (e.g. ``(1, 2, 4)``) adds a row of env
@@ -152,15 +154,18 @@ def run_benchmark(
     mpe = None
     if wanted & {"floor", "train"}:  # their figures in MPE steps need the reference
         wanted.add("reference")
-    if "reference" in wanted:  # first, so that every env row carries its ratio when printed
+    if "env" in wanted:  # the env rows and the reference in turns (bench_env_turns)
+        turns = bench_env_turns(plan, seed)
+        out["reference"] = _emit(
+            report, "env", {"label": "MPE simple_spread", **turns["reference"]}
+        )
+        mpe = rate(out["reference"])
+        full = {"label": "full SLAM", **turns["full_slam"]}
+        nos = {"label": "slam_enabled=False", **turns["no_slam"]}
+        out["env"] = {"full_slam": _emit(report, "env", full), "no_slam": _emit(report, "env", nos)}
+    elif "reference" in wanted:  # first, so that every later row carries its ratio when printed
         out["reference"] = _emit(report, "env", {"label": "MPE simple_spread", **bench_mpe(plan)})
         mpe = rate(out["reference"])
-    if "env" in wanted:
-        full = {"label": "full SLAM", **bench_env(plan, seed)}
-        full["ratio_to_mpe"] = ratio(rate(full), mpe)
-        nos = {"label": "slam_enabled=False", **bench_env(plan, seed, slam_enabled=False)}
-        nos["ratio_to_mpe"] = ratio(rate(nos), mpe)
-        out["env"] = {"full_slam": _emit(report, "env", full), "no_slam": _emit(report, "env", nos)}
     if "vec" in wanted:
         one = {"label": "SB3 vec, 1 proc", **bench_vec(plan, seed, num_cpus=0)}
         one["ratio_to_mpe"] = ratio(rate(one), mpe)

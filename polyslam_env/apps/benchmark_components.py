@@ -159,7 +159,8 @@ def bench_slam(sizes: Sequence[int], plan: Plan, seed: int = 0) -> list[dict[str
             np.linalg.solve(a, b)
 
     windows = min(plan.slam_windows, plan.slam_steps)
-    times = interleaved_calls([*steppers, solves], plan.slam_steps, windows, plan.slam_warmup)
+    samples = interleaved_calls([*steppers, solves], plan.slam_steps, windows, plan.slam_warmup)
+    times = [Stats.of(x) for x in samples]
     solve_us = times[-1].scaled(1e6 / SOLVES)
     out = []
     for k, (slam, inputs) in enumerate(zip(slams, streams, strict=True)):

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -28,9 +28,11 @@ import numpy as np
 from polyslam_env.apps.benchmark_harness import (
     ENV_CONFIG,
     Plan,
+    Stats,
     parallel_stepper,
     random_stepper,
     rate,
+    rate_rounds,
     rate_samples,
     ratio,
 )
@@ -39,6 +41,7 @@ __all__ = [
     "BACKEND_ENV",
     "bench_backends",
     "bench_env",
+    "bench_env_turns",
     "bench_mpe",
     "bench_vec",
     "cpu_seconds",
@@ -48,12 +51,53 @@ __all__ = [
 
 def bench_env(plan: Plan, seed: int = 0, **overrides: Any) -> dict[str, Any]:
     """Env steps/s of the issue-8 config (plus ``overrides``), uniform random actions."""
+    step, close = env_stepper(seed, **overrides)
+    steps_per_s = rate_samples(step, plan.env_steps, plan.repeats, warmup=ENV_WARMUP)
+    close()
+    return {"installed": True, "steps_per_s": steps_per_s.to_dict()}
+
+
+ENV_WARMUP, MPE_WARMUP = 5, 20  # untimed steps before an env's or MPE's samples
+
+
+def env_stepper(seed: int, **overrides: Any) -> tuple[Callable[[], None], Callable[[], None]]:
+    """A seeded random stepper over the issue-8 config (plus ``overrides``), and its close."""
     from polyslam_env.environment.parallel import parallel_env
 
     env = parallel_env(**{**ENV_CONFIG, **overrides})
-    steps_per_s = rate_samples(random_stepper(env, seed), plan.env_steps, plan.repeats, warmup=5)
-    env.close()
-    return {"installed": True, "steps_per_s": steps_per_s.to_dict()}
+    return random_stepper(env, seed), env.close
+
+
+def bench_env_turns(plan: Plan, seed: int = 0) -> dict[str, dict[str, Any]]:
+    """MPE's, the full-SLAM env's and the no-SLAM env's steps/s timed in turns
+    (:func:`~polyslam_env.apps.benchmark_harness.rate_rounds`, ``plan.repeats`` rounds): the
+    rows ``reference``, ``full_slam`` and ``no_slam``. Each env row carries ``ratio_to_mpe``
+    (its median over MPE's) and ``ratio_to_mpe_rounds`` (the ratio round by round: each round's
+    blocks ran within a second or two of each other). Without ``mpe2`` the reference row says
+    not installed and the env rows carry no ratio."""
+    mpe = mpe_stepper(seed)
+    full, close_full = env_stepper(seed)
+    nos, close_nos = env_stepper(seed, slam_enabled=False)
+    steppers, steps, warmups = [full, nos], [plan.env_steps] * 2, [ENV_WARMUP] * 2
+    if mpe is not None:  # MPE first in every round
+        steppers, steps = [mpe[0], *steppers], [plan.mpe_steps, *steps]
+        warmups = [MPE_WARMUP, *warmups]
+    samples = rate_rounds(steppers, steps, plan.repeats, warmups)
+    close_full()
+    close_nos()
+    out: dict[str, dict[str, Any]] = {"reference": {"installed": False, "name": MPE_NAME}}
+    if mpe is not None:
+        mpe[1]()
+        mpe_rate = Stats.of(samples[0]).to_dict()
+        out["reference"] = {"installed": True, "name": MPE_NAME, "steps_per_s": mpe_rate}
+    for label, row_samples in zip(("full_slam", "no_slam"), samples[-2:], strict=True):
+        row: dict[str, Any] = {"installed": True, "steps_per_s": Stats.of(row_samples).to_dict()}
+        row["ratio_to_mpe"] = ratio(rate(row), rate(out["reference"]))
+        if mpe is not None:
+            rounds = [a / b for a, b in zip(row_samples, samples[0], strict=True)]
+            row["ratio_to_mpe_rounds"] = Stats.of(rounds).to_dict()
+        out[label] = row
+    return out
 
 
 #: The env of the back-end rows: 3 robots on the pillar hall with the pillar sensor on.
@@ -171,23 +215,27 @@ def parallel_speedup(processes: int = 2, n: int = 200_000) -> float:
     return alone / together
 
 
-def bench_mpe(plan: Plan, seed: int = 0) -> dict[str, Any]:
-    """PettingZoo MPE ``simple_spread`` (3 agents, defaults) through the same harness."""
+MPE_NAME = "mpe2 simple_spread_v3"
+
+
+def mpe_stepper(seed: int) -> tuple[Callable[[], None], Callable[[], None]] | None:
+    """A seeded random stepper over MPE ``simple_spread`` (3 agents, defaults) and its close;
+    None when ``mpe2`` is not installed."""
     try:
         from mpe2 import simple_spread_v3
     except ImportError:
-        return {"installed": False, "name": "mpe2 simple_spread_v3"}
+        return None
     env = simple_spread_v3.parallel_env(N=3)
     rng = np.random.default_rng(seed)
-    steps_per_s = rate_samples(
-        parallel_stepper(env, lambda e, a: int(rng.integers(e.action_space(a).n)), seed),
-        plan.mpe_steps,
-        plan.repeats,
-        warmup=20,
-    )
-    env.close()
-    return {
-        "installed": True,
-        "name": "mpe2 simple_spread_v3",
-        "steps_per_s": steps_per_s.to_dict(),
-    }
+    step = parallel_stepper(env, lambda e, a: int(rng.integers(e.action_space(a).n)), seed)
+    return step, env.close
+
+
+def bench_mpe(plan: Plan, seed: int = 0) -> dict[str, Any]:
+    """PettingZoo MPE ``simple_spread`` (3 agents, defaults) through the same harness."""
+    mpe = mpe_stepper(seed)
+    if mpe is None:
+        return {"installed": False, "name": MPE_NAME}
+    steps_per_s = rate_samples(mpe[0], plan.mpe_steps, plan.repeats, warmup=MPE_WARMUP)
+    mpe[1]()
+    return {"installed": True, "name": MPE_NAME, "steps_per_s": steps_per_s.to_dict()}

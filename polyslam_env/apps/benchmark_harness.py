@@ -37,6 +37,7 @@ __all__ = [
     "parallel_stepper",
     "random_stepper",
     "rate",
+    "rate_rounds",
     "rate_samples",
     "ratio",
     "time_calls",
@@ -103,8 +104,8 @@ def time_calls(fn: Callable[[], object], repeats: int, number: int = 1, warmup: 
 
 def interleaved_calls(
     fns: Sequence[Callable[[], object]], calls: int, windows: int, warmup: int = 0
-) -> list[Stats]:
-    """Seconds per call of each of ``fns``, one sample per call, measured in turns.
+) -> list[list[float]]:
+    """Seconds of each call of each of ``fns`` (one list per function), measured in turns.
 
     ``warmup`` untimed calls of each, then ``windows`` rounds in which each function makes its
     share of ``calls`` timed calls back to back (the shares differ by at most one). Why in
@@ -127,7 +128,7 @@ def interleaved_calls(
                 start = time.perf_counter()
                 fn()
                 out.append(time.perf_counter() - start)
-    return [Stats.of(x) for x in samples]
+    return samples
 
 
 def rate_samples(step: Callable[[], object], steps: int, repeats: int, warmup: int = 0) -> Stats:
@@ -141,6 +142,35 @@ def rate_samples(step: Callable[[], object], steps: int, repeats: int, warmup: i
             step()
         samples.append(steps / (time.perf_counter() - start))
     return Stats.of(samples)
+
+
+def rate_rounds(
+    steppers: Sequence[Callable[[], object]],
+    steps: Sequence[int],
+    repeats: int,
+    warmups: Sequence[int],
+) -> list[list[float]]:
+    """Calls per second of each of ``steppers``, measured in turns: ``warmups[k]`` untimed
+    calls of each, then ``repeats`` rounds in which each makes one block of ``steps[k]`` calls
+    (one sample per block, as :func:`rate_samples`). Sample ``r`` of every stepper comes from
+    round ``r``, so ratios can be taken round by round. Why in turns: see
+    :func:`interleaved_calls` (a slow spell of the machine falls on every row alike)."""
+    if not len(steppers) == len(steps) == len(warmups):
+        raise ValueError(
+            f"rate_rounds: {len(steppers)} steppers, {len(steps)} step counts, "
+            f"{len(warmups)} warm-ups: expected one of each per stepper"
+        )
+    for step, warmup in zip(steppers, warmups, strict=True):
+        for _ in range(warmup):
+            step()
+    samples: list[list[float]] = [[] for _ in steppers]
+    for _ in range(repeats):
+        for step, count, out in zip(steppers, steps, samples, strict=True):
+            start = time.perf_counter()
+            for _ in range(count):
+                step()
+            out.append(count / (time.perf_counter() - start))
+    return samples
 
 
 @contextlib.contextmanager

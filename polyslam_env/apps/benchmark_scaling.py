@@ -35,7 +35,12 @@ from typing import Any
 
 import numpy as np
 
-from polyslam_env.apps.benchmark_harness import ENV_CONFIG, profiling, random_stepper
+from polyslam_env.apps.benchmark_harness import (
+    ENV_CONFIG,
+    interleaved_calls,
+    profiling,
+    random_stepper,
+)
 
 __all__ = [
     "TEAM_CONFIG",
@@ -109,6 +114,9 @@ def bench_workers(
 
 
 # -- team size --------------------------------------------------------------------------------
+TEAM_WINDOWS = 15  # turns the team sizes' episodes take (bench_team)
+
+
 def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str, Any]]:
     """ms per env step with each team size over ``steps`` steps from a seeded reset (the cost
     grows as maps fill and robots meet, so the figure is the mean over the whole horizon, next
@@ -119,27 +127,28 @@ def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str
     refit), ``covered`` were wholly covered by better walls the receiver held (no refit),
     ``refits`` counts the received chains refitted.
 
+    The sizes' episodes are played in turns (``benchmark_harness.interleaved_calls``, up to
+    :data:`TEAM_WINDOWS` rounds): each makes the same steps as alone, but a slow spell of the
+    machine falls on every size alike instead of on the 3-robot episode's fraction of a second
+    or not at all, which moved the ratio by a third from run to run.
+
     The first size's episode is played once untimed before the timed runs: kernels load from
     numba's cache on their first call in a process (up to ~0.3 s in all), which would land in
     the first size's mean alone and shrink every ratio. Kernels only a larger team reaches
     still load inside its timed run, which errs against the ratio, not for it."""
     from polyslam_env.environment.parallel import parallel_env
 
-    def play(n: int) -> tuple[Any, list[float]]:
-        env = parallel_env(**TEAM_CONFIG, num_robots=n)
-        step = random_stepper(env, seed)
-        times = []
-        for _ in range(steps):
-            start = time.perf_counter()
-            step()
-            times.append(time.perf_counter() - start)
-        return env, times
-
     if sizes:
-        play(sizes[0])[0].close()
+        env = parallel_env(**TEAM_CONFIG, num_robots=sizes[0])
+        step = random_stepper(env, seed)
+        for _ in range(steps):
+            step()
+        env.close()
+    envs = [parallel_env(**TEAM_CONFIG, num_robots=n) for n in sizes]
+    steppers = [random_stepper(env, seed) for env in envs]
+    samples = interleaved_calls(steppers, steps, min(TEAM_WINDOWS, max(steps, 1)))
     rows = []
-    for n in sizes:
-        env, times = play(n)
+    for n, env, times in zip(sizes, envs, samples, strict=True):
         exchange = env.episode.exchange if env.episode is not None else None
         history = exchange.history if exchange is not None else []
         env.close()

@@ -21,6 +21,7 @@ from polyslam_env.apps.benchmark_components import scaling_exponent
 from polyslam_env.apps.benchmark_harness import (
     Stats,
     interleaved_calls,
+    rate_rounds,
     rate_samples,
     time_calls,
 )
@@ -100,10 +101,27 @@ def test_interleaved_calls__turns_shares_and_one_sample_per_call(clock: FakeCloc
     assert (
         order == ["a", "b"] + ["a"] * 2 + ["b"] * 2 + ["a"] * 2 + ["b"] * 2 + ["a"] * 3 + ["b"] * 3
     )
-    assert (a.n, a.median, a.max) == (7, 1.0, 1.0)
-    assert (b.n, b.median, b.min) == (7, 3.0, 3.0)
+    assert (a, b) == ([1.0] * 7, [3.0] * 7)
     with pytest.raises(ValueError, match="windows"):
         interleaved_calls([make("a", 1.0)], calls=3, windows=0)
+
+
+def test_rate_rounds__one_block_each_per_round_in_order(clock: FakeClock) -> None:
+    order: list[str] = []
+    per_call = {"a": 0.5, "b": 0.25}
+
+    def make(name: str) -> Callable[[], None]:
+        def step() -> None:
+            order.append(name)
+            clock.tick(per_call[name])
+
+        return step
+
+    a, b = rate_rounds([make("a"), make("b")], steps=[2, 4], repeats=2, warmups=[1, 0])
+    assert order == ["a"] + (["a"] * 2 + ["b"] * 4) * 2
+    assert (a, b) == ([2.0, 2.0], [4.0, 4.0])  # calls per second, one sample per round
+    with pytest.raises(ValueError, match="one of each per stepper"):
+        rate_rounds([make("a")], steps=[1, 2], repeats=1, warmups=[0])
 
 
 def test_rate_samples__calls_per_second(clock: FakeClock) -> None:
