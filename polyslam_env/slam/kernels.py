@@ -1094,6 +1094,7 @@ def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from
     (``tests/slam/reference_floats.joseph_full``); the rows of K are taken four (then two)
     per pass over P's row, summed in that order inside one loop, the last pass subtracting:
     fewer passes over the row than one per row of K, the same operations in the same order.
+    The cross block goes separately (:func:`_cross_block`), two rows of P at a time.
     """
     count, n = kt.shape
     c = min(max(consider_from, 0), n)
@@ -1102,10 +1103,9 @@ def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from
         inner = c - i
         # the estimated and the cross columns as separate slices, each loop from 0: written
         # as one loop over j with a bound between, LLVM left it scalar (2.6× slower)
-        estimated, cross = acc[:inner], acc[inner : n - i]
-        row_estimated, row_cross = cov[i, i:c], cov[i, c:]
+        estimated = acc[:inner]
+        row_estimated = cov[i, i:c]
         estimated[:] = 0.0
-        cross[:] = 0.0
         q = 0
         while q + 4 < count:  # four rows of K into the sums
             k0, k1, k2, k3 = kt[q, i], kt[q + 1, i], kt[q + 2, i], kt[q + 3, i]
@@ -1117,42 +1117,74 @@ def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from
                 s = s + (k1 * wr1[j] + w1 * kr1[j])
                 s = s + (k2 * wr2[j] + w2 * kr2[j])
                 estimated[j] = s + (k3 * wr3[j] + w3 * kr3[j])
-            wc0, wc1, wc2, wc3 = wt[q, c:], wt[q + 1, c:], wt[q + 2, c:], wt[q + 3, c:]
-            for j in range(n - c):
-                cross[j] = (((cross[j] + k0 * wc0[j]) + k1 * wc1[j]) + k2 * wc2[j]) + k3 * wc3[j]
             q += 4
         while q < count:  # two rows into the sums, or the last one or two, subtracting
-            k0, w0, kr0, wr0, wc0 = kt[q, i], wt[q, i], kt[q, i:c], wt[q, i:c], wt[q, c:]
+            k0, w0, kr0, wr0 = kt[q, i], wt[q, i], kt[q, i:c], wt[q, i:c]
             if q + 1 == count:
                 for j in range(inner):
                     row_estimated[j] -= estimated[j] + (k0 * wr0[j] + w0 * kr0[j])
-                for j in range(n - c):
-                    row_cross[j] -= cross[j] + k0 * wc0[j]
                 q += 1
                 continue
-            k1, w1, kr1, wr1, wc1 = (
-                kt[q + 1, i],
-                wt[q + 1, i],
-                kt[q + 1, i:c],
-                wt[q + 1, i:c],
-                wt[q + 1, c:],
-            )
+            k1, w1, kr1, wr1 = kt[q + 1, i], wt[q + 1, i], kt[q + 1, i:c], wt[q + 1, i:c]
             if q + 2 == count:
                 for j in range(inner):
                     s = estimated[j] + (k0 * wr0[j] + w0 * kr0[j])
                     row_estimated[j] -= s + (k1 * wr1[j] + w1 * kr1[j])
-                for j in range(n - c):
-                    row_cross[j] -= (cross[j] + k0 * wc0[j]) + k1 * wc1[j]
             else:
                 for j in range(inner):
                     s = estimated[j] + (k0 * wr0[j] + w0 * kr0[j])
                     estimated[j] = s + (k1 * wr1[j] + w1 * kr1[j])
-                for j in range(n - c):
-                    cross[j] = (cross[j] + k0 * wc0[j]) + k1 * wc1[j]
             q += 2
+    _cross_block(cov, kt, wt, c)
     for i in range(min(3, c)):  # the pose block whole (its readers take it as a matrix)
         for j in range(i):
             cov[i, j] = cov[j, i]
+
+
+@njit
+def _cross_block(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, c: int) -> None:
+    """:func:`joseph_blocks`' cross block, rows i < c, columns j ≥ c: P_ij −= Σ_q K_qi W_qj, each
+    sum over q in order from +0, then subtracted. Two rows of P at a time and four rows of K per
+    pass over them: each W row slice is loaded once for both rows (the same operations in the
+    same order as one row at a time)."""
+    count, n = kt.shape
+    m = n - c
+    if count == 0 or m == 0:
+        return
+    a0, a1 = np.zeros(m), np.zeros(m)
+    for i in range(0, c - 1, 2):
+        a0[:] = 0.0
+        a1[:] = 0.0
+        q = 0
+        while q + 4 <= count:
+            p0, p1, p2, p3 = kt[q, i], kt[q + 1, i], kt[q + 2, i], kt[q + 3, i]
+            r0, r1, r2, r3 = kt[q, i + 1], kt[q + 1, i + 1], kt[q + 2, i + 1], kt[q + 3, i + 1]
+            wc0, wc1, wc2, wc3 = wt[q, c:], wt[q + 1, c:], wt[q + 2, c:], wt[q + 3, c:]
+            for j in range(m):
+                x0, x1, x2, x3 = wc0[j], wc1[j], wc2[j], wc3[j]
+                a0[j] = (((a0[j] + p0 * x0) + p1 * x1) + p2 * x2) + p3 * x3
+                a1[j] = (((a1[j] + r0 * x0) + r1 * x1) + r2 * x2) + r3 * x3
+            q += 4
+        while q < count:
+            p0, r0, wc0 = kt[q, i], kt[q, i + 1], wt[q, c:]
+            for j in range(m):
+                a0[j] = a0[j] + p0 * wc0[j]
+                a1[j] = a1[j] + r0 * wc0[j]
+            q += 1
+        row0, row1 = cov[i, c:], cov[i + 1, c:]
+        for j in range(m):
+            row0[j] -= a0[j]
+            row1[j] -= a1[j]
+    if c % 2 == 1:  # the last row alone
+        i = c - 1
+        a0[:] = 0.0
+        for q in range(count):
+            p0, wc0 = kt[q, i], wt[q, c:]
+            for j in range(m):
+                a0[j] = a0[j] + p0 * wc0[j]
+        row0 = cov[i, c:]
+        for j in range(m):
+            row0[j] -= a0[j]
 
 
 @njit
