@@ -301,7 +301,10 @@ class FrontierPolicy(Policy):
             self._stop_closing()
             return
         window, dist = paths.window, paths.dist
-        candidate = self._anchors[window] & (dist >= self.min_goal) & (dist <= self.close_reach)
+        # reachable (finite path length: with close_reach unbounded, ``dist <= close_reach``
+        # alone let walled-off anchors through, each "path" its goal cell alone)
+        reach = np.isfinite(dist) & (dist >= self.min_goal) & (dist <= self.close_reach)
+        candidate = self._anchors[window] & reach
         if not candidate.any():
             self._stop_closing()
             self._plan(pose)

@@ -232,6 +232,33 @@ def test_plan_anchor__goes_to_the_nearest_anchor_by_path_within_reach() -> None:
     assert not policy._closing and policy.goal != far  # out of reach: back to exploring
 
 
+def test_plan_anchor__never_heads_for_an_anchor_it_cannot_reach() -> None:
+    """With ``close_reach`` unbounded (the default), an anchor walled off from the robot (its
+    path length infinite) is no goal: before, it was one, its "path" the goal cell alone, and
+    on Willow (seed 3, robot_2 from step ~500) a robot in a pocket of clutter took that lone
+    far waypoint, found it blocked by its beams, dropped it, and planned it again every other
+    step, turning on the spot for the rest of the episode. With no anchor in reach the loop
+    closing ends."""
+    policy = _open_room_policy()
+    assert policy.close_reach == math.inf
+    m = policy.map
+    rows, cols = m.cells(np.array([[1.0, 1.0], [2.0, 2.0]]))  # a walled-off 1 m box
+    m.occ[rows[0] - 1, cols[0] - 1 : cols[1] + 2] = True
+    m.occ[rows[1] + 1, cols[0] - 1 : cols[1] + 2] = True
+    m.occ[rows[0] - 1 : rows[1] + 2, cols[0] - 1] = True
+    m.occ[rows[0] - 1 : rows[1] + 2, cols[1] + 1] = True
+    m.rebuild()
+    walled = _anchor(policy, 1.5, 1.5)
+    pose = np.array([-2.0, 0.0, 0.0])
+    policy._closing = True
+    policy._plan_anchor(pose)
+    assert not policy._closing and policy.goal != walled
+    reachable = _anchor(policy, -2.0, 2.0)
+    policy._closing = True
+    policy._plan_anchor(pose)
+    assert policy._closing and policy.goal == reachable
+
+
 def _sigma_steps(policy: FrontierPolicy) -> Callable[[float], bool]:
     """A function that plays one step of ``policy``'s loop-closing switch at the origin with
     the filter's position σ ``s`` (m) and returns whether a closing is on."""
