@@ -432,7 +432,7 @@ class FrontierPolicy(Policy):
         """The action that follows the path (the walls when there is none), kept clear of
         mapped obstacles and of the robots the camera sees."""
         ctx, control = self.context, self.controller
-        if self._backing_off(pose, detections):
+        if self._backing_off(pose, ranges, detections):
             assert self.modes.back_off is not None
             v, omega = control.head(pose, self.modes.back_off.direction, ranges)
             v = self._safe_speed(pose, v, omega)
@@ -457,10 +457,11 @@ class FrontierPolicy(Policy):
         """:meth:`~policies.controller.Controller.head`."""
         return self.controller.head(pose, direction, ranges)
 
-    def _backing_off(self, pose: np.ndarray, detections: np.ndarray) -> bool:
-        """Whether to back off from a robot now: one is, or was until the last
-        ``BACK_OFF_STEPS``, too close ahead to pass (no free travel left, within ±80°: what
-        :func:`~policies.scripted.avoid_robots` stops for) while this robot stalled. Ending a
+    def _backing_off(self, pose: np.ndarray, ranges: np.ndarray, detections: np.ndarray) -> bool:
+        """Whether to back off now, for ``BACK_OFF_STEPS``: from a robot that is too close ahead
+        to pass (no free travel left, within ±80°: what
+        :func:`~policies.scripted.avoid_robots` stops for) while this robot stalled; or, stalled
+        with no path (no frontier reachable: wall following), toward its longest beam. Ending a
         back-off drops the path and rests its goal, as a stall does."""
         modes = self.modes
         if modes.back_off is not None:
@@ -471,15 +472,27 @@ class FrontierPolicy(Policy):
                 self._blacklist[self.goal] = self._step + REST_GOAL
             self.path = self.goal = None
             return False
-        if not self._stalled() or len(detections) == 0:
+        if not self._stalled():
             return False
+        if len(detections) == 0:
+            return self._escape(pose, ranges)
         gap = contact_gap(detections[:, 0], self.context)
         blocking = (gap <= 0.0) & (np.abs(detections[:, 1]) <= math.radians(80))
         if not blocking.any():
-            return False
+            return self._escape(pose, ranges)
         nearest = int(np.argmin(np.where(blocking, detections[:, 0], np.inf)))
         away = pose[2] + float(detections[nearest, 1]) + math.pi
         modes.back_off = BackOff(away, self._step + BACK_OFF_STEPS)
+        return True
+
+    def _escape(self, pose: np.ndarray, ranges: np.ndarray) -> bool:
+        """A stalled robot with no path (wall following, which in a pocket of clutter turns
+        on the spot one way for the wall on its left and back for the one ahead, step after
+        step) backs off toward its longest beam."""
+        if self.path is not None:
+            return False
+        toward = pose[2] + float(self.context.beam_angles[int(np.argmax(ranges))])
+        self.modes.back_off = BackOff(toward, self._step + BACK_OFF_STEPS)
         return True
 
     def _stalled(self) -> bool:

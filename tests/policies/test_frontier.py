@@ -433,17 +433,47 @@ def test_back_off__a_robot_stalled_against_another_drives_away_then_plans_again(
     policy.goal, policy.path = (5, 5), np.array([[2.0, 1.0]])
     # a robot 5 cm from touching (avoid_robots keeps 0.1 m), 0.2 rad left of ahead
     contact = np.array([[2 * policy.context.robot_radius + 0.05, 0.2]])
-    assert not policy._backing_off(pose, np.array([[1.5, 0.2]]))  # far enough to pass
-    assert policy._backing_off(pose, contact)
+    clear = np.full(len(policy.context.beam_angles), 5.0)
+    assert not policy._backing_off(pose, clear, np.array([[1.5, 0.2]]))  # far enough to pass
+    assert policy._backing_off(pose, clear, contact)
     assert policy._back_off is not None
     assert math.remainder(policy._back_off[0] - (0.2 + math.pi), 2 * math.pi) == pytest.approx(0)
     # it heads away from the other robot, turning on the spot first
-    clear = np.full(len(policy.context.beam_angles), 5.0)
     v, omega = policy._head(pose, policy._back_off[0], clear)
     assert v == 0.0 and omega != 0.0
     policy._step += BACK_OFF_STEPS  # then it plans again, that goal rested
-    assert not policy._backing_off(pose, np.zeros((0, 2)))
+    assert not policy._backing_off(pose, clear, np.zeros((0, 2)))
     assert policy.path is None and policy.goal is None and (5, 5) in policy._blacklist
+
+
+def test_escape__a_stalled_robot_with_no_path_backs_off_toward_its_longest_beam() -> None:
+    """Wall following in a pocket of clutter (Willow, seed 3: robot_0 from step ~1,150 with
+    ranges of 0.16-0.24 m) turned on the spot one way for the wall on the left and back for
+    the one ahead, every step, for the rest of the episode. Stalled with no path, the robot
+    now backs off toward its longest beam for ``BACK_OFF_STEPS``; with a path, or moving, it
+    does not."""
+    env = polyslam_env.parallel_env(map="two_rooms", num_robots=1)
+    policy = make_policy("frontier", env, "robot_0")
+    assert isinstance(policy, FrontierPolicy)
+    policy.reset(0)
+    pose = np.array([1.0, 1.0, 0.3])
+    angles = policy.context.beam_angles
+    ranges = np.full(len(angles), 0.2)
+    longest = len(angles) // 3
+    ranges[longest] = 1.5
+    none = np.zeros((0, 2))
+    policy._trail = [pose[:2] + np.array([0.02 * k, 0.0]) for k in range(8)]  # moving
+    assert not policy._backing_off(pose, ranges, none)
+    policy._trail = [pose[:2].copy()] * 8  # stalled
+    policy.path = np.array([[2.0, 1.0]])  # with a path: the stall rests its goal instead
+    assert not policy._backing_off(pose, ranges, none)
+    policy.path = None
+    assert policy._backing_off(pose, ranges, none)
+    assert policy._back_off is not None
+    want = pose[2] + float(angles[longest])
+    assert math.remainder(policy._back_off[0] - want, 2 * math.pi) == pytest.approx(0)
+    _, omega = policy._head(pose, policy._back_off[0], ranges)
+    assert omega != 0.0  # turning toward the open beam first
 
 
 def test_back_off__two_robots_that_meet_round_a_corner_part_again() -> None:
