@@ -427,8 +427,8 @@ def test_joseph_blocks__bit_identical_to_the_full_update(
     """Leaving the considered block out and the cross block's zero products out changes no
     bit: K's considered rows are exact zeros; nor does summing K's rows four and two per pass
     (1 to 9 rows: every mix of the passes), nor the cross block's two rows of P at a time
-    (an even and an odd number of estimated rows). The lower triangle (but the pose block) is neither
-    read nor written (nan there stays nan and reaches nothing) until
+    (an even and an odd number of estimated rows). The lower triangle (but the pose block) is
+    neither read nor written (nan there stays nan and reaches nothing) until
     :func:`kernels.mirror_lower`."""
     rng = np.random.default_rng(n_state + consider_from + rows)
     cov = random_spd(rng, n_state, 0.01)
