@@ -488,16 +488,26 @@ class FrontierPolicy(Policy):
     def _escape(self, pose: np.ndarray, ranges: np.ndarray) -> bool:
         """A stalled robot with no path (wall following, which in a pocket of clutter turns
         on the spot one way for the wall on its left and back for the one ahead, step after
-        step) backs off toward its longest beam."""
+        step) backs off: toward its longest beam if its own map lets it drive that way as fast
+        as any way, else toward the heading (of ``ESCAPE_HEADINGS`` round it) the own map lets
+        it drive fastest, which may lie behind it, where no beam reaches."""
         if self.path is not None:
             return False
-        toward = pose[2] + float(self.context.beam_angles[int(np.argmax(ranges))])
+        beam = pose[2] + float(self.context.beam_angles[int(np.argmax(ranges))])
+        headings = [beam, *(pose[2] + np.linspace(-np.pi, np.pi, ESCAPE_HEADINGS, False))]
+        v_max = self.context.v_max
+        speeds = [self._safe_speed(np.array([pose[0], pose[1], h]), v_max, 0.0) for h in headings]
+        toward = float(headings[int(np.argmax(speeds))])  # the first of the fastest: the beam's
         self.modes.back_off = BackOff(toward, self._step + BACK_OFF_STEPS)
         return True
 
     def _stalled(self) -> bool:
         """Whether the robot moved less than 0.1 m over its last 8 positions."""
         return len(self._trail) >= 8 and bool(np.hypot(*(self._trail[-1] - self._trail[0])) < 0.1)
+
+
+#: Headings (evenly round the robot) an escape weighs on the own map (:meth:`_escape`).
+ESCAPE_HEADINGS = 16
 
 
 def frontier_closing(context: PolicyContext, **kwargs: Any) -> FrontierPolicy:

@@ -476,6 +476,29 @@ def test_escape__a_stalled_robot_with_no_path_backs_off_toward_its_longest_beam(
     assert omega != 0.0  # turning toward the open beam first
 
 
+def test_escape__heads_where_the_own_map_lets_it_drive_even_behind_it() -> None:
+    """Willow, seed 7 (closing, ``pose``): robot_2 stood in a channel of clutter whose way out
+    lay behind it, where its ±90° beams do not reach (all 0.17-0.20 m). The escape takes the
+    heading its own map lets it drive fastest when the longest beam's way is blocked there."""
+    policy = _open_room_policy()
+    m = policy.map
+    pose = np.array([0.0, 0.0, 0.0])  # facing +x
+    # a U of walls: just ahead, and on both sides from behind the robot to ahead of it
+    boxes = [((0.15, -1.0), (0.3, 1.0)), ((-0.3, 0.2), (0.3, 0.35)), ((-0.3, -0.35), (0.3, -0.2))]
+    for low, high in boxes:  # (x, y) corners
+        (r0, r1), (c0, c1) = m.cells(np.array([low, high]))
+        m.occ[r0 : r1 + 1, c0 : c1 + 1] = True
+    m.rebuild()
+    assert m.obstacles[m.cell(0.2, 0.0)] and m.obstacles[m.cell(0.0, 0.25)]
+    ranges = np.full(len(policy.context.beam_angles), 0.2)
+    policy._trail = [pose[:2].copy()] * 8
+    policy.path = None
+    assert policy._backing_off(pose, ranges, np.zeros((0, 2)))
+    direction = policy._back_off[0]
+    assert abs(math.remainder(direction - pose[2], 2 * math.pi)) > 0.5 * math.pi  # behind it
+    assert policy._safe_speed(np.array([0.0, 0.0, direction]), policy.context.v_max, 0.0) > 0
+
+
 def test_back_off__two_robots_that_meet_round_a_corner_part_again() -> None:
     """The loop, seed 4, exchange on: robots 1 and 2 meet round the corridor's corner at
     step 37, 0.28 m apart when their cameras first see each other. Before the back-off they
