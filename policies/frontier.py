@@ -461,8 +461,9 @@ class FrontierPolicy(Policy):
         """Whether to back off now, for ``BACK_OFF_STEPS``: from a robot that is too close ahead
         to pass (no free travel left, within ±80°: what
         :func:`~policies.scripted.avoid_robots` stops for) while this robot stalled; or, stalled
-        with no path (no frontier reachable: wall following), toward its longest beam. Ending a
-        back-off drops the path and rests its goal, as a stall does."""
+        with no path (no frontier reachable: wall following), out of its pocket
+        (:meth:`_escape`). Ending a back-off drops the path and rests its goal, as a stall
+        does."""
         modes = self.modes
         if modes.back_off is not None:
             if self._step < modes.back_off.until:

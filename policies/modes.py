@@ -4,7 +4,9 @@ state instead of flags spread over the policy).
 The planner heads for one of two kinds of goal — the frontier of best utility
 (:attr:`Mode.EXPLORE`) or, during an active loop closing, a place where the pose was well
 known (:attr:`Mode.CLOSE_LOOP`); a back-off (:attr:`Mode.BACK_OFF`) interrupts either for a
-few steps, driving away from a robot it stalled against, and then the heading goes on.
+few steps, driving away from a robot it stalled against, or, stalled with no path, out of a
+pocket the way its own map lets it drive (:meth:`policies.frontier.FrontierPolicy._escape`),
+and then the heading goes on.
 :class:`ModeState` holds the mode and the facts its transitions need; the policy decides when
 they happen (:mod:`policies.frontier`).
 """
@@ -16,7 +18,7 @@ from dataclasses import dataclass
 
 __all__ = ["BACK_OFF_STEPS", "BackOff", "Mode", "ModeState"]
 
-#: Steps a robot stalled against another drives away from it before it plans again.
+#: Steps a stalled robot drives away (from another robot, or out of a pocket) before it plans again.
 BACK_OFF_STEPS = 8
 
 
@@ -25,7 +27,7 @@ class Mode(enum.Enum):
 
     EXPLORE = "explore"  # to the frontier of best utility
     CLOSE_LOOP = "close_loop"  # back to a well-localised place, to re-observe its walls
-    BACK_OFF = "back_off"  # away from a robot it stalled against
+    BACK_OFF = "back_off"  # away from a robot it stalled against, or out of a pocket
 
 
 @dataclass(frozen=True)

@@ -109,8 +109,8 @@ def interleaved_calls(
 
     ``warmup`` untimed calls of each, then ``windows`` rounds in which each function makes its
     share of ``calls`` timed calls back to back (the shares differ by at most one). Why in
-    turns: this machine has slow spells (5 ms to 0.5 s during which even a fixed numpy workload
-    runs up to 1.7× slower, from whatever shares the host). A row timed in one stretch of
+    turns: this machine has slow spells (5 ms to over a second during which even a fixed numpy
+    workload runs up to 1.7× slower, from whatever shares the host). A row timed in one stretch of
     25 ms either misses a spell or sits wholly inside one, so its median came out at one of
     two values from run to run. In turns, a spell falls on a minority of each row's windows
     and on every row alike: the medians are those of the machine's usual state.
@@ -132,16 +132,9 @@ def interleaved_calls(
 
 
 def rate_samples(step: Callable[[], object], steps: int, repeats: int, warmup: int = 0) -> Stats:
-    """Calls per second of ``step``: one sample per block of ``steps`` calls."""
-    for _ in range(warmup):
-        step()
-    samples = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(steps):
-            step()
-        samples.append(steps / (time.perf_counter() - start))
-    return Stats.of(samples)
+    """Calls per second of ``step``: one sample per block of ``steps`` calls
+    (:func:`rate_rounds` of the one stepper)."""
+    return Stats.of(rate_rounds([step], [steps], repeats, [warmup])[0])
 
 
 def rate_rounds(

@@ -1098,11 +1098,9 @@ def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from
     """
     count, n = kt.shape
     c = min(max(consider_from, 0), n)
-    acc = np.zeros(n)  # row i of K Wᵀ + W Kᵀ from the diagonal on, summed over K's rows
+    acc = np.zeros(c)  # row i of K Wᵀ + W Kᵀ from the diagonal to column c, over K's rows
     for i in range(c):
         inner = c - i
-        # the estimated and the cross columns as separate slices, each loop from 0: written
-        # as one loop over j with a bound between, LLVM left it scalar (2.6× slower)
         estimated = acc[:inner]
         row_estimated = cov[i, i:c]
         estimated[:] = 0.0
