@@ -307,7 +307,8 @@ class PolySlamParallelEnv(ParallelEnv[str, Obs, Action]):
         free = self._free
         if free is None:
             free = free_space_grid(layout, self.config.coverage_resolution)
-        self.episode = state = stages.new_episode(self.config, rngs, layout, free)
+        last = self.episode.world if self.episode is not None else None
+        self.episode = state = stages.new_episode(self.config, rngs, layout, free, last)
         self.agents = self.possible_agents[:]
         observations = stages.observe(state, self._encoder, self._acting(), estimates(state))
         return observations, {a: {} for a in self.agents}

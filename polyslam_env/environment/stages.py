@@ -87,7 +87,11 @@ Obs = np.ndarray | dict[str, np.ndarray]
 
 # -- reset ----------------------------------------------------------------------------------------
 def new_episode(
-    config: EnvConfig, rngs: dict[str, np.random.Generator], layout: Layout, free: FreeGrid
+    config: EnvConfig,
+    rngs: dict[str, np.random.Generator],
+    layout: Layout,
+    free: FreeGrid,
+    recycle: World | None = None,
 ) -> EpisodeState:
     """A fresh episode on ``layout`` (its free-space grid ``free``) with the named streams
     ``rngs``: a new pymunk world, the team's fresh SLAM, grids and histories, the first sensor
@@ -96,11 +100,12 @@ def new_episode(
     Each robot's frame is its nominal start pose (the layout's); with ``initial_error`` (and
     SLAM on) its true start is drawn around it from N(0, P0) (:func:`perturb_starts`, stream
     ``start_error``), while its SLAM starts at x̂ = 0 with covariance P0. Without SLAM the robot
-    knows its true pose, so ``initial_error`` has no effect there.
+    knows its true pose, so ``initial_error`` has no effect there. ``recycle``: the previous
+    episode's world, whose walls the new one reuses when the layout is the same (``World``).
     """
     n = config.num_robots
     wc, oc = config.world, config.observation
-    world = World(layout, wc, n, rngs)
+    world = World(layout, wc, n, rngs, recycle=recycle)
     coverage = metrics.CoverageGrid(free.mask, free.origin, free.resolution)
     start_poses = world.poses  # (N, 3), each robot's frame in the absolute frame
     if config.initial_error and config.slam_enabled:

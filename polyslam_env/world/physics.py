@@ -103,7 +103,11 @@ class World:
         num_robots: int,
         rngs: dict[str, np.random.Generator],
         start_poses: np.ndarray | None = None,
+        recycle: World | None = None,
     ) -> None:
+        """``recycle``: the previous episode's world on the same layout, whose pymunk space
+        (its static walls and pillars) this world takes over instead of building its own
+        (:meth:`_take_space`); that world can no longer step."""
         self.layout = layout
         self.config = config
         self.num_robots = num_robots
@@ -137,13 +141,13 @@ class World:
         self._pose = self._start_poses(start_poses)  # (N, 3), θ unwrapped like pymunk's
         self._wrapped = self._pose  # (N, 3): _wrapped_of with θ wrapped (see ``poses``)
         self._wrapped_of: np.ndarray | None = None
-        self.space = self._make_space()
+        self.space = self._take_space(recycle) or self._make_space()
         self.bodies = [self._add_robot(p) for p in self._pose]
         self._attach_chipmunk()
 
     def _attach_chipmunk(self) -> None:
         """Chipmunk's pointers of the space and the robot bodies (see the module doc)."""
-        self._space_c = self.space._space  # cpSpace*
+        self._space_c: Any = self.space._space  # cpSpace*; None once recycled
         self._bodies_c = [b._body for b in self.bodies]  # cpBody* of each robot
 
     def __getstate__(self) -> dict[str, Any]:
@@ -209,6 +213,35 @@ class World:
             circ = pymunk.Circle(static, rad, (x, y))
             circ.friction, circ.elasticity = 0.0, 0.0
             space.add(circ)
+        return space
+
+    def _take_space(self, old: World | None) -> pymunk.Space | None:
+        """``old``'s space, emptied of its robots, when it holds this world's static shapes
+        (same layout and world config); None otherwise, or when a robot of ``old`` failed
+        (its body went static and changed the static index).
+
+        Building the walls is most of a reset on a fixed map (~190 pymunk segments on the
+        paper map, each a handful of Python calls). The emptied space is the fresh one to the
+        bit: the robots' bodies and shapes leave with their contacts, and the two counters a
+        fresh space starts at zero go back there, the shape id counter (hash ids order the
+        collision pairs and so the contact solver) to the number of static shapes, and the
+        previous step's length (it scales cached impulses) to zero. The space's timestamps
+        only ever count relative to each other. ``tests/world/test_physics.py`` checks whole
+        episodes against fresh worlds."""
+        if (
+            old is None
+            or old._space_c is None
+            or old.layout is not self.layout
+            or old.config != self.config
+            or not old.active.all()
+        ):
+            return None
+        space = old.space
+        for body in old.bodies:
+            space.remove(*body.shapes, body)
+        chipmunk.cpSpaceSetShapeIDCounter(space._space, len(self.segments) + len(self.pillars))
+        chipmunk.cpSpaceSetCurrentTimeStep(space._space, 0.0)
+        old.bodies, old._space_c, old._bodies_c = [], None, []
         return space
 
     def _add_robot(self, pose: np.ndarray) -> pymunk.Body:
@@ -287,6 +320,8 @@ class World:
         ``slip`` (N,) in (0, 1], default all 1: robot i moves ``slip[i]`` times its command and
         its odometry reports the true displacement divided by ``slip[i]`` (module doc).
         """
+        if self._space_c is None:
+            raise RuntimeError("World.step: this world's space went to the next episode's world")
         cmd = self.clip_commands(commands)
         start = self._pose
         scale = None if slip is None else np.asarray(slip, dtype=float)  # (N,)

@@ -275,3 +275,58 @@ def test_default_substeps__no_robot_through_or_into_anything_on_the_generators(
     assert row["after_guard"] == 0
     # A robot that moved less than half its commanded chord was blocked by a push: counted.
     assert row["pushes_counted"] in (None, 1.0)
+
+
+def _run(world: World, rng: np.random.Generator, steps: int) -> list[tuple[np.ndarray, ...]]:
+    """Each step's true poses, odometry and pushes under the contact-stressing commands."""
+    out = []
+    for k in range(steps):
+        pattern = ("push", "converge", "random")[(k // 10) % 3]
+        result = world.step(commands_for(pattern, rng, world))
+        out.append((world.poses, result.odometry, result.collided))
+    return out
+
+
+# a seeded box with interior walls, a team of 2-5 and a command sequence; the seed is the input
+@pytest.mark.parametrize("seed", range(12))
+def test_recycled_space__same_episode_as_a_fresh_world_to_the_bit(seed: int) -> None:
+    # The next episode's world takes the last one's space (its walls) instead of building one:
+    # crowded robots pushing walls and each other give the contact solver many pairs at once,
+    # whose order follows the shapes' hash ids (World._take_space resets their counter).
+    rng = np.random.default_rng(seed)
+    layout = random_layout(rng)
+    n = int(rng.integers(2, 6))
+    first, second = random_poses(rng, layout, n), random_poses(rng, layout, n)
+    if first is None or second is None:
+        return  # too cramped for this team; other seeds cover it
+    old = World(layout, CFG, n, make_rngs(seed), start_poses=first)
+    _run(old, np.random.default_rng(seed + 100), 40)  # contacts cached when it ends
+    recycled = World(layout, CFG, n, make_rngs(seed + 1), start_poses=second, recycle=old)
+    fresh = World(layout, CFG, n, make_rngs(seed + 1), start_poses=second)
+    assert recycled.space is old.space and fresh.space is not old.space
+    got = _run(recycled, np.random.default_rng(seed + 200), 60)
+    want = _run(fresh, np.random.default_rng(seed + 200), 60)
+    assert any(c.any() for _, _, c in want)  # the episode has contacts to get wrong
+    for a, b in zip(got, want, strict=True):
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
+
+
+def test_recycled_space__old_world_cannot_step_and_others_are_not_taken() -> None:
+    layout = box_layout(2.0, 2.0)
+    poses = np.array([[0.5, 0.5, 0.0], [1.5, 1.5, 1.0]])
+    old = World(layout, CFG, 2, make_rngs(0), start_poses=poses)
+    new = World(layout, CFG, 2, make_rngs(1), start_poses=poses, recycle=old)
+    assert new.space is old.space
+    with pytest.raises(RuntimeError, match="next episode"):
+        old.step(np.zeros((2, 2)))
+    # a spent world, another layout, another config or a failed robot: a space of its own
+    again = World(layout, CFG, 2, make_rngs(2), start_poses=poses, recycle=old)
+    assert again.space is not new.space
+    other = World(box_layout(2.0, 2.0), CFG, 2, make_rngs(2), start_poses=poses, recycle=new)
+    assert other.space is not new.space
+    slow = WorldConfig(substeps=20)
+    assert World(layout, slow, 2, make_rngs(2), poses, recycle=other).space is not other.space
+    failed = World(layout, CFG, 2, make_rngs(3), start_poses=poses)
+    failed.disable(0)
+    assert World(layout, CFG, 2, make_rngs(2), poses, recycle=failed).space is not failed.space
