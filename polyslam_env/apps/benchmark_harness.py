@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from polyslam_env.core.jit import compile_seconds
 from polyslam_env.world.config import PAPER_BEAMS_DEG
 
 __all__ = [
@@ -34,6 +35,7 @@ __all__ = [
     "count_calls",
     "interleaved_calls",
     "machine_info",
+    "net_seconds",
     "parallel_stepper",
     "random_stepper",
     "rate",
@@ -125,10 +127,21 @@ def interleaved_calls(
         share = calls * (w + 1) // windows - calls * w // windows
         for fn, out in zip(fns, samples, strict=True):
             for _ in range(share):
-                start = time.perf_counter()
+                start, loaded = time.perf_counter(), compile_seconds()
                 fn()
-                out.append(time.perf_counter() - start)
+                out.append(net_seconds(start, loaded))
     return samples
+
+
+def net_seconds(start: float, loaded: float) -> float:
+    """Wall seconds since ``start`` (``time.perf_counter``) less those spent since then making
+    kernels ready (``loaded``: :func:`~polyslam_env.core.jit.compile_seconds` at ``start``).
+
+    A kernel loads from numba's disk cache on its first call in a process, ~0.3 s for the
+    exchange's on the first rendezvous: a one-off cost of the process (the ``compile`` rows
+    give it), not of the step. Left in, it landed in whichever samples met a kernel first,
+    the first rounds of the env rows, and took the paper env's median down by ~0.05 × MPE."""
+    return time.perf_counter() - start - (compile_seconds() - loaded)
 
 
 def rate_samples(step: Callable[[], object], steps: int, repeats: int, warmup: int = 0) -> Stats:
@@ -147,7 +160,8 @@ def rate_rounds(
     calls of each, then ``repeats`` rounds in which each makes one block of ``steps[k]`` calls
     (one sample per block, as :func:`rate_samples`). Sample ``r`` of every stepper comes from
     round ``r``, so ratios can be taken round by round. Why in turns: see
-    :func:`interleaved_calls` (a slow spell of the machine falls on every row alike)."""
+    :func:`interleaved_calls` (a slow spell of the machine falls on every row alike). A block's
+    time leaves out what it spent making kernels ready (:func:`net_seconds`)."""
     if not len(steppers) == len(steps) == len(warmups):
         raise ValueError(
             f"rate_rounds: {len(steppers)} steppers, {len(steps)} step counts, "
@@ -159,10 +173,10 @@ def rate_rounds(
     samples: list[list[float]] = [[] for _ in steppers]
     for _ in range(repeats):
         for step, count, out in zip(steppers, steps, samples, strict=True):
-            start = time.perf_counter()
+            start, loaded = time.perf_counter(), compile_seconds()
             for _ in range(count):
                 step()
-            out.append(count / (time.perf_counter() - start))
+            out.append(count / net_seconds(start, loaded))
     return samples
 
 

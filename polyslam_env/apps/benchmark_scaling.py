@@ -132,10 +132,10 @@ def bench_team(sizes: Sequence[int], steps: int, seed: int = 0) -> list[dict[str
     machine falls on every size alike instead of on the 3-robot episode's fraction of a second
     or not at all, which moved the ratio by a third from run to run.
 
-    The first size's episode is played once untimed before the timed runs: kernels load from
-    numba's cache on their first call in a process (up to ~0.3 s in all), which would land in
-    the first size's mean alone and shrink every ratio. Kernels only a larger team reaches
-    still load inside its timed run, which errs against the ratio, not for it."""
+    The first size's episode is played once untimed before the timed runs (kernels load from
+    numba's cache on their first call in a process, up to ~0.3 s in all); the load of a kernel
+    only a larger team reaches is left out of its call's time like any other
+    (``benchmark_harness.net_seconds``)."""
     from polyslam_env.environment.parallel import parallel_env
 
     if sizes:

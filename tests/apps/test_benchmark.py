@@ -124,6 +124,22 @@ def test_rate_rounds__one_block_each_per_round_in_order(clock: FakeClock) -> Non
         rate_rounds([make("a")], steps=[1, 2], repeats=1, warmups=[0])
 
 
+def test_timed_calls__leave_out_kernel_loads(
+    clock: FakeClock, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # a call that spends 0.75 of its 1 s making a kernel ready (the compile clock advances by
+    # that much while it runs) counts 0.25 s, in the per-call and the per-block timings alike
+    loaded = [0.0]
+    monkeypatch.setattr(benchmark_harness, "compile_seconds", lambda: loaded[0])
+
+    def step() -> None:
+        clock.tick(1.0)
+        loaded[0] += 0.75
+
+    assert interleaved_calls([step], calls=2, windows=1) == [[0.25, 0.25]]
+    assert rate_rounds([step], steps=[2], repeats=1, warmups=[0]) == [[2 / 0.5]]
+
+
 def test_rate_samples__calls_per_second(clock: FakeClock) -> None:
     per_call = [0.5]  # seconds each call takes; changed between blocks
 
