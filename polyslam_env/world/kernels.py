@@ -366,3 +366,44 @@ def drive_forces(
             mid = heading[i] + w * h * (k + 0.5)
             out[i, k, 0] = gain * math.cos(mid)
             out[i, k, 1] = gain * math.sin(mid)
+
+
+@njit
+def motion_end(
+    pose: np.ndarray,
+    cmd: np.ndarray,
+    dt: float,
+    force: np.ndarray,
+    drift: float,
+    tolerance: float,
+    end: np.ndarray,
+    touched: np.ndarray,
+) -> None:
+    """The end of a control period (``World._integrate``): ``end`` (N, 3) holds the robots'
+    end positions (x, y, read from chipmunk); writes each end heading θ + ω dt and ``touched``
+    (N,): whether the end is off the free end, the start moved by the sub-steps' drive forces
+    ``force`` (N, substeps, 2) times ``drift`` = h²/m, by more than ``tolerance``."""
+    for i in range(pose.shape[0]):
+        end[i, 2] = pose[i, 2] + cmd[i, 1] * dt
+        fx = 0.0
+        fy = 0.0
+        for k in range(force.shape[1]):  # in order, as numpy sums along a middle axis
+            fx += force[i, k, 0]
+            fy += force[i, k, 1]
+        ox = end[i, 0] - pose[i, 0] - fx * drift
+        oy = end[i, 1] - pose[i, 1] - fy * drift
+        touched[i] = ox * ox + oy * oy > tolerance * tolerance
+
+
+@njit
+def odometry(start: np.ndarray, end: np.ndarray, out: np.ndarray) -> None:
+    """``core.geometry.between(start, end)`` of (N, 3) poses into ``out`` (N, 3): each end in
+    its start's frame, the turn wrapped to (−π, π] (``wrap_angle``'s formula)."""
+    for i in range(start.shape[0]):
+        c = math.cos(start[i, 2])
+        s = math.sin(start[i, 2])
+        dx = end[i, 0] - start[i, 0]
+        dy = end[i, 1] - start[i, 1]
+        out[i, 0] = c * dx + s * dy
+        out[i, 1] = -s * dx + c * dy
+        out[i, 2] = math.pi - (math.pi - (end[i, 2] - start[i, 2])) % (2.0 * math.pi)

@@ -62,7 +62,7 @@ import pymunk
 from pymunk._chipmunk_cffi import lib as chipmunk
 
 from polyslam_env.core.errors import MapFileError
-from polyslam_env.core.geometry import between, wrap_angle
+from polyslam_env.core.geometry import wrap_angle
 from polyslam_env.world import kernels
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
@@ -327,7 +327,8 @@ class World:
         scale = None if slip is None else np.asarray(slip, dtype=float)  # (N,)
         end = self._integrate(cmd if scale is None else cmd * scale[:, None])
         self._pose = self._guard(start, end)
-        true_odo = between(start, self._pose)
+        true_odo = np.empty((self.num_robots, 3))
+        kernels.odometry(start, self._pose, true_odo)  # between(start, pose), compiled
         reported = true_odo if scale is None else true_odo / scale[:, None]
         noise = self.rngs["motion"].standard_normal((self.num_robots, 3)) * self._odo_sigma
         return StepResult(
@@ -361,7 +362,6 @@ class World:
                 set_force(body, f[k])
             space_step(space, h)
         end = np.empty((self.num_robots, 3))
-        end[:, 2] = th0 + cmd[:, 1] * self.config.dt
         for i, (body, active) in enumerate(zip(self._bodies_c, self.active.tolist(), strict=True)):
             if active:
                 p, vel = chipmunk.cpBodyGetPosition(body), chipmunk.cpBodyGetVelocity(body)
@@ -369,9 +369,13 @@ class World:
                 chipmunk.cpBodySetVelocity(body, (0.0, 0.0))
             p = chipmunk.cpBodyGetPosition(body)
             end[i, 0], end[i, 1] = p.x, p.y
-        # Free motion: the sum of the sub-steps' velocities f·h/m, each held for h.
-        off = end[:, :2] - self._pose[:, :2] - force.sum(axis=1) * (h * h / self.config.robot.mass)
-        self._touched = (off * off).sum(axis=1) > PUSH_TOLERANCE**2
+        # The heading turns by ω dt; free motion is the sum of the sub-steps' velocities f·h/m,
+        # each held for h: a robot whose end is off that was pushed.
+        self._touched = np.empty(self.num_robots, dtype=bool)
+        drift = h * h / self.config.robot.mass
+        kernels.motion_end(
+            self._pose, cmd, self.config.dt, force, drift, PUSH_TOLERANCE, end, self._touched
+        )
         return end
 
     def _guard(self, start: np.ndarray, end: np.ndarray) -> np.ndarray:

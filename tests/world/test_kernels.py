@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pytest
 
+from polyslam_env.core.geometry import between
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.world import kernels
 from polyslam_env.world.config import CameraConfig, RangeSensorConfig, WorldConfig
@@ -151,6 +152,38 @@ def test_drive_forces__equal_the_oracle() -> None:
     out = np.empty((50, 20, 2))
     kernels.drive_forces(heading, cmd, 0.005, 20, 1.3, out)
     np.testing.assert_array_equal(out, reference.drive_forces(heading, cmd, 0.005, 20, 1.3))
+
+
+def test_odometry__equals_between_to_the_bit() -> None:
+    # the world's odometry kernel against core.geometry.between (numpy), headings unwrapped
+    # as the world keeps them, turns of any size and signed zeros
+    rng = np.random.default_rng(6)
+    start = np.column_stack([rng.uniform(-50, 50, (500, 2)), rng.uniform(-40, 40, 500)])
+    end = start + np.column_stack([rng.normal(0, 0.3, (500, 2)), rng.normal(0, 2, 500)])
+    end[:20, 2] = start[:20, 2]  # no turn
+    end[20:40, 2] = start[20:40, 2] + np.pi * rng.integers(-3, 4, 20)  # multiples of π
+    out = np.empty((500, 3))
+    kernels.odometry(start, end, out)
+    np.testing.assert_array_equal(out, between(start, end))
+
+
+def test_motion_end__equals_the_numpy_expressions() -> None:
+    # heading θ + ω dt, and pushed = the end is off the start moved by Σ forces · h²/m
+    rng = np.random.default_rng(7)
+    n, substeps, dt, drift, tol = 40, 10, 1.0, 0.1**2 / 1.3, 1e-9
+    pose = np.column_stack([rng.uniform(-5, 5, (n, 2)), rng.uniform(-9, 9, n)])
+    cmd = rng.uniform(-1, 1, (n, 2))
+    force = rng.normal(0, 2, (n, substeps, 2))
+    end = np.empty((n, 3))
+    end[:, :2] = pose[:, :2] + force.sum(axis=1) * drift  # free ends
+    end[::3, :2] += rng.normal(0, 1e-3, (len(end[::3]), 2))  # pushed ones
+    end[1::6, :2] += 1e-10  # within the tolerance
+    touched = np.empty(n, dtype=bool)
+    kernels.motion_end(pose, cmd, dt, force, drift, tol, end, touched)
+    np.testing.assert_array_equal(end[:, 2], pose[:, 2] + cmd[:, 1] * dt)
+    off = end[:, :2] - pose[:, :2] - force.sum(axis=1) * drift
+    np.testing.assert_array_equal(touched, (off * off).sum(axis=1) > tol**2)
+    assert touched[::3].all() and not touched[1::6].any()
 
 
 @pytest.mark.parametrize("cell", [0.1, 0.5, 3.0])
