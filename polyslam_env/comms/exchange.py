@@ -1150,9 +1150,11 @@ class RendezvousExchange:
         seen = self._seen[r]
         fresh = [rec for rec in message.records if not _held(rec, r, seen)]
         self.skipped[r] += len(message.records) - len(fresh)  # no transform, no refit
+        # each record's chain in the sender's frame: the alignment's and the refit's points
+        chains = [chain_points(rec.polynomial, self.chord_tol, self.spacing) for rec in fresh]
         if self.config.align_maps and fresh:
             # on the new versions only: a held copy would pull T back to its meeting's error
-            t, cov_t = self._align(slam, r, fresh, t, cov_t, sender)
+            t, cov_t = self._align(slam, r, fresh, chains, t, cov_t, sender)
         limit = slam.config.rho_min / RECEIVED_SIGMAS
         # a received wall is turned from the truth by the transform's turn (its part through
         # the receiver's pose, and the rest's variance), not by the receiver's heading alone
@@ -1165,12 +1167,11 @@ class RendezvousExchange:
         fused_cov_t = pose_part + d_noise @ noise_cov @ d_noise.T / RECEIVED_CI_WEIGHT
         min_overlap = slam.config.merge_min_overlap
         turned = rotation(float(t[2]))
-        for record in fresh:
+        for record, q in zip(fresh, chains, strict=True):
             version = _version(record)
             seen[version] = record.revision
             # received_point_set and transform_normal_sigma on one chain and one ∂p/∂T; on
             # the pose columns only (the rest are zeros): _fuse sizes G_x to the state
-            q = chain_points(record.polynomial, self.chord_tol, self.spacing)
             xy, dp_dt, normals, sigma = received_geometry(q, t, turned, cov_t)
             sure = sigma <= limit
             self.dropped_points[r] += int(np.count_nonzero(~sure))
@@ -1206,12 +1207,13 @@ class RendezvousExchange:
         slam: PolySlam,
         r: int,
         records: Sequence[PolynomialRecord],
+        chains: Sequence[np.ndarray],
         t: np.ndarray,
         cov_t: np.ndarray,
         sender: int,
     ) -> tuple[np.ndarray, np.ndarray]:
         """The transform refined on the receiver's walls and its covariance
-        (:func:`refine_transform`): anchors
+        (:func:`refine_transform`) from ``records`` and their ``chains`` (sender frame): anchors
         are its landmarks holding no data of this sender (an earlier copy would pull T back
         to that meeting's error); one (chain, wall) pair weighs as one offset whose variance
         is the range noise's plus both landmarks' normal variances (the sender's from its
@@ -1223,7 +1225,6 @@ class RendezvousExchange:
             dtype=np.int64,
         )
         walls = _table_walls(slam, rows)
-        chains = [chain_points(rec.polynomial, self.chord_tol, self.spacing) for rec in records]
         refined, cov_refined = refine_transform(
             t,
             cov_t,
