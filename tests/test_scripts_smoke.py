@@ -37,6 +37,7 @@ def _run(*args: str, cwd: Path = ROOT) -> str:
 PRINTING = [
     (["divergence_rates.py", "--seeds", "1"], "healthy (80 steps): flag fired in"),
     (["bench_team_act.py", "--steps", "2", "4", "--compare", "."], "this tree "),
+    (["bench_reset.py", "--resets", "20"], "fresh/reuse"),
     (["env_stage_calls.py", "--env", "noslam", "--first", "2", "--last", "6"],
      "Python calls per env step"),
     (["exchange_bytes.py"], "polynomials"),
