@@ -393,17 +393,3 @@ def motion_end(
         ox = end[i, 0] - pose[i, 0] - fx * drift
         oy = end[i, 1] - pose[i, 1] - fy * drift
         touched[i] = ox * ox + oy * oy > tolerance * tolerance
-
-
-@njit
-def odometry(start: np.ndarray, end: np.ndarray, out: np.ndarray) -> None:
-    """``core.geometry.between(start, end)`` of (N, 3) poses into ``out`` (N, 3): each end in
-    its start's frame, the turn wrapped to (−π, π] (``wrap_angle``'s formula)."""
-    for i in range(start.shape[0]):
-        c = math.cos(start[i, 2])
-        s = math.sin(start[i, 2])
-        dx = end[i, 0] - start[i, 0]
-        dy = end[i, 1] - start[i, 1]
-        out[i, 0] = c * dx + s * dy
-        out[i, 1] = -s * dx + c * dy
-        out[i, 2] = math.pi - (math.pi - (end[i, 2] - start[i, 2])) % (2.0 * math.pi)

@@ -62,7 +62,7 @@ import pymunk
 from pymunk._chipmunk_cffi import lib as chipmunk
 
 from polyslam_env.core.errors import MapFileError
-from polyslam_env.core.geometry import wrap_angle
+from polyslam_env.core.geometry import between, wrap_angle
 from polyslam_env.world import kernels
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
@@ -327,8 +327,7 @@ class World:
         scale = None if slip is None else np.asarray(slip, dtype=float)  # (N,)
         end = self._integrate(cmd if scale is None else cmd * scale[:, None])
         self._pose = self._guard(start, end)
-        true_odo = np.empty((self.num_robots, 3))
-        kernels.odometry(start, self._pose, true_odo)  # between(start, pose), compiled
+        true_odo = between(start, self._pose)
         reported = true_odo if scale is None else true_odo / scale[:, None]
         noise = self.rngs["motion"].standard_normal((self.num_robots, 3)) * self._odo_sigma
         return StepResult(

@@ -13,7 +13,6 @@ import math
 import numpy as np
 import pytest
 
-from polyslam_env.core.geometry import between
 from polyslam_env.core.seeding import make_rngs
 from polyslam_env.world import kernels
 from polyslam_env.world.config import CameraConfig, RangeSensorConfig, WorldConfig
@@ -152,19 +151,6 @@ def test_drive_forces__equal_the_oracle() -> None:
     out = np.empty((50, 20, 2))
     kernels.drive_forces(heading, cmd, 0.005, 20, 1.3, out)
     np.testing.assert_array_equal(out, reference.drive_forces(heading, cmd, 0.005, 20, 1.3))
-
-
-def test_odometry__equals_between_to_the_bit() -> None:
-    # the world's odometry kernel against core.geometry.between (numpy), headings unwrapped
-    # as the world keeps them, turns of any size and signed zeros
-    rng = np.random.default_rng(6)
-    start = np.column_stack([rng.uniform(-50, 50, (500, 2)), rng.uniform(-40, 40, 500)])
-    end = start + np.column_stack([rng.normal(0, 0.3, (500, 2)), rng.normal(0, 2, 500)])
-    end[:20, 2] = start[:20, 2]  # no turn
-    end[20:40, 2] = start[20:40, 2] + np.pi * rng.integers(-3, 4, 20)  # multiples of π
-    out = np.empty((500, 3))
-    kernels.odometry(start, end, out)
-    np.testing.assert_array_equal(out, between(start, end))
 
 
 def test_motion_end__equals_the_numpy_expressions() -> None:
