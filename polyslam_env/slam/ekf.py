@@ -253,12 +253,26 @@ def augment(
     if V.shape != (gy.size, gy.size):
         raise ValueError(f"V must have shape ({gy.size}, {gy.size}), got {V.shape}")
     cross = cov @ gx  # (3+n,) = P Gxᵀ
-    new_cov = np.empty((n_state + 1, n_state + 1))
-    new_cov[:n_state, :n_state] = cov
-    new_cov[:n_state, n_state] = cross
-    new_cov[n_state, :n_state] = cross
-    new_cov[n_state, n_state] = gx @ cross + gy @ V @ gy
-    return np.append(mean, value), new_cov
+    var = gx @ cross + gy @ V @ gy
+    return grown(mean, cov, value, cross, var, np.arange(n_state + 1))
+
+
+def grown(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    value: float,
+    cross: np.ndarray,
+    var: float,
+    order: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The state with one entry appended (mean ``value``, covariance ``cross`` with the rest,
+    variance ``var``) and taken in ``order`` (N+1 indices; N is the new entry): one compiled
+    copy (:func:`~polyslam_env.slam.kernels.grown`)."""
+    return kernels.grown(
+        np.ascontiguousarray(mean, dtype=float), np.ascontiguousarray(cov, dtype=float),
+        float(value), np.ascontiguousarray(cross, dtype=float), float(var),
+        np.ascontiguousarray(order, dtype=np.int64),
+    )  # fmt: skip
 
 
 def remove(

@@ -1304,6 +1304,36 @@ def update_sparse(
     return count
 
 
+# -- the state's size changes --------------------------------------------------------------------
+@njit
+def grown(
+    mean: np.ndarray,  # (N,)
+    cov: np.ndarray,  # (N, N)
+    value: float,
+    cross: np.ndarray,  # (N,) the new entry's covariance with the state
+    var: float,
+    order: np.ndarray,  # (N+1,) int64: the grown state's entries in their new order
+) -> tuple[np.ndarray, np.ndarray]:
+    """The state with one entry appended (mean ``value``, covariance row ``cross``, variance
+    ``var``: ``ekf.augment``'s [P, P Gxᵀ; Gx P, …]) and taken in ``order`` (index N is the new
+    entry), in one pass: copies only, each float moved as it is."""
+    n = mean.size
+    size = n + 1
+    out_mean, out_cov = np.empty(size), np.empty((size, size))
+    for i in range(size):
+        a = order[i]
+        out_mean[i] = value if a == n else mean[a]
+        for j in range(size):
+            b = order[j]
+            if a == n:
+                out_cov[i, j] = var if b == n else cross[b]
+            elif b == n:
+                out_cov[i, j] = cross[a]
+            else:
+                out_cov[i, j] = cov[a, b]
+    return out_mean, out_cov
+
+
 # -- the SLAM step's two scans --------------------------------------------------------------------
 @njit
 def _scan_model(

@@ -108,8 +108,8 @@ class StateLayout:
             return mean, cov
         size = mean.size  # 3 + 2n + 1: the new c0 is last
         gx, var = turn_row(size, n, source, fit_var)
-        mean, cov = ekf.augment(mean, cov, 0.0, gx, np.ones(1), np.array([[var]]))
-        return new_c0_before_turns(mean, cov, n)
+        cross = cov @ gx  # ekf.augment's, with G_y = 1 and V = [var]: its Gy V Gyᵀ is var
+        return ekf.grown(mean, cov, 0.0, cross, gx @ cross + var, new_c0_before_turns(n))
 
     def remove(
         self, mean: np.ndarray, cov: np.ndarray, row: int | Sequence[int], n: int
@@ -123,23 +123,11 @@ class StateLayout:
         return ekf.remove(mean, cov, drop)
 
 
-def new_c0_before_turns(mean: np.ndarray, cov: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """[pose, c0_1 … c0_n, α_1 … α_n, c0_new, α_new] (``mean`` (3+2n+2,), ``cov`` square)
-    reordered to [pose, c0_1 … c0_new, α_1 … α_new]: the state's index permutation
-    ``np.r_[0:3+n, last−1, 3+n:last−1, last]`` copied as its four contiguous spans per axis
-    (16 block copies: a fancy ``np.ix_`` gather of the whole covariance cost ~5× more at a
-    hundred landmarks; the same numbers, a copy)."""
-    size = mean.size
-    c0_end, last = 3 + n, size - 1
-    spans = (  # (to, from) along each axis
-        (slice(0, c0_end), slice(0, c0_end)),
-        (slice(c0_end, c0_end + 1), slice(last - 1, last)),
-        (slice(c0_end + 1, last), slice(c0_end, last - 1)),
-        (slice(last, size), slice(last, size)),
-    )
-    out_mean, out_cov = np.empty_like(mean), np.empty_like(cov)
-    for to_row, from_row in spans:
-        out_mean[to_row] = mean[from_row]
-        for to_col, from_col in spans:
-            out_cov[to_row, to_col] = cov[from_row, from_col]
-    return out_mean, out_cov
+def new_c0_before_turns(n: int) -> np.ndarray:
+    """The order that takes [pose, c0_1 … c0_n, α_1 … α_n, c0_new, α_new] to [pose, c0_1 …
+    c0_new, α_1 … α_new]: ``np.r_[0:3+n, last−1, 3+n:last−1, last]`` (last = 3 + 2n + 1)."""
+    last = 3 + 2 * n + 1
+    order = np.arange(last + 1)
+    order[3 + n] = last - 1
+    order[4 + n : last] = np.arange(3 + n, last - 1)
+    return order
