@@ -166,7 +166,7 @@ from polyslam_env.slam.landmarks import boxes_near
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH
 from polyslam_env.slam.map_kernels import equally_spaced
-from polyslam_env.slam.merging import MERGE_ANGLE_DEG, measured_gamma
+from polyslam_env.slam.merging import MERGE_ANGLE_DEG, merge_gammas, table_candidates
 from polyslam_env.slam.polynomial import Polynomial
 
 if TYPE_CHECKING:
@@ -1492,23 +1492,20 @@ def uncovered_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> list[
 
 
 def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
-    """Ids of the landmarks PolySlam's merge test pairs with ``poly`` one by one
-    (:func:`~polyslam_env.slam.merging.measured_gamma`, as ``find_merge`` with one
-    candidate)."""
+    """Ids of the landmarks PolySlam's merge test pairs with ``poly`` one by one (γ below γ_M
+    with the tangents agreeing: :func:`~polyslam_env.slam.merging.merge_gammas`, joins
+    aside)."""
     cfg = slam.config
-    c0s = slam.c0s
     # poly.equally_spaced's points in one compiled call (the same floats)
     xy = equally_spaced(poly.coeffs, poly.variate, poly.lo, poly.hi, _BOX_SAMPLES)
     box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
-    found = np.empty(4)
-    return [
-        slam.table.ids[j]
-        for j in boxes_near(slam.landmark_boxes(), box, cfg.gamma_max).tolist()
-        if measured_gamma(
-            poly, slam.table.polys[j].with_c0(float(c0s[j])), cfg.gamma_max,
-            cfg.merge_min_overlap, MERGE_ANGLE_DEG, found,
-        ) is not None
-    ]  # fmt: skip
+    near = boxes_near(slam.landmark_boxes(), box, cfg.gamma_max)
+    gammas, _ = merge_gammas(
+        poly, table_candidates(slam.table, near, slam.c0s), cfg.merge_min_overlap
+    )
+    ids = slam.table.ids
+    pairs = zip(near.tolist(), gammas.tolist(), strict=True)
+    return [ids[j] for j, gamma in pairs if gamma < cfg.gamma_max]
 
 
 def _table_walls(slam: PolySlam, rows: np.ndarray) -> WallArrays:

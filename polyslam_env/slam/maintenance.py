@@ -30,7 +30,14 @@ from polyslam_env.slam.fitting import (
 from polyslam_env.slam.landmarks import boxes_near, clip_to_evidence, evidence_on, hull
 from polyslam_env.slam.layout import TurnSource
 from polyslam_env.slam.lineage import CREATED, INSERTED, MERGED, REMOVED, REPLACED
-from polyslam_env.slam.merging import JOIN_GAP, choose_merge, face_normal, merge_points
+from polyslam_env.slam.merging import (
+    JOIN_GAP,
+    face_normal,
+    merge_gammas,
+    merge_points,
+    pick_merge,
+    table_candidates,
+)
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.stored import PointArrays
 
@@ -301,31 +308,40 @@ class MapMaintenance:
         near = boxes_near(boxes, boxes[idx], reach)
         near = near[near != idx]
         poly = self.polynomial(idx)
-        partners = [self.polynomial(int(j)) for j in near]
-        sides = slam.table.side
+        table = slam.table
+        gammas, joined = merge_gammas(
+            poly,
+            table_candidates(table, near, c0s),
+            cfg.merge_min_overlap,
+            join_gap=JOIN_GAP if cfg.join_pieces else None,
+        )
+        sides = table.side[near].tolist()
         while len(near):
-            choice = choose_merge(
+            choice = pick_merge(
                 poly,
-                float(c0s[idx]),
-                partners,
-                c0s[near],
+                gammas,
+                joined,
                 cfg.gamma_max,
-                cfg.merge_min_overlap,
-                new_side=int(sides[idx]),
-                sides=sides[near].tolist(),
-                join_gap=JOIN_GAP if cfg.join_pieces else None,
+                functools.partial(self._near_polynomial, near),
+                new_side=int(table.side[idx]),
+                sides=sides,
             )
             if choice is None:
                 return None
             j = int(near[choice.partner])
             merged = self.merge_pair(
-                landmark_id, idx, poly, j, partners[choice.partner], choice.joined
+                landmark_id, idx, poly, j, self.polynomial(j), bool(choice.joined)
             )
             if merged is not None:
                 return merged
-            near = np.delete(near, choice.partner)
-            del partners[choice.partner]
+            # the state is unchanged: the others' answers stand
+            near, gammas, joined = (np.delete(a, choice.partner) for a in (near, gammas, joined))
+            del sides[choice.partner]
         return None
+
+    def _near_polynomial(self, rows: np.ndarray, k: int) -> Polynomial:
+        """The landmark at ``rows[k]`` with its current c0 (a merge candidate)."""
+        return self.polynomial(int(rows[k]))
 
     def merge_pair(
         self, landmark_id: int, idx: int, poly: Polynomial, j: int, other: Polynomial, joined: bool

@@ -374,6 +374,59 @@ def join_offset(
     return offset if offset <= thin_wall else np.nan
 
 
+@njit
+def merge_cosine(
+    p_variate: int, p_coeffs: np.ndarray, xi_p: float,
+    o_variate: int, o_coeffs: np.ndarray, xi_o: float,
+) -> float:  # fmt: skip
+    """|cos| of the angle between p's tangent at ``xi_p`` and the other's at ``xi_o``, at most
+    1 (``merging.merge_angle`` takes its arccos): the same floats as numpy's (the 2-vectors'
+    dot products are BLAS's plain sums of two products)."""
+    tp0, tp1 = _unit_tangent(p_variate, p_coeffs, xi_p)
+    to0, to1 = _unit_tangent(o_variate, o_coeffs, xi_o)
+    return min(abs(tp0 * to0 + tp1 * to1), 1.0)
+
+
+@njit
+def merge_candidates(
+    p_variate: int, p_coeffs: np.ndarray, p_lo: float, p_hi: float,
+    variates: np.ndarray,  # (k,) int64: the candidates, as the landmark table holds them
+    shapes: np.ndarray,  # (k, W) rows [·, b_1, …]: coefficient 0 is replaced by the c0
+    sizes: np.ndarray,  # (k,) int64: each one's number of coefficients (≤ W)
+    c0s: np.ndarray,  # (k,)
+    los: np.ndarray,  # (k,)
+    his: np.ndarray,  # (k,)
+    min_overlap: float, max_angle_deg: float,
+    join_gap: float, join_angle_deg: float, thin_wall: float,  # join_gap nan: no joins
+    gammas: np.ndarray,  # (k,) out: γ, nan when it does not count
+    joined: np.ndarray,  # (k,) bool out: γ is a join's offset
+) -> None:  # fmt: skip
+    """The merge test of p against every candidate in one call (``merging.merge_gammas``):
+    γ where :func:`merge_test` measures it and the tangents there agree within
+    ``max_angle_deg``; else, with ``join_gap``, :func:`join_offset` (nan when no join)."""
+    found = np.empty(4)
+    for i in range(variates.size):
+        c = shapes[i, : sizes[i]].copy()
+        c[0] = c0s[i]
+        gammas[i], joined[i] = np.nan, False
+        measured = merge_test(
+            p_variate, p_coeffs, p_lo, p_hi, variates[i], c, los[i], his[i], min_overlap, found
+        )
+        if measured == MEASURED:
+            cosine = merge_cosine(
+                p_variate, p_coeffs, 0.5 * (found[0] + found[1]), variates[i], c, found[3]
+            )
+            if math.acos(cosine) * (180.0 / math.pi) <= max_angle_deg:  # np.degrees' factor
+                gammas[i] = found[2]
+                continue
+        if not math.isnan(join_gap):
+            gammas[i] = join_offset(
+                p_variate, p_coeffs, p_lo, p_hi, variates[i], c, los[i], his[i], join_gap,
+                join_angle_deg, thin_wall,
+            )  # fmt: skip
+            joined[i] = True
+
+
 # -- stored points --------------------------------------------------------------------------------
 @njit
 def _append_point(

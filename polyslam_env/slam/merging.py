@@ -38,16 +38,18 @@ one curve at this sensor's resolution (2.5 σ of the 2 cm range noise), while th
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from typing import NamedTuple
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from polyslam_env.slam import map_kernels
 from polyslam_env.slam.association import GAP_SPLIT
 from polyslam_env.slam.fitting import PointSet, sample_into
-from polyslam_env.slam.map_kernels import MEASURED
 from polyslam_env.slam.polynomial import Polynomial
+
+if TYPE_CHECKING:
+    from polyslam_env.slam.landmarks import LandmarkTable
 
 #: m, largest gap between the nearer end points of two pieces that may be joined into one
 #: landmark: the gap below which points along a wall are sampling, not a doorway — the same
@@ -68,9 +70,10 @@ THIN_WALL = 0.05
 def merge_angle(poly: Polynomial, other: Polynomial, a: float, b: float, xi_other: float) -> float:
     """Angle (rad) between the tangents of ``poly`` at the middle of the overlap [a, b] and of
     ``other`` at ``xi_other`` (the middle of its samples there: ``map_kernels.merge_test``)."""
-    t_p = unit_tangent(poly, 0.5 * (a + b))
-    t_o = unit_tangent(other, xi_other)
-    return float(np.arccos(min(abs(float(t_p @ t_o)), 1.0)))
+    cosine = map_kernels.merge_cosine(
+        poly.variate, poly.coeffs, 0.5 * (a + b), other.variate, other.coeffs, xi_other
+    )
+    return float(np.arccos(cosine))
 
 
 def unit_tangent(poly: Polynomial, xi: float) -> np.ndarray:
@@ -142,48 +145,100 @@ def choose_merge(
     :func:`join_gamma` accepts them (their γ is that function's offset).
     """
     p = new_poly.with_c0(new_c0)
-    found = np.empty(4)  # merge_test's a, b, γ and the other's tangent ξ
+    others = [p2.with_c0(float(c02)) for p2, c02 in zip(polys, c0s, strict=True)]
+    gammas, joined = merge_gammas(p, candidates_of(others), min_overlap, max_angle_deg, join_gap)
+    return pick_merge(p, gammas, joined, gamma_max, others.__getitem__, exclude, new_side, sides)
+
+
+class Candidates(NamedTuple):
+    """Polynomials to test a merge against, as arrays (:func:`merge_gammas`): each one's
+    variate, coefficient row (its first entry is replaced by its c0), number of coefficients,
+    c0 and extent. :func:`table_candidates` reads them from a map's columns;
+    :func:`candidates_of` from polynomials."""
+
+    variate: np.ndarray  # (k,) int64
+    shape: np.ndarray  # (k, W)
+    size: np.ndarray  # (k,) int64
+    c0: np.ndarray  # (k,)
+    lo: np.ndarray  # (k,)
+    hi: np.ndarray  # (k,)
+
+
+def candidates_of(polys: Sequence[Polynomial]) -> Candidates:
+    """:class:`Candidates` of polynomials that carry their c0."""
+    k = len(polys)
+    width = max((p.coeffs.size for p in polys), default=2)
+    shape = np.zeros((k, width))
+    for i, p in enumerate(polys):
+        shape[i, : p.coeffs.size] = p.coeffs
+    return Candidates(
+        np.array([p.variate for p in polys], dtype=np.int64),
+        shape,
+        np.array([p.coeffs.size for p in polys], dtype=np.int64),
+        shape[:, 0].copy(),
+        np.array([p.lo for p in polys], dtype=float),
+        np.array([p.hi for p in polys], dtype=float),
+    )
+
+
+def table_candidates(table: LandmarkTable, rows: np.ndarray, c0s: np.ndarray) -> Candidates:
+    """:class:`Candidates` of a map's landmarks ``rows`` (int64) at the c0s ``c0s`` (n,), from
+    its columns (no polynomial objects but the cached shapes' sizes)."""
+    return Candidates(
+        table.variate[rows],
+        table.shape[rows],
+        np.array([table.poly(j).coeffs.size for j in rows.tolist()], dtype=np.int64),
+        c0s[rows],
+        table.lo[rows],
+        table.hi[rows],
+    )
+
+
+def merge_gammas(
+    p: Polynomial,
+    candidates: Candidates,
+    min_overlap: float,
+    max_angle_deg: float = MERGE_ANGLE_DEG,
+    join_gap: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(γ (k,), joined (k,)) of ``p`` (with its c0) against each candidate: its γ where they
+    overlap by at least ``min_overlap`` (``map_kernels.merge_test``) and their tangents there
+    agree within ``max_angle_deg``; else, with ``join_gap``, the offset of an end-to-end join
+    (:func:`join_gamma`, ``joined`` True); nan where neither counts. One compiled call
+    (:func:`~polyslam_env.slam.map_kernels.merge_candidates`)."""
+    k = candidates.variate.size
+    gammas, joined = np.empty(k), np.empty(k, dtype=np.bool_)
+    map_kernels.merge_candidates(
+        p.variate, p.coeffs, p.lo, p.hi, *candidates, min_overlap, max_angle_deg,
+        math.nan if join_gap is None else join_gap, JOIN_ANGLE_DEG, THIN_WALL, gammas, joined,
+    )  # fmt: skip
+    return gammas, joined
+
+
+def pick_merge(
+    p: Polynomial,
+    gammas: np.ndarray,
+    joined: np.ndarray,
+    gamma_max: float,
+    other: Callable[[int], Polynomial],
+    exclude: int | None = None,
+    new_side: int = 0,
+    sides: Sequence[int] | None = None,
+) -> MergeChoice | None:
+    """:func:`choose_merge`'s choice from :func:`merge_gammas`' answers: the smallest γ below
+    γ_M (the first of ties), a pair of opposite faces only below :data:`THIN_WALL`;
+    ``other(j)`` gives candidate j's polynomial with its c0 (read only for such a pair)."""
     best: MergeChoice | None = None
     best_gamma = gamma_max
-    for j, (p2, c02) in enumerate(zip(polys, c0s, strict=True)):
+    for j, (gamma, join) in enumerate(zip(gammas.tolist(), joined.tolist(), strict=True)):
         if j == exclude:
             continue
-        other = p2.with_c0(float(c02))
         side = 0 if sides is None else int(sides[j])
-        opposite = new_side * side < 0 and _faces_opposite(p, new_side, other, side)
+        opposite = new_side * side < 0 and _faces_opposite(p, new_side, other(j), side)
         limit = min(best_gamma, THIN_WALL) if opposite else best_gamma
-        # the tangents' angle decides only whether γ counts: not needed when it could not win
-        # and no join would be tried instead
-        below = None if join_gap is not None else limit
-        gamma = measured_gamma(p, other, below, min_overlap, max_angle_deg, found)
-        joined = False
-        if gamma is None and join_gap is not None:
-            gamma, joined = join_gamma(p, other, join_gap), True
-        if gamma is not None and gamma < limit:
-            best, best_gamma = MergeChoice(j, gamma, joined), gamma
+        if gamma < limit:  # nan: neither an overlap nor a join counts
+            best, best_gamma = MergeChoice(j, gamma, join), gamma
     return best
-
-
-def measured_gamma(
-    p: Polynomial,
-    other: Polynomial,
-    limit: float | None,
-    min_overlap: float,
-    max_angle_deg: float,
-    found: np.ndarray,
-) -> float | None:
-    """γ of ``other`` against ``p`` (both with their c0) where they overlap by at least
-    ``min_overlap`` (``map_kernels.merge_test``), if it is below ``limit`` (None: any) and
-    their tangents there agree within ``max_angle_deg``; else None. ``found`` (4,) is
-    merge_test's scratch (a, b, γ, the other's tangent ξ)."""
-    measured = map_kernels.merge_test(
-        p.variate, p.coeffs, p.lo, p.hi, other.variate, other.coeffs, other.lo, other.hi,
-        min_overlap, found,
-    )  # fmt: skip
-    if measured != MEASURED or not (limit is None or found[2] < limit):
-        return None
-    a, b, g, xi_other = found.tolist()
-    return g if np.degrees(merge_angle(p, other, a, b, xi_other)) <= max_angle_deg else None
 
 
 def join_gamma(poly: Polynomial, other: Polynomial, max_gap: float) -> float | None:

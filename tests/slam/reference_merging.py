@@ -3,16 +3,23 @@ the overlap of two polynomials on the first one's axis and their two-way RMS err
 as ``slam/merging.py`` computed them before the test was compiled; and a polynomial's
 steepest slope as numpy's polynomial functions find it (the oracle of
 ``Polynomial.max_slope``); and the end-to-end join's offset (the oracle of
-``map_kernels.join_offset``)."""
+``map_kernels.join_offset``); and the choice of a merge partner candidate by candidate
+(the oracle of ``merging.choose_merge``'s one compiled call over them)."""
 
 from __future__ import annotations
 
 import numpy as np
 import numpy.polynomial.polynomial as P
 
-from polyslam_env.slam import kernels
+from polyslam_env.slam import kernels, map_kernels
 from polyslam_env.slam.landmarks import own_orders
-from polyslam_env.slam.merging import JOIN_ANGLE_DEG, THIN_WALL, unit_tangent
+from polyslam_env.slam.merging import (
+    JOIN_ANGLE_DEG,
+    MERGE_ANGLE_DEG,
+    THIN_WALL,
+    face_normal,
+    unit_tangent,
+)
 from polyslam_env.slam.polynomial import Polynomial
 
 _SAMPLES = 64  # samples of p2 used to project it on p's axis
@@ -100,3 +107,52 @@ def join_gamma(poly: Polynomial, other: Polynomial, max_gap: float) -> float | N
     cross = [float(t[0] * delta[1] - t[1] * delta[0]) for t in (t_p, t_o)]
     offset = max(abs(cross[0]), abs(cross[1]))
     return offset if offset <= THIN_WALL else None
+
+
+def choose_merge(
+    new_poly: Polynomial,
+    new_c0: float,
+    polys: list[Polynomial],
+    c0s: list[float],
+    gamma_max: float,
+    min_overlap: float,
+    new_side: int,
+    sides: list[int],
+    join_gap: float | None,
+) -> tuple[int, float, bool] | None:
+    """``merging.choose_merge`` as it was before its merge tests ran in one compiled call
+    (the oracle): candidate by candidate, the merge test against the best γ so far (the tangents
+    checked only where γ would count), a join tried where no γ was measured."""
+    p = new_poly.with_c0(new_c0)
+    best: tuple[int, float, bool] | None = None
+    best_gamma = gamma_max
+    found = np.empty(4)
+    for j, (p2, c02) in enumerate(zip(polys, c0s, strict=True)):
+        other = p2.with_c0(float(c02))
+        side = sides[j]
+        opposite = new_side * side < 0 and _faces_opposite(p, new_side, other, side)
+        limit = min(best_gamma, THIN_WALL) if opposite else best_gamma
+        below = None if join_gap is not None else limit
+        gamma: float | None = None
+        measured = map_kernels.merge_test(
+            p.variate, p.coeffs, p.lo, p.hi, other.variate, other.coeffs, other.lo, other.hi,
+            min_overlap, found,
+        )  # fmt: skip
+        if measured == map_kernels.MEASURED and (below is None or found[2] < below):
+            a, b, g, xi_other = found.tolist()
+            t_p = unit_tangent(p, 0.5 * (a + b))
+            t_o = unit_tangent(other, xi_other)
+            angle = float(np.arccos(min(abs(float(t_p @ t_o)), 1.0)))
+            gamma = g if np.degrees(angle) <= MERGE_ANGLE_DEG else None
+        joined = False
+        if gamma is None and join_gap is not None:
+            gamma, joined = join_gamma(p, other, join_gap), True
+        if gamma is not None and gamma < limit:
+            best, best_gamma = (j, gamma, joined), gamma
+    return best
+
+
+def _faces_opposite(poly: Polynomial, side: int, other: Polynomial, other_side: int) -> bool:
+    n_p = face_normal(poly, 0.5 * (poly.lo + poly.hi), side)
+    n_o = face_normal(other, 0.5 * (other.lo + other.hi), other_side)
+    return float(n_p @ n_o) < 0.0

@@ -12,6 +12,7 @@ from polyslam_env.slam.fitting import PointSet, centroid_xi, fit_polynomial, tur
 from polyslam_env.slam.merging import (
     JOIN_GAP,
     THIN_WALL,
+    choose_merge,
     face_normal,
     find_merge,
     join_gamma,
@@ -418,3 +419,39 @@ def test_join_gamma__equals_the_numpy_oracle_bit_for_bit() -> None:
             assert join_gamma(a, b, 0.3) == want
             joined += want is not None
     assert joined > 100
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    new=merge_polys,
+    others=st.lists(merge_polys, min_size=0, max_size=6),
+    sides=st.lists(st.sampled_from([-1, 0, 1]), min_size=7, max_size=7),
+    joins=st.booleans(),
+    gamma_max=st.sampled_from([0.05, 0.35, 2.0]),
+)
+def test_choose_merge__the_same_choice_as_candidate_by_candidate(
+    new: Polynomial, others: list[Polynomial], sides: list[int], joins: bool, gamma_max: float
+) -> None:
+    """The merge tests of all candidates in one compiled call choose what the readable loop
+    over them chose (partner, γ bit for bit, join or overlap): nearby copies of the new piece
+    mixed with unrelated ones, faces on either side, with and without joins."""
+    rng = np.random.default_rng(len(others))
+    near = [  # shifted copies and neighbours of the new piece, so that merges do happen
+        Polynomial(new.variate, new.coeffs + rng.normal(0.0, 0.02, new.coeffs.size),
+                   new.lo + d, new.hi + d)
+        for d in rng.uniform(-0.5, 2.0, 3)
+    ]  # fmt: skip
+    polys = others + near
+    c0s = [float(p.c0) + float(rng.normal(0.0, 0.01)) for p in polys]
+    side_of = [sides[j % len(sides)] for j in range(len(polys))]
+    join_gap = 0.25 if joins else None
+    got = choose_merge(
+        new, new.c0, polys, c0s, gamma_max, 0.1, new_side=sides[0], sides=side_of,
+        join_gap=join_gap,
+    )  # fmt: skip
+    want = reference_merging.choose_merge(
+        new, new.c0, polys, c0s, gamma_max, 0.1, sides[0], side_of, join_gap
+    )
+    assert (got is None) == (want is None)
+    if got is not None and want is not None:
+        assert (got.partner, got.gamma.hex(), got.joined) == (want[0], want[1].hex(), want[2])
