@@ -130,6 +130,7 @@ from polyslam_env.comms.free_space import FreeCells, FreeSpace
 from polyslam_env.comms.kernels import (
     covered_by_walls,
     kept_runs,
+    largest_residual,
     normal_variances,
     point_jacobians,
     variance_floor,
@@ -508,13 +509,14 @@ def _fit_chain(points: PointSet, order: int, auto_order: bool, tol: float) -> tu
     """The fit (coefficients padded to ``order + 1``) and its largest |η residual| (m)."""
     for m in range(1, order + 1) if auto_order else (order,):
         fit = fit_polynomial(points, m, None, shape_fixed=True, auto_order=False)
-        xi, eta = fit.poly.from_xy(points.xy)
-        worst = float(np.max(np.abs(eta - fit.poly.value(xi))))
+        xy = np.ascontiguousarray(points.xy, dtype=float)
+        worst = largest_residual(xy, fit.poly.variate, fit.poly.coeffs)
         if worst <= tol:
             break
     coeffs = np.zeros(order + 1)
     coeffs[: fit.poly.order + 1] = fit.poly.coeffs
-    poly = Polynomial(fit.poly.variate, coeffs, fit.poly.lo, fit.poly.hi)
+    # a valid polynomial with a zero tail: valid as it is
+    poly = Polynomial.unchecked(fit.poly.variate, coeffs, fit.poly.lo, fit.poly.hi)
     return Fit(poly, fit.c0, fit.Gx, fit.Gy, fit.V, fit.rms, fit.order), worst
 
 

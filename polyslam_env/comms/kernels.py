@@ -19,6 +19,7 @@ import numpy as np
 
 from polyslam_env.core.jit import fma, njit, sum_like_numpy
 from polyslam_env.slam.fitting import J_ROT
+from polyslam_env.slam.kernels import horner
 from polyslam_env.slam.map_kernels import eta_range
 
 
@@ -611,3 +612,20 @@ def point_jacobians(
                     acc = fma(dp_dt[i, r, m], d_noise[m, c], acc)
                 out_noise[i, r, 1 + c] = acc
     return out_state, out_noise
+
+
+@njit
+def largest_residual(xy: np.ndarray, variate: int, coeffs: np.ndarray) -> float:
+    """max |η − p(ξ)| over the points ``xy`` (N ≥ 1, 2) of the polynomial with ``coeffs``
+    (c0 first, at least two) on axis ``variate``: ``np.max(np.abs(eta − poly.value(xi)))``,
+    the same float (Horner in polyval's order; a nan residual is the answer, as numpy's)."""
+    m = coeffs.size - 1
+    worst = 0.0
+    for i in range(xy.shape[0]):
+        xi, eta = (xy[i, 0], xy[i, 1]) if variate == 1 else (xy[i, 1], xy[i, 0])
+        residual = abs(eta - horner(coeffs, m, xi, coeffs[0])[0])
+        if residual != residual:
+            return residual
+        if i == 0 or residual > worst:
+            worst = residual
+    return worst

@@ -81,3 +81,22 @@ def test_point_jacobians__are_the_numpy_oracle_bit_for_bit() -> None:
             )
             want = ref.point_jacobians(dp_dt, d_state, d_noise, shift, n_state)
             assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
+def test_largest_residual__numpys_max_of_the_residuals() -> None:
+    """The compiled largest |η − p(ξ)| is numpy's ``np.max(np.abs(eta − poly.value(xi)))``
+    bit for bit, on points near random polynomials of either variate and order 1–5 (zero
+    tails too), and nan where a point is nan."""
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        coeffs = rng.normal(0.0, [1.0, 0.5, 0.1, 0.02, 0.01, 0.003][: int(rng.integers(2, 7))])
+        if trial % 4 == 0:
+            coeffs[-1] = 0.0
+        poly = Polynomial(int(rng.integers(1, 3)), coeffs, -2.0, 3.0)
+        xy = poly.points_at(rng.uniform(-2.0, 3.0, int(rng.integers(1, 40))))
+        xy = xy + rng.normal(0.0, 0.02, xy.shape)
+        xi, eta = poly.from_xy(xy)
+        want = float(np.max(np.abs(eta - poly.value(xi))))
+        assert kernels.largest_residual(xy, poly.variate, poly.coeffs) == want
+    xy[0, 1] = np.nan
+    assert np.isnan(kernels.largest_residual(xy, 1, poly.coeffs))
