@@ -408,8 +408,12 @@ class _RayTasks:
     def __exit__(self, kind: Any, value: Any, tb: Any) -> None:
         import ray
 
-        if kind is not None:
+        if self.started:
+            # the job ends with this driver's connection, and its tasks with it; cancelling
+            # them first raced with a task's completion in Ray's core worker, which then
+            # aborted this process (RAY_CHECK "it != submissible_tasks_.end()", seen with Ray
+            # 2.60 on SIGTERM; ray-project/ray#54798) instead of the clean exit --resume needs
+            ray.shutdown()
+        elif kind is not None:  # a Ray the caller started stays up: stop what this study ran
             for ref in self.running:
                 ray.cancel(ref, force=True)
-        if self.started:
-            ray.shutdown()
