@@ -29,13 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from polyslam_env.comms.kernels import (
-    frame_chain,
-    match_walls,
-    near_chains,
-    reach_boxes,
-    unit_tangents,
-)
+from polyslam_env.comms.kernels import frame_chain, match_walls, reach_boxes, unit_tangents
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH, line_angle, off_square
 from polyslam_env.slam.polynomial import Polynomial
@@ -51,7 +45,6 @@ CHI2_3DOF_99 = 11.345
 RESTART_SIGMAS = 2.0
 GATE_SIGMAS = 3.0  # a point pairs with a wall within 3σ of its predicted normal distance
 MAX_ANGLE_DEG = 30.0  # same direction: tangents within 30° (the merge test's angle)
-_SIN_MAX = float(np.sqrt(1 - np.cos(np.radians(MAX_ANGLE_DEG)) ** 2))  # its sine
 
 
 class WallArrays(NamedTuple):
@@ -172,8 +165,7 @@ def _refine_from(
     if not n_walls or not chains:
         return None
     q = np.vstack(chains)  # (N, 2)
-    lengths = [len(c) for c in chains]
-    chain_of = np.repeat(np.arange(len(chains)), lengths)  # (N,) each point's chain
+    chain_of = np.concatenate([np.full(len(c), k) for k, c in enumerate(chains)])
     var_c = np.zeros(len(chains)) if chain_var is None else np.asarray(chain_var, dtype=float)
     var_w = np.zeros(n_walls) if wall_var is None else np.asarray(wall_var, dtype=float)
     if var_c.shape != (len(chains),) or var_w.shape != (n_walls,):
@@ -181,7 +173,7 @@ def _refine_from(
     point_var = sigma * sigma + var_c[chain_of]  # (N,) before the wall's share
     tangents_q = np.vstack([_tangents(c) for c in chains])  # (N, 2) sender frame
     reach = wall_reach(walls, var_w, cov_t, point_var, q)
-    starts = np.cumsum([0, *lengths])
+    starts = np.cumsum([0] + [len(c) for c in chains])
     t = np.array(start, dtype=float)
     info = info_prior
     for _ in range(iterations):
@@ -200,7 +192,7 @@ def _refine_from(
         rhs = -(grad * weight[:, None]).T @ residual - info_prior @ (t - t0)
         step = np.linalg.solve(info, rhs)
         t = t + step
-        if np.abs(step).max() < 1e-9:
+        if np.max(np.abs(step)) < 1e-9:
             break
     d = t - t0
     if float(d @ info_prior @ d) > CHI2_3DOF_99:
@@ -276,10 +268,11 @@ def _match(
     walls = pack_walls(walls)
     if meets is None or starts is None:
         meets, starts = np.ones((len(walls.order), 1), dtype=bool), np.array([0, len(p)])
+    sin_max = float(np.sqrt(1 - np.cos(np.radians(MAX_ANGLE_DEG)) ** 2))
     _, residual, grad, wall_of = match_walls(
         p, dp_dt, tangents, walls.variate, walls.coeffs, walls.extent, cov_t, point_var,
         np.asarray(wall_var, dtype=float), meets, np.asarray(starts, dtype=np.int64),
-        GATE_SIGMAS, _SIN_MAX,
+        GATE_SIGMAS, sin_max,
     )  # fmt: skip
     keep = wall_of >= 0
     if not keep.any():
@@ -319,11 +312,10 @@ def wall_reach(
 
 def _near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndarray:
     """(W, K) whether chain k of ``p`` (rows starts[k]:starts[k+1]) has a bounding box that
-    meets wall w's ``reach`` box (:func:`wall_reach`): only those chains can pair with it.
-    Compiled: :func:`~polyslam_env.comms.kernels.near_chains` (its numpy form is the oracle in
-    ``tests/comms/test_alignment.py``)."""
-    return near_chains(
-        np.ascontiguousarray(reach, dtype=float),
-        np.ascontiguousarray(p, dtype=float),
-        np.ascontiguousarray(starts, dtype=np.int64),
-    )
+    meets wall w's ``reach`` box (:func:`wall_reach`): only those chains can pair with it."""
+    first = starts[:-1]
+    lo, hi = np.minimum.reduceat(p, first, axis=0), np.maximum.reduceat(p, first, axis=0)
+    return np.asarray(
+        (lo[None, :, 0] <= reach[:, 1, None]) & (hi[None, :, 0] >= reach[:, 0, None])
+        & (lo[None, :, 1] <= reach[:, 3, None]) & (hi[None, :, 1] >= reach[:, 2, None])
+    )  # fmt: skip

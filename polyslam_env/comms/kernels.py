@@ -121,31 +121,6 @@ def max_slope(coeffs: np.ndarray, lo: float, hi: float) -> float:
 
 
 @njit
-def near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndarray:
-    """(W, K) whether chain k of ``p`` (N, 2) (rows ``starts[k]:starts[k+1]``, each at least
-    one) has a bounding box that meets wall w's ``reach`` box [x_lo, x_hi, y_lo, y_hi] (W, 4)
-    (``alignment._near_chains``; comparisons only, so the same answers as its numpy form)."""
-    n_chains = starts.size - 1
-    lo, hi = np.empty((n_chains, 2)), np.empty((n_chains, 2))
-    for k in range(n_chains):
-        for axis in range(2):
-            low = high = p[starts[k], axis]
-            for i in range(starts[k] + 1, starts[k + 1]):
-                value = p[i, axis]
-                low = value if value < low else low
-                high = value if value > high else high
-            lo[k, axis], hi[k, axis] = low, high
-    meets = np.empty((reach.shape[0], n_chains), dtype=np.bool_)
-    for w in range(reach.shape[0]):
-        for k in range(n_chains):
-            meets[w, k] = (
-                lo[k, 0] <= reach[w, 1] and hi[k, 0] >= reach[w, 0]
-                and lo[k, 1] <= reach[w, 3] and hi[k, 1] >= reach[w, 2]
-            )  # fmt: skip
-    return meets
-
-
-@njit
 def reach_boxes(
     order: np.ndarray,  # (W,) int64: wall w's coefficients are coeffs[w, : order[w] + 1]
     variate: np.ndarray,  # (W,) int64, 1 or 2

@@ -457,36 +457,3 @@ def test_wall_reach__compiled_is_the_per_polynomial_bound_bit_for_bit() -> None:
         oracle = np.array([normal_variance(poly, var) for poly, var in pairs])
         assert variances.tobytes() == oracle.tobytes()
     assert turns_inside > 20
-
-
-def _near_chains_oracle(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndarray:
-    """``alignment._near_chains`` in numpy (what the compiled ``comms.kernels.near_chains``
-    replaced): each chain's box by ``reduceat``, met against every reach box."""
-    first = starts[:-1]
-    lo, hi = np.minimum.reduceat(p, first, axis=0), np.maximum.reduceat(p, first, axis=0)
-    return np.asarray(
-        (lo[None, :, 0] <= reach[:, 1, None]) & (hi[None, :, 0] >= reach[:, 0, None])
-        & (lo[None, :, 1] <= reach[:, 3, None]) & (hi[None, :, 1] >= reach[:, 2, None])
-    )  # fmt: skip
-
-
-def test_near_chains__the_numpy_boxes_answers() -> None:
-    """Chains of 1 to 9 points (single-point chains, equal ends) against reach boxes that
-    touch, contain or miss them: the compiled test answers as the numpy one, entry for entry."""
-    rng = np.random.default_rng(5)
-    met = 0
-    for _ in range(200):
-        lengths = rng.integers(1, 10, int(rng.integers(1, 8)))
-        starts = np.cumsum([0, *lengths.tolist()])
-        p = np.round(rng.uniform(-3, 3, (int(starts[-1]), 2)), 1)  # ties on the box edges
-        centre = np.round(rng.uniform(-3, 3, (int(rng.integers(1, 6)), 2)), 1)
-        half = np.round(rng.uniform(0, 1.5, centre.shape), 1)
-        reach = np.column_stack(
-            [centre[:, 0] - half[:, 0], centre[:, 0] + half[:, 0],
-             centre[:, 1] - half[:, 1], centre[:, 1] + half[:, 1]]
-        )  # fmt: skip
-        got = alignment._near_chains(reach, p, starts)
-        want = _near_chains_oracle(reach, p, starts)
-        assert got.dtype == want.dtype and got.tolist() == want.tolist()
-        met += int(want.sum())
-    assert met > 0
