@@ -29,7 +29,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from polyslam_env.comms.kernels import frame_chain, match_walls, reach_boxes, unit_tangents
+from polyslam_env.comms.kernels import (
+    chain_tangents,
+    frame_chain,
+    gauss_newton_terms,
+    match_walls,
+    near_chains,
+    reach_boxes,
+    unit_tangents,
+)
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH, line_angle, off_square
 from polyslam_env.slam.polynomial import Polynomial
@@ -45,6 +53,7 @@ CHI2_3DOF_99 = 11.345
 RESTART_SIGMAS = 2.0
 GATE_SIGMAS = 3.0  # a point pairs with a wall within 3σ of its predicted normal distance
 MAX_ANGLE_DEG = 30.0  # same direction: tangents within 30° (the merge test's angle)
+_SIN_MAX = float(np.sqrt(1 - np.cos(np.radians(MAX_ANGLE_DEG)) ** 2))  # |n·tangent| at most
 
 
 class WallArrays(NamedTuple):
@@ -164,35 +173,33 @@ def _refine_from(
     n_walls = len(walls.order)
     if not n_walls or not chains:
         return None
-    q = np.vstack(chains)  # (N, 2)
-    chain_of = np.concatenate([np.full(len(c), k) for k, c in enumerate(chains)])
+    lengths = [len(c) for c in chains]
+    q = np.vstack(chains).astype(float, copy=False)  # (N, 2)
+    starts = np.cumsum([0, *lengths])  # chain k is rows starts[k]:starts[k+1]
+    chain_of = np.repeat(np.arange(len(chains)), lengths)  # (N,) each point's chain
     var_c = np.zeros(len(chains)) if chain_var is None else np.asarray(chain_var, dtype=float)
     var_w = np.zeros(n_walls) if wall_var is None else np.asarray(wall_var, dtype=float)
     if var_c.shape != (len(chains),) or var_w.shape != (n_walls,):
         raise ValueError("chain_var and wall_var need one variance per chain and per wall")
     point_var = sigma * sigma + var_c[chain_of]  # (N,) before the wall's share
-    tangents_q = np.vstack([_tangents(c) for c in chains])  # (N, 2) sender frame
+    tangents_q = chain_tangents(q, starts)  # (N, 2) sender frame (:func:`_tangents`)
     reach = wall_reach(walls, var_w, cov_t, point_var, q)
-    starts = np.cumsum([0] + [len(c) for c in chains])
     t = np.array(start, dtype=float)
     info = info_prior
     for _ in range(iterations):
-        p, dp_dt = frame_points(q, t)
-        tangents = tangents_q @ rotation(t[2]).T
-        meets = _near_chains(reach, p, starts)
-        match = _match(p, dp_dt, tangents, walls, cov_t, point_var, var_w, meets, starts)
-        if match is None:
+        # the pairing (:func:`_match` on the chains :func:`_near_chains` gives) and each
+        # point's weight, so that each (chain, wall) pair counts once: one compiled call
+        residual, grad, weighted, weight, n_pairs = gauss_newton_terms(
+            q, tangents_q, starts, chain_of, t, rotation(float(t[2])), reach, walls.variate,
+            walls.coeffs, walls.extent, cov_t, point_var, var_w, GATE_SIGMAS, _SIN_MAX,
+        )  # fmt: skip
+        if not len(residual):
             return None
-        residual, grad, wall, keep = match  # (M,), (M, 3), (M,), (N,)
-        pair = chain_of[keep] * n_walls + wall  # (chain, wall) key
-        counts = np.bincount(pair)  # points per pair key (np.unique's counts, without a sort)
-        pair_var = point_var[keep] + var_w[wall]  # (M,)
-        weight = 1.0 / (pair_var * counts[pair])  # each pair counts once
-        info = info_prior + (grad * weight[:, None]).T @ grad
-        rhs = -(grad * weight[:, None]).T @ residual - info_prior @ (t - t0)
+        info = info_prior + weighted.T @ grad
+        rhs = -weighted.T @ residual - info_prior @ (t - t0)
         step = np.linalg.solve(info, rhs)
         t = t + step
-        if np.max(np.abs(step)) < 1e-9:
+        if all(abs(s) < 1e-9 for s in step.tolist()):  # np.max(np.abs(step)) < 1e-9
             break
     d = t - t0
     if float(d @ info_prior @ d) > CHI2_3DOF_99:
@@ -202,7 +209,7 @@ def _refine_from(
     # pair one observation) against their count; residuals larger than their variances
     # say (map errors the variances miss, errors shared by many walls) scale it up, never
     # down (Förstner & Wrobel's σ̂₀², capped below at 1)
-    factor = max(1.0, float(weight @ (residual * residual)) / np.count_nonzero(counts))
+    factor = max(1.0, float(weight @ (residual * residual)) / n_pairs)
     return t, factor * 0.5 * (posterior + posterior.T)
 
 
@@ -268,11 +275,10 @@ def _match(
     walls = pack_walls(walls)
     if meets is None or starts is None:
         meets, starts = np.ones((len(walls.order), 1), dtype=bool), np.array([0, len(p)])
-    sin_max = float(np.sqrt(1 - np.cos(np.radians(MAX_ANGLE_DEG)) ** 2))
     _, residual, grad, wall_of = match_walls(
         p, dp_dt, tangents, walls.variate, walls.coeffs, walls.extent, cov_t, point_var,
         np.asarray(wall_var, dtype=float), meets, np.asarray(starts, dtype=np.int64),
-        GATE_SIGMAS, sin_max,
+        GATE_SIGMAS, _SIN_MAX,
     )  # fmt: skip
     keep = wall_of >= 0
     if not keep.any():
@@ -312,10 +318,9 @@ def wall_reach(
 
 def _near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndarray:
     """(W, K) whether chain k of ``p`` (rows starts[k]:starts[k+1]) has a bounding box that
-    meets wall w's ``reach`` box (:func:`wall_reach`): only those chains can pair with it."""
-    first = starts[:-1]
-    lo, hi = np.minimum.reduceat(p, first, axis=0), np.maximum.reduceat(p, first, axis=0)
-    return np.asarray(
-        (lo[None, :, 0] <= reach[:, 1, None]) & (hi[None, :, 0] >= reach[:, 0, None])
-        & (lo[None, :, 1] <= reach[:, 3, None]) & (hi[None, :, 1] >= reach[:, 2, None])
+    meets wall w's ``reach`` box (:func:`wall_reach`): only those chains can pair with it.
+    Compiled: :func:`~polyslam_env.comms.kernels.near_chains`."""
+    return near_chains(
+        np.ascontiguousarray(reach, dtype=float), np.ascontiguousarray(p, dtype=float),
+        np.ascontiguousarray(starts, dtype=np.int64),
     )  # fmt: skip

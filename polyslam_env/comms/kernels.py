@@ -2,7 +2,10 @@
 
 :func:`match_walls` is the point-to-wall pairing of the transform refinement, point by point
 in the numpy version's operations (``tests/comms/test_alignment.py`` holds that version as the
-oracle and checks the two bit for bit); :func:`reach_boxes` and :func:`normal_variances` are
+oracle and checks the two bit for bit); :func:`gauss_newton_terms` is one whole iteration of
+the refinement up to its matrix products and solve (which stay numpy's: BLAS and LAPACK), on
+:func:`near_chains` (the chains within each wall's reach) and :func:`match_walls` (its numpy
+form is the oracle in the same tests); :func:`reach_boxes` and :func:`normal_variances` are
 the refinement's per-wall bounds and weights, in the operations of ``Polynomial.max_slope``,
 ``map_kernels.eta_range`` and ``exchange.normal_variance`` (oracles in the same tests).
 :func:`unit_tangents`, :func:`frame_chain`, :func:`received_geometry` and
@@ -95,6 +98,102 @@ def match_walls(
                     best[i], residual[i], wall_of[i] = score, r, w
                     grad[i, 0], grad[i, 1], grad[i, 2] = g[0], g[1], g[2]
     return best, residual, grad, wall_of
+
+
+@njit
+def near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(W, K) whether chain k of ``p`` (N, 2) (rows ``starts[k]:starts[k+1]``, each at least
+    one) has a bounding box that meets wall w's ``reach`` box [x_lo, x_hi, y_lo, y_hi] (W, 4)
+    (:func:`reach_boxes`): only those chains can pair with it (``alignment._near_chains``;
+    comparisons only, the answers of its numpy form, the oracle in
+    ``tests/comms/test_alignment.py``)."""
+    n_chains = starts.size - 1
+    lo, hi = np.empty((n_chains, 2)), np.empty((n_chains, 2))
+    for k in range(n_chains):
+        for axis in range(2):
+            low = high = p[starts[k], axis]
+            for i in range(starts[k] + 1, starts[k + 1]):
+                value = p[i, axis]
+                if low == low and not value >= low:  # smaller, or NaN (np.minimum keeps it)
+                    low = value
+                if high == high and not value <= high:
+                    high = value
+            lo[k, axis], hi[k, axis] = low, high
+    meets = np.empty((reach.shape[0], n_chains), dtype=np.bool_)
+    for w in range(reach.shape[0]):
+        for k in range(n_chains):
+            meets[w, k] = (
+                lo[k, 0] <= reach[w, 1] and hi[k, 0] >= reach[w, 0]
+                and lo[k, 1] <= reach[w, 3] and hi[k, 1] >= reach[w, 2]
+            )  # fmt: skip
+    return meets
+
+
+@njit
+def gauss_newton_terms(
+    q: np.ndarray,  # (N, 2) the received chains' points, sender frame, one after another
+    tangents_q: np.ndarray,  # (N, 2) their unit tangents (:func:`chain_tangents`)
+    starts: np.ndarray,  # (K+1,) int64: chain k is rows starts[k]:starts[k+1]
+    chain_of: np.ndarray,  # (N,) int64: each point's chain
+    t: np.ndarray,  # (3,) the current transform
+    rot: np.ndarray,  # (2, 2) R(t[2])
+    reach: np.ndarray,  # (W, 4) the walls' reach boxes (:func:`reach_boxes`)
+    variate: np.ndarray,  # (W,) int64, 1 or 2
+    coeffs: np.ndarray,  # (W, M+1) zero-padded, current c0 first
+    extent: np.ndarray,  # (W, 2) lo, hi
+    cov_t: np.ndarray,  # (3, 3)
+    point_var: np.ndarray,  # (N,)
+    wall_var: np.ndarray,  # (W,)
+    gate: float,  # GATE_SIGMAS
+    sin_max: float,  # √(1 − cos²(MAX_ANGLE))
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """One Gauss–Newton iteration of ``alignment._refine_from`` up to its products: the
+    points under T (:func:`frame_chain`), their tangents turned by R (as numpy's matmul),
+    the chains near each wall (:func:`near_chains`), the pairing (:func:`match_walls`), and
+    for the M points that pair their residuals (M,), gradients (M, 3), those times the
+    weights, the weights (M,) 1 / ((point_var + wall_var) · n), n the points of the same
+    (chain, wall) pair (each pair counts once), and the number of pairs; M = 0: none."""
+    n = q.shape[0]
+    p, dp_dt = frame_chain(q, t, rot)
+    tangents = np.empty((n, 2))
+    _times_transposed(tangents_q, rot, tangents)
+    meets = near_chains(reach, p, starts)
+    _, residual_all, grad_all, wall_of = match_walls(
+        p, dp_dt, tangents, variate, coeffs, extent, cov_t, point_var, wall_var, meets, starts,
+        gate, sin_max,
+    )  # fmt: skip
+    n_walls = coeffs.shape[0]
+    m = 0
+    for i in range(n):
+        if wall_of[i] >= 0:
+            m += 1
+    residual, grad, pair = np.empty(m), np.empty((m, 3)), np.empty(m, dtype=np.int64)
+    k = 0
+    n_keys = 0
+    for i in range(n):
+        if wall_of[i] >= 0:
+            residual[k] = residual_all[i]
+            grad[k, 0], grad[k, 1], grad[k, 2] = grad_all[i, 0], grad_all[i, 1], grad_all[i, 2]
+            pair[k] = chain_of[i] * n_walls + wall_of[i]
+            n_keys = max(n_keys, pair[k] + 1)
+            k += 1
+    counts = np.zeros(n_keys, dtype=np.int64)  # np.bincount
+    for k in range(m):
+        counts[pair[k]] += 1
+    n_pairs = 0
+    for key in range(n_keys):
+        if counts[key] > 0:
+            n_pairs += 1
+    weight, weighted = np.empty(m), np.empty((m, 3))
+    k = 0
+    for i in range(n):
+        if wall_of[i] >= 0:
+            pair_var = point_var[i] + wall_var[wall_of[i]]
+            weight[k] = 1.0 / (pair_var * float(counts[pair[k]]))
+            for j in range(3):
+                weighted[k, j] = grad[k, j] * weight[k]
+            k += 1
+    return residual, grad, weighted, weight, n_pairs
 
 
 @njit
@@ -455,6 +554,16 @@ def unit_tangents(q: np.ndarray) -> np.ndarray:
         if norm < 1e-12:  # np.maximum(norm, 1e-12): a NaN norm stays NaN
             norm = 1e-12
         out[i, 0], out[i, 1] = dx / norm, dy / norm
+    return out
+
+
+@njit
+def chain_tangents(q: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(N, 2) :func:`unit_tangents` of each chain of ``q`` (N, 2), chain k rows
+    ``starts[k]:starts[k+1]``."""
+    out = np.empty((q.shape[0], 2))
+    for k in range(starts.size - 1):
+        out[starts[k] : starts[k + 1]] = unit_tangents(q[starts[k] : starts[k + 1]])
     return out
 
 

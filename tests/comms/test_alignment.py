@@ -10,7 +10,7 @@ import pytest
 
 from polyslam_env.comms import alignment
 from polyslam_env.comms.alignment import CHI2_3DOF_99, align_transform, frame_points
-from polyslam_env.core.geometry import inverse, transform_points
+from polyslam_env.core.geometry import inverse, rotation, transform_points
 from polyslam_env.slam.polynomial import Polynomial
 
 # Walls in the receiver's frame: a corner and a curved wall, so that all of T is observable.
@@ -457,3 +457,145 @@ def test_wall_reach__compiled_is_the_per_polynomial_bound_bit_for_bit() -> None:
         oracle = np.array([normal_variance(poly, var) for poly, var in pairs])
         assert variances.tobytes() == oracle.tobytes()
     assert turns_inside > 20
+
+
+def _near_chains_oracle(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """``alignment._near_chains`` in numpy (what the compiled ``comms.kernels.near_chains``
+    replaced): each chain's box by ``reduceat``, met against every reach box."""
+    first = starts[:-1]
+    lo, hi = np.minimum.reduceat(p, first, axis=0), np.maximum.reduceat(p, first, axis=0)
+    return np.asarray(
+        (lo[None, :, 0] <= reach[:, 1, None]) & (hi[None, :, 0] >= reach[:, 0, None])
+        & (lo[None, :, 1] <= reach[:, 3, None]) & (hi[None, :, 1] >= reach[:, 2, None])
+    )  # fmt: skip
+
+
+def test_near_chains__compiled_answers_as_the_numpy_boxes() -> None:
+    """Chains of 1 to 9 points (single points, ties on the box edges, NaN points) against
+    reach boxes that touch, hold or miss them: the compiled test answers as numpy's."""
+    rng = np.random.default_rng(5)
+    met = 0
+    for trial in range(300):
+        lengths = rng.integers(1, 10, int(rng.integers(1, 8)))
+        starts = np.cumsum([0, *lengths.tolist()])
+        p = np.round(rng.uniform(-3, 3, (int(starts[-1]), 2)), 1)  # ties on the box edges
+        if trial % 5 == 0:
+            p[rng.integers(0, len(p)), int(rng.integers(0, 2))] = np.nan  # numpy's box: NaN
+        centre = np.round(rng.uniform(-3, 3, (int(rng.integers(1, 6)), 2)), 1)
+        half = np.round(rng.uniform(0, 1.5, centre.shape), 1)
+        reach = np.column_stack(
+            [centre[:, 0] - half[:, 0], centre[:, 0] + half[:, 0],
+             centre[:, 1] - half[:, 1], centre[:, 1] + half[:, 1]]
+        )  # fmt: skip
+        got = alignment._near_chains(reach, p, starts)
+        want = _near_chains_oracle(reach, p, starts)
+        assert got.dtype == want.dtype and got.tolist() == want.tolist()
+        met += int(want.sum())
+    assert met > 100
+
+
+def _gauss_newton_terms_oracle(
+    chains: list[np.ndarray], t: np.ndarray, walls: list[Polynomial], cov_t: np.ndarray,
+    point_var: np.ndarray, wall_var: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int] | None:  # fmt: skip
+    """One iteration of ``alignment._refine_from`` before its products, in the numpy it ran
+    (what the compiled ``comms.kernels.gauss_newton_terms`` replaced): points and tangents
+    under T, the pairing over every point, each (chain, wall) pair's points weighed to one."""
+    from tests.comms import reference_geometry as ref
+
+    q = np.vstack(chains)
+    chain_of = np.concatenate([np.full(len(c), k) for k, c in enumerate(chains)])
+    p, dp_dt = ref.frame_points(q, t)
+    tangents = np.vstack([ref.tangents(c) for c in chains]) @ rotation(t[2]).T
+    match = _match_oracle(p, dp_dt, tangents, walls, cov_t, point_var, wall_var)
+    if match is None:
+        return None
+    residual, grad, wall, keep = match
+    pair = chain_of[keep] * len(walls) + wall
+    counts = np.bincount(pair)
+    weight = 1.0 / ((point_var[keep] + wall_var[wall]) * counts[pair])
+    return residual, grad, grad * weight[:, None], weight, np.count_nonzero(counts)
+
+
+def test_gauss_newton_terms__compiled_is_the_numpy_iteration_bit_for_bit() -> None:
+    """The refinement's compiled iteration (points, tangents, the chains near each wall, the
+    pairing, the pair weights) equals its numpy form bit for bit on random walls and chains
+    (several pairs with many points, single-point chains, and transforms that pair nothing),
+    and so does the refinement built on it (``refine_transform``: the same products, solves
+    and result on the compiled iteration's arrays as on numpy's)."""
+    from polyslam_env.comms.kernels import gauss_newton_terms
+
+    rng = np.random.default_rng(3)
+    paired = unpaired = shared = refined = 0
+    for _ in range(40):
+        walls = _random_walls(rng, 6)
+        chains = [transform_points(w.sample_arclength(0.05), inverse(T_TRUE)) for w in walls]
+        chains = [c + rng.normal(0, 0.02, c.shape) for c in chains[:4]]
+        chains = [c[k : k + int(rng.integers(1, 12))] for c in chains for k in (0, 5, 20)]
+        chains = [c for c in chains if len(c)]
+        cov_t = COV_T * rng.uniform(0.5, 20.0)
+        q = np.vstack(chains)
+        lengths = [len(c) for c in chains]
+        starts = np.cumsum([0, *lengths])
+        chain_of = np.repeat(np.arange(len(chains)), lengths)
+        point_var = 0.02**2 + rng.uniform(0, 0.03**2, len(chains))[chain_of]
+        wall_var = rng.uniform(0, 0.05**2, len(walls))
+        packed = alignment.pack_walls(walls)
+        reach = alignment.wall_reach(packed, wall_var, cov_t, point_var, q)
+        tangents_q = np.vstack([alignment._tangents(c) for c in chains])
+        for t in (T_TRUE + rng.normal(0, 0.03, 3), T_TRUE + np.array([3.0, 0.0, 0.0])):
+            got = gauss_newton_terms(
+                q, tangents_q, starts, chain_of, t, rotation(float(t[2])), reach,
+                packed.variate, packed.coeffs, packed.extent, cov_t, point_var, wall_var,
+                alignment.GATE_SIGMAS, alignment._SIN_MAX,
+            )  # fmt: skip
+            want = _gauss_newton_terms_oracle(chains, t, walls, cov_t, point_var, wall_var)
+            if want is None:
+                assert len(got[0]) == 0 and got[4] == 0
+                unpaired += 1
+                continue
+            for a, b in zip(got[:4], want[:4], strict=True):
+                assert a.shape == b.shape and a.tobytes() == b.tobytes()
+            assert got[4] == want[4]
+            paired += len(want[0])
+            shared += int(len(want[0]) > want[4])
+        start = T_TRUE + rng.normal(0, 0.03, 3)
+        chain_var = rng.uniform(0, 0.03**2, len(chains))
+        want_t = _refine_oracle(start, cov_t, chains, walls, 0.02, chain_var, wall_var)
+        got_t = alignment.refine_transform(
+            start, cov_t, chains, walls, 0.02, chain_var=chain_var, wall_var=wall_var
+        )
+        refined += want_t is not None
+        want_t = want_t or (start, cov_t)
+        assert all(a.tobytes() == b.tobytes() for a, b in zip(got_t, want_t, strict=True))
+    assert paired > 500 and unpaired > 0 and shared > 10 and refined > 20
+
+
+def _refine_oracle(
+    t0: np.ndarray, cov_t: np.ndarray, chains: list[np.ndarray], walls: list[Polynomial],
+    sigma: float, chain_var: np.ndarray, wall_var: np.ndarray, iterations: int = 5,
+) -> tuple[np.ndarray, np.ndarray] | None:  # fmt: skip
+    """``alignment._refine_from`` from t0 in the numpy it ran, on
+    :func:`_gauss_newton_terms_oracle` (the products and the solve on numpy's own arrays)."""
+    lower_inv = np.linalg.inv(np.linalg.cholesky(cov_t))
+    info_prior = lower_inv.T @ lower_inv
+    chain_of = np.concatenate([np.full(len(c), k) for k, c in enumerate(chains)])
+    point_var = sigma * sigma + chain_var[chain_of]
+    t, info = t0.copy(), info_prior
+    for _ in range(iterations):
+        terms = _gauss_newton_terms_oracle(chains, t, walls, cov_t, point_var, wall_var)
+        if terms is None:
+            return None
+        residual, grad, _, weight, n_pairs = terms
+        info = info_prior + (grad * weight[:, None]).T @ grad
+        rhs = -(grad * weight[:, None]).T @ residual - info_prior @ (t - t0)
+        step = np.linalg.solve(info, rhs)
+        t = t + step
+        if np.max(np.abs(step)) < 1e-9:
+            break
+    d = t - t0
+    if float(d @ info_prior @ d) > CHI2_3DOF_99:
+        return None
+    posterior = np.linalg.inv(info)
+    factor = max(1.0, float(weight @ (residual * residual)) / n_pairs)
+    return t, factor * 0.5 * (posterior + posterior.T)
