@@ -65,6 +65,7 @@ never returns a partial message. Grid cell ``[r, c]`` covers
 
 from __future__ import annotations
 
+import math
 import struct
 import zlib
 from dataclasses import dataclass
@@ -88,6 +89,8 @@ _CRC = struct.Struct("<I")
 _RECORD = struct.Struct("<IHHBB")  # landmark id, origin robot, revision, variate, order
 _WIDTH = {"float32": 4, "float64": 8}
 _DTYPE: dict[int, np.dtype[np.floating]] = {4: np.dtype("<f4"), 8: np.dtype("<f8")}
+_CODE = {4: "f", 8: "d"}  # struct's format of a float of each width
+_FEW = 16  # floats read or written through struct, not numpy, up to this many (same bytes)
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,7 +146,16 @@ Message = PolynomialMessage | PointsMessage | GridMessage
 
 # -- encoding -------------------------------------------------------------------------------------
 def _floats(values: np.ndarray | list[float], width: int, what: str) -> bytes:
-    """Little-endian floats of the given width; refuses values that are not finite after cast."""
+    """Little-endian floats of the given width; refuses values that are not finite after cast.
+    A list of a few (a header's, a record's) goes through ``struct``, whose float32 is the
+    same C cast as numpy's, without numpy's per-call cost."""
+    if isinstance(values, list) and len(values) <= _FEW:
+        try:
+            out = struct.pack(f"<{len(values)}{_CODE[width]}", *values)
+        except OverflowError:  # finite, but beyond float32's range: numpy's cast gives inf
+            out = None
+        if out is not None and all(math.isfinite(v) for v in values):
+            return out
     arr = np.asarray(values, dtype=float).ravel()
     with np.errstate(over="ignore"):
         cast = arr.astype(_DTYPE[width])
@@ -183,7 +195,7 @@ def _record_bytes(rec: PolynomialRecord, sender: int, width: int) -> bytes:
     _check_uint("revision", rec.revision, 16)
     if not 1 <= poly.order <= 255:
         raise ValueError(f"polynomial order must be in 1..255, got {poly.order}")
-    if not (np.isfinite(rec.c0_var) and rec.c0_var >= 0):
+    if not (math.isfinite(rec.c0_var) and rec.c0_var >= 0):
         raise ValueError(f"c0_var must be finite and >= 0, got {rec.c0_var!r}")
     head = _RECORD.pack(rec.landmark_id, origin, rec.revision, poly.variate, poly.order)
     floats = [*poly.coeffs, rec.c0_var, poly.lo, poly.hi]
@@ -281,7 +293,13 @@ class _Reader:
         return struct.unpack(fmt, self.take(struct.calcsize(fmt), what))
 
     def floats(self, n: int, what: str) -> np.ndarray:
-        raw = np.frombuffer(self.take(n * self.width, what), dtype=_DTYPE[self.width])
+        data = self.take(n * self.width, what)
+        if n <= _FEW:  # struct's float32 → float is exact, as numpy's cast
+            values = struct.unpack(f"<{n}{_CODE[self.width]}", data)
+            if not all(math.isfinite(v) for v in values):
+                raise ValueError(f"corrupt message: non-finite value in {what}")
+            return np.array(values, dtype=float)
+        raw = np.frombuffer(data, dtype=_DTYPE[self.width])
         out = raw.astype(float)
         if not np.all(np.isfinite(out)):
             raise ValueError(f"corrupt message: non-finite value in {what}")

@@ -230,3 +230,35 @@ def test_encode__ids_out_of_range_rejected() -> None:
         encode(bad)
     with pytest.raises(ValueError, match="precision"):
         encode(msg, "float16")  # type: ignore[arg-type]
+
+
+def test_few_floats__struct_gives_numpys_bytes_and_floats() -> None:
+    """A header's or a record's few floats go through ``struct`` (``messages._floats`` and
+    ``_Reader.floats`` up to ``_FEW``): the bytes numpy's cast wrote, the same refusals
+    (non-finite, or beyond float32's range), and the floats numpy's read gave, in both
+    widths, from subnormal to past float32's largest."""
+    from polyslam_env.comms import messages
+
+    rng = np.random.default_rng(2)
+    largest = float(np.finfo(np.float32).max)
+    refused = 0
+    for width in (4, 8):
+        for _ in range(3000):
+            n = int(rng.integers(0, messages._FEW + 1))
+            values = (rng.normal(size=n) * 10.0 ** rng.integers(-45, 45, n)).tolist()
+            if n and rng.random() < 0.2:
+                values[0] = largest * float(rng.choice([1.0, 1.0 + 2**-25, 1.0 + 2**-23, 2.0]))
+            if n and rng.random() < 0.05:
+                values[-1] = float(rng.choice([np.inf, -np.inf, np.nan]))
+            with np.errstate(over="ignore"):
+                cast = np.asarray(values, dtype=float).astype(messages._DTYPE[width])
+            if not np.all(np.isfinite(cast)):
+                with pytest.raises(ValueError, match="must be finite"):
+                    messages._floats(values, width, "test")
+                refused += 1
+                continue
+            data = messages._floats(values, width, "test")
+            assert data == cast.tobytes()
+            got = messages._Reader(data, width).floats(n, "test")
+            assert got.dtype == np.float64 and got.tobytes() == cast.astype(float).tobytes()
+    assert refused > 100
