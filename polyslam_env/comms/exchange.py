@@ -128,11 +128,11 @@ from polyslam_env.comms.alignment import (
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
 from polyslam_env.comms.free_space import FreeCells, FreeSpace
 from polyslam_env.comms.kernels import (
-    covered_by_walls,
     kept_runs,
     largest_residual,
     normal_variances,
     point_jacobians,
+    received_cover,
     variance_floor,
 )
 from polyslam_env.comms.kernels import received_geometry as kernel_geometry
@@ -1167,7 +1167,8 @@ class RendezvousExchange:
         # through the noise, the latter as fused: divided by ω): what refit_variance_floor needs
         pose_part = d_state @ slam.cov[:3, :3] @ d_state.T
         fused_cov_t = pose_part + d_noise @ noise_cov @ d_noise.T / RECEIVED_CI_WEIGHT
-        min_overlap = slam.config.merge_min_overlap
+        cfg = slam.config
+        min_overlap = cfg.merge_min_overlap
         turned = rotation(float(t[2]))
         for record, q in zip(fresh, chains, strict=True):
             version = _version(record)
@@ -1175,23 +1176,27 @@ class RendezvousExchange:
             # received_point_set and transform_normal_sigma on one chain and one ∂p/∂T; on
             # the pose columns only (the rest are zeros): _fuse sizes G_x to the state
             xy, dp_dt, normals, sigma = received_geometry(q, t, turned, cov_t)
-            sure = sigma <= limit
-            self.dropped_points[r] += int(np.count_nonzero(~sure))
-            runs = uncovered_runs(sure, xy, min_overlap)
-            if not runs:
-                continue
-            # rule 1 before the refit: held walls better than any refit of this chain could
-            # be cover every run of it that rule 1 would keep, so nothing would be taken
+            # the points the transform moves little, their runs (uncovered_runs), and rule 1
+            # before the refit: whether held landmarks of the same wall better than any refit
+            # of this chain could be (normal variance at most refit_variance_floor, with
+            # _ROUNDOFF's margin) cover every such run (inside their extents, within γ_M,
+            # tangents within the merge test's angle, over runs of at least
+            # merge_min_overlap), so that nothing would be taken; one compiled call
             shift = turned @ _ETA_AXIS[record.polynomial.variate]
-            floor = refit_variance_floor(
-                normals[sure], fused_cov_t, shift, record.c0_var / RECEIVED_CI_WEIGHT
-            )
-            if not uncovered_runs(sure & ~_covered_by_better(slam, xy, normals, floor), xy,
-                                  min_overlap):  # fmt: skip
+            table = slam.table  # as the map stands: each fused record changes it
+            runs, dropped, covered = received_cover(
+                xy, normals, sigma, limit, fused_cov_t, shift, record.c0_var / RECEIVED_CI_WEIGHT,
+                slam.landmark_boxes(), table.variate, table.shape, slam.c0s, table.lo, table.hi,
+                slam.cov, _ROUNDOFF, cfg.gamma_max, _COS_MERGE, min_overlap,
+            )  # fmt: skip
+            self.dropped_points[r] += dropped
+            if not len(runs):
+                continue
+            if covered:
                 self.covered[r] += 1
                 continue
             pts = _point_set(record, t, xy, dp_dt, d_state, d_noise, noise_cov, 3)
-            for rows in runs:
+            for rows in (slice(a, b) for a, b in runs.tolist()):
                 for piece, fit in self._refit(r, _subset(pts, rows)):
                     received.append(fit.poly)
                     ids += self._fuse(
@@ -1449,28 +1454,6 @@ def refit_variance_floor(
             np.asarray(normals, dtype=float).reshape(-1, 2), np.asarray(cov_t, dtype=float),
             np.asarray(shift, dtype=float), float(shift_var),
         )
-    )  # fmt: skip
-
-
-def _covered_by_better(
-    slam: PolySlam, xy: np.ndarray, normals: np.ndarray, floor: float
-) -> np.ndarray:
-    """(N,) True where a chain point (N, 2, receiver frame; unit ``normals`` (N, 2)) lies on a
-    held landmark of the same wall whose normal variance (:func:`normal_variance`) is at most
-    ``floor`` (:func:`refit_variance_floor`; rule 1's "better", :data:`_ROUNDOFF`): inside its
-    extent, within γ_M of it (as :func:`covered_points`), its tangent within the merge test's
-    angle of the chain's, over a run of at least ``merge_min_overlap`` (the merge test's
-    overlap). Compiled: :func:`~polyslam_env.comms.kernels.covered_by_walls`."""
-    cfg = slam.config
-    table = slam.table
-    box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
-    c0s = slam.c0s
-    near = boxes_near(slam.landmark_boxes(), box, cfg.gamma_max)
-    if not len(near):
-        return np.zeros(len(xy), dtype=bool)
-    return covered_by_walls(
-        xy, normals, near, table.variate, table.shape, c0s, table.lo, table.hi, slam.cov,
-        floor * _ROUNDOFF, cfg.gamma_max, _COS_MERGE, cfg.merge_min_overlap,
     )  # fmt: skip
 
 

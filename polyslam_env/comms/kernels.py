@@ -22,7 +22,7 @@ import numpy as np
 
 from polyslam_env.core.jit import fma, njit, sum_like_numpy
 from polyslam_env.slam.fitting import J_ROT
-from polyslam_env.slam.kernels import horner
+from polyslam_env.slam.kernels import boxes_near, horner
 from polyslam_env.slam.map_kernels import eta_range
 
 
@@ -108,25 +108,34 @@ def near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndar
     comparisons only, the answers of its numpy form, the oracle in
     ``tests/comms/test_alignment.py``)."""
     n_chains = starts.size - 1
-    lo, hi = np.empty((n_chains, 2)), np.empty((n_chains, 2))
+    box = np.empty((n_chains, 4))
     for k in range(n_chains):
-        for axis in range(2):
-            low = high = p[starts[k], axis]
-            for i in range(starts[k] + 1, starts[k + 1]):
-                value = p[i, axis]
-                if low == low and not value >= low:  # smaller, or NaN (np.minimum keeps it)
-                    low = value
-                if high == high and not value <= high:
-                    high = value
-            lo[k, axis], hi[k, axis] = low, high
+        box[k] = bounding_box(p, starts[k], starts[k + 1])
     meets = np.empty((reach.shape[0], n_chains), dtype=np.bool_)
     for w in range(reach.shape[0]):
         for k in range(n_chains):
             meets[w, k] = (
-                lo[k, 0] <= reach[w, 1] and hi[k, 0] >= reach[w, 0]
-                and lo[k, 1] <= reach[w, 3] and hi[k, 1] >= reach[w, 2]
+                box[k, 0] <= reach[w, 1] and box[k, 1] >= reach[w, 0]
+                and box[k, 2] <= reach[w, 3] and box[k, 3] >= reach[w, 2]
             )  # fmt: skip
     return meets
+
+
+@njit
+def bounding_box(p: np.ndarray, first: int, end: int) -> np.ndarray:
+    """[x_min, x_max, y_min, y_max] of rows ``first:end`` (at least one) of ``p`` (N, 2), NaN
+    where a coordinate is (as numpy's ``min`` and ``max``)."""
+    out = np.empty(4)
+    for axis in range(2):
+        low = high = p[first, axis]
+        for i in range(first + 1, end):
+            value = p[i, axis]
+            if low == low and not value >= low:  # smaller, or NaN (numpy's min keeps it)
+                low = value
+            if high == high and not value <= high:
+                high = value
+        out[2 * axis], out[2 * axis + 1] = low, high
+    return out
 
 
 @njit
@@ -487,7 +496,7 @@ def covered_by_walls(
     var(c0)/(1 + B'²) (B' at the middle of its extent) is at most ``max_var``: inside the
     wall's extent, within ``reach`` of it along η, the two normals within the merge test's
     angle, on a run of such points at least ``min_overlap`` long (the sum of the steps between
-    its points) (``exchange._covered_by_better``, reading a landmark table's columns; the
+    its points) (:func:`received_cover`, reading a landmark table's columns; the
     oracle is in ``tests/comms/test_exchange.py``)."""
     n_pts = xy.shape[0]
     out = np.zeros(n_pts, dtype=np.bool_)
@@ -529,6 +538,62 @@ def covered_by_walls(
                 out[i : j + 1] = True
             i = j + 1
     return out
+
+
+@njit
+def received_cover(
+    xy: np.ndarray,  # (N, 2) a received chain in the receiver's frame
+    normals: np.ndarray,  # (N, 2) its unit normals
+    sigma: np.ndarray,  # (N,) each point's σ along its normal from the transform
+    limit: float,  # a point is kept where σ ≤ this
+    cov_t: np.ndarray,  # (3, 3) the transform's covariance as a refit carries it
+    shift: np.ndarray,  # (2,) the direction the sender's c0 moves every point
+    shift_var: float,  # that c0's variance as fused
+    boxes: np.ndarray,  # (n, 4) the receiver's landmarks' bounding boxes
+    variate: np.ndarray,  # (n,) int64, 1 or 2: the landmark table's columns
+    shape: np.ndarray,  # (n, M+1)
+    c0s: np.ndarray,  # (n,)
+    lo: np.ndarray,  # (n,)
+    hi: np.ndarray,  # (n,)
+    cov: np.ndarray,  # (3+n, 3+n) the receiver's state covariance
+    roundoff: float,  # the floor's relative margin (exchange._ROUNDOFF)
+    reach: float,  # m, γ_M
+    cos_max: float,  # cos of the merge test's angle
+    min_overlap: float,  # m, merge_min_overlap
+) -> tuple[np.ndarray, int, bool]:
+    """``exchange.RendezvousExchange._integrate``'s tests of one received chain before its
+    refit, in one call: the points kept (σ ≤ ``limit``), their runs at least ``min_overlap``
+    long (:func:`kept_runs`, (K, 2) [first, end) rows), the number of points dropped, and
+    whether held walls better than any refit of the chain could be (:func:`variance_floor` of
+    the kept normals; :func:`covered_by_walls` on the landmarks whose boxes lie within γ_M of
+    the chain's, ``slam.kernels.boxes_near``) cover every such run
+    (rule 1's "better"); not covered when no run is kept. The oracle, the exchange's calls
+    it replaced, is in ``tests/comms/test_exchange.py``."""
+    n = xy.shape[0]
+    sure = np.empty(n, dtype=np.bool_)
+    n_sure = 0
+    for i in range(n):
+        sure[i] = sigma[i] <= limit
+        n_sure += sure[i]
+    runs = kept_runs(sure, xy, min_overlap)
+    if runs.shape[0] == 0:
+        return runs, n - n_sure, False
+    kept = np.empty((n_sure, 2))
+    k = 0
+    for i in range(n):
+        if sure[i]:
+            kept[k, 0], kept[k, 1] = normals[i, 0], normals[i, 1]
+            k += 1
+    floor = variance_floor(kept, cov_t, shift, shift_var)
+    near = boxes_near(boxes, bounding_box(xy, 0, n), reach)
+    if near.size:
+        covered = covered_by_walls(
+            xy, normals, near, variate, shape, c0s, lo, hi, cov, floor * roundoff, reach,
+            cos_max, min_overlap,
+        )  # fmt: skip
+        for i in range(n):
+            sure[i] = sure[i] and not covered[i]
+    return runs, n - n_sure, kept_runs(sure, xy, min_overlap).shape[0] == 0
 
 
 # -- a received chain's geometry in the receiver's frame (comms/alignment.py, exchange.py) -------

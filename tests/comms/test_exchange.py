@@ -986,3 +986,75 @@ def test_covered_by_walls__matches_the_numpy_oracle() -> None:
         )
         hits += int(got.any() and not got.all())
     assert hits > 20  # partly covered chains were among the cases
+
+
+def _received_cover_oracle(
+    xy: np.ndarray, normals: np.ndarray, sigma: np.ndarray, limit: float, cov_t: np.ndarray,
+    shift: np.ndarray, shift_var: float, boxes: np.ndarray, columns: tuple[np.ndarray, ...],
+    cov: np.ndarray, reach: float, cos_max: float, min_overlap: float,
+) -> tuple[list[slice], int, bool]:  # fmt: skip
+    """The exchange's tests of a received chain before its refit as it ran them call by call
+    (what the compiled ``comms.kernels.received_cover`` replaced): the kept points' runs, the
+    floor, the chain's box, the landmarks near it, their coverage, the runs left."""
+    from polyslam_env.comms.exchange import _ROUNDOFF
+    from polyslam_env.slam.landmarks import boxes_near
+
+    sure = sigma <= limit
+    dropped = int(np.count_nonzero(~sure))
+    runs = uncovered_runs(sure, xy, min_overlap)
+    if not runs:
+        return runs, dropped, False
+    floor = refit_variance_floor(normals[sure], cov_t, shift, shift_var)
+    box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
+    near = boxes_near(boxes, box, reach)
+    covered = np.zeros(len(xy), dtype=bool)
+    if len(near):
+        covered = covered_by_walls(
+            xy, normals, near, *columns, cov, floor * _ROUNDOFF, reach, cos_max, min_overlap
+        )
+    return runs, dropped, not uncovered_runs(sure & ~covered, xy, min_overlap)
+
+
+def test_received_cover__is_the_exchange_calls_it_replaced() -> None:
+    """One compiled call for a received chain's kept runs, dropped points and rule 1's
+    coverage answers as the calls it replaced, on random chains near random walls (kept
+    and dropped points, walls better and worse than the floor, boxes near and far)."""
+    from polyslam_env.comms.kernels import received_cover
+
+    rng = np.random.default_rng(17)
+    cos_max = float(np.cos(np.radians(30.0)))
+    outcomes: set[tuple[bool, bool]] = set()
+    for _ in range(300):
+        walls = [_random_record(rng).polynomial.with_c0(float(rng.uniform(-1, 1)))
+                 for _ in range(int(rng.integers(1, 5)))]  # fmt: skip
+        base = walls[0]
+        xi = np.linspace(base.lo - 0.3, base.hi + 0.3, int(rng.integers(1, 80)))
+        eta = base.value(xi) + rng.normal(0.0, rng.choice([0.005, 0.2]), xi.size)
+        xy = base.to_xy(xi, eta)
+        d = np.gradient(xy, axis=0) if len(xy) > 1 else np.array([[1.0, 0.0]])
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        normals = np.stack([-d[:, 1], d[:, 0]], axis=1)
+        sigma = rng.uniform(0.0, 0.02, len(xy)) * rng.choice([0.5, 1.0, 3.0])
+        width = max(w.order for w in walls) + 1
+        coeffs = np.zeros((len(walls), width))
+        for k, w in enumerate(walls):
+            coeffs[k, : w.order + 1] = w.coeffs
+        columns = (
+            np.array([w.variate for w in walls]), coeffs, coeffs[:, 0].copy(),
+            np.array([w.lo for w in walls]), np.array([w.hi for w in walls]),
+        )  # fmt: skip
+        pts = [w.sample_arclength(0.05) for w in walls]
+        boxes = np.array([[p[:, 0].min(), p[:, 0].max(), p[:, 1].min(), p[:, 1].max()]
+                          for p in pts]) + rng.choice([0.0, 5.0])  # near, or all far  # fmt: skip
+        cov = np.zeros((3 + len(walls), 3 + len(walls)))
+        cov[3:, 3:] = np.diag(rng.uniform(0.0, 2e-4, len(walls)))
+        cov_t = _random_psd(rng, 3, 0.005)
+        shift = rotation(float(rng.uniform(-np.pi, np.pi))) @ np.array([0.0, 1.0])
+        args = (xy, normals, sigma, 0.01, cov_t, shift, float(rng.uniform(0.0, 2e-4)), boxes)
+        tail = (0.35, cos_max, float(rng.choice([0.0, 0.1, 0.5])))
+        runs, dropped, covered = received_cover(*args, *columns, cov, 1.0 + 1e-9, *tail)
+        want = _received_cover_oracle(*args, columns, cov, *tail)
+        assert [slice(a, b) for a, b in runs.tolist()] == want[0]
+        assert (dropped, covered) == want[1:]
+        outcomes.add((bool(want[0]), want[2]))
+    assert outcomes == {(False, False), (True, False), (True, True)}
