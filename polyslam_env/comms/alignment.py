@@ -216,7 +216,7 @@ def _refine_from(
 def is_straight_wall(poly: Polynomial, min_length: float = SQUARE_MIN_LENGTH) -> bool:
     """Whether ``poly`` is straight (no coefficient past the slope) and at least
     ``min_length`` long along ξ."""
-    return not np.any(poly.coeffs[2:]) and poly.hi - poly.lo >= min_length
+    return bool(poly.hi - poly.lo >= min_length) and not any(poly.coeffs[2:].tolist())
 
 
 def straight_walls(
