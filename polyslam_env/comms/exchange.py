@@ -166,7 +166,7 @@ from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
 from polyslam_env.slam.landmarks import boxes_near
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH
-from polyslam_env.slam.map_kernels import equally_spaced
+from polyslam_env.slam.map_kernels import curve_box
 from polyslam_env.slam.merging import MERGE_ANGLE_DEG, merge_gammas, table_candidates
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -1481,9 +1481,8 @@ def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
     with the tangents agreeing: :func:`~polyslam_env.slam.merging.merge_gammas`, joins
     aside)."""
     cfg = slam.config
-    # poly.equally_spaced's points in one compiled call (the same floats)
-    xy = equally_spaced(poly.coeffs, poly.variate, poly.lo, poly.hi, _BOX_SAMPLES)
-    box = np.array([xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max()])
+    # the box of poly.equally_spaced's points in one compiled call (the same floats)
+    box = curve_box(poly.coeffs, poly.variate, poly.lo, poly.hi, _BOX_SAMPLES)
     near = boxes_near(slam.landmark_boxes(), box, cfg.gamma_max)
     gammas, _ = merge_gammas(
         poly, table_candidates(slam.table, near, slam.c0s), cfg.merge_min_overlap

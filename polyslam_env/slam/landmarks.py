@@ -250,6 +250,7 @@ class LandmarkTable:
         self._next_id = 0
         self._built: list[Polynomial] = []  # the last Polynomial built for each row
         self._built_stamp: list[int] = []  # … and the stamp it was built at
+        self._sizes: np.ndarray | None = None  # (n,) int64 their coefficient counts, or None
         self._row_of: dict[int, int] | None = None  # id → row, rebuilt after append/remove
         self._packed: PackedPolynomials | None = None
         self._rows: list[LandmarkRow] | None = None
@@ -387,6 +388,7 @@ class LandmarkTable:
         self.ids.append(landmark_id)
         self._built.append(poly)
         self._built_stamp.append(0)
+        self._sizes = None
         self._changed(ids=True)
         return landmark_id
 
@@ -409,6 +411,7 @@ class LandmarkTable:
         n = len(self.ids)
         landmark_id = self.ids.pop(index)
         del self._built[index], self._built_stamp[index]
+        self._sizes = None
         self.real[:, index : n - 1] = self.real[:, index + 1 : n]
         self.index[:, index : n - 1] = self.index[:, index + 1 : n]
         self.shape_buffer[index : n - 1] = self.shape_buffer[index + 1 : n]
@@ -442,6 +445,7 @@ class LandmarkTable:
         map_kernels.set_extent(*self.buffers, index, poly.lo, poly.hi)  # η range, stamp
         self._built[index] = poly
         self._built_stamp[index] = int(self.index[STAMP, index])
+        self._sizes = None
         self._changed(ids=False)
 
     def extents_changed(self) -> None:
@@ -467,6 +471,15 @@ class LandmarkTable:
             )
             self._built_stamp[index] = stamp
         return self._built[index]
+
+    @property
+    def sizes(self) -> np.ndarray:
+        """(n,) int64: each landmark's number of coefficients as :meth:`poly` gives it (its
+        polynomial's order as inserted or set, which a zero top coefficient keeps above the
+        shape's own order), cached until a landmark is inserted, removed or reshaped."""
+        if self._sizes is None:
+            self._sizes = np.array([p.coeffs.size for p in self._built], dtype=np.int64)
+        return self._sizes
 
     def polynomials(self, c0s: Sequence[float] | np.ndarray) -> list[Polynomial]:
         """Every landmark with its c0 from ``c0s`` (n,), in state order."""

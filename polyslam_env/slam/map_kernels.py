@@ -390,12 +390,13 @@ def merge_cosine(
 @njit
 def merge_candidates(
     p_variate: int, p_coeffs: np.ndarray, p_lo: float, p_hi: float,
-    variates: np.ndarray,  # (k,) int64: the candidates, as the landmark table holds them
-    shapes: np.ndarray,  # (k, W) rows [·, b_1, …]: coefficient 0 is replaced by the c0
-    sizes: np.ndarray,  # (k,) int64: each one's number of coefficients (≤ W)
-    c0s: np.ndarray,  # (k,)
-    los: np.ndarray,  # (k,)
-    his: np.ndarray,  # (k,)
+    rows: np.ndarray,  # (k,) int64: the candidates' rows of the columns below
+    variates: np.ndarray,  # (n,) int64: the candidates' columns, as the landmark table holds them
+    shapes: np.ndarray,  # (n, W) rows [·, b_1, …]: coefficient 0 is replaced by the c0
+    sizes: np.ndarray,  # (n,) int64: each one's number of coefficients (≤ W)
+    c0s: np.ndarray,  # (n,)
+    los: np.ndarray,  # (n,)
+    his: np.ndarray,  # (n,)
     min_overlap: float, max_angle_deg: float,
     join_gap: float, join_angle_deg: float, thin_wall: float,  # join_gap nan: no joins
     gammas: np.ndarray,  # (k,) out: γ, nan when it does not count
@@ -405,26 +406,38 @@ def merge_candidates(
     γ where :func:`merge_test` measures it and the tangents there agree within
     ``max_angle_deg``; else, with ``join_gap``, :func:`join_offset` (nan when no join)."""
     found = np.empty(4)
-    for i in range(variates.size):
-        c = shapes[i, : sizes[i]].copy()
-        c[0] = c0s[i]
+    for i in range(rows.size):
+        j = rows[i]
+        c = shapes[j, : sizes[j]].copy()
+        c[0] = c0s[j]
         gammas[i], joined[i] = np.nan, False
         measured = merge_test(
-            p_variate, p_coeffs, p_lo, p_hi, variates[i], c, los[i], his[i], min_overlap, found
+            p_variate, p_coeffs, p_lo, p_hi, variates[j], c, los[j], his[j], min_overlap, found
         )
         if measured == MEASURED:
             cosine = merge_cosine(
-                p_variate, p_coeffs, 0.5 * (found[0] + found[1]), variates[i], c, found[3]
+                p_variate, p_coeffs, 0.5 * (found[0] + found[1]), variates[j], c, found[3]
             )
             if math.acos(cosine) * (180.0 / math.pi) <= max_angle_deg:  # np.degrees' factor
                 gammas[i] = found[2]
                 continue
         if not math.isnan(join_gap):
             gammas[i] = join_offset(
-                p_variate, p_coeffs, p_lo, p_hi, variates[i], c, los[i], his[i], join_gap,
+                p_variate, p_coeffs, p_lo, p_hi, variates[j], c, los[j], his[j], join_gap,
                 join_angle_deg, thin_wall,
             )  # fmt: skip
             joined[i] = True
+
+
+@njit
+def curve_box(c: np.ndarray, variate: int, lo: float, hi: float, n: int) -> np.ndarray:
+    """(4,) box (x_min, x_max, y_min, y_max) of :func:`equally_spaced`'s ``n`` points (the
+    exchange's same-wall test looks for the landmarks near it)."""
+    xy = equally_spaced(c, variate, lo, hi, n)
+    box = np.empty(4)
+    box[0], box[1] = xy[:, 0].min(), xy[:, 0].max()
+    box[2], box[3] = xy[:, 1].min(), xy[:, 1].max()
+    return box
 
 
 # -- stored points --------------------------------------------------------------------------------

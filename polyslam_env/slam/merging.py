@@ -151,17 +151,18 @@ def choose_merge(
 
 
 class Candidates(NamedTuple):
-    """Polynomials to test a merge against, as arrays (:func:`merge_gammas`): each one's
-    variate, coefficient row (its first entry is replaced by its c0), number of coefficients,
-    c0 and extent. :func:`table_candidates` reads them from a map's columns;
-    :func:`candidates_of` from polynomials."""
+    """Polynomials to test a merge against, as arrays (:func:`merge_gammas`): the candidates'
+    rows of columns holding each one's variate, coefficient row (its first entry is replaced
+    by its c0), number of coefficients, c0 and extent. :func:`table_candidates` gives a map's
+    columns themselves (no copies); :func:`candidates_of` packs polynomials."""
 
-    variate: np.ndarray  # (k,) int64
-    shape: np.ndarray  # (k, W)
-    size: np.ndarray  # (k,) int64
-    c0: np.ndarray  # (k,)
-    lo: np.ndarray  # (k,)
-    hi: np.ndarray  # (k,)
+    rows: np.ndarray  # (k,) int64: the candidates, in order
+    variate: np.ndarray  # (n,) int64
+    shape: np.ndarray  # (n, W)
+    size: np.ndarray  # (n,) int64
+    c0: np.ndarray  # (n,)
+    lo: np.ndarray  # (n,)
+    hi: np.ndarray  # (n,)
 
 
 def candidates_of(polys: Sequence[Polynomial]) -> Candidates:
@@ -172,6 +173,7 @@ def candidates_of(polys: Sequence[Polynomial]) -> Candidates:
     for i, p in enumerate(polys):
         shape[i, : p.coeffs.size] = p.coeffs
     return Candidates(
+        np.arange(k, dtype=np.int64),
         np.array([p.variate for p in polys], dtype=np.int64),
         shape,
         np.array([p.coeffs.size for p in polys], dtype=np.int64),
@@ -182,16 +184,10 @@ def candidates_of(polys: Sequence[Polynomial]) -> Candidates:
 
 
 def table_candidates(table: LandmarkTable, rows: np.ndarray, c0s: np.ndarray) -> Candidates:
-    """:class:`Candidates` of a map's landmarks ``rows`` (int64) at the c0s ``c0s`` (n,), from
-    its columns (no polynomial objects but the cached shapes' sizes)."""
-    return Candidates(
-        table.variate[rows],
-        table.shape[rows],
-        np.array([table.poly(j).coeffs.size for j in rows.tolist()], dtype=np.int64),
-        c0s[rows],
-        table.lo[rows],
-        table.hi[rows],
-    )
+    """:class:`Candidates` of a map's landmarks ``rows`` (int64) at the c0s ``c0s`` (n,): its
+    columns as they are, each row at its polynomial's number of coefficients
+    (:meth:`~polyslam_env.slam.landmarks.LandmarkTable.sizes`)."""
+    return Candidates(rows, table.variate, table.shape, table.sizes, c0s, table.lo, table.hi)
 
 
 def merge_gammas(
@@ -206,7 +202,7 @@ def merge_gammas(
     agree within ``max_angle_deg``; else, with ``join_gap``, the offset of an end-to-end join
     (:func:`join_gamma`, ``joined`` True); nan where neither counts. One compiled call
     (:func:`~polyslam_env.slam.map_kernels.merge_candidates`)."""
-    k = candidates.variate.size
+    k = candidates.rows.size
     gammas, joined = np.empty(k), np.empty(k, dtype=np.bool_)
     map_kernels.merge_candidates(
         p.variate, p.coeffs, p.lo, p.hi, *candidates, min_overlap, max_angle_deg,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -9,15 +11,19 @@ from hypothesis import strategies as st
 
 from polyslam_env.slam import map_kernels
 from polyslam_env.slam.fitting import PointSet, centroid_xi, fit_polynomial, turn_gradient
+from polyslam_env.slam.landmarks import LandmarkTable
 from polyslam_env.slam.merging import (
     JOIN_GAP,
+    MERGE_ANGLE_DEG,
     THIN_WALL,
     choose_merge,
     face_normal,
     find_merge,
     join_gamma,
     merge_angle,
+    merge_gammas,
     merge_points,
+    table_candidates,
     unit_tangent,
 )
 from polyslam_env.slam.polynomial import Polynomial
@@ -455,3 +461,51 @@ def test_choose_merge__the_same_choice_as_candidate_by_candidate(
     assert (got is None) == (want is None)
     if got is not None and want is not None:
         assert (got.partner, got.gamma.hex(), got.joined) == (want[0], want[1].hex(), want[2])
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    new=merge_polys,
+    walls=st.lists(merge_polys, min_size=0, max_size=7),
+    joins=st.booleans(),
+    seed=st.integers(0, 2**16),
+)
+def test_merge_gammas__a_tables_rows_as_merge_test_gives_them_one_by_one(
+    new: Polynomial, walls: list[Polynomial], joins: bool, seed: int
+) -> None:
+    """The compiled merge tests over rows of a map's columns (``map_kernels.merge_candidates``
+    reading ``table_candidates``) give, row by row, what ``merge_test`` gives for the row's
+    polynomial as the map builds it (``table.polys[j].with_c0``, at its own number of
+    coefficients, trailing zeros too), the tangents' angle taken by numpy, and else the
+    numpy join: the same γ bit for bit, nan where none counts."""
+    rng = np.random.default_rng(seed)
+    near = [  # shifted copies and neighbours of the new piece, so that merges do happen
+        Polynomial(new.variate, new.coeffs + rng.normal(0.0, 0.02, new.coeffs.size),
+                   new.lo + d, new.hi + d)
+        for d in rng.uniform(-0.5, 2.0, 3)
+    ]  # fmt: skip
+    table = LandmarkTable(capacity=2)
+    for wall in walls + near:
+        table.append(wall, pivot=0.0, xi_var=0.0, model_var=0.0, fit_half=1.0)
+    c0s = np.array([p.c0 for p in walls + near]) + rng.normal(0.0, 0.01, len(table))
+    rows = np.flatnonzero(rng.random(len(table)) < 0.8)  # ascending, as boxes_near gives them
+    join_gap = 0.25 if joins else None
+    got, joined = merge_gammas(new, table_candidates(table, rows, c0s), 0.1, join_gap=join_gap)
+    found = np.empty(4)
+    for k, j in enumerate(rows.tolist()):
+        other = table.polys[j].with_c0(float(c0s[j]))
+        want: float | None = None
+        measured = map_kernels.merge_test(
+            new.variate, new.coeffs, new.lo, new.hi, other.variate, other.coeffs, other.lo,
+            other.hi, 0.1, found,
+        )  # fmt: skip
+        if measured == map_kernels.MEASURED:
+            a, b, gamma, xi_other = found.tolist()
+            t_p, t_o = unit_tangent(new, 0.5 * (a + b)), unit_tangent(other, xi_other)
+            angle = float(np.arccos(min(abs(float(t_p @ t_o)), 1.0)))
+            want = gamma if np.degrees(angle) <= MERGE_ANGLE_DEG else None
+        join = want is None and join_gap is not None
+        if join:
+            want = reference_join_gamma(new, other, join_gap)
+        assert bool(joined[k]) == join
+        assert got[k].hex() == (math.nan if want is None else want).hex()
