@@ -43,13 +43,16 @@ PINNED_ENV = {
 }
 
 #: (name, seed, steps, env overrides). Together they cover vector and grid observations, SLAM
-#: on and off, the exchange (rendezvous happen on the paper and two_rooms maps), a generated map
-#: an injected fault, and the final metrics (each episode is truncated at its last step).
+#: on and off, the exchange (rendezvous happen on the paper and two_rooms maps; a team of 8
+#: meets often), a generated map, an injected fault, and the final metrics (each episode is
+#: truncated at its last step).
 ENV_EPISODES: tuple[tuple[str, int, int, dict[str, Any]], ...] = (
     ("paper-vector", 3, 120, {"map": "paper", "max_steps": 120}),
     ("two_rooms-grid", 5, 100, {"map": "two_rooms", "observation__mode": "grid", "max_steps": 100}),
     ("office-noslam", 1, 80, {"map": "office", "slam_enabled": False, "max_steps": 80}),
     ("rooms-fault", 2, 60, {"map": "generator:rooms", "faults": [[1, 30]], "max_steps": 60}),
+    # a crowded team: many meetings, so the exchange's alignment, refits and merges all run
+    ("rooms-team8", 2, 200, {"map": "generator:rooms", "num_robots": 8, "max_steps": 200}),
 )
 #: Wall-clock metrics are not reproducible; hit-point metrics were redefined on purpose (one
 #: record stage for env and simulate), so both stay out of the digests.
