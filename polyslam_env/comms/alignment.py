@@ -33,10 +33,7 @@ from polyslam_env.comms.kernels import (
     chain_tangents,
     frame_chain,
     gauss_newton_terms,
-    match_walls,
-    near_chains,
     reach_boxes,
-    unit_tangents,
 )
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH, line_angle, off_square
@@ -182,12 +179,12 @@ def _refine_from(
     if var_c.shape != (len(chains),) or var_w.shape != (n_walls,):
         raise ValueError("chain_var and wall_var need one variance per chain and per wall")
     point_var = sigma * sigma + var_c[chain_of]  # (N,) before the wall's share
-    tangents_q = chain_tangents(q, starts)  # (N, 2) sender frame (:func:`_tangents`)
+    tangents_q = chain_tangents(q, starts)  # (N, 2) sender frame
     reach = wall_reach(walls, var_w, cov_t, point_var, q)
     t = np.array(start, dtype=float)
     info = info_prior
     for _ in range(iterations):
-        # the pairing (:func:`_match` on the chains :func:`_near_chains` gives) and each
+        # the pairing (``match_walls`` on the chains ``near_chains`` gives) and each
         # point's weight, so that each (chain, wall) pair counts once: one compiled call
         residual, grad, weighted, weight, n_pairs = gauss_newton_terms(
             q, tangents_q, starts, chain_of, t, rotation(float(t[2])), reach, walls.variate,
@@ -247,45 +244,6 @@ def square_turn(
     return float(turns[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
 
 
-def _tangents(chain: np.ndarray) -> np.ndarray:
-    """(N, 2) unit tangents along a chain of points (N, 2) (compiled:
-    :func:`~polyslam_env.comms.kernels.unit_tangents`)."""
-    return unit_tangents(np.asarray(chain, dtype=float))
-
-
-def _match(
-    p: np.ndarray,
-    dp_dt: np.ndarray,
-    tangents: np.ndarray,
-    walls: Sequence[Polynomial] | WallArrays,
-    cov_t: np.ndarray,
-    point_var: np.ndarray,
-    wall_var: np.ndarray,
-    meets: np.ndarray | None = None,
-    starts: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """Per point (N, 2) the wall it pairs with (smallest normalised normal distance within
-    the gate, same direction, inside the extent; a pair's offset variance is the point's
-    ``point_var`` (N,) plus the wall's ``wall_var``): for the M points that pair, residuals
-    (M,), their gradients w.r.t. T (M, 3) and wall indices (M,), and which points pair (N,)
-    bool; None if none does. ``meets`` (W, K) (:func:`_near_chains`): which chains (rows
-    ``starts[k]:starts[k+1]`` of ``p``) can pair with each wall (default: one chain, every
-    wall); the others cannot, so leaving them out changes nothing. Compiled:
-    :func:`~polyslam_env.comms.kernels.match_walls`."""
-    walls = pack_walls(walls)
-    if meets is None or starts is None:
-        meets, starts = np.ones((len(walls.order), 1), dtype=bool), np.array([0, len(p)])
-    _, residual, grad, wall_of = match_walls(
-        p, dp_dt, tangents, walls.variate, walls.coeffs, walls.extent, cov_t, point_var,
-        np.asarray(wall_var, dtype=float), meets, np.asarray(starts, dtype=np.int64),
-        GATE_SIGMAS, _SIN_MAX,
-    )  # fmt: skip
-    keep = wall_of >= 0
-    if not keep.any():
-        return None
-    return residual[keep], grad[keep], wall_of[keep], keep
-
-
 def wall_reach(
     walls: Sequence[Polynomial] | WallArrays,
     wall_var: np.ndarray,
@@ -293,16 +251,16 @@ def wall_reach(
     point_var: np.ndarray,
     q: np.ndarray,
 ) -> np.ndarray:
-    """(W, 4) boxes [x_lo, x_hi, y_lo, y_hi], each holding every place where a point can pair
-    with that wall in :func:`_match`: inside its extent (ξ ∈ [lo, hi]) and within the gate,
-    |r| ≤ GATE_SIGMAS·pred with r the η offset over √(1 + B'²). Bounds: pred² = gᵀΣ_T g +
-    point_var + wall_var with g = nᵀ ∂p/∂T = (n_x, n_y, nᵀJR q), so |g|² ≤ 1 + |q|² and
-    gᵀΣ_T g ≤ tr(Σ_T)(1 + max |q|²); the η offset is at most |r| √(1 + max B'²) (the slope's
-    exact maximum over the extent, ``Polynomial.max_slope``); B over the extent lies in
-    :func:`~polyslam_env.slam.map_kernels.eta_range` (interval arithmetic, padded), and 1e-9 m
-    more covers the rounding of c0 + B. Compiled wall by wall
-    (:func:`~polyslam_env.comms.kernels.reach_boxes`); slopes of orders ≥ 4 (a root finder)
-    from ``Polynomial.max_slope``."""
+    """(W, 4) boxes [x_lo, x_hi, y_lo, y_hi], each holding every place where a point can pair with
+    that wall in :func:`~polyslam_env.comms.kernels.match_walls`: inside its extent (ξ ∈ [lo, hi])
+    and within the gate, |r| ≤ GATE_SIGMAS·pred with r the η offset over √(1 + B'²). Bounds: pred² =
+    gᵀΣ_T g + point_var + wall_var with g = nᵀ ∂p/∂T = (n_x, n_y, nᵀJR q), so |g|² ≤ 1 + |q|² and
+    gᵀΣ_T g ≤ tr(Σ_T)(1 + max |q|²); the η offset is at most |r| √(1 + max B'²) (the slope's exact
+    maximum over the extent, ``Polynomial.max_slope``); B over the extent lies in
+    :func:`~polyslam_env.slam.map_kernels.eta_range` (interval arithmetic, padded), and 1e-9 m more
+    covers the rounding of c0 + B. Compiled wall by wall
+    (:func:`~polyslam_env.comms.kernels.reach_boxes`); slopes of orders ≥ 4 (a root finder) from
+    ``Polynomial.max_slope``."""
     walls = pack_walls(walls)
     worst = float(np.trace(cov_t)) * (1.0 + float(np.max(np.sum(q * q, axis=1), initial=0.0)))
     worst += float(np.max(point_var, initial=0.0))
@@ -313,14 +271,4 @@ def wall_reach(
     return reach_boxes(
         walls.order, walls.variate, walls.coeffs, walls.extent, slopes,
         np.asarray(wall_var, dtype=float), worst, GATE_SIGMAS,
-    )  # fmt: skip
-
-
-def _near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndarray:
-    """(W, K) whether chain k of ``p`` (rows starts[k]:starts[k+1]) has a bounding box that
-    meets wall w's ``reach`` box (:func:`wall_reach`): only those chains can pair with it.
-    Compiled: :func:`~polyslam_env.comms.kernels.near_chains`."""
-    return near_chains(
-        np.ascontiguousarray(reach, dtype=float), np.ascontiguousarray(p, dtype=float),
-        np.ascontiguousarray(starts, dtype=np.int64),
     )  # fmt: skip

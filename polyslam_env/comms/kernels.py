@@ -55,7 +55,7 @@ def match_walls(
     """Per point its normalised |r| to the wall it pairs with (inf: none), r, ∂r/∂T (N, 3)
     and that wall (−1: none): the smallest within the gate, same direction, inside the
     extent; walls in order, a later one taking a point only with a strictly smaller score
-    (``alignment._match``)."""
+    (``alignment._refine_from``'s pairing, through :func:`gauss_newton_terms`)."""
     n_pts = p.shape[0]
     best = np.full(n_pts, np.inf)
     residual = np.zeros(n_pts)
@@ -102,10 +102,10 @@ def match_walls(
 
 @njit
 def near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndarray:
-    """(W, K) whether chain k of ``p`` (N, 2) (rows ``starts[k]:starts[k+1]``, each at least
-    one) has a bounding box that meets wall w's ``reach`` box [x_lo, x_hi, y_lo, y_hi] (W, 4)
-    (:func:`reach_boxes`): only those chains can pair with it (``alignment._near_chains``;
-    comparisons only, the answers of its numpy form, the oracle in
+    """(W, K) whether chain k of ``p`` (N, 2) (rows ``starts[k]:starts[k+1]``, each at least one)
+    has a bounding box that meets wall w's ``reach`` box [x_lo, x_hi, y_lo, y_hi] (W, 4)
+    (:func:`reach_boxes`): only those chains can pair with it (``alignment._refine_from``, through
+    :func:`gauss_newton_terms`; comparisons only, the answers of its numpy form, the oracle in
     ``tests/comms/test_alignment.py``)."""
     n_chains = starts.size - 1
     box = np.empty((n_chains, 4))

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from polyslam_env.comms import alignment
-from polyslam_env.comms.alignment import CHI2_3DOF_99, align_transform, frame_points
+from polyslam_env.comms.alignment import CHI2_3DOF_99, WallArrays, align_transform, frame_points
+from polyslam_env.comms.kernels import match_walls, near_chains, unit_tangents
 from polyslam_env.core.geometry import inverse, rotation, transform_points
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -326,7 +327,7 @@ def _match_oracle(
     point_var: np.ndarray,
     wall_var: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """``alignment._match`` in numpy, wall by wall over every point (what the compiled
+    """The pairing (``_match`` below) in numpy, wall by wall over every point (what the compiled
     ``comms.kernels.match_walls`` replaced)."""
     n_pts = len(p)
     best = np.full(n_pts, np.inf)
@@ -376,13 +377,13 @@ def test_match__compiled_with_reach_boxes_is_the_numpy_pairing_bit_for_bit() -> 
         point_var = np.full(len(q), 0.02**2)
         wall_var = rng.uniform(0, 0.05**2, len(walls))
         p, dp_dt = frame_points(q, T_TRUE + rng.normal(0, 0.05, 3))
-        tangents = np.vstack([alignment._tangents(c) for c in chains])
+        tangents = np.vstack([_tangents(c) for c in chains])
         args = (p, dp_dt, tangents, walls, cov_t, point_var, wall_var)
         reach = alignment.wall_reach(walls, wall_var, cov_t, point_var, q)
-        meets = alignment._near_chains(reach, p, starts)
+        meets = _near_chains(reach, p, starts)
         left_out += int(meets.size - meets.sum())
         oracle = _match_oracle(*args)
-        for out in (alignment._match(*args), alignment._match(*args, meets, starts)):
+        for out in (_match(*args), _match(*args, meets, starts)):
             assert (oracle is None) == (out is None)
             if oracle is not None and out is not None:
                 paired += len(oracle[0])
@@ -487,7 +488,7 @@ def test_near_chains__compiled_answers_as_the_numpy_boxes() -> None:
             [centre[:, 0] - half[:, 0], centre[:, 0] + half[:, 0],
              centre[:, 1] - half[:, 1], centre[:, 1] + half[:, 1]]
         )  # fmt: skip
-        got = alignment._near_chains(reach, p, starts)
+        got = _near_chains(reach, p, starts)
         want = _near_chains_oracle(reach, p, starts)
         assert got.dtype == want.dtype and got.tolist() == want.tolist()
         met += int(want.sum())
@@ -542,7 +543,7 @@ def test_gauss_newton_terms__compiled_is_the_numpy_iteration_bit_for_bit() -> No
         wall_var = rng.uniform(0, 0.05**2, len(walls))
         packed = alignment.pack_walls(walls)
         reach = alignment.wall_reach(packed, wall_var, cov_t, point_var, q)
-        tangents_q = np.vstack([alignment._tangents(c) for c in chains])
+        tangents_q = np.vstack([_tangents(c) for c in chains])
         for t in (T_TRUE + rng.normal(0, 0.03, 3), T_TRUE + np.array([3.0, 0.0, 0.0])):
             got = gauss_newton_terms(
                 q, tangents_q, starts, chain_of, t, rotation(float(t[2])), reach,
@@ -599,3 +600,53 @@ def _refine_oracle(
     posterior = np.linalg.inv(info)
     factor = max(1.0, float(weight @ (residual * residual)) / n_pairs)
     return t, factor * 0.5 * (posterior + posterior.T)
+
+
+# the compiled pieces of the refinement, called as it called them before its iteration became
+# one kernel (``comms.kernels.gauss_newton_terms``): the oracles below are checked through them
+def _tangents(chain: np.ndarray) -> np.ndarray:
+    """(N, 2) unit tangents along a chain of points (N, 2) (``kernels.unit_tangents``)."""
+    return unit_tangents(np.asarray(chain, dtype=float))
+
+
+def _match(
+    p: np.ndarray,
+    dp_dt: np.ndarray,
+    tangents: np.ndarray,
+    walls: list[Polynomial] | WallArrays,
+    cov_t: np.ndarray,
+    point_var: np.ndarray,
+    wall_var: np.ndarray,
+    meets: np.ndarray | None = None,
+    starts: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """Per point (N, 2) the wall it pairs with (smallest normalised normal distance within
+    the gate, same direction, inside the extent; a pair's offset variance is the point's
+    ``point_var`` (N,) plus the wall's ``wall_var``): for the M points that pair, residuals
+    (M,), their gradients w.r.t. T (M, 3) and wall indices (M,), and which points pair (N,)
+    bool; None if none does. ``meets`` (W, K) (:func:`_near_chains`): which chains (rows
+    ``starts[k]:starts[k+1]`` of ``p``) can pair with each wall (default: one chain, every
+    wall); the others cannot, so leaving them out changes nothing. Compiled:
+    :func:`~polyslam_env.comms.kernels.match_walls`."""
+    walls = alignment.pack_walls(walls)
+    if meets is None or starts is None:
+        meets, starts = np.ones((len(walls.order), 1), dtype=bool), np.array([0, len(p)])
+    _, residual, grad, wall_of = match_walls(
+        p, dp_dt, tangents, walls.variate, walls.coeffs, walls.extent, cov_t, point_var,
+        np.asarray(wall_var, dtype=float), meets, np.asarray(starts, dtype=np.int64),
+        alignment.GATE_SIGMAS, alignment._SIN_MAX,
+    )  # fmt: skip
+    keep = wall_of >= 0
+    if not keep.any():
+        return None
+    return residual[keep], grad[keep], wall_of[keep], keep
+
+
+def _near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(W, K) whether chain k of ``p`` (rows starts[k]:starts[k+1]) has a bounding box that
+    meets wall w's ``reach`` box (:func:`wall_reach`): only those chains can pair with it.
+    Compiled: :func:`~polyslam_env.comms.kernels.near_chains`."""
+    return near_chains(
+        np.ascontiguousarray(reach, dtype=float), np.ascontiguousarray(p, dtype=float),
+        np.ascontiguousarray(starts, dtype=np.int64),
+    )  # fmt: skip

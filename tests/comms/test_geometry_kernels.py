@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from polyslam_env.comms import kernels
-from polyslam_env.comms.alignment import _tangents, frame_points
+from polyslam_env.comms.alignment import frame_points
 from polyslam_env.comms.exchange import chain_points, received_geometry, refit_variance_floor
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.polynomial import Polynomial
@@ -46,7 +46,7 @@ def test_received_geometry__is_the_numpy_oracle_bit_for_bit() -> None:
             assert np.array_equal(frame_points(q, t)[0], want_xy)
             assert np.array_equal(normals, want_normals)
             assert np.array_equal(sigma, ref.normal_sigma(want_normals, want_dp, cov_t))
-            assert np.array_equal(_tangents(q), ref.tangents(q))
+            assert np.array_equal(kernels.unit_tangents(q), ref.tangents(q))
             shift = rotation(float(t[2])) @ np.array([0.0, 1.0])
             for rows in (slice(None), slice(0, 0), slice(0, 1), slice(0, 2), slice(0, 3)):
                 got = refit_variance_floor(normals[rows], cov_t, shift, 1e-4)
