@@ -236,13 +236,17 @@ def augment(
     Gx: np.ndarray,
     Gy: np.ndarray,
     V: np.ndarray,
+    order: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Append a landmark c0 = g(X, y) (paper eq. 4–5).
 
     ``Gx`` (3+n,) or (1, 3+n) is ∂g/∂X over the whole current state (pose and any c0 the new
     one was built from, e.g. when refitting or merging); ``Gy`` (k,) or (1, k) is ∂g/∂y for
     the k raw inputs y with covariance ``V`` (k, k). The new row/column is
-    [Gx P, Gx P Gxᵀ + Gy V Gyᵀ]: the cross-covariance with the pose is kept.
+    [Gx P, Gx P Gxᵀ + Gy V Gyᵀ]: the cross-covariance with the pose is kept. With ``order``
+    (N+1 indices, N the new entry) the grown state is returned taken in that order, in the
+    same compiled copy (:func:`~polyslam_env.slam.kernels.grown`; the state layout puts a new
+    entry inside its block so).
     """
     n_state = mean.size
     gx = np.asarray(Gx, dtype=float).reshape(-1)
@@ -254,24 +258,12 @@ def augment(
         raise ValueError(f"V must have shape ({gy.size}, {gy.size}), got {V.shape}")
     cross = cov @ gx  # (3+n,) = P Gxᵀ
     var = gx @ cross + gy @ V @ gy
-    return grown(mean, cov, value, cross, var, np.arange(n_state + 1))
-
-
-def grown(
-    mean: np.ndarray,
-    cov: np.ndarray,
-    value: float,
-    cross: np.ndarray,
-    var: float,
-    order: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The state with one entry appended (mean ``value``, covariance ``cross`` with the rest,
-    variance ``var``) and taken in ``order`` (N+1 indices; N is the new entry): one compiled
-    copy (:func:`~polyslam_env.slam.kernels.grown`)."""
+    order = np.arange(n_state + 1) if order is None else order
+    if order.shape != (n_state + 1,):
+        raise ValueError(f"order must have {n_state + 1} entries, got {order.shape}")
     return kernels.grown(
         np.ascontiguousarray(mean, dtype=float), np.ascontiguousarray(cov, dtype=float),
-        float(value), np.ascontiguousarray(cross, dtype=float), float(var),
-        np.ascontiguousarray(order, dtype=np.int64),
+        float(value), cross, float(var), np.ascontiguousarray(order, dtype=np.int64),
     )  # fmt: skip
 
 

@@ -108,8 +108,9 @@ class StateLayout:
             return mean, cov
         size = mean.size  # 3 + 2n + 1: the new c0 is last
         gx, var = turn_row(size, n, source, fit_var)
-        cross = cov @ gx  # ekf.augment's, with G_y = 1 and V = [var]: its Gy V Gyᵀ is var
-        return ekf.grown(mean, cov, 0.0, cross, gx @ cross + var, new_c0_before_turns(n))
+        return ekf.augment(
+            mean, cov, 0.0, gx, np.ones(1), np.array([[var]]), order=new_c0_before_turns(n)
+        )
 
     def remove(
         self, mean: np.ndarray, cov: np.ndarray, row: int | Sequence[int], n: int
