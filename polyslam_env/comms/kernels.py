@@ -340,7 +340,19 @@ def _point(variate: int, xi: float, eta: float) -> tuple[float, float]:
 def _initial_knots(variate: int, coeffs: np.ndarray, lo: float, hi: float, sagitta: float,
                    dense: int) -> np.ndarray:  # fmt: skip
     """``polyline._initial_knots``: ξ knots spaced so each chord's sagitta κL²/8 is about
-    ``sagitta``."""
+    ``sagitta``.
+
+    A line (no coefficient past the slope, and 1 + slope² finite) has no curvature anywhere:
+    its curvature grid would give κ = 0 at every point (p'' is +0 in Horner's scheme), a zero
+    integral and the two ends as knots, which are returned without it (most received walls
+    are straight, and the grid was most of their chain's time)."""
+    straight = True
+    for j in range(2, coeffs.size):
+        straight = straight and coeffs[j] == 0.0
+    if straight and coeffs.size > 1 and math.isfinite(1.0 + coeffs[1] * coeffs[1]):
+        out = np.empty(2)
+        out[0], out[1] = lo, hi
+        return out
     xi = _linspace(lo, hi, dense)
     density = np.empty(dense)
     first, second = _derivative(coeffs, 1), _derivative(coeffs, 2)

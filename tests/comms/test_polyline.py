@@ -148,12 +148,17 @@ def test_chain_points__compiled_chain_is_the_numpy_one_bit_for_bit() -> None:
     """``polyline.chain_points`` (the compiled kernel, orders ≤ 3) against the numpy
     ``polyline_points(piecewise_linear(…))`` it replaces, the oracle: every point equal bit for
     bit, on random curves of every order ≤ 3 with coefficients from metre scale down to
-    negligible (1e-15, as the trimmed leading terms), straight lines, degenerate extents,
+    negligible (1e-15, as the trimmed leading terms), straight lines (the kernel's shortcut:
+    padded with zeros or −0, steep or flat), degenerate extents,
     several tolerances and spacings; and an order-4 curve takes the numpy path."""
     rng = np.random.default_rng(41)
     cases = [Polynomial(1, np.array([0.3, -0.2]), 0.5, 0.5),  # one point
              Polynomial(2, np.array([0.3, -0.7, 0.0, 0.0]), -1.0, 2.0),  # padded line
-             Polynomial(1, np.array([0.0, 0.0, 1.0, 2.22507386e-313]), 0.0, 1.0)]  # fmt: skip
+             Polynomial(1, np.array([0.0, 0.0, 1.0, 2.22507386e-313]), 0.0, 1.0),
+             Polynomial(1, np.array([0.3, 0.02, -0.0, 0.0]), -1.0, 2.0),  # line, a −0 tail
+             Polynomial(2, np.array([-1.0, 1e3]), 0.2, 0.3),  # steep lines
+             Polynomial(1, np.array([0.5, -50.0, 0.0]), -0.01, 0.01),
+             Polynomial(1, np.array([0.5, 1e-300, 0.0, 0.0]), -4.0, -1.0)]  # fmt: skip
     for _ in range(400):
         order = int(rng.integers(1, 4))
         coeffs = rng.normal(0, 1, order + 1) * rng.choice([1.0, 0.05, 1e-9, 1e-15], order + 1)
