@@ -501,7 +501,7 @@ def refit_pieces(
             for rows in halves
             for piece in refit_pieces(_subset(points, rows), order, auto_order, tol, depth + 1)
         ]
-    finite = np.isfinite(fit.c0) and np.all(np.isfinite(fit.Gx)) and np.all(np.isfinite(fit.Gy))
+    finite = math.isfinite(fit.c0) and np.isfinite(fit.Gx).all() and np.isfinite(fit.Gy).all()
     return [(points, fit)] if finite else []
 
 
@@ -1422,7 +1422,7 @@ def normal_variance(poly: Polynomial, c0_var: float) -> float:
     the middle of the extent is c0 · cos(atan B'), so var_n = var(c0) / (1 + B'²). Unlike
     var(c0) it compares landmarks of either variate.
     """
-    slope = float(poly.slope(0.5 * (poly.lo + poly.hi)))
+    slope = poly.slope_at(0.5 * (poly.lo + poly.hi))
     return c0_var / (1.0 + slope * slope)
 
 

@@ -251,7 +251,9 @@ def augment(
     n_state = mean.size
     gx = np.asarray(Gx, dtype=float).reshape(-1)
     gy = np.asarray(Gy, dtype=float).reshape(-1)
-    V = np.atleast_2d(np.asarray(V, dtype=float))
+    V = np.asarray(V, dtype=float)
+    if V.ndim < 2:  # np.atleast_2d's (1, k), without its per-call checks
+        V = V.reshape(1, -1)
     if gx.size != n_state:
         raise ValueError(f"Gx must have {n_state} entries, got {gx.size}")
     if V.shape != (gy.size, gy.size):

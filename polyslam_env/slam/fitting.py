@@ -54,7 +54,7 @@ class PointSet:
             raise ValueError(
                 f"d_noise {self.d_noise.shape} and noise_cov {self.noise_cov.shape} disagree"
             )
-        if self.weights.shape != (n_pts,) or not np.all(self.weights > 0):
+        if self.weights.shape != (n_pts,) or not (self.weights > 0).all():
             raise ValueError("weights must be a positive (N,) array")
 
     @property

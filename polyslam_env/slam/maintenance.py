@@ -408,9 +408,7 @@ class MapMaintenance:
             min_noise_var=cfg.range_sigma**2,
             curvature_test=cfg.curvature_test,
         )
-        if not (
-            np.isfinite(fit.c0) and np.all(np.isfinite(fit.Gx)) and np.all(np.isfinite(fit.Gy))
-        ):
+        if not (math.isfinite(fit.c0) and np.isfinite(fit.Gx).all() and np.isfinite(fit.Gy).all()):
             return None
         if fit.poly.max_slope() > MAX_SLOPE:  # curves away between its points: not one wall
             return None

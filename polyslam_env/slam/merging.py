@@ -78,7 +78,7 @@ def merge_angle(poly: Polynomial, other: Polynomial, a: float, b: float, xi_othe
 
 def unit_tangent(poly: Polynomial, xi: float) -> np.ndarray:
     """(2,) unit tangent of the curve at ξ, in (x¹, x²)."""
-    slope = float(poly.slope(xi))
+    slope = poly.slope_at(xi)
     t = np.array([1.0, slope]) if poly.variate == 1 else np.array([slope, 1.0])
     return t / math.sqrt(t.dot(t))  # np.linalg.norm's own arithmetic, without its checks
 

@@ -33,7 +33,7 @@ class Polynomial:
         c = np.asarray(self.coeffs, dtype=float)
         if c.ndim != 1 or len(c) < 2:
             raise ValueError(f"coeffs must be [c0, b1, ...], got shape {c.shape}")
-        if not (np.all(np.isfinite(c)) and np.isfinite(self.lo) and np.isfinite(self.hi)):
+        if not (np.isfinite(c).all() and math.isfinite(self.lo) and math.isfinite(self.hi)):
             raise ValueError("polynomial coefficients and extent must be finite")
         if self.hi < self.lo:
             raise ValueError(f"extent must satisfy lo <= hi, got [{self.lo}, {self.hi}]")
@@ -60,11 +60,17 @@ class Polynomial:
         """B'(ξ) = dη/dξ."""
         return polyval(xi, self.coeffs, derivative=1)
 
+    def slope_at(self, xi: float) -> float:
+        """B'(ξ) at one ξ, as a float: :meth:`slope`'s value (the same operations), without
+        its array; the exchange and the merges ask for one per landmark they weigh."""
+        return _polyval_float(float(xi), self.coeffs, 1)
+
     def max_slope(self) -> float:
         """max |dη/dξ| over the extent [lo, hi], exactly: at an end or where the slope turns
         (a real root of p'' inside the extent), for any order. Up to cubics in plain floats
         (p'' = 2b₂ + 6b₃ξ: one turn at most), the same operations as numpy's ``polyder``,
-        ``polytrim`` and ``polyroots`` (checked against them in the tests)."""
+        ``polytrim`` and ``polyroots`` (checked against them in the tests); the slopes there
+        in floats, :meth:`slope_at`'s (the same operations as :meth:`slope` on an array)."""
         at = [self.lo, self.hi]
         if self.coeffs.size == 4:
             rate = 2 * (3 * float(self.coeffs[3]))  # p'' = 2b₂ + rate·ξ
@@ -77,7 +83,7 @@ class Polynomial:
             turns = P.polyroots(curvature) if len(curvature) > 1 else np.zeros(0)
             real = turns.real[np.abs(turns.imag) <= 1e-9 * np.maximum(1.0, np.abs(turns.real))]
             at.extend(real[(real > self.lo) & (real < self.hi)].tolist())
-        return float(np.max(np.abs(self.slope(np.array(at)))))
+        return max(abs(self.slope_at(x)) for x in at)
 
     def to_xy(self, xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
         """(ξ, η) pairs to (x¹, x²) points, shape (…, 2) (``np.stack`` on the last axis)."""

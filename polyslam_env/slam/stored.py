@@ -129,6 +129,8 @@ class StoredPoints:
         """Rows of the points one holder keeps, in rank order."""
         n = len(self)
         mine = np.flatnonzero((self.index[KIND, :n] == kind) & (self.index[OWNER, :n] == owner))
+        if mine.size < 2:  # none (a received landmark's Q_bad) or one: in order already
+            return mine
         return mine[np.argsort(self.index[RANK, mine], kind="stable")]
 
     def take(self, rows: np.ndarray) -> PointArrays:
