@@ -163,11 +163,10 @@ from polyslam_env.slam.alignment import Alignment, FeatureMap, align
 from polyslam_env.slam.corners import wall_corners
 from polyslam_env.slam.features import FeatureBook
 from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
-from polyslam_env.slam.landmarks import boxes_near
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH
 from polyslam_env.slam.map_kernels import curve_box
-from polyslam_env.slam.merging import MERGE_ANGLE_DEG, merge_gammas, table_candidates
+from polyslam_env.slam.merging import MERGE_ANGLE_DEG, near_merge_gammas
 from polyslam_env.slam.polynomial import Polynomial
 
 if TYPE_CHECKING:
@@ -1483,10 +1482,10 @@ def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
     cfg = slam.config
     # the box of poly.equally_spaced's points in one compiled call (the same floats)
     box = curve_box(poly.coeffs, poly.variate, poly.lo, poly.hi, _BOX_SAMPLES)
-    near = boxes_near(slam.landmark_boxes(), box, cfg.gamma_max)
-    gammas, _ = merge_gammas(
-        poly, table_candidates(slam.table, near, slam.c0s), cfg.merge_min_overlap
-    )
+    near, gammas, _ = near_merge_gammas(
+        poly, slam.table, slam.c0s, slam.landmark_boxes(), box, cfg.gamma_max,
+        cfg.merge_min_overlap,
+    )  # fmt: skip
     ids = slam.table.ids
     pairs = zip(near.tolist(), gammas.tolist(), strict=True)
     return [ids[j] for j, gamma in pairs if gamma < cfg.gamma_max]

@@ -27,16 +27,15 @@ from polyslam_env.slam.fitting import (
     fit_polynomial,
     turn_gradient,
 )
-from polyslam_env.slam.landmarks import boxes_near, clip_to_evidence, evidence_on, hull
+from polyslam_env.slam.landmarks import clip_to_evidence, evidence_on, hull
 from polyslam_env.slam.layout import TurnSource
 from polyslam_env.slam.lineage import CREATED, INSERTED, MERGED, REMOVED, REPLACED
 from polyslam_env.slam.merging import (
     JOIN_GAP,
     face_normal,
-    merge_gammas,
     merge_points,
+    near_merge_gammas,
     pick_merge,
-    table_candidates,
 )
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.stored import PointArrays
@@ -305,16 +304,12 @@ class MapMaintenance:
         c0s = slam.c0s
         reach = cfg.gamma_max * (1.0 + 1e-9) + 1e-12  # ≥ γ_M despite rounding
         boxes = slam.landmark_boxes()  # cached until the map or the state changes
-        near = boxes_near(boxes, boxes[idx], reach)
-        near = near[near != idx]
         poly = self.polynomial(idx)
         table = slam.table
-        gammas, joined = merge_gammas(
-            poly,
-            table_candidates(table, near, c0s),
-            cfg.merge_min_overlap,
+        near, gammas, joined = near_merge_gammas(
+            poly, table, c0s, boxes, boxes[idx], reach, cfg.merge_min_overlap, exclude=idx,
             join_gap=JOIN_GAP if cfg.join_pieces else None,
-        )
+        )  # fmt: skip
         sides = table.side[near].tolist()
         while len(near):
             choice = pick_merge(

@@ -430,6 +430,32 @@ def merge_candidates(
 
 
 @njit
+def near_merge_candidates(
+    p_variate: int, p_coeffs: np.ndarray, p_lo: float, p_hi: float,
+    boxes: np.ndarray,  # (n, 4) the candidates' boxes (x_min, x_max, y_min, y_max)
+    box: np.ndarray,  # (4,) p's
+    distance: float,
+    exclude: int,  # a row left out (p's own), −1: none
+    variates: np.ndarray, shapes: np.ndarray, sizes: np.ndarray, c0s: np.ndarray,
+    los: np.ndarray, his: np.ndarray,
+    min_overlap: float, max_angle_deg: float,
+    join_gap: float, join_angle_deg: float, thin_wall: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The rows whose boxes lie within ``distance`` of ``box`` (``kernels.boxes_near``,
+    ascending, without ``exclude``) and :func:`merge_candidates`' (γ, joined) for them, in one
+    call (``merging.near_merge_gammas``)."""
+    near = boxes_near(boxes, box, distance)
+    if exclude >= 0:
+        near = near[near != exclude]
+    gammas, joined = np.empty(near.size), np.empty(near.size, dtype=np.bool_)
+    merge_candidates(
+        p_variate, p_coeffs, p_lo, p_hi, near, variates, shapes, sizes, c0s, los, his,
+        min_overlap, max_angle_deg, join_gap, join_angle_deg, thin_wall, gammas, joined,
+    )  # fmt: skip
+    return near, gammas, joined
+
+
+@njit
 def curve_box(c: np.ndarray, variate: int, lo: float, hi: float, n: int) -> np.ndarray:
     """(4,) box (x_min, x_max, y_min, y_max) of :func:`equally_spaced`'s ``n`` points (the
     exchange's same-wall test looks for the landmarks near it)."""

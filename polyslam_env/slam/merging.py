@@ -211,6 +211,29 @@ def merge_gammas(
     return gammas, joined
 
 
+def near_merge_gammas(
+    p: Polynomial,
+    table: LandmarkTable,
+    c0s: np.ndarray,
+    boxes: np.ndarray,
+    box: np.ndarray,
+    distance: float,
+    min_overlap: float,
+    exclude: int = -1,
+    join_gap: float | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rows of a map's ``table`` (at the c0s ``c0s``) whose ``boxes`` (n, 4) lie within
+    ``distance`` of ``box`` (4,) (ascending, without row ``exclude``: −1 none) and
+    :func:`merge_gammas`' (γ, joined) of ``p`` against them (:func:`table_candidates`), in
+    one compiled call (:func:`~polyslam_env.slam.map_kernels.near_merge_candidates`): the
+    map's merge check and the exchange's same-wall test ask for it on every change."""
+    return map_kernels.near_merge_candidates(
+        p.variate, p.coeffs, p.lo, p.hi, boxes, box, distance, exclude, table.variate,
+        table.shape, table.sizes, c0s, table.lo, table.hi, min_overlap, MERGE_ANGLE_DEG,
+        math.nan if join_gap is None else join_gap, JOIN_ANGLE_DEG, THIN_WALL,
+    )  # fmt: skip
+
+
 def pick_merge(
     p: Polynomial,
     gammas: np.ndarray,

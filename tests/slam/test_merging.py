@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from polyslam_env.slam import map_kernels
 from polyslam_env.slam.fitting import PointSet, centroid_xi, fit_polynomial, turn_gradient
-from polyslam_env.slam.landmarks import LandmarkTable
+from polyslam_env.slam.landmarks import LandmarkTable, boxes_near
 from polyslam_env.slam.merging import (
     JOIN_GAP,
     MERGE_ANGLE_DEG,
@@ -23,6 +23,7 @@ from polyslam_env.slam.merging import (
     merge_angle,
     merge_gammas,
     merge_points,
+    near_merge_gammas,
     table_candidates,
     unit_tangent,
 )
@@ -509,3 +510,37 @@ def test_merge_gammas__a_tables_rows_as_merge_test_gives_them_one_by_one(
             want = reference_join_gamma(new, other, join_gap)
         assert bool(joined[k]) == join
         assert got[k].hex() == (math.nan if want is None else want).hex()
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    new=merge_polys,
+    walls=st.lists(merge_polys, min_size=0, max_size=9),
+    joins=st.booleans(),
+    distance=st.sampled_from([0.0, 0.35, 1.0, math.inf]),
+    seed=st.integers(0, 2**16),
+)
+def test_near_merge_gammas__is_boxes_near_then_merge_gammas(
+    new: Polynomial, walls: list[Polynomial], joins: bool, distance: float, seed: int
+) -> None:
+    """``near_merge_gammas`` (one compiled call) gives the rows ``boxes_near`` gives, without
+    the excluded one, and ``merge_gammas``' answers over them, bit for bit."""
+    rng = np.random.default_rng(seed)
+    table = LandmarkTable(capacity=2)
+    for wall in [*walls, new]:
+        table.append(wall, pivot=0.0, xi_var=0.0, model_var=0.0, fit_half=1.0)
+    c0s = np.array([p.c0 for p in [*walls, new]]) + rng.normal(0.0, 0.01, len(table))
+    boxes = table.boxes(c0s)
+    join_gap = 0.25 if joins else None
+    for exclude in (-1, len(table) - 1):
+        box = boxes[len(table) - 1]
+        rows, got, joined = near_merge_gammas(
+            new, table, c0s, boxes, box, distance, 0.1, exclude=exclude, join_gap=join_gap
+        )
+        want_rows = boxes_near(boxes, box, distance)
+        want_rows = want_rows[want_rows != exclude]
+        want, want_joined = merge_gammas(
+            new, table_candidates(table, want_rows, c0s), 0.1, join_gap=join_gap
+        )
+        assert rows.tolist() == want_rows.tolist()
+        assert got.tobytes() == want.tobytes() and joined.tolist() == want_joined.tolist()
