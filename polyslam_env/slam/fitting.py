@@ -19,6 +19,7 @@ Points come from three constructors:
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -396,8 +397,15 @@ def fit_polynomial(
         points.xy, points.weights, points.d_state, points.d_noise, order,
         0 if variate is None else variate, shape_fixed, auto_order, limits,
     )  # fmt: skip
+    # lo ≤ hi (the points' ξ range) and coeffs a float (order+1,) array: a fit of a known
+    # variate with finite numbers needs no more of Polynomial's checks; any other gets them
+    # (and their error)
+    valid = var in (1, 2) and math.isfinite(lo) and math.isfinite(hi)
+    valid = valid and bool(np.isfinite(coeffs).all())
     return Fit(
-        poly=Polynomial(var, coeffs, lo, hi),
+        poly=Polynomial.unchecked(var, coeffs, lo, hi)
+        if valid
+        else Polynomial(var, coeffs, lo, hi),
         c0=float(coeffs[0]),
         Gx=gx[None, :],
         Gy=gy[None, :],
