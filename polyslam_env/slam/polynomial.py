@@ -132,8 +132,7 @@ class Polynomial:
         of a valid polynomial or a table's extents), without :meth:`__post_init__`'s checks,
         which cost as much as the rest of a map change's reading of its landmarks."""
         out = object.__new__(Polynomial)
-        for name, value in (("variate", variate), ("coeffs", coeffs), ("lo", lo), ("hi", hi)):
-            object.__setattr__(out, name, value)
+        out.__dict__.update(variate=variate, coeffs=coeffs, lo=lo, hi=hi)  # frozen: not setattr
         return out
 
     # -- sampling ---------------------------------------------------------------------------
