@@ -77,6 +77,8 @@ BOX_MARGIN = 1e-3
 #: Largest shape order the kernels take (the SLAM's is at most 5: SlamConfig.order).
 MAX_ORDER = 15
 
+#: Rows of K that :func:`joseph_blocks` takes in one pass over P: the paper's scan's five beams.
+PASS_ROWS = 5
 _TINY = 2.2250738585072014e-308  # smallest normal float: np.finfo(float).tiny
 _BINOM = np.array(
     [[float(math.comb(i, k)) for k in range(MAX_ORDER + 1)] for i in range(MAX_ORDER + 1)]
@@ -1095,9 +1097,27 @@ def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from
     per pass over P's row, summed in that order inside one loop, the last pass subtracting:
     fewer passes over the row than one per row of K, the same operations in the same order.
     The cross block goes separately (:func:`_cross_block`), two rows of P at a time.
+
+    Up to :data:`PASS_ROWS` rows of K (the paper's scan: five beams) take one pass over P,
+    two rows of P at a time, subtracting as it sums (:func:`_estimated_one_pass`,
+    :func:`_cross_one_pass`): K and W padded to :data:`PASS_ROWS` rows with zero rows, whose
+    terms are +0 (0·0, or 0·0 + 0·0); a sum that starts at +0 is never −0 (x + y is −0 only
+    when both are), so adding +0 to it changes no bit.
     """
     count, n = kt.shape
     c = min(max(consider_from, 0), n)
+    if 0 < count <= PASS_ROWS:
+        if count < PASS_ROWS:
+            padded_k, padded_w = np.zeros((PASS_ROWS, n)), np.zeros((PASS_ROWS, n))
+            padded_k[:count] = kt
+            padded_w[:count] = wt
+            kt, wt = padded_k, padded_w
+        _estimated_one_pass(cov, kt, wt, c)
+        _cross_one_pass(cov, kt, wt, c)
+        for i in range(min(3, c)):  # the pose block whole (its readers take it as a matrix)
+            for j in range(i):
+                cov[i, j] = cov[j, i]
+        return
     acc = np.zeros(c)  # row i of K Wᵀ + W Kᵀ from the diagonal to column c, over K's rows
     for i in range(c):
         inner = c - i
@@ -1183,6 +1203,67 @@ def _cross_block(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, c: int) -> Non
         row0 = cov[i, c:]
         for j in range(m):
             row0[j] -= a0[j]
+
+
+@njit
+def _estimated_one_pass(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, c: int) -> None:
+    """:func:`joseph_blocks`' estimated block (upper triangle, i ≤ j < c) with
+    :data:`PASS_ROWS` rows of K: P_ij −= Σ_q (K_qi W_qj + W_qi K_qj), the sum over q in order
+    from +0, in one pass that subtracts as it sums. Rows i and i + 1 at a time from column
+    i + 1 (each slice of K's and W's rows is loaded once for both), entry (i, i) alone."""
+    for i in range(0, c, 2):
+        k0, k1, k2, k3, k4 = kt[0, i], kt[1, i], kt[2, i], kt[3, i], kt[4, i]
+        w0, w1, w2, w3, w4 = wt[0, i], wt[1, i], wt[2, i], wt[3, i], wt[4, i]
+        s = 0.0 + (k0 * w0 + w0 * k0)
+        s = s + (k1 * w1 + w1 * k1)
+        s = s + (k2 * w2 + w2 * k2)
+        s = s + (k3 * w3 + w3 * k3)
+        cov[i, i] -= s + (k4 * w4 + w4 * k4)
+        lo = i + 1
+        if lo == c:
+            break
+        l0, l1, l2, l3, l4 = kt[0, lo], kt[1, lo], kt[2, lo], kt[3, lo], kt[4, lo]
+        v0, v1, v2, v3, v4 = wt[0, lo], wt[1, lo], wt[2, lo], wt[3, lo], wt[4, lo]
+        kr0, kr1, kr2, kr3, kr4 = kt[0, lo:c], kt[1, lo:c], kt[2, lo:c], kt[3, lo:c], kt[4, lo:c]
+        wr0, wr1, wr2, wr3, wr4 = wt[0, lo:c], wt[1, lo:c], wt[2, lo:c], wt[3, lo:c], wt[4, lo:c]
+        row0, row1 = cov[i, lo:c], cov[lo, lo:c]
+        for j in range(c - lo):
+            x0, x1, x2, x3, x4 = wr0[j], wr1[j], wr2[j], wr3[j], wr4[j]
+            y0, y1, y2, y3, y4 = kr0[j], kr1[j], kr2[j], kr3[j], kr4[j]
+            s = 0.0 + (k0 * x0 + w0 * y0)
+            s = s + (k1 * x1 + w1 * y1)
+            s = s + (k2 * x2 + w2 * y2)
+            s = s + (k3 * x3 + w3 * y3)
+            row0[j] -= s + (k4 * x4 + w4 * y4)
+            t = 0.0 + (l0 * x0 + v0 * y0)
+            t = t + (l1 * x1 + v1 * y1)
+            t = t + (l2 * x2 + v2 * y2)
+            t = t + (l3 * x3 + v3 * y3)
+            row1[j] -= t + (l4 * x4 + v4 * y4)
+
+
+@njit
+def _cross_one_pass(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, c: int) -> None:
+    """:func:`joseph_blocks`' cross block (i < c ≤ j) with :data:`PASS_ROWS` rows of K:
+    P_ij −= Σ_q K_qi W_qj, the sum over q in order from +0, in one pass that subtracts as it
+    sums. Rows i and i + 1 at a time (each slice of W's rows is loaded once for both); an odd
+    last row with itself as its partner, written once."""
+    n = kt.shape[1]
+    x0s, x1s, x2s, x3s, x4s = wt[0, c:], wt[1, c:], wt[2, c:], wt[3, c:], wt[4, c:]
+    for i in range(0, c, 2):
+        lo = min(i + 1, c - 1)
+        p0, p1, p2, p3, p4 = kt[0, i], kt[1, i], kt[2, i], kt[3, i], kt[4, i]
+        r0, r1, r2, r3, r4 = kt[0, lo], kt[1, lo], kt[2, lo], kt[3, lo], kt[4, lo]
+        row0, row1 = cov[i, c:], cov[lo, c:]
+        if lo == i:
+            for j in range(n - c):
+                x0, x1, x2, x3, x4 = x0s[j], x1s[j], x2s[j], x3s[j], x4s[j]
+                row0[j] -= ((((0.0 + p0 * x0) + p1 * x1) + p2 * x2) + p3 * x3) + p4 * x4
+            break
+        for j in range(n - c):
+            x0, x1, x2, x3, x4 = x0s[j], x1s[j], x2s[j], x3s[j], x4s[j]
+            row0[j] -= ((((0.0 + p0 * x0) + p1 * x1) + p2 * x2) + p3 * x3) + p4 * x4
+            row1[j] -= ((((0.0 + r0 * x0) + r1 * x1) + r2 * x2) + r3 * x3) + r4 * x4
 
 
 @njit

@@ -418,18 +418,19 @@ def test_update_sparse__with_rotation_states__equals_numpy_oracle(
 
 @pytest.mark.parametrize(
     ("n_state", "consider_from", "rows"),
-    [(31, 17, 5), (31, 31, 5), (31, 3, 5), (8, 5, 5), (31, 16, 5), (8, 2, 3)]
-    + [(31, 17, rows) for rows in (1, 2, 3, 4, 6, 8, 9)],
+    [(31, 17, 5), (31, 31, 5), (31, 3, 5), (8, 5, 5), (31, 16, 5), (8, 2, 3), (31, 1, 5)]
+    + [(31, 0, 5), (32, 16, 7), (32, 17, 10), (61, 31, 5), (60, 32, 5), (3, 3, 2)]
+    + [(31, 17, rows) for rows in (1, 2, 3, 4, 6, 8, 9, 10, 11, 12, 13)],
 )
 def test_joseph_blocks__bit_identical_to_the_full_update(
     n_state: int, consider_from: int, rows: int
 ) -> None:
     """Leaving the considered block out and the cross block's zero products out changes no
-    bit: K's considered rows are exact zeros; nor does summing K's rows four and two per pass
-    (1 to 9 rows: every mix of the passes), nor the cross block's two rows of P at a time
-    (an even and an odd number of estimated rows). The lower triangle (but the pose block) is
-    neither read nor written (nan there stays nan and reaches nothing) until
-    :func:`kernels.mirror_lower`."""
+    bit: K's considered rows are exact zeros; nor does one pass for up to five rows of K,
+    padded with zero rows, nor summing more rows four and two per pass (1 to 13 rows), nor
+    two rows of P at a time (an even and an odd number of estimated rows, none or all of them
+    considered). The lower triangle (but the pose block) is neither read nor written (nan
+    there stays nan and reaches nothing) until :func:`kernels.mirror_lower`."""
     rng = np.random.default_rng(n_state + consider_from + rows)
     cov = random_spd(rng, n_state, 0.01)
     if consider_from < n_state:  # a signed zero in the considered block keeps its sign
