@@ -32,7 +32,7 @@ import numpy as np
 from polyslam_env.comms.kernels import (
     chain_tangents,
     frame_chain,
-    gauss_newton_terms,
+    gauss_newton,
     reach_boxes,
 )
 from polyslam_env.core.geometry import rotation
@@ -181,23 +181,17 @@ def _refine_from(
     point_var = sigma * sigma + var_c[chain_of]  # (N,) before the wall's share
     tangents_q = chain_tangents(q, starts)  # (N, 2) sender frame
     reach = wall_reach(walls, var_w, cov_t, point_var, q)
-    t = np.array(start, dtype=float)
-    info = info_prior
-    for _ in range(iterations):
-        # the pairing (``match_walls`` on the chains ``near_chains`` gives) and each
-        # point's weight, so that each (chain, wall) pair counts once: one compiled call
-        residual, grad, weighted, weight, n_pairs = gauss_newton_terms(
-            q, tangents_q, starts, chain_of, t, rotation(float(t[2])), reach, walls.variate,
-            walls.coeffs, walls.extent, cov_t, point_var, var_w, GATE_SIGMAS, _SIN_MAX,
-        )  # fmt: skip
-        if not len(residual):
-            return None
-        info = info_prior + weighted.T @ grad
-        rhs = -weighted.T @ residual - info_prior @ (t - t0)
-        step = np.linalg.solve(info, rhs)
-        t = t + step
-        if all(abs(s) < 1e-9 for s in step.tolist()):  # np.max(np.abs(step)) < 1e-9
-            break
+    # the iterations, each pairing (``match_walls`` on the chains ``near_chains`` gives) and
+    # weighing the points so that each (chain, wall) pair counts once: one compiled call
+    t, info, residual, weight, n_pairs, regular = gauss_newton(
+        q, tangents_q, starts, chain_of, np.asarray(start, dtype=float), t0, info_prior, reach,
+        walls.variate, walls.coeffs, walls.extent, cov_t, point_var, var_w, GATE_SIGMAS,
+        _SIN_MAX, iterations,
+    )  # fmt: skip
+    if not regular:
+        raise np.linalg.LinAlgError("Singular matrix")  # as np.linalg.solve
+    if not len(residual):
+        return None
     d = t - t0
     if float(d @ info_prior @ d) > CHI2_3DOF_99:
         return None

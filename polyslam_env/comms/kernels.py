@@ -3,9 +3,12 @@
 :func:`match_walls` is the point-to-wall pairing of the transform refinement, point by point
 in the numpy version's operations (``tests/comms/test_alignment.py`` holds that version as the
 oracle and checks the two bit for bit); :func:`gauss_newton_terms` is one whole iteration of
-the refinement up to its matrix products and solve (which stay numpy's: BLAS and LAPACK), on
-:func:`near_chains` (the chains within each wall's reach) and :func:`match_walls` (its numpy
-form is the oracle in the same tests); :func:`reach_boxes` and :func:`normal_variances` are
+the refinement up to its matrix products and solve, on :func:`near_chains` (the chains within
+each wall's reach) and :func:`match_walls` (its numpy form is the oracle in the same tests);
+:func:`gauss_newton` is all the iterations, with the products and the 3 × 3 solve in the
+operations of the OpenBLAS kernels numpy called (:func:`transposed_product`,
+:func:`transposed_times`, :func:`times3`, :func:`solve3`; checked against numpy's in the same
+tests); :func:`reach_boxes` and :func:`normal_variances` are
 the refinement's per-wall bounds and weights, in the operations of ``Polynomial.max_slope``,
 ``map_kernels.eta_range`` and ``exchange.normal_variance`` (oracles in the same tests).
 :func:`unit_tangents`, :func:`frame_chain`, :func:`received_geometry` and
@@ -203,6 +206,177 @@ def gauss_newton_terms(
                 weighted[k, j] = grad[k, j] * weight[k]
             k += 1
     return residual, grad, weighted, weight, n_pairs
+
+
+@njit
+def gauss_newton(
+    q: np.ndarray,  # (N, 2) the received chains' points, sender frame, one after another
+    tangents_q: np.ndarray,  # (N, 2) their unit tangents (:func:`chain_tangents`)
+    starts: np.ndarray,  # (K+1,) int64: chain k is rows starts[k]:starts[k+1]
+    chain_of: np.ndarray,  # (N,) int64: each point's chain
+    start: np.ndarray,  # (3,) the transform the iteration starts from
+    t0: np.ndarray,  # (3,) the prior's mean
+    info_prior: np.ndarray,  # (3, 3) the prior's information Σ_T⁻¹
+    reach: np.ndarray,  # (W, 4) the walls' reach boxes (:func:`reach_boxes`)
+    variate: np.ndarray,  # (W,) int64, 1 or 2
+    coeffs: np.ndarray,  # (W, M+1) zero-padded, current c0 first
+    extent: np.ndarray,  # (W, 2) lo, hi
+    cov_t: np.ndarray,  # (3, 3) the prior's covariance Σ_T
+    point_var: np.ndarray,  # (N,)
+    wall_var: np.ndarray,  # (W,)
+    gate: float,  # GATE_SIGMAS
+    sin_max: float,  # √(1 − cos²(MAX_ANGLE))
+    iterations: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, bool]:
+    """``alignment._refine_from``'s Gauss–Newton iterations from ``start``: each
+    :func:`gauss_newton_terms`, then info = Σ_T⁻¹ + (wg)ᵀ g, rhs = (−wg)ᵀ r − Σ_T⁻¹ (t − t0)
+    and t += info⁻¹ rhs, stopping once every |step| < 1e-9, in the floats numpy computed them
+    with (OpenBLAS's gemm, gemv and gesv: :func:`transposed_product`,
+    :func:`transposed_times`, :func:`times3`, :func:`solve3`; R(θ) from libm's cos and sin, as
+    numpy's). Returns t, the last info, the last iteration's residuals and weights, its
+    number of pairs, and False when that matrix was singular (numpy's solve raised); no
+    residuals: an iteration paired nothing."""
+    t = start.copy()
+    info = info_prior.copy()
+    residual, weight = np.empty(0), np.empty(0)
+    n_pairs = 0
+    d = np.empty(3)
+    rot = np.empty((2, 2))
+    for _ in range(iterations):
+        c, s = math.cos(t[2]), math.sin(t[2])
+        rot[0, 0], rot[0, 1], rot[1, 0], rot[1, 1] = c, -s, s, c
+        residual, grad, weighted, weight, n_pairs = gauss_newton_terms(
+            q, tangents_q, starts, chain_of, t, rot, reach, variate, coeffs, extent, cov_t,
+            point_var, wall_var, gate, sin_max,
+        )  # fmt: skip
+        if residual.size == 0:
+            break
+        info = info_prior + transposed_product(weighted, grad)
+        for j in range(3):
+            d[j] = t[j] - t0[j]
+        rhs = transposed_times(-weighted, residual) - times3(info_prior, d)
+        step, regular = solve3(info, rhs)
+        if not regular:
+            return t, info, residual, weight, n_pairs, False
+        t = t + step
+        if abs(step[0]) < 1e-9 and abs(step[1]) < 1e-9 and abs(step[2]) < 1e-9:
+            break
+    return t, info, residual, weight, n_pairs, True
+
+
+@njit
+def transposed_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a.T @ b`` (3, 3) of ``a`` and ``b`` (M, 3) as numpy's matmul computes it through
+    OpenBLAS's gemm (Haswell kernels): per output a chain of fused multiply-adds along M from
+    0, M split as the gemm driver splits it (blocks of 256; a rest between 256 and 512 in two
+    halves rounded up to 4), the blocks' sums added in order."""
+    out = np.empty((3, 3))
+    m = a.shape[0]
+    for i in range(3):
+        for j in range(3):
+            total = 0.0
+            first = 0
+            while first < m:
+                size = m - first
+                if size >= 512:
+                    size = 256
+                elif size > 256:
+                    size = ((size // 2 + 3) // 4) * 4
+                acc = 0.0
+                for k in range(first, first + size):
+                    acc = fma(a[k, i], b[k, j], acc)
+                total = acc if first == 0 else total + acc
+                first += size
+            out[i, j] = total
+    return out
+
+
+@njit
+def transposed_times(a: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``a.T @ v`` (3,) of ``a`` (M, 3) and ``v`` (M,) as numpy's matmul computes it through
+    OpenBLAS's gemv (a 3-row matrix: per output the products rounded, added two by two onto
+    a running sum from 0 over each four, the rest one by one)."""
+    out = np.empty(3)
+    m = v.size
+    for i in range(3):
+        acc = 0.0
+        k = 0
+        while k < m - m % 4:
+            acc = acc + (a[k, i] * v[k] + a[k + 1, i] * v[k + 1])
+            acc = acc + (a[k + 2, i] * v[k + 2] + a[k + 3, i] * v[k + 3])
+            k += 4
+        while k < m:
+            acc = acc + a[k, i] * v[k]
+            k += 1
+        out[i] = 0.0 + acc
+    return out
+
+
+@njit
+def times3(m: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``m @ v`` (3,) of ``m`` (3, 3) and ``v`` (3,) as numpy's matmul computes it through
+    OpenBLAS's gemv: per output the second product rounded, the first and then the third
+    fused onto it (found by testing every order and fusion)."""
+    out = np.empty(3)
+    for j in range(3):
+        out[j] = 0.0 + fma(m[j, 2], v[2], fma(m[j, 0], v[0], m[j, 1] * v[1]))
+    return out
+
+
+@njit
+def solve3(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
+    """``np.linalg.solve(a, b)`` of ``a`` (3, 3) and ``b`` (3,) in the operations of
+    OpenBLAS's gesv: LU with partial pivoting column by column (getf2: the earlier pivots and
+    unit-lower columns applied to column j as dot products, the largest |entry| from j down as
+    the pivot, the first of ties, the column below it times the pivot's reciprocal), then
+    the row swaps, the unit-lower and the upper triangular solves (trsv: column by column,
+    the diagonal divided). False (and no answer) when a pivot is zero: numpy raises."""
+    lu = a.copy()
+    x = b.copy()
+    pivots = np.empty(3, dtype=np.int64)
+    for j in range(3):
+        for i in range(j):
+            p = pivots[i]
+            if p != i:
+                lu[i, j], lu[p, j] = lu[p, j], lu[i, j]
+        for i in range(1, j):
+            dot = 0.0
+            for k in range(i):
+                dot = dot + lu[i, k] * lu[k, j]
+            lu[i, j] -= dot
+        if j > 0:
+            for i in range(j, 3):
+                dot = 0.0
+                for k in range(j):
+                    dot = dot + lu[i, k] * lu[k, j]
+                lu[i, j] = lu[i, j] + (-1.0) * dot
+        p = j
+        largest = abs(lu[j, j])
+        for i in range(j + 1, 3):
+            if abs(lu[i, j]) > largest:
+                largest, p = abs(lu[i, j]), i
+        pivots[j] = p
+        pivot = lu[p, j]
+        if pivot == 0.0:
+            return x, False
+        if p != j:
+            for k in range(j + 1):
+                lu[j, k], lu[p, k] = lu[p, k], lu[j, k]
+        reciprocal = 1.0 / pivot
+        for i in range(j + 1, 3):
+            lu[i, j] *= reciprocal
+    for i in range(3):
+        p = pivots[i]
+        if p != i:
+            x[i], x[p] = x[p], x[i]
+    for i in range(3):
+        for k in range(i + 1, 3):
+            x[k] = x[k] + (-x[i]) * lu[k, i]
+    for i in range(2, -1, -1):
+        x[i] /= lu[i, i]
+        for k in range(i):
+            x[k] = x[k] + (-x[i]) * lu[k, i]
+    return x, True
 
 
 @njit
