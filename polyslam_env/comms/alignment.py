@@ -256,13 +256,12 @@ def wall_reach(
     (:func:`~polyslam_env.comms.kernels.reach_boxes`); slopes of orders ≥ 4 (a root finder) from
     ``Polynomial.max_slope``."""
     walls = pack_walls(walls)
-    worst = float(np.trace(cov_t)) * (1.0 + float(np.max(np.sum(q * q, axis=1), initial=0.0)))
-    worst += float(np.max(point_var, initial=0.0))
     slopes = np.full(len(walls.order), -1.0)
     for w in np.flatnonzero(walls.order > 3).tolist():
         c = walls.coeffs[w, : walls.order[w] + 1]
         slopes[w] = Polynomial.unchecked(1, c, *walls.extent[w].tolist()).max_slope()
     return reach_boxes(
         walls.order, walls.variate, walls.coeffs, walls.extent, slopes,
-        np.asarray(wall_var, dtype=float), worst, GATE_SIGMAS,
+        np.asarray(wall_var, dtype=float), np.asarray(cov_t, dtype=float),
+        np.asarray(q, dtype=float), np.asarray(point_var, dtype=float), GATE_SIGMAS,
     )  # fmt: skip

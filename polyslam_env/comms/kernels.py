@@ -86,6 +86,8 @@ def match_walls(
                 norm = math.sqrt(1.0 + slope * slope)
                 a, b = -slope / norm, 1.0 / norm
                 n0, n1 = (a, b) if variate[w] == 1 else (b, a)
+                if not abs(n0 * tangents[i, 0] + n1 * tangents[i, 1]) <= sin_max:
+                    continue  # not the same direction (tested first: nothing below is needed)
                 r = (eta - _horner(c, xi)) / math.sqrt(1.0 + slope * slope)
                 for j in range(3):
                     g[j] = n0 * dp_dt[i, 0, j] + n1 * dp_dt[i, 1, j]
@@ -94,8 +96,6 @@ def match_walls(
                     for v in range(3):
                         quad += g[u] * cov_t[u, v] * g[v]
                 pred = math.sqrt(quad + point_var[i] + wall_var[w])
-                if not abs(n0 * tangents[i, 0] + n1 * tangents[i, 1]) <= sin_max:
-                    continue
                 score = abs(r) / pred
                 if score <= gate and score < best[i]:
                     best[i], residual[i], wall_of[i] = score, r, w
@@ -410,10 +410,25 @@ def reach_boxes(
     extent: np.ndarray,  # (W, 2) lo, hi
     slopes: np.ndarray,  # (W,) max |B'| where known (orders ≥ 4), −1: computed here
     wall_var: np.ndarray,  # (W,)
-    worst: float,  # the bound of gᵀΣ_T g + point_var (alignment.wall_reach)
+    cov_t: np.ndarray,  # (3, 3) Σ_T
+    q: np.ndarray,  # (N, 2) the received points, sender frame
+    point_var: np.ndarray,  # (N,)
     gate: float,  # GATE_SIGMAS
 ) -> np.ndarray:
-    """``alignment.wall_reach``'s boxes (W, 4), wall by wall in its operations."""
+    """``alignment.wall_reach``'s boxes (W, 4), wall by wall in its operations, after its
+    bound of gᵀΣ_T g + point_var: tr(Σ_T)(1 + max |q|²) + max point_var (numpy's floats:
+    the trace summed in order, each |q|² as its two squares added, the maxima from 0 and NaN
+    if any is)."""
+    largest_q = 0.0
+    for i in range(q.shape[0]):
+        value = q[i, 0] * q[i, 0] + q[i, 1] * q[i, 1]
+        if value > largest_q or value != value:
+            largest_q = value
+    largest_var = 0.0
+    for i in range(point_var.size):
+        if point_var[i] > largest_var or point_var[i] != point_var[i]:
+            largest_var = point_var[i]
+    worst = (cov_t[0, 0] + cov_t[1, 1] + cov_t[2, 2]) * (1.0 + largest_q) + largest_var
     out = np.empty((coeffs.shape[0], 4))
     for w in range(coeffs.shape[0]):
         c = coeffs[w, : order[w] + 1]
