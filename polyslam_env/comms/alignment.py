@@ -33,6 +33,8 @@ from polyslam_env.comms.kernels import (
     chain_tangents,
     frame_chain,
     gauss_newton,
+    inverse3,
+    prior_information,
     reach_boxes,
 )
 from polyslam_env.core.geometry import rotation
@@ -162,11 +164,9 @@ def _refine_from(
     """:func:`refine_transform`'s Gauss–Newton from ``start`` with the prior N(t0, cov_t):
     the solution and its posterior covariance, or None when nothing matches, Σ_T is
     singular, or the correction fails the χ²₃ 99 % test."""
-    try:
-        info_prior = np.linalg.inv(np.linalg.cholesky(cov_t))  # L⁻¹, Σ⁻¹ = L⁻ᵀ L⁻¹
-    except np.linalg.LinAlgError:
+    info_prior, definite = prior_information(cov_t)  # (3, 3) Σ⁻¹ = L⁻ᵀ L⁻¹
+    if not definite:
         return None
-    info_prior = info_prior.T @ info_prior  # (3, 3)
     n_walls = len(walls.order)
     if not n_walls or not chains:
         return None
@@ -195,7 +195,9 @@ def _refine_from(
     d = t - t0
     if float(d @ info_prior @ d) > CHI2_3DOF_99:
         return None
-    posterior = np.linalg.inv(info)
+    posterior, regular = inverse3(info)
+    if not regular:
+        raise np.linalg.LinAlgError("Singular matrix")  # as np.linalg.inv
     # a-posteriori variance factor: the pairs' normalised residuals at the solution (each
     # pair one observation) against their count; residuals larger than their variances
     # say (map errors the variances miss, errors shared by many walls) scale it up, never

@@ -326,13 +326,61 @@ def times3(m: np.ndarray, v: np.ndarray) -> np.ndarray:
 @njit
 def solve3(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
     """``np.linalg.solve(a, b)`` of ``a`` (3, 3) and ``b`` (3,) in the operations of
-    OpenBLAS's gesv: LU with partial pivoting column by column (getf2: the earlier pivots and
-    unit-lower columns applied to column j as dot products, the largest |entry| from j down as
-    the pivot, the first of ties, the column below it times the pivot's reciprocal), then
-    the row swaps, the unit-lower and the upper triangular solves (trsv: column by column,
-    the diagonal divided). False (and no answer) when a pivot is zero: numpy raises."""
-    lu = a.copy()
+    OpenBLAS's gesv: :func:`_lu3`, then the row swaps, the unit-lower and the upper
+    triangular solves (trsv: column by column, the diagonal divided). False (and no answer)
+    when a pivot is zero: numpy raises."""
+    lu, pivots, regular = _lu3(a)
     x = b.copy()
+    if not regular:
+        return x, False
+    for i in range(3):
+        p = pivots[i]
+        if p != i:
+            x[i], x[p] = x[p], x[i]
+    for i in range(3):
+        for k in range(i + 1, 3):
+            x[k] = x[k] + (-x[i]) * lu[k, i]
+    for i in range(2, -1, -1):
+        x[i] /= lu[i, i]
+        for k in range(i):
+            x[k] = x[k] + (-x[i]) * lu[k, i]
+    return x, True
+
+
+@njit
+def inverse3(a: np.ndarray) -> tuple[np.ndarray, bool]:
+    """``np.linalg.inv(a)`` of ``a`` (3, 3) in the operations of OpenBLAS's gesv on the
+    identity: :func:`_lu3`, the row swaps, then column by column the unit-lower solve (trsm:
+    fused multiply-adds) and the upper one (the diagonal's reciprocal multiplied). False
+    (and no answer) when a pivot is zero: numpy raises."""
+    lu, pivots, regular = _lu3(a)
+    x = np.eye(3)
+    if not regular:
+        return x, False
+    for i in range(3):
+        p = pivots[i]
+        if p != i:
+            for c in range(3):
+                x[i, c], x[p, c] = x[p, c], x[i, c]
+    for c in range(3):
+        for i in range(3):
+            for k in range(i + 1, 3):
+                x[k, c] = fma(-x[i, c], lu[k, i], x[k, c])
+        for i in range(2, -1, -1):
+            x[i, c] = x[i, c] * (1.0 / lu[i, i])
+            for k in range(i):
+                x[k, c] = x[k, c] + (-x[i, c]) * lu[k, i]
+    return x, True
+
+
+@njit
+def _lu3(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """OpenBLAS's getf2 on ``a`` (3, 3): LU with partial pivoting column by column (the
+    earlier pivots and unit-lower columns applied to column j as dot products, the largest
+    |entry| from j down as the pivot, the first of ties, the column below it times the
+    pivot's reciprocal). The factors (unit lower below the diagonal), the pivot rows, and
+    False when a pivot is zero."""
+    lu = a.copy()
     pivots = np.empty(3, dtype=np.int64)
     for j in range(3):
         for i in range(j):
@@ -358,25 +406,46 @@ def solve3(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
         pivots[j] = p
         pivot = lu[p, j]
         if pivot == 0.0:
-            return x, False
+            return lu, pivots, False
         if p != j:
             for k in range(j + 1):
                 lu[j, k], lu[p, k] = lu[p, k], lu[j, k]
         reciprocal = 1.0 / pivot
         for i in range(j + 1, 3):
             lu[i, j] *= reciprocal
-    for i in range(3):
-        p = pivots[i]
-        if p != i:
-            x[i], x[p] = x[p], x[i]
-    for i in range(3):
-        for k in range(i + 1, 3):
-            x[k] = x[k] + (-x[i]) * lu[k, i]
-    for i in range(2, -1, -1):
-        x[i] /= lu[i, i]
-        for k in range(i):
-            x[k] = x[k] + (-x[i]) * lu[k, i]
-    return x, True
+    return lu, pivots, True
+
+
+@njit
+def prior_information(cov: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Σ⁻¹ (3, 3) of ``cov`` (3, 3) as ``alignment._refine_from`` had numpy compute it:
+    L⁻ᵀ L⁻¹ with L its Cholesky factor (OpenBLAS's potf2: per column the squares of the row
+    so far summed, the root, the column below it less its rows' products and times the
+    root's reciprocal), L⁻¹ by :func:`inverse3`, the product by :func:`transposed_product`.
+    False when Σ is not positive definite (numpy raises)."""
+    lower = np.zeros((3, 3))
+    for j in range(3):
+        dot = 0.0
+        for k in range(j):
+            dot = dot + lower[j, k] * lower[j, k]
+        diagonal = cov[j, j] - dot
+        if diagonal <= 0.0:
+            return lower, False
+        diagonal = math.sqrt(diagonal)
+        lower[j, j] = diagonal
+        reciprocal = 1.0 / diagonal
+        for i in range(j + 1, 3):
+            below = cov[i, j]
+            if j > 0:
+                dot = 0.0
+                for k in range(j):
+                    dot = dot + lower[i, k] * lower[j, k]
+                below = below + (-1.0) * dot
+            lower[i, j] = below * reciprocal
+    lower_inv, regular = inverse3(lower)
+    if not regular:
+        return lower, False
+    return transposed_product(lower_inv, lower_inv), True
 
 
 @njit

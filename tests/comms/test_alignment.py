@@ -653,12 +653,20 @@ def _near_chains(reach: np.ndarray, p: np.ndarray, starts: np.ndarray) -> np.nda
 
 
 def test_refinement_products__compiled_are_numpy_bit_for_bit() -> None:
-    """The refinement's products and solve, compiled in ``comms.kernels.gauss_newton`` in the
-    operations of OpenBLAS's kernels, equal numpy's (``a.T @ b`` across the gemm driver's
-    splits of M at 256 and 512, ``a.T @ v``, a 3 × 3 times a vector, ``np.linalg.solve``)
-    bit for bit on random operands of many scales; a singular matrix is flagged, as numpy
-    raises."""
-    from polyslam_env.comms.kernels import solve3, times3, transposed_product, transposed_times
+    """The refinement's products, solve and inverses, compiled (``comms.kernels.gauss_newton``,
+    ``prior_information``, ``inverse3``) in the operations of OpenBLAS's kernels, equal
+    numpy's (``a.T @ b`` across the gemm driver's splits of M at 256 and 512, ``a.T @ v``, a
+    3 × 3 times a vector, ``np.linalg.solve``, ``np.linalg.inv``, L⁻ᵀ L⁻¹ of
+    ``np.linalg.cholesky``) bit for bit on random operands of many scales; a singular or
+    indefinite matrix is flagged, as numpy raises."""
+    from polyslam_env.comms.kernels import (
+        inverse3,
+        prior_information,
+        solve3,
+        times3,
+        transposed_product,
+        transposed_times,
+    )
 
     rng = np.random.default_rng(5)
     sizes = [*range(1, 40), 100, 255, 256, 257, 258, 263, 300, 511, 512, 513, 514, 600, 1025]
@@ -676,6 +684,14 @@ def test_refinement_products__compiled_are_numpy_bit_for_bit() -> None:
         assert times3(m, v).tobytes() == (m @ v).tobytes()
         x, regular = solve3(m, v)
         assert regular and x.tobytes() == np.linalg.solve(m, v).tobytes()
-    assert not solve3(np.ones((3, 3)), np.ones(3))[1]
+        inv, regular = inverse3(m)
+        assert regular and inv.tobytes() == np.linalg.inv(m).tobytes()
+        root = rng.normal(size=(3, 3)) * 10.0 ** rng.uniform(-3, 1, size=(3, 1))
+        cov = root @ root.T + np.diag(rng.uniform(0.0, 1e-2, 3))  # a covariance
+        lower_inv = np.linalg.inv(np.linalg.cholesky(cov))
+        info, definite = prior_information(cov)
+        assert definite and info.tobytes() == (lower_inv.T @ lower_inv).tobytes()
+    assert not solve3(np.ones((3, 3)), np.ones(3))[1] and not inverse3(np.ones((3, 3)))[1]
+    assert not prior_information(np.diag([1.0, -1.0, 1.0]))[1]
     with pytest.raises(np.linalg.LinAlgError):
         np.linalg.solve(np.ones((3, 3)), np.ones(3))
