@@ -130,6 +130,7 @@ from polyslam_env.comms.free_space import FreeCells, FreeSpace
 from polyslam_env.comms.kernels import (
     kept_runs,
     largest_residual,
+    longest_straight,
     normal_variances,
     point_jacobians,
     received_cover,
@@ -1275,15 +1276,13 @@ class RendezvousExchange:
         if cfg.square_evidence and not slam.walls.rectilinear():
             return False
         table = slam.table
-        # is_straight_wall from the table's columns: no coefficient past the slope, long enough
-        length = table.hi - table.lo
-        held = ~np.any(table.shape[:, 2:], axis=1) & (length >= SQUARE_MIN_LENGTH)
+        # is_straight_wall from the table's columns: the longest (the first of ties), or none
+        k = longest_straight(table.shape, table.lo, table.hi, SQUARE_MIN_LENGTH)
         sent = straight_walls([rec.polynomial for rec in records])
-        if not held.any() or not sent:
+        if k < 0 or not sent:
             return False
-        k = int(np.argmax(np.where(held, length, -np.inf)))  # the longest (the first of ties)
-        longest = table.poly(k).with_c0(float(slam.c0s[k]))
-        square = square_turn(sent, straight_walls([longest]), float(t[2]))
+        # its direction and length (its c0 changes neither)
+        square = square_turn(sent, straight_walls([table.poly(k)]), float(t[2]))
         assert square is not None
         turn_var = slam.turn_variance(slam.table.ids[k])
         sigma = math.sqrt(float(cov_refined[2, 2]) + 2.0 * turn_var)

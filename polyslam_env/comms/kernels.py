@@ -533,6 +533,28 @@ def normal_variances(
 
 
 @njit
+def longest_straight(shape: np.ndarray, lo: np.ndarray, hi: np.ndarray, min_length: float) -> int:
+    """The row of the longest straight landmark of a table's columns ``shape`` (n, M+1), ``lo``
+    and ``hi`` (n,): no coefficient past the slope nonzero (NaN counts, as numpy's ``any``)
+    and at least ``min_length`` long; the first of ties, −1 for none
+    (``exchange.RendezvousExchange._off_square``'s reference wall, numpy's argmax over those
+    lengths in one pass)."""
+    best, best_length = -1, 0.0
+    for k in range(lo.size):
+        length = hi[k] - lo[k]
+        if not length >= min_length:
+            continue
+        straight = True
+        for j in range(2, shape.shape[1]):
+            if shape[k, j] != 0.0:
+                straight = False
+                break
+        if straight and (best < 0 or length > best_length):
+            best, best_length = k, length
+    return best
+
+
+@njit
 def kept_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> np.ndarray:
     """(K, 2) [first, end) rows of the maximal runs of ``keep`` (N,) bool along a chain
     ``xy`` (N, 2) whose length (the sum of the run's own steps ‖p_{i+1} − p_i‖, in numpy's

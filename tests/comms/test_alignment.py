@@ -695,3 +695,28 @@ def test_refinement_products__compiled_are_numpy_bit_for_bit() -> None:
     assert not prior_information(np.diag([1.0, -1.0, 1.0]))[1]
     with pytest.raises(np.linalg.LinAlgError):
         np.linalg.solve(np.ones((3, 3)), np.ones(3))
+
+
+def test_longest_straight__is_the_numpy_choice_of_the_reference_wall() -> None:
+    """``kernels.longest_straight`` (``RendezvousExchange._off_square``'s reference wall)
+    picks what the numpy form it replaced picks: the first of the longest rows with no
+    coefficient past the slope (NaN counts, −0.0 does not) at least ``SQUARE_MIN_LENGTH``
+    long, −1 for none; over random tables with ties, curved and short rows, and lines only."""
+    from polyslam_env.comms.kernels import longest_straight
+    from polyslam_env.slam.links import SQUARE_MIN_LENGTH
+
+    rng = np.random.default_rng(9)
+    found = 0
+    for _ in range(2000):
+        n, width = int(rng.integers(0, 12)), int(rng.integers(2, 6))
+        shape = np.zeros((n, width))
+        curved = rng.uniform(size=(n, width - 2)) < 0.3
+        shape[:, 2:] = np.where(curved, rng.choice([0.1, np.nan, -0.0], size=curved.shape), 0.0)
+        lo = rng.uniform(-3, 0, n)
+        hi = lo + rng.choice([0.2, 1.0, 1.5, 2.5, SQUARE_MIN_LENGTH], n)
+        length = hi - lo
+        held = ~np.any(shape[:, 2:], axis=1) & (length >= SQUARE_MIN_LENGTH)
+        want = int(np.argmax(np.where(held, length, -np.inf))) if held.any() else -1
+        assert longest_straight(shape, lo, hi, SQUARE_MIN_LENGTH) == want
+        found += want >= 0
+    assert 500 < found < 1900
