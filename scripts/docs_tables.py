@@ -173,6 +173,8 @@ def render_speed(data: Sequence[Any]) -> tuple[str, str]:
     for r in results["targets"]:
         value = "—" if r["measured"] is None else f"{r['measured']:.3g}"
         goal = ("≤ " if r["at_most"] else "≥ ") + f"{r['goal']:g}"
+        if r["met"] is False and value == f"{r['goal']:.3g}":  # a miss rounding onto the goal
+            value = f"{r['measured']:.4g}"
         met = "not measured" if r["met"] is None else "yes" if r["met"] else "no"
         lines.append(f"| {r['target']} | {value} | {goal} | {met} |")
     m = results["machine"]

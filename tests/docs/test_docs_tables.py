@@ -81,6 +81,8 @@ def test_render_speed__targets_and_machine() -> None:
             {"target": "SLAM step, 30 landmarks", "measured": 118.0, "goal": 60, "at_most": True,
              "met": False},
             {"target": "team", "measured": None, "goal": 10, "at_most": True, "met": None},
+            {"target": "20 / 3", "measured": 10.0172, "goal": 10, "at_most": True, "met": False},
+            {"target": "3 / 1", "measured": 9.9981, "goal": 10, "at_most": True, "met": True},
         ],
         "machine": {"blas": "openblas ×2", "numpy": "2", "pymunk": "7", "python": "3.11",
                     "load_before": 1.0, "load_after": 2.0},
@@ -88,7 +90,9 @@ def test_render_speed__targets_and_machine() -> None:
     text, headline = tables.render_speed([results])
     assert "| full-SLAM env / MPE | 0.17 | ≥ 0.5 | no |" in text
     assert "| team | — | ≤ 10 | not measured |" in text
-    assert headline == "0 of 2 speed targets met; full-SLAM env at 0.17× PettingZoo MPE's steps/s"
+    assert "| 20 / 3 | 10.02 | ≤ 10 | no |" in text  # a miss does not round onto its goal
+    assert "| 3 / 1 | 10 | ≤ 10 | yes |" in text
+    assert headline == "1 of 4 speed targets met; full-SLAM env at 0.17× PettingZoo MPE's steps/s"
 
 
 def test_write__page_section_and_readme_headline(tmp_path: Path) -> None:
