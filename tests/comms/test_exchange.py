@@ -951,6 +951,27 @@ def _covered_oracle(
     return out
 
 
+def _chain_near_walls(
+    rng: np.random.Generator, max_walls: int, min_points: int, noises: tuple[float, float]
+) -> tuple[list[Polynomial], np.ndarray, np.ndarray, np.ndarray]:
+    """1 … ``max_walls`` random walls, a chain of points along the first (past its ends, η noise
+    one of ``noises``), the chain's unit normals, and the walls' coefficients zero-padded
+    (rows): the random cases of the received-chain coverage tests."""
+    walls = [_random_record(rng).polynomial.with_c0(float(rng.uniform(-1, 1)))
+             for _ in range(int(rng.integers(1, max_walls + 1)))]  # fmt: skip
+    base = walls[0]
+    xi = np.linspace(base.lo - 0.3, base.hi + 0.3, int(rng.integers(min_points, 80)))
+    eta = base.value(xi) + rng.normal(0.0, rng.choice(noises), xi.size)
+    xy = base.to_xy(xi, eta)
+    d = np.gradient(xy, axis=0) if len(xy) > 1 else np.array([[1.0, 0.0]])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    normals = np.stack([-d[:, 1], d[:, 0]], axis=1)
+    coeffs = np.zeros((len(walls), max(w.order for w in walls) + 1))
+    for k, w in enumerate(walls):
+        coeffs[k, : w.order + 1] = w.coeffs
+    return walls, xy, normals, coeffs
+
+
 def test_covered_by_walls__matches_the_numpy_oracle() -> None:
     """The compiled coverage of a received chain by held walls is numpy's, point for point,
     on random chains near random walls (some covered, some crossing, some too uncertain)."""
@@ -958,20 +979,8 @@ def test_covered_by_walls__matches_the_numpy_oracle() -> None:
     cos_max = float(np.cos(np.radians(30.0)))
     hits = 0
     for _ in range(200):
-        walls = [_random_record(rng).polynomial.with_c0(float(rng.uniform(-1, 1)))
-                 for _ in range(int(rng.integers(1, 4)))]  # fmt: skip
-        base = walls[0]
-        xi = np.linspace(base.lo - 0.3, base.hi + 0.3, int(rng.integers(2, 80)))
-        eta = base.value(xi) + rng.normal(0.0, rng.choice([0.01, 0.2]), xi.size)
-        xy = base.to_xy(xi, eta)
-        d = np.gradient(xy, axis=0)
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        normals = np.stack([-d[:, 1], d[:, 0]], axis=1)
+        walls, xy, normals, coeffs = _chain_near_walls(rng, 3, 2, (0.01, 0.2))
         c0_var = rng.uniform(0.0, 1e-3, len(walls))
-        width = max(w.order for w in walls) + 1
-        coeffs = np.zeros((len(walls), width))
-        for k, w in enumerate(walls):
-            coeffs[k, : w.order + 1] = w.coeffs
         args = (0.35, cos_max, float(rng.choice([0.0, 0.1, 0.5])))
         max_var = float(rng.uniform(0.0, 1e-3))
         cov = np.zeros((3 + len(walls), 3 + len(walls)))
@@ -1025,20 +1034,8 @@ def test_received_cover__is_the_exchange_calls_it_replaced() -> None:
     cos_max = float(np.cos(np.radians(30.0)))
     outcomes: set[tuple[bool, bool]] = set()
     for _ in range(300):
-        walls = [_random_record(rng).polynomial.with_c0(float(rng.uniform(-1, 1)))
-                 for _ in range(int(rng.integers(1, 5)))]  # fmt: skip
-        base = walls[0]
-        xi = np.linspace(base.lo - 0.3, base.hi + 0.3, int(rng.integers(1, 80)))
-        eta = base.value(xi) + rng.normal(0.0, rng.choice([0.005, 0.2]), xi.size)
-        xy = base.to_xy(xi, eta)
-        d = np.gradient(xy, axis=0) if len(xy) > 1 else np.array([[1.0, 0.0]])
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        normals = np.stack([-d[:, 1], d[:, 0]], axis=1)
+        walls, xy, normals, coeffs = _chain_near_walls(rng, 4, 1, (0.005, 0.2))
         sigma = rng.uniform(0.0, 0.02, len(xy)) * rng.choice([0.5, 1.0, 3.0])
-        width = max(w.order for w in walls) + 1
-        coeffs = np.zeros((len(walls), width))
-        for k, w in enumerate(walls):
-            coeffs[k, : w.order + 1] = w.coeffs
         columns = (
             np.array([w.variate for w in walls]), coeffs, coeffs[:, 0].copy(),
             np.array([w.lo for w in walls]), np.array([w.hi for w in walls]),
