@@ -533,6 +533,16 @@ def normal_variances(
 
 
 @njit
+def _no_curvature(coeffs: np.ndarray) -> bool:
+    """Whether no coefficient past the slope of ``coeffs`` [c0, b_1, …] is nonzero (a NaN
+    is): a line (``alignment.is_straight_wall``'s shape test)."""
+    for j in range(2, coeffs.size):
+        if coeffs[j] != 0.0:
+            return False
+    return True
+
+
+@njit
 def longest_straight(shape: np.ndarray, lo: np.ndarray, hi: np.ndarray, min_length: float) -> int:
     """The row of the longest straight landmark of a table's columns ``shape`` (n, M+1), ``lo``
     and ``hi`` (n,): no coefficient past the slope nonzero (NaN counts, as numpy's ``any``)
@@ -544,12 +554,7 @@ def longest_straight(shape: np.ndarray, lo: np.ndarray, hi: np.ndarray, min_leng
         length = hi[k] - lo[k]
         if not length >= min_length:
             continue
-        straight = True
-        for j in range(2, shape.shape[1]):
-            if shape[k, j] != 0.0:
-                straight = False
-                break
-        if straight and (best < 0 or length > best_length):
+        if _no_curvature(shape[k]) and (best < 0 or length > best_length):
             best, best_length = k, length
     return best
 
@@ -626,10 +631,7 @@ def _initial_knots(variate: int, coeffs: np.ndarray, lo: float, hi: float, sagit
     its curvature grid would give κ = 0 at every point (p'' is +0 in Horner's scheme), a zero
     integral and the two ends as knots, which are returned without it (most received walls
     are straight, and the grid was most of their chain's time)."""
-    straight = True
-    for j in range(2, coeffs.size):
-        straight = straight and coeffs[j] == 0.0
-    if straight and coeffs.size > 1 and math.isfinite(1.0 + coeffs[1] * coeffs[1]):
+    if _no_curvature(coeffs) and coeffs.size > 1 and math.isfinite(1.0 + coeffs[1] * coeffs[1]):
         out = np.empty(2)
         out[0], out[1] = lo, hi
         return out
