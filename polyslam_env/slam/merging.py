@@ -227,11 +227,14 @@ def near_merge_gammas(
     :func:`merge_gammas`' (γ, joined) of ``p`` against them (:func:`table_candidates`), in
     one compiled call (:func:`~polyslam_env.slam.map_kernels.near_merge_candidates`): the
     map's merge check and the exchange's same-wall test ask for it on every change."""
+    columns = table_candidates(table, _NO_ROWS, c0s)[1:]  # the rows are the kernel's to find
     return map_kernels.near_merge_candidates(
-        p.variate, p.coeffs, p.lo, p.hi, boxes, box, distance, exclude, table.variate,
-        table.shape, table.sizes, c0s, table.lo, table.hi, min_overlap, MERGE_ANGLE_DEG,
-        math.nan if join_gap is None else join_gap, JOIN_ANGLE_DEG, THIN_WALL,
+        p.variate, p.coeffs, p.lo, p.hi, boxes, box, distance, exclude, *columns, min_overlap,
+        MERGE_ANGLE_DEG, math.nan if join_gap is None else join_gap, JOIN_ANGLE_DEG, THIN_WALL,
     )  # fmt: skip
+
+
+_NO_ROWS = np.zeros(0, dtype=np.int64)
 
 
 def pick_merge(
