@@ -1114,10 +1114,20 @@ def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from
             kt, wt = padded_k, padded_w
         _estimated_one_pass(cov, kt, wt, c)
         _cross_one_pass(cov, kt, wt, c)
-        for i in range(min(3, c)):  # the pose block whole (its readers take it as a matrix)
-            for j in range(i):
-                cov[i, j] = cov[j, i]
-        return
+    else:
+        _estimated_passes(cov, kt, wt, c)
+        _cross_block(cov, kt, wt, c)
+    for i in range(min(3, c)):  # the pose block whole (its readers take it as a matrix)
+        for j in range(i):
+            cov[i, j] = cov[j, i]
+
+
+@njit
+def _estimated_passes(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, c: int) -> None:
+    """:func:`joseph_blocks`' estimated block (upper triangle, i ≤ j < c) with any number of
+    rows of K: four rows per pass over P's row into a scratch row, then two (or the last one
+    or two) subtracting."""
+    count = kt.shape[0]
     acc = np.zeros(c)  # row i of K Wᵀ + W Kᵀ from the diagonal to column c, over K's rows
     for i in range(c):
         inner = c - i
@@ -1153,10 +1163,6 @@ def joseph_blocks(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray, consider_from
                     s = estimated[j] + (k0 * wr0[j] + w0 * kr0[j])
                     estimated[j] = s + (k1 * wr1[j] + w1 * kr1[j])
             q += 2
-    _cross_block(cov, kt, wt, c)
-    for i in range(min(3, c)):  # the pose block whole (its readers take it as a matrix)
-        for j in range(i):
-            cov[i, j] = cov[j, i]
 
 
 @njit
