@@ -128,8 +128,8 @@ from polyslam_env.comms.alignment import (
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
 from polyslam_env.comms.free_space import FreeCells, FreeSpace
 from polyslam_env.comms.kernels import (
+    chain_fit,
     kept_runs,
-    largest_residual,
     longest_straight,
     normal_variances,
     point_jacobians,
@@ -163,7 +163,7 @@ from polyslam_env.core.geometry import (
 from polyslam_env.slam.alignment import Alignment, FeatureMap, align
 from polyslam_env.slam.corners import wall_corners
 from polyslam_env.slam.features import FeatureBook
-from polyslam_env.slam.fitting import Fit, PointSet, fit_polynomial
+from polyslam_env.slam.fitting import Fit, PointSet
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH
 from polyslam_env.slam.map_kernels import curve_box
@@ -506,18 +506,19 @@ def refit_pieces(
 
 
 def _fit_chain(points: PointSet, order: int, auto_order: bool, tol: float) -> tuple[Fit, float]:
-    """The fit (coefficients padded to ``order + 1``) and its largest |η residual| (m)."""
-    for m in range(1, order + 1) if auto_order else (order,):
-        fit = fit_polynomial(points, m, None, shape_fixed=True, auto_order=False)
-        xy = np.ascontiguousarray(points.xy, dtype=float)
-        worst = largest_residual(xy, fit.poly.variate, fit.poly.coeffs)
-        if worst <= tol:
-            break
-    coeffs = np.zeros(order + 1)
-    coeffs[: fit.poly.order + 1] = fit.poly.coeffs
-    # a valid polynomial with a zero tail: valid as it is
-    poly = Polynomial.unchecked(fit.poly.variate, coeffs, fit.poly.lo, fit.poly.hi)
-    return Fit(poly, fit.c0, fit.Gx, fit.Gy, fit.V, fit.rms, fit.order), worst
+    """The fit (coefficients padded to ``order + 1``) and its largest |η residual| (m): the
+    lowest order whose largest residual is within ``tol`` with ``auto_order``, else ``order``
+    (one compiled call: :func:`~polyslam_env.comms.kernels.chain_fit`)."""
+    if points.n_points == 0:
+        raise ValueError("cannot fit a polynomial to zero points")
+    valid, var, m, coeffs, lo, hi, rms, gx, gy, worst = chain_fit(
+        np.ascontiguousarray(points.xy, dtype=float), points.weights, points.d_state,
+        points.d_noise, order, auto_order, tol,
+    )  # fmt: skip
+    # a fit of a known variate with finite numbers is a valid polynomial (a zero tail
+    # included); any other gets Polynomial's checks, and their error
+    poly = Polynomial.unchecked(var, coeffs, lo, hi) if valid else Polynomial(var, coeffs, lo, hi)
+    return Fit(poly, float(coeffs[0]), gx[None, :], gy[None, :], points.noise_cov, rms, m), worst
 
 
 def map_transform(

@@ -24,6 +24,7 @@ import math
 import numpy as np
 
 from polyslam_env.core.jit import fma, njit, sum_like_numpy
+from polyslam_env.slam.fit_kernels import fit_points
 from polyslam_env.slam.fitting import J_ROT
 from polyslam_env.slam.kernels import boxes_near, horner
 from polyslam_env.slam.map_kernels import eta_range
@@ -1072,3 +1073,41 @@ def largest_residual(xy: np.ndarray, variate: int, coeffs: np.ndarray) -> float:
         if i == 0 or residual > worst:
             worst = residual
     return worst
+
+
+@njit
+def chain_fit(
+    xy: np.ndarray,
+    weights: np.ndarray,
+    d_state: np.ndarray,
+    d_noise: np.ndarray,
+    max_order: int,
+    auto_order: bool,
+    tol: float,
+) -> tuple[bool, int, int, np.ndarray, float, float, float, np.ndarray, np.ndarray, float]:
+    """A received chain's refit in one call (``exchange._fit_chain``): the shape-fixed fit
+    (:func:`~polyslam_env.slam.fit_kernels.fit_points`) of order 1, 2, … ``max_order`` with
+    ``auto_order`` (else ``max_order`` alone), the first whose :func:`largest_residual` is
+    within ``tol``, or the last tried.
+
+    Returns (valid, variate, m, coeffs, lo, hi, rms, G_x, G_y, worst): ``coeffs`` padded with
+    zeros to ``max_order + 1``; ``valid`` False when a tried fit has no variate or a non-finite
+    coefficient or extent (its values are returned, and the loop stops there: the caller
+    builds the checked polynomial, whose error it then raises as the fit-by-fit loop did)."""
+    no_limits = np.zeros((0, 0))
+    first = 1 if auto_order else max_order
+    for order in range(first, max_order + 1):
+        var, m, coeffs, lo, hi, rms, gx, gy, _, _ = fit_points(
+            xy, weights, d_state, d_noise, order, 0, True, False, no_limits
+        )
+        valid = (var == 1 or var == 2) and math.isfinite(lo) and math.isfinite(hi)
+        for c in coeffs:
+            valid = valid and math.isfinite(c)
+        padded = np.zeros(max_order + 1)
+        padded[: coeffs.size] = coeffs
+        if not valid:
+            return False, var, m, padded, lo, hi, rms, gx, gy, 0.0
+        worst = largest_residual(xy, var, coeffs)
+        if worst <= tol or order == max_order:
+            return True, var, m, padded, lo, hi, rms, gx, gy, worst
+    raise ValueError("chain_fit: max_order must be at least 1")

@@ -1,14 +1,15 @@
 """A received chain's geometry as readable numpy (the oracles of ``comms/kernels.py``'s
-:func:`unit_tangents`, :func:`frame_chain`, :func:`received_geometry` and
-:func:`variance_floor`): the numpy the exchange and the transform refinement ran before
-those were compiled."""
+:func:`unit_tangents`, :func:`frame_chain`, :func:`received_geometry`,
+:func:`variance_floor` and :func:`chain_fit`): the numpy the exchange and the transform
+refinement ran before those were compiled."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from polyslam_env.core.geometry import rotation
-from polyslam_env.slam.fitting import J_ROT
+from polyslam_env.slam.fitting import J_ROT, Fit, PointSet, fit_polynomial
+from polyslam_env.slam.polynomial import Polynomial
 
 
 def frame_points(q: np.ndarray, transform: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -69,3 +70,19 @@ def point_jacobians(
         [np.broadcast_to(shift[None, :, None], (n_pts, 2, 1)), dp_dt @ d_noise], axis=2
     )
     return out_state, out_noise
+
+
+def fit_chain(points: PointSet, order: int, auto_order: bool, tol: float) -> tuple[Fit, float]:
+    """``exchange._fit_chain`` fit by fit (its form before :func:`~polyslam_env.comms.kernels.
+    chain_fit`): orders 1 … ``order`` through :func:`fit_polynomial` until the largest |η
+    residual| is within ``tol``, the coefficients then padded to ``order + 1``."""
+    for m in range(1, order + 1) if auto_order else (order,):
+        fit = fit_polynomial(points, m, None, shape_fixed=True, auto_order=False)
+        xi, eta = fit.poly.from_xy(points.xy)
+        worst = float(np.max(np.abs(eta - fit.poly.value(xi))))
+        if worst <= tol:
+            break
+    coeffs = np.zeros(order + 1)
+    coeffs[: fit.poly.order + 1] = fit.poly.coeffs
+    poly = Polynomial(fit.poly.variate, coeffs, fit.poly.lo, fit.poly.hi)
+    return Fit(poly, fit.c0, fit.Gx, fit.Gy, fit.V, fit.rms, fit.order), worst

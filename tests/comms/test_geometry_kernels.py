@@ -4,11 +4,18 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from polyslam_env.comms import kernels
 from polyslam_env.comms.alignment import frame_points
-from polyslam_env.comms.exchange import chain_points, received_geometry, refit_variance_floor
+from polyslam_env.comms.exchange import (
+    _fit_chain,
+    chain_points,
+    received_geometry,
+    refit_variance_floor,
+)
 from polyslam_env.core.geometry import rotation
+from polyslam_env.slam.fitting import PointSet
 from polyslam_env.slam.polynomial import Polynomial
 from tests.comms import reference_geometry as ref
 
@@ -100,3 +107,49 @@ def test_largest_residual__numpys_max_of_the_residuals() -> None:
         assert kernels.largest_residual(xy, poly.variate, poly.coeffs) == want
     xy[0, 1] = np.nan
     assert np.isnan(kernels.largest_residual(xy, 1, poly.coeffs))
+
+
+def test_chain_fit__is_the_fit_by_fit_loop_bit_for_bit() -> None:
+    """A received chain's refit in one compiled call (``exchange._fit_chain``) gives the fit
+    of the order-by-order loop through ``fit_polynomial`` (``reference_geometry.fit_chain``):
+    the same variate, padded coefficients, extent, order, RMS, G_x, G_y and largest residual,
+    on chains of straight and curved walls of either variate, 2–60 points, with and without
+    auto order, at tolerances that stop it at each order."""
+    rng = np.random.default_rng(11)
+    for trial in range(200):
+        coeffs = rng.normal(0.0, [1.0, 0.5, [0.0, 0.2][trial % 2], 0.03 * (trial % 3 == 0)])
+        lo = float(rng.uniform(-3.0, 2.0))
+        poly = Polynomial(int(rng.integers(1, 3)), coeffs, lo, lo + float(rng.uniform(0.1, 4.0)))
+        n, n_state, k = int(rng.integers(2, 61)), int(rng.integers(3, 30)), 4
+        xy = poly.points_at(np.sort(rng.uniform(poly.lo, poly.hi, n)))
+        xy = xy + rng.normal(0.0, [0.0, 0.002, 0.02][trial % 3], xy.shape)
+        a = rng.normal(0.0, 0.1, (k, k))
+        points = PointSet(
+            xy, rng.normal(0.0, 1.0, (n, 2, n_state)), rng.normal(0.0, 1.0, (n, 2, k)), a @ a.T,
+            np.ones(n),
+        )  # fmt: skip
+        for auto_order in (True, False):
+            for tol in (1e-9, 0.003, 0.03, 1.0):
+                got, worst = _fit_chain(points, 3, auto_order, tol)
+                want, want_worst = ref.fit_chain(points, 3, auto_order, tol)
+                assert worst == want_worst
+                assert (got.poly.variate, got.poly.lo, got.poly.hi) == (
+                    want.poly.variate, want.poly.lo, want.poly.hi,
+                )  # fmt: skip
+                assert np.array_equal(got.poly.coeffs, want.poly.coeffs)
+                assert (got.c0, got.rms, got.order) == (want.c0, want.rms, want.order)
+                assert np.array_equal(got.Gx, want.Gx) and np.array_equal(got.Gy, want.Gy)
+                assert got.V is points.noise_cov
+
+
+def test_chain_fit__a_nan_point_raises_as_the_loop_did() -> None:
+    """A chain with a NaN point raises the fit's own error, the same as the fit-by-fit loop,
+    not a fit with NaN coefficients."""
+    xy = np.array([[0.0, 0.0], [0.5, np.nan], [1.0, 0.1], [1.5, 0.1]])
+    points = PointSet(xy, np.zeros((4, 2, 5)), np.zeros((4, 2, 1)), np.eye(1), np.ones(4))
+    errors = []
+    for fit_chain in (_fit_chain, ref.fit_chain):
+        with pytest.raises(ValueError) as error:
+            fit_chain(points, 3, True, 0.01)
+        errors.append((error.type, str(error.value)))
+    assert errors[0] == errors[1]
