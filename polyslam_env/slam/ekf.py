@@ -245,28 +245,62 @@ def augment(
     the k raw inputs y with covariance ``V`` (k, k). The new row/column is
     [Gx P, Gx P Gxᵀ + Gy V Gyᵀ]: the cross-covariance with the pose is kept. With ``order``
     (N+1 indices, N the new entry) the grown state is returned taken in that order, in the
-    same compiled copy (:func:`~polyslam_env.slam.kernels.grown`; the state layout puts a new
-    entry inside its block so).
+    same compiled call (:func:`~polyslam_env.slam.kernels.augmented`; the state layout puts
+    a new entry inside its block so).
     """
-    n_state = mean.size
-    gx = np.asarray(Gx, dtype=float).reshape(-1)
-    gy = np.asarray(Gy, dtype=float).reshape(-1)
-    V = np.asarray(V, dtype=float)
+    gx, gy, V = _augment_args(mean, Gx, Gy, V)
+    order = np.arange(mean.size + 1) if order is None else order
+    if order.shape != (mean.size + 1,):
+        raise ValueError(f"order must have {mean.size + 1} entries, got {order.shape}")
+    return kernels.augmented(
+        np.ascontiguousarray(mean, dtype=float), np.ascontiguousarray(cov, dtype=float),
+        float(value), gx, gy, V, np.ascontiguousarray(order, dtype=np.int64),
+    )  # fmt: skip
+
+
+def augment_pair(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    value: float,
+    Gx: np.ndarray,
+    Gy: np.ndarray,
+    V: np.ndarray,
+    turn_gx: np.ndarray,
+    turn_var: float,
+    order: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`augment` twice in one compiled call: c0 = g(X, y) appended, then an entry with
+    ∂/∂X ``turn_gx`` (N+2,) over that grown state and variance ``turn_var`` beyond it (G_y
+    = [1], V = [[turn_var]]: a landmark's turn α, :class:`~polyslam_env.slam.layout.
+    StateLayout`), the result taken in ``order`` (N+2 indices); the same floats as the two
+    calls (:func:`~polyslam_env.slam.kernels.augmented_pair`)."""
+    gx, gy, V = _augment_args(mean, Gx, Gy, V)
+    turn = np.ascontiguousarray(turn_gx, dtype=float).reshape(-1)
+    if turn.size != mean.size + 1 or order.shape != (mean.size + 2,):
+        raise ValueError(
+            f"the second entry needs {mean.size + 1} derivatives and {mean.size + 2} order "
+            f"entries, got {turn.size} and {order.shape}"
+        )
+    return kernels.augmented_pair(
+        np.ascontiguousarray(mean, dtype=float), np.ascontiguousarray(cov, dtype=float),
+        float(value), gx, gy, V, turn, float(turn_var), np.ascontiguousarray(order, dtype=np.int64),
+    )  # fmt: skip
+
+
+def _augment_args(
+    mean: np.ndarray, Gx: np.ndarray, Gy: np.ndarray, V: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`augment`'s G_x, G_y (flat) and V (2-D), contiguous floats, checked."""
+    gx = np.ascontiguousarray(Gx, dtype=float).reshape(-1)
+    gy = np.ascontiguousarray(Gy, dtype=float).reshape(-1)
+    V = np.ascontiguousarray(V, dtype=float)
     if V.ndim < 2:  # np.atleast_2d's (1, k), without its per-call checks
         V = V.reshape(1, -1)
-    if gx.size != n_state:
-        raise ValueError(f"Gx must have {n_state} entries, got {gx.size}")
+    if gx.size != mean.size:
+        raise ValueError(f"Gx must have {mean.size} entries, got {gx.size}")
     if V.shape != (gy.size, gy.size):
         raise ValueError(f"V must have shape ({gy.size}, {gy.size}), got {V.shape}")
-    cross = cov @ gx  # (3+n,) = P Gxᵀ
-    var = gx @ cross + gy @ V @ gy
-    order = np.arange(n_state + 1) if order is None else order
-    if order.shape != (n_state + 1,):
-        raise ValueError(f"order must have {n_state + 1} entries, got {order.shape}")
-    return kernels.grown(
-        np.ascontiguousarray(mean, dtype=float), np.ascontiguousarray(cov, dtype=float),
-        float(value), cross, float(var), np.ascontiguousarray(order, dtype=np.int64),
-    )  # fmt: skip
+    return gx, gy, V
 
 
 def remove(

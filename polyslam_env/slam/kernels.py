@@ -1421,6 +1421,44 @@ def grown(
     return out_mean, out_cov
 
 
+@njit
+def augmented(
+    mean: np.ndarray,  # (N,)
+    cov: np.ndarray,  # (N, N)
+    value: float,
+    gx: np.ndarray,  # (N,) ∂g/∂X
+    gy: np.ndarray,  # (K,) ∂g/∂y
+    v: np.ndarray,  # (K, K) the covariance of y
+    order: np.ndarray,  # (N+1,) int64, as grown's
+) -> tuple[np.ndarray, np.ndarray]:
+    """``ekf.augment`` in one call: the new entry's covariance row P Gxᵀ and its variance
+    Gx P Gxᵀ + Gy V Gyᵀ by the same BLAS products numpy's matmul calls (gemv, dot: the same
+    floats, checked against numpy's in ``tests/slam/test_ekf.py``), then :func:`grown`."""
+    cross = cov @ gx
+    var = gx @ cross + gy @ v @ gy
+    return grown(mean, cov, value, cross, var, order)
+
+
+@njit
+def augmented_pair(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    value: float,
+    gx: np.ndarray,
+    gy: np.ndarray,
+    v: np.ndarray,
+    turn_gx: np.ndarray,  # (N+1,) the second entry's ∂/∂X over the state grown by the first
+    turn_var: float,  # its variance beyond what the state holds
+    order: np.ndarray,  # (N+2,) int64: the twice-grown state's order
+) -> tuple[np.ndarray, np.ndarray]:
+    """Two :func:`augmented` in one call, as ``StateLayout.add`` makes a landmark's c0 and
+    then its turn α: the first appended in place, the second (G_y = [1], V = [[turn_var]])
+    then taken in ``order``."""
+    first_mean, first_cov = augmented(mean, cov, value, gx, gy, v, np.arange(mean.size + 1))
+    one = np.ones(1)
+    return augmented(first_mean, first_cov, 0.0, turn_gx, one, np.full((1, 1), turn_var), order)
+
+
 # -- the SLAM step's two scans --------------------------------------------------------------------
 @njit
 def _scan_model(

@@ -103,13 +103,13 @@ class StateLayout:
         4–5) and, with rotation states, its turn α (:func:`turn_row` of ``source``; ``fit_var``
         its shape's own slope error), each at the end of its block: [pose, c0_1 … c0_n,
         α_1 … α_n] becomes [pose, c0_1 … c0_new, α_1 … α_new]."""
-        mean, cov = ekf.augment(mean, cov, fit.c0, fit.Gx, fit.Gy, fit.V)
         if not self.rotation_states:
-            return mean, cov
-        size = mean.size  # 3 + 2n + 1: the new c0 is last
-        gx, var = turn_row(size, n, source, fit_var)
-        return ekf.augment(
-            mean, cov, 0.0, gx, np.ones(1), np.array([[var]]), order=new_c0_before_turns(n)
+            return ekf.augment(mean, cov, fit.c0, fit.Gx, fit.Gy, fit.V)
+        # α's row over the state grown by the c0 (3 + 2n + 1: the new c0 last), both in one
+        # compiled call
+        gx, var = turn_row(mean.size + 1, n, source, fit_var)
+        return ekf.augment_pair(
+            mean, cov, fit.c0, fit.Gx, fit.Gy, fit.V, gx, var, new_c0_before_turns(n)
         )
 
     def remove(

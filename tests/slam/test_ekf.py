@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from polyslam_env.core.geometry import compose
 from polyslam_env.slam.ekf import (
     augment,
+    augment_pair,
     divergence_ratio,
     is_diverging,
     nees,
@@ -248,6 +249,40 @@ def test_augment__equals_full_jacobian_formula() -> None:
     # 1e-14: same products, different association order
     np.testing.assert_allclose(new_cov, G @ joint @ G.T, atol=1e-14)
     assert new_mean[-1] == 0.7 and np.array_equal(new_mean[:-1], mean)
+
+
+def _numpy_augment(
+    mean: np.ndarray, cov: np.ndarray, value: float, gx: np.ndarray, gy: np.ndarray, V: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The oracle of the compiled augment: numpy's products, then the grown state by hand."""
+    cross = cov @ gx
+    var = gx @ cross + gy @ V @ gy
+    n = mean.size
+    out = np.empty((n + 1, n + 1))
+    out[:n, :n], out[:n, n], out[n, :n], out[n, n] = cov, cross, cross, var
+    return np.append(mean, value), out
+
+
+@pytest.mark.parametrize("n_state", [3, 4, 9, 41, 120, 603])
+def test_augment__compiled_products_are_numpys_bit_for_bit(n_state: int) -> None:
+    """The compiled augment (one call: BLAS's gemv and dot through numba) gives numpy's
+    floats, at state sizes of a new map to a 300-landmark one; the pair (a c0, then its turn
+    over the grown state, put in place by an order) gives the two numpy steps' floats."""
+    rng = np.random.default_rng(n_state)
+    for k in (1, 2, 7, 13):
+        mean, cov = rng.normal(size=n_state), random_spd(rng, n_state, 0.01)
+        gx, gy, V = rng.normal(size=n_state), rng.normal(size=k), random_spd(rng, k, 1e-3)
+        want = _numpy_augment(mean, cov, 0.7, gx, gy, V)
+        got = augment(mean, cov, 0.7, gx[None, :], gy[None, :], V)
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+        turn_gx, turn_var = rng.normal(size=n_state + 1), float(rng.uniform(0.0, 1e-3))
+        order = rng.permutation(n_state + 2)
+        second = _numpy_augment(*want, 0.0, turn_gx, np.ones(1), np.array([[turn_var]]))
+        got = augment_pair(mean, cov, 0.7, gx, gy, V, turn_gx, turn_var, order)
+        assert np.array_equal(got[0], second[0][order])
+        assert np.array_equal(got[1], second[1][np.ix_(order, order)])
+    with pytest.raises(ValueError, match="second entry"):
+        augment_pair(mean, cov, 0.7, gx, gy, V, turn_gx[1:], 0.0, order)
 
 
 def test_remove__undoes_augment_and_moves_a_copied_landmark() -> None:
