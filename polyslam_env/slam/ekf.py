@@ -307,14 +307,13 @@ def remove(
     mean: np.ndarray, cov: np.ndarray, indices: np.ndarray | list[int] | int
 ) -> tuple[np.ndarray, np.ndarray]:
     """Drop the landmark state entries at ``indices`` (state indices ≥ 3) and their rows/cols
-    (a map change's: a handful of array calls, not ``np.setdiff1d`` / ``np.ix_``)."""
-    drop = np.asarray(indices, dtype=np.intp).reshape(-1)
-    if ((drop < 3) | (drop >= mean.size)).any():
+    (a map change's: one compiled copy, :func:`~polyslam_env.slam.kernels.shrunk`)."""
+    drop = np.asarray(indices, dtype=np.int64).reshape(-1)
+    if drop.size and (int(drop.min()) < 3 or int(drop.max()) >= mean.size):
         raise ValueError(f"landmark state indices must lie in [3, {mean.size}), got {drop}")
-    keep = np.ones(mean.size, dtype=bool)
-    keep[drop] = False
-    rows = keep.nonzero()[0]
-    return mean[rows], cov.take(rows, axis=0).take(rows, axis=1)
+    return kernels.shrunk(
+        np.ascontiguousarray(mean, dtype=float), np.ascontiguousarray(cov, dtype=float), drop
+    )
 
 
 # -- divergence and consistency ------------------------------------------------------------------

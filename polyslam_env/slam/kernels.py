@@ -1459,6 +1459,24 @@ def augmented_pair(
     return augmented(first_mean, first_cov, 0.0, turn_gx, one, np.full((1, 1), turn_var), order)
 
 
+@njit
+def shrunk(mean: np.ndarray, cov: np.ndarray, drop: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The state without the entries ``drop`` (int64, any order, in range): ``ekf.remove``'s
+    marginalisation, the rest in their order, each float copied as it is, in one pass."""
+    n = mean.size
+    keep = np.ones(n, dtype=np.bool_)
+    for a in drop:
+        keep[a] = False
+    rows = np.flatnonzero(keep)
+    size = rows.size
+    out_mean, out_cov = np.empty(size), np.empty((size, size))
+    for i in range(size):
+        out_mean[i] = mean[rows[i]]
+        for j in range(size):
+            out_cov[i, j] = cov[rows[i], rows[j]]
+    return out_mean, out_cov
+
+
 # -- the SLAM step's two scans --------------------------------------------------------------------
 @njit
 def _scan_model(

@@ -165,8 +165,7 @@ class MapMaintenance:
         slam.mean, slam.cov = slam.layout.remove(slam.mean, slam.cov, rows, len(slam.table))
         for row in sorted(rows, reverse=True):  # the rows after a removed one move up
             slam.table.remove(row)
-        for landmark_id in landmark_ids:
-            slam.points.drop_qbad(landmark_id)
+        slam.points.drop_qbad(*landmark_ids)
 
     def remove(self, landmark_id: int) -> None:
         """:meth:`drop`, recorded as removed."""

@@ -168,9 +168,14 @@ class StoredPoints:
         self.index[:, :count] = self.index[:, kept]
         self.counters[SIZE] = count
 
-    def drop_qbad(self, landmark_id: int) -> None:
-        """Forget landmark ``landmark_id``'s Q_bad (it left the map)."""
-        rows = self.rows_of(QBAD, landmark_id)
+    def drop_qbad(self, *landmark_ids: int) -> None:
+        """Forget the Q_bad of landmarks ``landmark_ids`` (they left the map)."""
+        n = len(self)
+        kind, owner = self.index[KIND, :n], self.index[OWNER, :n]
+        theirs = np.zeros(n, dtype=bool)
+        for landmark_id in landmark_ids:
+            theirs |= owner == landmark_id
+        rows = np.flatnonzero(theirs & (kind == QBAD))
         if rows.size:
             self.drop(rows)
 

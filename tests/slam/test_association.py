@@ -33,6 +33,7 @@ from polyslam_env.slam.columns import (
     QBAD,
     RANK,
     REFIT,
+    SIZE,
     ST_EXTENTS,
     ST_SCREEN,
     UX,
@@ -624,3 +625,25 @@ def test_associate__box_candidates__two_zero_length_walls() -> None:
         pose=np.full(3, 0.1328125), offsets=np.zeros(8), turns=np.zeros(8),
         ranges=np.full(9, 0.1015625), squared=False,
     )  # fmt: skip
+
+
+def test_drop_qbad__several_landmarks_at_once() -> None:
+    """A merge's two landmarks leave the stored points together: their Q_bad points go, and
+    every other point (clusters, other landmarks' Q_bad, a cluster keyed like a dropped
+    landmark) stays, in its row order."""
+    rng = np.random.default_rng(4)
+    points = StoredPoints()
+    points.reserve(40)
+    points.counters[SIZE] = 40
+    points.real[:2, :40] = np.arange(80.0).reshape(2, 40)
+    points.index[KIND, :40] = rng.choice([CLUSTER, QBAD], 40)
+    points.index[OWNER, :40] = rng.integers(0, 5, 40)
+    points.index[RANK, :40] = np.arange(40)
+    kind, owner = points.index[KIND, :40].copy(), points.index[OWNER, :40].copy()
+    stays = ~((kind == QBAD) & ((owner == 1) | (owner == 3)))
+    want_real, want_index = points.real[:, :40][:, stays], points.index[:, :40][:, stays]
+    points.drop_qbad(1, 3)
+    n = len(points)
+    assert n == int(stays.sum()) < 40
+    assert np.array_equal(points.real[:, :n], want_real)
+    assert np.array_equal(points.index[:, :n], want_index)
