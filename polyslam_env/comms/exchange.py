@@ -412,21 +412,25 @@ def _point_set(
     d_transform_noise: np.ndarray,
     noise_cov: np.ndarray,
     n_state: int,
+    shift: np.ndarray | None = None,
 ) -> PointSet:
     """:func:`received_point_set` from the chain's points ``xy`` (N, 2) in the receiver's
     frame and their ∂p/∂T ``dp_dt`` (N, 2, 3) (:func:`frame_points`); the Jacobians in one
-    compiled call (:func:`~polyslam_env.comms.kernels.point_jacobians`)."""
-    shift = rotation(transform[2]) @ _ETA_AXIS[record.polynomial.variate]  # (2,)
+    compiled call (:func:`~polyslam_env.comms.kernels.point_jacobians`). ``shift``: the
+    sender's η axis turned by the transform, R(θ) e_η (computed when not given)."""
+    if shift is None:
+        shift = rotation(transform[2]) @ _ETA_AXIS[record.polynomial.variate]  # (2,)
     d_state, d_noise = point_jacobians(
         dp_dt, np.ascontiguousarray(d_transform_state, dtype=float),
         np.ascontiguousarray(d_transform_noise, dtype=float), shift, n_state,
     )  # fmt: skip
-    return PointSet(
-        xy=xy,
-        d_state=d_state,
-        d_noise=d_noise,
-        noise_cov=_with_c0_variance(record.c0_var, noise_cov) / RECEIVED_CI_WEIGHT,
-        weights=np.ones(len(xy)),
+    # made to PointSet's shapes here (N, 2), (N, 2, S), (N, 2, 1 + K), (1 + K, 1 + K), ones
+    return PointSet.unchecked(
+        xy,
+        d_state,
+        d_noise,
+        _with_c0_variance(record.c0_var, noise_cov) / RECEIVED_CI_WEIGHT,
+        np.ones(len(xy)),
     )
 
 
@@ -466,7 +470,8 @@ _CHAIN_CACHE: dict[tuple[object, ...], np.ndarray] = {}
 
 
 def _subset(points: PointSet, rows: slice) -> PointSet:
-    return PointSet(
+    """The points of a run of ``points``' rows (a run of a checked set: no checks again)."""
+    return PointSet.unchecked(
         points.xy[rows], points.d_state[rows], points.d_noise[rows], points.noise_cov,
         points.weights[rows],
     )  # fmt: skip
@@ -1196,7 +1201,7 @@ class RendezvousExchange:
             if covered:
                 self.covered[r] += 1
                 continue
-            pts = _point_set(record, t, xy, dp_dt, d_state, d_noise, noise_cov, 3)
+            pts = _point_set(record, t, xy, dp_dt, d_state, d_noise, noise_cov, 3, shift)
             for rows in (slice(a, b) for a, b in runs.tolist()):
                 for piece, fit in self._refit(r, _subset(pts, rows)):
                     received.append(fit.poly)

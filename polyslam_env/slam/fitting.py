@@ -58,6 +58,23 @@ class PointSet:
         if self.weights.shape != (n_pts,) or not (self.weights > 0).all():
             raise ValueError("weights must be a positive (N,) array")
 
+    @staticmethod
+    def unchecked(
+        xy: np.ndarray,
+        d_state: np.ndarray,
+        d_noise: np.ndarray,
+        noise_cov: np.ndarray,
+        weights: np.ndarray,
+    ) -> PointSet:
+        """A point set from parts known consistent (a run of a checked set's rows, or arrays
+        made to these shapes), without :meth:`__post_init__`'s checks: the exchange makes
+        and cuts a received chain's set several times per record."""
+        out = object.__new__(PointSet)
+        out.__dict__.update(  # frozen: not setattr
+            xy=xy, d_state=d_state, d_noise=d_noise, noise_cov=noise_cov, weights=weights
+        )
+        return out
+
     @property
     def n_points(self) -> int:
         return int(self.xy.shape[0])
