@@ -496,7 +496,7 @@ def refit_pieces(
     points: PointSet, order: int, auto_order: bool, tol: float, depth: int = 0
 ) -> list[tuple[PointSet, Fit]]:
     """:func:`refit_received` with, for each fit, the points (a run of the chain) it fits."""
-    fit, worst = _fit_chain(points, order, auto_order, tol)
+    fit, worst, finite = _fit_chain(points, order, auto_order, tol)
     n_pts = points.n_points
     if worst > tol and depth < _MAX_SPLIT_DEPTH and n_pts >= 4:
         mid = n_pts // 2
@@ -506,24 +506,27 @@ def refit_pieces(
             for rows in halves
             for piece in refit_pieces(_subset(points, rows), order, auto_order, tol, depth + 1)
         ]
-    finite = math.isfinite(fit.c0) and np.isfinite(fit.Gx).all() and np.isfinite(fit.Gy).all()
     return [(points, fit)] if finite else []
 
 
-def _fit_chain(points: PointSet, order: int, auto_order: bool, tol: float) -> tuple[Fit, float]:
-    """The fit (coefficients padded to ``order + 1``) and its largest |η residual| (m): the
-    lowest order whose largest residual is within ``tol`` with ``auto_order``, else ``order``
-    (one compiled call: :func:`~polyslam_env.comms.kernels.chain_fit`)."""
+def _fit_chain(
+    points: PointSet, order: int, auto_order: bool, tol: float
+) -> tuple[Fit, float, bool]:
+    """The fit (coefficients padded to ``order + 1``), its largest |η residual| (m) and
+    whether its c0 and Jacobians are finite: the lowest order whose largest residual is within
+    ``tol`` with ``auto_order``, else ``order`` (one compiled call:
+    :func:`~polyslam_env.comms.kernels.chain_fit`)."""
     if points.n_points == 0:
         raise ValueError("cannot fit a polynomial to zero points")
-    valid, var, m, coeffs, lo, hi, rms, gx, gy, worst = chain_fit(
+    valid, var, m, coeffs, lo, hi, rms, gx, gy, worst, finite = chain_fit(
         np.ascontiguousarray(points.xy, dtype=float), points.weights, points.d_state,
         points.d_noise, order, auto_order, tol,
     )  # fmt: skip
     # a fit of a known variate with finite numbers is a valid polynomial (a zero tail
     # included); any other gets Polynomial's checks, and their error
     poly = Polynomial.unchecked(var, coeffs, lo, hi) if valid else Polynomial(var, coeffs, lo, hi)
-    return Fit(poly, float(coeffs[0]), gx[None, :], gy[None, :], points.noise_cov, rms, m), worst
+    fit = Fit(poly, float(coeffs[0]), gx[None, :], gy[None, :], points.noise_cov, rms, m)
+    return fit, worst, finite
 
 
 def map_transform(

@@ -1084,16 +1084,17 @@ def chain_fit(
     max_order: int,
     auto_order: bool,
     tol: float,
-) -> tuple[bool, int, int, np.ndarray, float, float, float, np.ndarray, np.ndarray, float]:
+) -> tuple[bool, int, int, np.ndarray, float, float, float, np.ndarray, np.ndarray, float, bool]:
     """A received chain's refit in one call (``exchange._fit_chain``): the shape-fixed fit
     (:func:`~polyslam_env.slam.fit_kernels.fit_points`) of order 1, 2, … ``max_order`` with
     ``auto_order`` (else ``max_order`` alone), the first whose :func:`largest_residual` is
     within ``tol``, or the last tried.
 
-    Returns (valid, variate, m, coeffs, lo, hi, rms, G_x, G_y, worst): ``coeffs`` padded with
-    zeros to ``max_order + 1``; ``valid`` False when a tried fit has no variate or a non-finite
-    coefficient or extent (its values are returned, and the loop stops there: the caller
-    builds the checked polynomial, whose error it then raises as the fit-by-fit loop did)."""
+    Returns (valid, variate, m, coeffs, lo, hi, rms, G_x, G_y, worst, finite): ``coeffs``
+    padded with zeros to ``max_order + 1``; ``valid`` False when a tried fit has no variate or
+    a non-finite coefficient or extent (its values are returned, and the loop stops there: the
+    caller builds the checked polynomial, whose error it then raises as the fit-by-fit loop
+    did); ``finite``: whether G_x and G_y are finite too (a refit the exchange keeps)."""
     no_limits = np.zeros((0, 0))
     first = 1 if auto_order else max_order
     for order in range(first, max_order + 1):
@@ -1106,8 +1107,13 @@ def chain_fit(
         padded = np.zeros(max_order + 1)
         padded[: coeffs.size] = coeffs
         if not valid:
-            return False, var, m, padded, lo, hi, rms, gx, gy, 0.0
+            return False, var, m, padded, lo, hi, rms, gx, gy, 0.0, False
         worst = largest_residual(xy, var, coeffs)
         if worst <= tol or order == max_order:
-            return True, var, m, padded, lo, hi, rms, gx, gy, worst
+            finite = True
+            for g in gx:
+                finite = finite and math.isfinite(g)
+            for g in gy:
+                finite = finite and math.isfinite(g)
+            return True, var, m, padded, lo, hi, rms, gx, gy, worst, finite
     raise ValueError("chain_fit: max_order must be at least 1")

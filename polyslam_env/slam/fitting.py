@@ -250,7 +250,8 @@ def polynomial_points(
     """
     xy, d_state, weights = np.empty((n, 2)), np.zeros((n, 2, n_state)), np.empty(n)
     sample_into(poly, c0_index, c0_var, (lo, hi, n), turn, (xy, d_state, weights), 0)
-    return PointSet(xy, d_state, np.zeros((n, 2, 0)), np.zeros((0, 0)), weights)
+    # sample_into checked its arguments (weights 1/var(c0) > 0): made to PointSet's shapes
+    return PointSet.unchecked(xy, d_state, np.zeros((n, 2, 0)), np.zeros((0, 0)), weights)
 
 
 def sample_into(

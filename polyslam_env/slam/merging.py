@@ -318,4 +318,5 @@ def merge_points(
     sample_into(poly_a, c0_index_a, c0_var_a, (poly_a.lo, poly_a.hi, eps_m), turn_a, out, 0)
     sample_into(poly_b, c0_index_b, c0_var_b, (poly_b.lo, poly_b.hi, eps_m), turn_b, out, eps_m)
     xy, d_state, weights = out
-    return PointSet(xy, d_state, np.zeros((n, 2, 0)), np.zeros((0, 0)), weights)
+    # sample_into checked its arguments (weights 1/var(c0) > 0): made to PointSet's shapes
+    return PointSet.unchecked(xy, d_state, np.zeros((n, 2, 0)), np.zeros((0, 0)), weights)

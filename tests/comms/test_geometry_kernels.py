@@ -130,9 +130,11 @@ def test_chain_fit__is_the_fit_by_fit_loop_bit_for_bit() -> None:
         )  # fmt: skip
         for auto_order in (True, False):
             for tol in (1e-9, 0.003, 0.03, 1.0):
-                got, worst = _fit_chain(points, 3, auto_order, tol)
+                got, worst, finite = _fit_chain(points, 3, auto_order, tol)
                 want, want_worst = ref.fit_chain(points, 3, auto_order, tol)
                 assert worst == want_worst
+                jacobians = np.concatenate([want.Gx.ravel(), want.Gy.ravel()])
+                assert finite == bool(np.isfinite(want.c0) and np.isfinite(jacobians).all())
                 assert (got.poly.variate, got.poly.lo, got.poly.hi) == (
                     want.poly.variate, want.poly.lo, want.poly.hi,
                 )  # fmt: skip
