@@ -128,6 +128,7 @@ from polyslam_env.comms.alignment import (
 from polyslam_env.comms.channel import Channel, ChannelConfig, Delivered, Expired
 from polyslam_env.comms.free_space import FreeCells, FreeSpace
 from polyslam_env.comms.kernels import (
+    better_cover,
     chain_fit,
     kept_runs,
     longest_straight,
@@ -1324,16 +1325,20 @@ class RendezvousExchange:
         fit = _on_state(fit, slam.mean.size)
         cfg = slam.config
         var = normal_variance(fit.poly, _c0_variance(fit, slam.cov))
-        walls = _same_wall(slam, fit.poly.with_c0(fit.c0))
-        better = [
-            slam.shapes[lid].with_c0(float(slam.mean[slam.table.state_index(lid)]))
-            for lid in walls
-            if normal_variance(slam.shapes[lid], slam.c0_variance(lid)) <= var * _ROUNDOFF
-        ]
+        rows = _same_wall(slam, fit.poly.with_c0(fit.c0))
+        table = slam.table
+        walls = [table.ids[j] for j in rows.tolist()]
+        # rule 1: the landmarks of the same wall at least as good as the piece, and the
+        # piece's points they cover, in one compiled call
+        better, covered = better_cover(
+            np.ascontiguousarray(points.xy, dtype=float), rows, var * _ROUNDOFF, table.variate,
+            table.shape, table.order, table.sizes, slam.c0s, table.lo, table.hi, slam.cov,
+            cfg.gamma_max,
+        )  # fmt: skip
         if better:
             if depth >= _MAX_TRIM_DEPTH:
                 return []
-            keep = ~covered_points(points.xy, better, cfg.gamma_max)
+            keep = ~covered
             return [
                 lid
                 for rows in uncovered_runs(keep, points.xy, cfg.merge_min_overlap)
@@ -1464,16 +1469,6 @@ def refit_variance_floor(
     )  # fmt: skip
 
 
-def covered_points(xy: np.ndarray, polys: Sequence[Polynomial], reach: float) -> np.ndarray:
-    """(N,) True where a point (N, 2) lies within ``polys``' extents (its ξ) and within
-    ``reach`` (m) of the curve along η."""
-    out = np.zeros(len(xy), dtype=bool)
-    for poly in polys:
-        xi, eta = poly.from_xy(xy)
-        out |= (xi >= poly.lo) & (xi <= poly.hi) & (np.abs(eta - poly.value(xi)) <= reach)
-    return out
-
-
 def uncovered_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> list[slice]:
     """Maximal runs of consecutive ``keep`` points (N,) of a chain (N, 2) whose length along
     the chain is at least ``min_length`` (m): each run's own steps summed as numpy sums them
@@ -1483,10 +1478,10 @@ def uncovered_runs(keep: np.ndarray, xy: np.ndarray, min_length: float) -> list[
     return [slice(a, b) for a, b in bounds.tolist()]
 
 
-def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
-    """Ids of the landmarks PolySlam's merge test pairs with ``poly`` one by one (γ below γ_M
-    with the tangents agreeing: :func:`~polyslam_env.slam.merging.merge_gammas`, joins
-    aside)."""
+def _same_wall(slam: PolySlam, poly: Polynomial) -> np.ndarray:
+    """Rows (ascending, int64) of the landmarks PolySlam's merge test pairs with ``poly`` one
+    by one (γ below γ_M with the tangents agreeing: :func:`~polyslam_env.slam.merging.
+    merge_gammas`, joins aside)."""
     cfg = slam.config
     # the box of poly.equally_spaced's points in one compiled call (the same floats)
     box = curve_box(poly.coeffs, poly.variate, poly.lo, poly.hi, _BOX_SAMPLES)
@@ -1494,9 +1489,7 @@ def _same_wall(slam: PolySlam, poly: Polynomial) -> list[int]:
         poly, slam.table, slam.c0s, slam.landmark_boxes(), box, cfg.gamma_max,
         cfg.merge_min_overlap,
     )  # fmt: skip
-    ids = slam.table.ids
-    pairs = zip(near.tolist(), gammas.tolist(), strict=True)
-    return [ids[j] for j, gamma in pairs if gamma < cfg.gamma_max]
+    return near[gammas < cfg.gamma_max]  # nan: not the same wall
 
 
 def _table_walls(slam: PolySlam, rows: np.ndarray) -> WallArrays:

@@ -527,10 +527,53 @@ def normal_variances(
     the extent, in its operations."""
     out = np.empty(coeffs.shape[0])
     for w in range(coeffs.shape[0]):
-        deriv = _derivative(coeffs[w, : order[w] + 1], 1)
-        slope = _horner(deriv, 0.5 * (extent[w, 0] + extent[w, 1]))
-        out[w] = c0_var[w] / (1.0 + slope * slope)
+        out[w] = _normal_variance(coeffs[w, : order[w] + 1], extent[w, 0], extent[w, 1], c0_var[w])
     return out
+
+
+@njit
+def _normal_variance(coeffs: np.ndarray, lo: float, hi: float, c0_var: float) -> float:
+    """``exchange.normal_variance`` of one wall: var(c0) / (1 + B'²), B' at the middle of
+    [lo, hi], in its operations."""
+    slope = _horner(_derivative(coeffs, 1), 0.5 * (lo + hi))
+    return c0_var / (1.0 + slope * slope)
+
+
+@njit
+def better_cover(
+    xy: np.ndarray,  # (N, 2) a received piece's points in the receiver's frame
+    rows: np.ndarray,  # (k,) int64: the receiver's landmarks of the same wall
+    limit: float,  # the piece's normal variance, with the round-off margin
+    variate: np.ndarray,  # (n,) int64: the receiver's table's columns …
+    shape: np.ndarray,  # (n, M+1)
+    order: np.ndarray,  # (n,) int64 each shape's own order
+    size: np.ndarray,  # (n,) int64 each polynomial's number of coefficients
+    c0: np.ndarray,  # (n,) the current c0s
+    lo: np.ndarray,  # (n,)
+    hi: np.ndarray,  # (n,)
+    cov: np.ndarray,  # (S, S) the receiver's covariance (c0 of row j at 3 + j)
+    reach: float,
+) -> tuple[int, np.ndarray]:
+    """Rule 1 of a received piece's fusion (``RendezvousExchange._fuse``) in one call: how
+    many of the landmarks ``rows`` are *better* (their normal-offset variance,
+    ``exchange.normal_variance`` of their shape and var(c0), at most ``limit``), and (N,)
+    which points those cover: within a landmark's extent (its ξ) and within ``reach`` of its
+    curve along η (the readable form is ``covered_points`` in ``tests/comms/
+    reference_geometry.py``, its value in ``polyval``'s operations)."""
+    covered = np.zeros(xy.shape[0], dtype=np.bool_)
+    better = 0
+    for r in rows:
+        k = 3 + r
+        if not _normal_variance(shape[r, : order[r] + 1], lo[r], hi[r], cov[k, k]) <= limit:
+            continue
+        better += 1
+        c = shape[r, : size[r]].copy()
+        c[0] = c0[r]
+        for i in range(xy.shape[0]):
+            xi, eta = (xy[i, 0], xy[i, 1]) if variate[r] == 1 else (xy[i, 1], xy[i, 0])
+            if xi >= lo[r] and xi <= hi[r] and abs(eta - _horner(c, xi)) <= reach:
+                covered[i] = True
+    return better, covered
 
 
 @njit

@@ -1,9 +1,11 @@
 """A received chain's geometry as readable numpy (the oracles of ``comms/kernels.py``'s
 :func:`unit_tangents`, :func:`frame_chain`, :func:`received_geometry`,
-:func:`variance_floor` and :func:`chain_fit`): the numpy the exchange and the transform
-refinement ran before those were compiled."""
+:func:`variance_floor`, :func:`chain_fit` and :func:`better_cover`): the numpy the exchange
+and the transform refinement ran before those were compiled."""
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -86,3 +88,14 @@ def fit_chain(points: PointSet, order: int, auto_order: bool, tol: float) -> tup
     coeffs[: fit.poly.order + 1] = fit.poly.coeffs
     poly = Polynomial(fit.poly.variate, coeffs, fit.poly.lo, fit.poly.hi)
     return Fit(poly, fit.c0, fit.Gx, fit.Gy, fit.V, fit.rms, fit.order), worst
+
+
+def covered_points(xy: np.ndarray, polys: Sequence[Polynomial], reach: float) -> np.ndarray:
+    """(N,) True where a point (N, 2) lies within ``polys``' extents (its ξ) and within
+    ``reach`` (m) of the curve along η: the readable form of the cover in
+    :func:`~polyslam_env.comms.kernels.better_cover`."""
+    out = np.zeros(len(xy), dtype=bool)
+    for poly in polys:
+        xi, eta = poly.from_xy(xy)
+        out |= (xi >= poly.lo) & (xi <= poly.hi) & (np.abs(eta - poly.value(xi)) <= reach)
+    return out

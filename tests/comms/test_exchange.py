@@ -20,7 +20,6 @@ from polyslam_env.comms.exchange import (
     RendezvousExchange,
     _c0_variance,
     chain_points,
-    covered_points,
     frame_message,
     map_transform,
     normal_variance,
@@ -43,6 +42,7 @@ from polyslam_env.slam.fitting import PointSet, fit_polynomial
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.config import WorldConfig
+from tests.comms import reference_geometry as ref
 
 WCFG = WorldConfig()
 # An alignment-mode frame's empty free-space block: deflated nothing, then its 16-byte head
@@ -838,7 +838,7 @@ def test_exchange__a_wall_stretched_in_place_reaches_a_peer_holding_it_shorter()
     stretch = wall.points_at(np.linspace(wall.hi + 0.15, longer - 0.01, 8))  # past the old end
 
     def covered() -> bool:  # within 2 cm of the receiver's walls (the chain and refit tols)
-        return bool(covered_points(stretch, receiver.polynomials(), 0.02).all())
+        return bool(ref.covered_points(stretch, receiver.polynomials(), 0.02).all())
 
     assert not covered()
     again = ex.step(k, slams, view, active)

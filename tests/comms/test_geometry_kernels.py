@@ -11,11 +11,13 @@ from polyslam_env.comms.alignment import frame_points
 from polyslam_env.comms.exchange import (
     _fit_chain,
     chain_points,
+    normal_variance,
     received_geometry,
     refit_variance_floor,
 )
 from polyslam_env.core.geometry import rotation
 from polyslam_env.slam.fitting import PointSet
+from polyslam_env.slam.landmarks import LandmarkTable
 from polyslam_env.slam.polynomial import Polynomial
 from tests.comms import reference_geometry as ref
 
@@ -155,3 +157,39 @@ def test_chain_fit__a_nan_point_raises_as_the_loop_did() -> None:
             fit_chain(points, 3, True, 0.01)
         errors.append((error.type, str(error.value)))
     assert errors[0] == errors[1]
+
+
+def test_better_cover__is_the_per_landmark_rule_bit_for_bit() -> None:
+    """Rule 1 of a received piece's fusion in one call (``comms.kernels.better_cover``) picks
+    the landmarks whose ``exchange.normal_variance`` is at most the limit and covers the
+    points ``reference_geometry.covered_points`` covers with them, on tables of random walls
+    (orders 1–3 with zero tails, either variate, a c0 in the state unlike the fit's) and
+    points on, near and off them."""
+    rng = np.random.default_rng(21)
+    for _ in range(60):
+        table, n = LandmarkTable(), int(rng.integers(1, 12))
+        for _ in range(n):
+            coeffs = rng.normal(0.0, [1.0, 0.4, 0.1, 0.02])
+            coeffs[int(rng.integers(2, 5)) :] = 0.0  # a line, a quadratic or a cubic
+            lo = float(rng.uniform(-3.0, 2.0))
+            poly = Polynomial(int(rng.integers(1, 3)), coeffs, lo, lo + float(rng.uniform(0.2, 3)))
+            table.append(poly, 0.5 * (poly.lo + poly.hi), 0.0, 0.0, 0.5, evidence=(-9.0, 9.0))
+        a = rng.normal(0.0, 0.02, (3 + 2 * n, 3 + 2 * n))
+        cov = a @ a.T
+        c0s = rng.normal(0.0, 1.0, n)
+        rows = np.flatnonzero(rng.random(n) < 0.7)
+        walls = [table.poly(int(r)).with_c0(float(c0s[r])) for r in rows]
+        xy = np.concatenate(
+            [w.points_at(rng.uniform(w.lo - 0.3, w.hi + 0.3, 6)) for w in walls]
+            + [rng.normal(0.0, 2.0, (5, 2))]
+        )
+        xy += rng.normal(0.0, 0.03, xy.shape)
+        limit = float(np.median(np.diagonal(cov))) * 0.9
+        variances = [normal_variance(table.poly(int(r)), float(cov[3 + r, 3 + r])) for r in rows]
+        want = [w for w, var in zip(walls, variances, strict=True) if var <= limit]
+        better, covered = kernels.better_cover(
+            xy, rows, limit, table.variate, table.shape, table.order, table.sizes, c0s,
+            table.lo, table.hi, cov, 0.05,
+        )  # fmt: skip
+        assert better == len(want)
+        assert np.array_equal(covered, ref.covered_points(xy, want, 0.05))
