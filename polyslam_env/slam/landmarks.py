@@ -31,7 +31,6 @@ from polyslam_env.slam.columns import (
     EV_LO,
     FIT_HALF,
     HI,
-    ID,
     LO,
     MODEL_VAR,
     N_INDEX,
@@ -42,7 +41,6 @@ from polyslam_env.slam.columns import (
     SHIFT_SLOPE,
     SIDE,
     STAMP,
-    USES,
     VARIATE,
     XI_VAR,
 )
@@ -370,21 +368,11 @@ class LandmarkTable:
         self._next_id += 1
         i = len(self.ids)
         self._make_room(i + 1, poly.order + 1)
-        shape = self.shape_buffer[i]
-        shape[:] = 0.0
-        shape[1 : poly.order + 1] = poly.shape
-        ev = (poly.lo, poly.hi) if evidence is None else evidence
-        real, index = self.real, self.index
-        real[LO, i], real[HI, i] = poly.lo, poly.hi
-        real[ETA_LO, i], real[ETA_HI, i] = map_kernels.eta_range(shape, poly.lo, poly.hi)
-        real[EV_LO, i], real[EV_HI, i] = ev
-        real[PIVOT, i], real[XI_VAR, i] = pivot, xi_var
-        real[MODEL_VAR, i], real[FIT_HALF, i] = model_var, fit_half
-        real[SHIFT_SLOPE, i] = shift_slope
-        index[ID, i], index[VARIATE, i] = landmark_id, poly.variate
-        index[ORDER, i] = len(_own_order(shape)) - 1
-        index[SIDE, i], index[CHANGED_AT, i], index[STAMP, i] = int(side), step, 0
-        index[RECEIVED, i], index[USES, i] = int(received), 0
+        map_kernels.write_row(
+            *self.buffers, i, poly.coeffs, poly.variate, poly.lo, poly.hi,
+            (poly.lo, poly.hi) if evidence is None else evidence, pivot, xi_var, model_var,
+            fit_half, shift_slope, landmark_id, int(side), step, int(received),
+        )  # fmt: skip
         self.ids.append(landmark_id)
         self._built.append(poly)
         self._built_stamp.append(0)
@@ -441,7 +429,7 @@ class LandmarkTable:
         shape = self.shape_buffer[index]
         shape[:] = 0.0
         shape[1 : poly.order + 1] = poly.shape
-        self.index[ORDER, index] = len(_own_order(shape)) - 1
+        self.index[ORDER, index] = map_kernels.own_order(shape)
         map_kernels.set_extent(*self.buffers, index, poly.lo, poly.hi)  # η range, stamp
         self._built[index] = poly
         self._built_stamp[index] = int(self.index[STAMP, index])

@@ -32,10 +32,12 @@ from polyslam_env.slam.columns import (
     ETA_LO,
     EV_HI,
     EV_LO,
+    FIT_HALF,
     HI,
     ID,
     KIND,
     LO,
+    MODEL_VAR,
     N_NEW,
     N_REFIT,
     NEW,
@@ -54,6 +56,7 @@ from polyslam_env.slam.columns import (
     PY,
     QBAD,
     RANK,
+    RECEIVED,
     REFIT,
     S_EPS_M,
     S_EPS_Z,
@@ -61,14 +64,18 @@ from polyslam_env.slam.columns import (
     S_ROTATION_STATES,
     S_SQUARED,
     S_STRETCH_ENDS,
+    SHIFT_SLOPE,
+    SIDE,
     SIGMA,
     SIZE,
     STAMP,
     STEP,
+    USES,
     UX,
     UY,
     VARIATE,
     WEIGHT,
+    XI_VAR,
     X,
     Y,
 )
@@ -716,6 +723,43 @@ def extend_to_hit(
     follows and its stamp moves (``LandmarkTable.extend_to_hit``)."""
     real[EV_LO, j], real[EV_HI, j] = _min(real[EV_LO, j], xi), _max(real[EV_HI, j], xi)
     set_extent(real, index, shape, j, _min(real[LO, j], xi), _max(real[HI, j], xi))
+
+
+@njit
+def own_order(shape: np.ndarray) -> int:
+    """A zero-padded shape row's own order: its last nonzero coefficient's index (a NaN is
+    nonzero), at least 1 (``landmarks._own_order``'s row length minus one)."""
+    last = -1
+    for k in range(shape.size):
+        if shape[k] != 0.0:
+            last = k
+    return last if last > 1 else 1
+
+
+@njit
+def write_row(
+    real: np.ndarray, index: np.ndarray, shape: np.ndarray, i: int,
+    coeffs: np.ndarray,  # (m+1,) [c0, b_1, …, b_m]: the shape row gets b_1 … b_m
+    variate: int, lo: float, hi: float, evidence: tuple[float, float],
+    pivot: float, xi_var: float, model_var: float, fit_half: float, shift_slope: float,
+    landmark_id: int, side: int, step: int, received: int,
+) -> None:  # fmt: skip
+    """Row ``i`` of a landmark table's buffers (room made) for a new landmark
+    (``LandmarkTable.append``): its zero-padded shape, extent, η range, evidence and
+    scalars, its id, variate, own order, face, step and received flag; stamp and uses 0."""
+    row = shape[i]
+    row[:] = 0.0
+    row[1 : coeffs.size] = coeffs[1:]
+    real[LO, i], real[HI, i] = lo, hi
+    real[ETA_LO, i], real[ETA_HI, i] = eta_range(row, lo, hi)
+    real[EV_LO, i], real[EV_HI, i] = evidence
+    real[PIVOT, i], real[XI_VAR, i] = pivot, xi_var
+    real[MODEL_VAR, i], real[FIT_HALF, i] = model_var, fit_half
+    real[SHIFT_SLOPE, i] = shift_slope
+    index[ID, i], index[VARIATE, i] = landmark_id, variate
+    index[ORDER, i] = own_order(row)
+    index[SIDE, i], index[CHANGED_AT, i], index[STAMP, i] = side, step, 0
+    index[RECEIVED, i], index[USES, i] = received, 0
 
 
 @njit

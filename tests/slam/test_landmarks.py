@@ -7,10 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from polyslam_env.slam import map_kernels
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.ekf import predict, predict_inplace, spectral_norm_sym
 from polyslam_env.slam.fitting import Fit
-from polyslam_env.slam.landmarks import LandmarkTable, PackedPolynomials, shape_range
+from polyslam_env.slam.landmarks import LandmarkTable, PackedPolynomials, _own_order, shape_range
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.robot import PolySlam
 from tests.slam.reference import (
@@ -250,3 +251,35 @@ def test_profile_hook__records_stages_without_changing_the_estimate() -> None:
     np.testing.assert_array_equal(plain.cov, profiled.cov)
     assert set(profiled.profile) == {"predict", "association", "map", "update"}
     assert all(len(t) == 5 for t in profiled.profile.values())
+
+
+def test_landmark_table__append_writes_every_column_of_the_row() -> None:
+    """A new row (one compiled write, ``map_kernels.write_row``) holds the polynomial's shape
+    zero-padded to the table's width, its extent and η range (``map_kernels.eta_range`` of
+    that row), evidence, scalars and flags; its own order is the last nonzero coefficient's
+    (a zero tail, −0.0 included, does not count; at least 1), as ``landmarks._own_order``."""
+    rng = np.random.default_rng(8)
+    table = LandmarkTable()
+    for k in range(40):
+        coeffs = rng.normal(0.0, 1.0, int(rng.integers(2, 5)))
+        coeffs[int(rng.integers(1, coeffs.size + 1)) :] = [0.0, -0.0][k % 2]
+        poly = Polynomial(int(rng.integers(1, 3)), coeffs, -1.0 - k, 2.0 + k)
+        values = rng.normal(size=5).tolist()
+        lid = table.append(poly, *values[:4], step=k, side=k % 3 - 1, evidence=(-50.0, 50.0),
+                           received=bool(k % 2), shift_slope=values[4])  # fmt: skip
+        i = table.index_of(lid)
+        row = table.shape[i]
+        assert row[0] == 0.0 and np.array_equal(row[1 : coeffs.size], coeffs[1:])
+        assert not row[coeffs.size :].any()
+        assert (table.lo[i], table.hi[i]) == (poly.lo, poly.hi)
+        assert tuple(table.eta_range[i]) == map_kernels.eta_range(row.copy(), poly.lo, poly.hi)
+        assert tuple(table.evidence[i]) == (-50.0, 50.0)
+        assert [table.pivot[i], table.xi_var[i], table.model_var[i], table.fit_half[i]] == values[
+            :4
+        ]
+        assert table.shift_slope[i] == values[4]
+        assert int(table.order[i]) == len(_own_order(row)) - 1
+        assert (int(table.variate[i]), int(table.side[i]), int(table.changed_at[i])) == (
+            poly.variate, k % 3 - 1, k,
+        )  # fmt: skip
+        assert (int(table.received[i]), int(table.stamp[i])) == (k % 2, 0)
