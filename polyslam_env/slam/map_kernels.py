@@ -266,24 +266,44 @@ def _on_curve(c: np.ndarray, variate: int, xi: np.ndarray, out: np.ndarray) -> N
 
 @njit
 def _rms_error(xy: np.ndarray, variate: int, c: np.ndarray, lo: float, hi: float) -> float:
-    """RMS approximation error of the points ``xy`` by one polynomial (``nearest_by_error``
-    with it the only candidate), its mean summed as numpy sums."""
+    """RMS approximation error of the points ``xy`` by one polynomial: each point's
+    ``kernels.nearest_by_error`` with it the only candidate (|η − p(ξ)| inside the extent,
+    else the distance to the nearer end point; no finite error: inf), in its operations
+    without its candidate arrays, and their mean square summed as numpy sums."""
     m = c.size - 1
     order = 1
     for k in range(m, 0, -1):  # the shape's own order (its last non-zero power, ≥ 1)
         if c[k] != 0.0:
             order = max(k, 1)
             break
-    shape = np.zeros((1, m + 1))
-    shape[0, 1:] = c[1:]
+    c0 = c[0]
+    end_lo, end_hi = horner(c, order, lo, c0)[0], horner(c, order, hi, c0)[0]
     n = xy.shape[0]
-    best, errors = np.empty(n, dtype=np.int64), np.empty(n)
-    nearest_by_error(
-        xy, np.zeros(1, dtype=np.int64), np.full(1, variate, dtype=np.int64),
-        np.full(1, order, dtype=np.int64), shape, np.full(1, lo), np.full(1, hi),
-        np.full(1, c[0]), False, best, errors,
-    )  # fmt: skip
-    return math.sqrt(sum_like_numpy(errors * errors, 0, n) / n)
+    squares = np.empty(n)
+    for p in range(n):
+        xi, eta = (xy[p, 0], xy[p, 1]) if variate == 1 else (xy[p, 1], xy[p, 0])
+        if lo <= xi and xi <= hi:
+            err = abs(eta - horner(c, order, xi, c0)[0])
+        else:
+            err = _min(hypot(xi - lo, eta - end_lo), hypot(xi - hi, eta - end_hi))
+        err = err if err < math.inf else math.inf  # nearest_by_error keeps inf past a nan
+        squares[p] = err * err
+    return math.sqrt(sum_like_numpy(squares, 0, n) / n)
+
+
+@njit
+def _unique_rounded(spots: np.ndarray) -> np.ndarray:
+    """``np.unique(np.rint(spots).astype(np.int64))`` of non-decreasing ``spots`` (a
+    linspace): rint (numpy's round, half to even) keeps their order, so the unique values are
+    the first of each run of equal ones."""
+    out = np.empty(spots.size, dtype=np.int64)
+    count = 0
+    for i in range(spots.size):
+        value = np.int64(np.rint(spots[i]))
+        if count == 0 or value != out[count - 1]:
+            out[count] = value
+            count += 1
+    return out[:count]
 
 
 @njit
@@ -326,7 +346,7 @@ def merge_test(
         inside = np.arange(MERGE_SAMPLES)
     spots = np.empty(m + 1)
     _linspace(0.0, float(inside.size - 1), m + 1, spots)
-    pick = np.unique(np.rint(spots).astype(np.int64))  # rint: numpy's round, half to even
+    pick = _unique_rounded(spots)
     gamma_o = _rms_error(samples[inside[pick]], p_variate, p_coeffs, p_lo, p_hi)
     out[0], out[1] = a, b
     out[2] = gamma_o if gamma_o > gamma_p else gamma_p  # Python's max(gamma_p, gamma_o)
