@@ -520,3 +520,28 @@ def wall_mask(
     :func:`~polyslam_env.slam.association.fit_cluster`): the points of one wall
     (MSAC dominant lines, corner test), then their largest run without a gap."""
     return _largest_run(xy, _select_wall(xy, tol, min_second, corner_angle), max_gap)
+
+
+@njit
+def merge_fit(
+    a_coeffs: np.ndarray, a_variate: int, a_extent: tuple[float, float],
+    a_c0: tuple[int, float], a_turn: tuple[int, float],
+    b_coeffs: np.ndarray, b_variate: int, b_extent: tuple[float, float],
+    b_c0: tuple[int, float], b_turn: tuple[int, float],
+    n_each: int, n_state: int, order: int, auto_order: bool, limits: np.ndarray,
+) -> tuple[
+    np.ndarray, np.ndarray, np.ndarray,
+    int, int, np.ndarray, float, float, float, np.ndarray, np.ndarray, np.ndarray, float,
+]:  # fmt: skip
+    """A merge's point set and its fit in one call (``merging.merge_fit``): ``n_each``
+    points on each of two curves (:func:`sample_into`, the first's rows first), then their
+    shape-fixed LMS fit of the variate their direction chooses (:func:`fit_points`, no noise
+    of their own). Returns (xy, d_state, weights) and :func:`fit_points`' results."""
+    n = 2 * n_each
+    xy, d_state, weights = np.empty((n, 2)), np.zeros((n, 2, n_state)), np.empty(n)
+    sample_into(a_coeffs, a_variate, a_extent, a_c0, a_turn, xy, d_state, weights, 0, n_each)
+    sample_into(b_coeffs, b_variate, b_extent, b_c0, b_turn, xy, d_state, weights, n_each, n_each)
+    var, m, coeffs, lo, hi, rms, gx, gy, r, scale = fit_points(
+        xy, weights, d_state, np.zeros((n, 2, 0)), order, 0, True, auto_order, limits
+    )
+    return xy, d_state, weights, var, m, coeffs, lo, hi, rms, gx, gy, r, scale

@@ -269,7 +269,18 @@ def sample_into(
     (:func:`~polyslam_env.slam.merging.merge_points`). The arguments are checked here, the
     points made by one compiled call (:func:`~polyslam_env.slam.fit_kernels.sample_into`)."""
     xy, d_state, weights = out
-    n_state = d_state.shape[2]
+    c0, rotation = sample_args(c0_index, c0_var, turn, d_state.shape[2])
+    fit_kernels.sample_into(
+        poly.coeffs, poly.variate, (float(span[0]), float(span[1])), c0, rotation,
+        xy, d_state, weights, start, span[2],
+    )  # fmt: skip
+
+
+def sample_args(
+    c0_index: int, c0_var: float, turn: tuple[int, float] | None, n_state: int
+) -> tuple[tuple[int, float], tuple[int, float]]:
+    """:func:`sample_into`'s checked (c0's state index, its variance) and (α's state index
+    or −1, pivot ξ), as the compiled samplers take them."""
     if not 3 <= c0_index < n_state:
         raise ValueError(
             f"c0_index must be a landmark state index in [3, {n_state}), got {c0_index}"
@@ -278,11 +289,7 @@ def sample_into(
         raise ValueError(f"c0_var must be > 0, got {c0_var}")
     if turn is not None and (not 3 <= turn[0] < n_state or turn[0] == c0_index):
         raise ValueError(f"turn index must be another state index, got {turn[0]}")
-    fit_kernels.sample_into(
-        poly.coeffs, poly.variate, (float(span[0]), float(span[1])),
-        (c0_index, float(c0_var)), NO_TURN if turn is None else (turn[0], float(turn[1])),
-        xy, d_state, weights, start, span[2],
-    )  # fmt: skip
+    return (c0_index, float(c0_var)), NO_TURN if turn is None else (turn[0], float(turn[1]))
 
 
 def concat(*pointsets: PointSet) -> PointSet:
@@ -405,16 +412,46 @@ def fit_polynomial(
         raise ValueError("cannot fit a polynomial to zero points")
     if order < 1:
         raise ValueError(f"order must be >= 1, got {order}")
-    limits = _NO_LIMITS
-    if auto_order:
-        noise_var = max(float(points.noise_cov.trace()) / n_points, min_noise_var)
-        limits = order_limits(n_points, order, noise_var)
-        if curvature_test and float(points.noise_cov.trace()) > 0:
-            limits = np.vstack([limits, next_term_limits(order, noise_var)])
-    var, m, coeffs, lo, hi, rms, gx, gy, r, scale = fit_kernels.fit_points(
+    limits = fit_limits(
+        n_points, float(points.noise_cov.trace()), order, auto_order, min_noise_var,
+        curvature_test,
+    )  # fmt: skip
+    result = fit_kernels.fit_points(
         points.xy, points.weights, points.d_state, points.d_noise, order,
         0 if variate is None else variate, shape_fixed, auto_order, limits,
     )  # fmt: skip
+    return fit_of(result, points.noise_cov)
+
+
+def fit_limits(
+    n_points: int,
+    noise_trace: float,
+    order: int,
+    auto_order: bool,
+    min_noise_var: float,
+    curvature_test: bool,
+) -> np.ndarray:
+    """The order tests' limits :func:`fit_polynomial` hands its compiled fit for ``n_points``
+    points whose noise covariance has trace ``noise_trace``: none without ``auto_order``;
+    :func:`order_limits` at their mean noise variance (floored at ``min_noise_var``), and
+    with ``curvature_test`` for points with noise of their own :func:`next_term_limits`."""
+    if not auto_order:
+        return _NO_LIMITS
+    noise_var = max(noise_trace / n_points, min_noise_var)
+    limits = order_limits(n_points, order, noise_var)
+    if curvature_test and noise_trace > 0:
+        limits = np.vstack([limits, next_term_limits(order, noise_var)])
+    return limits
+
+
+def fit_of(
+    result: tuple[int, int, np.ndarray, float, float, float, np.ndarray, np.ndarray, np.ndarray,
+                  float],
+    noise_cov: np.ndarray,
+) -> Fit:  # fmt: skip
+    """The :class:`Fit` of :func:`~polyslam_env.slam.fit_kernels.fit_points`' ``result`` for
+    points of noise covariance ``noise_cov``."""
+    var, m, coeffs, lo, hi, rms, gx, gy, r, scale = result
     # lo ≤ hi (the points' ξ range) and coeffs a float (order+1,) array: a fit of a known
     # variate with finite numbers needs no more of Polynomial's checks; any other gets them
     # (and their error)
@@ -427,7 +464,7 @@ def fit_polynomial(
         c0=float(coeffs[0]),
         Gx=gx[None, :],
         Gy=gy[None, :],
-        V=points.noise_cov,
+        V=noise_cov,
         rms=rms,
         order=m,
         r_factor=r,

@@ -33,7 +33,7 @@ from polyslam_env.slam.lineage import CREATED, INSERTED, MERGED, REMOVED, REPLAC
 from polyslam_env.slam.merging import (
     JOIN_GAP,
     face_normal,
-    merge_points,
+    merge_fit,
     near_merge_gammas,
     pick_merge,
 )
@@ -346,7 +346,7 @@ class MapMaintenance:
         slam, cfg = self.slam, self.config
         sides = slam.table.side
         other_id = slam.table.ids[j]
-        pts = merge_points(
+        pts, merged = merge_fit(
             poly,
             3 + idx,
             float(slam.cov[3 + idx, 3 + idx]),
@@ -357,8 +357,9 @@ class MapMaintenance:
             slam.mean.size,
             self.turn_of(idx),
             self.turn_of(j),
+            (cfg.order, cfg.auto_order, cfg.range_sigma**2, cfg.curvature_test),
         )
-        fit = self.fit(pts)
+        fit = usable(merged)
         if fit is None:
             return None
         # one polynomial must explain both pieces, else they are not one wall: a join within
@@ -402,11 +403,7 @@ class MapMaintenance:
             min_noise_var=cfg.range_sigma**2,
             curvature_test=cfg.curvature_test,
         )
-        if not (math.isfinite(fit.c0) and np.isfinite(fit.Gx).all() and np.isfinite(fit.Gy).all()):
-            return None
-        if fit.poly.max_slope() > MAX_SLOPE:  # curves away between its points: not one wall
-            return None
-        return fit
+        return usable(fit)
 
     def rotation_fit_var(self, poly: Polynomial) -> float:
         """Variance of a fitted shape's turn from its slope's fit error: the slope's
@@ -443,6 +440,16 @@ class MapMaintenance:
     def box(self, row: int) -> np.ndarray:
         """(4,) bounding box (x_min, x_max, y_min, y_max) of landmark ``row``."""
         return self.slam.table.boxes(self.slam.c0s)[row]
+
+
+def usable(fit: Fit) -> Fit | None:
+    """``fit``, or None when it is not finite or curves away between its points (steeper than
+    ``MAX_SLOPE``): not one wall (the map's fits, :meth:`MapMaintenance.fit`, and its merges)."""
+    if not (math.isfinite(fit.c0) and np.isfinite(fit.Gx).all() and np.isfinite(fit.Gy).all()):
+        return None
+    if fit.poly.max_slope() > MAX_SLOPE:  # curves away between its points: not one wall
+        return None
+    return fit
 
 
 @functools.lru_cache(maxsize=16)

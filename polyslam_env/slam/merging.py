@@ -4,7 +4,8 @@ When a new (or received) polynomial p overlaps a map polynomial p2 — one's ext
 the other's, or they overlap for at least ``min_overlap`` metres — take m+1 equally spaced
 points on p in the overlap; if the RMS approximation error γ of p2 on them is below γ_M the
 two are replaced by one weighted LMS polynomial through ε_M equally spaced points on each
-(:func:`merge_points` → :func:`~polyslam_env.slam.fitting.fit_polynomial`).
+(:func:`merge_fit`: the points and :func:`~polyslam_env.slam.fitting.fit_polynomial`'s fit
+of them).
 
 Choices where the paper is silent:
 
@@ -43,9 +44,9 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from polyslam_env.slam import map_kernels
+from polyslam_env.slam import fit_kernels, map_kernels
 from polyslam_env.slam.association import GAP_SPLIT
-from polyslam_env.slam.fitting import PointSet, sample_into
+from polyslam_env.slam.fitting import Fit, PointSet, fit_limits, fit_of, sample_args
 from polyslam_env.slam.polynomial import Polynomial
 
 if TYPE_CHECKING:
@@ -295,7 +296,7 @@ def _faces_opposite(poly: Polynomial, side: int, other: Polynomial, other_side: 
     return float(n_p @ n_o) < 0.0
 
 
-def merge_points(
+def merge_fit(
     poly_a: Polynomial,
     c0_index_a: int,
     c0_var_a: float,
@@ -304,19 +305,35 @@ def merge_points(
     c0_var_b: float,
     eps_m: int,
     n_state: int,
-    turn_a: tuple[int, float] | None = None,
-    turn_b: tuple[int, float] | None = None,
-) -> PointSet:
-    """ε_M equally spaced points on each polynomial (whole extents), for the merged LMS fit.
+    turn_a: tuple[int, float] | None,
+    turn_b: tuple[int, float] | None,
+    fit_settings: tuple[int, bool, float, bool],
+) -> tuple[PointSet, Fit]:
+    """ε_M equally spaced points on each polynomial (whole extents) and their merged LMS fit,
+    in one compiled call (:func:`~polyslam_env.slam.fit_kernels.merge_fit`).
 
     Both polynomials must carry their current c0; each set weighs 1/var(c0) of its own
     landmark, so the fit's G_x has entries on both c0s, and on their turns α with ``turn_a``,
-    ``turn_b`` = (α's state index, pivot ξ) (:func:`~polyslam_env.slam.fitting.polynomial_points`).
+    ``turn_b`` = (α's state index, pivot ξ) (:func:`~polyslam_env.slam.fitting.
+    polynomial_points`). The fit is :func:`~polyslam_env.slam.fitting.fit_polynomial`'s,
+    shape fixed, with ``fit_settings`` = (order, auto_order, min_noise_var, curvature_test);
+    the points-then-fit form is the oracle in ``tests/slam/reference_merging.py``.
     """
     n = 2 * eps_m
-    out = np.empty((n, 2)), np.zeros((n, 2, n_state)), np.empty(n)
-    sample_into(poly_a, c0_index_a, c0_var_a, (poly_a.lo, poly_a.hi, eps_m), turn_a, out, 0)
-    sample_into(poly_b, c0_index_b, c0_var_b, (poly_b.lo, poly_b.hi, eps_m), turn_b, out, eps_m)
-    xy, d_state, weights = out
-    # sample_into checked its arguments (weights 1/var(c0) > 0): made to PointSet's shapes
-    return PointSet.unchecked(xy, d_state, np.zeros((n, 2, 0)), np.zeros((0, 0)), weights)
+    order, auto_order, min_noise_var, curvature_test = fit_settings
+    if n == 0:
+        raise ValueError("cannot fit a polynomial to zero points")
+    if order < 1:
+        raise ValueError(f"order must be >= 1, got {order}")
+    a_c0, a_turn = sample_args(c0_index_a, c0_var_a, turn_a, n_state)
+    b_c0, b_turn = sample_args(c0_index_b, c0_var_b, turn_b, n_state)
+    noise_cov = np.zeros((0, 0))  # points sampled on polynomials: no noise of their own
+    limits = fit_limits(n, 0.0, order, auto_order, min_noise_var, curvature_test)
+    xy, d_state, weights, var, m, coeffs, lo, hi, rms, gx, gy, r, scale = fit_kernels.merge_fit(
+        poly_a.coeffs, poly_a.variate, (float(poly_a.lo), float(poly_a.hi)), a_c0, a_turn,
+        poly_b.coeffs, poly_b.variate, (float(poly_b.lo), float(poly_b.hi)), b_c0, b_turn,
+        eps_m, n_state, order, auto_order, limits,
+    )  # fmt: skip
+    # sample_args checked what the points are made of (weights 1/var(c0) > 0)
+    points = PointSet.unchecked(xy, d_state, np.zeros((n, 2, 0)), noise_cov, weights)
+    return points, fit_of((var, m, coeffs, lo, hi, rms, gx, gy, r, scale), noise_cov)

@@ -12,6 +12,7 @@ import numpy as np
 import numpy.polynomial.polynomial as P
 
 from polyslam_env.slam import kernels, map_kernels
+from polyslam_env.slam.fitting import PointSet, sample_into
 from polyslam_env.slam.landmarks import own_orders
 from polyslam_env.slam.merging import (
     JOIN_ANGLE_DEG,
@@ -156,3 +157,27 @@ def _faces_opposite(poly: Polynomial, side: int, other: Polynomial, other_side: 
     n_p = face_normal(poly, 0.5 * (poly.lo + poly.hi), side)
     n_o = face_normal(other, 0.5 * (other.lo + other.hi), other_side)
     return float(n_p @ n_o) < 0.0
+
+
+def merge_points(
+    poly_a: Polynomial,
+    c0_index_a: int,
+    c0_var_a: float,
+    poly_b: Polynomial,
+    c0_index_b: int,
+    c0_var_b: float,
+    eps_m: int,
+    n_state: int,
+    turn_a: tuple[int, float] | None = None,
+    turn_b: tuple[int, float] | None = None,
+) -> PointSet:
+    """ε_M equally spaced points on each polynomial (whole extents), for the merged LMS fit:
+    the points of ``merging.merge_fit`` (its oracle with :func:`~polyslam_env.slam.fitting.
+    fit_polynomial`), each set weighing 1/var(c0) of its own landmark, with ∂π/∂α on their
+    turns α with ``turn_a``, ``turn_b`` = (α's state index, pivot ξ)."""
+    n = 2 * eps_m
+    out = np.empty((n, 2)), np.zeros((n, 2, n_state)), np.empty(n)
+    sample_into(poly_a, c0_index_a, c0_var_a, (poly_a.lo, poly_a.hi, eps_m), turn_a, out, 0)
+    sample_into(poly_b, c0_index_b, c0_var_b, (poly_b.lo, poly_b.hi, eps_m), turn_b, out, eps_m)
+    xy, d_state, weights = out
+    return PointSet(xy, d_state, np.zeros((n, 2, 0)), np.zeros((0, 0)), weights)

@@ -29,10 +29,10 @@ from polyslam_env.slam.fitting import (
     turn_gradient,
 )
 from polyslam_env.slam.map_kernels import GAP_SPLIT
-from polyslam_env.slam.merging import merge_points
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.slam.stored import PointArrays
 from tests.slam import reference_fitting as reference
+from tests.slam.reference_merging import merge_points
 
 EPS = np.finfo(float).eps
 

@@ -21,8 +21,8 @@ from polyslam_env.slam.merging import (
     find_merge,
     join_gamma,
     merge_angle,
+    merge_fit,
     merge_gammas,
-    merge_points,
     near_merge_gammas,
     table_candidates,
     unit_tangent,
@@ -31,7 +31,7 @@ from polyslam_env.slam.polynomial import Polynomial
 from tests.slam import reference_merging
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 from tests.slam.reference_merging import join_gamma as reference_join_gamma
-from tests.slam.reference_merging import max_slope, merge_gamma, overlap_interval
+from tests.slam.reference_merging import max_slope, merge_gamma, merge_points, overlap_interval
 
 GAMMA_M = 0.35  # paper value
 
@@ -95,6 +95,47 @@ def test_merge_points__jacobians_on_both_c0s_match_finite_differences(
     assert abs(fit.Gx[0, i_a]) > 1e-3 and abs(fit.Gx[0, i_b]) > 1e-3
     np.testing.assert_array_equal(fit.Gx[0, :4], 0.0)
     assert fit.Gy.shape == (1, 0)
+
+
+@pytest.mark.parametrize("rotation", [False, True])
+def test_merge_fit__is_the_points_then_fit_polynomial_bit_for_bit(rotation: bool) -> None:
+    """A merge's points and fit in one compiled call (``merging.merge_fit``) equal
+    ``merge_points`` then ``fit_polynomial`` (shape fixed, the map's settings): the points,
+    their Jacobians and weights, and the fit's variate, coefficients, extent, order, RMS,
+    G_x, G_y and R, on random pairs of curves of either variate, with and without turns, auto
+    order on and off; and the same error for a non-positive variance."""
+    rng = np.random.default_rng(17)
+    for trial in range(120):
+        polys = []
+        for _ in range(2):
+            coeffs = rng.normal(0.0, [1.0, 0.6, 0.1, 0.02])
+            coeffs[int(rng.integers(2, 5)) :] = 0.0
+            lo = float(rng.uniform(-2.0, 2.0))
+            polys.append(Polynomial(int(rng.integers(1, 3)), coeffs, lo, lo + rng.uniform(0.1, 3)))
+        n_state = int(rng.integers(7, 20))
+        turns = (6, float(rng.uniform(-1, 1))), (5, float(rng.uniform(-1, 1)))
+        turn_a, turn_b = turns if rotation else (None, None)
+        var_a, var_b = rng.uniform(1e-5, 1e-2, 2).tolist()
+        settings = (3, bool(trial % 2), 0.02**2, bool(trial % 3))
+        pts, fit = merge_fit(polys[0], 3, var_a, polys[1], 4, var_b, 5, n_state, turn_a, turn_b,
+                             settings)  # fmt: skip
+        want_pts = merge_points(polys[0], 3, var_a, polys[1], 4, var_b, 5, n_state, turn_a, turn_b)
+        want = fit_polynomial(
+            want_pts, 3, None, shape_fixed=True, auto_order=settings[1],
+            min_noise_var=settings[2], curvature_test=settings[3],
+        )  # fmt: skip
+        for name in ("xy", "d_state", "d_noise", "noise_cov", "weights"):
+            assert np.array_equal(getattr(pts, name), getattr(want_pts, name)), name
+        assert (fit.poly.variate, fit.poly.lo, fit.poly.hi, fit.c0, fit.rms, fit.order) == (
+            want.poly.variate, want.poly.lo, want.poly.hi, want.c0, want.rms, want.order,
+        )  # fmt: skip
+        assert np.array_equal(fit.poly.coeffs, want.poly.coeffs)
+        assert np.array_equal(fit.Gx, want.Gx) and np.array_equal(fit.Gy, want.Gy)
+        assert fit.r_factor is not None and want.r_factor is not None
+        assert np.array_equal(fit.r_factor, want.r_factor) and fit.scale == want.scale
+    for bad in (0.0, -1e-4, math.nan):
+        with pytest.raises(ValueError, match="c0_var must be > 0"):
+            merge_fit(polys[0], 3, bad, polys[1], 4, 1e-4, 5, 8, None, None, (3, True, 0.0, False))
 
 
 def test_find_merge__gamma_threshold_is_respected() -> None:
