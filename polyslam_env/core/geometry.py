@@ -182,12 +182,36 @@ def between(
 
     Computed as ``R(θ_a)ᵀ (b_xy − a_xy)`` and ``wrap(θ_b − θ_a)``: the odometry between two
     poses, or an absolute pose in a robot's start frame. Poses (3,) or (…, 3), broadcast.
-    ``wrap`` is :func:`wrap_angle` (arrays) or :func:`wrap_remainder` (one pose).
+    ``wrap`` is :func:`wrap_angle` (arrays) or :func:`wrap_remainder` (one pose). Row by row
+    in one compiled call (:func:`_between_rows`; the world asks for every robot's odometry
+    each step): numpy's dozen calls on three rows took 15 µs.
     """
     a, b = _poses(a), _poses(b)
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
-    return _columns(c * dx + s * dy, -s * dx + c * dy, wrap(b[..., 2] - a[..., 2]))
+    if a.shape != b.shape:
+        a, b = np.broadcast_arrays(a, b)
+    out = np.empty(a.shape)
+    rows = out.reshape(-1, 3)  # a view: out is new and contiguous
+    turned = wrap is wrap_angle
+    _between_rows(
+        np.ascontiguousarray(a).reshape(-1, 3), np.ascontiguousarray(b).reshape(-1, 3), turned, rows
+    )
+    if not turned:  # the kernel left θ_b − θ_a
+        out[..., 2] = wrap(out[..., 2])
+    return out
+
+
+@njit
+def _between_rows(a: np.ndarray, b: np.ndarray, wrap: bool, out: np.ndarray) -> None:
+    """:func:`between` of rows a, b (M, 3) into ``out`` (M, 3): numpy's float operations in
+    numpy's order (cos and sin are the C library's in both), θ wrapped as :func:`wrap_angle`
+    does (the formula of :func:`wrap_scalar`) when ``wrap``, else left as θ_b − θ_a."""
+    for i in range(a.shape[0]):
+        c, s = math.cos(a[i, 2]), math.sin(a[i, 2])
+        dx, dy = b[i, 0] - a[i, 0], b[i, 1] - a[i, 1]
+        out[i, 0] = c * dx + s * dy
+        out[i, 1] = -s * dx + c * dy
+        turn = b[i, 2] - a[i, 2]
+        out[i, 2] = math.pi - (math.pi - turn) % (2.0 * math.pi) if wrap else turn
 
 
 def compose_inverse(a: np.ndarray, b: np.ndarray) -> np.ndarray:  # (…, 3)

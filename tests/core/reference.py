@@ -1,12 +1,17 @@
-"""Readable numpy versions of the raster kernels of ``polyslam_env/core/raster.py``: the oracles
-of the kernel tests (they were the production code before the kernels; same float operations
-in the same order, so the cells are identical)."""
+"""Readable numpy versions of the raster kernels of ``polyslam_env/core/raster.py`` and of
+``between`` of ``polyslam_env/core/geometry.py``: the oracles of the kernel tests (they were the
+production code before the kernels; same float operations in the same order, so the cells and
+poses are identical)."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
+
+from polyslam_env.core.geometry import wrap_angle
 
 
 def point_cells(
@@ -94,3 +99,13 @@ def count_distinct_new(cells: np.ndarray, mask: np.ndarray, marked: np.ndarray) 
     """Distinct ids among ``cells`` in ``mask`` and not ``marked`` (flat views)."""
     m, s = mask.reshape(-1), marked.reshape(-1)
     return len(np.unique(cells[m[cells] & ~s[cells]]))
+
+
+def between(
+    a: np.ndarray, b: np.ndarray, wrap: Callable[[Any], Any] = wrap_angle
+) -> np.ndarray:  # (…, 3)
+    """``a⁻¹ ⊕ b`` in numpy, broadcast: ``R(θ_a)ᵀ (b_xy − a_xy)`` and ``wrap(θ_b − θ_a)``."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
+    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap(b[..., 2] - a[..., 2])], axis=-1)

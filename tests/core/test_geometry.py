@@ -26,6 +26,7 @@ from polyslam_env.core.geometry import (
     wrap_remainder,
     wrap_scalar,
 )
+from tests.core import reference
 from tests.slam.finite_differences import FD_ATOL, FD_RTOL, fd_jacobian
 
 
@@ -145,6 +146,18 @@ def test_se2__vectorised_rows_equal_single_poses_bit_for_bit() -> None:
         np.testing.assert_array_equal(func(a, b), rows)
         np.testing.assert_array_equal(func(a[0], b), np.array([func(a[0], q) for q in b]))
     np.testing.assert_array_equal(inverse(a), np.array([inverse(p) for p in a]))
+
+
+def test_between__compiled_rows_equal_the_numpy_oracle_bit_for_bit() -> None:
+    rng = np.random.default_rng(6)
+    a, b = _random_poses(rng, 500), _random_poses(rng, 500)
+    a[:5, 2] = [0.0, -0.0, math.pi, -math.pi, 3 * math.pi]  # wrap's edges
+    b[5:10, 2] = a[5:10, 2] + 1e-20  # tiny differences: wrap_angle rounds, wrap_remainder keeps
+    cases = [(a, b), (a[0], b), (a, b[0]), (a[0], b[0]), (a.reshape(5, 100, 3), b[:100])]
+    for p, q in cases:
+        for wrap in (wrap_angle, wrap_remainder):
+            np.testing.assert_array_equal(between(p, q, wrap), reference.between(p, q, wrap))
+    np.testing.assert_array_equal(between(np.asfortranarray(a), b), reference.between(a, b))
 
 
 def _to_frame(pose: np.ndarray, frame: np.ndarray) -> np.ndarray:
