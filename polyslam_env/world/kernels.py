@@ -352,6 +352,25 @@ def guard_violations(
 
 
 @njit
+def clip_commands(
+    cmd: np.ndarray, lo: np.ndarray, hi: np.ndarray, active: np.ndarray, out: np.ndarray
+) -> int:
+    """Commands (N, 2) clipped per column to [lo, hi] (2,) into ``out`` (N, 2) as ``np.clip``
+    does (max with lo, then min with hi, each keeping the first operand unless the second is
+    strictly beyond it), 0 for robots not ``active`` (N,). Returns the first row holding a value
+    that is not finite (``out`` then unfinished), −1 when there is none."""
+    for i in range(cmd.shape[0]):
+        for k in range(2):
+            if not math.isfinite(cmd[i, k]):
+                return i
+    for i in range(cmd.shape[0]):
+        for k in range(2):
+            v = cmd[i, k] if cmd[i, k] > lo[k] else lo[k]
+            out[i, k] = (v if v < hi[k] else hi[k]) if active[i] else 0.0
+    return -1
+
+
+@njit
 def drive_forces(
     heading: np.ndarray, cmd: np.ndarray, h: float, substeps: int, mass: float, out: np.ndarray
 ) -> None:

@@ -306,12 +306,10 @@ class World:
         cmd = np.asarray(commands, dtype=float)
         if cmd.shape != (self.num_robots, 2):
             raise ValueError(f"commands: expected shape ({self.num_robots}, 2), got {cmd.shape}")
-        if not np.isfinite(cmd).all():
-            i = int(np.argmax(~np.isfinite(cmd).all(axis=1)))
+        out = np.empty((self.num_robots, 2))
+        i = kernels.clip_commands(cmd, self._cmd_lo, self._cmd_hi, self.active, out)
+        if i >= 0:
             raise ValueError(f"commands[{i}] (robot_{i}): not finite, got {tuple(cmd[i])}")
-        out = cmd.clip(self._cmd_lo, self._cmd_hi)  # per column (np.clip without its wrappers)
-        if not self.active.all():
-            out[~self.active] = 0.0
         return out
 
     def step(self, commands: np.ndarray, slip: np.ndarray | None = None) -> StepResult:

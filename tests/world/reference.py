@@ -183,3 +183,12 @@ def camera_noise(
     d = np.maximum(dist + noise[..., 0] * sigma_d, 0.0)
     b = wrap_angle(bearing + noise[..., 1] * sigma_bearing)
     return d, b
+
+
+def clip_commands(
+    cmd: np.ndarray, lo: np.ndarray, hi: np.ndarray, active: np.ndarray
+) -> np.ndarray:  # (N, 2)
+    """``World.clip_commands`` as numpy wrote it: clipped per column, 0 for failed robots."""
+    out = cmd.clip(lo, hi)
+    out[~active] = 0.0
+    return out

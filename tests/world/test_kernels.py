@@ -207,3 +207,20 @@ def test_camera_noise__equals_the_oracle() -> None:
     np.testing.assert_array_equal(d, want_d)
     np.testing.assert_array_equal(b, want_b)
     assert (d == 0.0).any()
+
+
+def test_clip_commands__equals_numpy_clip_bit_for_bit() -> None:
+    rng = np.random.default_rng(11)
+    cmd = rng.uniform(-3.0, 3.0, (400, 2))
+    cmd[:8] = [[0.0, -0.0], [-0.0, 0.0], [1.0, 2.0], [-1.0, -2.0], [0.5, 5.0], [-5.0, -0.5],
+               [1e-300, -1e-300], [-1e-300, 1e-300]]  # fmt: skip
+    active = rng.random(400) < 0.8
+    for lo in (np.array([-1.0, -2.0]), np.array([0.0, -2.0])):
+        hi = np.array([1.0, 2.0])
+        out = np.empty_like(cmd)
+        assert kernels.clip_commands(cmd, lo, hi, active, out) == -1
+        expected = reference.clip_commands(cmd, lo, hi, active)
+        np.testing.assert_array_equal(out, expected)
+        np.testing.assert_array_equal(np.signbit(out), np.signbit(expected))
+    cmd[7, 1], cmd[9, 0] = math.nan, math.inf
+    assert kernels.clip_commands(cmd, lo, hi, active, np.empty_like(cmd)) == 7
