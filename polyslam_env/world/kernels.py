@@ -185,8 +185,6 @@ def in_view(
 def camera_visible(
     poses: np.ndarray,
     active: np.ndarray,
-    rel: np.ndarray,
-    direction: np.ndarray,
     cam_range: float,
     half_fov: float,
     limit_fov: bool,
@@ -203,17 +201,18 @@ def camera_visible(
     bearing: np.ndarray,
 ) -> None:
     """Which robot (column) each robot (row) sees: ``mask`` (N, N), and the distance ``dist``
-    and ``bearing`` (N, N) of every pair, from the offsets ``rel`` (N, N, 2) and absolute
-    directions ``direction`` (N, N) (numpy's arctan2 of ``rel``) of target − observer. Seen:
-    both active, not itself, within ``cam_range``, within the field of view when
-    ``limit_fov``, and no wall or circle on the line of sight before the target."""
+    and ``bearing`` (N, N) of every pair, from the offset target − observer and its absolute
+    direction (atan2, the C library's, as numpy's arctan2). Seen: both active, not itself,
+    within ``cam_range``, within the field of view when ``limit_fov``, and no wall or circle
+    on the line of sight before the target."""
     n = poses.shape[0]
     for o in range(n):
         for g in range(n):
-            d = math.hypot(rel[o, g, 0], rel[o, g, 1])
+            rx, ry = poses[g, 0] - poses[o, 0], poses[g, 1] - poses[o, 1]
+            d = math.hypot(rx, ry)
             dist[o, g] = d
             bearing[o, g], mask[o, g] = in_view(
-                poses[o, 0], poses[o, 1], poses[o, 2], d, direction[o, g],
+                poses[o, 0], poses[o, 1], poses[o, 2], d, math.atan2(ry, rx),
                 active[o] and active[g] and o != g, cam_range, half_fov, limit_fov, d,
                 segments, origin, cell, rows, cols, starts, items, circles, -1,
             )  # fmt: skip

@@ -174,11 +174,9 @@ class Camera:
         walls (S, 4) or their index, circles (C, 3) the pillars."""
         p = np.ascontiguousarray(np.asarray(poses, dtype=float).reshape(-1, 3))
         n = len(p)
-        rel = p[None, :, :2] - p[:, None, :2]  # (N, N, 2): target − observer
-        direction = np.arctan2(rel[..., 1], rel[..., 0])  # (N, N) absolute
         mask, dist, bearing = np.empty((n, n), dtype=bool), np.empty((n, n)), np.empty((n, n))
         kernels.camera_visible(
-            p, np.asarray(active, dtype=bool), rel, direction, float(self.config.range),
+            p, np.asarray(active, dtype=bool), float(self.config.range),
             self.half_fov, self.config.fov_deg < 360.0, *_index(walls).arrays,
             _circles(circles), mask, dist, bearing,
         )  # fmt: skip
