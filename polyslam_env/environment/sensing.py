@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -30,7 +31,8 @@ class Sensing:
     camera: CameraFrame  # (N, N) arrays: who sees whom, at what distance and bearing
     pillars: tuple[PillarReading, ...] = ()  # per robot, with the pillar sensor on
 
-    @property
+    @cached_property
     def detections(self) -> list[list[Detection]]:
-        """Per robot, the robots its camera sees (target order)."""
+        """Per robot, the robots its camera sees (target order); made at the first read (the
+        exchange stage reads it twice a step)."""
         return self.camera.lists()

@@ -208,7 +208,7 @@ def exchange(state: EpisodeState) -> ExchangeStep | None:
     each new rendezvous count it and remember its step."""
     seen = state.sensing.camera.seen  # (N, N)
     state.links = []
-    if seen.any():  # (most steps nobody sees anyone)
+    if any(state.sensing.detections):  # (most steps nobody sees anyone)
         i_idx, j_idx = (seen & seen.T).nonzero()  # row by row, as np.triu(…, k=1) then nonzero
         upper = i_idx < j_idx
         state.links = list(zip(i_idx[upper].tolist(), j_idx[upper].tolist(), strict=True))
