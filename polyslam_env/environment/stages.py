@@ -187,7 +187,8 @@ def record(
     est, cov = estimates
     rows: slice | np.ndarray = slots  # the slots' rows of the per-slot arrays
     live: slice | np.ndarray = of[slots]  # (K,) their robots' rows of the world's arrays
-    if len(slots) == len(poses) and (of == slots).all():  # every robot, in order: views
+    # every robot, in order: views (count_nonzero: a C call, .all() a ufunc reduction)
+    if len(slots) == len(poses) and not np.count_nonzero(of != slots):
         rows = live = slice(None)
     history.record(
         slots, poses[live], est[rows], cov[rows], sensing.true_ranges[live], times[rows],
@@ -248,7 +249,7 @@ def observe(
     robots = list(acting.values())
     # every robot acting (the usual case): views of the team's arrays, not copies
     every = robots == list(range(len(active)))
-    if every and active.all():
+    if every and np.count_nonzero(active) == len(active):  # all active
         sweep_beliefs(state.beliefs, poses, state.angles, state.sensing.ranges)
     else:
         sweeping = [i for i in robots if active[i]]

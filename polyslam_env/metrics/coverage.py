@@ -157,7 +157,7 @@ class CoverageGrid:
             np.ascontiguousarray(ranges, dtype=float), act, max_range, self.origin,
             self.resolution, self.free, self.swept, self._masks, rows,
         )  # fmt: skip
-        if act.any():
+        if np.count_nonzero(act):  # (a C call; .any() is a ufunc reduction)
             self.gain = last
         self._n_swept_free += total
         return gains

@@ -146,7 +146,7 @@ class CameraFrame(NamedTuple):
     def lists(self) -> list[list[Detection]]:
         """Per observer, its :class:`Detection` s in target order."""
         out: list[list[Detection]] = [[] for _ in range(len(self.seen))]
-        if not self.seen.any():
+        if not np.count_nonzero(self.seen):  # (a C call; .any() is a ufunc reduction)
             return out
         obs, tgt = np.nonzero(self.seen)
         d, b = self.distance[self.seen].tolist(), self.bearing[self.seen].tolist()
@@ -206,7 +206,7 @@ class Camera:
         n = len(poses)
         mask, dist, bearing = self.visible(poses, np.asarray(active, dtype=bool), walls, circles)
         noise = rng.standard_normal((n, n, 2))  # drawn for every pair, seen or not
-        if not mask.any():
+        if not np.count_nonzero(mask):
             return CameraFrame(mask, np.zeros((n, n)), np.zeros((n, n)))
         d, b = np.empty((n, n)), np.empty((n, n))
         cfg = self.config
