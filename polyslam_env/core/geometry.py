@@ -21,8 +21,20 @@ from polyslam_env.core.jit import njit
 
 
 def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
-    """Angles (any shape) wrapped to (−π, π]."""
-    return np.asarray(np.pi - np.mod(np.pi - np.asarray(angle, dtype=float), 2.0 * np.pi))
+    """Angles (any shape) wrapped to (−π, π]: π − ((π − a) mod 2π), in one compiled call
+    (:func:`_wrap_into`; numpy's four calls on a few angles cost 3 µs)."""
+    a = np.asarray(angle, dtype=float)
+    out = np.empty(a.shape)
+    _wrap_into(np.ascontiguousarray(a.reshape(-1)), out.reshape(-1))
+    return out
+
+
+@njit
+def _wrap_into(angles: np.ndarray, out: np.ndarray) -> None:
+    """:func:`wrap_angle` of ``angles`` (M,) into ``out`` (M,): the formula of
+    :func:`wrap_scalar` (Python's float modulo is numpy's mod, sign rules included)."""
+    for i in range(angles.size):
+        out[i] = math.pi - (math.pi - angles[i]) % (2.0 * math.pi)
 
 
 def wrap_scalar(angle: float) -> float:

@@ -1,7 +1,7 @@
 """Readable numpy versions of the raster kernels of ``polyslam_env/core/raster.py`` and of
-``between`` of ``polyslam_env/core/geometry.py``: the oracles of the kernel tests (they were the
-production code before the kernels; same float operations in the same order, so the cells and
-poses are identical)."""
+``wrap_angle`` and ``between`` of ``polyslam_env/core/geometry.py``: the oracles of the kernel
+tests (they were the production code before the kernels; same float operations in the same
+order, so the cells and poses are identical)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,6 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-
-from polyslam_env.core.geometry import wrap_angle
 
 
 def point_cells(
@@ -99,6 +97,11 @@ def count_distinct_new(cells: np.ndarray, mask: np.ndarray, marked: np.ndarray) 
     """Distinct ids among ``cells`` in ``mask`` and not ``marked`` (flat views)."""
     m, s = mask.reshape(-1), marked.reshape(-1)
     return len(np.unique(cells[m[cells] & ~s[cells]]))
+
+
+def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
+    """Angles (any shape) wrapped to (−π, π] by numpy's mod."""
+    return np.asarray(np.pi - np.mod(np.pi - np.asarray(angle, dtype=float), 2.0 * np.pi))
 
 
 def between(
