@@ -149,11 +149,7 @@ from polyslam_env.comms.messages import (
     encode,
 )
 from polyslam_env.comms.payloads import ScanLog, occupancy_grid
-from polyslam_env.comms.relative_pose import (
-    frame_transform_with_jacobian,
-    relative_pose,
-    relative_pose_covariance,
-)
+from polyslam_env.comms.relative_pose import delivery_transform, rendezvous_transform
 from polyslam_env.core.geometry import (
     compose,
     compose_with_jacobians,
@@ -544,12 +540,16 @@ def map_transform(
     pose was ``receiver_pose ⊕ motion_since⁻¹`` (``motion_since`` = zero pose when the message
     arrives at the step it was sent); ``bearing_sender`` and ``sender_pose`` come from the
     header. Returns T, ∂T/∂(receiver's current pose) (3, 3) with the motion held fixed, and
-    ∂T/∂[relative pose | sender pose] (3, 6).
+    ∂T/∂[relative pose | sender pose] (3, 6). One compiled call
+    (:func:`~polyslam_env.comms.relative_pose.rendezvous_transform`).
     """
-    pose_then, j_then, _ = compose_with_jacobians(receiver_pose, inverse(motion_since))
-    rel = relative_pose(distance, bearing_receiver, bearing_sender)
-    transform, jac = frame_transform_with_jacobian(pose_then, rel, sender_pose)
-    return transform, jac[:, :3] @ j_then, jac[:, 3:]
+    out = rendezvous_transform(
+        np.asarray(receiver_pose, dtype=float), np.asarray(motion_since, dtype=float),
+        float(distance),
+        float(bearing_receiver), float(bearing_sender), np.asarray(sender_pose, dtype=float),
+        0.0, 0.0, np.zeros(3),
+    )  # fmt: skip
+    return out[0], out[1], out[2]
 
 
 def _mutual_sightings(
@@ -1029,18 +1029,16 @@ class RendezvousExchange:
     def _transform(
         self, receiver_pose: np.ndarray, sighting: _Sighting, header: Header, pose_var: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:func:`map_transform` for a delivery, plus the covariance (6, 6) of its noise."""
-        motion = compose(inverse(sighting.pose), receiver_pose)  # estimated motion since
-        out = map_transform(
-            receiver_pose, motion, sighting.distance, sighting.bearing, header.bearing, header.pose
-        )
-        rel_cov = relative_pose_covariance(
-            sighting.distance, sighting.bearing, header.bearing, self.sigma_d, self.sigma_bearing
-        )
-        noise_cov = np.zeros((6, 6))  # block-diagonal: the relative pose's, the sender's pose's
-        noise_cov[:3, :3] = rel_cov
-        noise_cov[3:, 3:] = np.diag(pose_var)
-        return (*out, noise_cov)
+        """:func:`map_transform` for a delivery (the motion since the sighting estimated as
+        ``sighting.pose⁻¹ ⊕ receiver_pose``), plus the covariance (6, 6) of its noise, block
+        diagonal: the relative pose's (:func:`relative_pose_covariance`), the sender's pose's
+        (``pose_var`` on the diagonal). One compiled call
+        (:func:`~polyslam_env.comms.relative_pose.delivery_transform`)."""
+        return delivery_transform(
+            np.asarray(receiver_pose, dtype=float), sighting.pose, float(sighting.distance),
+            float(sighting.bearing), float(header.bearing), header.pose, self.sigma_d**2,
+            self.sigma_bearing**2, np.asarray(pose_var, dtype=float),
+        )  # fmt: skip
 
     def _feature_map(
         self, robot: int, slams: Sequence[PolySlam], features: Sequence[FeatureBook]

@@ -1,7 +1,8 @@
 """A received chain's geometry as readable numpy (the oracles of ``comms/kernels.py``'s
 :func:`unit_tangents`, :func:`frame_chain`, :func:`received_geometry`,
-:func:`variance_floor`, :func:`chain_fit` and :func:`better_cover`): the numpy the exchange
-and the transform refinement ran before those were compiled."""
+:func:`variance_floor`, :func:`chain_fit` and :func:`better_cover`), and a delivery's
+transform (the oracle of ``comms/relative_pose.py``'s :func:`rendezvous_transform`): the numpy
+the exchange and the transform refinement ran before those were compiled."""
 
 from __future__ import annotations
 
@@ -9,7 +10,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from polyslam_env.core.geometry import rotation
+from polyslam_env.comms.relative_pose import (
+    frame_transform_with_jacobian,
+    relative_pose,
+    relative_pose_covariance,
+)
+from polyslam_env.core.geometry import compose, compose_with_jacobians, inverse, rotation
 from polyslam_env.slam.fitting import J_ROT, Fit, PointSet, fit_polynomial
 from polyslam_env.slam.polynomial import Polynomial
 
@@ -99,3 +105,45 @@ def covered_points(xy: np.ndarray, polys: Sequence[Polynomial], reach: float) ->
         xi, eta = poly.from_xy(xy)
         out |= (xi >= poly.lo) & (xi <= poly.hi) & (np.abs(eta - poly.value(xi)) <= reach)
     return out
+
+
+def map_transform(
+    receiver_pose: np.ndarray,
+    motion_since: np.ndarray,
+    distance: float,
+    bearing_receiver: float,
+    bearing_sender: float,
+    sender_pose: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``exchange.map_transform``: T (3,), ∂T/∂(receiver's current pose) (3, 3) and
+    ∂T/∂[relative pose | sender pose] (3, 6)."""
+    pose_then, j_then, _ = compose_with_jacobians(receiver_pose, inverse(motion_since))
+    rel = relative_pose(distance, bearing_receiver, bearing_sender)
+    transform, jac = frame_transform_with_jacobian(pose_then, rel, sender_pose)
+    return transform, jac[:, :3] @ j_then, jac[:, 3:]
+
+
+def delivery_transform(
+    receiver_pose: np.ndarray,
+    sighting_pose: np.ndarray,
+    distance: float,
+    bearing_receiver: float,
+    bearing_sender: float,
+    sender_pose: np.ndarray,
+    sigma_d: float,
+    sigma_bearing: float,
+    pose_var: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``RendezvousExchange._transform``: :func:`map_transform` with the motion since the
+    sighting, and the noise's covariance (6, 6)."""
+    motion = compose(inverse(sighting_pose), receiver_pose)  # estimated motion since
+    out = map_transform(
+        receiver_pose, motion, distance, bearing_receiver, bearing_sender, sender_pose
+    )
+    rel_cov = relative_pose_covariance(
+        distance, bearing_receiver, bearing_sender, sigma_d, sigma_bearing
+    )
+    noise_cov = np.zeros((6, 6))
+    noise_cov[:3, :3] = rel_cov
+    noise_cov[3:, 3:] = np.diag(pose_var)
+    return (*out, noise_cov)

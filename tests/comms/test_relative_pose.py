@@ -144,3 +144,40 @@ def test_frame_transform_jacobian__matches_finite_differences(
 
     num = _numeric_jacobian(f, np.concatenate([pj, rel, pl]))
     np.testing.assert_allclose(jac, num, atol=JAC_TOL)
+
+
+def test_rendezvous_transform__is_the_numpy_oracle_bit_for_bit() -> None:
+    """The exchange's compiled transform of a delivery (T, its Jacobians, the noise's
+    covariance) against the numpy it replaced (``tests/comms/reference_geometry.py``), every
+    float's bits, on random poses and measurements and on the exact zeros and ±π a robot at
+    its start or an unmoved receiver gives (they settle the signs of exact zeros)."""
+    from polyslam_env.comms.exchange import map_transform
+    from polyslam_env.comms.relative_pose import delivery_transform
+    from tests.comms import reference_geometry as ref
+
+    rng = np.random.default_rng(7)
+    special = [0.0, -0.0, np.pi, -np.pi, 0.5 * np.pi]
+    for case in range(3000):
+        receiver, sighting, sender = (_random_pose(rng, 20.0) for _ in range(3))
+        d = float(rng.uniform(0.05, 3.0))
+        a_r, a_s = (float(a) for a in rng.uniform(-np.pi, np.pi, 2))
+        var = rng.uniform(0.0, 1e-3, 3)
+        if case % 3 == 0:  # delivered at the step it was sent: no motion
+            sighting = receiver.copy()
+        if case % 5 == 0:  # headings, bearings and positions at exact zeros and ±π
+            receiver[2], sighting[2], sender[2] = rng.choice(special, 3)
+            a_r, a_s = (float(a) for a in rng.choice(special, 2))
+            sender[: int(rng.integers(0, 3))] = 0.0
+        if case % 7 == 0:
+            var[int(rng.integers(0, 3))] = 0.0
+        sd, sb = float(rng.uniform(0.001, 0.1)), float(rng.uniform(0.001, 0.1))
+        got = delivery_transform(receiver, sighting, d, a_r, a_s, sender, sd**2, sb**2, var)
+        want = ref.delivery_transform(receiver, sighting, d, a_r, a_s, sender, sd, sb, var)
+        for g, w in zip(got, want, strict=True):
+            assert g.shape == w.shape
+            assert np.ascontiguousarray(g).tobytes() == np.ascontiguousarray(w).tobytes()
+        motion = rng.normal(0.0, 0.3, 3) if case % 2 else np.zeros(3)
+        got3 = map_transform(receiver, motion, d, a_r, a_s, sender)
+        want3 = ref.map_transform(receiver, motion, d, a_r, a_s, sender)
+        for g, w in zip(got3, want3, strict=True):
+            assert np.ascontiguousarray(g).tobytes() == np.ascontiguousarray(w).tobytes()
