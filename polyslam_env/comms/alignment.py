@@ -170,9 +170,10 @@ def _refine_from(
     n_walls = len(walls.order)
     if not n_walls or not chains:
         return None
-    lengths = [len(c) for c in chains]
-    q = np.vstack(chains).astype(float, copy=False)  # (N, 2)
-    starts = np.cumsum([0, *lengths])  # chain k is rows starts[k]:starts[k+1]
+    lengths = np.array([len(c) for c in chains], dtype=np.int64)
+    q = np.concatenate(chains).astype(float, copy=False)  # (N, 2)
+    starts = np.zeros(len(chains) + 1, dtype=np.int64)  # chain k is rows starts[k]:starts[k+1]
+    np.cumsum(lengths, out=starts[1:])
     chain_of = np.repeat(np.arange(len(chains)), lengths)  # (N,) each point's chain
     var_c = np.zeros(len(chains)) if chain_var is None else np.asarray(chain_var, dtype=float)
     var_w = np.zeros(n_walls) if wall_var is None else np.asarray(wall_var, dtype=float)

@@ -290,7 +290,7 @@ def frame_message(
     pose variances and a CRC-32."""
     width = message[3]  # the message header's float width
     var = np.asarray(pose_var, dtype=float).reshape(3)
-    if not np.all(np.isfinite(var) & (var >= 0)):
+    if not all(math.isfinite(v) and v >= 0 for v in var.tolist()):
         raise ValueError(f"pose variances must be finite and >= 0, got {var}")
     if free is not None and features is None:
         raise ValueError("a free-space block goes with a feature map (alignment mode)")
@@ -1234,11 +1234,14 @@ class RendezvousExchange:
         is the range noise's plus both landmarks' normal variances (the sender's from its
         record, the receiver's from its state: :func:`normal_variance`)."""
         table = slam.table
-        sources = self._sources[r]
-        rows = np.array(
-            [i for i, lid in enumerate(table.ids) if sender not in sources.get(lid, ())],
-            dtype=np.int64,
-        )
+        # the landmarks holding the sender's data (few, often none): every other row anchors
+        held = {lid for lid, senders in self._sources[r].items() if sender in senders}
+        if held:
+            rows = np.array(
+                [i for i, lid in enumerate(table.ids) if lid not in held], dtype=np.int64
+            )
+        else:
+            rows = np.arange(len(table.ids), dtype=np.int64)
         walls = _table_walls(slam, rows)
         refined, cov_refined = refine_transform(
             t,
@@ -1499,7 +1502,9 @@ def _table_walls(slam: PolySlam, rows: np.ndarray) -> WallArrays:
     width = int(order.max(initial=1)) + 1
     coeffs = table.shape[rows, :width]  # a copy: [0, b_1, …]
     coeffs[:, 0] = slam.c0s[rows]
-    extent = np.stack([table.lo[rows], table.hi[rows]], axis=1)
+    extent = np.empty((len(rows), 2))  # as np.stack([lo, hi], axis=1), without its overhead
+    extent[:, 0] = table.lo[rows]
+    extent[:, 1] = table.hi[rows]
     return WallArrays(order, table.variate[rows], coeffs, extent)
 
 
