@@ -121,6 +121,7 @@ from polyslam_env.comms import polyline
 from polyslam_env.comms.alignment import (
     WallArrays,
     frame_points,
+    pack_walls,
     refine_transform,
     square_turn,
     straight_walls,
@@ -135,6 +136,7 @@ from polyslam_env.comms.kernels import (
     normal_variances,
     point_jacobians,
     received_cover,
+    table_walls,
     variance_floor,
 )
 from polyslam_env.comms.kernels import received_geometry as kernel_geometry
@@ -1242,20 +1244,23 @@ class RendezvousExchange:
             )
         else:
             rows = np.arange(len(table.ids), dtype=np.int64)
-        walls = _table_walls(slam, rows)
+        walls, wall_var = _table_walls(slam, rows)
+        sent = pack_walls([rec.polynomial for rec in records])
         refined, cov_refined = refine_transform(
             t,
             cov_t,
             chains,
             walls,
             slam.config.range_sigma,
-            chain_var=[normal_variance(rec.polynomial, rec.c0_var) for rec in records],
-            wall_var=normal_variances(
-                walls.order, walls.coeffs, walls.extent, np.diagonal(slam.cov)[3 + rows]
+            # normal_variance of each record and each wall, compiled (the same floats)
+            chain_var=normal_variances(
+                sent.order, sent.coeffs, sent.extent, np.array([rec.c0_var for rec in records])
             ),
+            wall_var=wall_var,
             restarts=self.config.align_restarts,
         )
-        if not np.array_equal(refined, t) and self._off_square(
+        # not np.array_equal(refined, t), on their floats (NaN equal to nothing, −0 to 0)
+        if refined.tolist() != t.tolist() and self._off_square(
             slam, records, t, refined, cov_refined
         ):
             self.off_square[r] += 1
@@ -1493,19 +1498,16 @@ def _same_wall(slam: PolySlam, poly: Polynomial) -> np.ndarray:
     return near[gammas < cfg.gamma_max]  # nan: not the same wall
 
 
-def _table_walls(slam: PolySlam, rows: np.ndarray) -> WallArrays:
+def _table_walls(slam: PolySlam, rows: np.ndarray) -> tuple[WallArrays, np.ndarray]:
     """Landmarks ``rows`` of a SLAM's map as :class:`~polyslam_env.comms.alignment.
     WallArrays`, from its table's columns (no polynomial objects): each row at its own order,
-    its current c0 first."""
+    its current c0 first; and their normal variances (:func:`normal_variance`). One compiled
+    call (:func:`~polyslam_env.comms.kernels.table_walls`)."""
     table = slam.table
-    order = table.order[rows]
-    width = int(order.max(initial=1)) + 1
-    coeffs = table.shape[rows, :width]  # a copy: [0, b_1, …]
-    coeffs[:, 0] = slam.c0s[rows]
-    extent = np.empty((len(rows), 2))  # as np.stack([lo, hi], axis=1), without its overhead
-    extent[:, 0] = table.lo[rows]
-    extent[:, 1] = table.hi[rows]
-    return WallArrays(order, table.variate[rows], coeffs, extent)
+    order, variate, coeffs, extent, wall_var = table_walls(
+        rows, table.order, table.variate, table.shape, slam.c0s, table.lo, table.hi, slam.cov
+    )
+    return WallArrays(order, variate, coeffs, extent), wall_var
 
 
 def _c0_variance(fit: Fit, cov: np.ndarray) -> float:

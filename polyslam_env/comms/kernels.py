@@ -577,6 +577,42 @@ def better_cover(
 
 
 @njit
+def table_walls(
+    rows: np.ndarray,  # (W,) int64: the table's rows to take, in order
+    order: np.ndarray,  # (n,) int64: each row's own order
+    variate: np.ndarray,  # (n,) int64
+    shape: np.ndarray,  # (n, M+1) [0, b_1, …, b_M]
+    c0s: np.ndarray,  # (n,) current c0s
+    lo: np.ndarray,  # (n,)
+    hi: np.ndarray,  # (n,)
+    cov: np.ndarray,  # (3+…, 3+…) the state's covariance: row r's c0 at 3 + r
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rows ``rows`` of a landmark table as ``alignment.WallArrays`` (order, variate,
+    coefficients at the widest order among them (at least 2 columns) with the current c0
+    first, extent (W, 2)) and their normal variances (:func:`normal_variances` of their c0
+    variances): ``exchange._table_walls`` and its walls' variances in one call, copies only."""
+    n_rows = rows.size
+    width = 2
+    for k in range(n_rows):
+        width = max(width, order[rows[k]] + 1)
+    out_order = np.empty(n_rows, dtype=np.int64)
+    out_variate = np.empty(n_rows, dtype=np.int64)
+    coeffs = np.empty((n_rows, width))
+    extent = np.empty((n_rows, 2))
+    c0_var = np.empty(n_rows)
+    for k in range(n_rows):
+        r = rows[k]
+        out_order[k], out_variate[k] = order[r], variate[r]
+        coeffs[k, 0] = c0s[r]
+        for j in range(1, width):
+            coeffs[k, j] = shape[r, j]
+        extent[k, 0], extent[k, 1] = lo[r], hi[r]
+        c0_var[k] = cov[3 + r, 3 + r]
+    wall_var = normal_variances(out_order, coeffs, extent, c0_var)
+    return out_order, out_variate, coeffs, extent, wall_var
+
+
+@njit
 def _no_curvature(coeffs: np.ndarray) -> bool:
     """Whether no coefficient past the slope of ``coeffs`` [c0, b_1, …] is nonzero (a NaN
     is): a line (``alignment.is_straight_wall``'s shape test)."""

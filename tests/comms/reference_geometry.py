@@ -147,3 +147,37 @@ def delivery_transform(
     noise_cov[:3, :3] = rel_cov
     noise_cov[3:, 3:] = np.diag(pose_var)
     return (*out, noise_cov)
+
+
+def table_walls(
+    rows: np.ndarray,
+    order: np.ndarray,
+    variate: np.ndarray,
+    shape: np.ndarray,
+    c0s: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cov: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``exchange._table_walls`` as numpy ran it (the walls' order, variate, coefficients with
+    the current c0 first, extent) and each wall's ``exchange.normal_variance`` of its c0's
+    variance (the state's diagonal at 3 + row)."""
+    from polyslam_env.comms.exchange import normal_variance
+
+    order_r = order[rows]
+    width = int(order_r.max(initial=1)) + 1
+    coeffs = shape[rows, :width]  # a copy: [0, b_1, …]
+    coeffs[:, 0] = c0s[rows]
+    extent = np.stack([lo[rows], hi[rows]], axis=1)
+    c0_var = np.diagonal(cov)[3 + rows]
+    wall_var = np.array(
+        [
+            normal_variance(
+                Polynomial(int(v), coeffs[k, : int(m) + 1], float(a), float(b)), float(var)
+            )
+            for k, (v, m, (a, b), var) in enumerate(
+                zip(variate[rows], order_r, extent, c0_var, strict=True)
+            )
+        ]
+    ).reshape(-1)
+    return order_r, variate[rows], coeffs, extent, wall_var

@@ -193,3 +193,35 @@ def test_better_cover__is_the_per_landmark_rule_bit_for_bit() -> None:
         )  # fmt: skip
         assert better == len(want)
         assert np.array_equal(covered, ref.covered_points(xy, want, 0.05))
+
+
+def test_table_walls__is_the_numpy_oracle_bit_for_bit() -> None:
+    """A landmark table's rows as the refinement's walls and their normal variances, in one
+    compiled call (``kernels.table_walls``), against the numpy ``exchange._table_walls`` ran
+    and ``exchange.normal_variance`` per wall: every array's bits, on tables of mixed orders
+    (a zero-padded shape buffer), rows in any order, none, or all."""
+    rng = np.random.default_rng(5)
+    for case in range(300):
+        n = int(rng.integers(1, 40))
+        width = int(rng.integers(2, 6))  # the buffer's columns: orders up to width − 1
+        order = rng.integers(1, width, n).astype(np.int64)
+        shape = rng.normal(0.0, [0.0, 0.5, 0.2, 0.05, 0.01][:width], (n, width))
+        for r in range(n):
+            shape[r, order[r] + 1 :] = 0.0
+        variate = rng.integers(1, 3, n).astype(np.int64)
+        c0s = rng.normal(0.0, 3.0, n)
+        lo = rng.uniform(-4.0, 2.0, n)
+        hi = lo + rng.uniform(0.0, 3.0, n)
+        cov = rng.normal(0.0, 0.01, (3 + 2 * n, 3 + 2 * n))
+        cov = cov @ cov.T
+        if case % 3 == 0:
+            rows = np.arange(n, dtype=np.int64)
+        elif case % 3 == 1:
+            rows = rng.permutation(n)[: int(rng.integers(0, n + 1))].astype(np.int64)
+        else:
+            rows = np.zeros(0, dtype=np.int64)
+        got = kernels.table_walls(rows, order, variate, shape, c0s, lo, hi, cov)
+        want = ref.table_walls(rows, order, variate, shape, c0s, lo, hi, cov)
+        for g, w in zip(got, want, strict=True):
+            assert g.shape == w.shape and g.dtype == w.dtype
+            assert g.tobytes() == w.tobytes()
