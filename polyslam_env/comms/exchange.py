@@ -559,11 +559,13 @@ def _mutual_sightings(
 ) -> dict[tuple[int, int], tuple[DetectionLike, DetectionLike]]:
     """(i, j) with i < j → (i's detection of j, j's detection of i), for mutual sightings."""
     seen = {(i, d.target): d for i, dets in enumerate(detections) for d in dets}
+    up = active.tolist()  # Python bools: no numpy scalar per lookup
     out: dict[tuple[int, int], tuple[DetectionLike, DetectionLike]] = {}
-    for (i, j), d_ij in sorted(seen.items()):
+    for i, j in sorted(pair for pair in seen if pair[0] < pair[1]):
         d_ji = seen.get((j, i))
-        if i >= j or d_ji is None or not (active[i] and active[j]):
+        if d_ji is None or not (up[i] and up[j]):
             continue
+        d_ij = seen[(i, j)]
         if max(d_ij.distance, d_ji.distance) <= max_range:
             out[(i, j)] = (d_ij, d_ji)
     return out
@@ -901,15 +903,16 @@ class RendezvousExchange:
         polys = slam.polynomials() if whole else []
         table, c0s = slam.table, slam.c0s
         rows = [table.index_of(lid) for lid in ids]
+        versions = [self.version(s, lid) for lid in ids]  # (origin, its landmark id)
         records = tuple(
             PolynomialRecord(
-                self.version(s, lid)[1],
+                landmark,
                 table.poly(row).with_c0(c0s[row]),
                 max(slam.c0_variance(lid), 0.0),
-                self.version(s, lid)[0],
+                origin,
                 self.revision(s, lid),
             )
-            for lid, row in zip(ids, rows, strict=True)
+            for lid, row, (origin, landmark) in zip(ids, rows, versions, strict=True)
         )
         since_log = self._last_log.get((s, r), 0)
         self._last_meeting[(s, r)] = slam.step_count

@@ -198,7 +198,7 @@ def _record_bytes(rec: PolynomialRecord, sender: int, width: int) -> bytes:
     if not (math.isfinite(rec.c0_var) and rec.c0_var >= 0):
         raise ValueError(f"c0_var must be finite and >= 0, got {rec.c0_var!r}")
     head = _RECORD.pack(rec.landmark_id, origin, rec.revision, poly.variate, poly.order)
-    floats = [*poly.coeffs, rec.c0_var, poly.lo, poly.hi]
+    floats = [*poly.coeffs.tolist(), rec.c0_var, poly.lo, poly.hi]  # no numpy scalars
     return head + _floats(floats, width, f"landmark {rec.landmark_id}")
 
 
