@@ -24,6 +24,8 @@ would let whole walls in far from where the maps overlap.
 
 from __future__ import annotations
 
+import bisect
+import itertools
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -234,11 +236,12 @@ def square_turn(
     if not sent or not held:
         return None
     reference = max(held, key=lambda w: w[1])[0]
-    turns = np.array([turn - off_square(d + turn - reference) for d, _ in sent])
-    weights = np.array([length for _, length in sent])
-    order = np.argsort(turns)
-    cumulative = np.cumsum(weights[order])
-    return float(turns[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
+    turns = [turn - off_square(d + turn - reference) for d, _ in sent]
+    # numpy's argsort (its order of ties), then the weights' running sums (np.cumsum's, one
+    # by one) and the first reaching half the total (np.searchsorted's on sums that only grow)
+    order = np.argsort(turns).tolist()
+    cumulative = list(itertools.accumulate(sent[k][1] for k in order))
+    return float(turns[order[bisect.bisect_left(cumulative, 0.5 * cumulative[-1])]])
 
 
 def wall_reach(

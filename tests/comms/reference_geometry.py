@@ -181,3 +181,20 @@ def table_walls(
         ]
     ).reshape(-1)
     return order_r, variate[rows], coeffs, extent, wall_var
+
+
+def square_turn(
+    sent: list[tuple[float, float]], held: list[tuple[float, float]], turn: float
+) -> float | None:
+    """``alignment.square_turn`` in numpy: the length-weighted median of the sent walls'
+    square turns (argsort, cumsum, searchsorted)."""
+    from polyslam_env.slam.links import off_square
+
+    if not sent or not held:
+        return None
+    reference = max(held, key=lambda w: w[1])[0]
+    turns = np.array([turn - off_square(d + turn - reference) for d, _ in sent])
+    weights = np.array([length for _, length in sent])
+    order = np.argsort(turns)
+    cumulative = np.cumsum(weights[order])
+    return float(turns[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])

@@ -251,6 +251,32 @@ def test_square_turn__is_the_turn_that_squares_the_sent_walls_nearest_the_camera
     assert alignment.square_turn(sent, [], 0.0) is None
 
 
+def test_square_turn__is_the_numpy_oracle_bit_for_bit() -> None:
+    """``square_turn`` (numpy's argsort, then the running sums and the search in Python)
+    against its numpy form (``tests/comms/reference_geometry.py``), every bit: random walls,
+    walls of equal directions (ties in the turns, of unequal lengths) and of equal lengths
+    (a running sum landing on half the total)."""
+    from tests.comms import reference_geometry as ref
+
+    rng = np.random.default_rng(3)
+    for case in range(3000):
+        n = int(rng.integers(1, 25))
+        directions = rng.uniform(-np.pi, np.pi, n)
+        lengths = rng.uniform(0.5, 6.0, n)
+        if case % 3 == 0:  # ties: a few directions, repeated (and a quarter turn apart)
+            few = rng.uniform(-np.pi, np.pi, 3)
+            directions = few[rng.integers(0, 3, n)] + 0.5 * np.pi * rng.integers(-1, 2, n)
+        if case % 4 == 0:
+            lengths = np.full(n, float(rng.choice([1.0, 2.5])))
+        sent = list(zip(directions.tolist(), lengths.tolist(), strict=True))
+        held = [(float(rng.uniform(-np.pi, np.pi)), 3.0), (float(rng.uniform(-1, 1)), 1.0)]
+        turn = float(rng.uniform(-np.pi, np.pi))
+        got = alignment.square_turn(sent, held, turn)
+        want = ref.square_turn(sent, held, turn)
+        assert got is not None and want is not None
+        assert np.float64(got).tobytes() == np.float64(want).tobytes()
+
+
 def _square_check(walls: np.ndarray) -> tuple[Any, tuple[Any, ...], np.ndarray, float, float]:
     """A receiver that drove the corner drive among ``walls`` (its longest straight wall runs
     along x) and a message's records whose straight wall runs at −20° in the sender's frame:
