@@ -14,6 +14,7 @@ is halved in ξ until all pass.
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 from numpy.polynomial import polynomial as npoly
@@ -44,7 +45,7 @@ def chain_points(poly: Polynomial, chord_tol: float, spacing: float) -> np.ndarr
 
 
 def _check_positive(name: str, value: float) -> None:
-    if not (np.isfinite(value) and value > 0):
+    if not (math.isfinite(value) and value > 0):  # math's: no numpy scalar per record
         raise ValueError(f"{name} must be > 0, got {value!r}")
 
 
