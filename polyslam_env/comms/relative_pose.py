@@ -25,8 +25,8 @@ from polyslam_env.core.geometry import (
     inverse_with_jacobian,
     wrap_angle,
 )
-from polyslam_env.core.jit import fma, njit
-from polyslam_env.slam.kernels import wrap
+from polyslam_env.core.jit import njit
+from polyslam_env.slam.kernels import fma_product3, wrap
 
 
 # -- rendezvous measurement -> relative pose ----------------------------------------------------
@@ -211,13 +211,9 @@ def _jacobian_b(theta: float) -> np.ndarray:
 @njit
 def _product3(a: np.ndarray, b: np.ndarray, transposed: bool) -> np.ndarray:
     """a b (or a bᵀ when ``transposed``) of 3 × 3 matrices as numpy's matmul computes it on
-    OpenBLAS's gemm: each entry a chain of fused multiply-adds along the inner index from 0,
-    the zeros included (they settle the sign of an exact zero)."""
+    OpenBLAS's gemm (:func:`~polyslam_env.slam.kernels.fma_product3`: each entry a chain of
+    fused multiply-adds along the inner index from 0, the zeros included, which settle the
+    sign of an exact zero), as a new array."""
     out = np.empty((3, 3))
-    for r in range(3):
-        for c in range(3):
-            acc = 0.0
-            for k in range(3):
-                acc = fma(a[r, k], b[c, k] if transposed else b[k, c], acc)
-            out[r, c] = acc
+    fma_product3(a, b, transposed, out)
     return out

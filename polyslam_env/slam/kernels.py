@@ -1769,7 +1769,7 @@ def update_scan(
 
 
 @njit
-def _fma_product3(a: np.ndarray, b: np.ndarray, transposed: bool, out: np.ndarray) -> None:
+def fma_product3(a: np.ndarray, b: np.ndarray, transposed: bool, out: np.ndarray) -> None:
     """``out`` = a b (or a bᵀ when ``transposed``) of 3 × 3 matrices, each entry a chain of
     fused multiply-adds along the inner index from 0, as OpenBLAS's FMA gemm kernels run it."""
     for r in range(3):
@@ -1793,8 +1793,8 @@ def start_error_covs(poses: np.ndarray, p0: np.ndarray, out: np.ndarray) -> None
         jac[0, 0] = jac[1, 1] = jac[2, 2] = 1.0
         jac[0, 2] = -poses[i, 1]
         jac[1, 2] = poses[i, 0]
-        _fma_product3(jac, p0, False, left)
-        _fma_product3(left, jac, True, both)
+        fma_product3(jac, p0, False, left)
+        fma_product3(left, jac, True, both)
         for r in range(3):
             for c in range(3):
                 out[i, r, c] = 0.5 * (both[r, c] + both[c, r])
