@@ -162,7 +162,7 @@ from polyslam_env.core.geometry import (
 from polyslam_env.slam.alignment import Alignment, FeatureMap, align
 from polyslam_env.slam.corners import wall_corners
 from polyslam_env.slam.features import FeatureBook
-from polyslam_env.slam.fitting import Fit, PointSet
+from polyslam_env.slam.fitting import Fit, PointSet, check_fit_size
 from polyslam_env.slam.lineage import MERGED, REMOVED, REPLACED
 from polyslam_env.slam.links import SQUARE_MIN_LENGTH
 from polyslam_env.slam.map_kernels import curve_box
@@ -515,8 +515,7 @@ def _fit_chain(
     whether its c0 and Jacobians are finite: the lowest order whose largest residual is within
     ``tol`` with ``auto_order``, else ``order`` (one compiled call:
     :func:`~polyslam_env.comms.kernels.chain_fit`)."""
-    if points.n_points == 0:
-        raise ValueError("cannot fit a polynomial to zero points")
+    check_fit_size(points.n_points, order)
     valid, var, m, coeffs, lo, hi, rms, gx, gy, worst, finite = chain_fit(
         np.ascontiguousarray(points.xy, dtype=float), points.weights, points.d_state,
         points.d_noise, order, auto_order, tol,

@@ -408,10 +408,7 @@ def fit_polynomial(
     polynomials, whose noise is only the floor ``min_noise_var``, not their scatter.
     """
     n_points = points.n_points
-    if n_points == 0:
-        raise ValueError("cannot fit a polynomial to zero points")
-    if order < 1:
-        raise ValueError(f"order must be >= 1, got {order}")
+    check_fit_size(n_points, order)
     limits = fit_limits(
         n_points, float(points.noise_cov.trace()), order, auto_order, min_noise_var,
         curvature_test,
@@ -421,6 +418,14 @@ def fit_polynomial(
         0 if variate is None else variate, shape_fixed, auto_order, limits,
     )  # fmt: skip
     return fit_of(result, points.noise_cov)
+
+
+def check_fit_size(n_points: int, order: int) -> None:
+    """The fits' one-line errors: no points to fit, or no order to fit them with."""
+    if n_points == 0:
+        raise ValueError("cannot fit a polynomial to zero points")
+    if order < 1:
+        raise ValueError(f"order must be >= 1, got {order}")
 
 
 def fit_limits(

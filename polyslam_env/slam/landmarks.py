@@ -205,10 +205,9 @@ class LandmarkRow(NamedTuple):
 
 
 def _own_order(shape: np.ndarray) -> tuple[float, ...]:
-    """A zero-padded shape row without its zero tail, kept at least linear."""
-    used = np.flatnonzero(shape)
-    width = max(int(used[-1]) + 1 if used.size else 0, 2)
-    return tuple(shape[:width].tolist())
+    """A zero-padded shape row without its zero tail, kept at least linear
+    (:func:`~polyslam_env.slam.map_kernels.own_order` + 1 coefficients)."""
+    return tuple(shape[: map_kernels.own_order(shape) + 1].tolist())
 
 
 class LandmarkTable:

@@ -46,7 +46,14 @@ import numpy as np
 
 from polyslam_env.slam import fit_kernels, map_kernels
 from polyslam_env.slam.association import GAP_SPLIT
-from polyslam_env.slam.fitting import Fit, PointSet, fit_limits, fit_of, sample_args
+from polyslam_env.slam.fitting import (
+    Fit,
+    PointSet,
+    check_fit_size,
+    fit_limits,
+    fit_of,
+    sample_args,
+)
 from polyslam_env.slam.polynomial import Polynomial
 
 if TYPE_CHECKING:
@@ -321,10 +328,7 @@ def merge_fit(
     """
     n = 2 * eps_m
     order, auto_order, min_noise_var, curvature_test = fit_settings
-    if n == 0:
-        raise ValueError("cannot fit a polynomial to zero points")
-    if order < 1:
-        raise ValueError(f"order must be >= 1, got {order}")
+    check_fit_size(n, order)
     a_c0, a_turn = sample_args(c0_index_a, c0_var_a, turn_a, n_state)
     b_c0, b_turn = sample_args(c0_index_b, c0_var_b, turn_b, n_state)
     noise_cov = np.zeros((0, 0))  # points sampled on polynomials: no noise of their own

@@ -257,12 +257,13 @@ def test_landmark_table__append_writes_every_column_of_the_row() -> None:
     """A new row (one compiled write, ``map_kernels.write_row``) holds the polynomial's shape
     zero-padded to the table's width, its extent and η range (``map_kernels.eta_range`` of
     that row), evidence, scalars and flags; its own order is the last nonzero coefficient's
-    (a zero tail, −0.0 included, does not count; at least 1), as ``landmarks._own_order``."""
+    (a zero tail, −0.0 included, does not count; at least 1)."""
     rng = np.random.default_rng(8)
     table = LandmarkTable()
     for k in range(40):
         coeffs = rng.normal(0.0, 1.0, int(rng.integers(2, 5)))
-        coeffs[int(rng.integers(1, coeffs.size + 1)) :] = [0.0, -0.0][k % 2]
+        cut = int(rng.integers(1, coeffs.size + 1))  # the zero tail starts here
+        coeffs[cut:] = [0.0, -0.0][k % 2]
         poly = Polynomial(int(rng.integers(1, 3)), coeffs, -1.0 - k, 2.0 + k)
         values = rng.normal(size=5).tolist()
         lid = table.append(poly, *values[:4], step=k, side=k % 3 - 1, evidence=(-50.0, 50.0),
@@ -278,8 +279,28 @@ def test_landmark_table__append_writes_every_column_of_the_row() -> None:
             :4
         ]
         assert table.shift_slope[i] == values[4]
-        assert int(table.order[i]) == len(_own_order(row)) - 1
+        assert int(table.order[i]) == max(cut - 1, 1)  # normal draws are nonzero
         assert (int(table.variate[i]), int(table.side[i]), int(table.changed_at[i])) == (
             poly.variate, k % 3 - 1, k,
         )  # fmt: skip
         assert (int(table.received[i]), int(table.stamp[i])) == (k % 2, 0)
+
+
+@pytest.mark.parametrize(
+    ("row", "order"),
+    [
+        ([0.0, 0.5, 0.0, 0.0], 1),
+        ([0.0, 0.0, 0.0, 0.0], 1),  # a flat line is still a line
+        ([0.0, 1.0, 2.0, -0.0], 2),  # −0.0 is zero
+        ([0.0, 0.0, 3.0, 0.0], 2),
+        ([0.0, 0.0, 0.0, np.nan], 3),  # a NaN is not zero (as np.flatnonzero says)
+    ],
+)
+def test_own_order__the_last_nonzero_coefficient_at_least_linear(row: list, order: int) -> None:
+    """A shape row's own order (``map_kernels.own_order``) and the row cut to it
+    (``landmarks._own_order``)."""
+    shape = np.array(row)
+    assert map_kernels.own_order(shape) == order
+    got = _own_order(shape)
+    assert len(got) == order + 1
+    np.testing.assert_array_equal(got, shape[: order + 1])
