@@ -1,9 +1,10 @@
 """The filter's model as the compiled step reads it (:func:`step_model`): a robot's
-``SlamConfig`` and sensor in three arrays, made once (:mod:`~polyslam_env.slam.columns` names
-their fields)."""
+``SlamConfig`` and sensor in three arrays, made once per config and sensor and shared by every
+filter built with them (:mod:`~polyslam_env.slam.columns` names their fields)."""
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -43,7 +44,18 @@ def update_beam_mask(angles: np.ndarray, spacing_deg: float) -> np.ndarray:
 def step_model(config: SlamConfig, beam_angles: np.ndarray, max_range: float) -> StepModel:
     """The model of a robot with ``config`` and a range sensor of ``beam_angles`` (B,) and
     ``max_range`` (module docstring). Derived values are computed as the Python they
-    replaced computed them (``x ** 2`` is libm's pow), so the step is bit for bit the same."""
+    replaced computed them (``x ** 2`` is libm's pow), so the step is bit for bit the same.
+
+    Made once per (config, beam angles, range) and shared: a team's filters, and every
+    episode's, read the same arrays (the compiled step never writes them; nothing else may).
+    """
+    angles = tuple(np.asarray(beam_angles, dtype=float).reshape(-1).tolist())
+    return _step_model(config, angles, float(max_range))
+
+
+@functools.lru_cache(maxsize=64)
+def _step_model(config: SlamConfig, angles_tuple: tuple[float, ...], max_range: float) -> StepModel:
+    """:func:`step_model` of hashable arguments (the beam angles as a tuple of floats)."""
     p = np.zeros(col.N_PARAMS)
     p[col.P_RANGE_SIGMA] = config.range_sigma
     p[col.P_RANGE_VAR] = config.range_sigma**2
@@ -78,7 +90,7 @@ def step_model(config: SlamConfig, beam_angles: np.ndarray, max_range: float) ->
     s[col.S_SCREEN_ALARM] = screen_alarm(config)
     s[col.S_REUSE_BOUND] = REUSE_BOUNDS.index(config.reuse_bound)
     s[col.S_SHIFT_WITH_POSE] = config.shape_shift == "pose"
-    angles = np.asarray(beam_angles, dtype=float).reshape(-1)
+    angles = np.array(angles_tuple, dtype=float)  # (B,)
     beams = np.zeros((col.N_BEAM_MODEL, angles.size))
     beams[col.B_ANGLE] = angles
     beams[col.B_UPDATE] = update_beam_mask(angles, config.update_spacing_deg)
