@@ -558,6 +558,39 @@ def beam_rows(
     Returns how many. See :func:`_beam_rows_of` for the model (the Jacobian of
     SPEC §3 and the frozen shape's terms). Outputs are written, not returned: numba boxes
     every array it returns into a new Python object (~0.6 µs each)."""
+    angle, t, landmark, slope, denom, xi = cast_beams(
+        x, y, theta, angles, beams, reach, variate, order, shape, lo, hi, c0s, boxes, max_range
+    )
+    return rows_of_casts(
+        theta, ranges, beams, angle, t, landmark, slope, denom, xi, variate, order, shape, lo,
+        hi, min_sine, range_var, model_var, shape_follows_pose, shift_with_pose, pivot, xi_var,
+        pose_var, shift_slope, turn_var, fit_half, fit_inverse, n_fit, alpha_base, innovation,
+        h_pose, c0_index, h_c0, alpha_index, h_alpha, variance, end_room, xi_grad,
+    )  # fmt: skip
+
+
+@njit
+def cast_beams(
+    x: float,
+    y: float,
+    theta: float,
+    angles: np.ndarray,  # (B,) every beam's angle
+    beams: np.ndarray,  # (k,) int64: the beams cast, in this order
+    reach: float,  # landmarks whose box lies farther from the robot cannot be hit
+    variate: np.ndarray,
+    order: np.ndarray,
+    shape: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    c0s: np.ndarray,
+    boxes: np.ndarray,
+    max_range: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The ``beams`` cast from the pose (x, y, θ) on the landmarks within ``reach``
+    (:func:`cast_into`): their angles, then t*, the landmark hit, B'(ξ*), D and ξ* (k,) each,
+    in beam order. Each beam's cast is its own (the same beam cast alone gives the same floats),
+    so a caller may cast once and use a subset: :func:`beam_rows` and :func:`steady_beams` do
+    both, :func:`update_scan` shares one cast between them."""
     candidates = boxes_near(boxes, np.array([x, x, y, y]), reach)
     n_beams = beams.size
     angle = np.empty(n_beams)
@@ -569,6 +602,52 @@ def beam_rows(
         x, y, theta, angle, candidates, variate, order, shape, lo, hi, c0s, boxes, max_range,
         t, landmark, slope, denom, xi,
     )  # fmt: skip
+    return angle, t, landmark, slope, denom, xi
+
+
+@njit
+def rows_of_casts(
+    theta: float,
+    ranges: np.ndarray,  # (B,) every beam's reading
+    beams: np.ndarray,  # (k,) int64: the beams cast
+    angle: np.ndarray,  # (k,) their angles
+    t: np.ndarray,  # (k,) their casts (:func:`cast_beams`)
+    landmark: np.ndarray,
+    slope: np.ndarray,
+    denom: np.ndarray,
+    xi: np.ndarray,
+    variate: np.ndarray,
+    order: np.ndarray,
+    shape: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    min_sine: float,
+    range_var: float,
+    model_var: np.ndarray,
+    shape_follows_pose: bool,
+    shift_with_pose: bool,
+    pivot: np.ndarray,
+    xi_var: np.ndarray,
+    pose_var: np.ndarray,
+    shift_slope: np.ndarray,
+    turn_var: np.ndarray,
+    fit_half: np.ndarray,
+    fit_inverse: np.ndarray,
+    n_fit: int,
+    alpha_base: int,
+    innovation: np.ndarray,
+    h_pose: np.ndarray,
+    c0_index: np.ndarray,
+    h_c0: np.ndarray,
+    alpha_index: np.ndarray,
+    h_alpha: np.ndarray,
+    variance: np.ndarray,
+    end_room: np.ndarray,
+    xi_grad: np.ndarray,
+) -> int:
+    """:func:`beam_rows`' rows from the beams' casts at the pose of heading ``theta``
+    (arguments as :func:`beam_rows`'); returns how many."""
+    n_beams = beams.size
     k = 0
     for b in range(n_beams):
         j = landmark[b]
@@ -768,19 +847,42 @@ def steady_beams(
     NEES 5.25 on the pillar hall (95 % band 2.02–4.16). Casting the beam itself at sigma
     points tests the measurement function, not its linearisation.
     """
-    n_beams = beams.size
+    angle, _, landmark, slope, denom, _ = cast_beams(
+        mean[0], mean[1], mean[2], angles, beams, reach, variate, order, shape, lo, hi,
+        mean[3 : 3 + n_lm], boxes, max_range,
+    )  # fmt: skip
+    return steady_of_casts(
+        mean, cov, assigned, reach, variate, order, shape, lo, hi, boxes, max_range, min_sine,
+        n_lm, spread, angle, landmark, slope, denom, keep,
+    )  # fmt: skip
+
+
+@njit
+def steady_of_casts(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    assigned: np.ndarray,
+    reach: float,
+    variate: np.ndarray,
+    order: np.ndarray,
+    shape: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    boxes: np.ndarray,
+    max_range: float,
+    min_sine: float,
+    n_lm: int,
+    spread: float,
+    angle: np.ndarray,  # (k,) the beams' angles
+    landmark: np.ndarray,  # (k,) their casts at the mean (:func:`cast_beams`)
+    slope: np.ndarray,
+    denom: np.ndarray,
+    keep: np.ndarray,  # (k,) bool out
+) -> int:
+    """:func:`steady_beams` from the beams' casts at the mean (arguments as its)."""
+    n_beams = angle.size
     x, y, theta = mean[0], mean[1], mean[2]
     c0s = mean[3 : 3 + n_lm].copy()
-    angle = np.empty(n_beams)
-    for b in range(n_beams):
-        angle[b] = angles[beams[b]]
-    t, landmark = np.empty(n_beams), np.empty(n_beams, dtype=np.int64)
-    slope, denom, xi = np.empty(n_beams), np.empty(n_beams), np.empty(n_beams)
-    candidates = boxes_near(boxes, np.array([x, x, y, y]), reach)
-    cast_into(
-        x, y, theta, angle, candidates, variate, order, shape, lo, hi, c0s, boxes, max_range,
-        t, landmark, slope, denom, xi,
-    )  # fmt: skip
     one = np.empty(1)
     t1, landmark1 = np.empty(1), np.empty(1, dtype=np.int64)
     slope1, denom1, xi1 = np.empty(1), np.empty(1), np.empty(1)
@@ -1725,19 +1827,29 @@ def update_scan(
     c0_index, h_c0, variance = np.empty(n_beams, np.int64), np.empty(n_beams), np.empty(n_beams)
     alpha_index, h_alpha = np.empty(n_beams, np.int64), np.empty(n_beams)
     end_room, xi_grad = np.empty(n_beams), np.empty((n_beams, 4))
+    # one scan model and one cast at the mean serve the sigma-point test and the rows
+    near, turn_var, alpha_base = _scan_model(mean, real, index, n, params, switches, step)
+    variate, order, lo, hi = index[VARIATE, :n], index[ORDER, :n], real[LO, :n], real[HI, :n]
+    angle, t, landmark, slope, denom, xi = cast_beams(
+        mean[0], mean[1], mean[2], angles, beams, params[P_REACH], variate, order, shape[:n],
+        lo, hi, mean[3 : 3 + n], near, params[P_MAX_RANGE],
+    )  # fmt: skip
     if end_sigma > 0.0:
         steady = np.empty(n_beams, np.bool_)
-        near, _, _ = _scan_model(mean, real, index, n, params, switches, step)
-        steady_beams(
-            mean, cov, angles, beams, assigned, params[P_REACH], index[VARIATE, :n],
-            index[ORDER, :n], shape[:n], real[LO, :n], real[HI, :n], near, params[P_MAX_RANGE],
-            params[P_MIN_SINE], n, end_sigma, steady,
+        steady_of_casts(
+            mean, cov, assigned, params[P_REACH], variate, order, shape[:n], lo, hi, near,
+            params[P_MAX_RANGE], params[P_MIN_SINE], n, end_sigma, angle, landmark, slope,
+            denom, steady,
         )  # fmt: skip
-        beams = beams[steady]
-    k = _beam_rows_of(
-        mean, cov, angles, ranges, beams, real, index, shape, n, params, switches, fit_inverse,
-        step, innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance, end_room,
-        xi_grad,
+        beams, angle, t, landmark = beams[steady], angle[steady], t[steady], landmark[steady]
+        slope, denom, xi = slope[steady], denom[steady], xi[steady]
+    k = rows_of_casts(
+        mean[2], ranges, beams, angle, t, landmark, slope, denom, xi, variate, order, shape[:n],
+        lo, hi, params[P_MIN_SINE], params[P_RANGE_VAR], real[MODEL_VAR, :n],
+        switches[S_SHAPE_FOLLOWS_POSE] != 0, switches[S_SHIFT_WITH_POSE] != 0, real[PIVOT, :n],
+        real[XI_VAR, :n], np.array([cov[0, 0], cov[1, 1]]), real[SHIFT_SLOPE, :n], turn_var,
+        real[FIT_HALF, :n], fit_inverse, switches[S_N_FIT], alpha_base, innovation, h_pose,
+        c0_index, h_c0, alpha_index, h_alpha, variance, end_room, xi_grad,
     )  # fmt: skip
     if k > 0 and end_sigma > 0.0:
         keep = np.empty(k, np.bool_)

@@ -12,6 +12,7 @@ orders 4–5: complex instead of real LAPACK; the update and the NIS: BLAS's pro
 * :func:`update_sparse_inplace`, :func:`predict_inplace`, :func:`normalised_innovations` — the
   numpy EKF pieces;
 * :func:`nearest_by_error`, :func:`boxes`, :func:`boxes_near`;
+* :func:`update_scan_two_casts` — the update as composed before it cast once;
 * :func:`fma_exact`, :func:`fma_matmul` — a product as an FMA-based BLAS computes it, in exact
   rationals rounded once per multiply-add (the oracle of kernels that replaced such products).
 """
@@ -865,3 +866,72 @@ def fma_matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:  # (m, p)
                 acc = fma_exact(float(a[r, k]), float(b[k, c]), acc)
             out[r, c] = acc
     return out
+
+
+def update_scan_two_casts(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    angles: np.ndarray,
+    ranges: np.ndarray,
+    beams: np.ndarray,
+    assigned: np.ndarray,
+    real: np.ndarray,
+    index: np.ndarray,
+    shape: np.ndarray,
+    n: int,
+    params: np.ndarray,
+    switches: np.ndarray,
+    fit_inverse: np.ndarray,
+    step: int,
+) -> int:
+    """``kernels.update_scan`` as it was composed before its sigma-point test and its rows
+    shared one scan model and one cast at the mean: ``kernels.steady_beams`` casting the
+    wanted beams, then ``kernels._beam_rows_of`` casting the steady ones again (each with its
+    own ``_scan_model``); the rest as the kernel does it."""
+    from polyslam_env.slam import columns as c
+    from polyslam_env.slam import kernels
+
+    n_beams = beams.size
+    end_sigma = params[c.P_END_SIGMA]
+    innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))
+    c0_index, h_c0, variance = np.empty(n_beams, np.int64), np.empty(n_beams), np.empty(n_beams)
+    alpha_index, h_alpha = np.empty(n_beams, np.int64), np.empty(n_beams)
+    end_room, xi_grad = np.empty(n_beams), np.empty((n_beams, 4))
+    if end_sigma > 0.0:
+        steady = np.empty(n_beams, np.bool_)
+        near, _, _ = kernels._scan_model(mean, real, index, n, params, switches, step)
+        kernels.steady_beams(
+            mean, cov, angles, beams, assigned, params[c.P_REACH], index[c.VARIATE, :n],
+            index[c.ORDER, :n], shape[:n], real[c.LO, :n], real[c.HI, :n], near,
+            params[c.P_MAX_RANGE], params[c.P_MIN_SINE], n, end_sigma, steady,
+        )  # fmt: skip
+        beams = beams[steady]
+    k = kernels._beam_rows_of(
+        mean, cov, angles, ranges, beams, real, index, shape, n, params, switches, fit_inverse,
+        step, innovation, h_pose, c0_index, h_c0, alpha_index, h_alpha, variance, end_room,
+        xi_grad,
+    )  # fmt: skip
+    if k > 0 and end_sigma > 0.0:
+        keep = np.empty(k, np.bool_)
+        kernels.ends_in_doubt(
+            cov, h_pose[:k], c0_index[:k], h_c0[:k], alpha_index[:k], h_alpha[:k],
+            end_room[:k], xi_grad[:k], end_sigma, keep,
+        )  # fmt: skip
+        kept = np.flatnonzero(keep)
+        k = kept.size
+        innovation[:k], h_pose[:k], c0_index[:k] = innovation[kept], h_pose[kept], c0_index[kept]
+        h_c0[:k], alpha_index[:k], h_alpha[:k] = h_c0[kept], alpha_index[kept], h_alpha[kept]
+        variance[:k] = variance[kept]
+    if k == 0:
+        return -1
+    reuse = np.empty(n)
+    kernels.reuse_factors(index, n, switches[c.S_REUSE_BOUND], reuse)
+    kernels.share_landmark_error(c0_index[:k], variance[:k], params[c.P_RANGE_VAR], reuse)
+    accepted, nis = np.empty(k, np.bool_), np.empty(k)
+    consider_from = 3 + n if switches[c.S_ROTATION_STATES] else mean.size
+    used = kernels.update_sparse(
+        mean, cov, innovation[:k], h_pose[:k], c0_index[:k], h_c0[:k], alpha_index[:k],
+        h_alpha[:k], variance[:k], params[c.P_GATE], consider_from, accepted, nis,
+    )  # fmt: skip
+    kernels.count_uses(index, n, c0_index[:k], accepted)
+    return int(used)

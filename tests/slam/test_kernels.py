@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -448,6 +449,57 @@ def test_joseph_blocks__bit_identical_to_the_full_update(
     assert np.isnan(got[stale]).all()
     kernels.mirror_lower(got, consider_from)
     assert want.tobytes() == got.tobytes()
+
+
+def test_update_scan__one_cast_equals_two_casts_bit_for_bit(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The update's sigma-point test and its rows share one scan model and one cast at the
+    mean: every update of a paper-map team episode (random actions, 3 robots, 300 steps) and
+    of 60 steps among 30 random walls gives the floats of the composition that cast twice
+    (``ref.update_scan_two_casts``), including updates where the sigma points dropped beams."""
+    from polyslam_env.apps.benchmark_harness import ENV_CONFIG, random_stepper
+    from polyslam_env.environment.parallel import parallel_env
+    from polyslam_env.slam.columns import P_END_SIGMA, P_MAX_RANGE, P_MIN_SINE, P_REACH, VARIATE
+
+    compiled = kernels.update_scan
+    seen = {"updates": 0, "dropped": 0}
+
+    def checked(
+        mean: np.ndarray, cov: np.ndarray, angles: np.ndarray, ranges: np.ndarray,
+        beams: np.ndarray, assigned: np.ndarray, real: np.ndarray, index: np.ndarray, *rest: Any,
+    ) -> int:  # fmt: skip
+        shape, n, params, switches, _, step = rest
+        steady = np.empty(beams.size, np.bool_)
+        near, _, _ = kernels._scan_model(mean, real, index, n, params, switches, step)
+        kept = kernels.steady_beams(
+            mean, cov, angles, beams, assigned, params[P_REACH], index[VARIATE, :n],
+            index[ORDER, :n], shape[:n], real[kernels.LO, :n], real[kernels.HI, :n], near,
+            params[P_MAX_RANGE], params[P_MIN_SINE], n, params[P_END_SIGMA], steady,
+        )  # fmt: skip
+        seen["updates"] += 1
+        seen["dropped"] += int(kept < beams.size)
+        want_mean, want_cov, want_index = mean.copy(), cov.copy(), index.copy()
+        want = ref.update_scan_two_casts(
+            want_mean, want_cov, angles, ranges, beams, assigned, real, want_index, *rest
+        )
+        got = compiled(mean, cov, angles, ranges, beams, assigned, real, index, *rest)
+        assert got == want
+        assert mean.tobytes() == want_mean.tobytes() and cov.tobytes() == want_cov.tobytes()
+        assert index.tobytes() == want_index.tobytes()
+        return got
+
+    monkeypatch.setattr(step_kernels, "finish_step", step_kernels.finish_step.py_func)
+    monkeypatch.setattr(kernels, "update_scan", checked)
+    step = random_stepper(parallel_env(**ENV_CONFIG), 0)
+    for _ in range(300):
+        step()
+    rng = np.random.default_rng(1)
+    walls = make_walls(30, rng)
+    slam = make_slam(walls)
+    for odometry, ranges in make_inputs(walls, 60, rng):
+        slam.step(odometry, ranges)
+    assert seen["updates"] > 500 and seen["dropped"] > 0, seen
 
 
 def test_slam_steps__compiled_update_tracks_numpy_update_over_a_short_horizon(
