@@ -1,5 +1,6 @@
-"""Compiled kernels of the observations: the robots' map points shifted by their c0s, the
-egocentric local map's occupied and free cells, and the vector observation's parts.
+"""Compiled kernels of the observations: a map sampler's cache brought up to date with its
+table (:func:`resample_map`) and its points shifted by the c0s, the egocentric local map's
+occupied and free cells, and the vector observation's parts.
 
 Plain loops compiled by :func:`polyslam_env.core.jit.njit`, with the same float operations in
 the same order as the numpy version they replaced (the oracle in
@@ -17,28 +18,130 @@ import numpy as np
 
 from polyslam_env.core.jit import fma, njit
 from polyslam_env.core.raster import cell_id
+from polyslam_env.metrics.kernels import sample_rows
+from polyslam_env.slam import columns as col
+
+# Fields (rows) of a map sampler's int64 cache (fields × capacity): per landmark in state order,
+# its stable id and stamp when sampled, its dependent coordinate (0 or 1), and where its points
+# are in the pool
+CACHE_ID = 0
+CACHE_STAMP = 1
+CACHE_AXIS = 2
+CACHE_START = 3
+CACHE_COUNT = 4
+N_CACHE = 5
+
+
+@njit
+def resample_map(
+    cache: np.ndarray,
+    cache_c0: np.ndarray,
+    cached: int,
+    index: np.ndarray,
+    real: np.ndarray,
+    shape: np.ndarray,
+    mean: np.ndarray,
+    n: int,
+    step: float,
+    dense: int,
+    pool: np.ndarray,
+    used: int,
+) -> tuple[np.ndarray, int, int]:
+    """A map sampler's cache (``cache`` (N_CACHE, capacity ≥ n) int64 and ``cache_c0``
+    (capacity,), its first ``cached`` rows in use) brought up to date with the ``n`` landmarks
+    of a table (its buffers ``index``, ``real``, ``shape``, c0s in the state ``mean``), rows
+    rewritten in the table's order; returns the pool (``pool`` (P, 2), or a larger one), the
+    rows of it in use and the live points (Σ count).
+
+    A landmark keeps its cached row (found by id) while its stamp is the one it was sampled at;
+    the others (stale or new) are sampled every ``step`` of arc length at their c0 now
+    (:func:`~polyslam_env.metrics.kernels.sample_rows` with ``dense``, in row order) and
+    appended to the pool from row ``used`` on. When they do not fit, the live rows' points are
+    first copied, in row order, to the front of a new pool of twice the live points (64 at
+    least): the pool never holds more than twice what it must, and a change touches only the
+    stale rows."""
+    old = cache[:, :cached].copy()
+    old_c0 = cache_c0[:cached].copy()
+    stale = np.empty(n, dtype=np.int64)
+    q = 0
+    hint = 0  # where the search for the next id starts: rows keep their order
+    for r in range(n):
+        found = -1
+        for t in range(cached):
+            o = hint + t
+            if o >= cached:
+                o -= cached
+            if old[CACHE_ID, o] == index[col.ID, r]:
+                found = o
+                break
+        cache[CACHE_ID, r] = index[col.ID, r]
+        cache[CACHE_STAMP, r] = index[col.STAMP, r]
+        if found >= 0:
+            hint = found + 1
+        if found >= 0 and old[CACHE_STAMP, found] == index[col.STAMP, r]:
+            cache[CACHE_AXIS, r] = old[CACHE_AXIS, found]
+            cache[CACHE_START, r] = old[CACHE_START, found]
+            cache[CACHE_COUNT, r] = old[CACHE_COUNT, found]
+            cache_c0[r] = old_c0[found]
+        else:
+            cache[CACHE_COUNT, r] = 0  # its old points, if any, are dropped
+            stale[q] = r
+            q += 1
+    if q:
+        coeffs = shape[:n].copy()  # (n, M+1) [0, b_1, …]: c0 from the state
+        coeffs[:, 0] = mean[3 : 3 + n]
+        points, starts = sample_rows(
+            index[col.VARIATE, :n], coeffs, real[col.LO, :n], real[col.HI, :n], stale[:q],
+            step, dense,
+        )  # fmt: skip
+        if used + points.shape[0] > pool.shape[0]:
+            live = 0
+            for r in range(n):
+                live += cache[CACHE_COUNT, r]
+            room = np.empty((max(2 * (live + points.shape[0]), 64), 2))
+            at = 0
+            for r in range(n):
+                a, k = cache[CACHE_START, r], cache[CACHE_COUNT, r]
+                if k > 0:
+                    room[at : at + k] = pool[a : a + k]
+                    cache[CACHE_START, r] = at
+                    at += k
+            pool, used = room, at
+        for j in range(q):
+            r = stale[j]
+            cache[CACHE_AXIS, r] = 1 if index[col.VARIATE, r] == 1 else 0
+            cache[CACHE_START, r] = starts[j] + used
+            cache[CACHE_COUNT, r] = starts[j + 1] - starts[j]
+            cache_c0[r] = mean[3 + r]
+        pool[used : used + points.shape[0]] = points
+        used += points.shape[0]
+    total = 0
+    for r in range(n):
+        total += cache[CACHE_COUNT, r]
+    return pool, used, total
 
 
 @njit
 def shifted_points(
     pool: np.ndarray,
-    start: np.ndarray,
-    count: np.ndarray,
-    axis: np.ndarray,
+    cache: np.ndarray,
+    cache_c0: np.ndarray,
+    n: int,
     mean: np.ndarray,
-    c0: np.ndarray,
     out: np.ndarray,
 ) -> None:
-    """A map sampler's cached points, landmark o's ``count[o]`` rows of ``pool`` (P, 2) from
-    ``start[o]`` (n,) at the c0 they were sampled with, ``c0[o]``, moved to the c0s of the
-    state ``mean`` (its ``3 + o`` entry) and written one landmark after the other into ``out``
-    (Σ count, 2): each point's dependent coordinate ``axis[o]`` (0 or 1) gains
-    ``mean[3 + o] − c0[o]`` (as ``points[m, axis] + (c0s − c0)[owner]``)."""
+    """A map sampler's cached points (:func:`resample_map`: landmark o's ``cache[CACHE_COUNT,
+    o]`` rows of ``pool`` (P, 2) from ``cache[CACHE_START, o]``, at the c0 they were sampled
+    with, ``cache_c0[o]``), moved to the c0s of the state ``mean`` (its ``3 + o`` entry) and
+    written one landmark after the other into ``out`` (Σ count, 2): each point's dependent
+    coordinate ``cache[CACHE_AXIS, o]`` (0 or 1) gains ``mean[3 + o] − cache_c0[o]`` (as
+    ``points[m, axis] + (c0s − c0)[owner]``)."""
     m = 0
-    for o in range(start.shape[0]):
-        shift = mean[3 + o] - c0[o]
-        a = axis[o]
-        for p in range(start[o], start[o] + count[o]):
+    for o in range(n):
+        shift = mean[3 + o] - cache_c0[o]
+        a = cache[CACHE_AXIS, o]
+        first = cache[CACHE_START, o]
+        for p in range(first, first + cache[CACHE_COUNT, o]):
             out[m, 0] = pool[p, 0]
             out[m, 1] = pool[p, 1]
             out[m, a] += shift

@@ -15,7 +15,6 @@ compiled calls; :class:`RobotView` is one robot's view, for encoding a single ro
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -27,8 +26,6 @@ from gymnasium import spaces
 from polyslam_env.core import raster
 from polyslam_env.environment import kernels
 from polyslam_env.environment.config import EnvConfig, ObservationConfig
-from polyslam_env.metrics.mapping import MapShapes, sample_shapes
-from polyslam_env.slam import columns as col
 from polyslam_env.slam.robot import PolySlam
 from polyslam_env.world.sensors import Detection
 
@@ -49,6 +46,8 @@ STD_CAPS = np.array([1.0, 1.0, math.pi])
 _NO_POINTS = np.zeros((0, 2))
 _NO_CELLS = np.zeros((1, 0), dtype=bool)  # (1, 0): no local map
 _CODES = np.array([FREE, UNKNOWN, OCCUPIED])
+#: Points per curve a map sampler measures its arc length on (``Polynomial.sample_arclength``'s).
+_DENSE = 512
 
 
 def _cells_a_side(size: float, resolution: float) -> int:
@@ -161,91 +160,45 @@ class MapSampler:
 
     Nothing is looked at while the map's table keeps its ``version`` (only c0s moved); after
     a change, a landmark is resampled only when its ``stamp`` moved (created, refit, merged
-    or extended: the table bumps it with every change of shape or extent), all of them in
-    one compiled call (:func:`~polyslam_env.metrics.mapping.sample_shapes`). A c0 change
-    alone shifts the cached points along the polynomial's dependent axis, which is exact.
+    or extended: the table bumps it with every change of shape or extent). A c0 change alone
+    shifts the cached points along the polynomial's dependent axis, which is exact.
 
-    The points live in an append-only pool: a resampled landmark's points are appended and
-    its row points at them, so a change touches only the stale rows (the others' points stay
-    where they are); :meth:`write` gathers the rows in state order. The pool is compacted
-    (copied, no arithmetic) when it holds more than twice the live points.
+    The cache is one int64 array (:data:`~polyslam_env.environment.kernels.N_CACHE` fields ×
+    capacity: per landmark in state order, its id, its stamp, its dependent axis and where its
+    points are) and the c0s they were sampled at; the points live in an append-only pool. A
+    change is one compiled call (:func:`~polyslam_env.environment.kernels.resample_map`: the
+    stale rows resampled and appended, the others kept where they are), and :meth:`write`
+    another (:func:`~polyslam_env.environment.kernels.shifted_points`).
     """
 
     def __init__(self, step: float) -> None:
         self.step = float(step)
         self._table: object | None = None  # the table the cache was built on
         self._version = -1  # its version then
-        self._ids: list[int] = []  # the landmark ids then, in state order
-        self._row_of: dict[int, int] = {}  # landmark id → row (built when the ids change)
-        # Per landmark (row in state order): its stamp and c0 when sampled, its dependent
-        # coordinate (0 or 1), and where its points are in the pool
-        self._stamp = np.zeros(0, dtype=np.int64)  # (n,)
-        self._c0 = np.zeros(0)  # (n,)
-        self._dependent = np.zeros(0, dtype=np.int64)  # (n,)
-        self._start = np.zeros(0, dtype=np.int64)  # (n,) first point in the pool
-        self._count = np.zeros(0, dtype=np.int64)  # (n,) number of points
+        self._cache = np.zeros((kernels.N_CACHE, 16), dtype=np.int64)  # (fields, capacity)
+        self._c0 = np.zeros(16)  # (capacity,) c0 of each landmark when sampled
+        self._cached = 0  # rows of the cache in use: the table's landmarks then
         self._pool = np.zeros((0, 2))  # (capacity, 2): points at the cached c0s
         self._used = 0  # rows of the pool in use (live or dropped)
         self._total = 0  # live points: Σ count
 
     def _rebuild(self, slam: PolySlam) -> None:
-        """Resample the landmarks whose stamp moved (or that are new) into the pool, keep the
-        others' rows: a handful of array operations, whatever the number of landmarks."""
+        """Bring the cache up to date with the map's table (the stale rows resampled)."""
         table = slam.table
-        ids = table.ids
-        n = len(ids)
+        n = len(table.ids)
+        if n > self._c0.shape[0]:  # more room, the rows in use kept
+            cache = np.zeros((kernels.N_CACHE, 2 * n), dtype=np.int64)
+            c0 = np.zeros(2 * n)
+            cache[:, : self._cached] = self._cache[:, : self._cached]
+            c0[: self._cached] = self._c0[: self._cached]
+            self._cache, self._c0 = cache, c0
         real, index, shape = table.buffers  # the table's columns (capacity ≥ n), read whole
-        stamps, c0s = index[col.STAMP, :n], slam.mean[3 : 3 + n]  # (n,) each
-        if ids == self._ids:  # the same landmarks in the same rows (an extent or shape moved)
-            stale = self._stamp != stamps
-            start, count = self._start.copy(), self._count.copy()
-            c0, dependent = self._c0.copy(), self._dependent.copy()
-        else:
-            if len(self._row_of) != len(self._ids):
-                self._row_of = dict(zip(self._ids, range(len(self._ids)), strict=True))
-            rows_then = map(self._row_of.get, ids, itertools.repeat(-1, n))
-            old = np.fromiter(rows_then, np.int64, n)  # (n,) row in the cache, −1: new
-            kept = old >= 0
-            stale = ~kept
-            was = old[kept]
-            stale[kept] = self._stamp[was] != stamps[kept]
-            start, count = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
-            c0, dependent = np.zeros(n), np.zeros(n, dtype=np.int64)
-            start[kept], count[kept] = self._start[was], self._count[was]
-            c0[kept], dependent[kept] = self._c0[was], self._dependent[was]
-            self._ids = list(ids)
-            self._row_of = {}  # rebuilt at the next change of ids
-        rows = stale.nonzero()[0]
-        if len(rows):
-            coeffs = shape[:n].copy()  # (n, M+1) [0, b_1, …]: c0 from the state
-            coeffs[:, 0] = c0s
-            fresh = MapShapes(index[col.VARIATE, :n], coeffs, real[col.LO, :n], real[col.HI, :n])
-            points, starts = sample_shapes(fresh, self.step, rows)
-            count[rows] = 0  # their old points are dropped
-            if self._used + len(points) > len(self._pool):
-                self._make_room(start, count, int(count.sum()) + len(points))
-            start[rows] = starts[:-1] + self._used
-            count[rows] = starts[1:] - starts[:-1]
-            c0[rows] = c0s[rows]
-            dependent[rows] = fresh.variate[rows] == 1
-            self._pool[self._used : self._used + len(points)] = points
-            self._used += len(points)
-        self._total = int(count.sum())
-        self._stamp, self._c0, self._dependent = stamps.copy(), c0, dependent
-        self._start, self._count = start, count
+        self._pool, self._used, self._total = kernels.resample_map(
+            self._cache, self._c0, self._cached, index, real, shape, slam.mean, n, self.step,
+            _DENSE, self._pool, self._used,
+        )  # fmt: skip
+        self._cached = n
         self._table, self._version = table, table.version
-
-    def _make_room(self, start: np.ndarray, count: np.ndarray, need: int) -> None:
-        """Copy the live rows' points (``start``, ``count`` (n,), changed to where they go)
-        to the front of a pool with room for ``need`` points (twice as much: amortised)."""
-        pool = np.empty((max(2 * need, 64), 2))
-        at = 0
-        for r in (count > 0).nonzero()[0].tolist():
-            a, k = int(start[r]), int(count[r])
-            pool[at : at + k] = self._pool[a : a + k]
-            start[r] = at
-            at += k
-        self._pool, self._used = pool, at
 
     def count(self, slam: PolySlam) -> int:
         """How many points :meth:`points` of ``slam`` gives (resampling first if the map's
@@ -258,9 +211,7 @@ class MapSampler:
     def write(self, slam: PolySlam, out: np.ndarray) -> None:
         """:meth:`points` of ``slam`` written into ``out`` (:meth:`count`, 2), which must be
         called first (its resampling is not repeated here)."""
-        kernels.shifted_points(
-            self._pool, self._start, self._count, self._dependent, slam.mean, self._c0, out
-        )
+        kernels.shifted_points(self._pool, self._cache, self._c0, self._cached, slam.mean, out)
 
     def points(self, slam: PolySlam) -> np.ndarray:  # (M, 2)
         """All map points of ``slam`` in its frame."""

@@ -13,6 +13,8 @@ from polyslam_env.environment.observations import (
     RobotView,
     TeamView,
 )
+from polyslam_env.metrics.mapping import MapShapes, sample_shapes
+from polyslam_env.slam import columns as col
 from polyslam_env.world.sensors import Detection
 from tests.environment import reference
 from tests.slam.reference_floats import fma_exact
@@ -171,3 +173,55 @@ def test_local_cells__places_by_exact_fma_chains_and_a_lone_point_as_numpy() -> 
                     float(d[1]), rot_t[j][1], fma_exact(float(d[0]), rot_t[j][0], 0.0)
                 )
                 assert got[j] == chain
+
+
+def test_resample_map__keeps_rows_by_id_in_any_order_and_samples_the_rest() -> None:
+    """The sampler's cache through a run of table changes (rows reordered, removed, added, a
+    stamp moved): the points equal the curves sampled afresh (the c0s stay, so kept points
+    are exact), kept rows keep their pool rows unless the pool was compacted, and only the
+    stale rows are appended."""
+    rng = np.random.default_rng(7)
+    cap = 8
+    real = np.zeros((col.N_REAL, cap))
+    index = np.zeros((col.N_INDEX, cap), dtype=np.int64)
+    shape = np.zeros((cap, 3))
+    curves = {}  # id → (variate, lo, hi, b1, b2, c0)
+    cache = np.zeros((kernels.N_CACHE, cap), dtype=np.int64)
+    cache_c0 = np.zeros(cap)
+    pool, used, cached = np.zeros((0, 2)), 0, 0
+    tables = [([0, 1, 2], [0, 0, 0]), ([2, 0, 1], [0, 0, 0]), ([2, 1], [0, 1]),
+              ([2, 3, 1, 4], [0, 0, 1, 0]), ([4, 3, 2, 1], [0, 0, 0, 1]),
+              ([4, 3, 2, 1], [1, 1, 0, 2]), ([4, 3, 2, 1], [2, 2, 0, 2]), ([], [])]  # fmt: skip
+    for ids, stamps in tables:
+        mean = np.zeros(3 + len(ids))
+        for r, (i, stamp) in enumerate(zip(ids, stamps, strict=True)):
+            if i not in curves:
+                lo = rng.uniform(-2.0, 1.0)
+                curves[i] = (int(rng.integers(1, 3)), lo, lo + rng.uniform(0.0, 2.0),
+                             *rng.uniform(-1.0, 1.0, 3))  # fmt: skip
+            variate, lo, hi, b1, b2, c0 = curves[i]
+            index[col.ID, r], index[col.STAMP, r], index[col.VARIATE, r] = i, stamp, variate
+            real[col.LO, r], real[col.HI, r] = lo, hi
+            shape[r] = 0.0, b1, b2
+            mean[3 + r] = c0
+        n = len(ids)
+        was = {int(i): (int(s), int(a)) for i, s, a in cache[[0, 1, 3], :cached].T.tolist()}
+        before, before_used = pool, used
+        pool, used, total = kernels.resample_map(
+            cache, cache_c0, cached, index, real, shape, mean, n, 0.1, 512, pool, used
+        )
+        cached = n
+        out = np.empty((total, 2))
+        kernels.shifted_points(pool, cache, cache_c0, n, mean, out)
+        coeffs = shape[:n].copy()
+        coeffs[:, 0] = mean[3:]
+        fresh = MapShapes(index[col.VARIATE, :n], coeffs, real[col.LO, :n], real[col.HI, :n])
+        want, _ = sample_shapes(fresh, 0.1)
+        np.testing.assert_array_equal(out, want)
+        np.testing.assert_array_equal(cache[kernels.CACHE_ID, :n], ids)
+        for r, i in enumerate(ids):
+            start = int(cache[kernels.CACHE_START, r])
+            if i in was and was[i][0] == stamps[r] and pool is before:
+                assert start == was[i][1]  # kept where it was
+            elif pool is before:
+                assert start >= before_used  # appended
