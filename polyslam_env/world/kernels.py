@@ -199,13 +199,14 @@ def camera_visible(
     mask: np.ndarray,
     dist: np.ndarray,
     bearing: np.ndarray,
-) -> None:
+) -> int:
     """Which robot (column) each robot (row) sees: ``mask`` (N, N), and the distance ``dist``
     and ``bearing`` (N, N) of every pair, from the offset target − observer and its absolute
-    direction (atan2, the C library's, as numpy's arctan2). Seen: both active, not itself,
-    within ``cam_range``, within the field of view when ``limit_fov``, and no wall or circle
-    on the line of sight before the target."""
+    direction (atan2, the C library's, as numpy's arctan2); returns how many pairs are seen.
+    Seen: both active, not itself, within ``cam_range``, within the field of view when
+    ``limit_fov``, and no wall or circle on the line of sight before the target."""
     n = poses.shape[0]
+    seen = 0
     for o in range(n):
         for g in range(n):
             rx, ry = poses[g, 0] - poses[o, 0], poses[g, 1] - poses[o, 1]
@@ -216,6 +217,8 @@ def camera_visible(
                 active[o] and active[g] and o != g, cam_range, half_fov, limit_fov, d,
                 segments, origin, cell, rows, cols, starts, items, circles, -1,
             )  # fmt: skip
+            seen += mask[o, g]
+    return seen
 
 
 @njit
@@ -254,6 +257,16 @@ def pillar_visible(
                 half_fov, limit_fov, d - r, segments, origin, cell, rows, cols, starts, items,
                 circles, c,
             )  # fmt: skip
+
+
+@njit
+def noisy_ranges(true: np.ndarray, noise: np.ndarray, sigma: float, out: np.ndarray) -> None:
+    """Noisy ranges ``out`` (N, B): ``true`` (N, B) + standard normal ``noise`` (N, B) ·
+    ``sigma``, clipped to ≥ 0 as ``np.maximum(v, 0.0)`` (NaN stays, −0 becomes 0)."""
+    for i in range(true.shape[0]):
+        for b in range(true.shape[1]):
+            v = true[i, b] + noise[i, b] * sigma
+            out[i, b] = v if v > 0.0 or v != v else 0.0
 
 
 @njit

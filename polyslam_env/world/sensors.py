@@ -29,6 +29,7 @@ from polyslam_env.world.config import CameraConfig, RangeSensorConfig
 from polyslam_env.world.nearby import WallIndex
 
 Walls = np.ndarray | WallIndex  # segments (S, 4), or their static index
+_FLOAT = np.dtype(float)
 
 
 def _index(walls: Walls) -> WallIndex:
@@ -36,8 +37,13 @@ def _index(walls: Walls) -> WallIndex:
     return walls if isinstance(walls, WallIndex) else WallIndex.build(walls)
 
 
-def _circles(circles: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(np.asarray(circles, dtype=float).reshape(-1, 3))
+def _rows3(a: np.ndarray) -> np.ndarray:  # (M, 3)
+    """``a`` (poses or circles) as a C-contiguous float array of rows of 3: itself when it is
+    one already (the common case, checked without numpy calls)."""
+    if type(a) is np.ndarray and a.dtype == _FLOAT and a.ndim == 2 and a.shape[1] == 3:
+        if a.flags.c_contiguous:
+            return a
+    return np.ascontiguousarray(np.asarray(a, dtype=float).reshape(-1, 3))
 
 
 def cast_rays(
@@ -61,7 +67,7 @@ def cast_rays(
     ex = np.full(len(ang), -1, dtype=np.int64) if exclude is None else np.asarray(exclude)
     out = np.empty((len(ang), 1))
     kernels.beam_ranges(
-        poses, np.zeros(1), float(max_range), *_index(walls).arrays, _circles(circles),
+        poses, np.zeros(1), float(max_range), *_index(walls).arrays, _rows3(circles),
         ex.astype(np.int64), out,
     )  # fmt: skip
     return out.reshape(-1)
@@ -87,9 +93,9 @@ class RangeSensor:
         When ``hit_robots`` is set, the other robots (radius ``robot_radius``) are appended to
         the circles, and each robot's beams skip its own body.
         """
-        p = np.ascontiguousarray(np.asarray(poses, dtype=float).reshape(-1, 3))
+        p = _rows3(poses)
         n = len(p)
-        circ = _circles(circles)
+        circ = _rows3(circles)
         exclude = np.full(n, -1, dtype=np.int64)
         if self.config.hit_robots and n > 0:
             bodies = np.column_stack([p[:, :2], np.full(n, robot_radius)])  # (N, 3)
@@ -118,8 +124,10 @@ class RangeSensor:
 
     def add_noise(self, true: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy ranges from noiseless ones (N, B), as :meth:`measure` (one draw per beam)."""
-        noise = rng.standard_normal(true.shape) * self.config.sigma  # drawn for every beam
-        return np.maximum(true + noise, 0.0)
+        noise = rng.standard_normal(true.shape)  # drawn for every beam
+        out = np.empty(true.shape)
+        kernels.noisy_ranges(true, noise, self.config.sigma, out)
+        return out
 
 
 @dataclass(frozen=True)
@@ -172,15 +180,21 @@ class Camera:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Noiseless (mask, distance, bearing), each (N, N): row = observer, column = target;
         walls (S, 4) or their index, circles (C, 3) the pillars."""
-        p = np.ascontiguousarray(np.asarray(poses, dtype=float).reshape(-1, 3))
+        return self._visible(poses, active, walls, circles)[:3]
+
+    def _visible(
+        self, poses: np.ndarray, active: np.ndarray, walls: Walls, circles: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """:meth:`visible` and how many pairs are seen."""
+        p = _rows3(poses)
         n = len(p)
         mask, dist, bearing = np.empty((n, n), dtype=bool), np.empty((n, n)), np.empty((n, n))
-        kernels.camera_visible(
+        seen = kernels.camera_visible(
             p, np.asarray(active, dtype=bool), float(self.config.range),
             self.half_fov, self.config.fov_deg < 360.0, *_index(walls).arrays,
-            _circles(circles), mask, dist, bearing,
+            _rows3(circles), mask, dist, bearing,
         )  # fmt: skip
-        return mask, dist, bearing
+        return mask, dist, bearing, seen
 
     def detect(
         self,
@@ -204,9 +218,9 @@ class Camera:
         """:meth:`detect` as arrays: who sees whom, with noisy distance (≥ 0) and bearing
         (wrapped) where seen (the same draws: one pair of normals per robot pair)."""
         n = len(poses)
-        mask, dist, bearing = self.visible(poses, np.asarray(active, dtype=bool), walls, circles)
+        mask, dist, bearing, seen = self._visible(poses, active, walls, circles)
         noise = rng.standard_normal((n, n, 2))  # drawn for every pair, seen or not
-        if not np.count_nonzero(mask):
+        if not seen:
             return CameraFrame(mask, np.zeros((n, n)), np.zeros((n, n)))
         d, b = np.empty((n, n)), np.empty((n, n))
         cfg = self.config

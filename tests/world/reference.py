@@ -176,6 +176,11 @@ def drive_forces(
     return np.stack([gain * np.cos(mid), gain * np.sin(mid)], axis=-1)
 
 
+def noisy_ranges(true: np.ndarray, noise: np.ndarray, sigma: float) -> np.ndarray:  # (N, B)
+    """Noisy ranges from noiseless ones and standard normal noise (N, B), clipped to ≥ 0."""
+    return np.maximum(true + noise * sigma, 0.0)
+
+
 def camera_noise(
     dist: np.ndarray, bearing: np.ndarray, noise: np.ndarray, sigma_d: float, sigma_bearing: float
 ) -> tuple[np.ndarray, np.ndarray]:

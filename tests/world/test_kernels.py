@@ -209,6 +209,22 @@ def test_camera_noise__equals_the_oracle() -> None:
     assert (d == 0.0).any()
 
 
+def test_noisy_ranges__equal_the_oracle() -> None:
+    """Ranges with noise clipped at 0 as numpy's maximum: no return (inf) stays inf, NaN stays
+    NaN, a sum of −0 becomes 0."""
+    rng = np.random.default_rng(9)
+    true = rng.uniform(0.0, 0.05, (7, 5))  # some noisy ranges below 0
+    true[0] = (np.inf, np.nan, 0.0, -0.0, 2.0)
+    noise = rng.standard_normal((7, 5))
+    noise[0, 2:4] = -0.0
+    out = np.empty((7, 5))
+    kernels.noisy_ranges(true, noise, 0.02, out)
+    want = reference.noisy_ranges(true, noise, 0.02)
+    np.testing.assert_array_equal(out, want)
+    assert not np.signbit(out[~np.isnan(out)]).any()
+    assert (out == 0.0).any()
+
+
 def test_clip_commands__equals_numpy_clip_bit_for_bit() -> None:
     rng = np.random.default_rng(11)
     cmd = rng.uniform(-3.0, 3.0, (400, 2))
