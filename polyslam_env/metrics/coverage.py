@@ -32,6 +32,9 @@ class CoverageGrid:
         self.swept = np.zeros_like(self.free)  # (H, W): swept by any beam (free or not)
         self._masks = np.zeros((0, *mask.shape), dtype=bool)  # (R, H, W): per swept robot
         self._rows: dict[int, int] = {}  # robot -> its row of _masks, in order of first sweep
+        # sweep_team's rows (N,) int64 for its last active flags (N,): a robot's row never moves
+        self._team_flags: list[bool] = []
+        self._team_rows = np.zeros(0, dtype=np.int64)
         self.gain = 0  # new free cells of the team in the last sweep
         self._n_swept_free = 0
 
@@ -151,13 +154,17 @@ class CoverageGrid:
         if not max_range > 0:
             raise ValueError(f"max_range must be > 0, got {max_range}")
         act = np.asarray(active, dtype=bool)
-        rows = np.array([self._row(i) if a else -1 for i, a in enumerate(act.tolist())])
+        flags = act.tolist()
+        if flags != self._team_flags:
+            rows = [self._row(i) if a else -1 for i, a in enumerate(flags)]
+            self._team_rows = np.array(rows, dtype=np.int64)
+            self._team_flags = flags
         gains, total, last = raster.sweep_team(
             np.ascontiguousarray(poses, dtype=float), np.ascontiguousarray(angles, dtype=float),
             np.ascontiguousarray(ranges, dtype=float), act, max_range, self.origin,
-            self.resolution, self.free, self.swept, self._masks, rows,
+            self.resolution, self.free, self.swept, self._masks, self._team_rows,
         )  # fmt: skip
-        if np.count_nonzero(act):  # (a C call; .any() is a ufunc reduction)
+        if True in flags:
             self.gain = last
         self._n_swept_free += total
         return gains
