@@ -93,16 +93,24 @@ def nees_series(
     true_poses: np.ndarray, est_poses: np.ndarray, est_covs: np.ndarray, start_pose: np.ndarray
 ) -> np.ndarray:  # (K,)
     """Per-step NEES eᵀP⁻¹e (standard form, via ``solve``); raises LinAlgError on singular P."""
-    err, cov = _pose_errors(true_poses, est_poses, est_covs, start_pose)
-    sol = np.linalg.solve(cov, err[..., None])[..., 0]  # (K, 3)
-    return np.asarray(np.einsum("ki,ki->k", err, sol))
+    return _standard(*_pose_errors(true_poses, est_poses, est_covs, start_pose))
 
 
 def nees_paper_series(
     true_poses: np.ndarray, est_poses: np.ndarray, est_covs: np.ndarray, start_pose: np.ndarray
 ) -> np.ndarray:  # (K,)
     """Per-step eᵀPe, the index as the paper prints it (gives its ~1e-6 values)."""
-    err, cov = _pose_errors(true_poses, est_poses, est_covs, start_pose)
+    return _paper(*_pose_errors(true_poses, est_poses, est_covs, start_pose))
+
+
+def _standard(err: np.ndarray, cov: np.ndarray) -> np.ndarray:  # (K,)
+    """eᵀP⁻¹e of each absolute error (K, 3) and covariance (K, 3, 3) (:func:`_pose_errors`)."""
+    sol = np.linalg.solve(cov, err[..., None])[..., 0]  # (K, 3)
+    return np.asarray(np.einsum("ki,ki->k", err, sol))
+
+
+def _paper(err: np.ndarray, cov: np.ndarray) -> np.ndarray:  # (K,)
+    """eᵀPe of each absolute error (K, 3) and covariance (K, 3, 3) (:func:`_pose_errors`)."""
     return np.asarray(np.einsum("ki,kij,kj->k", err, cov, err))
 
 
@@ -128,6 +136,15 @@ def nees_paper(
 ) -> float:
     """μ_j as the paper literally writes it: mean of eᵀPe (same arguments as :func:`nees`)."""
     return _mean_of(nees_paper_series(true_poses, est_poses, est_covs, start_pose))
+
+
+def nees_and_paper(
+    true_poses: np.ndarray, est_poses: np.ndarray, est_covs: np.ndarray, start_pose: np.ndarray
+) -> tuple[float, float]:
+    """(:func:`nees`, :func:`nees_paper`) of the same arguments, from one mapping of the
+    estimates to the absolute frame (the same numbers as the two calls)."""
+    err, cov = _pose_errors(true_poses, est_poses, est_covs, start_pose)
+    return _mean_of(_standard(err, cov)), _mean_of(_paper(err, cov))
 
 
 def nees_band(dof: int = 3, runs: int = 1, prob: float = 0.95) -> tuple[float, float]:
