@@ -14,13 +14,19 @@
   the float operations of :meth:`~polyslam_env.slam.polynomial.Polynomial.sample_arclength`
   in the same order (numpy's ``linspace``, Horner's ``polyval``, ``diff``, the norm as the sum
   of two squares, ``cumsum`` and ``interp``), so the points are bit-identical to it.
+* :func:`map_sums`: what the env's map rewards need of a map each time it changes, in one
+  call: its samples (:func:`sample_rows`) placed by a pose, the sum of their distances to the
+  boundary (:func:`wall_distances` and the pillars) and the weight of the boundary samples
+  they cover (:func:`covered_by`), both sums in numpy's order (``sum_like_numpy``).
 * :func:`record_rows`: one step of a team's history (poses, covariances, SLAM times, the
   beams' true ranges, path length, collisions, divergence flags) written for every recorded
   slot in one call, the
   path length's step with libm's ``hypot`` as ``np.hypot`` computes it.
 
 Oracles: brute force over all segments and all points, ``Polynomial.sample_arclength`` and
-the numpy form of the history's record (``tests/metrics/test_kernels.py``).
+the numpy form of the history's record (``tests/metrics/test_kernels.py``); for
+:func:`map_sums`, ``completeness`` and ``map_error_length``, which place, measure and sum the
+map in numpy (``tests/metrics/test_map_quality.py``).
 """
 
 from __future__ import annotations
@@ -29,13 +35,14 @@ import math
 
 import numpy as np
 
-from polyslam_env.core.jit import njit
+from polyslam_env.core.jit import njit, sum_like_numpy
 from polyslam_env.world.kernels import _segment_distance
 
 __all__ = [
     "buckets",
     "covered",
     "covered_by",
+    "map_sums",
     "parallel_neighbours",
     "record_rows",
     "sample_rows",
@@ -353,6 +360,70 @@ def sample_rows(
     for q in range(q_count):
         out[starts[q] : starts[q + 1]] = chunks[q]
     return out, starts
+
+
+@njit
+def map_sums(
+    variate: np.ndarray,
+    coeffs: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    step: float,
+    dense: int,
+    pose: np.ndarray,
+    c: float,
+    s: float,
+    index: tuple[np.ndarray, np.ndarray, float, int, int, np.ndarray, np.ndarray],
+    pillars: np.ndarray,
+    samples: np.ndarray,
+    weights: np.ndarray,
+    found: tuple[float, float, float, int, int, np.ndarray, np.ndarray],
+    tol: float,
+) -> tuple[float, float]:
+    """(Σ weights of the boundary samples covered, Σ distances to the boundary) of a map
+    (``variate`` … ``hi``, every row, as :func:`sample_rows` reads them, sampled every
+    ``step``) placed by ``pose`` (3,), (c, s) the cosine and sine of its heading: each sample
+    p goes to (x + c·p₀ − s·p₁, y + s·p₀ + c·p₁). A placed sample's distance is the least of
+    the wall ``index``'s (:func:`wall_distances`) and |‖p − centre‖ − r| of each pillar
+    (P, 3), NaN if any is NaN (``np.minimum``'s rule); the boundary ``samples`` (M, 2) of
+    ``weights`` (M,), bucketed in ``found`` (:func:`buckets` with ``tol``), are covered by
+    the finite placed samples strictly within ``tol`` (:func:`covered_by`). Both sums in
+    numpy's order, over the distances and over the covered weights in sample order."""
+    own = sample_rows(variate, coeffs, lo, hi, np.arange(variate.shape[0]), step, dense)[0]
+    n = own.shape[0]
+    placed = np.empty((n, 2))  # (N, 2)
+    finite = np.empty((n, 2))  # the finite rows of placed
+    m = 0
+    for i in range(n):
+        px, py = own[i, 0], own[i, 1]
+        placed[i, 0] = pose[0] + c * px - s * py
+        placed[i, 1] = pose[1] + s * px + c * py
+        if math.isfinite(placed[i, 0]) and math.isfinite(placed[i, 1]):
+            finite[m] = placed[i]
+            m += 1
+    dist = wall_distances(placed, *index)  # (N,)
+    for i in range(n if pillars.shape[0] else 0):
+        least = np.inf
+        for k in range(pillars.shape[0]):
+            dx, dy = placed[i, 0] - pillars[k, 0], placed[i, 1] - pillars[k, 1]
+            d = abs(math.hypot(dx, dy) - pillars[k, 2])
+            least = d if k == 0 else _minimum(least, d)
+        dist[i] = _minimum(dist[i], least)
+    error = sum_like_numpy(dist, 0, n)
+    near = covered_by(samples, *found, finite[:m], tol)  # (M,)
+    kept = np.empty(samples.shape[0])
+    k = 0
+    for j in range(samples.shape[0]):
+        if near[j]:
+            kept[k] = weights[j]
+            k += 1
+    return sum_like_numpy(kept, 0, k), error
+
+
+@njit
+def _minimum(a: float, b: float) -> float:
+    """``np.minimum(a, b)``: the lesser, NaN if either is."""
+    return a if a != a or a < b else b
 
 
 @njit

@@ -36,10 +36,11 @@ from polyslam_env.metrics.boundary import (
     boundary_samples,
     distance_to_boundary,
 )
-from polyslam_env.metrics.kernels import covered_by, parallel_neighbours, sample_rows
+from polyslam_env.metrics.kernels import covered_by, map_sums, parallel_neighbours, sample_rows
 from polyslam_env.metrics.pose import _check_pose
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
+from polyslam_env.world.nearby import wall_index
 
 
 # -- mapping error and completeness -----------------------------------------------------------
@@ -477,14 +478,37 @@ def completeness_and_error(
     step: float = 0.01,
 ) -> tuple[float, float]:
     """``(completeness(...), map_error_length(...))`` with the same arguments, from one
-    sampling of the map (the numbers are the same; the env's reward needs both each time a
-    map changes). ``polys`` may be the map as arrays (:class:`MapShapes`)."""
+    compiled call (:func:`~polyslam_env.metrics.kernels.map_sums`: one sampling of the map,
+    the same numbers; the env's reward needs both each time a map changes). ``polys`` may be
+    the map as arrays (:class:`MapShapes`)."""
+    if tol < 0:
+        raise ValueError(f"tol must be >= 0, got {tol}")
+    pose = _check_pose(start_pose)
     shapes = MapShapes.of(polys)
+    samples, weights = boundary_samples(layout, step)
     if not len(shapes):
-        return _covered_fraction(np.zeros((0, 2)), layout, tol, step), 0.0
-    stacked = transform_points(sample_shapes(shapes, step)[0], _check_pose(start_pose))
-    error = float(distance_to_boundary(stacked, layout).sum()) * step
-    return _covered_fraction(stacked, layout, tol, step), error
+        return 0.0, 0.0
+    if len(layout.segments) == 0 and len(layout.pillars) == 0:
+        raise ValueError(f"layout {layout.name!r} has no walls and no pillars")
+    covered, error = map_sums(
+        np.ascontiguousarray(shapes.variate, dtype=np.int64),
+        np.ascontiguousarray(shapes.coeffs, dtype=float),
+        np.ascontiguousarray(shapes.lo, dtype=float),
+        np.ascontiguousarray(shapes.hi, dtype=float),
+        float(step),
+        512,  # Polynomial.sample_arclength's dense
+        pose,
+        float(np.cos(pose[2])),
+        float(np.sin(pose[2])),
+        wall_index(layout).arrays,
+        np.asarray(layout.pillars, dtype=float).reshape(-1, 3),
+        samples,
+        weights,
+        boundary_buckets(layout, step, tol),
+        float(tol),
+    )
+    total = float(weights.sum())
+    return (covered / total if total != 0.0 else 0.0), error * step
 
 
 def hit_fraction(

@@ -237,6 +237,27 @@ def test_completeness_and_error__the_two_metrics_bit_for_bit(count: int) -> None
     )
 
 
+@pytest.mark.parametrize("step", [0.01, 0.05])
+@pytest.mark.parametrize("seed", range(3))
+def test_completeness_and_error__compiled_sums_bit_for_bit_with_pillars(
+    step: float, seed: int
+) -> None:
+    # the compiled call's placing, distances (walls and pillars) and sums against the numpy
+    # path of the two functions, on a map that runs past the pillars and out of the room
+    rng = np.random.default_rng(seed)
+    wall = np.array([[0.0, 0.0], [SIDE, 0.0], [SIDE, SIDE], [0.0, SIDE], [0.0, 0.0]])
+    pillars = np.array([[1.0, 1.2, 0.15], [2.6, 2.9, 0.3], [1.9, 3.2, 0.2]])
+    layout = Layout("pillared", (wall,), pillars)
+    polys = _random_map(rng, 9)
+    polys.append(Polynomial(1, np.array([1.2, 0.4, -0.3]), -2.0, 5.5))
+    pose = np.array([0.03, -0.02, rng.normal(0, 0.2)])
+    for tol in (0.0, 0.05, 0.2):
+        assert M.completeness_and_error(polys, pose, layout, tol=tol, step=step) == (
+            M.completeness(polys, pose, layout, tol=tol, step=step),
+            M.map_error_length(polys, pose, layout, step=step),
+        )
+
+
 @pytest.mark.parametrize(("count", "offset"), [(0, False), (1, False), (7, False), (7, True)])
 def test_map_quality__every_metric_bit_for_bit_as_its_own_function(
     count: int, offset: bool
