@@ -3,8 +3,9 @@
 * :func:`wall_distances`: the exact distance of each point to the nearest wall segment, over
   the layout's static :class:`~polyslam_env.world.nearby.WallIndex`. The grid is searched in
   square rings of cells around the point's cell; a segment's nearest point to p lies in a cell
-  that lists it, and every cell of ring k+1 or beyond is at least k cells from p, so once the
-  best distance is ≤ k · cell after ring k, no unvisited segment can be nearer.
+  that lists it, and every cell of ring k+1 or beyond lies outside the block of rings 0…k, so
+  once the best distance is within p's distance to that block's edge, no unvisited segment
+  can be nearer (most map points, a few cm from a wall, stop after their own cell).
 * :func:`covered`: which boundary samples lie strictly within ``tol`` of some map point (the
   completeness), with the map points bucketed in a grid of side ≥ ``tol`` so that only the
   3 × 3 buckets around a sample are searched.
@@ -49,6 +50,9 @@ __all__ = [
     "wall_distances",
 ]
 
+#: How far (m) inside the searched block's edge the nearest segment must be for
+#: :func:`wall_distances` to stop.
+_REACH_MARGIN = 1e-9
 #: Most buckets a side in :func:`covered`.
 _MAX_BUCKETS = 256
 
@@ -91,7 +95,15 @@ def wall_distances(
                             if d < best:
                                 best = d
                     cc += step
-            if best <= k * cell:
+            # every unvisited cell lies outside the (2k + 1)² block, so no unvisited segment is
+            # nearer than the block's edge (less a margin far above the coordinates' round-off)
+            reach = min(
+                px - (origin[0] + (c - k) * cell),
+                origin[0] + (c + k + 1) * cell - px,
+                py - (origin[1] + (r - k) * cell),
+                origin[1] + (r + k + 1) * cell - py,
+            )
+            if best <= reach - _REACH_MARGIN:
                 break
             if r - k <= 0 and r + k >= rows - 1 and c - k <= 0 and c + k >= cols - 1:
                 break  # every cell of the grid visited
