@@ -177,22 +177,24 @@ def record(
     points the beams hit, placed with the true poses when read (beams without return give
     none; :meth:`~polyslam_env.metrics.episode.TeamHistory.hits`).
     """
-    poses = world.poses  # (N, 3)
-    of = np.asarray(robots, dtype=np.int64)  # (J,) slot → world robot
-    slots = world.active[of].nonzero()[0]  # (K,)
-    if not len(slots):
-        return
+    poses, active, ranges = world.poses, world.active, sensing.true_ranges  # (N, …)
     times = np.array([np.nan if i is None else i.time_s for i in slam_infos])  # (J,)
     diverging = np.array([i is not None and i.diverging for i in slam_infos], dtype=bool)
     est, cov = estimates
-    rows: slice | np.ndarray = slots  # the slots' rows of the per-slot arrays
-    live: slice | np.ndarray = of[slots]  # (K,) their robots' rows of the world's arrays
-    # every robot, in order: views (count_nonzero: a C call, .all() a ufunc reduction)
-    if len(slots) == len(poses) and not np.count_nonzero(of != slots):
-        rows = live = slice(None)
+    n = len(active)
+    # every robot, in order, all active (count_nonzero: a C call): the arrays as they are
+    if robots == range(n) and np.count_nonzero(active) == n:
+        slots = np.arange(n)
+        history.record(slots, poses, est, cov, ranges, times, collided, diverging)
+        return
+    of = np.asarray(robots, dtype=np.int64)  # (J,) slot → world robot
+    slots = active[of].nonzero()[0]  # (K,)
+    if not len(slots):
+        return
+    live = of[slots]  # (K,) their robots' rows of the world's arrays
     history.record(
-        slots, poses[live], est[rows], cov[rows], sensing.true_ranges[live], times[rows],
-        collided[live], diverging[rows],
+        slots, poses[live], est[slots], cov[slots], ranges[live], times[slots], collided[live],
+        diverging[slots],
     )  # fmt: skip
 
 

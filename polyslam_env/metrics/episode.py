@@ -275,6 +275,7 @@ class TeamHistory:
         self._beams = np.full((64, j, len(self.angles)), np.inf)  # true ranges (row 0: none)
         self._true[0], self._est[0], self._cov[0] = first, est_poses, est_covs
         self.lengths = np.ones(j, dtype=np.int64)  # (J,) rows of each slot
+        self._records = 0  # record calls so far: no slot has more than 1 + this many rows
         self._hits = np.empty((256, 2))  # (capacity, 2) hit points given as points, absolute
         self._hit_owner = np.empty(256, dtype=np.int64)  # its slot
         self._n_hits = 0
@@ -305,7 +306,8 @@ class TeamHistory:
         recorded): true poses (K, 3), estimates (K, 3), covariances (K, 3, 3), the true ranges
         (K, B) of the beams at :attr:`angles` (``inf`` or NaN: no return), SLAM seconds (K,)
         (NaN: none), collided and diverging flags (K,)."""
-        self._grow(int(self.lengths.max()) + 1)
+        self._records += 1
+        self._grow(self._records + 1)
         kernels.record_rows(
             slots, true_poses, est_poses, est_covs, slam_times, ranges, collided, diverging,
             self.lengths, self._true, self._est, self._cov, self._times, self._beams,
