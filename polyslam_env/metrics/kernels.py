@@ -206,9 +206,10 @@ def covered_by(
 ) -> np.ndarray:
     """:func:`covered` the other way round, for samples (M, 2) bucketed once
     (:func:`buckets` of the samples with the same ``tol``: x0 … starts) and many point sets:
-    each point (N, 2), finite, marks the samples strictly within ``tol`` (> 0) in its 3 × 3
-    buckets. The same booleans as ``covered(samples, points, tol)`` (the same test,
-    dx² + dy² < tol², on the same differences)."""
+    each finite point (N, 2) marks the samples strictly within ``tol`` (> 0) in its 3 × 3
+    buckets, a point with a NaN or infinite coordinate none. The same booleans as
+    ``covered(samples, finite points, tol)`` (the same test, dx² + dy² < tol², on the same
+    differences)."""
     m = samples.shape[0]
     out = np.zeros(m, dtype=np.bool_)
     if points.shape[0] == 0 or m == 0 or not tol > 0.0:
@@ -216,6 +217,8 @@ def covered_by(
     tol2 = tol * tol
     for i in range(points.shape[0]):
         px, py = points[i, 0], points[i, 1]
+        if not (math.isfinite(px) and math.isfinite(py)):
+            continue
         r0, r1, c0, c1 = _bucket_span(px, py, x0, y0, side, ncols, nrows)
         for rr in range(r0, r1 + 1):
             for cc in range(c0, c1 + 1):
@@ -404,15 +407,10 @@ def map_sums(
     own = sample_rows(variate, coeffs, lo, hi, np.arange(variate.shape[0]), step, dense)[0]
     n = own.shape[0]
     placed = np.empty((n, 2))  # (N, 2)
-    finite = np.empty((n, 2))  # the finite rows of placed
-    m = 0
     for i in range(n):
         px, py = own[i, 0], own[i, 1]
         placed[i, 0] = pose[0] + c * px - s * py
         placed[i, 1] = pose[1] + s * px + c * py
-        if math.isfinite(placed[i, 0]) and math.isfinite(placed[i, 1]):
-            finite[m] = placed[i]
-            m += 1
     dist = wall_distances(placed, *index)  # (N,)
     for i in range(n if pillars.shape[0] else 0):
         least = np.inf
@@ -422,7 +420,7 @@ def map_sums(
             least = d if k == 0 else _minimum(least, d)
         dist[i] = _minimum(dist[i], least)
     error = sum_like_numpy(dist, 0, n)
-    near = covered_by(samples, *found, finite[:m], tol)  # (M,)
+    near = covered_by(samples, *found, placed, tol)  # (M,)
     kept = np.empty(samples.shape[0])
     k = 0
     for j in range(samples.shape[0]):

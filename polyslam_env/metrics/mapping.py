@@ -412,14 +412,13 @@ def _near(points: np.ndarray, layout: Layout, tol: float, step: float) -> np.nda
     """Which of the boundary samples (``boundary_samples(layout, step)``) lie strictly within
     ``tol`` of a finite point (N, 2) (M,) bool: ``covered_by`` over the samples bucketed once
     per layout (each call only walks the points), the same booleans as ``covered(samples,
-    points, tol)``."""
+    finite points, tol)``."""
     bpts = boundary_samples(layout, step)[0]
-    pts = np.asarray(points, dtype=float).reshape(-1, 2)
-    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    pts = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 2))
     if len(pts) == 0:
         return np.zeros(len(bpts), dtype=bool)
     found = boundary_buckets(layout, step, tol)
-    return covered_by(bpts, *found, np.ascontiguousarray(pts), float(tol))
+    return covered_by(bpts, *found, pts, float(tol))
 
 
 def completeness(

@@ -102,6 +102,20 @@ def test_covered_by__equals_brute_force_and_covered(seed: int, tol: float) -> No
         assert np.array_equal(got, covered(samples, np.ascontiguousarray(points), tol))
 
 
+def test_covered_by__non_finite_points_mark_nothing() -> None:
+    rng = np.random.default_rng(5)
+    samples = rng.uniform(-1, 6, size=(1500, 2))
+    found = buckets(samples, 0.2)
+    points = rng.uniform(-1, 6, size=(120, 2))
+    points[::7, 0] = np.nan
+    points[3::11, 1] = np.inf
+    points[5::13] = -np.inf
+    finite = np.ascontiguousarray(points[np.isfinite(points).all(axis=1)])
+    got = covered_by(samples, *found, points, 0.2)
+    assert np.array_equal(got, covered_by(samples, *found, finite, 0.2))
+    assert np.array_equal(got, covered(samples, finite, 0.2))
+
+
 def test_covered__empty_inputs_and_zero_tolerance() -> None:
     samples = np.ones((4, 2))
     assert not covered(samples, np.zeros((0, 2)), 0.1).any()
