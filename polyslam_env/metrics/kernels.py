@@ -18,7 +18,9 @@
 * :func:`map_sums`: what the env's map rewards need of a map each time it changes, in one
   call: its samples (:func:`sample_rows`) placed by a pose, the sum of their distances to the
   boundary (:func:`wall_distances` and the pillars) and the weight of the boundary samples
-  they cover (:func:`covered_by`), both sums in numpy's order (``sum_like_numpy``).
+  they cover (:func:`covered_by`), both sums in numpy's order (``sum_like_numpy``);
+  :func:`map_quality_sums`: the same for the end-of-episode map-quality metrics (both
+  placings, per-polynomial sums, the seen boundary, the duplicates' pairs).
 * :func:`record_rows`: one step of a team's history (poses, covariances, SLAM times, the
   beams' true ranges, path length, collisions, divergence flags) written for every recorded
   slot in one call, the
@@ -26,8 +28,9 @@
 
 Oracles: brute force over all segments and all points, ``Polynomial.sample_arclength`` and
 the numpy form of the history's record (``tests/metrics/test_kernels.py``); for
-:func:`map_sums`, ``completeness`` and ``map_error_length``, which place, measure and sum the
-map in numpy (``tests/metrics/test_map_quality.py``).
+:func:`map_sums` and :func:`map_quality_sums`, the mapping metrics' own functions
+(``completeness``, ``map_error_length``, ``nu``, ``duplicates``, …), which place, measure and
+sum the map in numpy (``tests/metrics/test_map_quality.py``).
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ __all__ = [
     "buckets",
     "covered",
     "covered_by",
+    "map_quality_sums",
     "map_sums",
     "parallel_neighbours",
     "record_rows",
@@ -397,43 +401,165 @@ def map_sums(
 ) -> tuple[float, float]:
     """(Σ weights of the boundary samples covered, Σ distances to the boundary) of a map
     (``variate`` … ``hi``, every row, as :func:`sample_rows` reads them, sampled every
-    ``step``) placed by ``pose`` (3,), (c, s) the cosine and sine of its heading: each sample
-    p goes to (x + c·p₀ − s·p₁, y + s·p₀ + c·p₁). A placed sample's distance is the least of
-    the wall ``index``'s (:func:`wall_distances`) and |‖p − centre‖ − r| of each pillar
-    (P, 3), NaN if any is NaN (``np.minimum``'s rule); the boundary ``samples`` (M, 2) of
-    ``weights`` (M,), bucketed in ``found`` (:func:`buckets` with ``tol``), are covered by
-    the finite placed samples strictly within ``tol`` (:func:`covered_by`). Both sums in
-    numpy's order, over the distances and over the covered weights in sample order."""
+    ``step``) placed by ``pose`` (3,), (c, s) the cosine and sine of its heading
+    (:func:`_placed`). A placed sample's distance is :func:`_boundary_distances`' (the wall
+    ``index`` and the ``pillars`` (P, 3)); the boundary ``samples`` (M, 2) of ``weights``
+    (M,), bucketed in ``found`` (:func:`buckets` with ``tol``), are covered by the finite
+    placed samples strictly within ``tol`` (:func:`covered_by`). Both sums in numpy's order,
+    over the distances and over the covered weights in sample order."""
     own = sample_rows(variate, coeffs, lo, hi, np.arange(variate.shape[0]), step, dense)[0]
+    placed = _placed(own, pose, c, s)
+    dist = _boundary_distances(placed, index, pillars)
+    near = covered_by(samples, *found, placed, tol)  # (M,)
+    return _weight_sum(weights, near), sum_like_numpy(dist, 0, dist.shape[0])
+
+
+@njit
+def map_quality_sums(
+    variate: np.ndarray,
+    coeffs: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    step: float,
+    dense: int,
+    pose: np.ndarray,
+    c: float,
+    s: float,
+    frame: np.ndarray,
+    frame_c: float,
+    frame_s: float,
+    same: bool,
+    index: tuple[np.ndarray, np.ndarray, float, int, int, np.ndarray, np.ndarray],
+    pillars: np.ndarray,
+    samples: np.ndarray,
+    weights: np.ndarray,
+    found: tuple[float, float, float, int, int, np.ndarray, np.ndarray],
+    tol: float,
+    seen: np.ndarray,
+    duplicate_tol: float,
+    max_sine: float,
+) -> tuple[float, float, float, float, float, int, int, int]:
+    """The sums behind the map-quality metrics of a map (``variate`` … ``hi``, n ≥ 1 rows,
+    sampled every ``step`` by :func:`sample_rows`) placed by ``pose`` (3,) and by ``frame``
+    (3,) ((c, s) and (``frame_c``, ``frame_s``) their headings' cosines and sines; ``same``:
+    the frame is the pose, placed once), in numpy's order: (Σ over the polynomials of the sum
+    of their samples' distances to the boundary (:func:`_boundary_distances`), Σ of all
+    distances, the same placed by ``frame``, Σ weights of the boundary ``samples`` covered
+    within ``tol`` (:func:`covered_by` over the buckets ``found``), the same of those also
+    ``seen`` (M,), how many distances are ≤ ``tol``, how many samples lie within
+    ``duplicate_tol`` of a parallel sample of another polynomial (:func:`parallel_neighbours`
+    of the unit central-difference tangents, |sin| ≤ ``max_sine``), and the samples)."""
+    own, starts = sample_rows(variate, coeffs, lo, hi, np.arange(variate.shape[0]), step, dense)
     n = own.shape[0]
-    placed = np.empty((n, 2))  # (N, 2)
+    placed = _placed(own, pose, c, s)
+    dist = _boundary_distances(placed, index, pillars)
+    pieces = np.empty(starts.shape[0] - 1)  # (n_polys,) each polynomial's sum
+    for q in range(pieces.shape[0]):
+        pieces[q] = sum_like_numpy(dist, starts[q], starts[q + 1] - starts[q])
+    total = sum_like_numpy(dist, 0, n)
+    total_abs = total
+    if not same:
+        dist_abs = _boundary_distances(_placed(own, frame, frame_c, frame_s), index, pillars)
+        total_abs = sum_like_numpy(dist_abs, 0, n)
+    near = covered_by(samples, *found, placed, tol)  # (M,)
+    within = 0
     for i in range(n):
+        if dist[i] <= tol:
+            within += 1
+    owner = np.empty(n, dtype=np.int64)
+    for q in range(starts.shape[0] - 1):
+        owner[starts[q] : starts[q + 1]] = q
+    tangent, has_dir = _unit_tangents(own, starts)
+    marked = parallel_neighbours(own, owner, tangent, has_dir, duplicate_tol, max_sine)
+    return (
+        sum_like_numpy(pieces, 0, pieces.shape[0]),
+        total,
+        total_abs,
+        _weight_sum(weights, near),
+        _weight_sum(weights, near & seen),
+        within,
+        int(np.count_nonzero(marked)),
+        n,
+    )
+
+
+@njit
+def _placed(own: np.ndarray, pose: np.ndarray, c: float, s: float) -> np.ndarray:  # (N, 2)
+    """Points (N, 2) of a frame placed by its ``pose`` (3,) ((c, s) its heading's cosine and
+    sine): (x + c·p₀ − s·p₁, y + s·p₀ + c·p₁), as ``geometry.transform_points``."""
+    placed = np.empty((own.shape[0], 2))
+    for i in range(own.shape[0]):
         px, py = own[i, 0], own[i, 1]
         placed[i, 0] = pose[0] + c * px - s * py
         placed[i, 1] = pose[1] + s * px + c * py
-    dist = wall_distances(placed, *index)  # (N,)
-    for i in range(n if pillars.shape[0] else 0):
+    return placed
+
+
+@njit
+def _boundary_distances(
+    points: np.ndarray,
+    index: tuple[np.ndarray, np.ndarray, float, int, int, np.ndarray, np.ndarray],
+    pillars: np.ndarray,
+) -> np.ndarray:  # (N,)
+    """``boundary.distance_to_boundary``: each point's (N, 2) distance to the wall ``index``
+    (:func:`wall_distances`) and to the pillars (P, 3), |‖p − centre‖ − r|, the least, NaN if
+    any is NaN (``np.minimum``'s rule)."""
+    dist = wall_distances(points, *index)
+    for i in range(points.shape[0] if pillars.shape[0] else 0):
         least = np.inf
         for k in range(pillars.shape[0]):
-            dx, dy = placed[i, 0] - pillars[k, 0], placed[i, 1] - pillars[k, 1]
+            dx, dy = points[i, 0] - pillars[k, 0], points[i, 1] - pillars[k, 1]
             d = abs(math.hypot(dx, dy) - pillars[k, 2])
             least = d if k == 0 else _minimum(least, d)
         dist[i] = _minimum(dist[i], least)
-    error = sum_like_numpy(dist, 0, n)
-    near = covered_by(samples, *found, placed, tol)  # (M,)
-    kept = np.empty(samples.shape[0])
-    k = 0
-    for j in range(samples.shape[0]):
-        if near[j]:
-            kept[k] = weights[j]
-            k += 1
-    return sum_like_numpy(kept, 0, k), error
+    return dist
 
 
 @njit
 def _minimum(a: float, b: float) -> float:
     """``np.minimum(a, b)``: the lesser, NaN if either is."""
     return a if a != a or a < b else b
+
+
+@njit
+def _weight_sum(weights: np.ndarray, mask: np.ndarray) -> float:
+    """``weights[mask].sum()`` (M,): the weights picked, in order, summed in numpy's order."""
+    kept = np.empty(weights.shape[0])
+    k = 0
+    for j in range(weights.shape[0]):
+        if mask[j]:
+            kept[k] = weights[j]
+            k += 1
+    return sum_like_numpy(kept, 0, k)
+
+
+@njit
+def _unit_tangents(points: np.ndarray, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The unit tangents (N, 2) of each polynomial's samples (rows ``starts[q]:starts[q+1]``
+    of ``points`` (N, 2)) and which have a direction (N,): ``np.gradient`` along each
+    (central differences / 2 inside, one-sided at the ends, zero for a single point) over
+    its norm √(x² + y²), zero where the norm is not > 0 (``mapping._tangents`` and the
+    normalising of ``mapping._duplicates``)."""
+    n = points.shape[0]
+    tangent = np.zeros((n, 2))
+    has_dir = np.zeros(n, dtype=np.bool_)
+    for q in range(starts.shape[0] - 1):
+        first, last = starts[q], starts[q + 1] - 1
+        if last <= first:
+            continue  # a single point (or none): no direction
+        for i in range(first, last + 1):
+            if i == first:
+                dx, dy = points[i + 1, 0] - points[i, 0], points[i + 1, 1] - points[i, 1]
+            elif i == last:
+                dx, dy = points[i, 0] - points[i - 1, 0], points[i, 1] - points[i - 1, 1]
+            else:
+                dx = (points[i + 1, 0] - points[i - 1, 0]) / 2.0
+                dy = (points[i + 1, 1] - points[i - 1, 1]) / 2.0
+            norm = math.sqrt(dx * dx + dy * dy)
+            if norm > 0:
+                tangent[i, 0], tangent[i, 1] = dx / norm, dy / norm
+                has_dir[i] = True
+    return tangent, has_dir
 
 
 @njit

@@ -36,7 +36,13 @@ from polyslam_env.metrics.boundary import (
     boundary_samples,
     distance_to_boundary,
 )
-from polyslam_env.metrics.kernels import covered_by, map_sums, parallel_neighbours, sample_rows
+from polyslam_env.metrics.kernels import (
+    covered_by,
+    map_quality_sums,
+    map_sums,
+    parallel_neighbours,
+    sample_rows,
+)
 from polyslam_env.metrics.pose import _check_pose
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
@@ -446,27 +452,69 @@ def map_quality(
     """``nu``, ``nu_mean``, ``completeness``, ``completeness_seen``, ``map_precision`` (their
     defaults) of the map placed by ``start_pose``, ``nu_mean_abs`` (:func:`nu_mean` placed by
     ``frame``), ``duplicates`` and ``has_map``: the same numbers as those functions, from one
-    sampling, one placing and one distance query of the map (each function alone samples and
-    places it again; the distances were computed four times)."""
+    compiled call over the map (:func:`~polyslam_env.metrics.kernels.map_quality_sums`: one
+    sampling, and the distances, covered boundary and duplicates each computed once; each
+    function alone samples and places the map again)."""
     step, tol = 0.01, 0.05
-    own, starts = _sampled(polys, step)
-    points = _moved(own, start_pose)
-    ds = _distances(points, starts, layout)
-    frame = np.asarray(frame, dtype=float)
-    same = np.array_equal(frame, np.asarray(start_pose, dtype=float))
-    near = _near(points, layout, tol, step)  # for both completeness figures
+    shapes = MapShapes.of(polys)
+    pose = _check_pose(start_pose)
+    frame = _check_pose(frame)
+    if not len(shapes):
+        empty = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0)
+        return dict(zip(_QUALITY_KEYS, empty, strict=True))
+    samples, weights = boundary_samples(layout, step)
+    if len(layout.segments) == 0 and len(layout.pillars) == 0:
+        raise ValueError(f"layout {layout.name!r} has no walls and no pillars")
+    seen = _near(hit_points_abs, layout, SEEN_RADIUS, step)  # the seen boundary samples
+    pieces, total, total_abs, covered, covered_seen, within, duplicated, n = map_quality_sums(
+        np.ascontiguousarray(shapes.variate, dtype=np.int64),
+        np.ascontiguousarray(shapes.coeffs, dtype=float),
+        np.ascontiguousarray(shapes.lo, dtype=float),
+        np.ascontiguousarray(shapes.hi, dtype=float),
+        step,
+        512,  # Polynomial.sample_arclength's dense
+        pose,
+        float(np.cos(pose[2])),
+        float(np.sin(pose[2])),
+        frame,
+        float(np.cos(frame[2])),
+        float(np.sin(frame[2])),
+        bool(np.array_equal(frame, pose)),
+        wall_index(layout).arrays,
+        np.asarray(layout.pillars, dtype=float).reshape(-1, 3),
+        samples,
+        weights,
+        boundary_buckets(layout, step, tol),
+        tol,
+        seen,
+        DUPLICATE_TOL,
+        float(np.sin(DUPLICATE_ANGLE)),
+    )
+    boundary = float(weights.sum())
+    seen_length = float(weights[seen].sum())
     return {
-        "nu": _nu(ds),
-        "nu_mean": _nu_mean(ds),
-        "nu_mean_abs": _nu_mean(ds if same else _distances(_moved(own, frame), starts, layout)),
-        "completeness": _covered_fraction(points, layout, tol, step, near),
-        "completeness_seen": _completeness_seen(
-            points, starts, layout, hit_points_abs, SEEN_RADIUS, tol, step, near
-        ),
-        "map_precision": _precision(ds, tol),
-        "duplicates": _duplicates(own, starts, DUPLICATE_TOL, DUPLICATE_ANGLE),
-        "has_map": has_map(polys),
+        "nu": pieces / len(shapes),
+        "nu_mean": total / n,
+        "nu_mean_abs": total_abs / n,
+        "completeness": covered / boundary if boundary != 0.0 else 0.0,
+        "completeness_seen": covered_seen / seen_length if seen_length != 0.0 else 0.0,
+        "map_precision": float(within) / n,
+        "duplicates": float(duplicated) / n,
+        "has_map": 1.0,
     }
+
+
+#: The keys of :func:`map_quality`, in order.
+_QUALITY_KEYS = (
+    "nu",
+    "nu_mean",
+    "nu_mean_abs",
+    "completeness",
+    "completeness_seen",
+    "map_precision",
+    "duplicates",
+    "has_map",
+)
 
 
 def completeness_and_error(
