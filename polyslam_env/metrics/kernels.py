@@ -55,7 +55,9 @@ __all__ = [
 ]
 
 #: How far (m) inside the searched block's edge the nearest segment must be for
-#: :func:`wall_distances` to stop.
+#: :func:`wall_distances` to stop, and how far past ``tol`` a point may be from another
+#: polynomial's box for :func:`parallel_neighbours` to search it: far above the coordinates'
+#: round-off.
 _REACH_MARGIN = 1e-9
 #: Most buckets a side in :func:`covered`.
 _MAX_BUCKETS = 256
@@ -248,17 +250,26 @@ def parallel_neighbours(
     """Whether each point (M, 2) has a point of another ``owner`` (M,) within ``tol``
     (dx² + dy² ≤ tol², as ``cKDTree.query_pairs``) whose unit ``tangent`` (M, 2) is parallel
     to its own: |t_a × t_b| ≤ ``max_sine`` (t_a the lower index's), both with a direction
-    (``has_dir`` (M,)). The duplicates metric's pairs."""
+    (``has_dir`` (M,)). The duplicates metric's pairs.
+
+    A point farther than ``tol`` from every other owner's box (its points with a direction)
+    has no such neighbour and is not searched (most of a map's points: polynomials meet only
+    at their ends); its pairs with searched points are found from them."""
     m = points.shape[0]
     out = np.zeros(m, dtype=np.bool_)
     if m == 0 or not tol >= 0.0:
         return out
     x0, y0, side, ncols, nrows, order, starts = buckets(points, max(tol, 1e-12))
+    first = owner.min()
+    boxes = _owner_boxes(points, owner - first, has_dir)  # (owners, 4), or (0, 4): none
+    reach = tol + _REACH_MARGIN
     tol2 = tol * tol
     for i in range(m):
         if out[i] or not has_dir[i]:
             continue
         px, py = points[i, 0], points[i, 1]
+        if boxes.shape[0] and not _near_other_box(px, py, owner[i] - first, boxes, reach):
+            continue
         r0, r1, c0, c1 = _bucket_span(px, py, x0, y0, side, ncols, nrows)
         for rr in range(r0, r1 + 1):
             for cc in range(c0, c1 + 1):
@@ -276,6 +287,37 @@ def parallel_neighbours(
                         out[i] = True
                         out[j] = True
     return out
+
+
+@njit
+def _owner_boxes(points: np.ndarray, label: np.ndarray, has_dir: np.ndarray) -> np.ndarray:
+    """The bounding box (x_min, y_min, x_max, y_max) of each owner's points with a direction,
+    owner ``label`` (M,) ≥ 0 in row ``label`` (inf, inf, −inf, −inf: none); (0, 4) when the
+    labels outnumber the points (no boxes kept)."""
+    count = label.max() + 1
+    if count > points.shape[0]:
+        return np.empty((0, 4))
+    boxes = np.empty((count, 4))
+    boxes[:, :2] = np.inf
+    boxes[:, 2:] = -np.inf
+    for j in range(points.shape[0]):
+        if has_dir[j]:
+            o = label[j]
+            boxes[o, 0] = min(boxes[o, 0], points[j, 0])
+            boxes[o, 1] = min(boxes[o, 1], points[j, 1])
+            boxes[o, 2] = max(boxes[o, 2], points[j, 0])
+            boxes[o, 3] = max(boxes[o, 3], points[j, 1])
+    return boxes
+
+
+@njit
+def _near_other_box(px: float, py: float, own: int, boxes: np.ndarray, reach: float) -> bool:
+    """Whether (px, py) lies within ``reach`` of the box (4,) of an owner other than ``own``."""
+    for o in range(boxes.shape[0]):
+        if o != own and boxes[o, 0] - reach <= px <= boxes[o, 2] + reach:
+            if boxes[o, 1] - reach <= py <= boxes[o, 3] + reach:
+                return True
+    return False
 
 
 @njit
