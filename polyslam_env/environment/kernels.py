@@ -149,6 +149,29 @@ def shifted_points(
 
 
 @njit
+def team_status(
+    covs: np.ndarray,
+    last: np.ndarray,
+    step_count: int,
+    never: int,
+    stds: np.ndarray,
+    since: np.ndarray,
+    step: np.ndarray,
+) -> None:
+    """A team view's small fields of K robots: the pose standard deviations ``stds`` (K, 3),
+    the square roots of the covariances' ``covs`` (K, 3, 3) diagonals clipped at 0 as
+    ``np.maximum(v, 0.0)`` (NaN stays, −0 becomes 0); the steps ``since`` (K,) the last
+    rendezvous at step ``last`` (K,) (``never`` where it is ``never``); and ``step`` (K,), the
+    env step ``step_count`` of every robot."""
+    for k in range(covs.shape[0]):
+        for j in range(3):
+            v = covs[k, j, j]
+            stds[k, j] = math.sqrt(v if v > 0.0 or v != v else 0.0)
+        since[k] = never if last[k] == never else step_count - last[k]
+        step[k] = step_count
+
+
+@njit
 def placed_centre(
     a: float, b: float, c: float, s: float, x: float, y: float
 ) -> tuple[float, float]:

@@ -31,6 +31,7 @@ import numpy as np
 from polyslam_env import metrics
 from polyslam_env.comms.exchange import AlignmentAttempt, ExchangeStep
 from polyslam_env.core.geometry import between, wrap_remainder
+from polyslam_env.environment import kernels
 from polyslam_env.environment.backends import (
     WRONG_ALIGNMENT_DEG,
     WRONG_ALIGNMENT_M,
@@ -261,10 +262,13 @@ def observe(
     if not robots:
         return {}
     pick: slice | list[int] = slice(None) if every else robots
-    stds = np.sqrt(np.maximum(covs[pick].diagonal(axis1=1, axis2=2), 0.0))  # (K, 3)
+    k = len(robots)
+    stds, since, step = np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k, np.int64)
+    kernels.team_status(
+        covs[pick], state.last_rendezvous[pick], state.step_count, NEVER, stds, since, step
+    )
     map_points, starts = state.slam.team_map_points(robots)
     camera = state.sensing.camera
-    last = state.last_rendezvous[pick]
     team = TeamView(
         ranges=state.sensing.ranges[pick],
         poses=poses[pick],
@@ -276,9 +280,9 @@ def observe(
         seen=camera.seen[pick],
         distance=camera.distance[pick],
         bearing=camera.bearing[pick],
-        since=np.where(last == NEVER, NEVER, state.step_count - last),
+        since=since,
         rendezvous=state.rendezvous[pick],
-        step=np.full(len(robots), state.step_count, dtype=np.int64),
+        step=step,
     )
     return dict(zip(acting, encoder.encode_team(team), strict=True))
 

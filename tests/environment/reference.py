@@ -147,3 +147,13 @@ class MapSamplerOracle:
         shift = (slam.c0s - self._c0)[self._owner]
         out[np.arange(len(out)), self._axis] += shift
         return out
+
+
+def team_status(
+    covs: np.ndarray, last: np.ndarray, step_count: int, never: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A team view's pose standard deviations (K, 3), steps since the last rendezvous (K,) and
+    env step (K,), as ``stages.observe`` computed them with numpy."""
+    stds = np.sqrt(np.maximum(covs.diagonal(axis1=1, axis2=2), 0.0))
+    since = np.where(last == never, never, step_count - last)
+    return stds, since, np.full(len(covs), step_count, dtype=np.int64)

@@ -225,3 +225,20 @@ def test_resample_map__keeps_rows_by_id_in_any_order_and_samples_the_rest() -> N
                 assert start == was[i][1]  # kept where it was
             elif pool is before:
                 assert start >= before_used  # appended
+
+
+def test_team_status__equals_the_oracle() -> None:
+    """Standard deviations of random covariances (negative, −0, NaN and inf diagonals among
+    them: clipped at 0 as numpy's maximum) and the rendezvous counters (never among them)."""
+    rng = np.random.default_rng(11)
+    covs = rng.normal(0.0, 1.0, (6, 3, 3))
+    covs[0, 0, 0], covs[0, 1, 1], covs[0, 2, 2] = -0.0, np.nan, np.inf
+    covs[1, 2, 2] = 0.0
+    last = np.array([-1, 0, 5, 40, -1, 41], dtype=np.int64)
+    stds, since, step = np.empty((6, 3)), np.empty(6, np.int64), np.empty(6, np.int64)
+    kernels.team_status(covs, last, 41, -1, stds, since, step)
+    want = reference.team_status(covs, last, 41, -1)
+    for got, expected in zip((stds, since, step), want, strict=True):
+        np.testing.assert_array_equal(got, expected)
+        assert got.dtype == expected.dtype
+    assert not np.signbit(stds[~np.isnan(stds)]).any()
