@@ -141,10 +141,13 @@ def sweep_beliefs(
     size, resolution and range): poses (K, 3), ranges (K, B); the compiled
     :func:`~polyslam_env.core.raster.mark_scans`, in one call when the grids share a stack."""
     g = grids[0]
-    if any((h.n, h.resolution, h.max_range) != (g.n, g.resolution, g.max_range) for h in grids):
-        raise ValueError("sweep_beliefs needs grids of the same size, resolution and range")
+    shared = True  # one stack: one kernel call for the team
+    for h in grids:
+        if h.n != g.n or h.resolution != g.resolution or h.max_range != g.max_range:
+            raise ValueError("sweep_beliefs needs grids of the same size, resolution and range")
+        shared = shared and h.stack is g.stack
     origin, res, _ = g._grid
-    if all(h.stack is g.stack for h in grids):  # one kernel call for the team
+    if shared:
         rows = np.array([h.row for h in grids], dtype=np.int64)
         raster.mark_scans(poses, angles, ranges, g.max_range, g._t, origin, res, *g.stack, rows)
         return
