@@ -344,3 +344,56 @@ def vector_tail(
         out[k, c + 1] = min(rendezvous[k], cap) / cap
         p = step[k] / max_steps
         out[k, c + 2] = 1.0 if 1.0 < p else p
+
+
+@njit
+def encode_vectors(
+    cell_centres: np.ndarray,
+    map_points: np.ndarray,
+    map_starts: np.ndarray,
+    poses: np.ndarray,
+    cos: np.ndarray,
+    sin: np.ndarray,
+    lone: np.ndarray,
+    g: int,
+    cell: float,
+    belief_free: np.ndarray,
+    belief_hit: np.ndarray,
+    rows: np.ndarray,
+    origin: float,
+    resolution: float,
+    n: int,
+    use_hits: bool,
+    ranges: np.ndarray,
+    max_range: float,
+    scale: float,
+    stds: np.ndarray,
+    caps: np.ndarray,
+    codes: np.ndarray,
+    seen: np.ndarray,
+    distance: np.ndarray,
+    bearing: np.ndarray,
+    cam_range: float,
+    slots: int,
+    since: np.ndarray,
+    rendezvous: np.ndarray,
+    cap: int,
+    step: np.ndarray,
+    max_steps: int,
+    first: int,
+    out: np.ndarray,
+) -> None:
+    """K robots' vector observations with their local maps in one call: the cells of
+    :func:`local_cells`, then :func:`vector_head` and :func:`vector_tail` into ``out`` (K, D)
+    float32 (the arguments of the three in their order, each once)."""
+    occ = np.empty((poses.shape[0], g * g), dtype=np.bool_)
+    free = np.empty((poses.shape[0], g * g), dtype=np.bool_)
+    local_cells(
+        cell_centres, map_points, map_starts, poses, cos, sin, lone, g, cell, belief_free,
+        belief_hit, rows, origin, resolution, n, use_hits, occ, free,
+    )  # fmt: skip
+    vector_head(ranges, max_range, poses, scale, stds, caps, occ, free, codes, out)
+    vector_tail(
+        seen, distance, bearing, cam_range, slots, since, rendezvous, cap, step, max_steps,
+        first, out,
+    )  # fmt: skip

@@ -46,6 +46,11 @@ STD_CAPS = np.array([1.0, 1.0, math.pi])
 _NO_POINTS = np.zeros((0, 2))
 _NO_CELLS = np.zeros((1, 0), dtype=bool)  # (1, 0): no local map
 _CODES = np.array([FREE, UNKNOWN, OCCUPIED])
+# The arguments of kernels.local_cells before its outputs, and of kernels.vector_tail before
+# its output (ObservationEncoder._cell_args, _tail_args)
+_A = np.ndarray
+_CellArgs = tuple[_A, _A, _A, _A, _A, _A, _A, int, float, _A, _A, _A, float, float, int, bool]
+_TailArgs = tuple[_A, _A, _A, float, int, _A, _A, int, _A, int, int]
 #: Points per curve a map sampler measures its arc length on (``Polynomial.sample_arclength``'s).
 _DENSE = 512
 
@@ -374,17 +379,22 @@ class ObservationEncoder:
         :func:`~polyslam_env.environment.kernels.local_cells` (which places the cells and
         the map points itself)."""
         k, gg = len(team), self.g * self.g
+        occ, free = np.empty((k, gg), dtype=bool), np.empty((k, gg), dtype=bool)
+        kernels.local_cells(*self._cell_args(team), occ, free)
+        return occ, free
+
+    def _cell_args(self, team: TeamView) -> _CellArgs:
+        """The arguments of :func:`~polyslam_env.environment.kernels.local_cells` before its
+        outputs."""
         poses = team.poses
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        occ, free = np.empty((k, gg), dtype=bool), np.empty((k, gg), dtype=bool)
         grid = team.belief
         free_stack, hit_stack = grid.flat_stack
-        kernels.local_cells(
+        return (
             self.cell_centres, team.map_points, team.map_starts, poses, c, s,
             self._lone_points(team, c, s), self.g, self.res, free_stack, hit_stack,
-            team.belief_rows, grid.origin, grid.resolution, grid.n, self.use_hits, occ, free,
+            team.belief_rows, grid.origin, grid.resolution, grid.n, self.use_hits,
         )  # fmt: skip
-        return occ, free
 
     @staticmethod
     def _lone_points(team: TeamView, c: np.ndarray, s: np.ndarray) -> np.ndarray:  # (K, 2)
@@ -428,18 +438,23 @@ class ObservationEncoder:
         (K, 0) for none, written by two compiled calls: ranges, pose, standard deviations and
         local map (:func:`~polyslam_env.environment.kernels.vector_head`), then detections,
         channel and progress (:func:`~polyslam_env.environment.kernels.vector_tail`)."""
-        oc = self.config.observation
         out = np.empty((len(team), *self.vector_space.shape), dtype=np.float32)
         kernels.vector_head(
             team.ranges, self.max_range, team.poses, self.pose_scale, team.pose_stds, STD_CAPS,
             occ, free, _CODES, out,
         )  # fmt: skip
-        kernels.vector_tail(
+        kernels.vector_tail(*self._tail_args(team), out)
+        return out
+
+    def _tail_args(self, team: TeamView) -> _TailArgs:
+        """The arguments of :func:`~polyslam_env.environment.kernels.vector_tail` before its
+        output."""
+        oc = self.config.observation
+        return (
             team.seen, team.distance, team.bearing, self.config.world.camera.range, self.k,
             team.since, team.rendezvous, oc.rendezvous_cap, team.step, self.config.max_steps,
-            self._layout["detections"].start, out,
+            self._layout["detections"].start,
         )  # fmt: skip
-        return out
 
     def encode(self, view: RobotView) -> np.ndarray | dict[str, np.ndarray]:
         """The observation of one robot in :attr:`space`."""
@@ -447,13 +462,19 @@ class ObservationEncoder:
 
     def encode_team(self, team: TeamView) -> list[np.ndarray | dict[str, np.ndarray]]:
         """The observations of K robots (:meth:`encode` of each), the numerical parts computed
-        for all robots in one call of each kernel."""
+        for all robots in one call of each kernel (vector mode: one call of
+        :func:`~polyslam_env.environment.kernels.encode_vectors` in all)."""
         if not len(team):
             return []
-        occ, free = self.team_cells(team)
         if self.mode == "grid":
+            occ, free = self.team_cells(team)
             grids = self._channels(occ, free)
             none = np.zeros((len(team), 0), dtype=bool)  # no local map in the vector
             vectors = self.team_vectors(team, none, none)
             return [{"grid": g, "vector": v} for g, v in zip(grids, vectors, strict=True)]
-        return list(self.team_vectors(team, occ, free))
+        out = np.empty((len(team), *self.vector_space.shape), dtype=np.float32)
+        kernels.encode_vectors(
+            *self._cell_args(team), team.ranges, self.max_range, self.pose_scale, team.pose_stds,
+            STD_CAPS, _CODES, *self._tail_args(team), out,
+        )  # fmt: skip
+        return list(out)
