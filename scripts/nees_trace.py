@@ -20,12 +20,22 @@ there is a modelling error, not bad luck. ``--set KEY=VALUE`` changes the SLAM c
 replay only (``order=1``, ``square_walls=false``; the recording is the fidelity config's), so
 a variant is tried on the very same readings in seconds.
 
+``--info FROM:TO`` says where the heading's information comes from over steps FROM … TO − 1:
+the change of the filter's heading variance summed by stage of the step (prediction, map
+changes, update) and the update's share split by the landmarks in it (lines only, or curves
+among them; each landmark's age since it was fitted). In ground the robot has not seen
+before the heading variance can only grow (no landmark there holds information from before
+the robot's own poses there); a stage that shrinks it there takes information the readings
+do not hold (docs/notes/floors.md, Round 9).
+
 Usage::
 
     python scripts/nees_trace.py --map /work/real/willow.yaml --seed 0 --robot 2 --steps 1000 \
         --fixed-steps --cache willow0.pkl
     python scripts/nees_trace.py --map /work/real/willow.yaml --robot 2 --cache willow0.pkl \
         --ideal-ranges --ideal-odometry --set order=1 --plot trace.png
+    python scripts/nees_trace.py --map /work/real/willow.yaml --robot 2 --cache willow0.pkl \
+        --info 740:900
 """
 
 from __future__ import annotations
@@ -49,6 +59,8 @@ from polyslam_env.environment.config import EnvConfig
 from polyslam_env.environment.parallel import parallel_env
 from polyslam_env.metrics.boundary import distance_to_boundary
 from polyslam_env.metrics.mapping import map_points
+from polyslam_env.slam import robot as slam_robot
+from polyslam_env.slam.columns import G_ROW
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.lineage import LineageEvent
 from polyslam_env.slam.robot import PolySlam
@@ -200,6 +212,98 @@ def replay(rec: Recording, config: SlamConfig) -> Trace:
     return Trace(nees, error, sigma, events)
 
 
+@dataclass
+class HeadingInfo:
+    """Where the heading variance changed over a stretch of steps (rad², summed)."""
+
+    predict: float = 0.0
+    map_changes: float = 0.0
+    update_lines: float = 0.0  # steps whose update used straight landmarks only
+    update_curves: float = 0.0  # steps whose update used a curved landmark
+    steps_lines: int = 0
+    steps_curves: int = 0
+    steps_none: int = 0
+    ages: dict[str, int] | None = None  # landmark uses by kind and age since fitted
+    first: float = float("nan")  # the heading variance before step FROM
+    last: float = float("nan")  # … and after step TO − 1
+
+
+def heading_info(rec: Recording, config: SlamConfig, start: int, stop: int) -> HeadingInfo:
+    """The SLAM played on ``rec``'s readings to step ``stop``; over steps ``start`` …
+    ``stop`` − 1 the heading variance's change by stage (module docstring). The stages are
+    told apart by wrapping the step's two compiled calls (``step_kernels.begin_step``: the
+    prediction and the association, which leaves the covariance as the prediction made it;
+    ``finish_step``: the update); what lies between them is the map changes."""
+    slam = PolySlam(config, rec.angles, rec.max_range)
+    kernels = slam_robot.step_kernels
+    begin, finish = kernels.begin_step, kernels.finish_step
+    seen: dict[str, float] = {}
+
+    def begin_logged(mean: np.ndarray, cov: np.ndarray, *args: Any) -> None:
+        seen["before"] = float(cov[2, 2])
+        begin(mean, cov, *args)
+        seen["predicted"] = float(cov[2, 2])
+
+    def finish_logged(mean: np.ndarray, cov: np.ndarray, *args: Any) -> None:
+        seen["mapped"] = float(cov[2, 2])
+        finish(mean, cov, *args)
+        seen["updated"] = float(cov[2, 2])
+
+    info = HeadingInfo(ages={})
+    assert info.ages is not None
+    kernels.begin_step = begin_logged  # type: ignore[assignment]
+    kernels.finish_step = finish_logged  # type: ignore[assignment]
+    try:
+        steps = zip(rec.odometry[: stop - 1], rec.ranges[: stop - 1], strict=True)
+        for k, (odo, z) in enumerate(steps):
+            seen.clear()
+            slam.step(odo, z)
+            step = k + 1
+            if step < start:
+                continue
+            if step == start:
+                info.first = seen["before"]
+            info.last = seen["updated"]
+            info.predict += seen["predicted"] - seen["before"]
+            info.map_changes += seen["mapped"] - seen["predicted"]
+            rows = slam._outcome[0][G_ROW]
+            used = np.unique(rows[rows >= 0])
+            change = seen["updated"] - seen["mapped"]
+            if not used.size:
+                info.steps_none += 1
+                continue
+            orders = slam.table.order[used]
+            if (orders >= 2).any():
+                info.update_curves += change
+                info.steps_curves += 1
+            else:
+                info.update_lines += change
+                info.steps_lines += 1
+            made_at = slam.table.changed_at[used].tolist()
+            for order, made in zip(orders.tolist(), made_at, strict=True):
+                kind = "curve" if order >= 2 else "line"
+                key = f"{kind}, {'< 20' if step - made < 20 else '≥ 20'} steps"
+                info.ages[key] = info.ages.get(key, 0) + 1
+    finally:
+        kernels.begin_step, kernels.finish_step = begin, finish
+    return info
+
+
+def print_heading_info(info: HeadingInfo, start: int, stop: int) -> None:
+    deg2 = (180.0 / np.pi) ** 2
+    print(
+        f"heading variance (deg²) over steps {start}–{stop - 1}: {info.first * deg2:.5f} →"
+        f" {info.last * deg2:.5f}; its change summed by stage:"
+    )
+    print(f"  prediction        {info.predict * deg2:+.5f}")
+    print(f"  map changes       {info.map_changes * deg2:+.5f}")
+    print(f"  update, lines     {info.update_lines * deg2:+.5f}  ({info.steps_lines} steps)")
+    print(f"  update, curves    {info.update_curves * deg2:+.5f}  ({info.steps_curves} steps)")
+    print(f"  no update         {info.steps_none} steps")
+    assert info.ages is not None
+    print("  landmark uses: " + ", ".join(f"{k}: {v}" for k, v in sorted(info.ages.items())))
+
+
 def ideal_ranges(rec: Recording) -> np.ndarray:  # (T, B)
     """The ranges without noise: every beam cast from its step's true pose onto the true
     walls (no other robots: a beam that met one reads the wall behind it)."""
@@ -268,6 +372,9 @@ def main() -> None:
     parser.add_argument("--every", type=int, default=50, help="print a row every N steps")
     parser.add_argument("--cache", default=None, help="keep the recording in this file")
     parser.add_argument("--plot", default=None, help="draw NEES and heading error here")
+    parser.add_argument(
+        "--info", default=None, metavar="FROM:TO", help="where the heading's information came from"
+    )
     args = parser.parse_args()
     try:
         fidelity = FidelityConfig(steps=args.steps, area_budget=not args.fixed_steps)
@@ -295,6 +402,15 @@ def main() -> None:
         slam_config = SlamConfig.from_dict(rec.slam).replace(**overrides)
     except ConfigError as err:
         sys.exit(f"nees_trace: --set: {err}")
+    if args.info:
+        try:
+            start, stop = (int(x) for x in args.info.split(":"))
+            if not 1 <= start < stop <= len(rec.odometry) + 1:
+                raise ValueError
+        except ValueError:
+            sys.exit(f"nees_trace: --info {args.info!r}: FROM:TO with 1 ≤ FROM < TO ≤ steps + 1")
+        print_heading_info(heading_info(rec, slam_config, start, stop), start, stop)
+        return
     trace = replay(rec, slam_config)
     inputs = [name for name, on in (("ideal ranges", args.ideal_ranges),
                                     ("ideal odometry", args.ideal_odometry)) if on]  # fmt: skip
