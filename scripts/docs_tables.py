@@ -193,8 +193,8 @@ def render_speed(data: Sequence[Any]) -> tuple[str, str]:
 
 
 def render_learning(data: Sequence[Any]) -> tuple[str, str]:
-    """``polyslam evaluate --policy frontier,frontier_team,random,ppo,ppo_drive --json`` on
-    each map."""
+    """``polyslam evaluate --policy frontier,frontier_team,random,ppo,ppo_drive,ppo_careful
+    --json`` on each map (issue 44's policies)."""
     lines = [
         "| map | policy | team coverage | steps to 90 % | `nu_mean` (m) | bytes sent |",
         "|---|---|---|---|---|---|",
@@ -265,9 +265,9 @@ STUDIES: dict[str, Study] = {
         "learning.md",
         "Learning",
         (
-            "polyslam evaluate --policy frontier,frontier_team,random,ppo,ppo_drive"
+            "polyslam evaluate --policy frontier,frontier_team,random,ppo,ppo_drive,ppo_careful"
             " --map generator:office_floor --seed 10000 --episodes 20 --json {out}/office.json",
-            "polyslam evaluate --policy frontier,frontier_team,random,ppo,ppo_drive"
+            "polyslam evaluate --policy frontier,frontier_team,random,ppo,ppo_drive,ppo_careful"
             " --map generator:warehouse --seed 10000 --episodes 20 --json {out}/warehouse.json",
         ),
         ("office.json", "warehouse.json"),
