@@ -155,3 +155,13 @@ def test_env_config__round_trips_through_plain_data(
     )
     assert EnvConfig.from_dict(cfg.to_dict()) == cfg
     assert cfg.num_detections == num_robots - 1
+
+
+def test_real_building_config__sets_only_the_two_slam_fields_the_maps_guide_names() -> None:
+    """``configs/real_building.yaml`` (docs/guide/maps.md, "SLAM settings for imported
+    buildings"): the shape shift predicted from the pose and square ties to 1°; every other
+    field is the default, so the guide's figures (default config + these two) are its."""
+    path = Path(__file__).resolve().parents[2] / "configs" / "real_building.yaml"
+    config = resolve_config(str(path))
+    assert config.slam == SlamConfig().replace(shape_shift="pose", wall_squareness_deg=1.0)
+    assert config.replace(slam=SlamConfig()) == EnvConfig()
