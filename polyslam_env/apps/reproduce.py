@@ -23,6 +23,7 @@ from polyslam_env.core.config import Config
 from polyslam_env.core.errors import ConfigError
 from polyslam_env.core.resources import configs_dir
 from polyslam_env.metrics.episode import robot_metrics
+from polyslam_env.metrics.mapping import QUALITY_KEYS
 from polyslam_env.slam.config import SlamConfig
 from polyslam_env.world.config import WorldConfig
 from polyslam_env.world.layout import Layout
@@ -40,14 +41,7 @@ PAPER_TABLE: dict[str, tuple[float, float, float]] = {
 TABLE_KEYS = (
     "nees_paper",
     "nees",
-    "nu",
-    "nu_mean",
-    "nu_mean_abs",
-    "completeness",
-    "completeness_seen",
-    "map_precision",
-    "duplicates",
-    "has_map",
+    *QUALITY_KEYS,
     "slam_time_ms",
     "bytes_sent",
     "bytes_received",

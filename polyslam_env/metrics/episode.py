@@ -26,7 +26,7 @@ import numpy as np
 from polyslam_env import metrics
 from polyslam_env.core.geometry import beam_endpoints, between
 from polyslam_env.metrics import kernels
-from polyslam_env.metrics.mapping import MapShapes, map_quality
+from polyslam_env.metrics.mapping import QUALITY_KEYS, MapShapes, map_quality
 from polyslam_env.slam.ekf import start_error_covs
 from polyslam_env.slam.polynomial import Polynomial
 from polyslam_env.world.layout import Layout
@@ -64,14 +64,7 @@ ROBOT_METRIC_KEYS: tuple[str, ...] = (
     "nees_rel",
     "start_nees",
     "nees_paper",
-    "nu",
-    "nu_mean",
-    "nu_mean_abs",
-    "completeness",
-    "completeness_seen",
-    "map_precision",
-    "duplicates",
-    "has_map",
+    *QUALITY_KEYS,
     "pose_error",
     "landmark_error",
     "has_landmarks",

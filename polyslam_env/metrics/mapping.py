@@ -461,7 +461,7 @@ def map_quality(
     frame = _check_pose(frame)
     if not len(shapes):
         empty = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0)
-        return dict(zip(_QUALITY_KEYS, empty, strict=True))
+        return dict(zip(QUALITY_KEYS, empty, strict=True))
     samples, weights = boundary_samples(layout, step)
     if len(layout.segments) == 0 and len(layout.pillars) == 0:
         raise ValueError(f"layout {layout.name!r} has no walls and no pillars")
@@ -504,8 +504,9 @@ def map_quality(
     }
 
 
-#: The keys of :func:`map_quality`, in order.
-_QUALITY_KEYS = (
+#: The keys of :func:`map_quality`, in order (the per-robot metrics and the reproduction table
+#: list them through this tuple).
+QUALITY_KEYS = (
     "nu",
     "nu_mean",
     "nu_mean_abs",
