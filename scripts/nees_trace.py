@@ -43,7 +43,7 @@ from __future__ import annotations
 import argparse
 import pickle
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -223,7 +223,7 @@ class HeadingInfo:
     steps_lines: int = 0
     steps_curves: int = 0
     steps_none: int = 0
-    ages: dict[str, int] | None = None  # landmark uses by kind and age since fitted
+    ages: dict[str, int] = field(default_factory=dict)  # landmark uses by kind and age fitted
     first: float = float("nan")  # the heading variance before step FROM
     last: float = float("nan")  # … and after step TO − 1
 
@@ -249,8 +249,7 @@ def heading_info(rec: Recording, config: SlamConfig, start: int, stop: int) -> H
         finish(mean, cov, *args)
         seen["updated"] = float(cov[2, 2])
 
-    info = HeadingInfo(ages={})
-    assert info.ages is not None
+    info = HeadingInfo()
     kernels.begin_step = begin_logged  # type: ignore[assignment]
     kernels.finish_step = finish_logged  # type: ignore[assignment]
     try:
@@ -300,7 +299,6 @@ def print_heading_info(info: HeadingInfo, start: int, stop: int) -> None:
     print(f"  update, lines     {info.update_lines * deg2:+.5f}  ({info.steps_lines} steps)")
     print(f"  update, curves    {info.update_curves * deg2:+.5f}  ({info.steps_curves} steps)")
     print(f"  no update         {info.steps_none} steps")
-    assert info.ages is not None
     print("  landmark uses: " + ", ".join(f"{k}: {v}" for k, v in sorted(info.ages.items())))
 
 
