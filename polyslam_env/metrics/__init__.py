@@ -11,7 +11,13 @@ SLAM wall time τ is measured by its caller.
 """
 
 from polyslam_env.core.geometry import wrap_angle
-from polyslam_env.metrics.boundary import boundary_points, boundary_samples, distance_to_boundary
+from polyslam_env.metrics.boundary import (
+    boundary_faces,
+    boundary_points,
+    boundary_samples,
+    distance_to_boundary,
+    segment_faces,
+)
 from polyslam_env.metrics.coverage import CoverageGrid, time_to_fraction
 from polyslam_env.metrics.mapping import (
     completeness,
@@ -31,6 +37,7 @@ from polyslam_env.metrics.mapping import (
     nu_mean,
     sample_arclength_batch,
     seen_boundary,
+    seen_samples,
 )
 from polyslam_env.metrics.pose import (
     cov_to_absolute,
@@ -48,6 +55,7 @@ from polyslam_env.metrics.pose import (
 
 __all__ = [
     "CoverageGrid",
+    "boundary_faces",
     "boundary_points",
     "boundary_samples",
     "completeness",
@@ -79,6 +87,8 @@ __all__ = [
     "position_error",
     "sample_arclength_batch",
     "seen_boundary",
+    "seen_samples",
+    "segment_faces",
     "time_to_fraction",
     "wrap_angle",
 ]

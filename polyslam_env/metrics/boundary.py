@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import weakref
 from typing import Any
 
@@ -41,10 +42,11 @@ def _segment_samples(
     return pts, lengths[seg_id] / pieces[seg_id], seg_id
 
 
-def _pillar_samples(pillars: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
-    """Points (M, 2) and weights (M,) at the centres of equal arcs ≤ ``step`` on each pillar."""
+def _pillar_samples(pillars: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points (M, 2), weights (M,) and pillar ids (M,) at the centres of equal arcs ≤ ``step``
+    on each pillar."""
     if len(pillars) == 0:
-        return np.zeros((0, 2)), np.zeros(0)
+        return np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.int64)
     circ = 2.0 * np.pi * pillars[:, 2]
     pieces = np.maximum(np.ceil(circ / step).astype(int), 3)
     pid = np.repeat(np.arange(len(pillars)), pieces)
@@ -52,7 +54,7 @@ def _pillar_samples(pillars: np.ndarray, step: float) -> tuple[np.ndarray, np.nd
     ang = 2.0 * np.pi * (k + 0.5) / pieces[pid]
     p = pillars[pid]
     pts = np.column_stack([p[:, 0] + p[:, 2] * np.cos(ang), p[:, 1] + p[:, 2] * np.sin(ang)])
-    return pts, circ[pid] / pieces[pid]
+    return pts, circ[pid] / pieces[pid], pid
 
 
 def boundary_samples(layout: Layout, step: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
@@ -67,10 +69,61 @@ def boundary_samples(layout: Layout, step: float = 0.01) -> tuple[np.ndarray, np
     key = ("samples", float(step))
     if key not in per_layout:
         wp, ww, _ = _segment_samples(layout.segments, step, midpoints=True)
-        pp, pw = _pillar_samples(np.asarray(layout.pillars, dtype=float), step)
+        pp, pw, _ = _pillar_samples(np.asarray(layout.pillars, dtype=float), step)
         per_layout[key] = (_frozen(np.vstack([wp, pp])), _frozen(np.concatenate([ww, pw])))
     pts, weights = per_layout[key]
     return pts, weights
+
+
+#: Degrees: where a wall polyline turns by this much or more, one face of the boundary ends
+#: and the next begins (:func:`boundary_faces`). A beam sweeping a face reaches the face's
+#: next piece across a vertex that turns it by a few degrees (a traced wall's jogs, a curved
+#: wall's polygon), but not across a corner: past a convex corner the next face looks away
+#: from the robot, and past a concave one it is a wall of its own. Half a right angle.
+FACE_TURN_DEG = 45.0
+
+
+def segment_faces(layout: Layout) -> np.ndarray:
+    """A face id per segment of ``layout.segments`` (S,): consecutive segments of one wall
+    polyline share a face while it turns by less than :data:`FACE_TURN_DEG` at their common
+    vertex (a closed polyline's last segment joins its first by the same rule); face ids
+    count from 0 in segment order."""
+    limit = math.cos(math.radians(FACE_TURN_DEG))
+    faces: list[int] = []
+    next_face = 0
+    for wall in layout.walls:
+        d = np.diff(np.asarray(wall, dtype=float), axis=0)
+        length = np.hypot(d[:, 0], d[:, 1])
+        d = d[length > 0] / length[length > 0, None]  # the kept segments' unit directions
+        if not len(d):
+            continue
+        # a new face where the turn's cosine falls to cos(FACE_TURN_DEG) or below
+        new = np.concatenate([[True], np.einsum("ij,ij->i", d[:-1], d[1:]) <= limit])
+        ids = next_face + np.cumsum(new) - 1
+        closed = len(wall) > 2 and np.array_equal(wall[0], wall[-1])
+        if closed and len(d) > 1 and ids[-1] != ids[0] and float(d[-1] @ d[0]) > limit:
+            ids[ids == ids[-1]] = ids[0]  # the last face goes on into the first
+        faces.extend(ids.tolist())
+        next_face = int(ids.max()) + 1
+    out = np.asarray(faces, dtype=np.int64)
+    assert out.size == len(layout.segments)
+    return out
+
+
+def boundary_faces(layout: Layout, step: float = 0.01) -> np.ndarray:  # (M,) int64
+    """The face of each of :func:`boundary_samples`' samples (same order): its segment's
+    (:func:`segment_faces`), and one face per pillar after the walls'. Cached per layout;
+    read-only."""
+    per_layout = _CACHE.setdefault(layout, {})
+    key = ("faces", float(step))
+    if key not in per_layout:
+        seg_id = _segment_samples(layout.segments, step, midpoints=True)[2]
+        seg_faces = segment_faces(layout)
+        first_pillar = int(seg_faces.max()) + 1 if seg_faces.size else 0
+        pillar_id = _pillar_samples(np.asarray(layout.pillars, dtype=float), step)[2]
+        per_layout[key] = (_frozen(np.concatenate([seg_faces[seg_id], first_pillar + pillar_id])),)
+    faces: np.ndarray = per_layout[key][0]
+    return faces
 
 
 #: :func:`~polyslam_env.metrics.kernels.buckets`' answer: x0, y0, side, ncols, nrows, order, starts.

@@ -239,6 +239,60 @@ def covered_by(
 
 
 @njit
+def covered_on_face(
+    samples: np.ndarray,
+    faces: np.ndarray,
+    x0: float,
+    y0: float,
+    side: float,
+    ncols: int,
+    nrows: int,
+    order: np.ndarray,
+    starts: np.ndarray,
+    points: np.ndarray,
+    tol: float,
+) -> np.ndarray:
+    """:func:`covered_by` along each point's own face: a finite point (N, 2) lying on the
+    sampled boundary (a beam's hit) takes the face (``faces`` (M,), one id per sample) of the
+    sample nearest to it (the first on ties, in bucket order) and marks only the samples of
+    that face strictly within ``tol`` (> 0); a point with no sample within ``tol`` marks none.
+    Buckets as :func:`covered_by`'s (:func:`buckets` of the samples with the same ``tol``)."""
+    m = samples.shape[0]
+    out = np.zeros(m, dtype=np.bool_)
+    if points.shape[0] == 0 or m == 0 or not tol > 0.0:
+        return out
+    tol2 = tol * tol
+    for i in range(points.shape[0]):
+        px, py = points[i, 0], points[i, 1]
+        if not (math.isfinite(px) and math.isfinite(py)):
+            continue
+        r0, r1, c0, c1 = _bucket_span(px, py, x0, y0, side, ncols, nrows)
+        nearest, best = -1, tol2
+        for rr in range(r0, r1 + 1):
+            for cc in range(c0, c1 + 1):
+                b = rr * ncols + cc
+                for j in range(starts[b], starts[b + 1]):
+                    s = order[j]
+                    dx, dy = samples[s, 0] - px, samples[s, 1] - py
+                    d2 = dx * dx + dy * dy
+                    if d2 < best:
+                        nearest, best = s, d2
+        if nearest < 0:
+            continue
+        face = faces[nearest]
+        for rr in range(r0, r1 + 1):
+            for cc in range(c0, c1 + 1):
+                b = rr * ncols + cc
+                for j in range(starts[b], starts[b + 1]):
+                    s = order[j]
+                    if not out[s] and faces[s] == face:
+                        dx, dy = samples[s, 0] - px, samples[s, 1] - py
+                        if dx * dx + dy * dy < tol2:
+                            out[s] = True
+    return out
+
+
+@njit
 def parallel_neighbours(
     points: np.ndarray,
     owner: np.ndarray,

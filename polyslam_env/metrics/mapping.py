@@ -33,11 +33,13 @@ from scipy import special
 from polyslam_env.core.geometry import transform_points
 from polyslam_env.metrics.boundary import (
     boundary_buckets,
+    boundary_faces,
     boundary_samples,
     distance_to_boundary,
 )
 from polyslam_env.metrics.kernels import (
     covered_by,
+    covered_on_face,
     map_quality_sums,
     map_sums,
     parallel_neighbours,
@@ -282,20 +284,40 @@ def count_interval(probs: Sequence[float], prob: float = 0.95) -> tuple[float, i
     return float(np.sum(probs)), lo, min(hi, len(pmf) - 1)
 
 
-#: Radius (m) around the robot's true beam hits within which the true boundary counts as seen
-#: by :func:`completeness_seen`: half of v_max·T = 0.3 m, the most a robot moves in one step
-#: at the default speed limit, so while a beam sweeps a wall facing it its consecutive hits
-#: are at most 0.3 m apart and every boundary point between them is within 0.15 m of one.
+#: Radius (m) around the robot's true beam hits within which the true boundary of the hit's
+#: own face counts as seen by :func:`completeness_seen`: half of v_max·T = 0.3 m, the most a
+#: robot moves in one step at the default speed limit, so while a beam sweeps a wall facing it
+#: its consecutive hits are at most 0.3 m apart and every boundary point between them is
+#: within 0.15 m of one. That argument holds along the face the beam sweeps, so the radius
+#: does not reach across a corner onto the next face, nor onto another surface a few
+#: centimetres behind the hit one (a wall behind furniture): :func:`seen_samples`.
 SEEN_RADIUS = 0.15
+
+
+def seen_samples(
+    hit_points_abs: np.ndarray, layout: Layout, radius: float = SEEN_RADIUS, step: float = 0.01
+) -> np.ndarray:
+    """Which boundary samples (``boundary_samples(layout, step)``) the beams saw (M,) bool:
+    those within ``radius`` of a true beam hit (H, 2, absolute; non-finite rows ignored) and on
+    the hit's own face (:func:`~polyslam_env.metrics.boundary.boundary_faces`, the face of the
+    sample nearest to the hit)."""
+    bpts = boundary_samples(layout, step)[0]
+    hits = np.ascontiguousarray(np.asarray(hit_points_abs, dtype=float).reshape(-1, 2))
+    if len(hits) == 0:
+        return np.zeros(len(bpts), dtype=bool)
+    faces = boundary_faces(layout, step)
+    found = boundary_buckets(layout, step, radius)
+    return covered_on_face(bpts, faces, *found, hits, float(radius))
 
 
 def seen_boundary(
     layout: Layout, hit_points_abs: np.ndarray, radius: float = SEEN_RADIUS, step: float = 0.01
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The boundary samples (M, 2) within ``radius`` of a true beam hit (H, 2), absolute, and
-    their lengths (M,), read-only; non-finite hits are ignored."""
+    """The boundary samples (M, 2) the beams saw (:func:`seen_samples`: within ``radius`` of a
+    true beam hit (H, 2), absolute, on its face) and their lengths (M,), read-only; non-finite
+    hits are ignored."""
     bpts, weights = boundary_samples(layout, step)
-    seen = _near(hit_points_abs, layout, radius, step)
+    seen = seen_samples(hit_points_abs, layout, radius, step)
     seen_pts, seen_weights = bpts[seen], weights[seen]
     # read-only like the cached samples (numba types a read-only array apart: one compiled
     # specialisation of ``covered`` serves callers that query them)
@@ -314,7 +336,7 @@ def completeness_seen(
     step: float = 0.01,
 ) -> float:
     """:func:`completeness` over only the boundary the robot's beams hit: the seen length
-    (:func:`seen_boundary`) within ``tol`` of the map, over the seen length. 0.0 when the map
+    (:func:`seen_samples`) within ``tol`` of the map, over the seen length. 0.0 when the map
     is empty or nothing was seen."""
     return _completeness_seen(
         *_placed(polys, start_pose, step), layout, hit_points_abs, radius, tol, step
@@ -335,7 +357,7 @@ def _completeness_seen(
     :func:`_near` of them if the caller has it. The seen samples' weights are summed as
     :func:`seen_boundary` returns them (the same elements in the same order)."""
     weights = boundary_samples(layout, step)[1]
-    seen = _near(hit_points_abs, layout, radius, step)  # the seen samples
+    seen = seen_samples(hit_points_abs, layout, radius, step)
     total = float(weights[seen].sum())
     if len(starts) == 1 or total == 0.0:
         return 0.0
@@ -465,7 +487,7 @@ def map_quality(
     samples, weights = boundary_samples(layout, step)
     if len(layout.segments) == 0 and len(layout.pillars) == 0:
         raise ValueError(f"layout {layout.name!r} has no walls and no pillars")
-    seen = _near(hit_points_abs, layout, SEEN_RADIUS, step)  # the seen boundary samples
+    seen = seen_samples(hit_points_abs, layout, SEEN_RADIUS, step)  # the seen boundary samples
     pieces, total, total_abs, covered, covered_seen, within, duplicated, n = map_quality_sums(
         np.ascontiguousarray(shapes.variate, dtype=np.int64),
         np.ascontiguousarray(shapes.coeffs, dtype=float),

@@ -3,6 +3,7 @@ values of empty maps (issue 14), each against a brute-force oracle or a hand-com
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -71,20 +72,100 @@ def test_map_precision__half_on_the_wall_half_off() -> None:
 
 
 # -- completeness over the seen boundary ----------------------------------------------------------
+def _turn_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle (degrees) between directions a and b."""
+    return math.degrees(math.acos(np.clip(a @ b / np.hypot(*a) / np.hypot(*b), -1.0, 1.0)))
+
+
+def _faces_by_hand(layout: Layout) -> list[int]:
+    """The face of each of ``layout.segments``, readably: walk each polyline and start a new
+    face where it turns by 45° or more; a closed polyline's last face joins its first when
+    they meet at less than 45°."""
+    faces: list[int] = []
+    for wall in layout.walls:
+        pts = [p for i, p in enumerate(wall) if i == 0 or not np.array_equal(p, wall[i - 1])]
+        dirs = [np.subtract(b, a) for a, b in itertools.pairwise(pts)]
+        ids = [len(set(faces))]
+        for a, b in itertools.pairwise(dirs):
+            ids.append(ids[-1] + 1 if _turn_deg(a, b) >= 45.0 else ids[-1])
+        closed = np.array_equal(wall[0], wall[-1]) and len(dirs) > 1
+        if closed and _turn_deg(dirs[-1], dirs[0]) < 45.0 and ids[-1] != ids[0]:
+            ids = [ids[0] if i == ids[-1] else i for i in ids]
+        faces.extend(ids)
+    return faces
+
+
+def _seen_by_brute_force(layout: Layout, hits: np.ndarray, radius: float) -> np.ndarray:
+    """Per boundary sample: is a finite hit within ``radius`` whose nearest segment has the
+    sample's face (each sample's segment found the same way, by the nearest segment)?"""
+    segs, faces = layout.segments, _faces_by_hand(layout)
+    bpts, _ = M.boundary_samples(layout, 0.01)
+
+    def face_of(p: np.ndarray) -> int:
+        return faces[int(np.argmin(point_segment_distance(p, segs)))]
+
+    finite = hits[np.isfinite(hits).all(axis=1)]
+    hit_faces = [face_of(h) for h in finite]
+    seen = []
+    for b in bpts:
+        f, close = face_of(b), np.hypot(*(finite - b).T) < radius
+        seen.append(any(c and hf == f for c, hf in zip(close, hit_faces, strict=True)))
+    return np.array(seen)
+
+
+def test_segment_faces__corners_split_jogs_and_small_turns_do_not() -> None:
+    room = square_room()  # closed, four right angles: four faces
+    assert M.segment_faces(room).tolist() == [0, 1, 2, 3] == _faces_by_hand(room)
+    jagged = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.1], [3.0, 0.1], [3.0, 1.0], [3.0, 2.0]])
+    hexagon = np.array(
+        [[math.cos(a), 5 + math.sin(a)] for a in np.linspace(0, 2 * math.pi, 7)[:-1]]
+    )
+    hexagon = np.vstack([hexagon, hexagon[:1]])  # turns of 60°: each side a face
+    fine = np.array([[math.cos(a), 9 + math.sin(a)] for a in np.linspace(0, 2 * math.pi, 33)])
+    fine[-1] = fine[0]  # closed 32-gon: turns of 11.25°, one face, the last joining the first
+    layout = Layout("faces", (jagged, hexagon, fine))
+    got = M.segment_faces(layout).tolist()
+    assert got == _faces_by_hand(layout)
+    assert got[:5] == [0, 0, 0, 1, 1]
+    assert got[5:11] == list(range(2, 8))
+    assert set(got[11:]) == {8}
+
+
 def test_completeness_seen__matches_brute_force() -> None:
     rng = np.random.default_rng(7)
     layout, pose = square_room(), np.zeros(3)
     polys = _random_map(rng, 5)
-    hits = np.vstack([[x, 0.0] for x in np.arange(0.5, 3.0, 0.2)] + [[[SIDE, 1.0]], [[np.inf] * 2]])
+    # hits along the bottom wall up to 10 cm from the corner (the right wall's first 10 cm
+    # are within the radius of the last one, but on another face), one on the right wall
+    bottom = [[x, 0.0] for x in np.arange(0.5, 3.91, 0.2)]
+    hits = np.vstack([bottom, [[SIDE, 1.0]], [[np.inf] * 2]])
     radius, tol = M.mapping.SEEN_RADIUS, 0.05
     bpts, weights = M.boundary_samples(layout, 0.01)
-    finite = hits[np.isfinite(hits).all(axis=1)]
     map_pts = np.vstack(M.map_points(polys, pose, 0.01))
-    seen = np.array([np.hypot(*(finite - b).T).min() <= radius for b in bpts])
+    seen = _seen_by_brute_force(layout, hits, radius)
     covered = np.array([np.hypot(*(map_pts - b).T).min() <= tol for b in bpts])
     expected = weights[seen & covered].sum() / weights[seen].sum()
     got = M.completeness_seen(polys, pose, layout, hits, radius=radius, tol=tol)
     assert got == pytest.approx(expected, abs=1e-12)
+    assert np.array_equal(M.seen_samples(hits, layout, radius), seen)
+
+
+def test_seen_samples__stop_at_a_corner_and_at_a_surface_behind() -> None:
+    """The radius's sweep argument holds along the face a beam sweeps: hits on one face of a
+    box do not make its side faces seen, nor a wall 10 cm behind it (both would be within the
+    radius of the hits)."""
+    box = np.array([[1.0, 1.0], [2.0, 1.0], [2.0, 1.3], [1.0, 1.3], [1.0, 1.0]])
+    wall = np.array([[0.0, 1.4], [3.0, 1.4]])  # 10 cm behind the box's far face
+    layout = Layout("box", (box, wall))
+    hits = np.column_stack([np.arange(1.025, 1.98, 0.05), np.full(20, 1.3)])  # the far face
+    bpts, weights = M.boundary_samples(layout, 0.01)
+    seen = M.seen_samples(hits, layout)
+    assert np.array_equal(seen, _seen_by_brute_force(layout, hits, M.mapping.SEEN_RADIUS))
+    far_face = (np.abs(bpts[:, 1] - 1.3) < 1e-9) & (bpts[:, 0] > 1.0) & (bpts[:, 0] < 2.0)
+    assert seen[far_face].all()
+    assert weights[seen].sum() == pytest.approx(1.0, abs=0.011)  # the far face, nothing else
+    within = np.array([np.hypot(*(hits - b).T).min() < M.mapping.SEEN_RADIUS for b in bpts])
+    assert weights[within & ~seen].sum() > 0.5  # sides' ends and the wall behind: not seen
 
 
 def test_completeness_seen__full_on_the_seen_stretch_where_completeness_is_not() -> None:
