@@ -109,7 +109,8 @@ S_LINKS = 9  # 1 when links or square ties are on
 S_SCREEN_ALARM = 10  # outliers among the screen's window that raise the alarm
 S_REUSE_BOUND = 11  # whose own error is bounded over updates: 0 none, 1 curved, 2 all (REUSE_*)
 S_SHIFT_WITH_POSE = 12  # 1: a frozen shape's shift along ξ is the current pose's error along ξ
-N_SWITCHES = 13
+S_SEEN_FACES = 13  # 1: a beam cast onto a landmark's unseen face is left out of the update
+N_SWITCHES = 14
 
 # -- per beam (a (2, B) float64 ``beams`` model, an (N_PER_BEAM, B) int64 output) ----------------
 B_ANGLE = 0  # the beam's angle in the robot frame

@@ -137,6 +137,15 @@ class SlamConfig(Config):
     # is along ξ, information a shape placed by that same pose does not hold
     # (docs/notes/floors.md, Round 4)
     shape_shift: str = "noise"
+    # a beam is used only on a landmark face it can hit: the association leaves out the
+    # landmarks whose seen face (SIDE) the beam would meet from behind, and the update leaves
+    # out a beam its cast meets from behind (kernels.on_seen_face): the object's other face,
+    # which the map does not hold, stands in between (a table's far edge, a thick wall's far
+    # face), and read as the mapped face it turns the object's thickness into a pose error.
+    # Off by default: the generators' walls have no thickness, and there a wall's far side
+    # does hold its near side's line (docs/notes/floors.md, Round 10); on in
+    # configs/real_building.yaml
+    seen_faces: bool = False
     join_pieces: bool = True  # join end-to-end pieces of one wall (merging.py; paper: False)
     stretch_ends: bool = True  # a hit just past an end stretches it (association; paper: False)
     # beams whose hit lies within this many σ (of its place along the curve) of a landmark's
@@ -242,6 +251,7 @@ class SlamConfig(Config):
             "square_pair_evidence",
             "curvature_test",
             "curve_links",
+            "seen_faces",
         ):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(

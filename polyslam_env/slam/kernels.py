@@ -48,9 +48,11 @@ from polyslam_env.slam.columns import (
     S_N_FIT,
     S_REUSE_BOUND,
     S_ROTATION_STATES,
+    S_SEEN_FACES,
     S_SHAPE_FOLLOWS_POSE,
     S_SHIFT_WITH_POSE,
     SHIFT_SLOPE,
+    SIDE,
     USES,
     VARIATE,
     XI_VAR,
@@ -1798,6 +1800,23 @@ def count_uses(index: np.ndarray, n: int, c0_index: np.ndarray, accepted: np.nda
 
 
 @njit
+def on_seen_face(
+    landmark: np.ndarray,  # (k,) int64: the landmark each beam's cast hit (−1: none)
+    denom: np.ndarray,  # (k,) the cast's D = dη − B'·dξ at the hit
+    sides: np.ndarray,  # (n,) each landmark's seen face (``SIDE``: +1 from +η, −1 from −η, 0)
+    out: np.ndarray,  # (k,) bool out
+) -> None:
+    """Whether each cast meets its landmark on a face the landmark's beams saw
+    (``SlamConfig.seen_faces``): a ray with D > 0 crosses the curve towards +η, so it comes
+    from the −η side, and one with D < 0 from the +η side; it meets a landmark seen only
+    from the other side (SIDE·D > 0) from behind, and is out. A cast that hit nothing, or a
+    landmark of both faces or of no known face (SIDE 0), is in."""
+    for i in range(landmark.size):
+        j = landmark[i]
+        out[i] = j < 0 or sides[j] * denom[i] <= 0.0
+
+
+@njit
 def update_scan(
     mean: np.ndarray,  # (3+n(+n),) written in place
     cov: np.ndarray,  # written in place
@@ -1834,8 +1853,14 @@ def update_scan(
         mean[0], mean[1], mean[2], angles, beams, params[P_REACH], variate, order, shape[:n],
         lo, hi, mean[3 : 3 + n], near, params[P_MAX_RANGE],
     )  # fmt: skip
+    if switches[S_SEEN_FACES]:
+        seen = np.empty(beams.size, np.bool_)
+        on_seen_face(landmark, denom, index[SIDE, :n], seen)
+        beams, angle, t, landmark = beams[seen], angle[seen], t[seen], landmark[seen]
+        slope, denom, xi = slope[seen], denom[seen], xi[seen]
+        assigned = assigned[seen]
     if end_sigma > 0.0:
-        steady = np.empty(n_beams, np.bool_)
+        steady = np.empty(beams.size, np.bool_)
         steady_of_casts(
             mean, cov, assigned, params[P_REACH], variate, order, shape[:n], lo, hi, near,
             params[P_MAX_RANGE], params[P_MIN_SINE], n, end_sigma, angle, landmark, slope,

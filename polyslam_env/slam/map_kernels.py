@@ -62,6 +62,7 @@ from polyslam_env.slam.columns import (
     S_EPS_Z,
     S_LINK_CLUSTERS,
     S_ROTATION_STATES,
+    S_SEEN_FACES,
     S_SQUARED,
     S_STRETCH_ENDS,
     SHIFT_SLOPE,
@@ -793,6 +794,30 @@ def set_extent(
 
 
 @njit
+def facing_candidates(
+    candidates: np.ndarray,  # (K,) landmark rows
+    sides: np.ndarray,  # (n,) each landmark's seen face: +1 from +η, −1 from −η, 0 both/unknown
+    variate: np.ndarray,  # (n,)
+    ux: float,  # the beam's unit direction (frame 0)
+    uy: float,
+    out: np.ndarray,  # (≥ K,) int64 out: the rows kept, in order
+) -> int:
+    """The candidates a beam travelling along (ux, uy) can hit on their seen face, into
+    ``out``; returns how many (``maintenance.observed_side``'s rule: a beam travelling
+    towards +η comes from the −η side)."""
+    k = 0
+    for c in range(candidates.size):
+        j = candidates[c]
+        u_eta = uy if variate[j] == 1 else ux
+        beam_side = -1 if u_eta > 0.0 else (1 if u_eta < 0.0 else 0)
+        if sides[j] * beam_side < 0:
+            continue
+        out[k] = j
+        k += 1
+    return k
+
+
+@njit
 def associate_scan(
     mean: np.ndarray,  # (3+n(+n),) the predicted state
     cov: np.ndarray,
@@ -857,10 +882,20 @@ def associate_scan(
     candidates = boxes_near(near, box, reach)
     nearest, error = np.empty(count, dtype=np.int64), np.empty(count)
     xy = np.ascontiguousarray(points[:count, X : Y + 1])
-    nearest_by_error(
-        xy, candidates, variate, order, shape[:n], lo, hi, c0s, switches[S_SQUARED] != 0,
-        nearest, error,
-    )  # fmt: skip
+    if switches[S_SEEN_FACES]:
+        facing = np.empty(candidates.size, dtype=np.int64)
+        sides = index[SIDE, :n]
+        for i in range(count):  # per point, the landmarks whose seen face it can hit
+            k = facing_candidates(candidates, sides, variate, points[i, UX], points[i, UY], facing)
+            nearest_by_error(
+                xy[i : i + 1], facing[:k], variate, order, shape[:n], lo, hi, c0s,
+                switches[S_SQUARED] != 0, nearest[i : i + 1], error[i : i + 1],
+            )  # fmt: skip
+    else:
+        nearest_by_error(
+            xy, candidates, variate, order, shape[:n], lo, hi, c0s, switches[S_SQUARED] != 0,
+            nearest, error,
+        )  # fmt: skip
     row_of = np.full(count, -1, dtype=np.int64)  # landmark row of a good or extended point
     for i in range(count):
         j, eps, b = nearest[i], error[i], beam_of[i]

@@ -90,6 +90,7 @@ def _step_model(config: SlamConfig, angles_tuple: tuple[float, ...], max_range: 
     s[col.S_SCREEN_ALARM] = screen_alarm(config)
     s[col.S_REUSE_BOUND] = REUSE_BOUNDS.index(config.reuse_bound)
     s[col.S_SHIFT_WITH_POSE] = config.shape_shift == "pose"
+    s[col.S_SEEN_FACES] = config.seen_faces
     angles = np.array(angles_tuple, dtype=float)  # (B,)
     beams = np.zeros((col.N_BEAM_MODEL, angles.size))
     beams[col.B_ANGLE] = angles

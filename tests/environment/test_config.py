@@ -157,11 +157,13 @@ def test_env_config__round_trips_through_plain_data(
     assert cfg.num_detections == num_robots - 1
 
 
-def test_real_building_config__sets_only_the_two_slam_fields_the_maps_guide_names() -> None:
+def test_real_building_config__sets_only_the_three_slam_fields_the_maps_guide_names() -> None:
     """``configs/real_building.yaml`` (docs/guide/maps.md, "SLAM settings for imported
-    buildings"): the shape shift predicted from the pose and square ties to 1°; every other
-    field is the default, so the guide's figures (default config + these two) are its."""
+    buildings"): the shape shift predicted from the pose, square ties to 1° and beams on seen
+    faces only; every other field is the default, so the guide's figures (default config +
+    these three) are its."""
     path = Path(__file__).resolve().parents[2] / "configs" / "real_building.yaml"
     config = resolve_config(str(path))
-    assert config.slam == SlamConfig().replace(shape_shift="pose", wall_squareness_deg=1.0)
+    want = SlamConfig().replace(shape_shift="pose", wall_squareness_deg=1.0, seen_faces=True)
+    assert config.slam == want
     assert config.replace(slam=SlamConfig()) == EnvConfig()

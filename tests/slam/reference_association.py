@@ -227,6 +227,10 @@ class Model(NamedTuple):
     radius: float
     link: bool
     turn_var: Callable[[int], float]  # var(α − θ) of landmark row i
+    #: ``SlamConfig.seen_faces``: a point is associated only with landmarks whose seen face
+    #: (``sides``, row i: +1 from +η, −1 from −η, 0 both or unknown) its beam can hit
+    seen_faces: bool = False
+    sides: tuple[int, ...] = ()
 
 
 def associate_step(
@@ -255,9 +259,24 @@ def associate_step(
     reach = reach * (1.0 + 1e-9) + 1e-12
     candidates = boxes_near(book.boxes(c0s.tolist()), box, reach).tolist()
     rows = [book_row(book, i) for i in range(n)]
-    nearest = nearest_by_error(
-        [p.xy.tolist() for p in points], candidates, rows, c0s.tolist(), model.squared
-    )
+    if model.seen_faces:  # per point, the candidates whose seen face its beam can hit
+
+        def can_hit(point: StoredPoint, i: int) -> bool:
+            towards = point.direction[1] if book.polys[i].variate == 1 else point.direction[0]
+            beam_side = -1 if towards > 0 else (1 if towards < 0 else 0)  # where it came from
+            return model.sides[i] == 0 or beam_side == 0 or model.sides[i] == beam_side
+
+        nearest = [
+            nearest_by_error(
+                [p.xy.tolist()], [i for i in candidates if can_hit(p, i)], rows,
+                c0s.tolist(), model.squared,
+            )[0]
+            for p in points
+        ]  # fmt: skip
+    else:
+        nearest = nearest_by_error(
+            [p.xy.tolist() for p in points], candidates, rows, c0s.tolist(), model.squared
+        )
 
     def within(point: StoredPoint, i: int) -> bool:
         p = book.polys[i]

@@ -651,6 +651,44 @@ def joseph_full(cov: np.ndarray, kt: np.ndarray, wt: np.ndarray) -> None:
             cov[i, j] = cov[j, i]
 
 
+def seen_face_beams(
+    mean: np.ndarray,
+    angles: np.ndarray,
+    beams: np.ndarray,
+    assigned: np.ndarray,
+    real: np.ndarray,
+    index: np.ndarray,
+    shape: np.ndarray,
+    n: int,
+    params: np.ndarray,
+    switches: np.ndarray,
+    step: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``beams`` and ``assigned`` without the beams whose cast at the mean meets its landmark
+    from the side opposite to the face the landmark's beams saw (``SlamConfig.seen_faces``),
+    readably: a ray crossing the curve towards +η (D > 0) comes from the −η side (−1), one
+    crossing towards −η from the +η side (+1); it is kept when it hit nothing, when either
+    side is unknown (0), or when the two sides agree."""
+    from polyslam_env.slam import columns as c
+    from polyslam_env.slam import kernels
+
+    if not switches[c.S_SEEN_FACES]:
+        return beams, assigned
+    near, _, _ = kernels._scan_model(mean, real, index, n, params, switches, step)
+    _, _, landmark, _, denom, _ = kernels.cast_beams(
+        mean[0], mean[1], mean[2], angles, beams, params[c.P_REACH], index[c.VARIATE, :n],
+        index[c.ORDER, :n], shape[:n], real[c.LO, :n], real[c.HI, :n], mean[3 : 3 + n], near,
+        params[c.P_MAX_RANGE],
+    )  # fmt: skip
+    keep = []
+    for j, d in zip(landmark.tolist(), denom.tolist(), strict=True):
+        ray_side = -1 if d > 0 else (1 if d < 0 else 0)
+        seen_side = int(index[c.SIDE, j]) if j >= 0 else 0
+        keep.append(j < 0 or seen_side == 0 or ray_side == 0 or seen_side == ray_side)
+    mask = np.array(keep, dtype=bool)
+    return beams[mask], assigned[mask]
+
+
 def update_scan(
     mean: np.ndarray,
     cov: np.ndarray,
@@ -674,6 +712,9 @@ def update_scan(
     sigma point."""
     from polyslam_env.slam import columns, kernels
 
+    beams, assigned = seen_face_beams(
+        mean, angles, beams, assigned, real, index, shape, n, params, switches, step
+    )
     k = beams.size
     rows = (
         np.empty(k), np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k),
@@ -891,6 +932,9 @@ def update_scan_two_casts(
     from polyslam_env.slam import columns as c
     from polyslam_env.slam import kernels
 
+    beams, assigned = seen_face_beams(
+        mean, angles, beams, assigned, real, index, shape, n, params, switches, step
+    )
     n_beams = beams.size
     end_sigma = params[c.P_END_SIGMA]
     innovation, h_pose = np.empty(n_beams), np.empty((n_beams, 3))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -148,11 +149,16 @@ FLAT = Polynomial(1, np.array([1.0, 0.0, 0.0, 0.0]), 0.0, 2.0)  # x² = 1 on x¹
 RHO, SIGMA = 0.125, 0.25  # exact binary fractions: 1 + ε is exact at the boundaries
 
 
-def table_of(polys: list[Polynomial], rng: np.random.Generator | None = None) -> LandmarkTable:
+def table_of(
+    polys: list[Polynomial],
+    rng: np.random.Generator | None = None,
+    sides: Sequence[int] | None = None,
+) -> LandmarkTable:
     table = LandmarkTable()
     for k, p in enumerate(polys):
         pivot = 0.5 * (p.lo + p.hi) if rng is None else float(rng.uniform(p.lo, p.hi))
-        table.append(p, pivot=pivot, xi_var=0.0, model_var=0.0, fit_half=1.0, step=k)
+        side = 0 if sides is None else sides[k]
+        table.append(p, pivot=pivot, xi_var=0.0, model_var=0.0, fit_half=1.0, step=k, side=side)
     return table
 
 
@@ -368,19 +374,27 @@ def test_carry__bit_identical_in_any_storage_order() -> None:
     stretch=st.booleans(),
     link=st.booleans(),
     rotation=st.sampled_from(["considered", "heading"]),
+    seen_faces=st.booleans(),
 )
 def test_associate_scan__equals_the_readable_association_over_steps(
-    polys: list[Polynomial], seed: int, squared: bool, stretch: bool, link: bool, rotation: str
+    polys: list[Polynomial],
+    seed: int,
+    squared: bool,
+    stretch: bool,
+    link: bool,
+    rotation: str,
+    seen_faces: bool,
 ) -> None:
     """Bit for bit over five steps of random scans: good beams, Q_bad sets, clusters and
     requests (their points' beams and positions in order), and the stretched extents,
-    evidence and η ranges."""
+    evidence and η ranges; the landmarks' seen faces drawn at random (−1, 0, +1)."""
     rng = np.random.default_rng(seed)
     config = SlamConfig(
         eps_m=5, eps_z=6, squared_error=squared, stretch_ends=stretch, link_clusters=link,
-        shape_rotation=rotation,
+        shape_rotation=rotation, seen_faces=seen_faces,
     )  # fmt: skip
-    table = table_of(polys, rng)
+    sides = rng.integers(-1, 2, len(polys)).tolist()
+    table = table_of(polys, rng, sides)
     n = len(polys)
     state = 3 + (2 * n if config.rotation_states else n)
     a = rng.normal(size=(state, state)) * 0.01
@@ -405,7 +419,7 @@ def test_associate_scan__equals_the_readable_association_over_steps(
 
     model = oracle.Model(
         config.range_sigma, squared, stretch, config.eps_m, config.eps_z, config.cluster_radius,
-        link, turn_var,
+        link, turn_var, seen_faces, tuple(sides),
     )  # fmt: skip
     points = StoredPoints(capacity=4)  # grows
     angles = np.linspace(-np.pi, np.pi, 17, endpoint=False)

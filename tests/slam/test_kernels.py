@@ -21,6 +21,7 @@ from polyslam_env.apps.benchmark import make_inputs, make_slam, make_walls
 from polyslam_env.slam import ekf, kernels, step_kernels
 from polyslam_env.slam.association import nearest_by_error
 from polyslam_env.slam.columns import N_INDEX, ORDER, USES
+from polyslam_env.slam.config import SlamConfig
 from polyslam_env.slam.landmarks import LandmarkTable, boxes_near
 from polyslam_env.slam.maintenance import fit_inverse_table as _fit_inverse_table
 from polyslam_env.slam.measurement import cast
@@ -451,6 +452,19 @@ def test_joseph_blocks__bit_identical_to_the_full_update(
     assert want.tobytes() == got.tobytes()
 
 
+def test_on_seen_face__a_cast_from_behind_is_out() -> None:
+    """Every case of the rule against its reading: a ray crossing a curve towards +η (D > 0)
+    comes from the −η side; a landmark seen only from the other side is met from behind."""
+    sides = np.array([-1, 0, 1], dtype=np.int64)
+    for j in (-1, 0, 1, 2):
+        for d in (-0.7, -0.0, 0.0, 0.4):
+            out = np.empty(1, np.bool_)
+            kernels.on_seen_face(np.array([j]), np.array([d]), sides, out)
+            ray_side = -1 if d > 0 else (1 if d < 0 else 0)
+            behind = j >= 0 and sides[j] != 0 and ray_side != 0 and sides[j] != ray_side
+            assert bool(out[0]) is not behind, (j, d)
+
+
 def test_update_scan__one_cast_equals_two_casts_bit_for_bit(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -460,16 +474,26 @@ def test_update_scan__one_cast_equals_two_casts_bit_for_bit(
     (``ref.update_scan_two_casts``), including updates where the sigma points dropped beams."""
     from polyslam_env.apps.benchmark_harness import ENV_CONFIG, random_stepper
     from polyslam_env.environment.parallel import parallel_env
-    from polyslam_env.slam.columns import P_END_SIGMA, P_MAX_RANGE, P_MIN_SINE, P_REACH, VARIATE
+    from polyslam_env.slam.columns import (
+        P_END_SIGMA,
+        P_MAX_RANGE,
+        P_MIN_SINE,
+        P_REACH,
+        SIDE,
+        VARIATE,
+    )
 
     compiled = kernels.update_scan
-    seen = {"updates": 0, "dropped": 0}
+    seen = {"updates": 0, "dropped": 0, "faces": 0}
+    flip: dict[str, int] = {}
 
     def checked(
         mean: np.ndarray, cov: np.ndarray, angles: np.ndarray, ranges: np.ndarray,
         beams: np.ndarray, assigned: np.ndarray, real: np.ndarray, index: np.ndarray, *rest: Any,
     ) -> int:  # fmt: skip
         shape, n, params, switches, _, step = rest
+        if flip:
+            index[SIDE, flip.pop("wall")] = 1
         steady = np.empty(beams.size, np.bool_)
         near, _, _ = kernels._scan_model(mean, real, index, n, params, switches, step)
         kept = kernels.steady_beams(
@@ -479,6 +503,10 @@ def test_update_scan__one_cast_equals_two_casts_bit_for_bit(
         )  # fmt: skip
         seen["updates"] += 1
         seen["dropped"] += int(kept < beams.size)
+        facing, _ = ref.seen_face_beams(
+            mean, angles, beams, assigned, real, index, shape, n, params, switches, step
+        )
+        seen["faces"] += int(facing.size < beams.size)
         want_mean, want_cov, want_index = mean.copy(), cov.copy(), index.copy()
         want = ref.update_scan_two_casts(
             want_mean, want_cov, angles, ranges, beams, assigned, real, want_index, *rest
@@ -496,10 +524,13 @@ def test_update_scan__one_cast_equals_two_casts_bit_for_bit(
         step()
     rng = np.random.default_rng(1)
     walls = make_walls(30, rng)
-    slam = make_slam(walls)
+    slam = make_slam(walls, SlamConfig(seen_faces=True))
+    # after the first step's association, the wall at y = +0.5 as if seen only from above:
+    # the beams associated with it meet it from behind, and the update leaves them out
+    flip["wall"] = 0
     for odometry, ranges in make_inputs(walls, 60, rng):
         slam.step(odometry, ranges)
-    assert seen["updates"] > 500 and seen["dropped"] > 0, seen
+    assert seen["updates"] > 500 and seen["dropped"] > 0 and seen["faces"] > 0, seen
 
 
 def test_slam_steps__compiled_update_tracks_numpy_update_over_a_short_horizon(
