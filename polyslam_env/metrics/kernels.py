@@ -220,22 +220,42 @@ def covered_by(
     out = np.zeros(m, dtype=np.bool_)
     if points.shape[0] == 0 or m == 0 or not tol > 0.0:
         return out
-    tol2 = tol * tol
+    any_face = np.zeros(0, dtype=np.int64)
     for i in range(points.shape[0]):
         px, py = points[i, 0], points[i, 1]
         if not (math.isfinite(px) and math.isfinite(py)):
             continue
-        r0, r1, c0, c1 = _bucket_span(px, py, x0, y0, side, ncols, nrows)
-        for rr in range(r0, r1 + 1):
-            for cc in range(c0, c1 + 1):
-                b = rr * ncols + cc
-                for j in range(starts[b], starts[b + 1]):
-                    s = order[j]
-                    if not out[s]:
-                        dx, dy = samples[s, 0] - px, samples[s, 1] - py
-                        if dx * dx + dy * dy < tol2:
-                            out[s] = True
+        span = _bucket_span(px, py, x0, y0, side, ncols, nrows)
+        _mark_within(out, samples, any_face, -1, px, py, span, ncols, order, starts, tol * tol)
     return out
+
+
+@njit
+def _mark_within(
+    out: np.ndarray,  # (M,) bool, marked in place
+    samples: np.ndarray,
+    faces: np.ndarray,  # (M,) each sample's face; read only when ``face`` ≥ 0
+    face: int,  # −1: any face
+    px: float,
+    py: float,
+    span: tuple[int, int, int, int],  # :func:`_bucket_span` of (px, py)
+    ncols: int,
+    order: np.ndarray,
+    starts: np.ndarray,
+    tol2: float,
+) -> None:
+    """Mark the samples of ``face`` (any with −1) in the 3 × 3 buckets ``span`` strictly
+    within √``tol2`` of (px, py)."""
+    r0, r1, c0, c1 = span
+    for rr in range(r0, r1 + 1):
+        for cc in range(c0, c1 + 1):
+            b = rr * ncols + cc
+            for j in range(starts[b], starts[b + 1]):
+                s = order[j]
+                if not out[s] and (face < 0 or faces[s] == face):
+                    dx, dy = samples[s, 0] - px, samples[s, 1] - py
+                    if dx * dx + dy * dy < tol2:
+                        out[s] = True
 
 
 @njit
@@ -266,7 +286,8 @@ def covered_on_face(
         px, py = points[i, 0], points[i, 1]
         if not (math.isfinite(px) and math.isfinite(py)):
             continue
-        r0, r1, c0, c1 = _bucket_span(px, py, x0, y0, side, ncols, nrows)
+        span = _bucket_span(px, py, x0, y0, side, ncols, nrows)
+        r0, r1, c0, c1 = span
         nearest, best = -1, tol2
         for rr in range(r0, r1 + 1):
             for cc in range(c0, c1 + 1):
@@ -277,18 +298,10 @@ def covered_on_face(
                     d2 = dx * dx + dy * dy
                     if d2 < best:
                         nearest, best = s, d2
-        if nearest < 0:
-            continue
-        face = faces[nearest]
-        for rr in range(r0, r1 + 1):
-            for cc in range(c0, c1 + 1):
-                b = rr * ncols + cc
-                for j in range(starts[b], starts[b + 1]):
-                    s = order[j]
-                    if not out[s] and faces[s] == face:
-                        dx, dy = samples[s, 0] - px, samples[s, 1] - py
-                        if dx * dx + dy * dy < tol2:
-                            out[s] = True
+        if nearest >= 0:
+            _mark_within(
+                out, samples, faces, faces[nearest], px, py, span, ncols, order, starts, tol2
+            )
     return out
 
 
